@@ -1,0 +1,39 @@
+"""Policies with one interface, ``act(observations) -> actions``, for the env and for scripts.
+
+>>> import agents, coloc_env
+>>> env = coloc_env.parallel_env("bandwidth_fusion")
+>>> policy = agents.make_policy("paper", env)
+"""
+
+from __future__ import annotations
+
+from agents import bandwidth_fusion
+from agents.base import FixedActionPolicy, Policy, RandomPolicy
+
+SCENARIO_POLICIES = {"bandwidth_fusion": bandwidth_fusion.POLICIES}
+
+
+def available_policies(scenario: str) -> list[str]:
+    return ["random", *SCENARIO_POLICIES.get(scenario, {})]
+
+
+def make_policy(name: str, env, seed: int | None = None, **kwargs) -> Policy:
+    """A policy for ``env`` by name: ``paper`` (``paper:T2P3`` for other tables where the
+    scenario has them), ``random``, ``greedy``, ``oracle_*``, or a path to a trained ``.zip``."""
+    scenario = env.unwrapped.scenario.name
+    if name.endswith(".zip"):
+        from agents.sb3 import SB3Policy
+
+        return SB3Policy(env, name, **kwargs)
+    if name == "random":
+        return RandomPolicy(env, seed=seed)
+    base, _, variant = name.partition(":")
+    table = SCENARIO_POLICIES.get(scenario, {})
+    if base not in table:
+        raise ValueError(f"unknown policy {name!r} for {scenario}; available: {available_policies(scenario)} or a .zip")
+    if variant:
+        kwargs["tables"] = variant
+    return table[base](env, **kwargs)
+
+
+__all__ = ["FixedActionPolicy", "Policy", "RandomPolicy", "available_policies", "make_policy"]

@@ -1,0 +1,92 @@
+"""PettingZoo views of a batched scenario: the parallel env (B = 1) and the AEC view."""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+from pettingzoo import ParallelEnv
+
+from coloc_env.config import build_config
+from coloc_env.rendering import Renderer
+from coloc_env.scenarios.base import Scenario
+
+
+class CoLocParallelEnv(ParallelEnv):
+    """PettingZoo ``ParallelEnv`` over one copy of a :class:`Scenario`.
+
+    ``reset(seed=s)`` gives the env ``np.random.default_rng(s)``; ``reset()``
+    without a seed continues the same generator (DESIGN.md, Seeding).
+    Episodes end by truncation at the scenario's horizon.
+    """
+
+    metadata = {"render_modes": [None, "rgb_array", "human"], "is_parallelizable": True, "render_fps": 5}
+
+    def __init__(self, scenario_cls: type[Scenario], render_mode: str | None = None, **config):
+        self.scenario = scenario_cls(build_config(scenario_cls.Config, config), batch=1)
+        self.metadata = dict(self.metadata, name=scenario_cls.name)
+        self._renderer = Renderer(render_mode)
+        self.render_mode = render_mode
+        self.possible_agents = self.scenario.agent_names
+        self.agents: list[str] = []
+        self._rng: np.random.Generator | None = None
+        self._observation_space = self.scenario.observation_space()
+        self._action_space = self.scenario.action_space()
+        self.state_space = self.scenario.state_space()
+
+    @functools.cache  # noqa: B019 - one space per agent name, shared by design
+    def observation_space(self, agent):
+        return self._observation_space
+
+    @functools.cache  # noqa: B019
+    def action_space(self, agent):
+        return self._action_space
+
+    @property
+    def config(self):
+        return self.scenario.config
+
+    def reset(self, seed=None, options=None):
+        if seed is not None or self._rng is None:
+            self._rng = np.random.default_rng(seed)
+        self.scenario.reset([self._rng])
+        self.agents = list(self.possible_agents)
+        return self._observations(), self._infos()
+
+    def step(self, actions):
+        if not self.agents:
+            raise RuntimeError("step() called on a finished episode; call reset() first")
+        missing = [a for a in self.agents if a not in actions]
+        if missing:
+            raise ValueError(f"actions missing for agents {missing}")
+        stacked = np.stack([np.asarray(actions[a], dtype=float) for a in self.possible_agents])
+        self.scenario.step(stacked[None])
+        rewards = self.scenario.reward()[0]
+        done = bool(self.scenario.done()[0])
+        observations = self._observations()
+        infos = self._infos()
+        rewards = {a: float(rewards[i]) for i, a in enumerate(self.possible_agents)}
+        terminations = {a: False for a in self.possible_agents}
+        truncations = {a: done for a in self.possible_agents}
+        if done:
+            self.agents = []
+        return observations, rewards, terminations, truncations, infos
+
+    def _observations(self):
+        obs = self.scenario.observation()[0]
+        return {a: obs[i] for i, a in enumerate(self.possible_agents)}
+
+    def _infos(self):
+        info = self.scenario.info()
+        return {a: {k: v[0, i] for k, v in info.items()} for i, a in enumerate(self.possible_agents)}
+
+    def state(self):
+        return self.scenario.state()[0]
+
+    def render(self):
+        if self.render_mode is None:
+            return None
+        return self._renderer.render(self.scenario.scene(0))
+
+    def close(self):
+        self._renderer.close()

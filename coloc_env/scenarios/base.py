@@ -1,0 +1,110 @@
+"""The scenario interface: one batched core that every env view wraps.
+
+A scenario holds B copies of a world + network + estimator and steps them in
+one numpy call. ``env_index=None`` means all copies (VMAS's convention).
+Subclasses document observation, action, reward and termination in a
+cartpole-style table in their module docstring.
+"""
+
+from __future__ import annotations
+
+import abc
+from typing import ClassVar
+
+import gymnasium
+import numpy as np
+
+from coloc_env.rendering import Scene
+
+
+class Scenario(abc.ABC):
+    """Batched core of one paper setting. Shapes: B copies, N agents."""
+
+    name: ClassVar[str]
+    paper: ClassVar[str]
+    Config: ClassVar[type]
+    agent_prefix: ClassVar[str] = "uav"
+
+    def __init__(self, config, batch: int = 1):
+        if not isinstance(batch, (int, np.integer)) or batch < 1:
+            raise ValueError(f"batch must be a positive integer, got {batch!r}")
+        config.validate()
+        self.config = config
+        self.batch = int(batch)
+
+    # --- static description -------------------------------------------------
+    @property
+    @abc.abstractmethod
+    def num_agents(self) -> int: ...
+
+    @property
+    @abc.abstractmethod
+    def horizon(self) -> int: ...
+
+    @abc.abstractmethod
+    def observation_space(self) -> gymnasium.spaces.Space: ...
+
+    @abc.abstractmethod
+    def action_space(self) -> gymnasium.spaces.Space: ...
+
+    @abc.abstractmethod
+    def state_space(self) -> gymnasium.spaces.Box: ...
+
+    @property
+    def agent_names(self) -> list[str]:
+        return [f"{self.agent_prefix}_{i}" for i in range(self.num_agents)]
+
+    # --- dynamics -------------------------------------------------------------
+    def _indices(self, env_index) -> np.ndarray:
+        if env_index is None:
+            return np.arange(self.batch)
+        idx = np.atleast_1d(np.asarray(env_index, dtype=int))
+        if np.any((idx < 0) | (idx >= self.batch)):
+            raise ValueError(f"env_index must be in [0, {self.batch - 1}], got {env_index!r}")
+        return idx
+
+    @abc.abstractmethod
+    def reset(self, rngs: list[np.random.Generator], env_index=None) -> None:
+        """Start new episodes in the copies ``env_index`` (None = all), one generator per copy."""
+
+    @abc.abstractmethod
+    def step(self, actions: np.ndarray) -> None:
+        """Advance every copy one step; ``actions`` has shape (B, N, *action_shape)."""
+
+    @abc.abstractmethod
+    def observation(self) -> np.ndarray: ...
+
+    @abc.abstractmethod
+    def reward(self) -> np.ndarray: ...
+
+    @abc.abstractmethod
+    def done(self) -> np.ndarray: ...
+
+    @abc.abstractmethod
+    def state(self) -> np.ndarray: ...
+
+    @abc.abstractmethod
+    def info(self) -> dict[str, np.ndarray]: ...
+
+    @abc.abstractmethod
+    def scene(self, b: int) -> Scene: ...
+
+    def initial_cost(self) -> float:
+        """Expected cost of the state before the first step, which an episode's return does not
+        contain but a paper's cost may (bandwidth_fusion's k = 0 term). 0 by default."""
+        return 0.0
+
+    # --- helpers for subclasses ----------------------------------------------
+    def check_actions(self, actions) -> np.ndarray:
+        """Actions as a float array (B, N, *shape); a NaN/inf or a wrong shape is a ValueError."""
+        space = self.action_space()
+        arr = np.asarray(actions, dtype=float)
+        expected = (self.batch, self.num_agents, *space.shape)
+        if arr.shape != expected:
+            raise ValueError(f"actions must have shape {expected} (batch, agents, *action_shape), got {arr.shape}")
+        if not np.all(np.isfinite(arr)):
+            bad = np.argwhere(~np.isfinite(arr.reshape(self.batch, self.num_agents, -1)).all(axis=-1))
+            raise ValueError(
+                f"actions must be finite; non-finite action for (copy, agent) {bad[0].tolist()}"
+            )
+        return arr

@@ -1,0 +1,41 @@
+"""Linear noisy sensors y = C x + v, v ~ N(0, V)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from coloc_env.config import as_array, check_psd
+
+
+@dataclass(frozen=True)
+class LinearSensor:
+    """A linear sensor carried by each of ``count`` nodes, noise independent across nodes.
+
+    | field         | symbol | shape  | meaning                           |
+    |---------------|--------|--------|-----------------------------------|
+    | measurement   | C      | (m, n) | observation matrix                |
+    | noise         | V      | (m, m) | covariance of v(k), PD            |
+    """
+
+    measurement: np.ndarray
+    noise: np.ndarray
+
+    @property
+    def dim(self) -> int:
+        return np.asarray(self.measurement).shape[0]
+
+    def validate(self, state_dim: int, prefix: str = "") -> None:
+        C = as_array(f"{prefix}measurement", self.measurement, ndim=2)
+        if C.shape[1] != state_dim:
+            raise ValueError(f"{prefix}measurement must have shape (m, {state_dim}), got {C.shape}")
+        check_psd(f"{prefix}noise", self.noise, C.shape[0], strict=True)
+
+    def sample_noise(self, rng: np.random.Generator, size: tuple[int, ...]) -> np.ndarray:
+        """Measurement noise of shape ``(*size, m)`` drawn from ``rng``."""
+        return rng.multivariate_normal(np.zeros(self.dim), np.asarray(self.noise, float), size=size)
+
+    def measure(self, state: np.ndarray, noise: np.ndarray) -> np.ndarray:
+        """y = C x + v; ``state`` (..., n) broadcast against ``noise`` (..., m)."""
+        return np.einsum("mn,...n->...m", np.asarray(self.measurement, float), state) + noise

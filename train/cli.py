@@ -1,0 +1,138 @@
+"""The ``coloc`` command line: reproduce | train | evaluate | bench."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+PAPERS = {"zhao2020": "bandwidth_fusion"}
+SCENARIO_TO_PAPER = {v: k for k, v in PAPERS.items()}
+
+
+def _seed_range(text: str) -> list[int]:
+    if ".." in text:
+        a, b = text.split("..")
+        if int(b) < int(a):
+            raise argparse.ArgumentTypeError(f"--seeds A..B needs A <= B, got {text}")
+        return list(range(int(a), int(b) + 1))
+    return [int(text)]
+
+
+def _positive(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text}")
+    return value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="coloc", description=__doc__)
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    rep = sub.add_parser("reproduce", help="reproduce a paper's figures and claims")
+    rep.add_argument("paper", choices=[*PAPERS, "all"])
+    rep.add_argument("--runs", type=_positive, default=None, help="Monte Carlo runs (default 500, quick 100)")
+    rep.add_argument("--seed", type=int, default=0)
+    rep.add_argument("--out", default="results")
+    rep.add_argument("--quick", action="store_true", help="fewer Monte Carlo runs")
+    rep.add_argument("--executor", choices=["local", "ray"], default="local")
+    rep.add_argument("--address", default=None, help="Ray cluster address (default: a local Ray)")
+
+    tr = sub.add_parser("train", help="train a shared PPO policy with stable-baselines3")
+    tr.add_argument("scenario")
+    tr.add_argument("--timesteps", type=_positive, default=200_000)
+    group = tr.add_mutually_exclusive_group()
+    group.add_argument("--seed", type=int, default=None)
+    group.add_argument("--seeds", type=_seed_range, default=None, help="A..B")
+    tr.add_argument("--vec", choices=["supersuit", "native"], default="supersuit")
+    tr.add_argument("--out", default="results/train")
+    tr.add_argument("--executor", choices=["local", "ray"], default="local")
+    tr.add_argument("--tensorboard", action="store_true")
+
+    ev = sub.add_parser("evaluate", help="evaluate a policy over seeded episodes")
+    ev.add_argument("scenario")
+    ev.add_argument("--policy", default="paper", help="paper | random | greedy | oracle_* | PATH.zip")
+    ev.add_argument("--episodes", type=_positive, default=100)
+    ev.add_argument("--out", default="results")
+
+    be = sub.add_parser("bench", help="throughput of estimators and envs")
+    be.add_argument("--quick", action="store_true")
+    be.add_argument("--out", default="results")
+    return parser
+
+
+def cmd_reproduce(args) -> int:
+    from rich.console import Console
+
+    console = Console()
+    papers = list(PAPERS) if args.paper == "all" else [args.paper]
+    for paper in papers:
+        module = __import__(f"train.reproduce.{paper}", fromlist=["run"])
+        runs = args.runs or (100 if args.quick else 500)
+        with console.status(f"reproducing {paper} ({runs} Monte Carlo runs)") as status:
+            metrics = module.run(args.out, runs=runs, seed=args.seed, quick=args.quick,
+                                 executor=args.executor, address=args.address,
+                                 progress=lambda msg, status=status, paper=paper: status.update(f"{paper}: {msg}"))
+        console.print(f"[bold]{paper}[/bold]: wrote {os.path.join(args.out, paper)}/")
+        for claim, holds in metrics.get("claims", {}).items():
+            console.print(f"  {claim}: {'holds' if holds else '[red]does not hold[/red]'}")
+    return 0
+
+
+def cmd_train(args) -> int:
+    import coloc_env
+    from train.executor import map_tasks
+    from train.training import train
+
+    coloc_env.scenario_class(args.scenario)
+    seeds = args.seeds or [0 if args.seed is None else args.seed]
+    jobs = [(args.scenario, args.timesteps, s, args.out, args.vec, args.executor == "local", args.tensorboard)
+            for s in seeds]
+    for path in map_tasks(train, jobs, args.executor):
+        print(f"saved {path}")
+    return 0
+
+
+def cmd_evaluate(args) -> int:
+    from rich.console import Console
+    from rich.progress import Progress
+
+    import coloc_env
+    from train.evaluate import run_episodes, save
+
+    scenarios = list(coloc_env.SCENARIOS) if args.scenario == "all" else [args.scenario]
+    console = Console()
+    for scenario in scenarios:
+        coloc_env.scenario_class(scenario)
+        with Progress(console=console, transient=True) as bar:
+            task = bar.add_task(f"{scenario} / {args.policy}", total=args.episodes)
+            result = run_episodes(scenario, args.policy, args.episodes, progress=lambda task=task: bar.advance(task))
+        path = save(result, args.out, SCENARIO_TO_PAPER.get(scenario, scenario))
+        console.print(
+            f"{scenario} {args.policy}: mean realized cost {result['mean_cost']:.3f} "
+            f"+- {result['ci95']:.3f} (95 %, {args.episodes} episodes); with the k = 0 term "
+            f"{result['initial_cost']:.2f}: {result['paper_cost']:.3f}; "
+            f"communication {result['communication_per_step']:.2f} per step -> {path}")
+    return 0
+
+
+def cmd_bench(args) -> int:
+    from train.bench import run
+
+    run(args.out, quick=args.quick)
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    handlers = {"reproduce": cmd_reproduce, "train": cmd_train, "evaluate": cmd_evaluate, "bench": cmd_bench}
+    try:
+        return handlers[args.command](args)
+    except ValueError as exc:
+        print(f"coloc {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

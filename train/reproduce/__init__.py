@@ -1,0 +1,1 @@
+"""`coloc reproduce`: one module per paper."""
