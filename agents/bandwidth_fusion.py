@@ -79,7 +79,8 @@ class GreedyPolicy(Policy):
         selection = greedy_selection(self.scenario, self.weights[None])[0]
         actions = self.scenario.encode_actions(selection, self.weights)
         order = self.env.possible_agents
-        return {a: actions[order.index(a)].astype(np.float32) for a in observations}
+        dtype = self.env.action_space(order[0]).dtype
+        return {a: actions[order.index(a)].astype(dtype) for a in observations}
 
 
 @dataclass

@@ -44,4 +44,5 @@ class FixedActionPolicy(Policy):
 
     def act(self, observations):
         order = self.env.possible_agents
-        return {agent: self.actions[order.index(agent)].astype(np.float32) for agent in observations}
+        dtype = self.env.action_space(order[0]).dtype
+        return {agent: self.actions[order.index(agent)].astype(dtype) for agent in observations}

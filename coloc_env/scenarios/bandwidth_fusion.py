@@ -17,7 +17,7 @@ component selection T and the fusion weights p.
 
 Action (one per receiver, the same Box for all agents)
 ------------------------------------------------------
-``Box(-1, 1, shape=((N-1)*n + N,), float32)``; neighbours are indexed relative
+``Box(-1, 1, shape=((N-1)*n + N,), float64)``; neighbours are indexed relative
 to the receiver (neighbour k of ``uav_i`` is ``uav_{(i+1+k) mod N}``).
 
 | slice                   | meaning                                                                 |
@@ -196,7 +196,7 @@ class BandwidthFusionConfig:
         if V.ndim == 3 and V.shape[0] != self.num_uavs:
             raise ValueError(f"measurement_noise must be (m, m) or ({self.num_uavs}, m, m), got {V.shape}")
         for j, Vj in enumerate(per_node):
-            LinearSensor(C, Vj).validate(n, prefix="" if V.ndim == 2 else f"measurement_noise[{j}] ")
+            LinearSensor(C, Vj).validate(n, noise_name="measurement_noise" + (f"[{j}]" if V.ndim == 3 else ""))
         as_array("initial_state", self.initial_state, shape=(n,))
         check_psd("initial_cov", self.initial_cov, n)
         self.links.validate()
@@ -243,7 +243,7 @@ class BandwidthFusionScenario(Scenario):
         self._process = np.zeros((B, K, n))
         self._meas_noise = np.zeros((B, K, N, m))
         self.ages = np.zeros((B, N, N - 1, n))
-        self.selection = np.ones((B, N, N - 1, n), dtype=bool)
+        self.selection = np.zeros((B, N, N - 1, n), dtype=bool)
         self.weights = np.full((B, N, N), 1.0 / N)
         self._reward = np.zeros((B, N))
 
@@ -268,7 +268,8 @@ class BandwidthFusionScenario(Scenario):
         return gymnasium.spaces.Box(-np.inf, np.inf, shape=(self.obs_dim,), dtype=np.float32)
 
     def action_space(self):
-        return gymnasium.spaces.Box(-1.0, 1.0, shape=(self.action_dim,), dtype=np.float32)
+        # float64: the paper's weight tables must survive the softmax encoding exactly (float32 loses 1e-9)
+        return gymnasium.spaces.Box(-1.0, 1.0, shape=(self.action_dim,), dtype=np.float64)
 
     def state_space(self):
         dim = self.num_agents * (self.obs_dim + self.n)
@@ -337,7 +338,7 @@ class BandwidthFusionScenario(Scenario):
         self.trail[idx] = 0.0
         self.trail[idx, 0] = self.truth[idx]
         self.ages[idx] = 0.0
-        self.selection[idx] = True
+        self.selection[idx] = False  # nothing received before the first step
         self.weights[idx] = 1.0 / N
         self._reward[idx] = 0.0
 
@@ -410,9 +411,8 @@ class BandwidthFusionScenario(Scenario):
         for i in range(N):
             for kk, j in enumerate(self.links.neighbours[i]):
                 comps = self.selection[b, i, kk]
-                label = "".join(_COMPONENT_NAMES[c] for c in np.flatnonzero(comps)) if k > 0 else ""
-                links.append(Link(source=int(j), target=i, value=float(comps.sum()) if k > 0 else 0.0,
-                                  label=label))
+                label = "".join(_COMPONENT_NAMES[c] for c in np.flatnonzero(comps))
+                links.append(Link(source=int(j), target=i, value=float(comps.sum()), label=label))
         return Scene(
             title=f"bandwidth_fusion (zhao2020)  k = {k}/{self.horizon}",
             truth=self.truth[b, :2][None],

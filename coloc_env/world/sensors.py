@@ -26,11 +26,12 @@ class LinearSensor:
     def dim(self) -> int:
         return np.asarray(self.measurement).shape[0]
 
-    def validate(self, state_dim: int, prefix: str = "") -> None:
-        C = as_array(f"{prefix}measurement", self.measurement, ndim=2)
+    def validate(self, state_dim: int, matrix_name: str = "measurement", noise_name: str = "noise") -> None:
+        """Check shapes and that the noise is positive definite; errors name the config fields given."""
+        C = as_array(matrix_name, self.measurement, ndim=2)
         if C.shape[1] != state_dim:
-            raise ValueError(f"{prefix}measurement must have shape (m, {state_dim}), got {C.shape}")
-        check_psd(f"{prefix}noise", self.noise, C.shape[0], strict=True)
+            raise ValueError(f"{matrix_name} must have shape (m, {state_dim}), got {C.shape}")
+        check_psd(noise_name, self.noise, C.shape[0], strict=True)
 
     def sample_noise(self, rng: np.random.Generator, size: tuple[int, ...]) -> np.ndarray:
         """Measurement noise of shape ``(*size, m)`` drawn from ``rng``."""

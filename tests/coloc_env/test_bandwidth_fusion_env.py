@@ -1,0 +1,181 @@
+"""The bandwidth_fusion scenario through its PettingZoo views."""
+
+import warnings
+
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import data_equivalence
+from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test
+
+import agents
+import coloc_env
+import estimators.bandwidth_fusion as bf
+from coloc_env.scenarios.bandwidth_fusion import paper_selection, paper_weights
+
+NAME = "bandwidth_fusion"
+
+
+def play(env, policy, seed):
+    observations, infos = env.reset(seed=seed)
+    history = [(observations, infos)]
+    while env.agents:
+        observations, rewards, terms, truncs, infos = env.step(policy.act(observations))
+        history.append((observations, rewards, infos))
+    return history
+
+
+def test_pettingzoo_api_and_seed_tests():
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        parallel_api_test(coloc_env.parallel_env(NAME), num_cycles=60)
+        parallel_seed_test(lambda: coloc_env.parallel_env(NAME), num_cycles=60)
+        api_test(coloc_env.env(NAME), num_cycles=30)
+
+
+def test_spaces_are_shared_and_cached():
+    env = coloc_env.parallel_env(NAME)
+    assert env.possible_agents == ["uav_0", "uav_1", "uav_2", "uav_3"]
+    assert env.action_space("uav_0") is env.action_space("uav_0")
+    assert env.action_space("uav_0") == env.action_space("uav_3")
+    assert env.observation_space("uav_1").shape == (13,)
+    assert env.action_space("uav_1").shape == (13,)
+    env.reset(seed=0)
+    assert env.state().shape == env.state_space.shape
+
+
+@pytest.mark.parametrize("kwargs, field", [
+    ({"budget": 10}, "budget"),
+    ({"process_noise": [[0.02, 0.1, 0.0], [0.1, 0.05, 0.0], [0.0, 0.0, 0.03]]}, "process_noise"),
+    ({"measurement_noise": [[1.0, 0.0], [0.0, 1.0]]}, "measurement"),
+    ({"drift": [0.5, 0.5]}, "drift"),
+    ({"initial_cov": [[-1.0, 0, 0], [0, 1.0, 0], [0, 0, 1.0]]}, "initial_cov"),
+    ({"reward": "rmse"}, "reward"),
+    ({"horizon": 0}, "horizon"),
+    ({"component_cost": -1.0}, "component_cost"),
+    ({"num_uavs": 1}, "num_uavs"),
+    ({"bugdet": 5}, "unknown config key"),
+    ({"initial_state": [10.0, np.nan, 10.0]}, "initial_state"),
+])
+def test_bad_config_names_the_field(kwargs, field):
+    with pytest.raises(ValueError, match=field):
+        coloc_env.parallel_env(NAME, **kwargs)
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_non_finite_action_is_refused(bad):
+    env = coloc_env.parallel_env(NAME)
+    env.reset(seed=0)
+    actions = {a: env.action_space(a).sample() for a in env.agents}
+    actions["uav_2"] = actions["uav_2"].astype(float)
+    actions["uav_2"][4] = bad
+    with pytest.raises(ValueError, match="finite"):
+        env.step(actions)
+
+
+def test_wrong_action_shape_is_refused():
+    env = coloc_env.parallel_env(NAME)
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="shape"):
+        env.step({a: np.zeros(5) for a in env.agents})
+
+
+def test_same_seed_gives_identical_episodes_and_reset_continues_the_generator():
+    env_a, env_b = coloc_env.parallel_env(NAME), coloc_env.parallel_env(NAME)
+    policy_a, policy_b = agents.make_policy("random", env_a, seed=5), agents.make_policy("random", env_b, seed=5)
+    first_a, first_b = play(env_a, policy_a, 11), play(env_b, policy_b, 11)
+    assert len(first_a) == 51
+    assert data_equivalence(first_a, first_b)
+    other = play(coloc_env.parallel_env(NAME), agents.make_policy("random", env_a, seed=5), 12)
+    assert not data_equivalence(first_a, other)
+    # reset() without a seed continues the generator: a new episode, the same in both envs
+    obs_a, info_a = env_a.reset()
+    obs_b, info_b = env_b.reset()
+    np.testing.assert_array_equal(info_a["uav_0"]["true_position"], info_b["uav_0"]["true_position"])
+    assert not np.array_equal(info_a["uav_0"]["true_position"], first_a[0][1]["uav_0"]["true_position"])
+
+
+@pytest.mark.parametrize("tables", ["T1P1", "T2P3", "T3P2"])
+def test_env_with_paper_policy_equals_the_estimator(tables):
+    env = coloc_env.parallel_env(NAME)
+    policy = agents.make_policy(f"paper:{tables}", env)
+    observations, infos = env.reset(seed=7)
+    scenario = env.scenario
+    truth = scenario.truth[0].copy()
+    noise_v, noise_w = scenario._meas_noise[0].copy(), scenario._process[0].copy()
+    model = scenario.model
+    state = bf.initial_state(model, np.full(3, 10.0), np.diag([0.19, 0.09, 0.08]))
+    selection, weights = paper_selection(tables[:2]), paper_weights(tables[2:])
+    k = 0
+    while env.agents:
+        observations, rewards, _, _, infos = env.step(policy.act(observations))
+        state = bf.step(model, state, truth + noise_v[k], selection, weights)
+        truth = truth + model.drift + noise_w[k]
+        k += 1
+        for i, agent in enumerate(env.possible_agents):
+            np.testing.assert_allclose(infos[agent]["estimated_position"], state.estimate[i], atol=1e-12, rtol=0)
+            np.testing.assert_allclose(infos[agent]["true_position"], truth, atol=1e-12, rtol=0)
+            assert rewards[agent] == pytest.approx(-np.sum((state.estimate[i] - truth) ** 2), abs=1e-12)
+    assert k == 50
+
+
+def test_every_feasible_selection_and_weights_round_trip_through_the_action():
+    env = coloc_env.parallel_env(NAME)
+    scenario = env.scenario
+    rng = np.random.default_rng(0)
+    for option in range(len(scenario.links.feasible)):
+        selection = np.stack([scenario.links.feasible[(option + 17 * i) % 108] for i in range(4)])
+        weights = rng.dirichlet(np.ones(4) * 5, size=4)
+        actions = scenario.encode_actions(selection, weights)
+        assert np.all(np.abs(actions) <= 1)
+        decoded_sel, decoded_w = scenario.decode_actions(actions[None])
+        np.testing.assert_array_equal(decoded_sel[0], selection)
+        np.testing.assert_allclose(decoded_w[0], weights, atol=1e-14)
+    with pytest.raises(ValueError, match="budget"):
+        scenario.encode_actions(np.ones((4, 3, 3), bool), paper_weights("P1"))
+    with pytest.raises(ValueError, match="zero weight"):
+        scenario.encode_actions(paper_selection("T1"), np.eye(4))
+    with pytest.raises(ValueError, match="sum_j p_ij"):
+        scenario.encode_actions(paper_selection("T1"), np.full((4, 4), 0.3))
+
+
+def test_rewards_follow_the_reward_option_and_communication_cost():
+    for reward in ("error", "trace"):
+        env = coloc_env.parallel_env(NAME, reward=reward, component_cost=0.01)
+        policy = agents.make_policy("paper", env)
+        observations, _ = env.reset(seed=3)
+        observations, rewards, _, _, infos = env.step(policy.act(observations))
+        for agent in env.possible_agents:
+            info = infos[agent]
+            loss = info["error"] if reward == "error" else info["trace_error"]
+            assert info["components_received"] == 5
+            assert rewards[agent] == pytest.approx(-loss - 0.05, abs=1e-12)
+
+
+def test_observation_is_local_and_ages_count_missing_components():
+    env = coloc_env.parallel_env(NAME)
+    policy = agents.make_policy("paper", env)
+    observations, _ = env.reset(seed=0)
+    np.testing.assert_allclose(observations["uav_0"][:3], np.log([0.19, 0.09, 0.08]), rtol=1e-6)
+    for _ in range(3):
+        observations, *_ = env.step(policy.act(observations))
+    ages = observations["uav_0"][3:12].reshape(3, 3) * 50
+    # T1, receiver uav_0: neighbour uav_1 sends y only, uav_2 sends x, y, uav_3 sends y, z
+    np.testing.assert_allclose(ages, [[3, 0, 3], [0, 0, 3], [3, 0, 0]], atol=1e-5)
+    assert observations["uav_0"][-1] == pytest.approx(3 / 50)
+
+
+def test_rgb_render_draws_a_frame():
+    env = coloc_env.parallel_env(NAME, render_mode="rgb_array")
+    env.reset(seed=0)
+    env.step({a: env.action_space(a).sample() for a in env.agents})
+    frame = env.render()
+    assert frame.ndim == 3 and frame.shape[2] == 3 and frame.dtype == np.uint8
+    assert frame.std() > 10  # something was drawn
+    assert coloc_env.parallel_env(NAME).render() is None
+    with pytest.raises(ValueError, match="render_mode"):
+        coloc_env.parallel_env(NAME, render_mode="video")
+
+
+def test_unknown_scenario_is_refused():
+    with pytest.raises(ValueError, match="unknown scenario"):
+        coloc_env.parallel_env("no_such_scenario")

@@ -1,0 +1,88 @@
+"""The coloc command line end to end, on small runs."""
+
+import json
+import os
+
+import numpy as np
+import pytest
+
+from train.cli import main
+from train.io import _atomic, read_json, write_json
+
+
+def test_reproduce_zhao2020_writes_metrics_report_and_figures(tmp_path):
+    assert main(["reproduce", "zhao2020", "--runs", "500", "--seed", "1", "--out", str(tmp_path)]) == 0
+    folder = tmp_path / "zhao2020"
+    metrics = json.loads((folder / "metrics.json").read_text())
+    pairs = ["T1P1", "T1P2", "T1P3", "T2P1", "T3P1"]
+    for key in ("cost_exact", "cost_bound", "cost_mc"):
+        assert sorted(metrics[key]) == sorted(pairs)
+    for pair in pairs:
+        # exact covariance vs Monte Carlo within 3 %, and the bound above the exact cost
+        assert abs(metrics["cost_mc"][pair] / metrics["cost_exact"][pair] - 1) < 0.03
+        assert metrics["cost_bound"][pair] >= metrics["cost_exact"][pair]
+    assert metrics["oracle_static_cost"] <= min(metrics["cost_exact"].values())
+    assert metrics["greedy_cost"] < metrics["cost_exact"]["T1P1"]
+    assert metrics["baselines"]["centralized_kf"] < metrics["oracle_static_cost"]
+    for name in ("fig2_trajectories.png", "fig3_selection.png", "fig4_weights.png", "report.md"):
+        assert (folder / name).stat().st_size > 1000
+    report = (folder / "report.md").read_text()
+    assert "P1 (uniform) is best" in report and "| T1P1 |" in report
+
+
+def test_train_then_evaluate_a_saved_model(tmp_path, capsys):
+    out = str(tmp_path)
+    assert main(["train", "bandwidth_fusion", "--timesteps", "512", "--seed", "3", "--out", out]) == 0
+    model = os.path.join(out, "bandwidth_fusion", "seed3", "model.zip")
+    assert os.path.isfile(model)
+    assert read_json(os.path.join(out, "bandwidth_fusion", "seed3", "model.json"))["scenario"] == "bandwidth_fusion"
+    assert main(["evaluate", "bandwidth_fusion", "--policy", model, "--episodes", "3", "--out", out]) == 0
+    assert main(["evaluate", "bandwidth_fusion", "--policy", "paper", "--episodes", "3", "--out", out]) == 0
+    table = read_json(os.path.join(out, "zhao2020", "evaluation.json"))
+    assert set(table) == {model, "paper"}
+    assert table["paper"]["paper_cost"] == pytest.approx(table["paper"]["mean_cost"] + 1.44, abs=1e-12)
+    assert "mean realized cost" in capsys.readouterr().out
+
+
+def test_evaluate_paper_matches_the_exact_cost():
+    """Realized J_50 over seeded episodes agrees with the exact covariance within its 95 % interval (x1.5)."""
+    import estimators.bandwidth_fusion as bf
+    from coloc_env.scenarios.bandwidth_fusion import paper_selection, paper_weights
+    from train.evaluate import run_episodes
+
+    result = run_episodes("bandwidth_fusion", "paper", 60)
+    import coloc_env
+
+    model = coloc_env.parallel_env("bandwidth_fusion").config.fusion_model()
+    exact, _ = bf.expected_cost(model, np.diag([0.19, 0.09, 0.08]), paper_selection("T1"), paper_weights("P1"), 50)
+    assert abs(result["paper_cost"] - exact.sum()) < 1.5 * result["ci95"]
+
+
+def test_bench_quick_runs_and_writes_json(tmp_path):
+    assert main(["bench", "--quick", "--out", str(tmp_path)]) == 0
+    rows = read_json(str(tmp_path / "bench" / "bench.json"))["rows"]
+    assert {r["batch"] for r in rows} == {1, 1024}
+    assert all(r["steps_per_s"] > 0 for r in rows)
+
+
+def test_cli_errors_are_clear(capsys):
+    assert main(["evaluate", "no_such", "--policy", "paper"]) == 2
+    assert "unknown scenario" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["reproduce", "zhao2020", "--runs", "0"])
+    with pytest.raises(SystemExit):
+        main(["train", "bandwidth_fusion", "--seeds", "3..1"])
+
+
+def test_atomic_write_keeps_the_old_file_on_failure(tmp_path):
+    path = str(tmp_path / "m.json")
+    write_json(path, {"a": 1})
+
+    def half_then_fail(fh):
+        fh.write(b'{"a": 2, "b"')
+        raise OSError("disk full")
+
+    with pytest.raises(OSError, match="disk full"):
+        _atomic(path, half_then_fail)
+    assert read_json(path) == {"a": 1}
+    assert os.listdir(tmp_path) == ["m.json"]
