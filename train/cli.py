@@ -32,7 +32,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     rep = sub.add_parser("reproduce", help="reproduce a paper's figures and claims")
     rep.add_argument("paper", choices=[*PAPERS, "all"])
-    rep.add_argument("--runs", type=_positive, default=None, help="Monte Carlo runs (default 500, quick 100)")
+    rep.add_argument("--runs", type=_positive, default=None,
+                     help="Monte Carlo runs (default: the paper module's RUNS, or QUICK_RUNS with --quick)")
     rep.add_argument("--seed", type=int, default=0)
     rep.add_argument("--out", default="results")
     rep.add_argument("--quick", action="store_true", help="fewer Monte Carlo runs")
@@ -45,7 +46,8 @@ def build_parser() -> argparse.ArgumentParser:
     group = tr.add_mutually_exclusive_group()
     group.add_argument("--seed", type=int, default=None)
     group.add_argument("--seeds", type=_seed_range, default=None, help="A..B")
-    tr.add_argument("--vec", choices=["supersuit", "native"], default="supersuit")
+    tr.add_argument("--vec", choices=["supersuit"], default="supersuit",
+                    help="vectorization (the native batched vector env comes with the batching issue)")
     tr.add_argument("--out", default="results/train")
     tr.add_argument("--executor", choices=["local", "ray"], default="local")
     tr.add_argument("--tensorboard", action="store_true")
@@ -69,7 +71,7 @@ def cmd_reproduce(args) -> int:
     papers = list(PAPERS) if args.paper == "all" else [args.paper]
     for paper in papers:
         module = __import__(f"train.reproduce.{paper}", fromlist=["run"])
-        runs = args.runs or (100 if args.quick else 500)
+        runs = args.runs or (module.QUICK_RUNS if args.quick else module.RUNS)
         with console.status(f"reproducing {paper} ({runs} Monte Carlo runs)") as status:
             metrics = module.run(args.out, runs=runs, seed=args.seed, quick=args.quick,
                                  executor=args.executor, address=args.address,

@@ -50,7 +50,7 @@ def train(scenario: str, timesteps: int, seed: int, out: str, vec: str = "supers
     if timesteps < 1:
         raise ValueError(f"timesteps must be >= 1, got {timesteps}")
     if vec != "supersuit":
-        raise ValueError(f"vec must be 'supersuit' (the native vector env is not built yet), got {vec!r}")
+        raise ValueError(f"vec must be 'supersuit', got {vec!r}")
     hyper, env_config = load(scenario)
     copies = importlib.import_module(f"train.hyperparams.{scenario}").NUM_COPIES
     from stable_baselines3.common.utils import set_random_seed
