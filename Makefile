@@ -24,7 +24,9 @@ demo: $(STAMP)
 	MPLBACKEND=Agg $(VENV)/bin/coloc reproduce all --quick --out results
 	MPLBACKEND=Agg $(VENV)/bin/coloc train bandwidth_fusion --timesteps 20000 --seed 0 --out results/train
 	MPLBACKEND=Agg $(VENV)/bin/coloc evaluate bandwidth_fusion --policy results/train/bandwidth_fusion/seed0/model.zip --episodes 100 --out results
-	MPLBACKEND=Agg $(VENV)/bin/coloc evaluate bandwidth_fusion --policy paper --episodes 100 --out results
+	for policy in paper random greedy oracle_static; do \
+		MPLBACKEND=Agg $(VENV)/bin/coloc evaluate bandwidth_fusion --policy $$policy --episodes 100 --out results || exit 1; \
+	done
 
 test: $(STAMP)
 	$(VENV)/bin/ruff check .

@@ -179,3 +179,16 @@ def test_rgb_render_draws_a_frame():
 def test_unknown_scenario_is_refused():
     with pytest.raises(ValueError, match="unknown scenario"):
         coloc_env.parallel_env("no_such_scenario")
+
+
+def test_human_render_draws_without_returning_a_frame():
+    import matplotlib
+
+    matplotlib.use("Agg")  # no screen in CI: the window is drawn off-screen
+    env = coloc_env.parallel_env(NAME, render_mode="human")
+    env.reset(seed=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # Agg is non-interactive
+        assert env.render() is None
+    assert env._renderer._figure is not None and len(env._renderer._figure.axes) == 2
+    env.close()

@@ -86,3 +86,20 @@ def test_atomic_write_keeps_the_old_file_on_failure(tmp_path):
         _atomic(path, half_then_fail)
     assert read_json(path) == {"a": 1}
     assert os.listdir(tmp_path) == ["m.json"]
+
+
+def test_ray_executor_equals_local():
+    pytest.importorskip("ray")
+    from coloc_env.config import build_config
+    from coloc_env.scenarios.bandwidth_fusion import BandwidthFusionConfig
+    from train.executor import map_tasks
+    from train.reproduce.zhao2020 import PAIRS, monte_carlo_block
+
+    config = build_config(BandwidthFusionConfig, {"horizon": 10})
+    items = [(pair, 20, 3, config) for pair in PAIRS[:2]]
+    local = map_tasks(monte_carlo_block, items, "local")
+    remote = map_tasks(monte_carlo_block, items, "ray")
+    for a, b in zip(local, remote, strict=True):
+        np.testing.assert_array_equal(a["per_run_cost"], b["per_run_cost"])
+    with pytest.raises(ValueError, match="executor"):
+        map_tasks(monte_carlo_block, items, "dask")
