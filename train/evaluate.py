@@ -1,7 +1,9 @@
 """``coloc evaluate``: a policy's mean estimation error over seeded episodes, with a 95 % interval.
 
 Episodes use seeds EVAL_SEED_BASE + e (disjoint from training). The metric
-is the scenario's own: the sum over steps and agents of ``infos[agent]["error"]``
+is the scenario's own: the sum over steps and agents of ``infos[agent]["error"]``;
+communication is the per-step sum over agents of ``infos[agent]["communication"]``
+(components, messages or hops, as the scenario counts it)
 (the realized squared error for bandwidth_fusion, whose paper cost J_50 adds
 the k = 0 term ``Scenario.initial_cost()``).
 """
@@ -32,7 +34,7 @@ def run_episodes(scenario: str, policy_name: str, episodes: int, seed_base: int 
         while env.agents:
             observations, _, _, _, infos = env.step(policy.act(observations))
             cost += sum(float(info["error"]) for info in infos.values())
-            comm += sum(float(info.get("components_received", 0.0)) for info in infos.values())
+            comm += sum(float(info.get("communication", 0.0)) for info in infos.values())
             steps += 1
         costs.append(cost)
         comms.append(comm / steps)

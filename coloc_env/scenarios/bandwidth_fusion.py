@@ -60,8 +60,9 @@ Termination: none; truncation after ``horizon`` steps (the paper's 50).
 
 ``infos[agent]``: ``true_position``, ``estimated_position``, ``error``
 (squared), ``trace_error`` (tr Sigma_i), ``bound_trace`` (tr M_i),
-``components_received``, ``weights`` (the node's row p_i., absolute order),
-``step``.
+``components_received`` (and ``communication``, the same count: the key every
+scenario uses for what ``coloc evaluate`` reports as communication),
+``weights`` (the node's row p_i., absolute order), ``step``.
 
 Arguments (fields of :class:`BandwidthFusionConfig`, defaults = the paper)
 ------------------------------------------------------------------------
@@ -398,6 +399,7 @@ class BandwidthFusionScenario(Scenario):
             "trace_error": bf.node_traces(self.fusion.error_cov, N),
             "bound_trace": np.trace(self.fusion.bound, axis1=-2, axis2=-1),
             "components_received": self.links.components_received(self.selection),
+            "communication": self.links.components_received(self.selection).astype(float),
             "weights": self.weights.copy(),
             "step": np.broadcast_to(self.k[:, None], (B, N)).copy(),
         }
