@@ -27,9 +27,16 @@ def parallel_env(name: str, render_mode: str | None = None, **config) -> CoLocPa
     return CoLocParallelEnv(scenario_class(name), render_mode=render_mode, **config)
 
 
+def vector_env(name: str, num_envs: int = 1, seed: int | None = None, **config):
+    """An SB3 ``VecEnv`` of ``num_envs`` copies x N agents in one batched core (see :mod:`coloc_env.vector`)."""
+    from coloc_env.vector import CoLocVecEnv
+
+    return CoLocVecEnv(scenario_class(name), num_envs=num_envs, seed=seed, **config)
+
+
 def env(name: str, render_mode: str | None = None, **config):
     """The AEC view of :func:`parallel_env` (``pettingzoo.utils.parallel_to_aec``)."""
     return parallel_to_aec(parallel_env(name, render_mode=render_mode, **config))
 
 
-__all__ = ["SCENARIOS", "CoLocParallelEnv", "env", "parallel_env", "scenario_class"]
+__all__ = ["SCENARIOS", "CoLocParallelEnv", "env", "parallel_env", "scenario_class", "vector_env"]

@@ -46,6 +46,13 @@ class CoLocParallelEnv(ParallelEnv):
     def config(self):
         return self.scenario.config
 
+    def seed_generator(self, seed: int | None) -> None:
+        """Make the next ``reset()`` (without a seed) start as ``reset(seed=seed)`` would.
+
+        For wrappers that call ``reset()`` without a seed (SuperSuit under SB3).
+        """
+        self._rng = np.random.default_rng(seed)
+
     def reset(self, seed=None, options=None):
         if seed is not None or self._rng is None:
             self._rng = np.random.default_rng(seed)

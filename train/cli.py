@@ -46,8 +46,8 @@ def build_parser() -> argparse.ArgumentParser:
     group = tr.add_mutually_exclusive_group()
     group.add_argument("--seed", type=int, default=None)
     group.add_argument("--seeds", type=_seed_range, default=None, help="A..B")
-    tr.add_argument("--vec", choices=["supersuit"], default="supersuit",
-                    help="vectorization (the native batched vector env comes with the batching issue)")
+    tr.add_argument("--vec", choices=["native", "supersuit"], default="native",
+                    help="native: coloc_env.vector_env (one batched numpy call); supersuit: SuperSuit's concat")
     tr.add_argument("--out", default="results/train")
     tr.add_argument("--executor", choices=["local", "ray"], default="local")
     tr.add_argument("--tensorboard", action="store_true")

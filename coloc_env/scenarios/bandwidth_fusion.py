@@ -98,6 +98,7 @@ from coloc_env.config import as_array, check_choice, check_psd, check_range
 from coloc_env.rendering import Link, Scene, ring_layout
 from coloc_env.scenarios.base import Scenario
 from coloc_env.world import BandwidthBudget, LinearMotion, LinearSensor
+from coloc_env.world.noise import covariance_factor, sample_gaussian
 
 _COMPONENT_NAMES = "xyzabcdefghijklmnop"
 
@@ -236,6 +237,8 @@ class BandwidthFusionScenario(Scenario):
         self._weight_order = np.concatenate([np.arange(config.num_uavs)[:, None], self.links.neighbours], axis=1)
         self._initial_estimate = np.asarray(config.initial_state, float)
         self._initial_cov = np.asarray(config.initial_cov, float)
+        self._initial_factor = covariance_factor(self._initial_cov)
+        self._meas_factors = np.stack([covariance_factor(V) for V in self.model.measurement_noise])
         B, N, n, m, K = self.batch, self.num_agents, self.n, self.m, self.horizon
         self.k = np.zeros(B, dtype=int)
         self.truth = np.zeros((B, n))
@@ -326,11 +329,10 @@ class BandwidthFusionScenario(Scenario):
         K, N = self.horizon, self.num_agents
         for b, rng in zip(idx, rngs, strict=True):
             # One block per episode so that stepping never loops over copies.
-            self.truth[b] = rng.multivariate_normal(self._initial_estimate, self._initial_cov)
+            self.truth[b] = self._initial_estimate + sample_gaussian(rng, self._initial_factor, ())
             self._process[b] = self.motion.sample_noise(rng, (K,))
-            self._meas_noise[b] = np.stack(
-                [rng.multivariate_normal(np.zeros(self.m), self.model.measurement_noise[j], size=K)
-                 for j in range(N)], axis=1)
+            white = rng.standard_normal((K, N, self.m))
+            self._meas_noise[b] = (self._meas_factors @ white[..., None])[..., 0]
         fresh = bf.initial_state(self.model, self._initial_estimate, self._initial_cov, (len(idx),))
         self.fusion.estimate[idx] = fresh.estimate
         self.fusion.bound[idx] = fresh.bound

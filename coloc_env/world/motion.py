@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
 from coloc_env.config import as_array, check_psd
+from coloc_env.world.noise import covariance_factor, sample_gaussian
 
 
 @dataclass(frozen=True)
@@ -35,9 +37,14 @@ class LinearMotion:
         as_array(f"{prefix}drift", self.drift, shape=(A.shape[0],))
         check_psd(f"{prefix}process_noise", self.process_noise, A.shape[0])
 
+    @cached_property
+    def noise_factor(self) -> np.ndarray:
+        """F with F F^T = the noise covariance, computed once."""
+        return covariance_factor(self.process_noise)
+
     def sample_noise(self, rng: np.random.Generator, size: tuple[int, ...]) -> np.ndarray:
         """Process noise of shape ``(*size, n)`` drawn from ``rng``."""
-        return rng.multivariate_normal(np.zeros(self.dim), np.asarray(self.process_noise, float), size=size)
+        return sample_gaussian(rng, self.noise_factor, size)
 
     def step(self, state: np.ndarray, noise: np.ndarray) -> np.ndarray:
         """x(k+1) for a batch ``state`` of shape (..., n)."""

@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
 from coloc_env.config import as_array, check_psd
+from coloc_env.world.noise import covariance_factor, sample_gaussian
 
 
 @dataclass(frozen=True)
@@ -33,9 +35,14 @@ class LinearSensor:
             raise ValueError(f"{matrix_name} must have shape (m, {state_dim}), got {C.shape}")
         check_psd(noise_name, self.noise, C.shape[0], strict=True)
 
+    @cached_property
+    def noise_factor(self) -> np.ndarray:
+        """F with F F^T = the noise covariance, computed once."""
+        return covariance_factor(self.noise)
+
     def sample_noise(self, rng: np.random.Generator, size: tuple[int, ...]) -> np.ndarray:
         """Measurement noise of shape ``(*size, m)`` drawn from ``rng``."""
-        return rng.multivariate_normal(np.zeros(self.dim), np.asarray(self.noise, float), size=size)
+        return sample_gaussian(rng, self.noise_factor, size)
 
     def measure(self, state: np.ndarray, noise: np.ndarray) -> np.ndarray:
         """y = C x + v; ``state`` (..., n) broadcast against ``noise`` (..., m)."""

@@ -103,3 +103,17 @@ def test_ray_executor_equals_local():
         np.testing.assert_array_equal(a["per_run_cost"], b["per_run_cost"])
     with pytest.raises(ValueError, match="executor"):
         map_tasks(monte_carlo_block, items, "dask")
+
+
+def test_native_and_supersuit_training_learn_the_same_weights(tmp_path):
+    import torch
+    from stable_baselines3 import PPO
+
+    from train.training import train
+
+    paths = [train("bandwidth_fusion", timesteps=256, seed=4, out=str(tmp_path / vec), vec=vec, progress_bar=False)
+             for vec in ("native", "supersuit")]
+    native, supersuit = (PPO.load(p, device="cpu").policy.state_dict() for p in paths)
+    assert native.keys() == supersuit.keys()
+    for key in native:
+        assert torch.equal(native[key], supersuit[key]), key

@@ -1,0 +1,127 @@
+"""A stable-baselines3 ``VecEnv`` over B copies x N agents of one batched scenario.
+
+Each agent of each copy is one sub-env (index ``b * N + i``), so SB3 trains
+one policy shared by all agents (parameter sharing). Every step is one call of
+the batched :class:`~coloc_env.scenarios.base.Scenario` core: no Python loop
+over copies, except to build the info dicts of the copies whose episode just
+ended (SB3 needs one dict per sub-env).
+
+Seeding follows DESIGN.md: copy b of ``vector_env(name, num_envs=B, seed=s)``
+is exactly ``parallel_env(name)`` reset with seed ``s + b``, and a copy's
+later episodes continue its generator as ``reset()`` would. ``seed(s)``
+(called by SB3's ``PPO(seed=s)``) reseeds copy b with ``s + b`` at the next
+reset.
+
+Episodes end by truncation at the scenario's horizon: finished copies are
+reset automatically, and their sub-envs' infos carry ``terminal_observation``
+and ``TimeLimit.truncated = True`` so that SB3 bootstraps the value of the
+last observation.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
+
+from coloc_env.config import build_config
+from coloc_env.rendering import Renderer
+from coloc_env.scenarios.base import Scenario
+
+
+class CoLocVecEnv(VecEnv):
+    """B copies x N agents of ``scenario_cls`` as ``B * N`` SB3 sub-envs."""
+
+    def __init__(self, scenario_cls: type[Scenario], num_envs: int, seed: int | None = None,
+                 render_mode: str | None = None, **config):
+        if not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
+            raise ValueError(f"num_envs must be a positive integer (copies of the scenario), got {num_envs!r}")
+        self.scenario = scenario_cls(build_config(scenario_cls.Config, config), batch=int(num_envs))
+        self.num_copies = int(num_envs)
+        self.num_agents = self.scenario.num_agents
+        self.render_mode = render_mode
+        self._renderer = Renderer(render_mode)
+        super().__init__(self.num_copies * self.num_agents, self.scenario.observation_space(),
+                         self.scenario.action_space())
+        self._rngs: list[np.random.Generator] | None = None
+        self._copy_seeds: list[int] | None = None
+        self.seed(seed)
+        self._actions: np.ndarray | None = None
+
+    # --- seeding and reset ---------------------------------------------------
+    def seed(self, seed: int | None = None) -> Sequence[int | None]:
+        """Copy b gets ``default_rng(seed + b)`` at the next reset; None draws fresh entropy."""
+        if seed is None:
+            self._copy_seeds = None
+            return [None] * self.num_copies
+        self._copy_seeds = [int(seed) + b for b in range(self.num_copies)]
+        return list(self._copy_seeds)
+
+    def reset(self) -> np.ndarray:
+        if self._copy_seeds is not None or self._rngs is None:
+            seeds = self._copy_seeds or [None] * self.num_copies
+            self._rngs = [np.random.default_rng(s) for s in seeds]
+            self._copy_seeds = None
+        self.scenario.reset(self._rngs)
+        self.reset_infos = [{} for _ in range(self.num_envs)]
+        return self._flat_observation()
+
+    def _flat_observation(self) -> np.ndarray:
+        obs = self.scenario.observation()
+        return obs.reshape(self.num_envs, *obs.shape[2:])
+
+    # --- stepping ------------------------------------------------------------
+    def step_async(self, actions: np.ndarray) -> None:
+        self._actions = actions
+
+    def step_wait(self):
+        actions = np.asarray(self._actions)
+        shape = self.action_space.shape
+        self.scenario.step(actions.reshape(self.num_copies, self.num_agents, *shape))
+        observation = self._flat_observation()
+        rewards = self.scenario.reward().reshape(self.num_envs).astype(np.float32)
+        done_copies = self.scenario.done()
+        dones = np.repeat(done_copies, self.num_agents)
+        infos: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
+        finished = np.flatnonzero(done_copies)
+        if len(finished):
+            for b in finished:
+                for i in range(self.num_agents):
+                    sub = b * self.num_agents + i
+                    infos[sub] = {"terminal_observation": observation[sub].copy(), "TimeLimit.truncated": True}
+            self.scenario.reset([self._rngs[b] for b in finished], env_index=finished)
+            fresh = self.scenario.observation()[finished]
+            observation = observation.reshape(self.num_copies, self.num_agents, *observation.shape[1:])
+            observation[finished] = fresh
+            observation = observation.reshape(self.num_envs, *observation.shape[2:])
+        return observation, rewards, dones, infos
+
+    # --- the rest of the VecEnv interface --------------------------------------
+    def close(self) -> None:
+        self._renderer.close()
+
+    def get_images(self) -> Sequence[np.ndarray | None]:
+        renderer = Renderer("rgb_array")
+        return [renderer.render(self.scenario.scene(b)) for b in range(self.num_copies)]
+
+    def render(self, mode: str | None = None) -> np.ndarray | None:
+        """Copy 0 through the shared renderer."""
+        if (mode or self.render_mode) is None:
+            return None
+        return Renderer(mode or self.render_mode).render(self.scenario.scene(0))
+
+    def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
+        value = getattr(self, attr_name) if hasattr(self, attr_name) else getattr(self.scenario, attr_name)
+        return [value for _ in self._get_indices(indices)]
+
+    def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
+        raise AttributeError(f"sub-envs of a batched scenario share their attributes; cannot set {attr_name!r}")
+
+    def env_method(self, method_name: str, *method_args, indices: VecEnvIndices = None, **method_kwargs) -> list[Any]:
+        result = getattr(self.scenario, method_name)(*method_args, **method_kwargs)
+        return [result for _ in self._get_indices(indices)]
+
+    def env_is_wrapped(self, wrapper_class, indices: VecEnvIndices = None) -> list[bool]:
+        return [False for _ in self._get_indices(indices)]
