@@ -165,9 +165,18 @@ def check_weights(weights: np.ndarray, atol: float = 1e-9) -> np.ndarray:
     return weights
 
 
+def _is_identity(matrix: np.ndarray) -> bool:
+    return matrix.ndim == 2 and matrix.shape[0] == matrix.shape[1] and np.array_equal(matrix, np.eye(len(matrix)))
+
+
 def _sandwich(left: np.ndarray, middle: np.ndarray, right: np.ndarray) -> np.ndarray:
-    """left @ middle @ right^T over stacks (matmul: much faster than a 3-operand einsum)."""
-    return left @ middle @ np.swapaxes(right, -1, -2)
+    """left @ middle @ right^T over stacks (matmul: much faster than a 3-operand einsum).
+
+    An identity factor (the paper's A = C = I) is skipped: multiplying by it
+    changes no bit, and these products dominate the step at large batch.
+    """
+    product = middle if _is_identity(left) else left @ middle
+    return product if _is_identity(right) else product @ np.swapaxes(right, -1, -2)
 
 
 def _innovation_covariance(model: FusionModel, bound: np.ndarray) -> np.ndarray:
@@ -176,14 +185,15 @@ def _innovation_covariance(model: FusionModel, bound: np.ndarray) -> np.ndarray:
     return _sandwich(C, bound, C) + 0.5 * model.measurement_noise
 
 
-def gains(model: FusionModel, bound: np.ndarray) -> np.ndarray:
+def gains(model: FusionModel, bound: np.ndarray, innovation: np.ndarray | None = None) -> np.ndarray:
     """Suboptimal gains of eq. (18): L_j = A M_j C^T (C M_j C^T + V_j/2)^-1.
 
     Returns an array of shape (..., N, n, m). Solved as S L^T = C M A^T
-    (S symmetric) rather than by forming an inverse.
+    (S symmetric) rather than by forming an inverse. ``innovation`` may pass
+    S_j = C M_j C^T + V_j/2 when the caller has it.
     """
     A, C = model.transition, model.measurement
-    S = _innovation_covariance(model, bound)
+    S = _innovation_covariance(model, bound) if innovation is None else innovation
     return np.swapaxes(np.linalg.solve(S, _sandwich(C, bound, A)), -1, -2)
 
 
@@ -192,8 +202,8 @@ def intermediate_estimates(
 ) -> np.ndarray:
     """lambda_j = A xhat_j + B + L_j (y_j - C xhat_j), eq. (4) with the drift."""
     A, C = model.transition, model.measurement
-    innovation = measurements - estimate @ C.T
-    return estimate @ A.T + model.drift + (gain @ innovation[..., None])[..., 0]
+    innovation = measurements - (estimate if _is_identity(C) else estimate @ C.T)
+    return (estimate if _is_identity(A) else estimate @ A.T) + model.drift + (gain @ innovation[..., None])[..., 0]
 
 
 def fuse(
@@ -212,18 +222,18 @@ def fuse(
 
 def bound_step(
     model: FusionModel, bound: np.ndarray, selection: np.ndarray, weights: np.ndarray,
-    gain: np.ndarray | None = None,
+    gain: np.ndarray | None = None, innovation: np.ndarray | None = None,
 ) -> np.ndarray:
     """The bound recursion (19), M_i(k+1) from M(k), with the optimal gains (18) inside.
 
-    ``gain`` may pass the gains of eq. (18) for ``bound`` if already computed:
-    then A M_j C^T S_j^-1 C M_j A^T = L_j S_j L_j^T needs no second solve.
-    With diagonal T, T X T = X * (s s^T), which is how the products are formed.
+    ``gain`` (and ``innovation`` S_j) may pass what eq. (18) computed for
+    ``bound``: then A M_j C^T S_j^-1 C M_j A^T = L_j S_j L_j^T needs no second
+    solve. With diagonal T, T X T = X * (s s^T), which is how the products are formed.
     """
     A = model.transition
-    S = _innovation_covariance(model, bound)
+    S = _innovation_covariance(model, bound) if innovation is None else innovation
     if gain is None:
-        gain = gains(model, bound)
+        gain = gains(model, bound, S)
     AMA = _sandwich(A, bound, A)
     corrected = AMA - _sandwich(gain, S, gain)  # A M_j A^T - A M_j C^T S_j^-1 C M_j A^T
     sel = selection.astype(float)
@@ -251,7 +261,7 @@ def error_transition(
     A, C = model.transition, model.measurement
     N, n, m = model.num_nodes, model.state_dim, model.measurement_dim
     sel = selection.astype(float)
-    closed_loop = A - gain @ C  # A - L_j C
+    closed_loop = A - (gain if _is_identity(C) else gain @ C)  # A - L_j C
     blocks = weights[..., :, :, None, None] * sel[..., :, :, :, None] * closed_loop[..., None, :, :, :]
     own = np.einsum("...ij,...ijc->...ic", weights, 1.0 - sel)[..., :, :, None] * A  # sum_j p_ij Tbar_ji A
     idx = np.arange(N)
@@ -327,10 +337,11 @@ def step(
 
     ``measurements`` has shape (..., N, m): y_j(k) of every node.
     """
-    gain = gains(model, state.bound)
+    innovation = _innovation_covariance(model, state.bound)
+    gain = gains(model, state.bound, innovation)
     intermediate = intermediate_estimates(model, state.estimate, measurements, gain)
     estimate = fuse(model, state.estimate, intermediate, selection, weights)
-    bound = bound_step(model, state.bound, selection, weights, gain)
+    bound = bound_step(model, state.bound, selection, weights, gain, innovation)
     error_cov = None
     if state.error_cov is not None:
         error_cov = exact_covariance_step(model, state.error_cov, gain, selection, weights)
@@ -367,9 +378,10 @@ def expected_cost(
     for k in range(horizon):
         sel_k = selection[k] if time_varying else selection
         w_k = weights[k] if time_varying else weights
-        gain = gains(model, state.bound)
+        innovation = _innovation_covariance(model, state.bound)
+        gain = gains(model, state.bound, innovation)
         state.error_cov = exact_covariance_step(model, state.error_cov, gain, sel_k, w_k)
-        state.bound = bound_step(model, state.bound, sel_k, w_k, gain)
+        state.bound = bound_step(model, state.bound, sel_k, w_k, gain, innovation)
         exact.append(node_traces(state.error_cov, N))
         bound.append(np.trace(state.bound, axis1=-2, axis2=-1))
     return np.stack(exact), np.stack(bound)

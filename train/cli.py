@@ -61,6 +61,7 @@ def build_parser() -> argparse.ArgumentParser:
     be = sub.add_parser("bench", help="throughput of estimators and envs")
     be.add_argument("--quick", action="store_true")
     be.add_argument("--out", default="results")
+    be.add_argument("--scenarios", nargs="+", default=None, help="only these scenarios (default: all)")
     return parser
 
 
@@ -120,9 +121,12 @@ def cmd_evaluate(args) -> int:
 
 
 def cmd_bench(args) -> int:
+    import coloc_env
     from train.bench import run
 
-    run(args.out, quick=args.quick)
+    for name in args.scenarios or []:
+        coloc_env.scenario_class(name)
+    run(args.out, quick=args.quick, scenarios=args.scenarios)
     return 0
 
 

@@ -12,21 +12,35 @@ from tests.conftest import random_selection, random_weights
 M0 = np.diag([0.19, 0.09, 0.08])
 
 
+def general_model():
+    """Non-identity A and a 2x3 C with per-node V, so the identity fast paths are not taken."""
+    A = np.array([[0.95, 0.1, 0.0], [-0.05, 1.0, 0.02], [0.0, 0.03, 0.9]])
+    C = np.array([[1.0, 0.2, 0.0], [0.0, 0.5, 1.0]])
+    V = np.stack([np.array([[0.03, 0.01], [0.01, 0.05]]) * (1 + 0.3 * j) for j in range(4)])
+    return bf.FusionModel(A, np.array([0.5, -0.2, 0.1]), C, np.diag([0.02, 0.05, 0.03]), V)
+
+
+@pytest.fixture(params=["paper", "general"])
+def any_model(request, paper_model):
+    return paper_model if request.param == "paper" else general_model()
+
+
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(seed=st.integers(0, 2**32 - 1))
-def test_realized_errors_follow_corrected_eq11(paper_model, seed):
-    """e(k+1) = F e(k) + G [w; v] holds to 1e-12 for the actual estimates (any T, any p)."""
+def test_realized_errors_follow_corrected_eq11(any_model, seed):
+    """e(k+1) = F e(k) + G [w; v] holds to 1e-12 for the actual estimates (any T, any p, any A, C)."""
     rng = np.random.default_rng(seed)
-    N, n = 4, 3
+    model = any_model
+    N, n, m = 4, 3, model.measurement_dim
     selection, weights = random_selection(rng), random_weights(rng)
-    state = bf.initial_state(paper_model, np.full(n, 10.0), M0)
+    state = bf.initial_state(model, np.full(n, 10.0), M0)
     x = np.full(n, 10.0) + rng.normal(size=n)
     for _ in range(6):
-        v, w = rng.normal(size=(N, n)) * 0.2, rng.normal(size=n) * 0.2
-        F, G = bf.error_transition(paper_model, bf.gains(paper_model, state.bound), selection, weights)
+        v, w = rng.normal(size=(N, m)) * 0.2, rng.normal(size=n) * 0.2
+        F, G = bf.error_transition(model, bf.gains(model, state.bound), selection, weights)
         e = (x - state.estimate).ravel()
-        state = bf.step(paper_model, state, x + v, selection, weights)
-        x = x + paper_model.drift + w
+        state = bf.step(model, state, x @ model.measurement.T + v, selection, weights)
+        x = model.transition @ x + model.drift + w
         predicted = F @ e + G @ np.concatenate([w, v.ravel()])
         np.testing.assert_allclose(predicted, (x - state.estimate).ravel(), atol=1e-12)
 
@@ -61,22 +75,22 @@ def eq15(model, M, L, selection, weights):
             T = np.diag(selection[i, j].astype(float))
             Tb = np.eye(3) - T
             K = A - L[j] @ C
-            Mi += 2 * weights[i, j] * (T @ K @ M[j] @ K.T @ T.T + Tb @ A @ M[i] @ A.T @ Tb.T)
-            Mi += weights[i, j] * T @ L[j] @ model.measurement_noise[j] @ L[j].T @ T.T
+            Mi = Mi + 2 * weights[i, j] * (T @ K @ M[j] @ K.T @ T.T + Tb @ A @ M[i] @ A.T @ Tb.T)
+            Mi = Mi + weights[i, j] * T @ L[j] @ model.measurement_noise[j] @ L[j].T @ T.T
         out.append(Mi)
     return np.stack(out)
 
 
-def test_gain18_and_recursion19_minimize_eq15(paper_model):
+def test_gain18_and_recursion19_minimize_eq15(any_model):
     rng = np.random.default_rng(2)
     selection, weights = paper_selection("T3"), paper_weights("P3")
     M = np.stack([M0 * (1 + i) for i in range(4)])
-    L = bf.gains(paper_model, M)
-    at_optimum = eq15(paper_model, M, L, selection, weights)
-    np.testing.assert_allclose(bf.bound_step(paper_model, M, selection, weights), at_optimum, atol=1e-12)
+    L = bf.gains(any_model, M)
+    at_optimum = eq15(any_model, M, L, selection, weights)
+    np.testing.assert_allclose(bf.bound_step(any_model, M, selection, weights), at_optimum, atol=1e-12)
     for _ in range(20):
         perturbed = L + 0.05 * rng.normal(size=L.shape)
-        assert np.trace(eq15(paper_model, M, perturbed, selection, weights), axis1=1, axis2=2).sum() > \
+        assert np.trace(eq15(any_model, M, perturbed, selection, weights), axis1=1, axis2=2).sum() > \
             np.trace(at_optimum, axis1=1, axis2=2).sum()
 
 
@@ -92,10 +106,10 @@ def test_bound_dominates_exact_covariance(paper_model, pair):
         assert np.linalg.eigvalsh(gap).min() >= -1e-9 * np.abs(state.bound).max()
 
 
-def test_exact_cost_matches_monte_carlo_within_3_percent(paper_model):
+def test_exact_cost_matches_monte_carlo_within_3_percent(any_model):
     selection, weights = paper_selection("T1"), paper_weights("P1")
-    exact, bound = bf.expected_cost(paper_model, M0, selection, weights, 50)
-    sim = bf.simulate(paper_model, np.full(3, 10.0), M0, selection, weights, 50, np.random.default_rng(0), runs=500)
+    exact, bound = bf.expected_cost(any_model, M0, selection, weights, 50)
+    sim = bf.simulate(any_model, np.full(3, 10.0), M0, selection, weights, 50, np.random.default_rng(0), runs=500)
     mc = sim["squared_error"].sum(axis=(0, 2)).mean()
     assert abs(mc / exact.sum() - 1) < 0.03
     # the per-step, per-node traces too, where Monte Carlo has 500 samples of a 3-d error
@@ -104,7 +118,8 @@ def test_exact_cost_matches_monte_carlo_within_3_percent(paper_model):
     assert np.all(bound.sum() >= exact.sum())
 
 
-def test_batch_axis_equals_per_copy_steps(paper_model):
+def test_batch_axis_equals_per_copy_steps(any_model):
+    paper_model = any_model
     rng = np.random.default_rng(3)
     B = 5
     selections = np.stack([random_selection(rng) for _ in range(B)])
@@ -112,7 +127,7 @@ def test_batch_axis_equals_per_copy_steps(paper_model):
     batched = bf.initial_state(paper_model, np.full(3, 10.0), M0, (B,))
     singles = [bf.initial_state(paper_model, np.full(3, 10.0), M0) for _ in range(B)]
     for _ in range(4):
-        y = rng.normal(size=(B, 4, 3)) + 10
+        y = rng.normal(size=(B, 4, paper_model.measurement_dim)) + 10
         batched = bf.step(paper_model, batched, y, selections, weights)
         singles = [bf.step(paper_model, s, y[b], selections[b], weights[b]) for b, s in enumerate(singles)]
     for b in range(B):

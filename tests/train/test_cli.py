@@ -59,10 +59,14 @@ def test_evaluate_paper_matches_the_exact_cost():
 
 
 def test_bench_quick_runs_and_writes_json(tmp_path):
-    assert main(["bench", "--quick", "--out", str(tmp_path)]) == 0
+    assert main(["bench", "--quick", "--scenarios", "bandwidth_fusion", "--out", str(tmp_path)]) == 0
     rows = read_json(str(tmp_path / "bench" / "bench.json"))["rows"]
-    assert {r["batch"] for r in rows} == {1, 1024}
-    assert all(r["steps_per_s"] > 0 for r in rows)
+    ours = [r for r in rows if r["scenario"] == "bandwidth_fusion"]
+    assert {r["what"] for r in ours} == {"parallel_env loop", "supersuit concat_vec_envs_v1", "vector_env",
+                                         "estimator step"}
+    assert {r["batch"] for r in ours if r["what"] == "vector_env"} == {1, 64, 1024}
+    assert all(r["env_steps_per_s"] > 0 and r["agent_steps_per_s"] == 4 * r["env_steps_per_s"] for r in ours)
+    assert (tmp_path / "bench" / "throughput.png").stat().st_size > 1000
 
 
 def test_cli_errors_are_clear(capsys):
