@@ -80,6 +80,7 @@ def make_vec_env(scenario: str, copies: int, env_config: dict, seed: int, vec: s
 def train(scenario: str, timesteps: int, seed: int, out: str, vec: str = "native",
           progress_bar: bool = True, tensorboard: bool = False) -> str:
     """Train and save ``out/<scenario>/seed<S>/model.zip`` (+ ``model.json``); returns the model path."""
+    import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import VecMonitor
 
@@ -94,11 +95,18 @@ def train(scenario: str, timesteps: int, seed: int, out: str, vec: str = "native
     venv = VecMonitor(make_vec_env(scenario, copies, env_config, seed, vec))
     folder = os.path.join(out, scenario, f"seed{seed}")
     os.makedirs(folder, exist_ok=True)
-    set_random_seed(seed)
-    model = PPO("MlpPolicy", venv, device="cpu", verbose=0,
-                tensorboard_log=os.path.join(folder, "tb") if tensorboard else None, **hyper)
-    model.action_space.seed(seed)
-    model.learn(total_timesteps=timesteps, progress_bar=progress_bar)
+    # One torch thread: a Ray worker runs with one, and a different thread count changes the
+    # reduction order of the matmuls, so the same seed would give different weights there.
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        set_random_seed(seed)
+        model = PPO("MlpPolicy", venv, device="cpu", verbose=0,
+                    tensorboard_log=os.path.join(folder, "tb") if tensorboard else None, **hyper)
+        model.action_space.seed(seed)
+        model.learn(total_timesteps=timesteps, progress_bar=progress_bar)
+    finally:
+        torch.set_num_threads(threads)
     path = os.path.join(folder, "model.zip")
     tmp = os.path.join(folder, ".tmp-model.zip")
     model.save(tmp)

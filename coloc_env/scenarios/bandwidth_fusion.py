@@ -64,6 +64,10 @@ Termination: none; truncation after ``horizon`` steps (the paper's 50).
 scenario uses for what ``coloc evaluate`` reports as communication),
 ``weights`` (the node's row p_i., absolute order), ``step``.
 
+Batching: every step of B copies is one set of numpy calls (stacked matmul
+and solve); the only per-copy loop is at reset, where each copy draws its
+whole episode's noise from its own generator.
+
 Arguments (fields of :class:`BandwidthFusionConfig`, defaults = the paper)
 ------------------------------------------------------------------------
 | field               | default                  | allowed                                   |

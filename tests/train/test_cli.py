@@ -92,21 +92,36 @@ def test_atomic_write_keeps_the_old_file_on_failure(tmp_path):
     assert os.listdir(tmp_path) == ["m.json"]
 
 
-def test_ray_executor_equals_local():
-    pytest.importorskip("ray")
+def test_ray_executor_equals_local(tmp_path):
+    ray = pytest.importorskip("ray")
+    import torch
+    from stable_baselines3 import PPO
+
     from coloc_env.config import build_config
     from coloc_env.scenarios.bandwidth_fusion import BandwidthFusionConfig
     from train.executor import map_tasks
     from train.reproduce.zhao2020 import PAIRS, monte_carlo_block
+    from train.training import train
 
     config = build_config(BandwidthFusionConfig, {"horizon": 10})
-    items = [(pair, 20, 3, config) for pair in PAIRS[:2]]
-    local = map_tasks(monte_carlo_block, items, "local")
-    remote = map_tasks(monte_carlo_block, items, "ray")
+    blocks = [(pair, 20, 3, config) for pair in PAIRS[:2]]
+    jobs = [("bandwidth_fusion", 256, seed, str(tmp_path / executor), "native", False, False)
+            for executor in ("local", "ray") for seed in (5,)]
+    local = map_tasks(monte_carlo_block, blocks, "local")
+    local_model = map_tasks(train, jobs[:1], "local")[0]
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    try:
+        remote = map_tasks(monte_carlo_block, blocks, "ray")
+        remote_model = map_tasks(train, jobs[1:], "ray")[0]
+    finally:
+        ray.shutdown()
     for a, b in zip(local, remote, strict=True):
         np.testing.assert_array_equal(a["per_run_cost"], b["per_run_cost"])
+    weights_local = PPO.load(local_model, device="cpu").policy.state_dict()
+    weights_ray = PPO.load(remote_model, device="cpu").policy.state_dict()
+    assert all(torch.equal(weights_local[k], weights_ray[k]) for k in weights_local)
     with pytest.raises(ValueError, match="executor"):
-        map_tasks(monte_carlo_block, items, "dask")
+        map_tasks(monte_carlo_block, blocks, "dask")
 
 
 def test_native_and_supersuit_training_learn_the_same_weights(tmp_path):
