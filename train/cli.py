@@ -50,11 +50,16 @@ def build_parser() -> argparse.ArgumentParser:
                     help="native: coloc_env.vector_env (one batched numpy call); supersuit: SuperSuit's concat")
     tr.add_argument("--out", default="results/train")
     tr.add_argument("--executor", choices=["local", "ray"], default="local")
+    tr.add_argument("--address", default=None, help="Ray cluster address (default: a local Ray)")
     tr.add_argument("--tensorboard", action="store_true")
+    tr.add_argument("--curve-points", type=int, default=10, help="validation points of the learning curve (0: none)")
 
     ev = sub.add_parser("evaluate", help="evaluate a policy over seeded episodes")
     ev.add_argument("scenario")
-    ev.add_argument("--policy", default="paper", help="paper | random | greedy | oracle_* | PATH.zip")
+    ev.add_argument("--policy", default="paper",
+                    help="paper | random | greedy | oracle_* | PATH.zip | all (every named policy and the "
+                         "trained models under --models)")
+    ev.add_argument("--models", default="results/train", help="where --policy all looks for SCENARIO/seed*/model.zip")
     ev.add_argument("--episodes", type=_positive, default=100)
     ev.add_argument("--out", default="results")
 
@@ -79,7 +84,10 @@ def cmd_reproduce(args) -> int:
                                  progress=lambda msg, status=status, paper=paper: status.update(f"{paper}: {msg}"))
         console.print(f"[bold]{paper}[/bold]: wrote {os.path.join(args.out, paper)}/")
         for claim, holds in metrics.get("claims", {}).items():
-            console.print(f"  {claim}: {'holds' if holds else '[red]does not hold[/red]'}")
+            # claims may be grouped by setting (fu2017: per number of UAVs)
+            for name, value in (holds.items() if isinstance(holds, dict) else [(None, holds)]):
+                label = claim if name is None else f"{claim}.{name}"
+                console.print(f"  {label}: {'holds' if value else '[red]does not hold[/red]'}")
     return 0
 
 
@@ -90,11 +98,22 @@ def cmd_train(args) -> int:
 
     coloc_env.scenario_class(args.scenario)
     seeds = args.seeds or [0 if args.seed is None else args.seed]
-    jobs = [(args.scenario, args.timesteps, s, args.out, args.vec, args.executor == "local", args.tensorboard)
-            for s in seeds]
-    for path in map_tasks(train, jobs, args.executor):
-        print(f"saved {path}")
+    jobs = [(args.scenario, args.timesteps, s, args.out, args.vec, args.executor == "local", args.tensorboard,
+             args.curve_points) for s in seeds]
+    for path in map_tasks(train, jobs, args.executor, args.address):
+        print(f"saved {path} (learning curve beside it)")
     return 0
+
+
+def _policies_for(scenario: str, policy: str, models: str) -> list[str]:
+    import glob
+
+    import agents
+
+    if policy != "all":
+        return [policy]
+    found = sorted(glob.glob(os.path.join(models, scenario, "seed*", "model.zip")))
+    return agents.available_policies(scenario) + found
 
 
 def cmd_evaluate(args) -> int:
@@ -102,21 +121,23 @@ def cmd_evaluate(args) -> int:
     from rich.progress import Progress
 
     import coloc_env
-    from train.evaluate import run_episodes, save
+    from train.evaluate import run_episodes
+    from train.leaderboard import record
 
     scenarios = list(coloc_env.SCENARIOS) if args.scenario == "all" else [args.scenario]
     console = Console()
     for scenario in scenarios:
         coloc_env.scenario_class(scenario)
-        with Progress(console=console, transient=True) as bar:
-            task = bar.add_task(f"{scenario} / {args.policy}", total=args.episodes)
-            result = run_episodes(scenario, args.policy, args.episodes, progress=lambda task=task: bar.advance(task))
-        path = save(result, args.out, SCENARIO_TO_PAPER.get(scenario, scenario))
-        console.print(
-            f"{scenario} {args.policy}: mean realized cost {result['mean_cost']:.3f} "
-            f"+- {result['ci95']:.3f} (95 %, {args.episodes} episodes); with the k = 0 term "
-            f"{result['initial_cost']:.2f}: {result['paper_cost']:.3f}; "
-            f"communication {result['communication_per_step']:.2f} per step -> {path}")
+        for policy in _policies_for(scenario, args.policy, args.models):
+            with Progress(console=console, transient=True) as bar:
+                task = bar.add_task(f"{scenario} / {policy}", total=args.episodes)
+                result = run_episodes(scenario, policy, args.episodes, progress=lambda task=task: bar.advance(task))
+            path = record(result, args.out, SCENARIO_TO_PAPER.get(scenario, scenario))
+            console.print(
+                f"{scenario} {policy}: mean realized cost {result['mean_cost']:.3f} "
+                f"+- {result['ci95']:.3f} (95 %, {args.episodes} episodes); with the initial term "
+                f"{result['initial_cost']:.2f}: {result['paper_cost']:.3f}; "
+                f"communication {result['communication_per_step']:.2f} per step -> {path}")
     return 0
 
 

@@ -1,25 +1,50 @@
 """``coloc evaluate``: a policy's mean estimation error over seeded episodes, with a 95 % interval.
 
-Episodes use seeds EVAL_SEED_BASE + e (disjoint from training). The metric
-is the scenario's own: the sum over steps and agents of ``infos[agent]["error"]``;
-communication is the per-step sum over agents of ``infos[agent]["communication"]``
-(components, messages or hops, as the scenario counts it)
-(the realized squared error for bandwidth_fusion, whose paper cost J_50 adds
-the k = 0 term ``Scenario.initial_cost()``).
+Seeds (documented once, used everywhere):
+
+* training: seed S seeds the network and copy c of the training env with S + c
+  (small integers);
+* learning curves during training: VALIDATION_SEED_BASE + e;
+* ``coloc evaluate``: EVAL_SEED_BASE + e.
+
+The three ranges are disjoint, so no policy is evaluated on a training seed
+and nothing is tuned on the evaluation seeds.
+
+The metric is the scenario's own: the sum over steps and agents of
+``infos[agent]["error"]``; communication is the per-step sum over agents of
+``infos[agent]["communication"]`` (components, messages or hops, as the
+scenario counts it). ``paper_cost`` adds ``Scenario.initial_cost()``, the
+part of a paper's cost an episode does not contain (bandwidth_fusion's k = 0
+term).
 """
 
 from __future__ import annotations
 
-import os
-
 import numpy as np
 
-from train.io import read_json, write_json
-from train.training import EVAL_SEED_BASE
+EVAL_SEED_BASE = 10**6
+VALIDATION_SEED_BASE = 2 * 10**6
+
+
+def summarize(scenario, policy_name: str, costs, comms, seed_base: int, initial_cost: float) -> dict:
+    costs = np.asarray(costs, float)
+    half = 1.96 * costs.std(ddof=1) / np.sqrt(len(costs)) if len(costs) > 1 else float("nan")
+    return {
+        "scenario": scenario,
+        "policy": policy_name,
+        "episodes": len(costs),
+        "seed_base": seed_base,
+        "mean_cost": float(costs.mean()),
+        "ci95": float(half),
+        "paper_cost": float(costs.mean() + initial_cost),
+        "initial_cost": float(initial_cost),
+        "communication_per_step": float(np.mean(comms)),
+    }
 
 
 def run_episodes(scenario: str, policy_name: str, episodes: int, seed_base: int = EVAL_SEED_BASE,
                  progress=None, **env_config) -> dict:
+    """Any policy by name through the PettingZoo env, one episode per seed ``seed_base + e``."""
     import agents
     import coloc_env
 
@@ -40,26 +65,30 @@ def run_episodes(scenario: str, policy_name: str, episodes: int, seed_base: int 
         comms.append(comm / steps)
         if progress:
             progress()
-    costs = np.array(costs)
-    offset = env.scenario.initial_cost()
-    half = 1.96 * costs.std(ddof=1) / np.sqrt(len(costs))
-    return {
-        "scenario": scenario,
-        "policy": policy_name,
-        "episodes": episodes,
-        "seed_base": seed_base,
-        "mean_cost": float(costs.mean()),
-        "ci95": float(half),
-        "paper_cost": float(costs.mean() + offset),
-        "initial_cost": float(offset),
-        "communication_per_step": float(np.mean(comms)),
-    }
+    return summarize(scenario, policy_name, costs, comms, seed_base, env.scenario.initial_cost())
 
 
-def save(result: dict, out: str, key: str) -> str:
-    """Merge ``result`` into ``out/<key>/evaluation.json`` (atomic), keyed by policy."""
-    path = os.path.join(out, key, "evaluation.json")
-    table = read_json(path, default={})
-    table[result["policy"]] = result
-    write_json(path, table)
-    return path
+def run_model_batched(model, scenario: str, episodes: int, seed_base: int, **env_config) -> dict:
+    """An SB3 model on ``episodes`` copies of the batched core at once (copy e seeded ``seed_base + e``).
+
+    Steps the scenario core directly rather than the VecEnv, whose auto-reset
+    would discard the last step's infos. Deterministic actions.
+    """
+    import coloc_env
+    from coloc_env.config import build_config
+
+    cls = coloc_env.scenario_class(scenario)
+    core = cls(build_config(cls.Config, env_config), batch=episodes)
+    core.reset([np.random.default_rng(seed_base + e) for e in range(episodes)])
+    shape = core.action_space().shape
+    cost, comm, steps = np.zeros(episodes), np.zeros(episodes), 0
+    while not core.done().all():
+        observation = core.observation()
+        actions, _ = model.predict(observation.reshape(episodes * core.num_agents, *observation.shape[2:]),
+                                   deterministic=True)
+        core.step(np.asarray(actions, dtype=float).reshape(episodes, core.num_agents, *shape))
+        info = core.info()
+        cost += info["error"].sum(axis=-1)
+        comm += info["communication"].sum(axis=-1) if "communication" in info else 0.0
+        steps += 1
+    return summarize(scenario, "model", cost, comm / steps, seed_base, core.initial_cost())

@@ -1,9 +1,14 @@
 """``coloc train``: PPO with parameter sharing over a scenario's agents, read top to bottom.
 
 Training seeds: seed S seeds torch and numpy (network, sampling) and copy c
-of the environment with S + c, c < NUM_COPIES.
-Evaluation (``coloc evaluate``) uses episode seeds from EVAL_SEED_BASE = 10**6
-upward, which training never uses.
+of the environment with S + c, c < NUM_COPIES. Learning curves evaluate on
+the validation seeds and ``coloc evaluate`` on the evaluation seeds of
+:mod:`train.evaluate`; neither range overlaps the training seeds.
+
+Writes ``OUT/SCENARIO/seedS/``: ``model.zip`` (+ ``model.json``: scenario,
+config, spaces), ``checkpoint.zip`` (replaced atomically as training goes),
+``curve.json`` and ``learning_curve.png`` (validation error vs timesteps, the
+paper policy's level as a line).
 """
 
 from __future__ import annotations
@@ -12,9 +17,13 @@ import importlib
 import json
 import os
 
+import numpy as np
+
 from train.io import write_json
 
-EVAL_SEED_BASE = 10**6
+MAX_TRAINING_SEED = 10**5  # keeps S + c far below the validation and evaluation seed ranges
+CURVE_POINTS = 10
+CURVE_EPISODES = 16
 
 
 def _mark_truncation_wrapper():
@@ -77,9 +86,75 @@ def make_vec_env(scenario: str, copies: int, env_config: dict, seed: int, vec: s
     raise ValueError(f"vec must be 'native' or 'supersuit', got {vec!r}")
 
 
+def _callbacks(scenario: str, folder: str, timesteps: int, curve: list, points: int):
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    from train.evaluate import VALIDATION_SEED_BASE, run_model_batched
+
+    every = max(1, timesteps // max(points, 1))
+
+    class CheckpointAndCurve(BaseCallback):
+        """Every ``every`` timesteps: an atomic checkpoint and a validation point of the learning curve."""
+
+        def __init__(self):
+            super().__init__()
+            self.next_at = 0
+
+        def _on_step(self) -> bool:
+            if self.num_timesteps >= self.next_at:
+                self.next_at = self.num_timesteps + every
+                self._record()
+            return True
+
+        def _on_training_end(self) -> None:
+            if points and (not curve or curve[-1][0] != self.num_timesteps):
+                self._record()
+
+        def _record(self) -> None:
+            tmp = os.path.join(folder, ".tmp-checkpoint.zip")
+            self.model.save(tmp)
+            os.replace(tmp, os.path.join(folder, "checkpoint.zip"))
+            if points:
+                result = run_model_batched(self.model, scenario, CURVE_EPISODES, VALIDATION_SEED_BASE)
+                curve.append((int(self.num_timesteps), result["mean_cost"], result["ci95"]))
+
+    return CheckpointAndCurve()
+
+
+def write_learning_curve(folder: str, scenario: str, curve: list, title: str) -> None:
+    """``curve.json`` and ``learning_curve.png`` with the paper policy on the same validation seeds."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from train.evaluate import VALIDATION_SEED_BASE, run_episodes
+    from train.io import save_figure
+
+    paper = run_episodes(scenario, "paper", CURVE_EPISODES, VALIDATION_SEED_BASE)
+    write_json(os.path.join(folder, "curve.json"), {
+        "scenario": scenario, "validation_seed_base": VALIDATION_SEED_BASE, "episodes": CURVE_EPISODES,
+        "points": [{"timesteps": t, "mean_cost": c, "ci95": h} for t, c, h in curve],
+        "paper": {"mean_cost": paper["mean_cost"], "ci95": paper["ci95"]},
+    })
+    fig, ax = plt.subplots(figsize=(7, 4))
+    steps, costs, half = (np.array(v) for v in zip(*curve, strict=True))
+    ax.plot(steps, costs, "o-", label="trained policy (deterministic)")
+    ax.fill_between(steps, costs - half, costs + half, alpha=0.2)
+    ax.axhline(paper["mean_cost"], color="k", ls="--", label=f"paper policy ({paper['mean_cost']:.2f})")
+    ax.set_xlabel("timesteps (agent transitions)")
+    ax.set_ylabel("episode estimation error (scenario metric)")
+    ax.set_title(title, fontsize=10)
+    ax.legend()
+    save_figure(os.path.join(folder, "learning_curve.png"), fig)
+
+
 def train(scenario: str, timesteps: int, seed: int, out: str, vec: str = "native",
-          progress_bar: bool = True, tensorboard: bool = False) -> str:
-    """Train and save ``out/<scenario>/seed<S>/model.zip`` (+ ``model.json``); returns the model path."""
+          progress_bar: bool = True, tensorboard: bool = False, curve_points: int = CURVE_POINTS) -> str:
+    """Train and save ``out/<scenario>/seed<S>/model.zip`` (+ ``model.json``); returns the model path.
+
+    ``curve_points`` validation points make the learning curve (0: no curve, only checkpoints).
+    """
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import VecMonitor
@@ -88,6 +163,13 @@ def train(scenario: str, timesteps: int, seed: int, out: str, vec: str = "native
 
     if timesteps < 1:
         raise ValueError(f"timesteps must be >= 1, got {timesteps}")
+    if not 0 <= seed < MAX_TRAINING_SEED:
+        raise ValueError(f"seed must be in [0, {MAX_TRAINING_SEED}) (disjoint from evaluation seeds), got {seed}")
+    if tensorboard:
+        try:
+            import tensorboard as _  # noqa: F401
+        except ImportError as exc:
+            raise ValueError("--tensorboard needs the tensorboard package: pip install tensorboard") from exc
     hyper, env_config = load(scenario)
     copies = importlib.import_module(f"train.hyperparams.{scenario}").NUM_COPIES
     from stable_baselines3.common.utils import set_random_seed
@@ -104,7 +186,9 @@ def train(scenario: str, timesteps: int, seed: int, out: str, vec: str = "native
         model = PPO("MlpPolicy", venv, device="cpu", verbose=0,
                     tensorboard_log=os.path.join(folder, "tb") if tensorboard else None, **hyper)
         model.action_space.seed(seed)
-        model.learn(total_timesteps=timesteps, progress_bar=progress_bar)
+        curve: list = []
+        model.learn(total_timesteps=timesteps, progress_bar=progress_bar,
+                    callback=_callbacks(scenario, folder, timesteps, curve, curve_points))
     finally:
         torch.set_num_threads(threads)
     path = os.path.join(folder, "model.zip")
@@ -114,6 +198,9 @@ def train(scenario: str, timesteps: int, seed: int, out: str, vec: str = "native
     write_json(os.path.join(folder, "model.json"), {
         "scenario": scenario, "seed": seed, "timesteps": timesteps, "env_config": env_config,
         "hyperparams": json.loads(json.dumps(hyper)), "vec": vec, "copies": copies,
+        "observation_space": repr(venv.observation_space), "action_space": repr(venv.action_space),
     })
     venv.close()
+    if curve:
+        write_learning_curve(folder, scenario, curve, f"{scenario}, seed {seed}: validation error vs timesteps")
     return path

@@ -36,12 +36,38 @@ def test_train_then_evaluate_a_saved_model(tmp_path, capsys):
     model = os.path.join(out, "bandwidth_fusion", "seed3", "model.zip")
     assert os.path.isfile(model)
     assert read_json(os.path.join(out, "bandwidth_fusion", "seed3", "model.json"))["scenario"] == "bandwidth_fusion"
+    folder = os.path.join(out, "bandwidth_fusion", "seed3")
+    curve = read_json(os.path.join(folder, "curve.json"))
+    assert curve["points"][-1]["timesteps"] >= 512 and len(curve["points"]) >= 2
+    assert os.path.isfile(os.path.join(folder, "learning_curve.png"))
+    assert os.path.isfile(os.path.join(folder, "checkpoint.zip"))
     assert main(["evaluate", "bandwidth_fusion", "--policy", model, "--episodes", "3", "--out", out]) == 0
     assert main(["evaluate", "bandwidth_fusion", "--policy", "paper", "--episodes", "3", "--out", out]) == 0
-    table = read_json(os.path.join(out, "zhao2020", "evaluation.json"))
+    table = read_json(os.path.join(out, "zhao2020", "leaderboard.json"))
     assert set(table) == {model, "paper"}
     assert table["paper"]["paper_cost"] == pytest.approx(table["paper"]["mean_cost"] + 1.44, abs=1e-12)
     assert "mean realized cost" in capsys.readouterr().out
+    summary = (tmp_path / "leaderboard.md").read_text()
+    assert "## zhao2020 (`bandwidth_fusion`)" in summary and "trained (mean of 1 seed)" in summary
+    assert (tmp_path / "zhao2020" / "leaderboard.png").stat().st_size > 1000
+
+
+def test_batched_model_evaluation_equals_the_env_loop(tmp_path):
+    """run_model_batched (copies of the core) gives the parallel env's episode costs on the same seeds."""
+    from stable_baselines3 import PPO
+
+    import agents
+    import coloc_env
+    from train.evaluate import run_episodes, run_model_batched
+    from train.training import train
+
+    path = train("bandwidth_fusion", timesteps=256, seed=1, out=str(tmp_path), progress_bar=False, curve_points=0)
+    batched = run_model_batched(PPO.load(path, device="cpu"), "bandwidth_fusion", 4, seed_base=77)
+    looped = run_episodes("bandwidth_fusion", path, 4, seed_base=77)
+    assert batched["mean_cost"] == pytest.approx(looped["mean_cost"], rel=1e-6)
+    assert batched["communication_per_step"] == looped["communication_per_step"]
+    assert agents.available_policies("bandwidth_fusion")[0] == "random"
+    assert coloc_env.SCENARIOS
 
 
 def test_evaluate_paper_matches_the_exact_cost():
@@ -105,7 +131,7 @@ def test_ray_executor_equals_local(tmp_path):
 
     config = build_config(BandwidthFusionConfig, {"horizon": 10})
     blocks = [(pair, 20, 3, config) for pair in PAIRS[:2]]
-    jobs = [("bandwidth_fusion", 256, seed, str(tmp_path / executor), "native", False, False)
+    jobs = [("bandwidth_fusion", 256, seed, str(tmp_path / executor), "native", False, False, 0)
             for executor in ("local", "ray") for seed in (5,)]
     local = map_tasks(monte_carlo_block, blocks, "local")
     local_model = map_tasks(train, jobs[:1], "local")[0]
@@ -130,7 +156,8 @@ def test_native_and_supersuit_training_learn_the_same_weights(tmp_path):
 
     from train.training import train
 
-    paths = [train("bandwidth_fusion", timesteps=256, seed=4, out=str(tmp_path / vec), vec=vec, progress_bar=False)
+    paths = [train("bandwidth_fusion", timesteps=256, seed=4, out=str(tmp_path / vec), vec=vec, progress_bar=False,
+                   curve_points=0)
              for vec in ("native", "supersuit")]
     native, supersuit = (PPO.load(p, device="cpu").policy.state_dict() for p in paths)
     assert native.keys() == supersuit.keys()

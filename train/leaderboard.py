@@ -1,0 +1,89 @@
+"""Leaderboards: one table per paper (``OUT/<key>/leaderboard.json`` + a PNG bar chart) and
+``OUT/leaderboard.md`` gathering every scenario evaluated so far.
+
+Each row is one policy evaluated by ``coloc evaluate`` on the evaluation
+seeds. Trained models (policies given as a ``.zip`` path) are also summarized
+as one "trained" row: the mean over training seeds of their mean errors.
+"""
+
+from __future__ import annotations
+
+import glob
+import os
+
+import numpy as np
+
+from train.io import read_json, save_figure, write_json, write_text
+
+
+def record(result: dict, out: str, key: str) -> str:
+    """Merge ``result`` into ``out/<key>/leaderboard.json`` (keyed by policy), redraw its chart and the summary."""
+    path = os.path.join(out, key, "leaderboard.json")
+    table = read_json(path, default={})
+    table[result["policy"]] = result
+    write_json(path, table)
+    bar_chart(table, os.path.join(out, key, "leaderboard.png"), key)
+    write_text(os.path.join(out, "leaderboard.md"), markdown(out))
+    return path
+
+
+def _trained_summary(table: dict) -> dict | None:
+    models = [r for name, r in table.items() if name.endswith(".zip")]
+    if not models:
+        return None
+    means = np.array([r["mean_cost"] for r in models])
+    return {"policy": f"trained (mean of {len(models)} seed{'s' if len(models) > 1 else ''})",
+            "mean_cost": float(means.mean()), "ci95": float(np.mean([r["ci95"] for r in models])),
+            "paper_cost": float(np.mean([r["paper_cost"] for r in models])),
+            "communication_per_step": float(np.mean([r["communication_per_step"] for r in models])),
+            "episodes": models[0]["episodes"], "spread": (float(means.min()), float(means.max()))}
+
+
+def rows(table: dict) -> list[dict]:
+    """Named policies, each trained model, then the trained summary; best first within each group."""
+    named = sorted((r for n, r in table.items() if not n.endswith(".zip")), key=lambda r: r["mean_cost"])
+    models = sorted((r for n, r in table.items() if n.endswith(".zip")), key=lambda r: r["mean_cost"])
+    summary = _trained_summary(table)
+    return named + models + ([summary] if summary else [])
+
+
+def bar_chart(table: dict, path: str, key: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    entries = [r for r in rows(table) if not r["policy"].endswith(".zip")]
+    fig, ax = plt.subplots(figsize=(max(5, 1.3 * len(entries)), 4))
+    names = [r["policy"] for r in entries]
+    ax.bar(range(len(entries)), [r["mean_cost"] for r in entries], yerr=[r["ci95"] for r in entries],
+           capsize=4, color=["tab:green" if n.startswith("trained") else "tab:blue" for n in names])
+    if "paper" in table:
+        ax.axhline(table["paper"]["mean_cost"], color="k", ls="--", lw=1, label="paper")
+        ax.legend()
+    ax.set_xticks(range(len(entries)), names, rotation=20, ha="right", fontsize=8)
+    ax.set_ylabel("mean episode error (95 % CI)")
+    ax.set_title(f"{key}: policies on the evaluation seeds", fontsize=10)
+    save_figure(path, fig)
+
+
+def markdown(out: str) -> str:
+    lines = ["# Leaderboard", "",
+             "Mean episode estimation error (each scenario's own metric, lower is better) with its 95 % "
+             "interval over the evaluation seeds, and communication per step as the scenario counts it. "
+             "Written by `coloc evaluate`.", ""]
+    for path in sorted(glob.glob(os.path.join(out, "*", "leaderboard.json"))):
+        key = os.path.basename(os.path.dirname(path))
+        table = read_json(path)
+        scenario = next(iter(table.values()))["scenario"]
+        paper = table.get("paper")
+        lines += [f"## {key} (`{scenario}`)", "",
+                  "| policy | mean error | 95 % CI | vs paper | paper's cost | communication / step | episodes |",
+                  "|---|---|---|---|---|---|---|"]
+        for r in rows(table):
+            versus = f"{100 * (r['mean_cost'] / paper['mean_cost'] - 1):+.1f} %" if paper else ""
+            name = r["policy"] + (f" (seeds {r['spread'][0]:.3f}..{r['spread'][1]:.3f})" if "spread" in r else "")
+            lines.append(f"| {name} | {r['mean_cost']:.4g} | ±{r['ci95']:.3g} | {versus} | {r['paper_cost']:.4g} | "
+                         f"{r['communication_per_step']:.3g} | {r['episodes']} |")
+        lines.append("")
+    return "\n".join(lines)
