@@ -10,8 +10,8 @@ Seeds (documented once, used everywhere):
 The three ranges are disjoint, so no policy is evaluated on a training seed
 and nothing is tuned on the evaluation seeds.
 
-The metric is the scenario's own: the sum over steps and agents of
-``infos[agent]["error"]``; communication is the per-step sum over agents of
+The metric is the scenario's own, ``Scenario.episode_error`` of every step's
+``infos[agent]["error"]`` (by default the sum over steps and agents); communication is the per-step sum over agents of
 ``infos[agent]["communication"]`` (components, messages or hops, as the
 scenario counts it). ``paper_cost`` adds ``Scenario.initial_cost()``, the
 part of a paper's cost an episode does not contain (bandwidth_fusion's k = 0
@@ -55,14 +55,13 @@ def run_episodes(scenario: str, policy_name: str, episodes: int, seed_base: int 
     costs, comms = [], []
     for e in range(episodes):
         observations, _ = env.reset(seed=seed_base + e)
-        cost, comm, steps = 0.0, 0.0, 0
+        errors, comm = [], 0.0
         while env.agents:
             observations, _, _, _, infos = env.step(policy.act(observations))
-            cost += sum(float(info["error"]) for info in infos.values())
+            errors.append([float(infos[a]["error"]) for a in env.possible_agents])
             comm += sum(float(info.get("communication", 0.0)) for info in infos.values())
-            steps += 1
-        costs.append(cost)
-        comms.append(comm / steps)
+        costs.append(float(env.scenario.episode_error(np.array(errors))))
+        comms.append(comm / len(errors))
         if progress:
             progress()
     return summarize(scenario, policy_name, costs, comms, seed_base, env.scenario.initial_cost())
@@ -81,14 +80,14 @@ def run_model_batched(model, scenario: str, episodes: int, seed_base: int, **env
     core = cls(build_config(cls.Config, env_config), batch=episodes)
     core.reset([np.random.default_rng(seed_base + e) for e in range(episodes)])
     shape = core.action_space().shape
-    cost, comm, steps = np.zeros(episodes), np.zeros(episodes), 0
+    errors, comm = [], np.zeros(episodes)
     while not core.done().all():
         observation = core.observation()
         actions, _ = model.predict(observation.reshape(episodes * core.num_agents, *observation.shape[2:]),
                                    deterministic=True)
         core.step(np.asarray(actions, dtype=float).reshape(episodes, core.num_agents, *shape))
         info = core.info()
-        cost += info["error"].sum(axis=-1)
+        errors.append(info["error"])
         comm += info["communication"].sum(axis=-1) if "communication" in info else 0.0
-        steps += 1
-    return summarize(scenario, "model", cost, comm / steps, seed_base, core.initial_cost())
+    cost = core.episode_error(np.stack(errors, axis=1))  # (episodes, T, N) -> (episodes,)
+    return summarize(scenario, "model", cost, comm / len(errors), seed_base, core.initial_cost())

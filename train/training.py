@@ -91,18 +91,23 @@ def _callbacks(scenario: str, folder: str, timesteps: int, curve: list, points: 
 
     from train.evaluate import VALIDATION_SEED_BASE, run_model_batched
 
-    every = max(1, timesteps // max(points, 1))
-
     class CheckpointAndCurve(BaseCallback):
-        """Every ``every`` timesteps: an atomic checkpoint and a validation point of the learning curve."""
+        """An atomic checkpoint and a validation point of the learning curve every
+        ``timesteps / points`` timesteps, and at most once per rollout (a budget smaller than one
+        rollout would otherwise record on every vectorized step)."""
 
         def __init__(self):
             super().__init__()
             self.next_at = 0
+            self.every = 1
+
+        def _on_training_start(self) -> None:
+            rollout = self.model.n_steps * self.model.get_env().num_envs
+            self.every = max(timesteps // max(points, 1), rollout)
 
         def _on_step(self) -> bool:
             if self.num_timesteps >= self.next_at:
-                self.next_at = self.num_timesteps + every
+                self.next_at = self.num_timesteps + self.every
                 self._record()
             return True
 

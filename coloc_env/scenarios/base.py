@@ -94,6 +94,16 @@ class Scenario(abc.ABC):
         contain but a paper's cost may (bandwidth_fusion's k = 0 term). 0 by default."""
         return 0.0
 
+    def episode_error(self, errors: np.ndarray) -> np.ndarray:
+        """The paper's metric of whole episodes from ``infos[agent]["error"]``.
+
+        ``errors`` has shape (..., T, N): every step's error of every agent.
+        Default: the sum over steps and agents, a cost like J_K. A scenario
+        whose paper averages over time, or whose estimate is shared by all
+        agents, overrides this (its docstring says which).
+        """
+        return np.asarray(errors, float).sum(axis=(-2, -1))
+
     # --- helpers for subclasses ----------------------------------------------
     def check_actions(self, actions) -> np.ndarray:
         """Actions as a float array (B, N, *shape); a NaN/inf or a wrong shape is a ValueError."""
