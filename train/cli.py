@@ -7,6 +7,7 @@ import os
 import sys
 
 PAPERS = {"zhao2020": "bandwidth_fusion"}
+          "wan2014": "gps_denied_nbp"}
 SCENARIO_TO_PAPER = {v: k for k, v in PAPERS.items()}
 
 
@@ -121,7 +122,7 @@ def cmd_evaluate(args) -> int:
     from rich.progress import Progress
 
     import coloc_env
-    from train.evaluate import run_episodes
+    from train.evaluate import evaluate_policy
     from train.leaderboard import record
 
     scenarios = list(coloc_env.SCENARIOS) if args.scenario == "all" else [args.scenario]
@@ -131,7 +132,8 @@ def cmd_evaluate(args) -> int:
         for policy in _policies_for(scenario, args.policy, args.models):
             with Progress(console=console, transient=True) as bar:
                 task = bar.add_task(f"{scenario} / {policy}", total=args.episodes)
-                result = run_episodes(scenario, policy, args.episodes, progress=lambda task=task: bar.advance(task))
+                result = evaluate_policy(scenario, policy, args.episodes,
+                                         progress=lambda task=task: bar.advance(task))
             path = record(result, args.out, SCENARIO_TO_PAPER.get(scenario, scenario))
             console.print(
                 f"{scenario} {policy}: mean realized cost {result['mean_cost']:.3f} "
