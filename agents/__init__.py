@@ -7,10 +7,13 @@
 
 from __future__ import annotations
 
-from agents import bandwidth_fusion
+import inspect
+
+from agents import bandwidth_fusion, lossy_fusion, relay_ukf
 from agents.base import FixedActionPolicy, Policy, RandomPolicy
 
-SCENARIO_POLICIES = {"bandwidth_fusion": bandwidth_fusion.POLICIES}
+SCENARIO_POLICIES = {"bandwidth_fusion": bandwidth_fusion.POLICIES, "lossy_fusion": lossy_fusion.POLICIES,
+                     "relay_ukf": relay_ukf.POLICIES}
 
 
 def available_policies(scenario: str) -> list[str]:
@@ -33,6 +36,8 @@ def make_policy(name: str, env, seed: int | None = None, **kwargs) -> Policy:
         raise ValueError(f"unknown policy {name!r} for {scenario}; available: {available_policies(scenario)} or a .zip")
     if variant:
         kwargs["tables"] = variant
+    if "seed" in inspect.signature(table[base]).parameters:  # stochastic scenario policies take their own seed
+        kwargs.setdefault("seed", seed)
     return table[base](env, **kwargs)
 
 

@@ -1,7 +1,9 @@
 """Scenario registry: one module per paper setting."""
 
 from coloc_env.scenarios.bandwidth_fusion import BandwidthFusionScenario
+from coloc_env.scenarios.lossy_fusion import LossyFusionScenario
+from coloc_env.scenarios.relay_ukf import RelayUKFScenario
 
-REGISTRY = {cls.name: cls for cls in (BandwidthFusionScenario,)}
+REGISTRY = {cls.name: cls for cls in (BandwidthFusionScenario, LossyFusionScenario, RelayUKFScenario)}
 
 __all__ = ["REGISTRY"]

@@ -1,0 +1,98 @@
+"""Policies for ``relay_ukf`` (wang2019).
+
+* ``paper``: the paper's choices (Sec. 4). The measuring platform ranges with a
+  partner drawn uniformly among the others (from the policy's own generator,
+  ``seed``); the location information then goes to the nearest platform not yet
+  reached, until every platform is reached (the paper's "closest neighbour"
+  topology). One relay choice per agent is enough: a chain is a path, so each
+  platform has at most one successor; the last one stops.
+* ``no_relay``: the same random partner, but the chain stops at the measured
+  platform: only m and n update (with the consistent cross-covariance update).
+
+Both read only the observations: the measuring flag and the distances.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from agents.base import Policy
+from coloc_env.scenarios.relay_ukf import DISTANCE_SCALE
+
+
+def random_partners(rng: np.random.Generator, measuring: np.ndarray, num_platforms: int) -> np.ndarray:
+    """A partner != m drawn uniformly for every copy (B,); one draw per copy, with or without a measurement."""
+    offset = rng.integers(1, num_platforms, size=np.shape(measuring))
+    return (np.maximum(measuring, 0) + offset) % num_platforms
+
+
+def nearest_chain_choices(distances: np.ndarray, measuring: np.ndarray, partner: np.ndarray) -> np.ndarray:
+    """Relay choices (B, N) of the chain m -> n -> nearest not yet reached -> ... (N = stop).
+
+    ``distances`` (B, N, N); ``measuring`` (B,) (-1: no measurement, every
+    platform stops); ``partner`` (B,). Ties go to the lower index.
+    """
+    distances = np.asarray(distances, float)
+    B, N = distances.shape[:2]
+    rows = np.arange(B)
+    choice = np.full((B, N), N)
+    has = measuring >= 0
+    source = np.maximum(measuring, 0)
+    reached = np.zeros((B, N), dtype=bool)
+    reached[rows, source] = True
+    reached[rows, partner] = True
+    choice[rows[has], source[has]] = partner[has]
+    holder = partner.copy()
+    for _ in range(N - 2):
+        candidate = np.where(reached, np.inf, distances[rows, holder])
+        nearest = np.argmin(candidate, axis=-1)
+        more = has & ~reached.all(axis=-1)
+        choice[rows[more], holder[more]] = nearest[more]
+        reached[rows[more], nearest[more]] = True
+        holder = np.where(more, nearest, holder)
+    return choice
+
+
+def paper_actions(distances: np.ndarray, measuring: np.ndarray, rng: np.random.Generator,
+                  relay: bool = True) -> np.ndarray:
+    """Actions (B, N, 2) int64 of the ``paper`` policy (``relay=False``: ``no_relay``) for a batch."""
+    B, N = np.shape(distances)[:2]
+    partner = random_partners(rng, measuring, N)
+    actions = np.empty((B, N, 2), dtype=np.int64)
+    actions[..., 0] = np.arange(N)  # nobody but m ranges
+    actions[np.arange(B), np.maximum(measuring, 0), 0] = np.where(measuring >= 0, partner, np.maximum(measuring, 0))
+    if relay:
+        actions[..., 1] = nearest_chain_choices(distances, measuring, partner)
+    else:
+        actions[..., 1] = N
+    return actions
+
+
+class PaperPolicy(Policy):
+    """Random partner, nearest-not-yet-reached relay until everyone is reached (Sec. 4)."""
+
+    relay = True
+
+    def __init__(self, env, seed: int | None = None):
+        super().__init__(env)
+        self.rng = np.random.default_rng(seed)
+
+    def act(self, observations):
+        order = list(self.env.possible_agents)
+        N = len(order)
+        obs = np.stack([np.asarray(observations[a], float) if a in observations else np.zeros(2 * N + 3)
+                        for a in order])
+        flags = obs[:, N]
+        measuring = np.array([int(np.argmax(flags)) if flags.max() > 0.5 else -1])
+        distances = (obs[:, N + 1:2 * N + 1] * DISTANCE_SCALE)[None]
+        actions = paper_actions(distances, measuring, self.rng, relay=self.relay)[0]
+        return {a: actions[order.index(a)] for a in observations}
+
+
+class NoRelayPolicy(PaperPolicy):
+    """Random partner; the chain stops at the measured platform."""
+
+    relay = False
+
+
+POLICIES = {"paper": PaperPolicy, "no_relay": NoRelayPolicy}

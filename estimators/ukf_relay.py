@@ -1,0 +1,383 @@
+"""UKF cooperative localization, centralized (UKF-CCL) and distributed over a relay chain (UKF-DCL).
+
+Wang L., Cui J., Kong D., Zhao L., "A distributed cooperative localization
+algorithm for mobile multi-platforms oriented to unpredicted communication
+topology", Transactions of Nanjing University of Aeronautics and
+Astronautics 36(2):224-231, 2019 (seed ``002_1a9a5ea84f86e0cc.txt``).
+
+N platforms in the plane; the state is the stacked position
+x = [x_1; ...; x_N] in R^{2N} with joint covariance P (2N x 2N).
+
+Time update (eq. 1, 3-4). Platform i integrates its odometry, the measured
+speed V_mi(k) and the heading phi_mi(k) (integrated from the measured turn
+rate):
+
+    xbar_i(k+1) = xhat_i(k) + dt V_mi(k) [cos phi_mi(k); sin phi_mi(k)],
+    Pbar_ii     = Phat_ii + Q_i(k),       Pbar_ij = Phat_ij (i != j).
+
+The position transition is the identity, so cross-covariances do not change
+and every platform predicts alone. Q_i(k) = dt^2 sigma_v^2 u u^T with
+u = [cos phi; sin phi] (the paper's speed noise) plus, optionally, the
+heading term below.
+
+Observation update with one range z = ||x_m - x_n|| + noise, R = sigma_r^2.
+
+UKF-CCL (eqs. 5-12, 17). The joint state is reordered so that the blocks
+of the measuring platform m and the measured platform n come first (eq. 17);
+A is the lower Cholesky factor of the reordered P, L = 2N, and the 2L + 1
+sigma points are
+
+    xi^(0) = x,  xi^(p) = x + sqrt(L + lambda) A[:, p],  xi^(p+L) = x - sqrt(L + lambda) A[:, p],
+    p = 1..L,   w_0 = lambda / (L + lambda),  w_p = 0.5 / (L + lambda).
+
+    zbar = sum_p w_p h(xi^(p)),  Pz = sum_p w_p (h(xi^(p)) - zbar)^2 + R,
+    Pxz  = sum_p w_p (xi^(p) - x)(h(xi^(p)) - zbar),
+    K = Pxz / Pz,  xhat = xbar + K (z - zbar),  Phat = Pbar - K Pz K^T.
+
+UKF-DCL (Sec. 3, Algorithms 1-2). The location information travels along a
+serial chain c_1 = m -> c_2 = n -> c_3 -> ...; it never revisits a platform.
+Receiver c_i holds its own row of covariance blocks P_{c_i, .} and gets from
+the message the row blocks A_j (j < i) of its up-neighbours:
+
+* look-up Cholesky (15)-(16): A_{i,<i}^T = A_{<i}^{-1} [P_{c_i c_1} ... P_{c_i c_{i-1}}]^T
+  (forward substitution), A_ii = chol(P_{c_i c_i} - A_{i,<i} A_{i,<i}^T);
+* m (c_1) forms A_11 = chol(P_mm) and sends it to n; n forms A_2 and returns
+  its sigma deviations; m evaluates h on the sigma points and packs the
+  source location information S_m = {z - zbar, h(xi^(p)) - zbar, Pz} (eq. 13);
+* each receiver's own sigma deviations (18), its update weight Pxz^i (20),
+  its estimate (21), and its covariance blocks with every up-neighbour
+  (22)-(23); it appends A_i and Pxz^i to the message and passes it on.
+
+With m and n first, only the first four columns of A move h: all sigma points
+beyond them leave z at h(xbar). A complete chain therefore gives exactly the
+CCL update (the tests check 1e-9).
+
+Truncated chains. When the chain stops before every platform (hop budget
+spent, link lost, a platform chose to stop), the reached set R updates and
+the unreached set U keeps its estimate (gain K_U = 0). The paper leaves
+P_RU unchanged; that is not the covariance of any estimator and P becomes
+indefinite within a few hundred steps (``truncation="paper"``, kept for
+comparison). By default (``truncation="consistent"``) the cross-covariances
+become the covariance of the gain [K_R; 0]:
+
+    P_RU <- P_RU - K_R P_zU,   P_zU = P_(mn),z^T P_(mn)^-1 P_(mn),U,
+
+which m and n compute from their own blocks (P_zU = g^T A_mn^-1 [P_mU; P_nU]
+with g = sqrt(L + lambda) w_p (dzeta_q)_{q<=4}) and carry in the message. It
+is exact for the UT with m, n ordered first, and equals the CCL update with
+the same gain (:func:`ccl_update` with ``reached``).
+
+Array conventions (a leading batch shape ``...`` is allowed everywhere):
+
+* ``estimate``   ``(..., N, 2)``   positions x_i
+* ``cov``        ``(..., 2N, 2N)`` joint covariance P, block (i, j) = P_ij
+* ``measuring``, ``measured`` ``(...)`` int: m, n
+* ``chain``      ``(..., N)`` int, platforms in relay order (c_1 = m, c_2 = n), padded with -1
+* ``chain_length`` ``(...)`` int >= 2, number of platforms reached
+
+Departures from the printed equations
+-------------------------------------
+* (5): the "-" sigma points use column p - 2N, not p - n.
+* (8): R is added once, not inside the sum over sigma points (the printed
+  form adds it 4N + 1 times).
+* (11) and (23): the covariance decreases, Phat = Pbar - K Pz K^T (printed with +
+  in (11)); (12) and (21) divide by Pz: K = Pxz Pz^-1.
+* (22): Delta P_ij = Pxz^i Pz^-1 (Pxz^j)^T; the printed Pxz^i Pz (Pxz^j)^T
+  misses the inverses K = Pxz Pz^-1 on both sides of Pz.
+* (18): only the "+" points are printed; the "-" points sit at p + 2N, and
+  the scale is sqrt(2N + lambda), not sqrt(n + lambda).
+* (20): the sum must run over the receiver's own columns too, p <= 2(|neigh^u_i| + 1),
+  and over the "-" points p + 2N: Pxz^i = sqrt(2N + lambda) w_p sum_q A_i[:, q] (dzeta_q - dzeta_{q+2N}).
+* lambda is not given in the paper; the default 0 (filterpy's JulierSigmaPoints
+  default) keeps every weight non-negative.
+* The paper's initial positions are known (P(0) = 0); a Cholesky factor of a
+  singular P does not exist, so callers start from a small P(0) (the scenario's
+  ``initial_position_std``).
+* Truncated chains: the consistent cross-covariance update above instead of
+  leaving P_RU unchanged (the paper's rule stays available).
+* Heading noise (optional, :func:`process_noise`): the paper's Q carries only
+  the speed noise, although the heading is integrated from a noisy turn rate.
+  With ``heading_var`` > 0 the displacement's first-order sensitivity to the
+  heading error adds dt^2 V_m^2 sigma_phi^2(k) n n^T, n = [-sin phi; cos phi],
+  sigma_phi^2(k) the variance of the integrated heading. This is an
+  approximation: the heading error is a random walk, so its effect on the
+  position is correlated in time, which a position-only white Q cannot
+  carry; it keeps the per-step marginal variance right.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = [
+    "ccl_update",
+    "dcl_update",
+    "process_noise",
+    "range_of",
+    "reorder_first",
+    "sigma_points",
+    "time_update",
+    "ukf_weights",
+]
+
+def ukf_weights(dim: int, lam: float) -> np.ndarray:
+    """Weights w_0 = lambda/(dim+lambda), w_p = 0.5/(dim+lambda) of the 2 dim + 1 sigma points."""
+    if dim + lam <= 0:
+        raise ValueError(f"lambda must be > -{dim} (dim + lambda > 0), got {lam}")
+    w = np.full(2 * dim + 1, 0.5 / (dim + lam))
+    w[0] = lam / (dim + lam)
+    return w
+
+
+def _cholesky(matrix: np.ndarray, what: str) -> np.ndarray:
+    try:
+        return np.linalg.cholesky(matrix)
+    except np.linalg.LinAlgError as exc:
+        smallest = np.linalg.eigvalsh(0.5 * (matrix + np.swapaxes(matrix, -1, -2))).min()
+        raise np.linalg.LinAlgError(
+            f"{what} is not positive definite (smallest eigenvalue {smallest:.3g}); "
+            "the covariance lost positive definiteness") from exc
+
+
+def _lower_solve(lower: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """lower^-1 rhs on stacks (np.linalg: scipy's triangular solver takes no batch axis)."""
+    return np.linalg.solve(lower, rhs)
+
+
+def range_of(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """h(x_a, x_b) = ||x_a - x_b|| over the last axis."""
+    return np.sqrt(np.sum((np.asarray(a) - np.asarray(b)) ** 2, axis=-1))
+
+
+def process_noise(speed: np.ndarray, heading: np.ndarray, dt: float, speed_var: float,
+                  heading_var: np.ndarray | float = 0.0) -> np.ndarray:
+    """Q_i(k), shape (..., N, 2, 2): dt^2 sigma_v^2 u u^T + dt^2 V_m^2 sigma_phi^2 n n^T."""
+    speed, heading = np.asarray(speed, float), np.asarray(heading, float)
+    along = np.stack([np.cos(heading), np.sin(heading)], axis=-1)
+    across = np.stack([-np.sin(heading), np.cos(heading)], axis=-1)
+    lateral = dt**2 * speed**2 * np.asarray(heading_var, float)
+    return (dt**2 * speed_var * along[..., :, None] * along[..., None, :]
+            + lateral[..., None, None] * across[..., :, None] * across[..., None, :])
+
+
+def time_update(estimate: np.ndarray, cov: np.ndarray | None, speed: np.ndarray, heading: np.ndarray,
+                dt: float, speed_var: float, heading_var: np.ndarray | float = 0.0):
+    """Eq. (1) for every platform; Pbar_ii = P_ii + Q_i, cross-covariances unchanged.
+
+    ``cov`` may be None (independent localization without a covariance).
+    Returns ``(estimate, cov)``, new arrays.
+    """
+    speed, heading = np.asarray(speed, float), np.asarray(heading, float)
+    step = dt * speed[..., None] * np.stack([np.cos(heading), np.sin(heading)], axis=-1)
+    estimate = np.asarray(estimate, float) + step
+    if cov is None:
+        return estimate, None
+    N = estimate.shape[-2]
+    Q = process_noise(speed, heading, dt, speed_var, heading_var)
+    cov = np.array(cov, dtype=float, copy=True)
+    for i in range(N):  # N diagonal blocks, each batched over copies
+        cov[..., 2 * i:2 * i + 2, 2 * i:2 * i + 2] += Q[..., i, :, :]
+    return estimate, cov
+
+
+def _block_index(platforms: np.ndarray) -> np.ndarray:
+    """State indices of the blocks of ``platforms`` (..., k) -> (..., 2k)."""
+    platforms = np.asarray(platforms)
+    return (2 * platforms[..., :, None] + np.arange(2)).reshape(*platforms.shape[:-1], -1)
+
+
+def reorder_first(num_platforms: int, measuring: np.ndarray, measured: np.ndarray) -> np.ndarray:
+    """Platform order [m, n, the others ascending], shape (..., N) (eq. 17)."""
+    measuring, measured = np.asarray(measuring), np.asarray(measured)
+    ids = np.broadcast_to(np.arange(num_platforms), (*measuring.shape, num_platforms))
+    rest = (ids != measuring[..., None]) & (ids != measured[..., None])
+    others = np.sort(np.where(rest, ids, num_platforms), axis=-1)[..., : num_platforms - 2]
+    return np.concatenate([measuring[..., None], measured[..., None], others], axis=-1)
+
+
+def sigma_points(mean: np.ndarray, cov: np.ndarray, lam: float) -> np.ndarray:
+    """The 2L + 1 sigma points of eq. (5) with the lower Cholesky factor, shape (..., 2L+1, L).
+
+    Point p (1 <= p <= L) is mean + sqrt(L + lambda) A[:, p-1]; point p + L the "-" one.
+    """
+    L = mean.shape[-1]
+    ukf_weights(L, lam)
+    columns = np.sqrt(L + lam) * np.swapaxes(_cholesky(cov, "the joint covariance"), -1, -2)
+    mean = mean[..., None, :]
+    return np.concatenate([mean, mean + columns, mean - columns], axis=-2)
+
+
+def _flatten_batch(*arrays, core_ndims):
+    batch = np.asarray(arrays[0]).shape[: np.ndim(arrays[0]) - core_ndims[0]]
+    flat = [np.asarray(a).reshape(-1, *np.shape(a)[np.ndim(a) - c:]) for a, c in zip(arrays, core_ndims, strict=True)]
+    return batch, flat
+
+
+def ccl_update(estimate: np.ndarray, cov: np.ndarray, measuring, measured, z, range_var: float,
+               lam: float = 0.0, reached: np.ndarray | None = None):
+    """UKF-CCL observation update (eqs. 5-12, 17) with the generic 2L + 1 sigma points.
+
+    ``reached`` (..., N) bool (optional): platforms whose estimate updates; the
+    others keep theirs (gain 0) and the covariance is that of the gain
+    [K_R; 0], P - K Pxz^T - Pxz K^T + K Pz K^T, which is P - K Pz K^T (eq. 11,
+    with the sign corrected) when every platform is reached. Returns new
+    ``(estimate, cov)``.
+    """
+    N = np.shape(estimate)[-2]
+    L = 2 * N
+    if reached is None:
+        reached = np.ones((*np.shape(measuring), N), dtype=bool)
+    batch, (x, P, m, n, zz, reach) = _flatten_batch(
+        estimate, cov, measuring, measured, z, reached, core_ndims=(2, 2, 0, 0, 0, 1))
+    m, n = m.astype(int), n.astype(int)
+    if np.any(m == n):
+        raise ValueError("measuring and measured platforms must differ")
+    order = reorder_first(N, m, n)
+    idx = _block_index(order)  # (B, L)
+    x_r = np.take_along_axis(x.reshape(-1, L), idx, axis=-1)
+    P_r = np.take_along_axis(np.take_along_axis(P, idx[:, :, None], axis=1), idx[:, None, :], axis=2)
+    chi = sigma_points(x_r, P_r, lam)  # (B, 2L+1, L)
+    w = ukf_weights(L, lam)
+    z_sigma = range_of(chi[..., 0:2], chi[..., 2:4])  # (B, 2L+1)
+    z_bar = z_sigma @ w
+    dz = z_sigma - z_bar[:, None]
+    Pz = (dz**2) @ w + range_var
+    Pxz = np.einsum("p,bpl,bp->bl", w, chi - x_r[:, None, :], dz)
+    gain = Pxz / Pz[:, None] * np.repeat(np.take_along_axis(reach, order, axis=-1), 2, axis=-1)
+    x_r = x_r + gain * (zz - z_bar)[:, None]
+    outer_kx = gain[:, :, None] * Pxz[:, None, :]
+    P_r = P_r - outer_kx - np.swapaxes(outer_kx, -1, -2) + Pz[:, None, None] * gain[:, :, None] * gain[:, None, :]
+    P_r = 0.5 * (P_r + np.swapaxes(P_r, -1, -2))
+    inverse = np.argsort(idx, axis=-1)
+    x_new = np.take_along_axis(x_r, inverse, axis=-1).reshape(x.shape)
+    P_new = np.take_along_axis(np.take_along_axis(P_r, inverse[:, :, None], axis=1), inverse[:, None, :], axis=2)
+    return x_new.reshape(*batch, N, 2), P_new.reshape(*batch, L, L)
+
+
+def _gather_blocks(P: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+    """P[b, blocks of rows[b]][:, blocks of cols[b]] for each copy b: rows (B, r), cols (B, c) -> (B, 2r, 2c)."""
+    ri, ci = _block_index(rows), _block_index(cols)
+    return P[np.arange(len(P))[:, None, None], ri[:, :, None], ci[:, None, :]]
+
+
+def _add_blocks(P: np.ndarray, rows: np.ndarray, cols: np.ndarray, values: np.ndarray) -> None:
+    ri, ci = _block_index(rows), _block_index(cols)
+    P[np.arange(len(P))[:, None, None], ri[:, :, None], ci[:, None, :]] += values
+
+
+def dcl_update(estimate: np.ndarray, cov: np.ndarray, chain: np.ndarray, chain_length, z, range_var: float,
+               lam: float = 0.0, truncation: str = "consistent"):
+    """UKF-DCL observation update along the relay chain (Sec. 3, Algorithms 1-2).
+
+    ``chain[..., 0]`` measures ``chain[..., 1]``; the location information
+    then reaches ``chain[..., 2:chain_length]`` in order. Each receiver's
+    quantities are computed only from its own blocks and the message (the
+    row blocks A_j and update weights Pxz^j of its up-neighbours, S_m, and
+    for ``truncation="consistent"`` the P_zj of every platform, formed by m
+    and n). The joint ``cov`` array stands for the platforms' rows: receiver
+    c_i writes P_{c_i c_j} for its up-neighbours and the symmetric block
+    P_{c_j c_i} (the paper's "obtained by transposition").
+
+    Copies are vectorized per chain position (copies whose chain is still
+    going), so the loop runs over at most N positions, never over copies.
+    Returns new ``(estimate, cov)``.
+    """
+    if truncation not in ("consistent", "paper"):
+        raise ValueError(f"truncation must be 'consistent' or 'paper', got {truncation!r}")
+    N = np.shape(estimate)[-2]
+    L = 2 * N
+    batch, (x, P, chain, length, zz) = _flatten_batch(
+        estimate, cov, chain, chain_length, z, core_ndims=(2, 2, 1, 0, 0))
+    x, P = x.astype(float).copy(), P.astype(float).copy()
+    chain, length = chain.astype(int), length.astype(int)
+    B = len(x)
+    if np.any(length < 2) or np.any(length > N):
+        raise ValueError(f"chain_length must be in [2, {N}] (a measurement reaches at least m and n)")
+    positions = np.arange(N)
+    valid = np.where(positions < length[:, None], chain, -1)
+    if np.any(valid[:, :2] < 0) or np.any(valid >= N) or np.any(valid[:, 0] == valid[:, 1]):
+        raise ValueError(f"chain entries must be platforms in [0, {N - 1}], m != n")
+    hop_copy, hop_position = np.nonzero(valid >= 0)
+    reached_mask = np.zeros((B, N), dtype=bool)
+    reached_mask[hop_copy, valid[hop_copy, hop_position]] = True
+    if np.any(reached_mask.sum(axis=1) != length):
+        raise ValueError("a chain must not revisit a platform")
+
+    scale = np.sqrt(L + lam)
+    w = ukf_weights(L, lam)
+    w0, wp = w[0], w[1]
+    rows = np.arange(B)
+    A = np.zeros((B, L, L))  # the message's lower block-triangular rows A_1..A_i, in chain order
+
+    def own_row_block(sub, i):
+        """Receiver chain[sub, i]'s row block A_i from its own P blocks and A_{<i} (eqs. 15-16)."""
+        receiver = chain[sub, i:i + 1]
+        P_ii = _gather_blocks(P[sub], receiver, receiver)
+        if i == 0:
+            return None, _cholesky(P_ii, "P_mm")
+        upstream = chain[sub, :i]
+        own = _gather_blocks(P[sub], receiver, upstream)  # (b, 2, 2i) = [P_{c_i c_1} ... P_{c_i c_{i-1}}]
+        left = np.swapaxes(_lower_solve(A[sub, : 2 * i, : 2 * i], np.swapaxes(own, -1, -2)), -1, -2)
+        schur = P_ii - left @ np.swapaxes(left, -1, -2)
+        return left, _cholesky(0.5 * (schur + np.swapaxes(schur, -1, -2)), f"the Schur complement at hop {i}")
+
+    # Algorithm 1: m and n form A_1, A_2 and the source location information S_m (eq. 13).
+    for i in (0, 1):
+        left, diag = own_row_block(rows, i)
+        if left is not None:
+            A[:, 2 * i:2 * i + 2, : 2 * i] = left
+        A[:, 2 * i:2 * i + 2, 2 * i:2 * i + 2] = diag
+    m, n = chain[:, 0], chain[:, 1]
+    dev_m, dev_n = scale * A[:, 0:2, :], scale * A[:, 2:4, :]  # (B, 2, L) sigma deviations (18)
+    x_m, x_n = x[rows, m], x[rows, n]
+    z0 = range_of(x_m, x_n)
+    z_plus = range_of((x_m[:, :, None] + dev_m - x_n[:, :, None] - dev_n).transpose(0, 2, 1), 0.0)
+    z_minus = range_of((x_m[:, :, None] - dev_m - x_n[:, :, None] + dev_n).transpose(0, 2, 1), 0.0)
+    z_bar = w0 * z0 + wp * (z_plus.sum(axis=1) + z_minus.sum(axis=1))
+    dzeta0, dzeta_plus, dzeta_minus = z0 - z_bar, z_plus - z_bar[:, None], z_minus - z_bar[:, None]
+    Pz = w0 * dzeta0**2 + wp * (np.sum(dzeta_plus**2, axis=1) + np.sum(dzeta_minus**2, axis=1)) + range_var
+    innovation = zz - z_bar
+    g = scale * wp * (dzeta_plus - dzeta_minus)  # (B, L): Pxz^i = A_i g over the receiver's own columns
+
+    if truncation == "consistent":
+        # m and n: P_zj = g^T A_mn^-1 [P_mj; P_nj] for every platform j, carried in the message.
+        mn_rows = _gather_blocks(P, chain[:, :2], np.broadcast_to(np.arange(N), (B, N)))  # (B, 4, L)
+        P_zj = np.einsum("bq,bqc->bc", g[:, :4], _lower_solve(A[:, :4, :4], mn_rows)).reshape(B, N, 2)
+
+    update_weight = np.zeros((B, N, 2))  # Pxz^{c_j} in chain order, appended by each receiver
+    for i in range(N):
+        sub = np.flatnonzero(length > i)
+        if len(sub) == 0:
+            break
+        if i >= 2:  # Algorithm 2 (1): the receiver's row block from the message
+            left, diag = own_row_block(sub, i)
+            A[sub, 2 * i:2 * i + 2, : 2 * i] = left
+            A[sub, 2 * i:2 * i + 2, 2 * i:2 * i + 2] = diag
+        own_columns = 2 * (i + 1)
+        Pxz_i = np.einsum("bac,bc->ba", A[sub, 2 * i:2 * i + 2, :own_columns], g[sub, :own_columns])  # (20)
+        update_weight[sub, i] = Pxz_i
+        receiver = chain[sub, i]
+        x[sub, receiver] += Pxz_i / Pz[sub, None] * innovation[sub, None]  # (21)
+        # (22)-(23): Delta P_{c_i c_j} = Pxz^i Pz^-1 (Pxz^j)^T for the up-neighbours and itself
+        upstream = update_weight[sub, : i + 1]  # (b, i+1, 2)
+        delta = Pxz_i[:, :, None, None] * upstream[:, None, :, :] / Pz[sub, None, None, None]
+        delta = delta.reshape(len(sub), 2, 2 * (i + 1))  # columns: blocks c_1..c_i
+        P_sub = P[sub]
+        _add_blocks(P_sub, receiver[:, None], chain[sub, : i + 1], -delta)
+        if i > 0:
+            _add_blocks(P_sub, chain[sub, :i], receiver[:, None], -np.swapaxes(delta[:, :, : 2 * i], -1, -2))
+        P[sub] = P_sub
+
+    if truncation == "consistent":
+        unreached = ~reached_mask
+        partial = np.flatnonzero(unreached.any(axis=1))
+        if len(partial):
+            gain = np.zeros((B, N, 2))  # K_r = Pxz^r / Pz in absolute platform order
+            gain[hop_copy, valid[hop_copy, hop_position]] = update_weight[hop_copy, hop_position]
+            gain = gain / Pz[:, None, None]
+            cross = gain[:, :, None, :, None] * P_zj[:, None, :, None, :]  # (B, r, u, 2, 2) = K_r P_zu
+            mask = (reached_mask[:, :, None] & unreached[:, None, :])[:, :, :, None, None]
+            cross = np.where(mask, cross, 0.0).transpose(0, 1, 3, 2, 4).reshape(B, L, L)
+            P[partial] -= cross[partial] + np.swapaxes(cross[partial], -1, -2)
+    P = 0.5 * (P + np.swapaxes(P, -1, -2))
+    return x.reshape(*batch, N, 2), P.reshape(*batch, L, L)
