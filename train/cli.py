@@ -7,7 +7,6 @@ import os
 import sys
 
 PAPERS = {"zhao2020": "bandwidth_fusion", "fu2017": "lossy_fusion", "wang2019": "relay_ukf"}
-          "wan2014": "gps_denied_nbp"}
 SCENARIO_TO_PAPER = {v: k for k, v in PAPERS.items()}
 
 
