@@ -2,8 +2,10 @@
 
 from coloc_env.scenarios.bandwidth_fusion import BandwidthFusionScenario
 from coloc_env.scenarios.lossy_fusion import LossyFusionScenario
+from coloc_env.scenarios.nlos_horizon import NlosHorizonScenario
 from coloc_env.scenarios.relay_ukf import RelayUKFScenario
 
-REGISTRY = {cls.name: cls for cls in (BandwidthFusionScenario, LossyFusionScenario, RelayUKFScenario)}
+REGISTRY = {cls.name: cls for cls in (BandwidthFusionScenario, LossyFusionScenario, RelayUKFScenario,
+                                          NlosHorizonScenario)}
 
 __all__ = ["REGISTRY"]

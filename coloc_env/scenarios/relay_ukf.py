@@ -429,6 +429,10 @@ class RelayUKFScenario(Scenario):
                               np.log(self.own_traces())[..., None], frac[..., None]], axis=-1)
         return obs.astype(np.float32)
 
+    def episode_error(self, errors: np.ndarray) -> np.ndarray:
+        """The paper's metric: the distance error ||xhat_i - x_i|| averaged over the steps and platforms."""
+        return np.asarray(errors, float).mean(axis=(-2, -1))
+
     def reward(self) -> np.ndarray:
         return self._reward.copy()
 

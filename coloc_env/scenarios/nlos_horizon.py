@@ -1,0 +1,695 @@
+"""``nlos_horizon``: adaptive finite-horizon estimation under LOS/NLOS switching and random delay (Gao et al. 2016).
+
+Paper: Gao et al., "Adaptive finite-horizon group estimator ... mixed LOS/NLOS environments"
+(seed ``004_4a0edde314525ef9.txt``); the formulas were lost in extraction, so the contract is
+the reconstruction ``../shared/specs/gao2016_afge.md`` (labels [paper], [reconstructed],
+[chosen] as there). Estimator: :mod:`estimators.afge`.
+
+Every agent is a target UAV ``uav_i`` that cannot localise itself directly: it fuses the
+packets of its own J = 8 neighbours, each carrying the neighbour's navigation estimate
+(truth + N(0, sigma_nav^2 I), as in the paper), the RSS and the AOA of the target, stamped with
+the sending time. Each link switches between LOS and NLOS (a Markov chain per link, NLOS
+biases the RSS and the AOA), each packet arrives after a random delay tau <= D or is lost.
+The agent runs one delay-aware DFIR stack holding every horizon N = 1..N_max and decides,
+each step, which horizon's estimate to output and which neighbours' packets to fuse; the
+``paper`` policy is AHG (Algorithm 10) with the spec's defaults, so the env with ``paper``
+equals AFGE. Agents do not exchange estimates, so they are independent copies of the
+paper's single objective UAV with different paths (see the Arguments).
+
+Time line of one step (copy b, time k). Before the action the agent has received every
+packet that arrived up to k, and its observation describes them; the action then picks the
+horizon whose estimate is output as x_hat(k) (reward for time k), the world moves to k + 1
+and the packets arriving then are buffered.
+
+Action (one per agent, the same ``MultiDiscrete`` for all)
+----------------------------------------------------------
+``MultiDiscrete([N_max - N_min + 1, 2, 2, ..., 2])`` (J twos), int64.
+
+| index   | meaning                                                                                     |
+|---------|---------------------------------------------------------------------------------------------|
+| ``0``   | horizon N = N_min + a[0] (replaces AHG). If DFIR_N has no estimate (fewer than two observed |
+|         | stamps in the horizon) the output is the prediction A x_hat(k-1).                            |
+| ``1+s`` | keep (1) / drop (0) the packets of the neighbour in RSS slot s: neighbours ordered by the    |
+|         | RSS of their packet of the newest stamp (strongest first; neighbours with no newest packet  |
+|         | follow by index). The bit applies to that neighbour's packets of every stamp in the buffer. |
+
+[chosen] The config's ``n_strongest`` rule is applied after the mask (among the kept packets
+of a stamp, the strongest ``n_strongest`` are fused), so keeping all reproduces the paper's
+rule exactly; set ``n_strongest = num_neighbours`` to hand the whole selection to the agent.
+A NaN/inf or a value outside the space is a ``ValueError``.
+
+Observation (per agent, ``Box(-inf, inf, shape=(D + 1 + 3 J + M + 3,), float32)``; 36 by default)
+----------------------------------------------------------------------------------------------
+| index                   | meaning                                                                  |
+|-------------------------|--------------------------------------------------------------------------|
+| ``[0, D+1)``            | packets of stamp k - l known at time k, l = 0..D, divided by J           |
+| ``D+1+3s + 0``          | slot s has a packet of the newest stamp (0/1)                            |
+| ``D+1+3s + 1``          | its RSS, (RSS + 80 dBm) / 10 (0 when absent)                             |
+| ``D+1+3s + 2``          | its mode: +1 NLOS, -1 LOS with ``mode_info="known"``, else 0             |
+| ``D+1+3J``              | log(1 + e^T S^-1 e) of the newest fused observation against the          |
+|                         | prediction of the last output (0 without a fresh observation)            |
+| ``D+2+3J``              | the last horizon used, / N_max                                           |
+| ``[D+3+3J, D+3+3J+M)``  | log tr P_N (position block) for the M horizons of an AHG group centred on |
+|                         | the last horizon (clipped as AHG clips its centre); 14 where invalid     |
+| ``[-1]``                | step fraction k / horizon                                                |
+
+``state()``: every agent's observation, then each agent's true estimation error (x, y) / 10 m.
+
+Reward (per agent: each target has its own estimate)
+----------------------------------------------------
+| ``reward=`` | value for the output x_hat(k) (squared metres)                                  |
+|-------------|----------------------------------------------------------------------------------|
+| ``"error"`` | -||p_hat(k) - p(k)||^2 - packet_cost * packets used                               |
+| ``"trace"`` | -tr P(k)[:2, :2] (the estimator's own covariance) - packet_cost * packets used    |
+
+Termination: none; truncation after ``horizon`` steps (the paper's 1000 s flight).
+
+``infos[agent]``: ``true_position``, ``estimated_position``, ``error`` (squared m),
+``trace`` (tr of the output's position covariance), ``horizon`` (N used; 0 at reset),
+``valid`` (DFIR_N had an estimate), ``packets_received`` (packets arriving at k),
+``communication`` (packets used: of those arriving at k, how many were fused),
+``nlos_fraction`` (NLOS links among the neighbours in range at k), ``step``.
+
+Batching: B copies x N agents step in one set of numpy calls; the fused observations of
+the D + 1 buffer stamps, the D + 1 stack advances over all horizons and the AHG costs are
+all arrays (B, N, ...). The only loops are over the D + 1 buffer stamps (inside the
+estimator) and, at reset, over the copies being reset (each draws its whole episode from its
+own generator) and over time for the LOS/NLOS chains.
+
+Arguments (fields of :class:`NlosHorizonConfig`, defaults = spec §9)
+--------------------------------------------------------------------
+| field               | default                      | allowed / source                                  |
+|---------------------|------------------------------|---------------------------------------------------|
+| num_uavs            | 4                            | 1..64 agents (targets) [chosen]                   |
+| num_neighbours      | 8                            | 1..32, J [chosen]                                 |
+| horizon             | 1000                         | 1..100000 steps (1000 s flight [paper])           |
+| period              | 1.0                          | > 0, T (s) [chosen]                               |
+| accel_sigma         | 0.3                          | > 0, sigma_a of the estimator's Q [chosen]        |
+| speed               | 20.0                         | >= 0 m/s [chosen]                                 |
+| turn_rates_deg      | (3, -3, 3, -6)               | deg/s per turn [chosen]                           |
+| turn_windows        | (200,260) (500,560) (700,730) (850,880) | [start, end) steps [chosen]            |
+| target_spacing      | 3000.0                       | >= 0 m: uav_i starts at (0, i * spacing) [chosen] |
+| schedule_shift      | 40                           | >= 0 steps: uav_i's turns start i * shift later   |
+| orbit_radius        | (150, 900)                   | rho0 ~ U(.) m [chosen]                            |
+| orbit_wobble        | 200.0                        | a ~ U(0, .) m [chosen]                            |
+| orbit_wobble_rate   | (0.002, 0.01)                | w ~ U(.) rad/s [chosen]                           |
+| orbit_bearing_rate  | 0.01                         | om ~ U(-., .) rad/s [chosen]                      |
+| r_inf, r_sup        | 30, 1000                     | 0 < r_inf < r_sup (m) [chosen]                    |
+| sigma_nav           | 2.0                          | > 0 m per axis [chosen]                           |
+| tx_power_dbm        | 20.0                         | P_T [chosen]                                      |
+| frequency_hz        | 2.4e9                        | f > 0 [chosen]                                    |
+| d0                  | 1.0                          | > 0 m [chosen]                                    |
+| path_loss_exponent  | 2.2                          | n > 0 [chosen]                                    |
+| sigma_db            | 2.0                          | > 0 dB, LOS [chosen]                              |
+| sigma_theta_deg     | 0.1                          | > 0 deg, LOS [paper]                              |
+| nlos_bias_db        | 6.0                          | mu_db [chosen]                                    |
+| nlos_sigma_db       | 4.0                          | >= 0 [chosen]                                     |
+| nlos_bias_deg       | 1.0                          | mu_theta [chosen]                                 |
+| nlos_sigma_deg      | 1.0                          | >= 0 [chosen]                                     |
+| p_nlos              | 0.3                          | pi in [0, 1] [chosen]                             |
+| p10                 | 0.1                          | [0, 1], pi p10 <= 1 - pi [chosen]                 |
+| buffer_length       | 3                            | D, 0..1000 [chosen]                               |
+| delay_probs         | (0.6, 0.2, 0.1, 0.05)        | D + 1 entries in [0, 1], sum <= 1 [chosen]        |
+| n_strongest         | 4                            | 1..J [chosen] ("only the strongest" [paper])      |
+| min_packets         | 1                            | n_min, 1..J [chosen]                              |
+| weighting           | "distance"                   | "distance" (Def. 6), "information"                |
+| mode_info           | "known"                      | "known", "mean", "blind"                          |
+| window_min          | 4                            | N_min: 2..N_max and >= D + 1 [reconstructed]      |
+| window_max          | 30                           | N_max [chosen]                                    |
+| window_step         | 2                            | dN >= 1; N_max - N_min >= (M - 1) dN              |
+| group_size          | 5                            | M, odd >= 1                                       |
+| window_centre       | 12                           | N_c(0) in [N_min, N_max] (paper's best N)         |
+| likelihood          | "predictive"                 | AHG cost for ``paper``: predictive, paper, smoothed |
+| smoothing           | 0.8                          | lam in (0, 1) [chosen]                            |
+| prior_std           | (50, 50, 5, 5)               | > 0; x_hat before any estimate = truth + N(0, P0) |
+| reward              | "error"                      | "error", "trace"                                  |
+| packet_cost         | 0.0                          | >= 0 per packet used                              |
+
+"horizon" is the episode length as in every scenario; the paper's horizon size N is
+called the *window* here.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+
+import gymnasium
+import numpy as np
+
+import estimators.afge as af
+from coloc_env.config import as_array, check_choice, check_range
+from coloc_env.rendering import Link, Scene
+from coloc_env.scenarios.base import Scenario
+from coloc_env.world.flight import OrbitingNeighbours, OrbitParameters, TurnSchedulePath
+from coloc_env.world.los_nlos import LosNlosChain
+from coloc_env.world.radio import ReceiveSearchArea, RssAoaSensor
+from coloc_env.world.random_delay import NEVER, BoundedRandomDelay
+
+INVALID_LOG_TRACE = 14.0  # log tr P shown for a horizon without an estimate (~ a 1 km spread)
+
+
+@dataclass(frozen=True)
+class NlosHorizonConfig:
+    """Configuration of ``nlos_horizon``; defaults are spec §9 (see the module docstring)."""
+
+    num_uavs: int = 4
+    num_neighbours: int = 8
+    horizon: int = 1000
+    period: float = 1.0
+    accel_sigma: float = 0.3
+    speed: float = 20.0
+    turn_rates_deg: tuple = (3.0, -3.0, 3.0, -6.0)
+    turn_windows: tuple = ((200, 260), (500, 560), (700, 730), (850, 880))
+    target_spacing: float = 3000.0
+    schedule_shift: int = 40
+    orbit_radius: tuple = (150.0, 900.0)
+    orbit_wobble: float = 200.0
+    orbit_wobble_rate: tuple = (0.002, 0.01)
+    orbit_bearing_rate: float = 0.01
+    r_inf: float = 30.0
+    r_sup: float = 1000.0
+    sigma_nav: float = 2.0
+    tx_power_dbm: float = 20.0
+    frequency_hz: float = 2.4e9
+    d0: float = 1.0
+    path_loss_exponent: float = 2.2
+    sigma_db: float = 2.0
+    sigma_theta_deg: float = 0.1
+    nlos_bias_db: float = 6.0
+    nlos_sigma_db: float = 4.0
+    nlos_bias_deg: float = 1.0
+    nlos_sigma_deg: float = 1.0
+    p_nlos: float = 0.3
+    p10: float = 0.1
+    buffer_length: int = 3
+    delay_probs: tuple = (0.6, 0.2, 0.1, 0.05)
+    n_strongest: int = 4
+    min_packets: int = 1
+    weighting: str = "distance"
+    mode_info: str = "known"
+    window_min: int = 4
+    window_max: int = 30
+    window_step: int = 2
+    group_size: int = 5
+    window_centre: int = 12
+    likelihood: str = "predictive"
+    smoothing: float = 0.8
+    prior_std: tuple = (50.0, 50.0, 5.0, 5.0)
+    reward: str = "error"
+    packet_cost: float = 0.0
+
+    # --- the world and estimator parts this config describes ---------------------------
+    @property
+    def path(self) -> TurnSchedulePath:
+        return TurnSchedulePath(speed=self.speed, turn_rates=tuple(np.deg2rad(self.turn_rates_deg).tolist()),
+                                turn_windows=tuple(tuple(w) for w in self.turn_windows), period=self.period)
+
+    @property
+    def neighbours(self) -> OrbitingNeighbours:
+        return OrbitingNeighbours(self.num_neighbours, tuple(self.orbit_radius), self.orbit_wobble,
+                                  tuple(self.orbit_wobble_rate), self.orbit_bearing_rate, self.period)
+
+    @property
+    def area(self) -> ReceiveSearchArea:
+        return ReceiveSearchArea(self.r_inf, self.r_sup)
+
+    @property
+    def signal(self) -> af.SignalModel:
+        return af.SignalModel(
+            tx_power_dbm=float(self.tx_power_dbm), frequency_hz=float(self.frequency_hz), d0=float(self.d0),
+            exponent=float(self.path_loss_exponent), sigma_db=float(self.sigma_db),
+            sigma_theta=float(np.deg2rad(self.sigma_theta_deg)), nlos_bias_db=float(self.nlos_bias_db),
+            nlos_sigma_db=float(self.nlos_sigma_db), nlos_bias_theta=float(np.deg2rad(self.nlos_bias_deg)),
+            nlos_sigma_theta=float(np.deg2rad(self.nlos_sigma_deg)), sigma_nav=float(self.sigma_nav),
+            p_nlos=float(self.p_nlos))
+
+    @property
+    def chain(self) -> LosNlosChain:
+        return LosNlosChain(self.p_nlos, self.p10)
+
+    @property
+    def delay(self) -> BoundedRandomDelay:
+        return BoundedRandomDelay(tuple(self.delay_probs), self.buffer_length)
+
+    @property
+    def motion(self) -> af.MotionModel:
+        return af.MotionModel(float(self.period), float(self.accel_sigma))
+
+    @property
+    def ahg(self) -> af.AHGParams:
+        return af.AHGParams(self.window_min, self.window_max, self.window_step, self.group_size,
+                            self.window_centre, self.likelihood, float(self.smoothing))
+
+    @property
+    def prior_cov(self) -> np.ndarray:
+        return np.diag(np.asarray(self.prior_std, float) ** 2)
+
+    def validate(self) -> None:
+        check_range("num_uavs", self.num_uavs, 1, 64, integer=True)
+        check_range("horizon", self.horizon, 1, 100_000, integer=True)
+        check_range("period", self.period, 0.0, 1e4, low_open=True)
+        check_range("accel_sigma", self.accel_sigma, 0.0, 1e3, low_open=True)
+        check_range("speed", self.speed, 0.0, 1e4)
+        rates = as_array("turn_rates_deg", self.turn_rates_deg, ndim=1)
+        windows = as_array("turn_windows", self.turn_windows)
+        if windows.shape != (len(rates), 2):
+            raise ValueError(f"turn_windows must have shape ({len(rates)}, 2), one [start, end) per turn rate, "
+                             f"got {windows.shape}")
+        self.path.validate()
+        check_range("target_spacing", self.target_spacing, 0.0, 1e7)
+        check_range("schedule_shift", self.schedule_shift, 0, 100_000, integer=True)
+        check_range("num_neighbours", self.num_neighbours, 1, 32, integer=True)
+        for name in ("orbit_radius", "orbit_wobble_rate"):
+            pair = as_array(name, getattr(self, name), shape=(2,))
+            if pair[0] < 0 or pair[1] < pair[0]:
+                raise ValueError(f"{name} must be (low, high) with 0 <= low <= high, got {getattr(self, name)}")
+        check_range("orbit_wobble", self.orbit_wobble, 0.0, 1e6)
+        check_range("orbit_bearing_rate", self.orbit_bearing_rate, 0.0, 10.0)
+        self.area.validate()
+        check_range("sigma_nav", self.sigma_nav, 0.0, 1e4, low_open=True)
+        RssAoaSensor(self.signal).validate()
+        self.chain.validate()
+        self.delay.validate()
+        J = self.num_neighbours
+        check_range("n_strongest", self.n_strongest, 1, J, integer=True)
+        check_range("min_packets", self.min_packets, 1, J, integer=True)
+        check_choice("weighting", self.weighting, af.WEIGHTINGS)
+        check_choice("mode_info", self.mode_info, af.MODE_INFOS)
+        check_range("window_max", self.window_max, 2, 1000, integer=True)
+        check_range("window_min", self.window_min, 2, self.window_max, integer=True)
+        if self.window_min < self.buffer_length + 1:
+            raise ValueError(f"window_min must be >= buffer_length + 1 = {self.buffer_length + 1} (the group "
+                             f"reflects the possible delay, spec §7), got {self.window_min}")
+        check_range("window_step", self.window_step, 1, 1000, integer=True)
+        check_range("group_size", self.group_size, 1, 999, integer=True)
+        if self.group_size % 2 != 1:
+            raise ValueError(f"group_size must be odd (M = 2h + 1), got {self.group_size}")
+        if self.window_max - self.window_min < (self.group_size - 1) * self.window_step:
+            raise ValueError(f"window_max - window_min must be >= (group_size - 1) * window_step = "
+                             f"{(self.group_size - 1) * self.window_step}, got {self.window_max - self.window_min}")
+        check_range("window_centre", self.window_centre, self.window_min, self.window_max, integer=True)
+        check_choice("likelihood", self.likelihood, af.LIKELIHOODS)
+        check_range("smoothing", self.smoothing, 0.0, 1.0, low_open=True)
+        if self.smoothing >= 1.0:
+            raise ValueError(f"smoothing must be in (0, 1), got {self.smoothing}")
+        std = as_array("prior_std", self.prior_std, shape=(4,))
+        if np.any(std <= 0):
+            raise ValueError(f"prior_std must be > 0 (P0 positive definite), got {self.prior_std}")
+        check_choice("reward", self.reward, ("error", "trace"))
+        check_range("packet_cost", self.packet_cost, 0.0, np.inf)
+
+
+@dataclass
+class Episode:
+    """One copy's whole episode, stamps 0..K (K = horizon), targets T, neighbours J.
+
+    ``truth`` (K+1, T, 4); ``rss``/``aoa`` (K+1, T, J); ``nav`` (K+1, T, J, 2) the neighbours'
+    own position estimates; ``modes`` (K+1, T, J) int8 (1 = NLOS); ``delays`` (K+1, T, J) int16
+    (``NEVER`` where the neighbour was outside the RSA); ``prior`` (T, 4); ``orbits`` (T, J).
+    """
+
+    truth: np.ndarray
+    rss: np.ndarray
+    aoa: np.ndarray
+    nav: np.ndarray
+    modes: np.ndarray
+    delays: np.ndarray
+    prior: np.ndarray
+    orbits: OrbitParameters
+
+
+def target_paths(config: NlosHorizonConfig, targets: int, steps: int) -> np.ndarray:
+    """True states (steps, T, 4): uav_i starts at (0, i * spacing), turns delayed by i * shift."""
+    path = config.path
+    return np.stack([path.trajectory(steps, start=(0.0, i * float(config.target_spacing)),
+                                     shift=i * int(config.schedule_shift)) for i in range(targets)], axis=1)
+
+
+def in_turn(config: NlosHorizonConfig, targets: int, steps: int) -> np.ndarray:
+    """(steps, T) True where target i is turning."""
+    return np.stack([config.path.in_turn(steps, i * int(config.schedule_shift)) for i in range(targets)], axis=1)
+
+
+def draw_episode(config: NlosHorizonConfig, rng: np.random.Generator, targets: int | None = None) -> Episode:
+    """Draw one copy's episode from ``rng`` in a fixed order (orbits, modes, RSS/AOA noise,
+    navigation noise, delays, prior); ``targets`` defaults to ``num_uavs``."""
+    T = config.num_uavs if targets is None else targets
+    K1, J = config.horizon + 1, config.num_neighbours
+    truth = target_paths(config, T, K1)
+    orbits = config.neighbours.sample(rng, (T,))
+    senders = truth[:, :, None, :2] + config.neighbours.offsets(orbits, K1)  # (K+1, T, J, 2)
+    modes = config.chain.sample(rng, K1, (T, J))
+    white = rng.standard_normal((K1, T, J, 2))
+    rss, aoa = RssAoaSensor(config.signal).measure(truth[:, :, None, :2], senders, modes, white)
+    nav = senders + config.sigma_nav * rng.standard_normal((K1, T, J, 2))
+    distance = np.linalg.norm(truth[:, :, None, :2] - senders, axis=-1)
+    delays = np.where(config.area.contains(distance), config.delay.sample(rng, (K1, T, J)), NEVER).astype(np.int16)
+    prior = truth[0] + rng.standard_normal((T, 4)) * np.asarray(config.prior_std, float)
+    return Episode(truth, rss, aoa, nav, modes, delays, prior, orbits)
+
+
+def fuse_buffer(config: NlosHorizonConfig, rss, aoa, nav, modes, delays, lags, keep):
+    """Fused observations of buffered stamps from their packets (spec §4-5).
+
+    Packets on the last axis J: ``rss``/``aoa``/``modes``/``delays`` (..., J), ``nav``
+    (..., J, 2); ``lags`` (...) how long ago each stamp was (negative: not yet sent);
+    ``keep`` (..., J) the agent's mask. Returns (Y, y, gamma, used).
+    """
+    known = af.known_at_lag(delays, np.where(lags >= 0, lags, -1)[..., None]) & (lags >= 0)[..., None]
+    used = af.select_strongest(rss, known & keep, config.n_strongest)
+    m = af.mode_weight(config.mode_info, modes, config.p_nlos)
+    z, R, r_hat = af.packet_fixes(config.signal, nav, rss, aoa, m)
+    Y, y, gamma, _ = af.fuse_fixes(z, R, r_hat, used, config.weighting, config.min_packets)
+    return Y, y, gamma, used
+
+
+def fused_by_stamp_and_lag(config: NlosHorizonConfig, episode: Episode):
+    """All fused observations of an episode with every packet kept, by (stamp, lag):
+    arrays (K+1, T, D+1, ...) -> moved to (T, K+1, D+1, ...) for :func:`estimators.afge.run_fixed_mask`."""
+    lags = np.broadcast_to(np.arange(config.buffer_length + 1), (*episode.rss.shape[:2], config.buffer_length + 1))
+    Y, y, gamma, _ = fuse_buffer(config, episode.rss[:, :, None], episode.aoa[:, :, None], episode.nav[:, :, None],
+                                 episode.modes[:, :, None], episode.delays[:, :, None], lags, np.ones(1, bool))
+    return np.moveaxis(Y, 0, 1), np.moveaxis(y, 0, 1), np.moveaxis(gamma, 0, 1)
+
+
+class NlosHorizonScenario(Scenario):
+    """Batched core of ``nlos_horizon``; see the module docstring for the tables."""
+
+    name = "nlos_horizon"
+    paper = "gao2016"
+    Config = NlosHorizonConfig
+
+    def __init__(self, config: NlosHorizonConfig, batch: int = 1):
+        super().__init__(config, batch)
+        c = config
+        self.motion = c.motion
+        self.ahg = c.ahg
+        self.D = c.buffer_length
+        self.J = c.num_neighbours
+        self.S = c.window_max
+        B, N, K1, J, S = self.batch, c.num_uavs, c.horizon + 1, self.J, self.S
+        self.k = np.zeros(B, dtype=np.int64)
+        self.episode_id = np.zeros(B, dtype=np.int64)
+        self.truth = np.zeros((B, K1, N, 4))
+        self.rss = np.zeros((B, K1, N, J))
+        self.aoa = np.zeros((B, K1, N, J))
+        self.nav = np.zeros((B, K1, N, J, 2))
+        self.modes = np.zeros((B, K1, N, J), np.int8)
+        self.delays = np.full((B, K1, N, J), NEVER, np.int16)
+        self.prior = np.zeros((B, N, 4))
+        self.orbits = OrbitParameters(*(np.zeros((B, N, J)) for _ in range(5)))
+        self.final = af.empty_stack((B, N), S)
+        self.prev_x, self.prev_P = np.zeros((B, N, S, 4)), np.broadcast_to(np.eye(4), (B, N, S, 4, 4)).copy()
+        self.prev_valid = np.zeros((B, N, S), bool)
+        self.mask = np.ones((B, N, J), bool)
+        self.pred_x = np.zeros((B, N, 4))
+        self.pred_P = np.broadcast_to(c.prior_cov, (B, N, 4, 4)).copy()
+        self.out_x = np.zeros((B, N, 4))
+        self.out_P = np.broadcast_to(c.prior_cov, (B, N, 4, 4)).copy()
+        self.horizon_used = np.zeros((B, N), np.int64)
+        self.valid_used = np.zeros((B, N), bool)
+        self.packets_used = np.zeros((B, N))
+        self._reward = np.zeros((B, N))
+        self._last_arrived = np.zeros((B, N))
+        self._prepare()
+
+    # --- description ------------------------------------------------------------
+    @property
+    def num_agents(self) -> int:
+        return self.config.num_uavs
+
+    @property
+    def horizon(self) -> int:
+        return self.config.horizon
+
+    @property
+    def obs_dim(self) -> int:
+        return self.D + 1 + 3 * self.J + self.config.group_size + 3
+
+    def observation_space(self):
+        return gymnasium.spaces.Box(-np.inf, np.inf, shape=(self.obs_dim,), dtype=np.float32)
+
+    def action_space(self):
+        c = self.config
+        return gymnasium.spaces.MultiDiscrete([c.window_max - c.window_min + 1] + [2] * self.J, dtype=np.int64)
+
+    def state_space(self):
+        dim = self.num_agents * (self.obs_dim + 2)
+        return gymnasium.spaces.Box(-np.inf, np.inf, shape=(dim,), dtype=np.float32)
+
+    def encode_actions(self, window: np.ndarray, keep_slots: np.ndarray | None = None) -> np.ndarray:
+        """Actions (..., 1 + J) int64 for horizons ``window`` (...) and slot bits (..., J) (default: keep all)."""
+        window = np.asarray(window, np.int64)
+        keep = np.ones((*window.shape, self.J), np.int64) if keep_slots is None else np.asarray(keep_slots, np.int64)
+        return np.concatenate([(window - self.config.window_min)[..., None], keep], axis=-1)
+
+    # --- episode ----------------------------------------------------------------
+    def reset(self, rngs, env_index=None) -> None:
+        idx = self._indices(env_index)
+        if len(rngs) != len(idx):
+            raise ValueError(f"reset needs one generator per copy: {len(idx)} copies, {len(rngs)} generators")
+        for b, rng in zip(idx, rngs, strict=True):
+            ep = draw_episode(self.config, rng)
+            self.truth[b], self.rss[b], self.aoa[b], self.nav[b] = ep.truth, ep.rss, ep.aoa, ep.nav
+            self.modes[b], self.delays[b], self.prior[b] = ep.modes, ep.delays, ep.prior
+            for name in ("radius", "wobble", "wobble_rate", "phase", "bearing_rate"):
+                getattr(self.orbits, name)[b] = getattr(ep.orbits, name)
+        N, S = self.num_agents, self.S
+        self.k[idx] = 0
+        self.episode_id[idx] += 1
+        empty = af.empty_stack((len(idx), N), S)
+        self.final.info[idx], self.final.vector[idx], self.final.stamps[idx] = empty.info, empty.vector, empty.stamps
+        self.prev_x[idx], self.prev_P[idx], self.prev_valid[idx] = 0.0, np.eye(4), False
+        self.mask[idx] = True
+        self.pred_x[idx] = self.prior[idx]
+        self.pred_P[idx] = self.config.prior_cov
+        self.out_x[idx] = self.prior[idx]
+        self.out_P[idx] = self.config.prior_cov
+        self.horizon_used[idx] = 0
+        self.valid_used[idx] = False
+        self.packets_used[idx] = 0.0
+        self._last_arrived[idx] = 0.0
+        self._reward[idx] = 0.0
+        self._prepare()
+
+    def _gather_buffer(self):
+        """Packets of the buffer stamps k-D..k, arrays (B, N, D+1, J, ...), and the lags (B, D+1)."""
+        D, K1 = self.D, self.config.horizon + 1
+        stamps = self.k[:, None] + np.arange(-D, 1)
+        s = np.clip(stamps, 0, K1 - 1)
+        rows = np.arange(self.batch)[:, None]
+
+        def pick(arr):
+            return np.moveaxis(arr[rows, s], 1, 2)  # (B, D+1, N, J, ...) -> (B, N, D+1, J, ...)
+
+        lags = np.where(stamps >= 0, self.k[:, None] - s, -1)
+        return (pick(self.rss), pick(self.aoa), pick(self.nav), pick(self.modes), pick(self.delays),
+                np.broadcast_to(lags[:, None, :], (self.batch, self.num_agents, D + 1)))
+
+    def _filter(self, mask: np.ndarray) -> dict:
+        """The buffer re-run at time k with ``mask`` (B, N, J): fused buffer, stacks, estimates, costs."""
+        rss, aoa, nav, modes, delays, lags = self._gather_buffer()
+        Y, y, gamma, used = fuse_buffer(self.config, rss, aoa, nav, modes, delays, lags, mask[:, :, None, :])
+        final, current = af.buffer_step(self.motion, self.final, self.k[:, None], Y, y, gamma)
+        x, P, valid = af.stack_estimates(current)
+        fresh = gamma[..., -1]
+        z, R = af.fused_fix(Y[..., -1, :, :], y[..., -1, :], fresh)
+        arrived = (delays == lags[..., None]) & (lags[..., None] >= 0)
+        return {"mask": mask.copy(), "final": final, "x": x, "P": P, "valid": valid, "fresh": fresh, "z": z,
+                "R": R, "used": used, "arrived": arrived, "delays": delays, "lags": lags, "rss": rss,
+                "modes": modes}
+
+    def _prepare(self) -> None:
+        """Everything the agents see before acting at time k, filtered with the last mask."""
+        t = self._filter(self.mask)
+        t["predictive"] = af.predictive_costs(self.motion, self.prev_x, self.prev_P, self.prev_valid, t["z"], t["R"])
+        t["paper"] = af.in_sample_costs(t["x"], t["valid"], t["z"], t["R"])
+        e = t["z"] - self.pred_x[..., :2]
+        S = self.pred_P[..., :2, :2] + t["R"]
+        nis = np.einsum("...a,...ab,...b->...", e, np.linalg.inv(S), e)
+        t["nis"] = np.where(t["fresh"], nis, 0.0)
+        # RSS slots at the newest stamp: strongest first, then neighbours without a newest packet
+        newest = t["delays"][..., -1, :] == 0  # packets of stamp k known at k
+        key = np.where(newest, t["rss"][..., -1, :], -np.inf)
+        t["slots"] = np.argsort(-key, axis=-1, kind="stable")
+        t["slot_present"] = np.take_along_axis(newest, t["slots"], axis=-1)
+        t["slot_rss"] = np.take_along_axis(t["rss"][..., -1, :], t["slots"], axis=-1)
+        t["slot_mode"] = np.take_along_axis(t["modes"][..., -1, :], t["slots"], axis=-1)
+        self.pending = t
+
+    # --- costs for policies -------------------------------------------------------
+    def horizon_costs(self, likelihood: str) -> np.ndarray:
+        """AHG costs J_N(k) (B, N, S) of every horizon N = 1..S at the current time, computed with
+        the last mask (``predictive`` or ``paper``; ``smoothed`` is the policy's own forgetting of
+        the predictive costs)."""
+        if likelihood not in ("predictive", "paper"):
+            raise ValueError(f"likelihood must be 'predictive' or 'paper' here, got {likelihood!r}")
+        return self.pending[likelihood]
+
+    @property
+    def horizon_valid(self) -> np.ndarray:
+        """(B, N, S): DFIR_N has an estimate at the current time (last mask)."""
+        return self.pending["valid"]
+
+    @property
+    def fresh(self) -> np.ndarray:
+        """(B, N): gamma(k, 0), a fused observation of the newest stamp exists (last mask)."""
+        return self.pending["fresh"]
+
+    # --- dynamics ----------------------------------------------------------------
+    def decode_actions(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Actions (B, N, 1 + J) -> horizons (B, N) and the neighbour mask (B, N, J) (absolute order)."""
+        space = self.action_space()
+        if np.any(actions != np.round(actions)) or np.any(actions < 0) or np.any(actions >= space.nvec):
+            raise ValueError(f"actions must be integers in [0, nvec) with nvec = {space.nvec.tolist()}")
+        a = actions.astype(np.int64)
+        window = self.config.window_min + a[..., 0]
+        mask = np.zeros((self.batch, self.num_agents, self.J), bool)
+        np.put_along_axis(mask, self.pending["slots"], a[..., 1:] == 1, axis=-1)
+        return window, mask
+
+    def step(self, actions) -> None:
+        actions = self.check_actions(actions)
+        if np.any(self.k >= self.horizon):
+            raise RuntimeError("step() on a copy whose episode is over; reset it first")
+        window, mask = self.decode_actions(actions)
+        self.advance(window, mask)
+
+    def advance(self, window: np.ndarray, mask: np.ndarray) -> None:
+        """Output the horizon-``window`` estimate (B, N) at time k with the packets of ``mask``
+        (B, N, J), then move the world to k + 1."""
+        t = self.pending if np.array_equal(mask, self.pending["mask"]) else self._filter(mask)
+        A = self.motion.transition
+        idx = (window - 1)[..., None]
+        valid = np.take_along_axis(t["valid"], idx, axis=-1)[..., 0]
+        x = np.take_along_axis(t["x"], idx[..., None], axis=-2)[..., 0, :]
+        P = np.take_along_axis(t["P"], idx[..., None, None], axis=-3)[..., 0, :, :]
+        self.out_x = np.where(valid[..., None], x, self.pred_x)
+        self.out_P = np.where(valid[..., None, None], P, self.pred_P)
+        self.horizon_used, self.valid_used = np.asarray(window, np.int64), valid
+        self.packets_used = (t["used"] & t["arrived"]).sum(axis=(-1, -2)).astype(float)
+        truth = self.truth[np.arange(self.batch), self.k]
+        if self.config.reward == "error":
+            loss = np.sum((self.out_x[..., :2] - truth[..., :2]) ** 2, axis=-1)
+        else:
+            loss = np.trace(self.out_P[..., :2, :2], axis1=-2, axis2=-1)
+        self._reward = -loss - self.config.packet_cost * self.packets_used
+        self._last_arrived = t["arrived"].sum(axis=(-1, -2)).astype(float)
+        self.final = t["final"]
+        self.prev_x, self.prev_P, self.prev_valid = t["x"], t["P"], t["valid"]
+        self.mask = np.asarray(mask, bool).copy()
+        self.pred_x = self.out_x @ A.T
+        self.pred_P = A @ self.out_P @ A.T + self.motion.process_cov
+        self.k = self.k + 1
+        self._prepare()
+
+    def constant_horizon_errors(self) -> np.ndarray:
+        """Summed squared error (B, N, S) of every constant horizon N = 1..S from now to the end of
+        the episode, all packets kept (privileged: a look-ahead on a copy of the world)."""
+        sim = copy.deepcopy(self)
+        A = self.motion.transition
+        pred = np.broadcast_to(sim.pred_x[:, :, None, :], (*sim.prev_valid.shape, 4)).copy()
+        total = np.zeros(sim.prev_valid.shape)
+        keep = np.ones_like(sim.mask)
+        while not np.all(sim.k >= sim.horizon):
+            t = sim.pending
+            out = np.where(t["valid"][..., None], t["x"], pred)
+            truth = sim.truth[np.arange(sim.batch), sim.k]
+            total += np.sum((out[..., :2] - truth[:, :, None, :2]) ** 2, axis=-1)
+            pred = out @ A.T
+            sim.advance(np.full(sim.k.shape + (sim.num_agents,), self.config.window_min), keep)
+        return total
+
+    # --- views -------------------------------------------------------------------
+    def observation(self) -> np.ndarray:
+        c, t = self.config, self.pending
+        B, N, J = self.batch, self.num_agents, self.J
+        known = (t["delays"] <= t["lags"][..., None]) & (t["lags"][..., None] >= 0)
+        per_lag = known.sum(axis=-1)[..., ::-1] / J  # lag 0 first
+        mode_flag = np.where(t["slot_mode"] == 1, 1.0, -1.0) if c.mode_info == "known" else np.zeros((B, N, J))
+        slots = np.stack([t["slot_present"].astype(float),
+                          np.where(t["slot_present"], (t["slot_rss"] + 80.0) / 10.0, 0.0),
+                          np.where(t["slot_present"], mode_flag, 0.0)], axis=-1).reshape(B, N, 3 * J)
+        h = self.ahg.half * c.window_step
+        centre = np.clip(np.where(self.horizon_used > 0, self.horizon_used, c.window_centre),
+                         c.window_min + h, c.window_max - h)
+        group = af.ahg_group(self.ahg, centre)
+        trace = np.trace(t["P"][..., :2, :2], axis1=-2, axis2=-1)
+        log_trace = np.where(t["valid"], np.log(np.maximum(trace, 1e-300)), INVALID_LOG_TRACE)
+        group_trace = np.take_along_axis(log_trace, group - 1, axis=-1)
+        last = np.stack([np.log1p(t["nis"]), self.horizon_used / c.window_max], axis=-1)
+        frac = np.broadcast_to((self.k / self.horizon)[:, None, None], (B, N, 1))
+        return np.concatenate([per_lag, slots, last, group_trace, frac], axis=-1).astype(np.float32)
+
+    def episode_error(self, errors: np.ndarray) -> np.ndarray:
+        """Time-averaged squared position error over k >= min(50, horizon - 1), mean over the agents.
+
+        The paper's time-averaged RMSE (spec §12, ``train/reproduce/gao2016.py``)
+        is the square root of the mean of this over episodes.
+        """
+        warm = min(50, self.horizon - 1)
+        return np.asarray(errors, float)[..., warm:, :].mean(axis=(-2, -1))
+
+    def reward(self) -> np.ndarray:
+        return self._reward.copy()
+
+    def done(self) -> np.ndarray:
+        return self.k >= self.horizon
+
+    def _truth_now(self) -> np.ndarray:
+        """True states (B, N, 4) at the time of the last output (k - 1; 0 at reset)."""
+        return self.truth[np.arange(self.batch), np.maximum(self.k - 1, 0)]
+
+    def state(self) -> np.ndarray:
+        error = (self.out_x[..., :2] - self._truth_now()[..., :2]) / 10.0
+        return np.concatenate([self.observation().reshape(self.batch, -1), error.reshape(self.batch, -1)],
+                              axis=-1).astype(np.float32)
+
+    def info(self) -> dict[str, np.ndarray]:
+        B, N = self.batch, self.num_agents
+        truth = self._truth_now()
+        started = (self.k > 0)[:, None]
+        t = self.pending
+        in_range = t["delays"][..., -1, :] != NEVER
+        nlos = (t["modes"][..., -1, :] == 1) & in_range
+        return {
+            "true_position": truth[..., :2].copy(),
+            "estimated_position": self.out_x[..., :2].copy(),
+            "error": np.sum((self.out_x[..., :2] - truth[..., :2]) ** 2, axis=-1),
+            "trace": np.trace(self.out_P[..., :2, :2], axis1=-2, axis2=-1),
+            "horizon": self.horizon_used.copy(),
+            "valid": self.valid_used.copy(),
+            "packets_received": np.where(started, self._last_arrived, 0.0),
+            "communication": np.where(started, self.packets_used, 0.0),
+            "nlos_fraction": nlos.sum(-1) / np.maximum(in_range.sum(-1), 1),
+            "step": np.broadcast_to(self.k[:, None], (B, N)).copy(),
+        }
+
+    def scene(self, b: int) -> Scene:
+        k = int(self.k[b])
+        now = max(k - 1, 0)
+        truth = self.truth[b, now]
+        offsets = self.config.neighbours.offsets(
+            OrbitParameters(*(getattr(self.orbits, n)[b, 0] for n in
+                              ("radius", "wobble", "wobble_rate", "phase", "bearing_rate"))), now + 1)[now]
+        t = self.pending
+        used = t["used"][b, 0].sum(axis=0)  # packets fused per neighbour of uav_0 over the buffer
+        modes = self.modes[b, now, 0]
+        J = self.J
+        nodes = np.vstack([[0.0, 0.0], offsets / max(float(self.config.r_sup), 1.0)])
+        links = [Link(source=j + 1, target=0, value=float(used[j]), label="N" if modes[j] else "L") for j in range(J)]
+        return Scene(
+            title=f"nlos_horizon (gao2016)  k = {k}/{self.horizon}",
+            truth=truth[:, :2],
+            estimates=self.out_x[b, :, :2],
+            covariances=self.out_P[b, :, :2, :2],
+            trails=np.swapaxes(self.truth[b, max(0, now - 30):now + 1, :, :2], 0, 1),
+            node_positions=nodes,
+            node_labels=["uav_0"] + [f"nb_{j}" for j in range(J)],
+            links=links,
+            link_value_max=float(self.D + 1),
+            link_value_name="packets of uav_0's buffer fused (L/N = LOS/NLOS)",
+            notes=[f"uav_0: horizon {int(self.horizon_used[b, 0])}, error "
+                   f"{np.linalg.norm(self.out_x[b, 0, :2] - truth[0, :2]):.1f} m"],
+        )
