@@ -32,7 +32,8 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
 
     rep = sub.add_parser("reproduce", help="reproduce a paper's figures and claims")
-    rep.add_argument("paper", choices=[*PAPERS, "all"])
+    rep.add_argument("paper", choices=[*PAPERS, "all", "mrclam"],
+                     help="a paper, all of them, or mrclam (real UTIAS MRCLAM data; needs --data, not part of all)")
     rep.add_argument("--runs", type=_positive, default=None,
                      help="Monte Carlo runs (default: the paper module's RUNS, or QUICK_RUNS with --quick)")
     rep.add_argument("--seed", type=int, default=0)
@@ -40,6 +41,8 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument("--quick", action="store_true", help="fewer Monte Carlo runs")
     rep.add_argument("--executor", choices=["local", "ray"], default="local")
     rep.add_argument("--address", default=None, help="Ray cluster address (default: a local Ray)")
+    rep.add_argument("--data", default=None,
+                     help="mrclam: an MRCLAM dataset folder (default: $COLOC_MRCLAM_DATA)")
 
     tr = sub.add_parser("train", help="train a shared PPO policy with stable-baselines3")
     tr.add_argument("scenario")
@@ -79,9 +82,10 @@ def cmd_reproduce(args) -> int:
     for paper in papers:
         module = __import__(f"train.reproduce.{paper}", fromlist=["run"])
         runs = args.runs or (module.QUICK_RUNS if args.quick else module.RUNS)
+        extra = {"data": args.data} if paper == "mrclam" else {}
         with console.status(f"reproducing {paper} ({runs} Monte Carlo runs)") as status:
             metrics = module.run(args.out, runs=runs, seed=args.seed, quick=args.quick,
-                                 executor=args.executor, address=args.address,
+                                 executor=args.executor, address=args.address, **extra,
                                  progress=lambda msg, status=status, paper=paper: status.update(f"{paper}: {msg}"))
         console.print(f"[bold]{paper}[/bold]: wrote {os.path.join(args.out, paper)}/")
         for claim, holds in metrics.get("claims", {}).items():

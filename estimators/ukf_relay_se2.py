@@ -1,0 +1,339 @@
+"""UKF-CCL and UKF-DCL of wang2019 extended to planar robots with heading, range AND bearing, and landmarks.
+
+Base algorithm: Wang L., Cui J., Kong D., Zhao L., "A distributed cooperative
+localization algorithm for mobile multi-platforms oriented to unpredicted
+communication topology", Trans. Nanjing Univ. Aero. Astro. 36(2):224-231,
+2019 (eqs. 5-23; the position-only form is :mod:`estimators.ukf_relay`, whose
+sigma-point and relay-chain conventions this module keeps: lower Cholesky,
+the measuring platforms ordered first (eq. 17), 2L + 1 points with
+w_0 = lambda/(L + lambda), w_p = 0.5/(L + lambda), the look-up Cholesky
+(15)-(16) along the chain, the sign and inverse corrections listed there).
+Cross-covariance factorization: Roumeliotis S.I., Bekey G.A., "Distributed
+multirobot localization", IEEE Trans. Robotics and Automation 18(5):781-795,
+2002 (Sec. III-IV).
+
+Extension (documented here because neither paper states it in this form)
+-----------------------------------------------------------------------
+State: robot i has s_i = (x_i, y_i, theta_i); the joint state is
+s = [s_1; ...; s_N] in R^{3N}, covariance P (3N x 3N), L = 3N.
+
+Time update (unicycle, Euler over dt, odometry u_i = (v_i, w_i) with white
+noise of variances (sigma_v^2, sigma_w^2)):
+
+    s_i <- s_i + dt [v_i cos theta_i; v_i sin theta_i; w_i],
+    F_i = [[1, 0, -dt v_i sin theta_i], [0, 1, dt v_i cos theta_i], [0, 0, 1]],
+    G_i = dt [[cos theta_i, 0], [sin theta_i, 0], [0, 1]],
+    P_ii <- F_i P_ii F_i^T + G_i diag(sigma_v^2, sigma_w^2) G_i^T,
+    P_ij <- F_i P_ij F_j^T  (i != j).
+
+With the heading in the state the transition is no longer the identity and
+the cross-covariances change (wang2019's position-only P_ij stays fixed).
+The time update is the linearized (EKF) one so that the cross terms factor.
+Roumeliotis-Bekey: write P_ij = Phi_i sigma_ij Phi_j^T with Phi_i the
+product of robot i's own F_i since the start (Phi_i(0) = I); each robot
+propagates only Phi_i <- F_i Phi_i and its own P_ii, and sigma_ij changes
+only at observation updates. F_i has determinant 1, so Phi_i is invertible.
+
+Observation: robot m measures robot n (or a known landmark l),
+
+    h = [ ||p_n - p_m|| ; wrap(atan2(y_n - y_m, x_n - x_m) - theta_m) ],  R = diag(sigma_r^2, sigma_b^2),
+
+a 2-vector instead of wang2019's scalar range. The UT is the one of
+:mod:`estimators.ukf_relay` on the joint state (L = 3N) with the observed
+robots (m, n, or m alone for a landmark) ordered first. Bearings are
+averaged as offsets from h(xbar): d_p = wrap(h(chi_p) - h(xbar)),
+zbar = h(xbar) + sum_p w_p d_p, the deviations d_p - sum_q w_q d_q, and the
+innovation nu = wrap(z - zbar). Pz (2 x 2) = sum_p w_p dz_p dz_p^T + R,
+K = Pxz Pz^-1, s <- s + K nu, P <- P - K Pz K^T (heading wrapped after).
+
+Only the first 3q columns of A (q = 2 observed robots, or 1 for a
+landmark) move h; the other sigma points leave z at h(xbar). So with
+g = sqrt(L + lambda) w_p (dz_p^+ - dz_p^-), p <= 3q (a 3q x 2 matrix),
+Pxz_j = A_j[:, :3q] g for every robot j, and the distributed form is the
+one of wang2019 with 3 x 3 blocks and 3 x 2 update weights:
+
+* UKF-DCL along the chain c_1 = m (, c_2 = n), c_3, ...: receiver c_i forms
+  P_{c_i c_j} = Phi_{c_i} sigma_{c_i c_j} Phi_{c_j}^T from its own row of
+  sigma and the Phi_{c_j} carried in the message, its row of A by the
+  look-up Cholesky (15)-(16), Pxz_{c_i} (20), its estimate (21), and the
+  decrements Delta P_{c_i c_j} = Pxz_{c_i} Pz^-1 Pxz_{c_j}^T (22)-(23),
+  stored as sigma_{c_i c_j} -= Phi_{c_i}^-1 Delta P Phi_{c_j}^-T.
+* Truncated chains (reached set R, unreached U): gain [K_R; 0] and
+  P_RU <- P_RU - K_R Pxz_U^T, where Pxz_U^T = g^T A_o^-1 P_{o,U}
+  (o = observed robots) = r_U Phi_U^T with r_U = g^T A_o^-1 [Phi_o sigma_{o,U}],
+  which the observers compute from their own rows. Hence
+  sigma_RU -= Phi_R^-1 K_R r_U: exact, and no robot in U takes part.
+
+A complete chain gives exactly the CCL update (tests: 1e-9 on the MRCLAM
+data); the order of the robots after the observers does not matter.
+
+Outlier gate (both forms identically): an observation whose normalized
+innovation nu^T Pz^-1 nu exceeds ``gate`` is not applied (MRCLAM holds
+misread barcodes and occluded detections); ``gate=None`` applies all.
+
+Arrays (one copy, no batch axis; the position-only module batches):
+``estimate`` (N, 3), ``cov`` (3N, 3N); :class:`FactoredCov` holds
+``P_ii`` (N, 3, 3), ``phi`` (N, 3, 3), ``sigma`` (N, N, 3, 3) (sigma[i, i] unused).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from estimators.ukf_relay import ukf_weights
+
+__all__ = [
+    "FactoredCov",
+    "ccl_update",
+    "dcl_update",
+    "factor",
+    "motion",
+    "observe",
+    "time_update",
+    "time_update_factored",
+    "wrap",
+]
+
+
+def wrap(angle):
+    """Angle(s) wrapped to [-pi, pi)."""
+    return (np.asarray(angle) + np.pi) % (2 * np.pi) - np.pi
+
+
+def motion(estimate: np.ndarray, odometry: np.ndarray, dt: float):
+    """Unicycle step of every robot: new (N, 3) states and the Jacobians F (N, 3, 3), G (N, 3, 2)."""
+    s, u = np.asarray(estimate, float), np.asarray(odometry, float)
+    v, w, th = u[..., 0], u[..., 1], s[..., 2]
+    c, si = np.cos(th), np.sin(th)
+    new = np.stack([s[..., 0] + dt * v * c, s[..., 1] + dt * v * si, wrap(th + dt * w)], axis=-1)
+    F = np.zeros((*s.shape[:-1], 3, 3))
+    F[..., 0, 0] = F[..., 1, 1] = F[..., 2, 2] = 1.0
+    F[..., 0, 2] = -dt * v * si
+    F[..., 1, 2] = dt * v * c
+    G = np.zeros((*s.shape[:-1], 3, 2))
+    G[..., 0, 0], G[..., 1, 0], G[..., 2, 1] = dt * c, dt * si, dt
+    return new, F, G
+
+
+def _noise(G: np.ndarray, odometry_var) -> np.ndarray:
+    q = np.asarray(odometry_var, float)
+    if q.shape != (2,) or np.any(q < 0):
+        raise ValueError(f"odometry_var must be (sigma_v^2, sigma_w^2) >= 0, got {odometry_var!r}")
+    return np.einsum("...ab,b,...cb->...ac", G, q, G)
+
+
+def time_update(estimate, cov, odometry, dt: float, odometry_var):
+    """Joint (CCL) time update: s_i <- f(s_i, u_i), P <- F P F^T + G Q G^T with F block diagonal."""
+    new, F, G = motion(estimate, odometry, dt)
+    N = len(new)
+    Fb = np.zeros((3 * N, 3 * N))
+    Qb = np.zeros((3 * N, 3 * N))
+    Q = _noise(G, odometry_var)
+    for i in range(N):
+        Fb[3 * i:3 * i + 3, 3 * i:3 * i + 3] = F[i]
+        Qb[3 * i:3 * i + 3, 3 * i:3 * i + 3] = Q[i]
+    P = Fb @ np.asarray(cov, float) @ Fb.T + Qb
+    return new, 0.5 * (P + P.T)
+
+
+@dataclass
+class FactoredCov:
+    """Roumeliotis-Bekey storage: P_ii, Phi_i per robot; P_ij = Phi_i sigma_ij Phi_j^T (i != j)."""
+
+    P_ii: np.ndarray
+    phi: np.ndarray
+    sigma: np.ndarray
+
+    def block(self, i: int, j: int) -> np.ndarray:
+        if i == j:
+            return self.P_ii[i]
+        return self.phi[i] @ self.sigma[i, j] @ self.phi[j].T
+
+    def joint(self) -> np.ndarray:
+        """The joint covariance P (3N x 3N) the factors stand for."""
+        N = len(self.P_ii)
+        return np.block([[self.block(i, j) for j in range(N)] for i in range(N)])
+
+    def copy(self) -> FactoredCov:
+        return FactoredCov(self.P_ii.copy(), self.phi.copy(), self.sigma.copy())
+
+
+def factor(cov: np.ndarray) -> FactoredCov:
+    """Factors of a joint covariance with Phi_i = I."""
+    cov = np.asarray(cov, float)
+    N = cov.shape[0] // 3
+    blocks = cov.reshape(N, 3, N, 3).transpose(0, 2, 1, 3).copy()
+    P_ii = blocks[np.arange(N), np.arange(N)].copy()
+    return FactoredCov(P_ii, np.broadcast_to(np.eye(3), (N, 3, 3)).copy(), blocks)
+
+
+def time_update_factored(estimate, fcov: FactoredCov, odometry, dt: float, odometry_var):
+    """Each robot alone: s_i <- f(s_i, u_i), P_ii <- F_i P_ii F_i^T + Q_i, Phi_i <- F_i Phi_i."""
+    new, F, G = motion(estimate, odometry, dt)
+    P_ii = F @ fcov.P_ii @ np.swapaxes(F, -1, -2) + _noise(G, odometry_var)
+    return new, FactoredCov(0.5 * (P_ii + np.swapaxes(P_ii, -1, -2)), F @ fcov.phi, fcov.sigma.copy())
+
+
+def observe(observer_state: np.ndarray, target_xy: np.ndarray) -> np.ndarray:
+    """h = (range, bearing) from pose(s) (..., 3) to point(s) (..., 2), shape (..., 2)."""
+    d = np.asarray(target_xy, float) - np.asarray(observer_state, float)[..., :2]
+    return np.stack([np.hypot(d[..., 0], d[..., 1]),
+                     wrap(np.arctan2(d[..., 1], d[..., 0]) - observer_state[..., 2])], axis=-1)
+
+
+def _check(N, measuring, measured, landmark):
+    if not 0 <= measuring < N:
+        raise ValueError(f"measuring must be a robot in [0, {N - 1}], got {measuring}")
+    if (measured is None) == (landmark is None):
+        raise ValueError("give exactly one of measured (a robot) and landmark (a position)")
+    if measured is not None and (not 0 <= measured < N or measured == measuring):
+        raise ValueError(f"measured must be a robot in [0, {N - 1}] other than measuring, got {measured}")
+
+
+def _moments(h_points: np.ndarray, h0: np.ndarray, w: np.ndarray, R: np.ndarray):
+    """zbar, deviations (P, 2) and Pz of h evaluated on the sigma points (bearing as offsets from h0)."""
+    d = h_points - h0
+    d[:, 1] = wrap(d[:, 1])
+    mu = w @ d
+    dz = d - mu
+    Pz = np.einsum("p,pa,pb->ab", w, dz, dz) + R
+    return h0 + mu, dz, 0.5 * (Pz + Pz.T)
+
+
+def ccl_update(estimate, cov, measuring: int, z, R, measured: int | None = None, landmark=None,
+               lam: float = 0.0, reached=None, gate: float | None = None):
+    """UKF-CCL observation update on the joint state (L = 3N, observed robots first).
+
+    ``z`` = (range, bearing) measured by robot ``measuring`` of robot ``measured``
+    or of the known ``landmark`` (x, y). ``reached`` (N,) bool: robots whose
+    estimate updates (the others get gain 0; covariance of the gain [K_R; 0]).
+    Returns ``(estimate, cov, applied)``; ``applied`` is False when the gate rejected z.
+    """
+    x, P = np.asarray(estimate, float), np.asarray(cov, float)
+    N = len(x)
+    _check(N, measuring, measured, landmark)
+    L = 3 * N
+    observed = [measuring] if measured is None else [measuring, measured]
+    order = observed + [i for i in range(N) if i not in observed]
+    idx = (3 * np.asarray(order)[:, None] + np.arange(3)).ravel()
+    x_r, P_r = x.ravel()[idx], P[np.ix_(idx, idx)]
+    w = ukf_weights(L, lam)
+    cols = np.sqrt(L + lam) * np.linalg.cholesky(P_r).T
+    chi = np.concatenate([x_r[None], x_r + cols, x_r - cols])
+    target = chi[:, 3:5] if measured is not None else np.broadcast_to(np.asarray(landmark, float), (len(chi), 2))
+    h = observe(chi[:, 0:3], target)
+    z_bar, dz, Pz = _moments(h, h[0].copy(), w, np.asarray(R, float))
+    nu = np.asarray(z, float) - z_bar
+    nu[1] = wrap(nu[1])
+    Pz_inv = np.linalg.inv(Pz)
+    if gate is not None and nu @ Pz_inv @ nu > gate:
+        return x.copy(), P.copy(), False
+    Pxz = np.einsum("p,pl,pa->la", w, chi - x_r, dz)
+    K = Pxz @ Pz_inv
+    if reached is not None:
+        K = K * np.repeat(np.asarray(reached, bool)[order], 3)[:, None]
+    x_r = x_r + K @ nu
+    KPxz = K @ Pxz.T
+    P_r = P_r - KPxz - KPxz.T + K @ Pz @ K.T
+    inverse = np.argsort(idx)
+    x_new = x_r[inverse].reshape(N, 3)
+    x_new[:, 2] = wrap(x_new[:, 2])
+    P_new = P_r[np.ix_(inverse, inverse)]
+    return x_new, 0.5 * (P_new + P_new.T), True
+
+
+def dcl_update(estimate, fcov: FactoredCov, chain, z, R, measured_in_chain: bool = True, landmark=None,
+               lam: float = 0.0, gate: float | None = None):
+    """UKF-DCL along the relay ``chain`` (robot indices, no repeats) on the factored covariance.
+
+    ``chain[0]`` is the measuring robot; with ``measured_in_chain`` ``chain[1]``
+    is the measured robot, otherwise ``landmark`` (x, y) is the target. Each
+    receiver uses only its own P_ii, Phi_i, its row of sigma and the message
+    (rows of A, update weights Pxz, Phi of its up-neighbours, S_m, and the
+    r_U of the observers for robots the chain does not reach).
+    Returns ``(estimate, fcov, applied)``, new objects.
+    """
+    x = np.array(estimate, dtype=float)
+    N = len(x)
+    chain = [int(c) for c in chain]
+    q = 2 if measured_in_chain else 1
+    if len(set(chain)) != len(chain) or not chain or any(not 0 <= c < N for c in chain):
+        raise ValueError(f"chain must list distinct robots in [0, {N - 1}], got {chain}")
+    if len(chain) < q:
+        raise ValueError("a chain must reach the measuring and the measured robot")
+    if not measured_in_chain and landmark is None:
+        raise ValueError("landmark: a landmark observation needs its position")
+    L, k = 3 * N, len(chain)
+    w = ukf_weights(L, lam)
+    w0, wp = w[0], w[1]
+    scale = np.sqrt(L + lam)
+    f = fcov.copy()
+    A = np.zeros((3 * k, 3 * k))
+
+    def row_block(i):  # look-up Cholesky (15)-(16) by receiver chain[i]
+        ci = chain[i]
+        if i:
+            own = np.concatenate([f.block(ci, chain[j]) for j in range(i)], axis=1)  # (3, 3i)
+            left = np.linalg.solve(A[:3 * i, :3 * i], own.T).T
+            A[3 * i:3 * i + 3, :3 * i] = left
+            schur = f.P_ii[ci] - left @ left.T
+        else:
+            schur = f.P_ii[ci]
+        A[3 * i:3 * i + 3, 3 * i:3 * i + 3] = np.linalg.cholesky(0.5 * (schur + schur.T))
+
+    for i in range(q):
+        row_block(i)
+    m = chain[0]
+    dev = scale * A[:3 * q, :3 * q]  # sigma deviations of the observed robots, columns p <= 3q
+    x_o = x[chain[:q]].ravel()
+    plus, minus = x_o[:, None] + dev, x_o[:, None] - dev  # (3q, 3q): column p = point p
+    pts = np.concatenate([plus.T, minus.T])  # (6q, 3q)
+    if measured_in_chain:
+        h, h0 = observe(pts[:, 0:3], pts[:, 3:5]), observe(x[m], x[chain[1], :2])
+    else:
+        lm = np.asarray(landmark, float)
+        h, h0 = observe(pts[:, 0:3], lm), observe(x[m], lm)
+    # the other 2(L - 3q) points and the centre leave z at h0 (deviation 0 from h0)
+    h_all = np.concatenate([h0[None], h[:3 * q], np.repeat(h0[None], L - 3 * q, 0),
+                            h[3 * q:], np.repeat(h0[None], L - 3 * q, 0)])
+    z_bar, dz, Pz = _moments(h_all, h0.copy(), w, np.asarray(R, float))
+    del w0
+    nu = np.asarray(z, float) - z_bar
+    nu[1] = wrap(nu[1])
+    Pz_inv = np.linalg.inv(Pz)
+    if gate is not None and nu @ Pz_inv @ nu > gate:
+        return x, f, False
+    g = scale * wp * (dz[1:1 + 3 * q] - dz[1 + L:1 + L + 3 * q])  # (3q, 2)
+
+    unreached = [u for u in range(N) if u not in chain]
+    if unreached:  # observers: r_U = g^T A_o^-1 [Phi_o sigma_{o,U}]
+        rows = np.concatenate([np.concatenate([f.phi[o] @ f.sigma[o, u] for u in unreached], axis=1)
+                               for o in chain[:q]])
+        r_U = (g.T @ np.linalg.solve(A[:3 * q, :3 * q], rows)).reshape(2, len(unreached), 3)
+
+    weights = []
+    for i in range(k):
+        if i >= q:
+            row_block(i)
+        ci = chain[i]
+        Pxz_i = A[3 * i:3 * i + 3, :3 * q] @ g  # (20)
+        weights.append(Pxz_i)
+        K_i = Pxz_i @ Pz_inv
+        x[ci] = x[ci] + K_i @ nu  # (21)
+        phi_inv = np.linalg.inv(f.phi[ci])
+        for j in range(i + 1):  # (22)-(23)
+            cj = chain[j]
+            delta = K_i @ weights[j].T
+            if j == i:
+                P = f.P_ii[ci] - delta
+                f.P_ii[ci] = 0.5 * (P + P.T)
+            else:
+                f.sigma[ci, cj] -= phi_inv @ delta @ np.linalg.inv(f.phi[cj]).T
+                f.sigma[cj, ci] = f.sigma[ci, cj].T
+        for a, u in enumerate(unreached):
+            f.sigma[ci, u] -= phi_inv @ K_i @ r_U[:, a, :]
+            f.sigma[u, ci] = f.sigma[ci, u].T
+    x[:, 2] = wrap(x[:, 2])
+    return x, f, True

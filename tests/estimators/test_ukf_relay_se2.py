@@ -1,0 +1,109 @@
+"""UKF-DCL on (x, y, theta) with the Roumeliotis-Bekey factorization equals UKF-CCL (1e-9)."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+
+import estimators.ukf_relay_se2 as se2
+
+REPO_ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+DATASET6 = os.path.join(REPO_ROOT, "..", "shared", "data", "mrclam", "MRCLAM_Dataset6")
+R = np.diag([0.1**2, 0.05**2])
+Q = (0.05**2, 0.2**2)
+
+
+def _random_state(rng, N=4):
+    x = np.column_stack([rng.uniform(-3, 3, (N, 2)), rng.uniform(-np.pi, np.pi, N)])
+    a = rng.normal(size=(3 * N, 3 * N)) * 0.1
+    return x, a @ a.T + 0.01 * np.eye(3 * N)
+
+
+@pytest.mark.parametrize("landmark", [False, True])
+@pytest.mark.parametrize("length", [2, 3, 4])
+def test_dcl_equals_ccl_after_factored_time_updates(landmark, length):
+    rng = np.random.default_rng(1)
+    N = 4
+    x, P = _random_state(rng, N)
+    f = se2.factor(P)
+    xd = x.copy()
+    for _ in range(3):  # Phi_i != I before the update
+        u = rng.normal(size=(N, 2)) * [0.3, 0.5]
+        x, P = se2.time_update(x, P, u, 0.1, Q)
+        xd, f = se2.time_update_factored(xd, f, u, 0.1, Q)
+    chain = [2, 0, 3, 1][:length]
+    reached = np.isin(np.arange(N), chain)
+    z = np.array([2.0, 0.3])
+    if landmark:
+        lm = np.array([1.0, -2.0])
+        x1, P1, _ = se2.ccl_update(x, P, 2, z, R, landmark=lm, reached=reached)
+        x2, f2, _ = se2.dcl_update(xd, f, chain, z, R, measured_in_chain=False, landmark=lm)
+    else:
+        x1, P1, _ = se2.ccl_update(x, P, 2, z, R, measured=0, reached=reached)
+        x2, f2, _ = se2.dcl_update(xd, f, chain, z, R)
+    assert np.max(np.abs(x1 - x2)) < 1e-9
+    assert np.max(np.abs(P1 - f2.joint())) < 1e-9
+    assert np.all(np.linalg.eigvalsh(P1) > 0)
+
+
+def test_chain_order_after_observers_does_not_matter():
+    rng = np.random.default_rng(2)
+    x, P = _random_state(rng)
+    f = se2.factor(P)
+    a = se2.dcl_update(x, f, [1, 3, 0, 2], [1.5, -0.2], R)
+    b = se2.dcl_update(x, f, [1, 3, 2, 0], [1.5, -0.2], R)
+    assert np.allclose(a[0], b[0], atol=1e-12) and np.allclose(a[1].joint(), b[1].joint(), atol=1e-12)
+
+
+def test_gate_rejects_outlier():
+    rng = np.random.default_rng(3)
+    x, P = _random_state(rng)
+    z = se2.observe(x[0], x[1, :2]) + [50.0, 0.0]
+    _, _, applied = se2.ccl_update(x, P, 0, z, R, measured=1, gate=13.8)
+    _, _, applied_d = se2.dcl_update(x, se2.factor(P), [0, 1], z, R, gate=13.8)
+    assert not applied and not applied_d
+
+
+def test_bad_arguments():
+    rng = np.random.default_rng(4)
+    x, P = _random_state(rng)
+    with pytest.raises(ValueError, match="measured"):
+        se2.ccl_update(x, P, 0, [1, 0], R, measured=0)
+    with pytest.raises(ValueError, match="chain"):
+        se2.dcl_update(x, se2.factor(P), [0, 0, 1], [1, 0], R)
+    with pytest.raises(ValueError, match="odometry_var"):
+        se2.time_update(x, P, np.zeros((4, 2)), 0.1, (-1.0, 0.0))
+
+
+def test_dcl_equals_ccl_on_mrclam_slice():
+    if not os.path.isdir(DATASET6):
+        pytest.skip(f"MRCLAM dataset 6 not found at {DATASET6}")
+    from coloc_env.data import mrclam
+
+    d = mrclam.load_cached(DATASET6, 0.1).window(0, 400)
+    x = d.groundtruth[0].copy()
+    P = 1e-4 * np.eye(15)
+    xd, f = x.copy(), se2.factor(P)
+    worst, applied = 0.0, 0
+    for k in range(d.steps):
+        s = d.measurements_at(k)
+        for r, sub, rg, b in zip(d.meas_robot[s], d.meas_subject[s], d.meas_range[s], d.meas_bearing[s], strict=True):
+            z = np.array([rg, b])
+            if sub <= 5:
+                chain = [r, sub - 1] + [i for i in range(5) if i not in (r, sub - 1)]
+                x, P, a1 = se2.ccl_update(x, P, r, z, R, measured=sub - 1, gate=13.8)
+                xd, f, a2 = se2.dcl_update(xd, f, chain, z, R, gate=13.8)
+            else:
+                chain = [r] + [i for i in range(5) if i != r]
+                x, P, a1 = se2.ccl_update(x, P, r, z, R, landmark=d.landmarks[sub - 6], gate=13.8)
+                xd, f, a2 = se2.dcl_update(xd, f, chain, z, R, measured_in_chain=False,
+                                           landmark=d.landmarks[sub - 6], gate=13.8)
+            assert a1 == a2
+            applied += a1
+        worst = max(worst, np.abs(x - xd).max(), np.abs(P - f.joint()).max())
+        x, P = se2.time_update(x, P, d.odometry[k], d.dt, Q)
+        xd, f = se2.time_update_factored(xd, f, d.odometry[k], d.dt, Q)
+    assert applied > 100 and any(d.meas_subject <= 5)
+    assert worst < 1e-9
