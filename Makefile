@@ -23,7 +23,7 @@ install: $(STAMP)
 demo: $(STAMP)
 	MPLBACKEND=Agg $(VENV)/bin/coloc reproduce all --quick --out results
 	MPLBACKEND=Agg $(VENV)/bin/coloc train bandwidth_fusion --timesteps 20000 --seed 0 --out results/train
-	MPLBACKEND=Agg $(VENV)/bin/coloc evaluate all --policy all --models results/train --episodes 100 --out results
+	MPLBACKEND=Agg $(VENV)/bin/coloc evaluate bandwidth_fusion --policy all --models results/train --episodes 100 --out results
 	@echo "results: results/leaderboard.md, results/<paper>/report.md, results/train/<scenario>/seed0/learning_curve.png"
 
 test: $(STAMP)

@@ -9,6 +9,8 @@ all its agents; agent-steps = env-steps x N):
 * ``estimator``     the raw batched estimator step at the same B, where the
   scenario registers one in :data:`ESTIMATOR_STEPS` (so the env's overhead
   is the ratio of the two);
+* peers            for relay_ukf, filterpy's ``UnscentedKalmanFilter`` doing the
+  same range update one copy at a time (:data:`PEERS`);
 * ``vmas``          VMAS's batched ``simple_spread`` with 4 agents on the CPU at
   the same B, when ``vmas`` is installed (``pip install 'coloc[bench]'``).
 
@@ -61,8 +63,147 @@ def _bandwidth_fusion_estimator_step(batch: int) -> Callable[[], None]:
     return step
 
 
+def _nlos_horizon_estimator_step(batch: int, agents: int = 4, stack_size: int = 30) -> Callable[[], None]:
+    """One AFGE step of :mod:`estimators.afge` for B copies x ``agents`` targets: the delay-aware
+    re-run of the D + 1 buffer stamps over a stack of ``stack_size`` horizons, the estimates,
+    the predictive costs and the AHG choice (fused observations drawn once)."""
+    import estimators.afge as af
+
+    # the spec's AHG for 30 horizons; other stack sizes spread the group of 5 over 4..stack_size
+    params = af.AHGParams() if stack_size == 30 else af.AHGParams(
+        window_max=stack_size, window_step=max(1, (stack_size - 4) // 4), centre0=(4 + stack_size) // 2)
+    motion, D = af.MotionModel(), 3
+    rng = np.random.default_rng(0)
+    shape = (batch, agents)
+    info = np.broadcast_to(np.diag([0.05, 0.08]), (*shape, D + 1, 2, 2)).copy()
+    vector = np.einsum("...ab,...b->...a", info, rng.normal(scale=100.0, size=(*shape, D + 1, 2)))
+    success = np.ones((*shape, D + 1), bool)
+    box = {"final": af.empty_stack(shape, stack_size), "k": 0, "centre": np.full(shape, params.centre0),
+           "prev": (np.zeros((*shape, stack_size, 4)), np.broadcast_to(np.eye(4), (*shape, stack_size, 4, 4)),
+                    np.zeros((*shape, stack_size), bool))}
+
+    def step() -> None:
+        box["final"], current = af.buffer_step(motion, box["final"], box["k"], info, vector, success)
+        x, P, valid = af.stack_estimates(current)
+        z, R = af.fused_fix(info[..., -1, :, :], vector[..., -1, :], success[..., -1])
+        costs = af.predictive_costs(motion, *box["prev"], z, R)
+        _, box["centre"] = af.ahg_select(params, box["centre"], costs, valid, success[..., -1])
+        box["prev"], box["k"] = (x, P, valid), box["k"] + 1
+
+    return step
+
+
+def _gps_denied_nbp_episode(batch: int, num_particles: int = 100):
+    """(model, episode arrays stacked over B copies, initial dNBP state, per-copy generators) at the defaults."""
+    from coloc_env.config import build_config
+    from coloc_env.scenarios.gps_denied_nbp import GpsDeniedNbpConfig, initial_beliefs, sample_episode
+
+    config = build_config(GpsDeniedNbpConfig, {"num_particles": num_particles})
+    model = config.estimator_model()
+    episodes = [sample_episode(config, np.random.default_rng([0, b])) for b in range(batch)]
+    rngs = [np.random.default_rng([1, b]) for b in range(batch)]
+    stack = {k: np.stack([getattr(e, k) for e in episodes]) for k in
+             ("gps_normal", "gps_fix", "adjacency", "ranges", "accel")}
+    return config, model, stack, initial_beliefs(config, model, episodes, rngs), rngs
+
+
+def _gps_denied_nbp_estimator_step(batch: int, num_particles: int = 100) -> Callable[[], None]:
+    """One dNBP time step (:func:`estimators.dnbp.step`, paper schedule) for B copies, cycling the episode."""
+    import estimators.dnbp as dn
+
+    config, model, stack, state, rngs = _gps_denied_nbp_episode(batch, num_particles)
+    box = {"state": state, "k": 0}
+
+    def step() -> None:
+        k = box["k"] % config.horizon
+        box["state"], _ = dn.step(model, box["state"], *(stack[key][:, k] for key in
+                                                         ("gps_normal", "gps_fix", "adjacency", "ranges", "accel")),
+                                  rngs)
+        box["k"] += 1
+
+    return step
+
+
+def _gps_denied_nbp_particle_rows(min_seconds: float, batch: int | None = None, steps: int | None = None
+                                  ) -> list[dict]:
+    """Time per fault-UAV step of dNBP (Table 1's unit) at M = 50, 100, 200, 300, over the first steps.
+
+    B = 16 copies (the reproduction's batch) and 10 steps; 4 and 3 in quick mode.
+    """
+    import estimators.dnbp as dn
+
+    quick = min_seconds < 1.0
+    batch = batch or (4 if quick else 16)
+    steps = steps or (3 if quick else 10)
+    rows = []
+    for M in (50, 100, 200, 300):
+        config, model, stack, state, rngs = _gps_denied_nbp_episode(batch, M)
+        elapsed, fault_steps = 0.0, 0
+        for k in range(steps):
+            start = time.perf_counter()
+            state, _ = dn.step(model, state, *(stack[key][:, k] for key in
+                                               ("gps_normal", "gps_fix", "adjacency", "ranges", "accel")), rngs)
+            elapsed += time.perf_counter() - start
+            fault_steps += int((~stack["gps_normal"][:, k]).sum())
+        rate = steps / elapsed
+        rows.append({"scenario": "gps_denied_nbp", "what": f"dNBP step, M = {M}", "batch": batch,
+                     "env_steps_per_s": rate * batch, "agent_steps_per_s": rate * batch * config.num_uavs,
+                     "time_per_fault_uav_step_s": elapsed / max(fault_steps, 1)})
+    return rows
+
+
+# Scenarios too expensive per step for the default batches (dNBP: an M x M kernel per message).
+SCENARIO_BATCHES: dict[str, tuple[int, ...]] = {"gps_denied_nbp": (1, 16)}
+# Extra rows a scenario reports (name -> fn(min_seconds) -> rows).
+EXTRA_BENCHES: dict[str, Callable[[float], list[dict]]] = {"gps_denied_nbp": _gps_denied_nbp_particle_rows}
+
+
+def _relay_ukf_inputs(batch: int, platforms: int = 4):
+    rng = np.random.default_rng(0)
+    estimate = rng.normal(scale=20.0, size=(batch, platforms, 2))
+    root = rng.normal(scale=0.3, size=(batch, 2 * platforms, 2 * platforms))
+    cov = root @ np.swapaxes(root, -1, -2) + 0.1 * np.eye(2 * platforms)
+    z = np.linalg.norm(estimate[:, 0] - estimate[:, 1], axis=-1) + 0.5
+    return estimate, cov, z
+
+
+def _relay_ukf_estimator_step(batch: int, platforms: int = 4) -> Callable[[], None]:
+    """One UKF-DCL range update relayed along the full chain 0 -> 1 -> 2 -> 3 for B copies."""
+    import estimators.ukf_relay as ukf
+
+    estimate, cov, z = _relay_ukf_inputs(batch, platforms)
+    chain = np.broadcast_to(np.arange(platforms), (batch, platforms))
+
+    def step() -> None:
+        ukf.dcl_update(estimate, cov, chain, np.full(batch, platforms), z, 1.0)
+
+    return step
+
+
+def _relay_ukf_filterpy_loop(batch: int, platforms: int = 4) -> Callable[[], None]:
+    """The same range update by filterpy's ``UnscentedKalmanFilter``, one copy at a time (the peer)."""
+    from train.reproduce.wang2019 import filterpy_ccl_update
+
+    estimate, cov, z = _relay_ukf_inputs(batch, platforms)
+
+    def step() -> None:
+        for b in range(batch):
+            filterpy_ccl_update(estimate[b], cov[b], 0, 1, float(z[b]), 1.0)
+
+    return step
+
+
+# Peers measured beside a scenario's estimator: (label, factory(batch) -> step callable).
+PEERS: dict[str, tuple[str, Callable[[int], Callable[[], None]]]] = {
+    "relay_ukf": ("filterpy UnscentedKalmanFilter loop", _relay_ukf_filterpy_loop),
+}
+
+
 ESTIMATOR_STEPS: dict[str, Callable[[int], Callable[[], None]]] = {
+    "relay_ukf": _relay_ukf_estimator_step,
+    "gps_denied_nbp": _gps_denied_nbp_estimator_step,
     "bandwidth_fusion": _bandwidth_fusion_estimator_step,
+    "nlos_horizon": _nlos_horizon_estimator_step,
 }
 
 
@@ -84,6 +225,7 @@ def bench_scenario(name: str, min_seconds: float, batches=BATCHES) -> list[dict]
     rows: list[dict] = []
     paper = _paper_actions(name)
     num_agents = paper.shape[0]
+    batches = SCENARIO_BATCHES.get(name, batches)
 
     def add(what: str, batch: int, calls_per_s: float) -> None:
         rows.append({"scenario": name, "what": what, "batch": batch, "env_steps_per_s": calls_per_s * batch,
@@ -100,7 +242,7 @@ def bench_scenario(name: str, min_seconds: float, batches=BATCHES) -> list[dict]
 
     add("parallel_env loop", 1, _rate(loop_step, min_seconds))
 
-    supersuit_batch = 64
+    supersuit_batch = min(64, max(batches))
     supersuit = make_supersuit_vec_env(name, supersuit_batch, {})
     seed_supersuit_vec_env(supersuit, 0)
     supersuit.reset()
@@ -115,6 +257,11 @@ def bench_scenario(name: str, min_seconds: float, batches=BATCHES) -> list[dict]
         add("vector_env", batch, _rate(lambda venv=venv, tiled=tiled: venv.step(tiled), min_seconds))
         if name in ESTIMATOR_STEPS:
             add("estimator step", batch, _rate(ESTIMATOR_STEPS[name](batch), min_seconds))
+        if name in PEERS:
+            label, factory = PEERS[name]
+            add(label, batch, _rate(factory(batch), min_seconds))
+    if name in EXTRA_BENCHES:
+        rows += EXTRA_BENCHES[name](min_seconds)
     return rows
 
 
@@ -183,6 +330,10 @@ def run(out: str, quick: bool = False, scenarios: list[str] | None = None) -> li
         table.add_row(row["scenario"], row["what"], str(row["batch"]), f"{row['env_steps_per_s']:,.0f}",
                       f"{row['agent_steps_per_s']:,.0f}")
     console.print(table)
+    for row in rows:
+        if "time_per_fault_uav_step_s" in row:
+            console.print(f"{row['scenario']} {row['what']} (B = {row['batch']}): "
+                          f"{1e3 * row['time_per_fault_uav_step_s']:.1f} ms per fault-UAV step")
     folder = os.path.join(out, "bench")
     write_json(os.path.join(folder, "bench.json"), {"quick": quick, "cpu_count": os.cpu_count(), "rows": rows})
     _figure(rows, os.path.join(folder, "throughput.png"))

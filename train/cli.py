@@ -6,8 +6,8 @@ import argparse
 import os
 import sys
 
-PAPERS = {"zhao2020": "bandwidth_fusion", "fu2017": "lossy_fusion", "wang2019": "relay_ukf",
-          "gao2016": "nlos_horizon"}
+PAPERS = {"fu2017": "lossy_fusion", "zhao2020": "bandwidth_fusion", "wang2019": "relay_ukf", "gao2016": "nlos_horizon",
+          "wan2014": "gps_denied_nbp"}
 SCENARIO_TO_PAPER = {v: k for k, v in PAPERS.items()}
 
 

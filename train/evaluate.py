@@ -75,15 +75,18 @@ def run_episodes(scenario: str, policy_name: str, episodes: int, seed_base: int 
         raise ValueError(f"episodes must be >= 2 for a confidence interval, got {episodes}")
     env = coloc_env.parallel_env(scenario, **env_config)
     policy = agents.make_policy(policy_name, env, seed=seed_base)
+    weight_key = env.scenario.metric_weight_key
     costs, comms = [], []
     for e in range(episodes):
         observations, _ = env.reset(seed=seed_base + e)
-        errors, comm = [], 0.0
+        errors, weights, comm = [], [], 0.0
         while env.agents:
             observations, _, _, _, infos = env.step(policy.act(observations))
             errors.append([float(infos[a]["error"]) for a in env.possible_agents])
+            if weight_key:
+                weights.append([float(infos[a][weight_key]) for a in env.possible_agents])
             comm += sum(float(info.get("communication", 0.0)) for info in infos.values())
-        costs.append(float(env.scenario.episode_error(np.array(errors))))
+        costs.append(float(env.scenario.episode_error(np.array(errors), np.array(weights) if weight_key else None)))
         comms.append(comm / len(errors))
         if progress:
             progress()
@@ -103,7 +106,7 @@ def run_model_batched(model, scenario: str, episodes: int, seed_base: int, **env
     core = cls(build_config(cls.Config, env_config), batch=episodes)
     core.reset([np.random.default_rng(seed_base + e) for e in range(episodes)])
     shape = core.action_space().shape
-    errors, comm = [], np.zeros(episodes)
+    errors, weights, comm = [], [], np.zeros(episodes)
     while not core.done().all():
         observation = core.observation()
         actions, _ = model.predict(observation.reshape(episodes * core.num_agents, *observation.shape[2:]),
@@ -111,6 +114,9 @@ def run_model_batched(model, scenario: str, episodes: int, seed_base: int, **env
         core.step(np.asarray(actions, dtype=float).reshape(episodes, core.num_agents, *shape))
         info = core.info()
         errors.append(info["error"])
+        if core.metric_weight_key:
+            weights.append(info[core.metric_weight_key])
         comm += info["communication"].sum(axis=-1) if "communication" in info else 0.0
-    cost = core.episode_error(np.stack(errors, axis=1))  # (episodes, T, N) -> (episodes,)
+    # (episodes, T, N) -> (episodes,)
+    cost = core.episode_error(np.stack(errors, axis=1), np.stack(weights, axis=1) if weights else None)
     return summarize(scenario, "model", cost, comm / len(errors), seed_base, core.initial_cost())

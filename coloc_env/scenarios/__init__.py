@@ -1,11 +1,12 @@
 """Scenario registry: one module per paper setting."""
 
 from coloc_env.scenarios.bandwidth_fusion import BandwidthFusionScenario
+from coloc_env.scenarios.gps_denied_nbp import GpsDeniedNbpScenario
 from coloc_env.scenarios.lossy_fusion import LossyFusionScenario
 from coloc_env.scenarios.nlos_horizon import NlosHorizonScenario
 from coloc_env.scenarios.relay_ukf import RelayUKFScenario
 
 REGISTRY = {cls.name: cls for cls in (BandwidthFusionScenario, LossyFusionScenario, RelayUKFScenario,
-                                          NlosHorizonScenario)}
+                                          GpsDeniedNbpScenario, NlosHorizonScenario)}
 
 __all__ = ["REGISTRY"]

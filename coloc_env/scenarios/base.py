@@ -24,6 +24,8 @@ class Scenario(abc.ABC):
     paper: ClassVar[str]
     Config: ClassVar[type]
     agent_prefix: ClassVar[str] = "uav"
+    # An info key whose per-step values weight the episode metric (None: unweighted).
+    metric_weight_key: ClassVar[str | None] = None
 
     def __init__(self, config, batch: int = 1):
         if not isinstance(batch, (int, np.integer)) or batch < 1:
@@ -94,13 +96,15 @@ class Scenario(abc.ABC):
         contain but a paper's cost may (bandwidth_fusion's k = 0 term). 0 by default."""
         return 0.0
 
-    def episode_error(self, errors: np.ndarray) -> np.ndarray:
+    def episode_error(self, errors: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
         """The paper's metric of whole episodes from ``infos[agent]["error"]``.
 
-        ``errors`` has shape (..., T, N): every step's error of every agent.
-        Default: the sum over steps and agents, a cost like J_K. A scenario
-        whose paper averages over time, or whose estimate is shared by all
-        agents, overrides this (its docstring says which).
+        ``errors`` has shape (..., T, N): every step's error of every agent;
+        ``weights`` the same shape, ``infos[agent][metric_weight_key]`` where the
+        scenario names one. Default: the sum over steps and agents, a cost like
+        J_K. A scenario whose paper averages over time, over some agents only,
+        or whose estimate is shared by all agents, overrides this (its
+        docstring says which).
         """
         return np.asarray(errors, float).sum(axis=(-2, -1))
 

@@ -163,3 +163,21 @@ def test_native_and_supersuit_training_learn_the_same_weights(tmp_path):
     assert native.keys() == supersuit.keys()
     for key in native:
         assert torch.equal(native[key], supersuit[key]), key
+
+
+def test_episode_metrics_follow_each_paper():
+    """Default: a sum (J_K); lossy_fusion and relay_ukf: means; gps_denied_nbp: mean over faulty (step, UAV)."""
+    import coloc_env
+    from coloc_env.config import build_config
+
+    def core(name):
+        cls = coloc_env.scenario_class(name)
+        return cls(build_config(cls.Config, {}), batch=1)
+
+    errors = np.arange(12.0).reshape(3, 4)
+    assert core("bandwidth_fusion").episode_error(errors) == 66.0
+    assert core("relay_ukf").episode_error(errors) == 5.5
+    fault = np.zeros((3, 4))
+    fault[1, 2] = fault[2, 0] = 1.0
+    assert core("gps_denied_nbp").episode_error(errors, fault) == (6.0 + 8.0) / 2
+    assert core("gps_denied_nbp").episode_error(errors, np.zeros((3, 4))) == 0.0

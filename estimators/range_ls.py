@@ -1,0 +1,208 @@
+"""Baselines of wan2014: dead reckoning and least squares against normal neighbours (ref. [7]).
+
+Wan et al. 2014 compare dNBP with "the traditional cooperative localization
+method in [7], where the fault UAVs are located based on nearby normal ones
+only". The equations are lost in extraction; this module implements the
+reconstruction ``shared/specs/wan2014_dnbp.md`` §6 (tags: [paper] stated in the
+text, [chosen] the spec's choice).
+
+**DR / GPS-only** (non-cooperative): a linear Kalman filter per UAV on the
+constant-velocity model x(k+1) = F x + G a_hat + w, Q = sigma_acc^2 G G^T,
+updated with the GPS fix (R = sigma_gps^2 I2) when the receiver is normal,
+prediction only when it is faulty.
+
+**LS [7]**: the same filter; a fault UAV with at least ``min_anchors`` (3
+[chosen]) GPS-normal neighbours computes a snapshot fix against their KF
+position estimates a_k and its measured ranges d_k, by Gauss-Newton on
+sum_k (d_k - ||p - a_k||)^2 (<= 20 iterations, step tolerance 1e-4 m),
+started from its predicted position and, if that fix fails the gate, from
+the linearised solution 2 (a_k - a_1)^T p = d_1^2 - d_k^2 + ||a_k||^2 - ||a_1||^2.
+Gate [chosen]: residual RMS <= 3 sigma_d, sqrt(tr sigma_d^2 (J^T J)^-1) <= 10
+sigma_d and nu^T (C_pp + sigma_d^2 (J^T J)^-1)^-1 nu <= 13.8 with nu = p - p_pred.
+An accepted fix is the output and a position pseudo-measurement of the KF
+with covariance sigma_d^2 (J^T J)^-1; otherwise the output is the dead-
+reckoning estimate. No fault-to-fault cooperation.
+
+Arrays carry a leading batch axis B and the UAV axis N; everything is
+vectorized (anchors padded to N with a mask). Covariance updates use the
+Joseph form and are symmetrized.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["LsParams", "KalmanState", "initial_state", "predict", "update_position", "gauss_newton",
+           "linearized_fix", "step"]
+
+
+@dataclass(frozen=True)
+class LsParams:
+    """Parameters of the baselines (spec §1, §6).
+
+    | field          | default | tag      | meaning                                                |
+    |----------------|---------|----------|--------------------------------------------------------|
+    | min_anchors    | 3       | [chosen] | ls_min_anchors: normal neighbours needed for a fix     |
+    | max_rms        | 3       | [chosen] | ls_max_rms: residual RMS gate, in units of sigma_d     |
+    | max_std        | 10      | [chosen] | ls_max_std: sqrt(tr cov) gate, in units of sigma_d     |
+    | gate_chi2      | 13.8    | [chosen] | ls_gate_chi2: chi^2_2 99.9 % innovation gate           |
+    | max_iterations | 20      | [chosen] | Gauss-Newton iterations                                |
+    | tolerance      | 1e-4    | [chosen] | Gauss-Newton step tolerance [m]                        |
+    | cooperative    | True    |          | False: no fixes at all (the DR / GPS-only baseline)    |
+    """
+
+    min_anchors: int = 3
+    max_rms: float = 3.0
+    max_std: float = 10.0
+    gate_chi2: float = 13.8
+    max_iterations: int = 20
+    tolerance: float = 1e-4
+    cooperative: bool = True
+
+
+@dataclass
+class KalmanState:
+    """Per-UAV predicted mean (B, N, 4) and covariance (B, N, 4, 4) of the current step."""
+
+    mean: np.ndarray
+    cov: np.ndarray
+
+
+def initial_state(mean: np.ndarray, cov: np.ndarray) -> KalmanState:
+    """mean (B, N, 4), cov (4, 4) or (B, N, 4, 4)."""
+    mean = np.asarray(mean, float)
+    return KalmanState(mean.copy(), np.broadcast_to(np.asarray(cov, float), (*mean.shape, 4)).copy())
+
+
+def _sym(P: np.ndarray) -> np.ndarray:
+    return 0.5 * (P + np.swapaxes(P, -1, -2))
+
+
+def predict(state: KalmanState, accel: np.ndarray, F: np.ndarray, G: np.ndarray, Q: np.ndarray) -> KalmanState:
+    mean = state.mean @ F.T + accel @ G.T
+    cov = _sym(F @ state.cov @ F.T + Q)
+    return KalmanState(mean, cov)
+
+
+def update_position(state: KalmanState, z: np.ndarray, R: np.ndarray, mask: np.ndarray) -> KalmanState:
+    """Joseph-form update with a position measurement z (B, N, 2), covariance R (B, N, 2, 2), where ``mask``."""
+    H = np.zeros((2, 4))
+    H[0, 0] = H[1, 1] = 1.0
+    P = state.cov
+    S = P[..., :2, :2] + R
+    K = np.linalg.solve(S, P[..., :2, :]).swapaxes(-1, -2)  # P H^T S^-1 (S symmetric)
+    innovation = np.where(mask[..., None], z - state.mean[..., :2], 0.0)
+    mean = state.mean + np.einsum("...ij,...j->...i", K, innovation)
+    IKH = np.eye(4) - K @ H
+    cov = _sym(IKH @ P @ IKH.swapaxes(-1, -2) + K @ R @ K.swapaxes(-1, -2))
+    return KalmanState(np.where(mask[..., None], mean, state.mean), np.where(mask[..., None, None], cov, P))
+
+
+def _normal_matrix(p: np.ndarray, anchors: np.ndarray, ranges: np.ndarray, mask: np.ndarray):
+    diff = p[:, None, :] - anchors
+    dist = np.maximum(np.linalg.norm(diff, axis=-1), 1e-9)
+    H = np.where(mask[..., None], diff / dist[..., None], 0.0)
+    residual = np.where(mask, ranges - dist, 0.0)
+    return H, residual
+
+
+def gauss_newton(start: np.ndarray, anchors: np.ndarray, ranges: np.ndarray, mask: np.ndarray,
+                 max_iterations: int = 20, tolerance: float = 1e-4) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Minimize sum_k (d_k - ||p - a_k||)^2 for J problems.
+
+    start (J, 2), anchors (J, K, 2), ranges (J, K), mask (J, K). Returns
+    (p (J, 2), J^T J (J, 2, 2) at p, residual RMS (J,)). Rows converge
+    independently (a converged row stops moving).
+    """
+    p = np.asarray(start, float).copy()
+    active = np.ones(len(p), bool)
+    for _ in range(max_iterations):
+        H, residual = _normal_matrix(p, anchors, ranges, mask)
+        JtJ = np.einsum("jki,jkl->jil", H, H)
+        det = JtJ[:, 0, 0] * JtJ[:, 1, 1] - JtJ[:, 0, 1] ** 2
+        good = active & (det > 1e-12)
+        rhs = np.einsum("jki,jk->ji", H, residual)
+        delta = np.zeros_like(p)
+        if good.any():
+            delta[good] = np.linalg.solve(JtJ[good], rhs[good][..., None])[..., 0]
+        p = p + delta
+        active = good & (np.linalg.norm(delta, axis=-1) > tolerance)
+        if not active.any():
+            break
+    H, residual = _normal_matrix(p, anchors, ranges, mask)
+    JtJ = np.einsum("jki,jkl->jil", H, H)
+    rms = np.sqrt(np.sum(residual**2, axis=-1) / np.maximum(mask.sum(axis=-1), 1))
+    return p, JtJ, rms
+
+
+def linearized_fix(anchors: np.ndarray, ranges: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Linear LS: subtract the first anchor's squared-range equation from the others (J, 2)."""
+    first = np.argmax(mask, axis=-1)
+    rows = np.arange(len(anchors))
+    a1, d1 = anchors[rows, first], ranges[rows, first]
+    A = 2.0 * (anchors - a1[:, None, :])
+    b = d1[:, None] ** 2 - ranges**2 + np.sum(anchors**2, axis=-1) - np.sum(a1**2, axis=-1)[:, None]
+    use = mask.copy()
+    use[rows, first] = False
+    A = np.where(use[..., None], A, 0.0)
+    b = np.where(use, b, 0.0)
+    AtA = np.einsum("jki,jkl->jil", A, A)
+    Atb = np.einsum("jki,jk->ji", A, b)
+    return np.einsum("jil,jl->ji", np.linalg.pinv(AtA), Atb)
+
+
+def _gate(p, JtJ, rms, p_pred, C_pp, range_std, params):
+    det = JtJ[:, 0, 0] * JtJ[:, 1, 1] - JtJ[:, 0, 1] ** 2
+    ok = det > 1e-12
+    safe = np.where(ok[:, None, None], JtJ, np.eye(2))
+    cov = range_std**2 * np.linalg.inv(safe)
+    nu = p - p_pred
+    S = C_pp + cov
+    chi2 = np.einsum("ji,ji->j", nu, np.linalg.solve(S, nu[..., None])[..., 0])
+    accept = (ok & (rms <= params.max_rms * range_std)
+              & (np.sqrt(np.trace(cov, axis1=-2, axis2=-1)) <= params.max_std * range_std)
+              & (chi2 <= params.gate_chi2))
+    return accept, cov
+
+
+def step(params: LsParams, state: KalmanState, gps_normal: np.ndarray, gps_fix: np.ndarray, adjacency: np.ndarray,
+         ranges: np.ndarray, accel: np.ndarray, F: np.ndarray, G: np.ndarray, Q: np.ndarray, gps_std: float,
+         range_std: float) -> tuple[KalmanState, np.ndarray, np.ndarray]:
+    """One step tau for B copies: GPS updates, LS fixes of fault UAVs, outputs, then prediction to tau + 1.
+
+    ``state`` holds the predictions of tau. Returns (state of tau + 1,
+    estimates (B, N, 2), fixed (B, N) bool: fault UAVs whose fix passed the gate).
+    """
+    gps_normal = np.asarray(gps_normal, bool)
+    B, N = gps_normal.shape
+    R_gps = np.broadcast_to(gps_std**2 * np.eye(2), (B, N, 2, 2))
+    posterior = update_position(state, np.nan_to_num(gps_fix), R_gps, gps_normal)
+    estimate = posterior.mean[..., :2].copy()
+    fixed = np.zeros((B, N), bool)
+    anchors_ok = adjacency & gps_normal[:, None, :]  # [b, s, k]: k is a normal neighbour of s
+    candidates = ~gps_normal & (anchors_ok.sum(axis=-1) >= params.min_anchors)
+    if params.cooperative and candidates.any():
+        b_idx, s_idx = np.nonzero(candidates)
+        anchors = posterior.mean[b_idx, :, :2]
+        mask = anchors_ok[b_idx, s_idx]
+        d = ranges[b_idx, s_idx]
+        p_pred = state.mean[b_idx, s_idx, :2]
+        C_pp = state.cov[b_idx, s_idx, :2, :2]
+        p, JtJ, rms = gauss_newton(p_pred, anchors, d, mask, params.max_iterations, params.tolerance)
+        accept, cov = _gate(p, JtJ, rms, p_pred, C_pp, range_std, params)
+        retry = ~accept
+        if retry.any():
+            p2, JtJ2, rms2 = gauss_newton(linearized_fix(anchors[retry], d[retry], mask[retry]), anchors[retry],
+                                          d[retry], mask[retry], params.max_iterations, params.tolerance)
+            accept2, cov2 = _gate(p2, JtJ2, rms2, p_pred[retry], C_pp[retry], range_std, params)
+            p[retry], cov[retry], accept[retry] = p2, cov2, accept2
+        fb, fs = b_idx[accept], s_idx[accept]
+        fixed[fb, fs] = True
+        z = np.zeros((B, N, 2))
+        R = np.broadcast_to(np.eye(2), (B, N, 2, 2)).copy()
+        z[fb, fs], R[fb, fs] = p[accept], cov[accept]
+        posterior = update_position(posterior, z, R, fixed)
+        estimate[fb, fs] = p[accept]
+    return predict(posterior, accel, F, G, Q), estimate, fixed

@@ -1,0 +1,146 @@
+"""The gps_denied_nbp scenario through its PettingZoo views."""
+
+import warnings
+
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import data_equivalence
+from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test
+
+import agents
+import coloc_env
+import estimators.dnbp as dn
+from coloc_env.config import build_config
+from coloc_env.scenarios.gps_denied_nbp import GpsDeniedNbpConfig, initial_beliefs, sample_episode
+
+NAME = "gps_denied_nbp"
+SMALL = {"num_uavs": 5, "num_particles": 20, "horizon": 8, "area": 300.0}
+
+
+def play(env, policy, seed):
+    observations, infos = env.reset(seed=seed)
+    history = [(observations, infos)]
+    while env.agents:
+        observations, rewards, terms, truncs, infos = env.step(policy.act(observations))
+        history.append((observations, rewards, infos))
+    return history
+
+
+def test_pettingzoo_api_and_seed_tests():
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        parallel_api_test(coloc_env.parallel_env(NAME, **SMALL), num_cycles=20)
+        parallel_seed_test(lambda: coloc_env.parallel_env(NAME, **SMALL), num_cycles=20)
+        api_test(coloc_env.env(NAME, **SMALL), num_cycles=10)
+
+
+def test_spaces_state_render_and_infos():
+    env = coloc_env.parallel_env(NAME, render_mode="rgb_array", **SMALL)
+    assert env.possible_agents == [f"uav_{i}" for i in range(5)]
+    assert env.action_space("uav_0") is env.action_space("uav_0")
+    assert env.action_space("uav_0") == env.action_space("uav_4")
+    assert env.action_space("uav_0").n == 5 and env.observation_space("uav_1").shape == (7,)
+    _, infos = env.reset(seed=0)
+    assert env.state().shape == env.state_space.shape
+    frame = env.render()
+    assert frame.ndim == 3 and frame.shape[2] == 3
+    obs, rewards, _, _, infos = env.step({a: np.ones(5, np.int8) for a in env.agents})
+    assert env.scenario.scene(0).particles.shape == (5, 20, 2)
+    for key in ("true_position", "estimated_position", "error", "fault", "broadcasts", "communication",
+                "messages_sent", "messages_received", "neighbours", "step"):
+        assert key in infos["uav_0"]
+    faults = [infos[a]["fault"] for a in env.agents]
+    errors = [infos[a]["error"] for a in env.agents]
+    expected = -np.mean([e for e, f in zip(errors, faults, strict=True) if f]) if any(faults) else 0.0
+    assert rewards["uav_0"] == pytest.approx(expected)  # team reward, broadcast_cost 0
+    assert sum(infos[a]["messages_sent"] for a in env.agents) == sum(infos[a]["messages_received"]
+                                                                       for a in env.agents)
+    assert all(0 <= o[0] <= 1 for o in obs.values())
+    assert env.render().ndim == 3
+
+
+@pytest.mark.parametrize("kwargs, field", [
+    ({"num_uavs": 1}, "num_uavs"),
+    ({"p_normal_to_fault": 1.5}, "p_normal_to_fault"),
+    ({"gps_std": 0.0}, "gps_std"),
+    ({"range_std": -1.0}, "range_std"),
+    ({"comm_range": 0.0}, "comm_range"),
+    ({"num_normal": 11}, "num_normal"),
+    ({"num_particles": 1}, "num_particles"),
+    ({"init": "hot"}, "init"),
+    ({"schedule": "random"}, "schedule"),
+    ({"reward": "mse"}, "reward"),
+    ({"broadcast_cost": -0.1}, "broadcast_cost"),
+    ({"nominal_velocity": (20.0, np.nan)}, "nominal_velocity"),
+    ({"defensive_weight": 1.0}, "defensive_weight"),
+    ({"initial_threshold": 0}, "initial_threshold"),
+    ({"particles": 10}, "unknown config key"),
+])
+def test_bad_config_names_the_field(kwargs, field):
+    with pytest.raises(ValueError, match=field):
+        coloc_env.parallel_env(NAME, **kwargs)
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf])
+def test_non_finite_or_misshaped_action_is_refused(bad):
+    env = coloc_env.parallel_env(NAME, **SMALL)
+    env.reset(seed=0)
+    actions = {a: np.ones(5) for a in env.agents}
+    actions["uav_2"][3] = bad
+    with pytest.raises(ValueError, match="finite"):
+        env.step(actions)
+    with pytest.raises(ValueError, match="shape"):
+        env.step({a: np.ones(4) for a in env.agents})
+
+
+def test_same_seed_gives_identical_episodes_and_reset_continues_the_generator():
+    env_a, env_b = coloc_env.parallel_env(NAME, **SMALL), coloc_env.parallel_env(NAME, **SMALL)
+    first_a = play(env_a, agents.make_policy("random", env_a, seed=5), 11)
+    first_b = play(env_b, agents.make_policy("random", env_b, seed=5), 11)
+    assert len(first_a) == 9 and data_equivalence(first_a, first_b)
+    other = play(coloc_env.parallel_env(NAME, **SMALL), agents.make_policy("random", env_a, seed=5), 12)
+    assert not data_equivalence(first_a, other)
+    _, info_a = env_a.reset()
+    _, info_b = env_b.reset()
+    np.testing.assert_array_equal(info_a["uav_0"]["estimated_position"], info_b["uav_0"]["estimated_position"])
+    assert not np.array_equal(info_a["uav_0"]["true_position"], first_a[0][1]["uav_0"]["true_position"])
+
+
+def test_env_with_paper_policy_equals_the_estimator_called_directly():
+    env = coloc_env.parallel_env(NAME, **SMALL)
+    policy = agents.make_policy("paper", env)
+    observations, _ = env.reset(seed=7)
+    # the same episode and estimator generator, rebuilt from the seed exactly as reset does
+    config = build_config(GpsDeniedNbpConfig, SMALL)
+    rng = np.random.default_rng(7)
+    episode = sample_episode(config, rng)
+    estimator_rng = rng.spawn(1)[0]
+    model = config.estimator_model()
+    state = initial_beliefs(config, model, [episode], [estimator_rng])
+    for k in range(config.horizon):
+        observations, rewards, _, _, infos = env.step(policy.act(observations))
+        state, result = dn.step(model, state, episode.gps_normal[k][None], episode.gps_fix[k][None],
+                                episode.adjacency[k][None], episode.ranges[k][None], episode.accel[k][None],
+                                [estimator_rng])
+        for i, agent in enumerate(env.possible_agents):
+            np.testing.assert_array_equal(infos[agent]["estimated_position"], result.estimate[0, i])
+            np.testing.assert_array_equal(infos[agent]["true_position"], episode.truth[k, i, :2])
+            assert infos[agent]["broadcasts"] == result.broadcasts[0, i]
+    assert not env.agents
+
+
+def test_silent_policy_sends_nothing_and_paper_beats_it_on_fault_uavs():
+    config = {"num_uavs": 8, "num_particles": 40, "horizon": 10, "num_normal": 4}
+    totals = {}
+    for name in ("paper", "silent"):
+        env = coloc_env.parallel_env(NAME, **config)
+        policy = agents.make_policy(name, env)
+        errors, broadcasts = [], 0
+        for seed in range(2):
+            for _, _, infos in play(env, policy, seed)[1:]:
+                errors += [infos[a]["error"] for a in env.possible_agents if infos[a]["fault"]]
+                broadcasts += sum(infos[a]["broadcasts"] for a in env.possible_agents)
+        totals[name] = (np.mean(errors), broadcasts)
+    assert totals["silent"][1] == 0 and totals["paper"][1] > 0
+    assert totals["paper"][0] < totals["silent"][0]
+    assert agents.make_policy("paper", env).act({"uav_0": None})["uav_0"].dtype == np.int8

@@ -1,0 +1,79 @@
+"""``coloc reproduce wan2014`` on a small configuration, the training smoke run and the bench rows."""
+
+import json
+
+import numpy as np
+
+from coloc_env.config import build_config
+from coloc_env.scenarios.gps_denied_nbp import GpsDeniedNbpConfig
+from train.reproduce import wan2014
+
+SMALL = {"num_uavs": 6, "horizon": 3, "num_particles": 30}
+
+
+def test_reproduce_writes_the_spec_metrics_report_and_figures(tmp_path):
+    config = build_config(GpsDeniedNbpConfig, SMALL)
+    metrics = wan2014.run(str(tmp_path), runs=2, seed=3, config=config)
+    folder = tmp_path / "wan2014"
+    on_disk = json.loads((folder / "metrics.json").read_text())
+    assert on_disk["claims"] == metrics["claims"]
+    assert set(metrics["claims"]) == {"dnbp_beats_ls_default", "dnbp_beats_ls_mid_range",
+                                      "ls_beats_dnbp_large_range", "error_decreases_with_M",
+                                      "error_increases_with_noise"}
+    assert metrics["paper"] == "wan2014" and metrics["runs"] == 2 and metrics["seed_base"] == 3
+    d = metrics["default"]
+    for method in ("dnbp", "ls", "dr"):
+        assert len(d[method]["err_fault_t"]) == 3
+        assert {"err_fault", "err_all", "err_normal", "fail_rate", "err_fault_run_std"} <= set(d[method])
+    assert d["time_per_fault_uav_step_s"] > 0 and d["broadcasts_per_step"] > 0
+    assert d["msgs_per_step"] >= d["broadcasts_per_step"]
+    assert list(metrics["sweep_normal_ratio"]) == ["0.2", "0.3", "0.5", "0.7"]
+    assert list(metrics["sweep_particles"]) == ["50", "100", "200", "300"]
+    assert list(metrics["sweep_comm_range"]) == ["150", "250", "350", "500"]
+    # the fixed-proportion sweep has exactly round(ratio N) normal UAVs at every step
+    assert metrics["sweep_normal_ratio"]["0.5"]["fault_fraction"] == 0.5
+    # a point equal to the default is the default (common random numbers)
+    assert metrics["sweep_gps_std"]["3"] == metrics["default"]
+    assert metrics["case_study"]["schedule_matches_paper"] is True
+    for name in ("fig4_case_study.png", "fig5_error_vs_time.png", "fig6_sweeps.png", "tradeoff.png", "report.md"):
+        assert (folder / name).stat().st_size > 1000
+    report = (folder / "report.md").read_text()
+    assert "| Fig. 6(b): for R > 500 m LS is slightly better than dNBP |" in report
+
+
+def test_evaluate_point_is_reproducible_and_baselines_are_ordered():
+    base = {**SMALL, "horizon": 4, "num_normal": 3}
+    a = wan2014.evaluate_point({}, base, 2, 0)
+    b = wan2014.evaluate_point({}, base, 2, 0)
+    for key in ("dnbp", "ls", "dr"):
+        assert a[key] == b[key]
+    assert a["fault_fraction"] == 0.5 and a["dnbp"]["err_fault"] != a["ls"]["err_fault"]
+    assert np.isclose(a["dr"]["err_normal"], a["ls"]["err_normal"])  # normal UAVs: the same GPS filter
+    c = wan2014.evaluate_point({}, base, 2, 1)
+    assert c["dnbp"] != a["dnbp"]
+
+
+def test_train_smoke_then_the_model_plays_the_env(tmp_path):
+    import agents
+    import coloc_env
+    from train.training import train
+
+    path = train("gps_denied_nbp", timesteps=64, seed=1, out=str(tmp_path), progress_bar=False, curve_points=0)
+    assert (tmp_path / "gps_denied_nbp" / "seed1" / "model.zip").is_file()
+    env = coloc_env.parallel_env("gps_denied_nbp", num_uavs=10, num_particles=20, horizon=3)
+    policy = agents.make_policy(path, env)
+    observations, _ = env.reset(seed=0)
+    while env.agents:
+        actions = policy.act(observations)
+        assert actions["uav_0"].shape == (5,)
+        observations, rewards, _, _, infos = env.step(actions)
+    assert np.isfinite(rewards["uav_0"]) and infos["uav_0"]["error"] >= 0
+
+
+def test_bench_reports_time_per_fault_uav_step():
+    from train.bench import ESTIMATOR_STEPS, _gps_denied_nbp_particle_rows
+
+    ESTIMATOR_STEPS["gps_denied_nbp"](2)()
+    rows = _gps_denied_nbp_particle_rows(0.1, batch=1, steps=1)
+    assert [r["what"] for r in rows] == [f"dNBP step, M = {m}" for m in (50, 100, 200, 300)]
+    assert all(r["time_per_fault_uav_step_s"] > 0 for r in rows)

@@ -1,0 +1,448 @@
+"""Reproduce Wan et al. 2014 (``gps_denied_nbp``): Figs. 4-6, Table 1 and the paper's claims.
+
+The paper's equations and most numbers were lost in extraction; the model is
+the reconstruction ``shared/specs/wan2014_dnbp.md`` and the claims are its §8.
+Writes ``OUT/wan2014/metrics.json`` (spec §7):
+
+* ``default``: the default point (spec §1), with per-method (``dnbp``, ``ls``,
+  ``dr``) ``err_fault``, ``err_all``, ``err_normal`` (pooled means over
+  runs, steps and UAVs), ``fail_rate`` (fault errors > 20 m),
+  ``err_fault_run_std`` (std over runs of each run's pooled fault error) and
+  ``err_fault_t`` (Fig. 5); plus ``msgs_per_step``, ``broadcasts_per_step``,
+  ``time_per_step_s`` and ``time_per_fault_uav_step_s`` of dNBP;
+* ``sweep_normal_ratio`` (fixed proportion, Fig. 6(a)), ``sweep_comm_range``
+  (6(b)), ``sweep_gps_std`` (6(c)), ``sweep_range_std`` (6(d)),
+  ``sweep_particles`` (Table 1): the same object per point;
+* ``case_study`` (Fig. 4) and ``claims``.
+
+Seeding (common random numbers, spec §7): run r draws its world from
+``default_rng([seed, r])`` and its dNBP randomness from
+``default_rng([seed, 100000 + r])`` at every point, so curves are comparable
+point by point. A point's runs are one batched dNBP call (vectorized over
+runs); points are the independent tasks of :func:`train.executor.map_tasks`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import time
+
+import numpy as np
+
+import estimators.dnbp as dn
+import estimators.range_ls as rl
+from coloc_env.config import build_config
+from coloc_env.scenarios.gps_denied_nbp import GpsDeniedNbpConfig, GpsDeniedNbpScenario, sample_episode
+from train.executor import map_tasks
+from train.io import save_figure, write_json, write_text
+
+KEY = "wan2014"
+# 16 runs cost ~15 min of CPU on the 2-core development machine (13.8 min user + 1.4 min sys, measured), so the
+# default is 12 (~11 min); the paper used 100, the spec asks >= 16 for its acceptance checks: pass --runs 16.
+RUNS = 12
+QUICK_RUNS = 2
+QUICK_HORIZON = 10
+FAIL_THRESHOLD = 20.0  # metres: an unresolved flip / ring ambiguity (spec §7)
+ESTIMATOR_SEED_OFFSET = 100_000
+# A case-study belief counts as unimodal and located when its spread and its error are below this: on the
+# case-study graph a two-mode belief has a spread of ~70 m and a ring ~190 m, while a located belief is
+# limited by the ring bandwidth pi d / M (~8 m at M = 100) and the anchors' GPS noise.
+RESOLVED_SPREAD = 20.0
+
+SWEEPS = {
+    "sweep_normal_ratio": ("num_normal", (0.2, 0.3, 0.5, 0.7)),
+    "sweep_comm_range": ("comm_range", (150.0, 250.0, 350.0, 500.0)),
+    "sweep_gps_std": ("gps_std", (1.0, 3.0, 6.0, 10.0)),
+    "sweep_range_std": ("range_std", (0.5, 2.0, 5.0, 10.0)),
+    "sweep_particles": ("num_particles", (50, 100, 200, 300)),
+}
+
+# Case study of the paper's Sec. 4.1 (Figs. 3-4): UAVs 1-3 normal, 4-6 with no knowledge. Positions
+# [chosen] so that, with R = 300 m, UAV4 hears 1, 2, 3; UAV5 hears 1, 2 (and 4, 6); UAV6 hears 3 (and 4, 5).
+CASE_POSITIONS = np.array([[0.0, 0.0], [0.0, 250.0], [500.0, 125.0], [250.0, 125.0], [60.0, 200.0],
+                           [330.0, 200.0]])
+CASE_NORMAL = np.array([True, True, True, False, False, False])
+# The messages the paper describes (1-based UAV numbers), iteration -> [(sender, receiver)]
+CASE_MESSAGES = {0: [(1, 4), (1, 5), (2, 4), (2, 5), (3, 4), (3, 6)],
+                 1: [(4, 5), (4, 6)],
+                 2: [(4, 5), (4, 6), (5, 4), (5, 6)]}
+
+
+def _point_key(value) -> str:
+    return f"{value:g}"
+
+
+def _sweep_override(field: str, value, config: GpsDeniedNbpConfig) -> dict:
+    if field == "num_normal":
+        return {"num_normal": int(round(value * config.num_uavs))}
+    return {field: value}
+
+
+def summarize(errors: np.ndarray, fault: np.ndarray) -> dict:
+    """Pooled metrics (spec §7) of errors (R, T, N) with fault masks (R, T, N)."""
+    def pooled(mask):
+        return float(errors[mask].mean()) if mask.any() else None
+
+    per_run = [float(errors[r][fault[r]].mean()) for r in range(len(errors)) if fault[r].any()]
+    counts = fault.sum(axis=(0, 2))
+    curve = np.where(counts > 0, np.sum(errors * fault, axis=(0, 2)) / np.maximum(counts, 1), np.nan)
+    return {
+        "err_fault": pooled(fault),
+        "err_all": float(errors.mean()),
+        "err_normal": pooled(~fault),
+        "fail_rate": float((errors[fault] > FAIL_THRESHOLD).mean()) if fault.any() else None,
+        "err_fault_run_std": float(np.std(per_run, ddof=1)) if len(per_run) > 1 else None,
+        "err_fault_t": [None if np.isnan(v) else float(v) for v in curve],
+    }
+
+
+def run_baselines(config: GpsDeniedNbpConfig, episodes) -> dict[str, np.ndarray]:
+    """Errors (R, T, N) of the LS method of ref. [7] and of dead reckoning on the same episodes."""
+    motion = config.motion
+    F, G, Q = motion.transition, motion.input_matrix, motion.process_noise
+    stack = {name: np.stack([getattr(e, name) for e in episodes]) for name in
+             ("truth", "accel", "gps_normal", "gps_fix", "adjacency", "ranges", "init_position", "init_velocity")}
+    R, T, N = stack["gps_normal"].shape
+    if config.init == "warm":
+        mean = np.concatenate([stack["init_position"], stack["init_velocity"]], axis=-1)
+        var = [config.gps_std**2] * 2 + [config.velocity_spread**2] * 2
+    else:
+        width = config.area + 2 * config.box_margin
+        centre = np.full((R, N, 2), config.area / 2)
+        mean = np.concatenate([centre, np.broadcast_to(np.asarray(config.nominal_velocity, float), (R, N, 2))], -1)
+        var = [width**2 / 12] * 2 + [config.velocity_spread**2] * 2
+    out = {}
+    for name, cooperative in (("ls", True), ("dr", False)):
+        params = rl.LsParams(cooperative=cooperative)
+        state = rl.initial_state(mean, np.diag(var))
+        errors = np.zeros((R, T, N))
+        for k in range(T):
+            state, estimate, _ = rl.step(params, state, stack["gps_normal"][:, k], stack["gps_fix"][:, k],
+                                         stack["adjacency"][:, k], stack["ranges"][:, k], stack["accel"][:, k],
+                                         F, G, Q, config.gps_std, config.range_std)
+            errors[:, k] = np.linalg.norm(estimate - stack["truth"][:, k, :, :2], axis=-1)
+        out[name] = errors
+    return out
+
+
+def evaluate_point(overrides: dict, base: dict, runs: int, seed: int) -> dict:
+    """dNBP, LS and DR on ``runs`` common-random-number runs of one configuration."""
+    config = build_config(GpsDeniedNbpConfig, {**base, **overrides})
+    world_seeds = [[seed, r] for r in range(runs)]
+    estimator_seeds = [[seed, ESTIMATOR_SEED_OFFSET + r] for r in range(runs)]
+    episodes = [sample_episode(config, np.random.default_rng(s)) for s in world_seeds]
+    scenario = GpsDeniedNbpScenario(config, batch=runs)
+    start = time.perf_counter()
+    scenario.start(None, episodes, [np.random.default_rng(s) for s in estimator_seeds])
+    T, N = config.horizon, config.num_uavs
+    errors = np.zeros((runs, T, N))
+    messages = broadcasts = 0
+    always = np.ones((runs, N, config.num_iterations), bool)
+    for k in range(T):
+        scenario.advance(always)
+        errors[:, k] = scenario.errors
+        messages += int(scenario.delivered.sum())
+        broadcasts += int(scenario.broadcasts.sum())
+    elapsed = time.perf_counter() - start
+    fault = ~np.stack([e.gps_normal for e in episodes])
+    baselines = run_baselines(config, episodes)
+    steps = runs * T
+    return {
+        "overrides": overrides,
+        "world_seeds": world_seeds,
+        "estimator_seeds": estimator_seeds,
+        "fault_fraction": float(fault.mean()),
+        "dnbp": summarize(errors, fault),
+        "ls": summarize(baselines["ls"], fault),
+        "dr": summarize(baselines["dr"], fault),
+        "msgs_per_step": messages / steps,
+        "broadcasts_per_step": broadcasts / steps,
+        "time_per_step_s": elapsed / steps,
+        "time_per_fault_uav_step_s": elapsed / max(int(fault.sum()), 1),
+    }
+
+
+def case_study(config: GpsDeniedNbpConfig, seed: int) -> dict:
+    """One intraslice update on the case-study graph (Sec. 4.1, Fig. 4) from a cold start."""
+    model = dataclasses.replace(config.estimator_model(), num_iterations=3)
+    N = len(CASE_POSITIONS)
+    rng = np.random.default_rng([seed, 7])
+    state = dn.initial_state(model, [rng], "cold", np.zeros((1, N, 2)), np.zeros((1, N, 2)), 0.0)
+    distances = np.linalg.norm(CASE_POSITIONS[:, None] - CASE_POSITIONS[None], axis=-1)
+    noise = config.network.sample_noise(rng, (), N)
+    adjacency = (distances <= config.comm_range) & ~np.eye(N, dtype=bool)
+    ranges = np.where(adjacency, distances + noise, 0.0)
+    fix = CASE_POSITIONS + config.gps.sample_noise(rng, (N,))
+    _, result = dn.step(model, state, CASE_NORMAL[None], fix[None], adjacency[None], ranges[None],
+                        np.zeros((1, N, 2)), [rng], record=True)
+    sent = {n: sorted((int(t) + 1, int(s) + 1) for t, s in zip(*np.nonzero(result.delivered[0, n]), strict=True))
+            for n in range(model.num_iterations)}
+    spreads, errors = [], []
+    for belief in result.history:
+        pos = belief[0, :, :, :2]
+        centred = pos - pos.mean(axis=1, keepdims=True)
+        spreads.append(np.sqrt(np.mean(np.sum(centred**2, axis=-1), axis=1)).tolist())
+        errors.append(np.linalg.norm(pos.mean(axis=1) - CASE_POSITIONS, axis=-1).tolist())
+    resolved = all(spreads[-1][i] < RESOLVED_SPREAD and errors[-1][i] < RESOLVED_SPREAD for i in (3, 4, 5))
+    return {
+        "positions": CASE_POSITIONS.tolist(),
+        "messages": {str(n): [list(m) for m in v] for n, v in sent.items()},
+        "schedule_matches_paper": all(sent[n] == sorted(CASE_MESSAGES[n]) for n in CASE_MESSAGES),
+        "spread_after_iteration": spreads,
+        "error_after_iteration": errors,
+        "all_resolved_after_3_iterations": bool(resolved),
+        "_history": [h[0, :, :, :2] for h in result.history],
+    }
+
+
+def run(out: str, runs: int = RUNS, seed: int = 0, quick: bool = False, executor: str = "local",
+        address: str | None = None, config: GpsDeniedNbpConfig | None = None, progress=None) -> dict:
+    """Compute everything, write ``out/wan2014/``, return the metrics dict."""
+    config = config or build_config(GpsDeniedNbpConfig, {})
+    if quick:
+        config = dataclasses.replace(config, horizon=min(config.horizon, QUICK_HORIZON))
+    config.validate()
+    if runs < 2:
+        raise ValueError(f"runs must be >= 2 for a run-to-run spread, got {runs}")
+    base = {f.name: getattr(config, f.name) for f in dataclasses.fields(config)}
+    folder = os.path.join(out, KEY)
+    started = time.perf_counter()
+
+    # one task per distinct configuration; sweep points equal to the default reuse its result
+    points: dict[str, dict] = {"default": {}}
+    for sweep, (field, values) in SWEEPS.items():
+        for value in values:
+            override = _sweep_override(field, value, config)
+            if all(base.get(k) == v for k, v in override.items()):
+                continue
+            points[f"{sweep}/{_point_key(value)}"] = override
+    names = list(points)
+    results = map_tasks(evaluate_point, [(points[n], base, runs, seed) for n in names], executor, address)
+    by_name = dict(zip(names, results, strict=True))
+    if progress:
+        progress(f"{len(names)} configurations x {runs} runs done")
+
+    case = case_study(config, seed)
+    history = case.pop("_history")
+    metrics = {
+        "paper": KEY,
+        "seed_base": seed,
+        "runs": runs,
+        "quick": quick,
+        "params": base | {"ls_min_anchors": rl.LsParams.min_anchors, "ls_max_rms": rl.LsParams.max_rms,
+                          "ls_max_std": rl.LsParams.max_std, "ls_gate_chi2": rl.LsParams.gate_chi2},
+        "default": by_name["default"],
+    }
+    for sweep, (_field, values) in SWEEPS.items():
+        metrics[sweep] = {_point_key(v): by_name.get(f"{sweep}/{_point_key(v)}", by_name["default"]) for v in values}
+    metrics["case_study"] = case
+    claims = _claims(metrics)
+    metrics["claims"] = {c["id"]: c["holds"] for c in claims if c.get("key")}
+    metrics["wall_time_s"] = time.perf_counter() - started
+
+    write_json(os.path.join(folder, "metrics.json"), metrics)
+    _figures(folder, metrics, history, config)
+    write_text(os.path.join(folder, "report.md"), _report(metrics, claims, config))
+    return metrics
+
+
+def _err(point, method="dnbp"):
+    value = point[method]["err_fault"]
+    return np.nan if value is None else value
+
+
+def _claims(m: dict) -> list[dict]:
+    d = m["default"]
+    nr, cr, gs, rs, mp = (m[k] for k in SWEEPS)
+    claims = []
+
+    def add(cid, claim, ours, holds, criterion, key=True):
+        claims.append({"id": cid, "claim": claim, "ours": ours, "holds": bool(holds), "criterion": criterion,
+                       "key": key})
+
+    cs = m["case_study"]
+    add("case_study", "case study (Fig. 4): one normal neighbour -> ring, two -> bimodal, three -> unimodal; "
+        "all fault UAVs resolved after 3 iterations of the modified schedule",
+        f"messages per iteration {cs['messages']}; belief spread of UAV4/5/6 after iterations 0, 1, 2: "
+        + "; ".join("/".join(f"{s[i]:.1f}" for i in (3, 4, 5)) for s in cs["spread_after_iteration"])
+        + " m; errors after iteration 2: " + "/".join(f"{cs['error_after_iteration'][-1][i]:.1f}" for i in (3, 4, 5))
+        + " m", cs["schedule_matches_paper"] and cs["all_resolved_after_3_iterations"],
+        "the schedule sends exactly the paper's messages in iterations 0-2 and every fault belief has spread "
+        f"and error < {RESOLVED_SPREAD:g} m after iteration 2", key=False)
+    e = {k: _err(d, k) for k in ("dnbp", "ls", "dr")}
+    add("dnbp_beats_ls_default", "Fig. 5: dNBP's mean fault error is below the LS method of [7]",
+        f"pooled err_fault dNBP {e['dnbp']:.2f} m, LS {e['ls']:.2f} m, DR {e['dr']:.2f} m; fail rate dNBP "
+        f"{d['dnbp']['fail_rate']:.3f}, LS {d['ls']['fail_rate']:.3f}", e["dnbp"] < e["ls"],
+        "pooled err_fault(dNBP) < err_fault(LS) at the default point")
+    curve_d, curve_l = (np.array([np.nan if v is None else v for v in d[k]["err_fault_t"]], float)
+                        for k in ("dnbp", "ls"))
+    valid = ~np.isnan(curve_d) & ~np.isnan(curve_l)
+    below = float(np.mean(curve_d[valid] < curve_l[valid])) if valid.any() else float("nan")
+    add("dnbp_below_ls_over_time", "Fig. 5: dNBP below LS over the run",
+        f"dNBP below LS at {100 * below:.0f} % of the {int(valid.sum())} steps", below >= 0.8,
+        "mean error curve of dNBP below LS at >= 80 % of the steps", key=False)
+    add("dr_about_twice", "spec §11: DR about twice the cooperative methods; normal UAVs at the GPS-filter level",
+        f"DR / dNBP = {e['dr'] / e['dnbp']:.2f}, DR / LS = {e['dr'] / e['ls']:.2f}; err_normal dNBP "
+        f"{d['dnbp']['err_normal']:.2f}, LS {d['ls']['err_normal']:.2f}, DR {d['dr']['err_normal']:.2f} m",
+        e["dr"] > 1.5 * max(e["dnbp"], e["ls"]), "err_fault(DR) > 1.5 x the larger of dNBP and LS", key=False)
+    r = {k: (_err(nr[k]), _err(nr[k], "ls"), _err(nr[k], "dr")) for k in nr}
+    add("ls_degrades_sparse_normals", "Fig. 6(a): LS degrades fast as normal UAVs become sparse; dNBP much less",
+        "; ".join(f"ratio {k}: dNBP {v[0]:.1f}, LS {v[1]:.1f}, DR {v[2]:.1f} m" for k, v in r.items()),
+        r["0.2"][1] > r["0.7"][1] and r["0.2"][0] < r["0.2"][1],
+        "LS error at ratio 0.2 above its error at 0.7, and dNBP below LS at 0.2", key=False)
+    c = {k: (_err(cr[k]), _err(cr[k], "ls")) for k in cr}
+    text_c = "; ".join(f"R = {k} m: dNBP {v[0]:.1f}, LS {v[1]:.1f} m" for k, v in c.items())
+    add("dnbp_beats_ls_mid_range", "Fig. 6(b): dNBP clearly better than LS for R between 200 and 350 m", text_c,
+        all(c[k][0] < c[k][1] for k in ("250", "350")), "err_fault(dNBP) < err_fault(LS) at R = 250 and 350 m")
+    add("ls_beats_dnbp_large_range", "Fig. 6(b): for R > 500 m LS is slightly better than dNBP", text_c,
+        c["500"][1] < c["500"][0], "err_fault(LS) < err_fault(dNBP) at R = 500 m")
+    rising = []
+    for sweep in (gs, rs):
+        keys = list(sweep)
+        for method in ("dnbp", "ls"):
+            rising.append(_err(sweep[keys[-1]], method) > _err(sweep[keys[0]], method))
+    text_n = "; ".join(f"{label} std {k}: dNBP {_err(s[k]):.2f}, LS {_err(s[k], 'ls'):.2f} m"
+                       for label, s in (("GPS", gs), ("range", rs)) for k in s)
+    add("error_increases_with_noise", "Fig. 6(c)/(d): the error grows with the GPS and the range noise", text_n,
+        all(rising), "err_fault at the largest noise above the smallest, for both methods and both sweeps")
+    always_below = all(_err(s[k]) < _err(s[k], "ls") for s in (gs, rs) for k in s)
+    add("dnbp_always_better_noise", "Fig. 6(c)/(d): dNBP is always better than LS", text_n, always_below,
+        "err_fault(dNBP) < err_fault(LS) at every noise point", key=False)
+    ms = list(mp)
+    errs_m = [_err(mp[k]) for k in ms]
+    times = [mp[k]["time_per_fault_uav_step_s"] for k in ms]
+    slope = float(np.polyfit(np.log([float(k) for k in ms]), np.log(times), 1)[0])
+    add("error_decreases_with_M", "Table 1: more samples give lower error (about 3 m at 300 samples) and more time",
+        "; ".join(f"M = {k}: err_fault {v:.2f} m, {1e3 * t:.1f} ms per fault-UAV step" for k, v, t in
+                  zip(ms, errs_m, times, strict=True)) + f"; time ~ M^{slope:.2f}",
+        errs_m[-1] < errs_m[0], "err_fault(M = 300) < err_fault(M = 50)")
+    add("time_grows_with_M", "Table 1: the time per fault-UAV step grows with the number of samples",
+        f"log-log slope {slope:.2f} (spec §11 expects 1.5-2)", all(np.diff(times) > 0),
+        "time per fault-UAV step strictly increasing in M", key=False)
+    return claims
+
+
+def _figures(folder: str, m: dict, history: list[np.ndarray], config: GpsDeniedNbpConfig) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    # Fig. 4: beliefs of the fault UAVs after each iteration of the case study
+    cs = m["case_study"]
+    fig, axes = plt.subplots(len(history), 3, figsize=(11, 3.4 * len(history)), squeeze=False)
+    for n, pos in enumerate(history):
+        for col, i in enumerate((3, 4, 5)):
+            ax = axes[n, col]
+            ax.scatter(pos[i, :, 0], pos[i, :, 1], s=3, alpha=0.4, color="tab:red", label="belief particles")
+            ax.scatter(CASE_POSITIONS[:3, 0], CASE_POSITIONS[:3, 1], marker="^", color="tab:blue", s=50,
+                       label="normal UAVs 1-3")
+            ax.scatter(CASE_POSITIONS[3:, 0], CASE_POSITIONS[3:, 1], marker="*", color="k", s=60,
+                       label="fault UAVs 4-6 (truth)")
+            ax.set_xlim(-250, 750)
+            ax.set_ylim(-250, 500)
+            ax.set_aspect("equal")
+            ax.set_title(f"UAV{i + 1}, after iteration {n}: spread {cs['spread_after_iteration'][n][i]:.1f} m",
+                         fontsize=9)
+    axes[0, 0].legend(fontsize=7, loc="lower left")
+    fig.suptitle("Fig. 4: case study (cold start): ring -> bimodal -> unimodal beliefs", fontsize=11)
+    save_figure(os.path.join(folder, "fig4_case_study.png"), fig)
+
+    d = m["default"]
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for method, label in (("dnbp", "dNBP"), ("ls", "LS [7]"), ("dr", "dead reckoning")):
+        curve = [np.nan if v is None else v for v in d[method]["err_fault_t"]]
+        ax.plot(np.arange(len(curve)), curve, label=label)
+    ax.set_xlabel("time step tau")
+    ax.set_ylabel("mean fault-UAV position error [m]")
+    ax.set_title(f"Fig. 5: mean estimate error vs time ({m['runs']} runs)", fontsize=10)
+    ax.legend()
+    save_figure(os.path.join(folder, "fig5_error_vs_time.png"), fig)
+
+    fig, axes = plt.subplots(2, 2, figsize=(10, 7))
+    panels = [("sweep_normal_ratio", "proportion of normal UAVs (fixed)", "(a)"),
+              ("sweep_comm_range", "communication range R [m]", "(b)"),
+              ("sweep_gps_std", "GPS noise std [m]", "(c)"),
+              ("sweep_range_std", "range noise std [m]", "(d)")]
+    for ax, (key, xlabel, tag) in zip(axes.ravel(), panels, strict=True):
+        xs = [float(k) for k in m[key]]
+        for method, label in (("dnbp", "dNBP"), ("ls", "LS [7]"), ("dr", "DR")):
+            ax.plot(xs, [_err(p, method) for p in m[key].values()], "o-", label=label)
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel("mean fault-UAV error [m]")
+        ax.set_yscale("log")
+        ax.set_title(f"Fig. 6{tag}", fontsize=10)
+        ax.legend(fontsize=8)
+    save_figure(os.path.join(folder, "fig6_sweeps.png"), fig)
+
+    fig, ax = plt.subplots(figsize=(6, 4))
+    mp = m["sweep_particles"]
+    times = [1e3 * p["time_per_fault_uav_step_s"] for p in mp.values()]
+    errors = [_err(p) for p in mp.values()]
+    ax.plot(times, errors, "o-")
+    for k, t, e in zip(mp, times, errors, strict=True):
+        ax.annotate(f"M = {k}", (t, e), textcoords="offset points", xytext=(5, 5), fontsize=8)
+    ax.set_xlabel("time per fault-UAV step [ms] (batched numpy)")
+    ax.set_ylabel("mean fault-UAV error [m]")
+    ax.set_title("Table 1: accuracy vs cost (dNBP)", fontsize=10)
+    save_figure(os.path.join(folder, "tradeoff.png"), fig)
+
+
+def _report(m: dict, claims: list[dict], config: GpsDeniedNbpConfig) -> str:
+    d = m["default"]
+    lines = [
+        "# wan2014: dynamic NBP for UAVs under GPS loss (reproduction)",
+        "",
+        "Wan, Zhong, Zhang, IJDSN 2014. The paper's equations and most numbers were lost in extraction; the "
+        "model is the reconstruction `shared/specs/wan2014_dnbp.md`, so every number here comes from that "
+        "model and only the paper's qualitative claims (spec §8) can be checked. Scenario `gps_denied_nbp`, "
+        "estimators `estimators/dnbp.py` (dNBP) and `estimators/range_ls.py` (LS of ref. [7], dead reckoning).",
+        "",
+        f"Monte Carlo: {m['runs']} runs per point (the paper: 100), T = {config.horizon} steps, seed base "
+        f"{m['seed_base']}, common random numbers across points" + (" (quick mode)." if m["quick"] else ".")
+        + f" Wall time {m['wall_time_s']:.0f} s.",
+        "",
+        "## Claims",
+        "",
+        "| claim | our numbers | criterion | holds |",
+        "|---|---|---|---|",
+    ]
+    for c in claims:
+        lines.append(f"| {c['claim']} | {c['ours']} | {c['criterion']} | {'yes' if c['holds'] else '**no**'} |")
+    lines += [
+        "",
+        "## Default point",
+        "",
+        f"Fault fraction {d['fault_fraction']:.2f}; dNBP {d['msgs_per_step']:.1f} messages and "
+        f"{d['broadcasts_per_step']:.1f} broadcasts per step; {1e3 * d['time_per_step_s']:.0f} ms per step "
+        f"(all UAVs), {1e3 * d['time_per_fault_uav_step_s']:.1f} ms per fault-UAV step (batched numpy, "
+        f"{m['runs']} runs per call).",
+        "",
+        "| method | err_fault [m] | err_normal [m] | err_all [m] | fail rate (> 20 m) | run-to-run std [m] |",
+        "|---|---|---|---|---|---|",
+    ]
+    for method, label in (("dnbp", "dNBP"), ("ls", "LS [7]"), ("dr", "dead reckoning")):
+        s = d[method]
+        lines.append(f"| {label} | {s['err_fault']:.2f} | {s['err_normal']:.2f} | {s['err_all']:.2f} | "
+                     f"{s['fail_rate']:.3f} | {s['err_fault_run_std']:.2f} |")
+    lines += ["", "## Sweeps (pooled fault-UAV error, metres)", ""]
+    for key in SWEEPS:
+        lines += [f"### {key}", "", "| value | dNBP | LS | DR | dNBP fail rate | LS fail rate | ms / fault-UAV step |",
+                  "|---|---|---|---|---|---|---|"]
+        for value, p in m[key].items():
+            lines.append(f"| {value} | {_err(p):.2f} | {_err(p, 'ls'):.2f} | {_err(p, 'dr'):.2f} | "
+                         f"{p['dnbp']['fail_rate']:.3f} | {p['ls']['fail_rate']:.3f} | "
+                         f"{1e3 * p['time_per_fault_uav_step_s']:.1f} |")
+        lines.append("")
+    lines += [
+        "## Notes",
+        "",
+        "* `sweep_normal_ratio` uses the fixed-proportion mode (exactly round(ratio N) normal UAVs, no "
+        "switching), as the paper's Fig. 6(a).",
+        "* Times are for this numpy implementation on a shared CPU; the paper's Table 1 reports seconds in "
+        "unoptimised Matlab. Only the trend is comparable (spec §8).",
+        "* Known weakness (spec §11): a fault UAV with one or two neighbours can lock onto the wrong mode "
+        "(flip or ring ambiguity); the fail rate counts those steps.",
+    ]
+    return "\n".join(lines) + "\n"
