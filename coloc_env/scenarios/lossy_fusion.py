@@ -329,7 +329,7 @@ class LossyFusionScenario(Scenario):
     def reward(self) -> np.ndarray:
         return self._reward.copy()
 
-    def episode_error(self, errors: np.ndarray) -> np.ndarray:
+    def episode_error(self, errors: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
         """The paper's metric: the fused position MSE averaged over the slots (every agent holds the
         same fused error, so averaging over agents changes nothing)."""
         return np.asarray(errors, float).mean(axis=(-2, -1))

@@ -622,7 +622,7 @@ class NlosHorizonScenario(Scenario):
         frac = np.broadcast_to((self.k / self.horizon)[:, None, None], (B, N, 1))
         return np.concatenate([per_lag, slots, last, group_trace, frac], axis=-1).astype(np.float32)
 
-    def episode_error(self, errors: np.ndarray) -> np.ndarray:
+    def episode_error(self, errors: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
         """Time-averaged squared position error over k >= min(50, horizon - 1), mean over the agents.
 
         The paper's time-averaged RMSE (spec §12, ``train/reproduce/gao2016.py``)

@@ -429,7 +429,7 @@ class RelayUKFScenario(Scenario):
                               np.log(self.own_traces())[..., None], frac[..., None]], axis=-1)
         return obs.astype(np.float32)
 
-    def episode_error(self, errors: np.ndarray) -> np.ndarray:
+    def episode_error(self, errors: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
         """The paper's metric: the distance error ||xhat_i - x_i|| averaged over the steps and platforms."""
         return np.asarray(errors, float).mean(axis=(-2, -1))
 
