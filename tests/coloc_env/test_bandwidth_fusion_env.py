@@ -11,17 +11,11 @@ import agents
 import coloc_env
 import estimators.bandwidth_fusion as bf
 from coloc_env.scenarios.bandwidth_fusion import paper_selection, paper_weights
+from tests.helpers import play
 
 NAME = "bandwidth_fusion"
 
 
-def play(env, policy, seed):
-    observations, infos = env.reset(seed=seed)
-    history = [(observations, infos)]
-    while env.agents:
-        observations, rewards, terms, truncs, infos = env.step(policy.act(observations))
-        history.append((observations, rewards, infos))
-    return history
 
 
 def test_pettingzoo_api_and_seed_tests():

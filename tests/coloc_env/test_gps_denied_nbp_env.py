@@ -12,18 +12,12 @@ import coloc_env
 import estimators.dnbp as dn
 from coloc_env.config import build_config
 from coloc_env.scenarios.gps_denied_nbp import GpsDeniedNbpConfig, initial_beliefs, sample_episode
+from tests.helpers import play
 
 NAME = "gps_denied_nbp"
 SMALL = {"num_uavs": 5, "num_particles": 20, "horizon": 8, "area": 300.0}
 
 
-def play(env, policy, seed):
-    observations, infos = env.reset(seed=seed)
-    history = [(observations, infos)]
-    while env.agents:
-        observations, rewards, terms, truncs, infos = env.step(policy.act(observations))
-        history.append((observations, rewards, infos))
-    return history
 
 
 def test_pettingzoo_api_and_seed_tests():

@@ -10,19 +10,13 @@ from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test
 import agents
 import coloc_env
 import estimators.lossy_fusion as lf
+from tests.helpers import play
 
 NAME = "lossy_fusion"
 X0 = np.array([100.0, 10.0, 100.0, 10.0, 100.0, 0.0])
 P0 = np.diag([100.0, 5.0, 100.0, 5.0, 100.0, 5.0])
 
 
-def play(env, policy, seed):
-    observations, infos = env.reset(seed=seed)
-    history = [(observations, infos)]
-    while env.agents:
-        observations, rewards, terms, truncs, infos = env.step(policy.act(observations))
-        history.append((observations, rewards, infos))
-    return history
 
 
 @pytest.mark.parametrize("num_uavs", [2, 3])

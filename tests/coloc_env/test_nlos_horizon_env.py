@@ -11,18 +11,12 @@ import agents
 import coloc_env
 import estimators.afge as af
 from coloc_env.scenarios.nlos_horizon import draw_episode, fused_by_stamp_and_lag
+from tests.helpers import play
 
 NAME = "nlos_horizon"
 SHORT = {"horizon": 80}
 
 
-def play(env, policy, seed):
-    observations, infos = env.reset(seed=seed)
-    history = [(observations, infos)]
-    while env.agents:
-        observations, rewards, terms, truncs, infos = env.step(policy.act(observations))
-        history.append((observations, rewards, infos))
-    return history
 
 
 def test_pettingzoo_api_and_seed_tests():

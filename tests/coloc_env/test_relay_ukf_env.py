@@ -14,18 +14,12 @@ from agents.relay_ukf import paper_actions
 from coloc_env.config import build_config
 from coloc_env.scenarios.relay_ukf import RelayUKFConfig, RelayUKFScenario
 from coloc_env.world.relay import STOP_REASONS
+from tests.helpers import play
 
 NAME = "relay_ukf"
 SHORT = {"horizon": 60}
 
 
-def play(env, policy, seed):
-    observations, infos = env.reset(seed=seed)
-    history = [(observations, infos)]
-    while env.agents:
-        observations, rewards, terms, truncs, infos = env.step(policy.act(observations))
-        history.append((observations, rewards, infos))
-    return history
 
 
 def test_pettingzoo_api_and_seed_tests():
