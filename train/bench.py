@@ -199,7 +199,29 @@ PEERS: dict[str, tuple[str, Callable[[int], Callable[[], None]]]] = {
 }
 
 
+def _lossy_fusion_estimator_step(batch: int) -> Callable[[], None]:
+    """One slot of the distributed prediction-compensation filter (B) of :mod:`estimators.lossy_fusion`."""
+    import estimators.lossy_fusion as lf
+    from coloc_env.config import build_config
+    from coloc_env.scenarios.lossy_fusion import LossyFusionConfig
+
+    config = build_config(LossyFusionConfig, {})
+    model = config.lossy_model()
+    rng = np.random.default_rng(0)
+    x0, P0 = np.asarray(config.initial_state, float), np.asarray(config.initial_cov, float)
+    box = {"state": lf.distributed_initial(model, x0, P0, (batch,))}
+    z = x0[[0, 2, 4]] + rng.normal(size=(batch, config.num_uavs, 3))
+    outcome = rng.integers(0, 3, size=(batch, config.num_uavs))
+    outcome[:, 0] = lf.ON_TIME
+
+    def step() -> None:
+        box["state"] = lf.distributed_step(model, box["state"], z, outcome)
+
+    return step
+
+
 ESTIMATOR_STEPS: dict[str, Callable[[int], Callable[[], None]]] = {
+    "lossy_fusion": _lossy_fusion_estimator_step,
     "relay_ukf": _relay_ukf_estimator_step,
     "gps_denied_nbp": _gps_denied_nbp_estimator_step,
     "bandwidth_fusion": _bandwidth_fusion_estimator_step,

@@ -181,3 +181,13 @@ def test_episode_metrics_follow_each_paper():
     fault[1, 2] = fault[2, 0] = 1.0
     assert core("gps_denied_nbp").episode_error(errors, fault) == (6.0 + 8.0) / 2
     assert core("gps_denied_nbp").episode_error(errors, np.zeros((3, 4))) == 0.0
+
+
+@pytest.mark.parametrize("name", ["bandwidth_fusion", "lossy_fusion", "relay_ukf", "nlos_horizon", "gps_denied_nbp"])
+def test_every_scenario_has_a_raw_estimator_benchmark(name):
+    import coloc_env
+    from train.bench import ESTIMATOR_STEPS
+
+    assert name in coloc_env.SCENARIOS and name in ESTIMATOR_STEPS
+    step = ESTIMATOR_STEPS[name](2)
+    step()  # one batched step of two copies runs
