@@ -257,14 +257,6 @@ class BandwidthFusionScenario(Scenario):
 
     # --- description ------------------------------------------------------------
     @property
-    def num_agents(self) -> int:
-        return self.config.num_uavs
-
-    @property
-    def horizon(self) -> int:
-        return self.config.horizon
-
-    @property
     def action_dim(self) -> int:
         return (self.num_agents - 1) * self.n + self.num_agents
 

@@ -36,12 +36,14 @@ class Scenario(abc.ABC):
 
     # --- static description -------------------------------------------------
     @property
-    @abc.abstractmethod
-    def num_agents(self) -> int: ...
+    def num_agents(self) -> int:
+        """N; by default the config's ``num_uavs`` (a scenario whose agents are named otherwise overrides)."""
+        return self.config.num_uavs
 
     @property
-    @abc.abstractmethod
-    def horizon(self) -> int: ...
+    def horizon(self) -> int:
+        """Steps per episode (truncation); by default the config's ``horizon``."""
+        return self.config.horizon
 
     @abc.abstractmethod
     def observation_space(self) -> gymnasium.spaces.Space: ...

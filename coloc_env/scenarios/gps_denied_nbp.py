@@ -305,14 +305,6 @@ class GpsDeniedNbpScenario(Scenario):
         self._reward = np.zeros((B, N))
 
     # --- description ------------------------------------------------------------
-    @property
-    def num_agents(self) -> int:
-        return self.config.num_uavs
-
-    @property
-    def horizon(self) -> int:
-        return self.config.horizon
-
     def observation_space(self):
         return gymnasium.spaces.Box(-np.inf, np.inf, shape=(OBS_DIM,), dtype=np.float32)
 

@@ -216,14 +216,6 @@ class LossyFusionScenario(Scenario):
 
     # --- description ------------------------------------------------------------
     @property
-    def num_agents(self) -> int:
-        return self.config.num_uavs
-
-    @property
-    def horizon(self) -> int:
-        return self.config.horizon
-
-    @property
     def action_dim(self) -> int:
         L = self.num_agents
         return 1 + L + 3 * (L - 1)

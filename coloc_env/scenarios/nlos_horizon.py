@@ -416,14 +416,6 @@ class NlosHorizonScenario(Scenario):
 
     # --- description ------------------------------------------------------------
     @property
-    def num_agents(self) -> int:
-        return self.config.num_uavs
-
-    @property
-    def horizon(self) -> int:
-        return self.config.horizon
-
-    @property
     def obs_dim(self) -> int:
         return self.D + 1 + 3 * self.J + self.config.group_size + 3
 

@@ -263,9 +263,6 @@ class RelayUKFScenario(Scenario):
     def num_agents(self) -> int:
         return self.config.num_platforms
 
-    @property
-    def horizon(self) -> int:
-        return self.config.horizon
 
     @property
     def obs_dim(self) -> int:
