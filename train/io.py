@@ -62,3 +62,11 @@ def read_json(path: str, default: Any = None) -> Any:
         return default
     with open(path) as fh:
         return json.load(fh)
+
+
+def claims_table(claims: list[dict]) -> list[str]:
+    """Markdown rows of a reproduction's claims: claim, our numbers, criterion, holds (bold "no")."""
+    lines = ["| claim | our numbers | criterion | holds |", "|---|---|---|---|"]
+    for c in claims:
+        lines.append(f"| {c['claim']} | {c['ours']} | {c['criterion']} | {'yes' if c['holds'] else '**no**'} |")
+    return lines

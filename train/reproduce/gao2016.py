@@ -29,7 +29,7 @@ from coloc_env.config import build_config
 from coloc_env.scenarios.nlos_horizon import NlosHorizonConfig, draw_episode, fused_by_stamp_and_lag, in_turn
 from coloc_env.world.random_delay import NEVER
 from train.executor import map_tasks
-from train.io import save_figure, write_json, write_text
+from train.io import claims_table, save_figure, write_json, write_text
 
 KEY = "gao2016"
 RUNS = 40
@@ -396,11 +396,8 @@ def _report(m: dict, extra: dict, claims: list[dict], quick: bool) -> str:
         "",
         "## Claims (spec §11)",
         "",
-        "| claim | our numbers | criterion | holds |",
-        "|---|---|---|---|",
     ]
-    for c in claims:
-        lines.append(f"| {c['claim']} | {c['ours']} | {c['criterion']} | {'yes' if c['holds'] else '**no**'} |")
+    lines += claims_table(claims)
     lines += [
         "",
         "## Estimators, default setting (pi = 0.3, q = (0.6, 0.2, 0.1, 0.05))",

@@ -35,7 +35,7 @@ import estimators.range_ls as rl
 from coloc_env.config import build_config
 from coloc_env.scenarios.gps_denied_nbp import GpsDeniedNbpConfig, GpsDeniedNbpScenario, sample_episode
 from train.executor import map_tasks
-from train.io import save_figure, write_json, write_text
+from train.io import claims_table, save_figure, write_json, write_text
 
 KEY = "wan2014"
 # 16 runs cost ~15 min of CPU on the 2-core development machine (13.8 min user + 1.4 min sys, measured), so the
@@ -405,11 +405,8 @@ def _report(m: dict, claims: list[dict], config: GpsDeniedNbpConfig) -> str:
         "",
         "## Claims",
         "",
-        "| claim | our numbers | criterion | holds |",
-        "|---|---|---|---|",
     ]
-    for c in claims:
-        lines.append(f"| {c['claim']} | {c['ours']} | {c['criterion']} | {'yes' if c['holds'] else '**no**'} |")
+    lines += claims_table(claims)
     lines += [
         "",
         "## Default point",

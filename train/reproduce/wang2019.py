@@ -33,7 +33,7 @@ from coloc_env.config import build_config
 from coloc_env.scenarios.relay_ukf import RelayUKFConfig, RelayUKFScenario
 from coloc_env.world.relay import STOP_REASONS
 from train.executor import map_tasks
-from train.io import save_figure, write_json, write_text
+from train.io import claims_table, save_figure, write_json, write_text
 
 KEY = "wang2019"
 RUNS = 50
@@ -450,11 +450,8 @@ def _report(metrics: dict, claims: list[dict], quick: bool) -> str:
         "",
         "## Claims",
         "",
-        "| claim | our numbers | criterion | holds |",
-        "|---|---|---|---|",
     ]
-    for c in claims:
-        lines.append(f"| {c['claim']} | {c['ours']} | {c['criterion']} | {'yes' if c['holds'] else '**no**'} |")
+    lines += claims_table(claims)
     lines += [
         "",
         f"## Mean distance error at p = {metrics['measurement_probability']} (m, 95 % interval over runs)",

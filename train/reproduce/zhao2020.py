@@ -29,7 +29,7 @@ from coloc_env.scenarios.bandwidth_fusion import (
     paper_weights,
 )
 from train.executor import map_tasks
-from train.io import save_figure, write_json, write_text
+from train.io import claims_table, save_figure, write_json, write_text
 
 KEY = "zhao2020"
 RUNS = 500
@@ -312,11 +312,8 @@ def _report(metrics, claims, quick) -> str:
         "",
         "## Claims",
         "",
-        "| claim | our numbers | criterion | holds |",
-        "|---|---|---|---|",
     ]
-    for c in claims:
-        lines.append(f"| {c['claim']} | {c['ours']} | {c['criterion']} | {'yes' if c['holds'] else '**no**'} |")
+    lines += claims_table(claims)
     lines += [
         "",
         "## J_50 per (T, P) pair",
