@@ -46,7 +46,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["ENV_VAR", "NUM_LANDMARKS", "NUM_ROBOTS", "MrclamData", "load", "load_cached", "resolve_data_path"]
+__all__ = [
+    "ENV_VAR", "NUM_LANDMARKS", "NUM_ROBOTS", "MrclamData", "calibrate_noise", "load", "load_cached",
+    "resolve_data_path",
+]
 
 ENV_VAR = "COLOC_MRCLAM_DATA"
 NUM_ROBOTS = 5
@@ -267,6 +270,43 @@ def load(data: str | os.PathLike | None = None, dt: float = 0.1) -> MrclamData:
         meas_step=meas_step[order], meas_robot=meas_robot[order],
         meas_subject=np.concatenate(subject_l)[order], meas_range=np.concatenate(range_l)[order],
         meas_bearing=np.concatenate(bearing_l)[order], dropped_unknown_barcode=dropped)
+
+
+def _robust_std(values: np.ndarray) -> float:
+    values = np.asarray(values, float)
+    return float(1.4826 * np.median(np.abs(values - np.median(values))))
+
+
+def calibrate_noise(d: MrclamData, seconds: float = 60.0) -> dict:
+    """Noise standard deviations from the first ``seconds`` of ``d`` against the Vicon ground truth.
+
+    Odometry noise: odometry minus the Vicon-derived (v, w) per step; range and bearing noise:
+    measured minus Vicon-predicted values; each a robust standard deviation (1.4826 x median
+    absolute deviation) so that misread barcodes do not inflate it.
+    """
+    from estimators.ukf_relay_se2 import observe
+
+    k = max(2, min(d.steps - 1, int(round(seconds / d.dt))))
+    gt = d.groundtruth[: k + 1]
+    step = np.diff(gt[..., :2], axis=0)
+    heading = gt[:-1, :, 2]
+    v_gt = (step[..., 0] * np.cos(heading) + step[..., 1] * np.sin(heading)) / d.dt
+    w_gt = _wrap(np.diff(gt[..., 2], axis=0)) / d.dt
+    sel = d.meas_step < k
+    pose = d.groundtruth[d.meas_step[sel], d.meas_robot[sel]]
+    subject = d.meas_subject[sel]
+    target = np.where((subject <= NUM_ROBOTS)[:, None],
+                      d.groundtruth[d.meas_step[sel], np.clip(subject - 1, 0, NUM_ROBOTS - 1), :2],
+                      d.landmarks[np.clip(subject - NUM_ROBOTS - 1, 0, NUM_LANDMARKS - 1)])
+    predicted = observe(pose, target)
+    return {
+        "calibration_s": k * d.dt,
+        "sigma_v": _robust_std(d.odometry[:k, :, 0] - v_gt),
+        "sigma_w": _robust_std(d.odometry[:k, :, 1] - w_gt),
+        "sigma_range": _robust_std(d.meas_range[sel] - predicted[:, 0]),
+        "sigma_bearing": _robust_std(_wrap(d.meas_bearing[sel] - predicted[:, 1])),
+        "calibration_measurements": int(np.count_nonzero(sel)),
+    }
 
 
 @functools.lru_cache(maxsize=4)

@@ -55,36 +55,6 @@ GATE = 13.815510557964274  # chi-square(2) 0.999 quantile
 N = mrclam.NUM_ROBOTS
 
 
-def _robust_std(values: np.ndarray) -> float:
-    values = np.asarray(values, float)
-    return float(1.4826 * np.median(np.abs(values - np.median(values))))
-
-
-def calibrate(d: mrclam.MrclamData, seconds: float = CALIBRATION_S) -> dict:
-    """Noise standard deviations from the first ``seconds`` of data against the Vicon ground truth."""
-    k = max(2, min(d.steps - 1, int(round(seconds / d.dt))))
-    gt = d.groundtruth[: k + 1]
-    step = np.diff(gt[..., :2], axis=0)
-    heading = gt[:-1, :, 2]
-    v_gt = (step[..., 0] * np.cos(heading) + step[..., 1] * np.sin(heading)) / d.dt
-    w_gt = se2.wrap(np.diff(gt[..., 2], axis=0)) / d.dt
-    sel = d.meas_step < k
-    pose = d.groundtruth[d.meas_step[sel], d.meas_robot[sel]]
-    subject = d.meas_subject[sel]
-    target = np.where((subject <= N)[:, None],
-                      d.groundtruth[d.meas_step[sel], np.clip(subject - 1, 0, N - 1), :2],
-                      d.landmarks[np.clip(subject - N - 1, 0, mrclam.NUM_LANDMARKS - 1)])
-    predicted = se2.observe(pose, target)
-    return {
-        "calibration_s": k * d.dt,
-        "sigma_v": _robust_std(d.odometry[:k, :, 0] - v_gt),
-        "sigma_w": _robust_std(d.odometry[:k, :, 1] - w_gt),
-        "sigma_range": _robust_std(d.meas_range[sel] - predicted[:, 0]),
-        "sigma_bearing": _robust_std(se2.wrap(d.meas_bearing[sel] - predicted[:, 1])),
-        "calibration_measurements": int(np.count_nonzero(sel)),
-    }
-
-
 def run_filters(d: mrclam.MrclamData, noise: dict, progress=None) -> dict:
     """IL, CCL and DCL over the whole of ``d``; estimates (T, N, 3) and own-block covariances (T, N, 3, 3)."""
     R = np.diag([noise["sigma_range"] ** 2, noise["sigma_bearing"] ** 2])
@@ -157,7 +127,7 @@ def run(out: str, runs: int = RUNS, seed: int = 0, quick: bool = False, executor
         d = d.window(0, min(QUICK_STEPS, d.steps))
     if progress:
         progress(f"loaded {d.path}: {d.steps} steps of {d.dt} s")
-    noise = calibrate(d)
+    noise = mrclam.calibrate_noise(d, CALIBRATION_S)
     result = run_filters(d, noise, progress)
     pos_rmse, head_rmse, nees_mean, series = {}, {}, {}, {}
     for name in ("IL", "CCL", "DCL"):
