@@ -39,6 +39,49 @@ def _trained_summary(table: dict) -> dict | None:
             "episodes": models[0]["episodes"], "spread": (float(means.min()), float(means.max()))}
 
 
+# Issue 10's target per scenario: (what it says, the reference policies, whether the trained policy must
+# also use no more communication than the paper policy, the relative margin below the reference).
+TARGETS = {
+    "bandwidth_fusion": ("reach the best static selection (oracle_static)", ("oracle_static",), False, 0.0),
+    "lossy_fusion": ("at least 10 % below the paper's fixed fusion weights", ("paper",), True, 0.10),
+    "relay_ukf": ("the full chain's (paper) error with fewer hops", ("paper",), True, 0.0),
+    "nlos_horizon": ("at or below the best constant horizon (constant:N rows)", ("constant",), False, 0.0),
+    "gps_denied_nbp": ("the paper's error with fewer broadcasts", ("paper",), True, 0.0),
+}
+
+
+def target_verdict(scenario: str, table: dict) -> str | None:
+    """One line: the scenario's target, the trained mean against the reference, met or not.
+
+    "met" needs the trained mean at or below the reference times (1 - margin); "within noise" means the
+    gap is smaller than the larger of the two 95 % half-widths (not distinguishable on these episodes).
+    """
+    if scenario not in TARGETS or _trained_summary(table) is None:
+        return None
+    text, references, fewer_messages, margin = TARGETS[scenario]
+    trained = _trained_summary(table)
+    candidates = [r for name, r in table.items() if not name.endswith(".zip")
+                  and any(name == ref or name.startswith(ref + ":") for ref in references)]
+    if not candidates:
+        return f"Target: {text}. No reference row evaluated yet."
+    reference = min(candidates, key=lambda r: r["mean_cost"])
+    goal = reference["mean_cost"] * (1 - margin)
+    gap = trained["mean_cost"] / reference["mean_cost"] - 1
+    paper = table.get("paper")
+    comm_ok = not fewer_messages or paper is None or \
+        trained["communication_per_step"] <= paper["communication_per_step"] * (1 + 1e-9)
+    if trained["mean_cost"] <= goal and comm_ok:
+        verdict = "**met**"
+    elif trained["mean_cost"] - goal <= max(trained["ci95"], reference["ci95"]) and comm_ok:
+        verdict = "**not met, within noise**"
+    else:
+        verdict = "**not met**"
+    comm = (f"; communication {trained['communication_per_step']:.3g} vs the paper's "
+            f"{paper['communication_per_step']:.3g} per step" if fewer_messages and paper else "")
+    return (f"Target: {text}. Trained {trained['mean_cost']:.4g} vs {reference['policy']} "
+            f"{reference['mean_cost']:.4g} ({100 * gap:+.1f} %){comm}: {verdict}.")
+
+
 def rows(table: dict) -> list[dict]:
     """Named policies, each trained model, then the trained summary; best first within each group."""
     named = sorted((r for n, r in table.items() if not n.endswith(".zip")), key=lambda r: r["mean_cost"])
@@ -67,6 +110,22 @@ def bar_chart(table: dict, path: str, key: str) -> None:
     save_figure(path, fig)
 
 
+def _training_budget(table: dict) -> str | None:
+    """The trained models' timesteps and training seeds, read from each model's ``model.json``."""
+    budgets = []
+    for name in table:
+        meta = os.path.join(os.path.dirname(name), "model.json")
+        if name.endswith(".zip") and os.path.isfile(meta):
+            info = read_json(meta)
+            budgets.append((info.get("timesteps"), info.get("seed"), info.get("env_config")))
+    if not budgets:
+        return None
+    steps = sorted({b[0] for b in budgets})
+    config = budgets[0][2]
+    return (f"Trained models: {len(budgets)} training seed(s) ({', '.join(str(b[1]) for b in budgets)}), "
+            f"{'/'.join(f'{s:,}' for s in steps)} timesteps each, training config {config}.")
+
+
 def markdown(out: str) -> str:
     lines = ["# Leaderboard", "",
              "Mean episode estimation error (each scenario's own metric, lower is better) with its 95 % "
@@ -86,4 +145,10 @@ def markdown(out: str) -> str:
             lines.append(f"| {name} | {r['mean_cost']:.4g} | ±{r['ci95']:.3g} | {versus} | {r['paper_cost']:.4g} | "
                          f"{r['communication_per_step']:.3g} | {r['episodes']} |")
         lines.append("")
+        budget = _training_budget(table)
+        if budget:
+            lines += [budget, ""]
+        verdict = target_verdict(scenario, table)
+        if verdict:
+            lines += [verdict, ""]
     return "\n".join(lines)
