@@ -9,12 +9,12 @@ from __future__ import annotations
 
 import inspect
 
-from agents import bandwidth_fusion, gps_denied_nbp, lossy_fusion, nlos_horizon, relay_ukf
+from agents import bandwidth_fusion, gps_denied_nbp, lossy_fusion, mrclam_relay, nlos_horizon, relay_ukf
 from agents.base import FixedActionPolicy, Policy, RandomPolicy
 
 SCENARIO_POLICIES = {"bandwidth_fusion": bandwidth_fusion.POLICIES, "lossy_fusion": lossy_fusion.POLICIES,
                      "relay_ukf": relay_ukf.POLICIES, "nlos_horizon": nlos_horizon.POLICIES,
-                     "gps_denied_nbp": gps_denied_nbp.POLICIES}
+                     "gps_denied_nbp": gps_denied_nbp.POLICIES, "mrclam_relay": mrclam_relay.POLICIES}
 
 
 def available_policies(scenario: str) -> list[str]:

@@ -18,12 +18,13 @@ State: robot i has s_i = (x_i, y_i, theta_i); the joint state is
 s = [s_1; ...; s_N] in R^{3N}, covariance P (3N x 3N), L = 3N.
 
 Time update (unicycle, Euler over dt, odometry u_i = (v_i, w_i) with white
-noise of variances (sigma_v^2, sigma_w^2)):
+noise of variances (sigma_v^2, sigma_w^2), the same for every robot or, for a
+speed-dependent model (:func:`odometry_variance`), one pair per robot):
 
     s_i <- s_i + dt [v_i cos theta_i; v_i sin theta_i; w_i],
     F_i = [[1, 0, -dt v_i sin theta_i], [0, 1, dt v_i cos theta_i], [0, 0, 1]],
     G_i = dt [[cos theta_i, 0], [sin theta_i, 0], [0, 1]],
-    P_ii <- F_i P_ii F_i^T + G_i diag(sigma_v^2, sigma_w^2) G_i^T,
+    P_ii <- F_i P_ii F_i^T + G_i diag(sigma_v,i^2, sigma_w,i^2) G_i^T,
     P_ij <- F_i P_ij F_j^T  (i != j).
 
 With the heading in the state the transition is no longer the identity and
@@ -87,10 +88,12 @@ from estimators.ukf_relay import ukf_weights
 __all__ = [
     "FactoredCov",
     "ccl_update",
+    "correct_odometry",
     "dcl_update",
     "factor",
     "motion",
     "observe",
+    "odometry_variance",
     "time_update",
     "time_update_factored",
     "wrap",
@@ -119,9 +122,40 @@ def motion(estimate: np.ndarray, odometry: np.ndarray, dt: float):
 
 def _noise(G: np.ndarray, odometry_var) -> np.ndarray:
     q = np.asarray(odometry_var, float)
-    if q.shape != (2,) or np.any(q < 0):
-        raise ValueError(f"odometry_var must be (sigma_v^2, sigma_w^2) >= 0, got {odometry_var!r}")
-    return np.einsum("...ab,b,...cb->...ac", G, q, G)
+    if q.ndim not in (1, 2) or q.shape[-1] != 2 or (q.ndim == 2 and q.shape[0] != G.shape[0]) or np.any(q < 0):
+        raise ValueError(
+            f"odometry_var must be (sigma_v^2, sigma_w^2) >= 0, shape (2,) or (N, 2), got {odometry_var!r}")
+    return np.einsum("...ab,...b,...cb->...ac", G, np.broadcast_to(q, (*G.shape[:-2], 2)), G)
+
+
+def correct_odometry(odometry, scale=(1.0, 1.0), delay: int = 0) -> np.ndarray:
+    """Odometry (T, N, 2) with a calibrated scale and actuation delay: u'[k] = scale * u[max(k - delay, 0)].
+
+    ``delay`` steps: the command logged at step k moves the robot from step k + delay on
+    (a robot's response lags its command); before the first command the first one is held.
+    """
+    u = np.asarray(odometry, float)
+    delay = int(delay)
+    if delay < 0 or u.ndim < 2 or u.shape[-1] != 2:
+        raise ValueError(f"correct_odometry: delay must be >= 0 and odometry (T, ..., 2), got {delay}, {u.shape}")
+    index = np.maximum(np.arange(len(u)) - delay, 0)
+    return u[index] * np.asarray(scale, float)
+
+
+def odometry_variance(odometry, var0, var_gain=(0.0, 0.0), inflation=(1.0, 1.0)) -> np.ndarray:
+    """Speed-dependent odometry variances, per robot: inflation * (var0 + var_gain * u^2), shape of ``odometry``.
+
+    For (v, w): sigma_v^2 = r_v (a_v + b_v v^2), sigma_w^2 = r_w (a_w + b_w w^2); ``inflation``
+    (r_v, r_w) >= 1 accounts for errors correlated over steps (see
+    :func:`coloc_env.data.mrclam.calibrate_noise`). The result is a valid ``odometry_var``
+    for :func:`time_update` / :func:`time_update_factored` when ``odometry`` is (N, 2).
+    """
+    u = np.asarray(odometry, float)
+    a, b, r = (np.asarray(x, float) for x in (var0, var_gain, inflation))
+    if np.any(a < 0) or np.any(b < 0) or np.any(r <= 0):
+        raise ValueError(
+            f"odometry_variance: var0, var_gain must be >= 0 and inflation > 0, got {var0}, {var_gain}, {inflation}")
+    return r * (a + b * u**2)
 
 
 def time_update(estimate, cov, odometry, dt: float, odometry_var):

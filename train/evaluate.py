@@ -11,7 +11,9 @@ The three ranges are disjoint, so no policy is evaluated on a training seed
 and nothing is tuned on the evaluation seeds.
 
 The metric is the scenario's own, ``Scenario.episode_error`` of every step's
-``infos[agent]["error"]`` (by default the sum over steps and agents); communication is the per-step sum over agents of
+``infos[agent][Scenario.metric_error_key]`` (``"error"`` except where the paper samples
+its error elsewhere in the step: relay_ukf's ``"posterior_error"``; by default the sum
+over steps and agents); communication is the per-step sum over agents of
 ``infos[agent]["communication"]`` (components, messages or hops, as the
 scenario counts it). ``paper_cost`` adds ``Scenario.initial_cost()``, the
 part of a paper's cost an episode does not contain (bandwidth_fusion's k = 0
@@ -75,14 +77,14 @@ def run_episodes(scenario: str, policy_name: str, episodes: int, seed_base: int 
         raise ValueError(f"episodes must be >= 2 for a confidence interval, got {episodes}")
     env = coloc_env.parallel_env(scenario, **env_config)
     policy = agents.make_policy(policy_name, env, seed=seed_base)
-    weight_key = env.scenario.metric_weight_key
+    error_key, weight_key = env.scenario.metric_error_key, env.scenario.metric_weight_key
     costs, comms = [], []
     for e in range(episodes):
         observations, _ = env.reset(seed=seed_base + e)
         errors, weights, comm = [], [], 0.0
         while env.agents:
             observations, _, _, _, infos = env.step(policy.act(observations))
-            errors.append([float(infos[a]["error"]) for a in env.possible_agents])
+            errors.append([float(infos[a][error_key]) for a in env.possible_agents])
             if weight_key:
                 weights.append([float(infos[a][weight_key]) for a in env.possible_agents])
             comm += sum(float(info.get("communication", 0.0)) for info in infos.values())
@@ -113,7 +115,7 @@ def run_model_batched(model, scenario: str, episodes: int, seed_base: int, **env
                                    deterministic=True)
         core.step(np.asarray(actions, dtype=float).reshape(episodes, core.num_agents, *shape))
         info = core.info()
-        errors.append(info["error"])
+        errors.append(info[core.metric_error_key])
         if core.metric_weight_key:
             weights.append(info[core.metric_weight_key])
         comm += info["communication"].sum(axis=-1) if "communication" in info else 0.0

@@ -221,6 +221,41 @@ class BandwidthFusionConfig:
         )
 
 
+@dataclass(frozen=True)
+class NoiseFactors:
+    """Square-root factors F (F F^T = covariance) of one config's noises, computed once per scenario."""
+
+    initial: np.ndarray  # (n, n), of M(0)
+    process: np.ndarray  # (n, n), of W
+    measurement: np.ndarray  # (N, m, m), of each V_j
+
+
+def noise_factors(config: BandwidthFusionConfig) -> NoiseFactors:
+    model = config.fusion_model()
+    return NoiseFactors(initial=covariance_factor(np.asarray(config.initial_cov, float)),
+                        process=config.motion.noise_factor,
+                        measurement=np.stack([covariance_factor(V) for V in model.measurement_noise]))
+
+
+def draw_episode(config: BandwidthFusionConfig, rng: np.random.Generator,
+                 factors: NoiseFactors | None = None) -> dict[str, np.ndarray]:
+    """One episode's randomness, drawn from ``rng`` in the order ``reset`` draws it for a copy.
+
+    Returns ``initial_state`` x(0) ~ N(xhat(0), M(0)) (n,), ``process_noise`` w(0..K-1) (K, n)
+    and ``measurement_noise`` v_j(0..K-1) of every node (K, N, m). The reproduction
+    (``train/reproduce/zhao2020.py``) feeds the same draws to
+    :func:`estimators.bandwidth_fusion.simulate`, so that both see the same episodes.
+    ``factors``: :func:`noise_factors` of ``config``, when the caller has them.
+    """
+    factors = noise_factors(config) if factors is None else factors
+    K, N, m = config.horizon, config.num_uavs, factors.measurement.shape[-1]
+    x0 = np.asarray(config.initial_state, float) + sample_gaussian(rng, factors.initial, ())
+    process = sample_gaussian(rng, factors.process, (K,))
+    white = rng.standard_normal((K, N, m))
+    measurement = (factors.measurement @ white[..., None])[..., 0]
+    return {"initial_state": x0, "process_noise": process, "measurement_noise": measurement}
+
+
 class BandwidthFusionScenario(Scenario):
     """Batched core of ``bandwidth_fusion``; see the module docstring for the table."""
 
@@ -241,8 +276,7 @@ class BandwidthFusionScenario(Scenario):
         self._weight_order = np.concatenate([np.arange(config.num_uavs)[:, None], self.links.neighbours], axis=1)
         self._initial_estimate = np.asarray(config.initial_state, float)
         self._initial_cov = np.asarray(config.initial_cov, float)
-        self._initial_factor = covariance_factor(self._initial_cov)
-        self._meas_factors = np.stack([covariance_factor(V) for V in self.model.measurement_noise])
+        self._factors = noise_factors(config)
         B, N, n, m, K = self.batch, self.num_agents, self.n, self.m, self.horizon
         self.k = np.zeros(B, dtype=int)
         self.truth = np.zeros((B, n))
@@ -322,13 +356,13 @@ class BandwidthFusionScenario(Scenario):
         idx = self._indices(env_index)
         if len(rngs) != len(idx):
             raise ValueError(f"reset needs one generator per copy: {len(idx)} copies, {len(rngs)} generators")
-        K, N = self.horizon, self.num_agents
+        N = self.num_agents
         for b, rng in zip(idx, rngs, strict=True):
             # One block per episode so that stepping never loops over copies.
-            self.truth[b] = self._initial_estimate + sample_gaussian(rng, self._initial_factor, ())
-            self._process[b] = self.motion.sample_noise(rng, (K,))
-            white = rng.standard_normal((K, N, self.m))
-            self._meas_noise[b] = (self._meas_factors @ white[..., None])[..., 0]
+            episode = draw_episode(self.config, rng, self._factors)
+            self.truth[b] = episode["initial_state"]
+            self._process[b] = episode["process_noise"]
+            self._meas_noise[b] = episode["measurement_noise"]
         fresh = bf.initial_state(self.model, self._initial_estimate, self._initial_cov, (len(idx),))
         self.fusion.estimate[idx] = fresh.estimate
         self.fusion.bound[idx] = fresh.bound

@@ -24,6 +24,8 @@ class Scenario(abc.ABC):
     paper: ClassVar[str]
     Config: ClassVar[type]
     agent_prefix: ClassVar[str] = "uav"
+    # The info key whose per-step values the episode metric reduces (``episode_error``'s ``errors``).
+    metric_error_key: ClassVar[str] = "error"
     # An info key whose per-step values weight the episode metric (None: unweighted).
     metric_weight_key: ClassVar[str | None] = None
 
@@ -101,7 +103,8 @@ class Scenario(abc.ABC):
     def episode_error(self, errors: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
         """The paper's metric of whole episodes from ``infos[agent]["error"]``.
 
-        ``errors`` has shape (..., T, N): every step's error of every agent;
+        ``errors`` has shape (..., T, N): every step's error of every agent
+        (``infos[agent][metric_error_key]``, by default ``"error"``);
         ``weights`` the same shape, ``infos[agent][metric_weight_key]`` where the
         scenario names one. Default: the sum over steps and agents, a cost like
         J_K. A scenario whose paper averages over time, over some agents only,

@@ -69,14 +69,23 @@ Reward (team: the decisions of one agent move every platform's estimate)
 
 Termination: none; truncation after ``horizon`` steps (the paper's 400 s / 0.5 s = 800).
 
+Metric (``coloc evaluate``, :meth:`RelayUKFScenario.episode_error`): the paper's, the
+distance error of the estimate at each measurement time k = 0..K-1 after its update
+(``posterior_error``), averaged over the steps and platforms, as
+``train/reproduce/wang2019.py`` computes it. The reward's error is the one after the
+prediction to k + 1, so an episode's mean reward differs from the metric by the odometry
+drift of one step.
+
 ``infos[agent]``: ``true_position``, ``estimated_position``, ``error`` (distance, m),
-``trace`` (tr P_ii, m^2), ``dead_reckoning_error`` (the same platform by odometry
-alone, m), ``measuring`` (this agent measured this step), ``partner`` (whom it
-ranged, -1), ``chain_position`` (its place in this step's chain, 0 = m, -1 not
-reached), ``relay_target`` (whom it passed to, -1), ``communication`` (hops it
-delivered this step, 0 or 1; summed over agents = hops), ``hops`` and
-``hop_cost`` (the team's, this step), ``chain_stop`` (index into
-:data:`coloc_env.world.relay.STOP_REASONS`, -1 without a measurement), ``step``.
+``posterior_error`` (the distance error at time k right after this step's measurement
+update, before the prediction to k + 1: what the paper's metric averages), ``trace``
+(tr P_ii, m^2), ``dead_reckoning_error`` (the same platform by odometry alone, m),
+``measuring`` (this agent measured this step), ``partner`` (whom it ranged, -1),
+``chain_position`` (its place in this step's chain, 0 = m, -1 not reached),
+``relay_target`` (whom it passed to, -1), ``communication`` (hops it delivered this
+step, 0 or 1; summed over agents = hops), ``hops`` and ``hop_cost`` (the team's, this
+step), ``chain_stop`` (index into :data:`coloc_env.world.relay.STOP_REASONS`, -1 without
+a measurement), ``step``.
 
 Arguments (fields of :class:`RelayUKFConfig`, defaults = the paper's Sec. 4 / Table 1)
 -------------------------------------------------------------------------------------
@@ -235,6 +244,7 @@ class RelayUKFScenario(Scenario):
     paper = "wang2019"
     Config = RelayUKFConfig
     agent_prefix = "platform"
+    metric_error_key = "posterior_error"
 
     def __init__(self, config: RelayUKFConfig, batch: int = 1):
         super().__init__(config, batch)
@@ -257,6 +267,7 @@ class RelayUKFScenario(Scenario):
         self._loss_uniforms = np.zeros((B, K, max(N - 1, 1)))
         self.event = self._empty_event(B)
         self._reward = np.zeros((B, N))
+        self.posterior_error = np.zeros((B, N))
 
     # --- description ------------------------------------------------------------
     @property
@@ -327,6 +338,7 @@ class RelayUKFScenario(Scenario):
         for name in ("chain", "length", "hop_distance", "stop"):
             getattr(self.event.relay, name)[idx] = getattr(fresh.relay, name)
         self._reward[idx] = 0.0
+        self.posterior_error[idx] = 0.0  # the estimates start at the truth
 
     def _empty_event(self, count: int) -> MeasurementEvent:
         N = self.num_agents
@@ -388,7 +400,11 @@ class RelayUKFScenario(Scenario):
             self.config.range_noise_var, self.config.ukf_lambda, self.config.truncation)
 
     def time_update(self) -> None:
-        """Every platform predicts k -> k+1 from its odometry (eq. 1); the truth moves; rewards."""
+        """Every platform predicts k -> k+1 from its odometry (eq. 1); the truth moves; rewards.
+
+        First records ``posterior_error``, the error at time k after its measurement update.
+        """
+        self.posterior_error = self.position_error()
         speed, heading, heading_var = self.odometry()
         self.estimate, self.cov = ukf.time_update(self.estimate, self.cov, speed, heading, self.config.dt,
                                                   self.config.speed_noise_std**2, heading_var)
@@ -427,7 +443,11 @@ class RelayUKFScenario(Scenario):
         return obs.astype(np.float32)
 
     def episode_error(self, errors: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
-        """The paper's metric: the distance error ||xhat_i - x_i|| averaged over the steps and platforms."""
+        """The paper's metric: the distance error ||xhat_i - x_i|| averaged over the steps and platforms.
+
+        ``errors`` are the ``posterior_error`` infos (:attr:`metric_error_key`): time k after its
+        measurement update, k = 0..K-1, as the reproduction averages them.
+        """
         return np.asarray(errors, float).mean(axis=(-2, -1))
 
     def reward(self) -> np.ndarray:
@@ -451,6 +471,7 @@ class RelayUKFScenario(Scenario):
             "true_position": np.broadcast_to(self.truth[self.k], (B, N, 2)).copy(),
             "estimated_position": self.estimate.copy(),
             "error": self.position_error(),
+            "posterior_error": self.posterior_error.copy(),
             "trace": self.own_traces(),
             "dead_reckoning_error": np.linalg.norm(self.dead_reckoning - self.truth[self.k], axis=-1),
             "measuring": measuring,

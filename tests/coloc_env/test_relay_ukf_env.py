@@ -168,6 +168,10 @@ def test_env_with_paper_policy_equals_the_estimator_called_directly():
             updates += 1
         else:
             assert chain == [-1] * 4
+        # the metric's error: time k after its measurement update, before the prediction
+        posterior = np.linalg.norm(x - truth[k], axis=-1)
+        for i, agent in enumerate(env.possible_agents):
+            assert infos[agent]["posterior_error"] == pytest.approx(posterior[i], abs=1e-12)
         x, P = ur.time_update(x, P, speed[k], heading[k], config.dt, config.speed_noise_std**2,
                               k * config.dt**2 * config.turn_rate_noise_std**2)
         k += 1

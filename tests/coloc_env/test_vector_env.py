@@ -1,6 +1,7 @@
 """The batched SB3 vector env is the parallel env, copy for copy, bit for bit."""
 
 import dataclasses
+import os
 
 import numpy as np
 import pytest
@@ -9,10 +10,19 @@ import coloc_env
 
 NAME = "bandwidth_fusion"
 HORIZON = 6  # short episodes so that two auto-resets happen quickly
+MRCLAM_DATA = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))),
+                           "..", "shared", "data", "mrclam", "MRCLAM_Dataset6")
+# scenarios whose episode length is not ``horizon`` or that replay recorded data (skipped without it)
+SHORT_CONFIGS = {"mrclam_relay": {"data": MRCLAM_DATA, "window_steps": HORIZON}}
 
 
 def short_config(name: str) -> dict:
     """A short horizon where the scenario's config has one, so that auto-resets come quickly."""
+    if name in SHORT_CONFIGS:
+        config = dict(SHORT_CONFIGS[name])
+        if "data" in config and not os.path.isdir(config["data"]):
+            pytest.skip(f"{name}: recorded data not found at {config['data']}")
+        return config
     fields = {f.name for f in dataclasses.fields(coloc_env.scenario_class(name).Config)}
     return {"horizon": HORIZON} if "horizon" in fields else {}
 

@@ -118,6 +118,23 @@ def test_exact_cost_matches_monte_carlo_within_3_percent(any_model):
     assert np.all(bound.sum() >= exact.sum())
 
 
+def test_simulate_replays_given_noise_bit_for_bit(any_model):
+    """``noise=`` replays draws made elsewhere; drawn the way simulate draws them, nothing changes."""
+    selection, weights = paper_selection("T2"), paper_weights("P3")
+    x0 = np.full(3, 10.0)
+    drawn = bf.simulate(any_model, x0, M0, selection, weights, 20, np.random.default_rng(5), runs=7)
+    rng = np.random.default_rng(5)
+    noise = (rng.multivariate_normal(x0, M0, size=7),
+             rng.multivariate_normal(np.zeros(3), any_model.process_noise, size=(20, 7)),
+             np.stack([rng.multivariate_normal(np.zeros(any_model.measurement_dim), V, size=(20, 7))
+                       for V in any_model.measurement_noise], axis=2))
+    replayed = bf.simulate(any_model, x0, M0, selection, weights, 20, None, runs=7, noise=noise)
+    for key in ("truth", "estimate", "squared_error"):
+        np.testing.assert_array_equal(replayed[key], drawn[key])
+    with pytest.raises(ValueError, match="noise must have shapes"):
+        bf.simulate(any_model, x0, M0, selection, weights, 20, None, runs=6, noise=noise)
+
+
 def test_batch_axis_equals_per_copy_steps(any_model):
     paper_model = any_model
     rng = np.random.default_rng(3)

@@ -107,3 +107,45 @@ def test_dcl_equals_ccl_on_mrclam_slice():
         xd, f = se2.time_update_factored(xd, f, d.odometry[k], d.dt, Q)
     assert applied > 100 and any(d.meas_subject <= 5)
     assert worst < 1e-9
+
+
+def test_correct_odometry_shifts_and_scales():
+    u = np.arange(12, dtype=float).reshape(6, 1, 2) + 1.0  # (T=6, N=1, 2)
+    out = se2.correct_odometry(u, scale=(0.5, 2.0), delay=2)
+    assert out.shape == u.shape
+    assert np.allclose(out[2:], u[:-2] * [0.5, 2.0])  # command of step k - 2 moves the robot at step k
+    assert np.allclose(out[:2], u[0] * [0.5, 2.0])  # before the first command: the first one held
+    assert np.array_equal(se2.correct_odometry(u), u)
+    with pytest.raises(ValueError, match="delay"):
+        se2.correct_odometry(u, delay=-1)
+
+
+def test_odometry_variance_speed_dependent():
+    u = np.array([[0.0, 0.0], [0.1, 0.2], [0.3, -0.6]])
+    q = se2.odometry_variance(u, (1e-4, 1e-3), (0.1, 0.2), (2.0, 3.0))
+    assert np.allclose(q, [2.0, 3.0] * (np.array([1e-4, 1e-3]) + np.array([0.1, 0.2]) * u**2))
+    assert np.all(np.diff(q[:, 0]) > 0) and np.all(np.diff(q[:, 1]) > 0)  # larger speed, larger sigma
+    with pytest.raises(ValueError, match="var0"):
+        se2.odometry_variance(u, (-1.0, 0.0))
+
+
+def test_per_robot_odometry_variance():
+    """(N, 2) variances: each robot's block gets its own G Q G^T; DCL still equals CCL."""
+    rng = np.random.default_rng(5)
+    N = 4
+    x, P = _random_state(rng, N)
+    u = rng.normal(size=(N, 2)) * [0.3, 0.5]
+    q = se2.odometry_variance(u, (1e-4, 1e-3), (0.1, 0.2))
+    x1, P1 = se2.time_update(x, P, u, 0.1, q)
+    _, F, G = se2.motion(x, u, 0.1)
+    for i in range(N):
+        expected = F[i] @ P[3 * i:3 * i + 3, 3 * i:3 * i + 3] @ F[i].T + G[i] @ np.diag(q[i]) @ G[i].T
+        assert np.allclose(P1[3 * i:3 * i + 3, 3 * i:3 * i + 3], expected, atol=1e-14)
+    x2, f = se2.time_update_factored(x, se2.factor(P), u, 0.1, q)
+    assert np.allclose(x1, x2, atol=1e-14) and np.max(np.abs(P1 - f.joint())) < 1e-12
+    z = np.array([2.0, 0.3])
+    a = se2.ccl_update(x1, P1, 1, z, R, measured=3)
+    b = se2.dcl_update(x2, f, [1, 3, 0, 2], z, R)
+    assert np.max(np.abs(a[0] - b[0])) < 1e-9 and np.max(np.abs(a[1] - b[1].joint())) < 1e-9
+    with pytest.raises(ValueError, match="odometry_var"):
+        se2.time_update(x, P, u, 0.1, np.ones((N - 1, 2)))

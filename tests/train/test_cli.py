@@ -191,3 +191,15 @@ def test_every_scenario_has_a_raw_estimator_benchmark(name):
     assert name in coloc_env.SCENARIOS and name in ESTIMATOR_STEPS
     step = ESTIMATOR_STEPS[name](2)
     step()  # one batched step of two copies runs
+
+
+def test_all_skips_a_scenario_whose_data_is_missing(monkeypatch, capsys):
+    from rich.console import Console
+
+    import coloc_env
+    from train.cli import _runnable_scenarios
+
+    monkeypatch.delenv("COLOC_MRCLAM_DATA", raising=False)
+    names = _runnable_scenarios(Console())
+    assert "mrclam_relay" not in names and set(names) == set(coloc_env.SCENARIOS) - {"mrclam_relay"}
+    assert "mrclam_relay: skipped (data" in capsys.readouterr().out

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 
+import numpy as np
 import pytest
 
 from train.cli import PAPERS, build_parser
@@ -43,3 +44,108 @@ def test_quick_reproduce_on_dataset6(tmp_path, monkeypatch):
     assert stored["steps"] == 600
     assert metrics["max_abs_diff_dcl_ccl"] < 1e-9
     assert metrics["rmse_position"]["CCL"]["mean"] < metrics["rmse_position"]["IL"]["mean"]
+    # issue 9: the calibrated model is reported next to the baseline, and is the better-calibrated one
+    assert {"noise_baseline", "nees_mean_baseline", "rmse_position_baseline", "observations_baseline"} <= set(stored)
+    assert set(stored["nees_mean_baseline"]["CCL"]) == {f"robot{i}" for i in range(1, 6)} | {"mean"}
+    assert stored["noise"]["odometry_delay_steps"] == 2
+    assert metrics["nees_mean"]["CCL"]["mean"] < metrics["nees_mean_baseline"]["CCL"]["mean"]
+    assert metrics["observations"]["rejected"] < metrics["observations_baseline"]["rejected"]
+    report = (folder / "report.md").read_text()
+    assert "before (baseline)" in report and "68.27th percentile" in report
+
+
+# ---------------------------------------------------------------- calibrate_noise on synthetic data
+
+
+def _synthetic(rng, T=3000, delay=2, scale=(0.9, 0.8), var0=(1e-4, 4e-3), gain=(0.05, 0.1), rho=0.0,
+               range_var=(0.004, 0.002), sigma_b=0.01, pair_bias=0.0, p_see=0.3):
+    """Robots whose true velocity is scale * (command logged ``delay`` steps earlier) minus noise of
+    variance var0 + gain u^2 (AR(1) with coefficient ``rho``); (range, bearing) to landmarks with
+    white noise of variance range_var[0] + range_var[1] r^2 and sigma_b (+ a constant error per pair)."""
+    from coloc_env.data import mrclam
+    from estimators.ukf_relay_se2 import observe
+
+    dt, N = 0.1, 5
+    hold = 20
+    clean = np.repeat(np.stack([rng.uniform(0.0, 0.2, (T // hold + 1, N)),
+                                rng.uniform(-0.5, 0.5, (T // hold + 1, N))], -1), hold, axis=0)[:T]
+    sd = np.sqrt(np.asarray(var0) + np.asarray(gain) * clean**2)
+    white = rng.normal(size=(T, N, 2))
+    e = np.empty_like(white)
+    e[0] = white[0]
+    for k in range(1, T):
+        e[k] = rho * e[k - 1] + np.sqrt(1 - rho**2) * white[k]
+    e *= sd
+    true = clean - e
+    gt = np.zeros((T, N, 3))
+    gt[0, :, :2] = rng.uniform(-3, 3, (N, 2))
+    for k in range(T - 1):
+        th = gt[k, :, 2]
+        gt[k + 1] = gt[k] + dt * np.stack([true[k, :, 0] * np.cos(th), true[k, :, 0] * np.sin(th), true[k, :, 1]], -1)
+    gt[..., 2] = (gt[..., 2] + np.pi) % (2 * np.pi) - np.pi
+    command = np.concatenate([clean[delay:], np.repeat(clean[-1:], delay, 0)]) / np.asarray(scale)
+    landmarks = rng.uniform(-5, 5, (15, 2))
+    bias = pair_bias * rng.normal(size=(N, 15, 2))
+    steps, robots, subjects, ranges, bearings = [], [], [], [], []
+    for k in range(T):
+        for r in range(N):
+            if rng.random() < p_see:
+                lm = (k // hold + 3 * r) % 15  # bursts: a robot sees one landmark for `hold` steps
+                h = observe(gt[k, r], landmarks[lm])
+                sr = np.sqrt(range_var[0] + range_var[1] * h[0] ** 2)
+                steps.append(k)
+                robots.append(r)
+                subjects.append(lm + 6)
+                ranges.append(h[0] + sr * (rng.normal() + bias[r, lm, 0]))
+                bearings.append(h[1] + sigma_b * (rng.normal() + bias[r, lm, 1]))
+    return mrclam.MrclamData(
+        path="synthetic", dt=dt, t0=0.0, time=dt * np.arange(T), odometry=command, groundtruth=gt,
+        landmarks=landmarks, landmark_std=np.zeros((15, 2)), barcodes={}, meas_step=np.array(steps),
+        meas_robot=np.array(robots), meas_subject=np.array(subjects), meas_range=np.array(ranges),
+        meas_bearing=np.array(bearings), dropped_unknown_barcode=0)
+
+
+def test_calibrate_noise_recovers_injected_model():
+    from coloc_env.data import mrclam
+
+    d = _synthetic(np.random.default_rng(0))
+    n = mrclam.calibrate_noise(d, d.steps * d.dt)
+    for key in ("sigma_v", "sigma_w", "sigma_range", "sigma_bearing", "calibration_s", "calibration_measurements"):
+        assert key in n  # the baseline keys stay
+    assert n["odometry_delay_steps"] == 2
+    assert np.allclose(n["odometry_scale"], [0.9, 0.8], rtol=0.03)
+    for c, (a, b) in enumerate([(1e-4, 0.05), (4e-3, 0.1)]):
+        for u in (0.0, 0.15, 0.4):
+            truth = np.sqrt(a + b * u * u)
+            model = np.sqrt(n["odometry_var0"][c] + n["odometry_var_gain"][c] * u * u)
+            assert abs(model / truth - 1) < 0.15, (c, u, model, truth)
+        # white errors: the summed error over the horizon matches the white model
+        assert 1.0 <= n["odometry_inflation"][c] < 1.3
+    for r in (2.0, 6.0):
+        model = np.sqrt(n["range_var"][0] + n["range_var"][1] * r * r)
+        assert abs(model / np.sqrt(0.004 + 0.002 * r * r) - 1) < 0.15
+    assert abs(n["sigma_bearing_p68"] / 0.01 - 1) < 0.1
+    assert max(n["measurement_inflation"]) < 1.5
+    # MAD over raw commands understates: the baseline sigma_w ignores the scale error and the speed dependence
+    assert n["correction_horizon_steps"] >= 2
+
+
+def test_speed_dependent_sigma_grows_with_speed():
+    import estimators.ukf_relay_se2 as se2
+    from coloc_env.data import mrclam
+
+    n = mrclam.calibrate_noise(_synthetic(np.random.default_rng(1), T=2000), 200.0)
+    q = se2.odometry_variance(np.array([[0.0, 0.0], [0.2, 0.5]]), n["odometry_var0"], n["odometry_var_gain"],
+                              n["odometry_inflation"])
+    assert np.all(q[1] > 1.5 * q[0])
+
+
+def test_correlated_errors_are_inflated():
+    from coloc_env.data import mrclam
+
+    d = _synthetic(np.random.default_rng(2), rho=0.9, pair_bias=2.0)
+    n = mrclam.calibrate_noise(d, d.steps * d.dt)
+    assert n["odometry_lag1_autocorr"][0] > 0.8
+    assert n["odometry_inflation"][0] > 2.5 and n["odometry_inflation"][1] > 2.5
+    # a constant error per (robot, landmark) pair of 2 sigma: bursts of sightings share it
+    assert min(n["measurement_inflation"]) > 2.0

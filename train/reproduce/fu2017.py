@@ -20,6 +20,12 @@ plus ``report.md`` and PNG figures. Monte Carlo blocks of at most
 ``BLOCK_RUNS`` runs are independent tasks seeded by
 ``np.random.default_rng([seed, L, block])``, so a run's numbers do not
 depend on the executor or on how many other runs there are.
+
+``paper_policy_costs(seeds)`` gives this reproduction's per-episode number for algorithm (B),
+the filter of the env's ``paper`` policy, on the episodes ``env.reset(seed=s)`` draws for each s
+in ``seeds`` (the scenario's own sampler), through the same estimator code as the Monte Carlo
+above; a test checks that it equals what ``coloc evaluate`` reports for the ``paper`` policy on
+the same seeds.
 """
 
 from __future__ import annotations
@@ -66,16 +72,38 @@ BEATS = {
 # not in the comparison proper: (B) with each held packet predicted forward by its age (ours), and (A) with
 # the paper's gain (21) and its second moments exactly as printed (12)-(14), (20)
 DIAGNOSTICS = ("distributed_age_aware", "centralized_printed_moments")
+PAPER_FILTER = "distributed"  # the env's ``paper`` policy: (B), all transmit, weights (29)/(30)
 SIGNIFICANCE = 2.0  # a difference counts when it exceeds this many standard errors
 
 
 def monte_carlo_block(num_uavs: int, runs: int, seed: int, block: int, config: LossyFusionConfig) -> dict:
     """``runs`` episodes with ``num_uavs`` UAVs, every filter on the same runs; rng seeded by (seed, L, block)."""
     config = dataclasses.replace(config, num_uavs=num_uavs)
+    sim = config.sample_episodes(np.random.default_rng([seed, num_uavs, block]), (runs,))
+    return {"num_uavs": num_uavs, "block": block, **run_block_filters(config, sim)}
+
+
+def paper_policy_costs(seeds, config: LossyFusionConfig | None = None) -> np.ndarray:
+    """Per-episode MSE (mean over the slots of the squared position error) of :data:`PAPER_FILTER`,
+    the filter the env's ``paper`` policy runs, on the episodes the env draws for ``seeds``.
+
+    Episode e is ``config.sample_episodes(default_rng(seeds[e]))``, what
+    ``env.reset(seed=seeds[e])`` draws; the filters run by this reproduction's own path
+    (:func:`run_block_filters`), with ``config.num_uavs`` UAVs (the env's default 2: setting L2).
+    """
+    config = config or build_config(LossyFusionConfig, {})
+    episodes = [config.sample_episodes(np.random.default_rng(s)) for s in seeds]
+    sim = {key: np.stack([e[key] for e in episodes]) for key in ("truth", "z", "outcome")}
+    return run_block_filters(config, sim)["errors"][PAPER_FILTER].mean(axis=1)
+
+
+def run_block_filters(config: LossyFusionConfig, sim: dict) -> dict:
+    """Every filter (and the diagnostics) on the episodes ``sim`` (``truth``, ``z``, ``outcome`` with a
+    leading run axis, as :meth:`LossyFusionConfig.sample_episodes` returns them): squared position
+    errors (runs, K) and own covariance traces per filter, and the link outcome frequencies."""
     model = config.lossy_model()
     H = config.target.position_matrix
     x0, P0 = np.asarray(config.initial_state, float), np.asarray(config.initial_cov, float)
-    sim = config.sample_episodes(np.random.default_rng([seed, num_uavs, block]), (runs,))
     results = lf.run_filters(model, x0, P0, sim["z"], sim["outcome"])
     results["distributed_age_aware"] = lf.distributed_filter(model, x0, P0, sim["z"], sim["outcome"], age_aware=True)
     y = lf.received_measurements(sim["z"], sim["outcome"], H @ x0)
@@ -84,7 +112,7 @@ def monte_carlo_block(num_uavs: int, runs: int, seed: int, block: int, config: L
     for name, (estimates, covariances) in results.items():
         errors[name] = np.sum(((estimates - sim["truth"]) @ H.T) ** 2, axis=-1)  # (runs, K)
         own[name] = np.trace(H @ covariances @ H.T, axis1=-2, axis2=-1)  # (K,) or (runs, K)
-    return {"num_uavs": num_uavs, "block": block, "errors": errors, "own": own,
+    return {"errors": errors, "own": own,
             "delivered": np.bincount(sim["outcome"][..., 1:].ravel(), minlength=3) / sim["outcome"][..., 1:].size}
 
 

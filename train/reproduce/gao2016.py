@@ -15,6 +15,11 @@ claim, our numbers, holds or not, decided on the paired per-run interval) and th
 ``fig4_rmse_vs_horizon.png`` (the U-curve with AFGE as a line), ``fig6_rmse_over_time.png``,
 ``horizon_over_time.png`` (chosen horizon against the turn schedule) and
 ``fig5b_packets_per_step.png``. The returned dict is the metrics plus ``claims`` (for the CLI).
+
+``paper_policy_costs(seeds)`` gives this reproduction's per-episode number for AFGE, the env's
+``paper`` policy, on the episodes ``env.reset(seed=s)`` draws for each s in ``seeds`` (the
+scenario's own sampler), through the same estimator code as the Monte Carlo above; a test checks
+that it equals what ``coloc evaluate`` reports for the ``paper`` policy on the same seeds.
 """
 
 from __future__ import annotations
@@ -60,26 +65,58 @@ def _setting_config(config: NlosHorizonConfig, index: int) -> NlosHorizonConfig:
     return dataclasses.replace(config, **SETTINGS[index][1])
 
 
+def episode_inputs(config: NlosHorizonConfig, episodes: list, lag0: bool = False) -> list[tuple]:
+    """The estimators' inputs of each episode, every packet kept: (fused observations by stamp and
+    lag, true positions (T, K+1, 2), priors (T, 4)), targets first; ``lag0``: late packets dropped."""
+    parts = []
+    for ep in episodes:
+        if lag0:  # no reorganisation: a late packet is dropped
+            ep = dataclasses.replace(ep, delays=np.where(ep.delays == 0, ep.delays, NEVER).astype(np.int16))
+        parts.append((fused_by_stamp_and_lag(config, ep), np.moveaxis(ep.truth[:, :, :2], 0, 1), ep.prior))
+    return parts
+
+
+def stack_inputs(parts: list[tuple], K: int) -> tuple:
+    """:func:`episode_inputs` of several episodes as arrays over (episode, target), the first K stamps."""
+    Y = np.concatenate([p[0][0] for p in parts])[:, :K]
+    y = np.concatenate([p[0][1] for p in parts])[:, :K]
+    g = np.concatenate([p[0][2] for p in parts])[:, :K]
+    truth = np.concatenate([p[1] for p in parts])[:, :K]
+    prior = np.concatenate([p[2] for p in parts])
+    return Y, y, g, truth, prior
+
+
+def paper_policy_costs(seeds, config: NlosHorizonConfig | None = None) -> np.ndarray:
+    """Per-episode time-averaged squared error of AFGE (the env's ``paper`` policy: AHG with
+    ``config.likelihood``, every neighbour kept) over k >= min(50, K - 1), mean over the targets,
+    on the episodes the env draws for ``seeds``.
+
+    Episode e is :func:`draw_episode` of ``default_rng(seeds[e])`` with ``config.num_uavs``
+    targets, what ``env.reset(seed=seeds[e])`` draws; AFGE runs by this reproduction's own path
+    (:func:`episode_inputs`, :func:`estimators.afge.run_fixed_mask`) with the env's stack of
+    ``window_max`` horizons.
+    """
+    config = config or build_config(NlosHorizonConfig, {})
+    episodes = [draw_episode(config, np.random.default_rng(s)) for s in seeds]
+    K, T = config.horizon, config.num_uavs
+    Y, y, g, truth, prior = stack_inputs(episode_inputs(config, episodes), K)
+    out = af.run_fixed_mask(config.motion, Y, y, g, truth, prior, config.ahg, config.window_max,
+                            (config.likelihood,))
+    errors = out[f"afge_{config.likelihood}"].reshape(len(episodes), T, K)
+    return errors[..., min(WARMUP, K - 1):].mean(axis=(1, 2))
+
+
 def monte_carlo_block(config: NlosHorizonConfig, seed: int, run_indices: tuple) -> dict:
     """Every estimator on runs ``run_indices`` of every setting; per-run and per-step results."""
     R = len(run_indices)
     episodes = {i: [draw_episode(_setting_config(config, i), np.random.default_rng([seed + i, r]), targets=1)
                     for r in run_indices] for i in range(len(SETTINGS))}
-    fused, truth, prior = [], [], []
+    parts = []
     for _label, i, mode_info, lag0 in VARIANTS:
         cfg = dataclasses.replace(_setting_config(config, i), mode_info=mode_info)
-        for ep in episodes[i]:
-            if lag0:  # no reorganisation: a late packet is dropped
-                ep = dataclasses.replace(ep, delays=np.where(ep.delays == 0, ep.delays, NEVER).astype(np.int16))
-            fused.append(fused_by_stamp_and_lag(cfg, ep))
-            truth.append(np.moveaxis(ep.truth[:, :, :2], 0, 1))
-            prior.append(ep.prior)
+        parts += episode_inputs(cfg, episodes[i], lag0)
     K = config.horizon
-    Y = np.concatenate([f[0] for f in fused])[:, :K]
-    y = np.concatenate([f[1] for f in fused])[:, :K]
-    g = np.concatenate([f[2] for f in fused])[:, :K]
-    truth_p = np.concatenate(truth)[:, :K]
-    prior_m = np.concatenate(prior)
+    Y, y, g, truth_p, prior_m = stack_inputs(parts, K)
     motion = config.motion
     out = af.run_fixed_mask(motion, Y, y, g, truth_p, prior_m, config.ahg, max(HORIZONS),
                             ("predictive", "paper", "smoothed"))

@@ -20,6 +20,12 @@ Seeding (common random numbers, spec §7): run r draws its world from
 ``default_rng([seed, 100000 + r])`` at every point, so curves are comparable
 point by point. A point's runs are one batched dNBP call (vectorized over
 runs); points are the independent tasks of :func:`train.executor.map_tasks`.
+
+``paper_policy_costs(seeds)`` gives this reproduction's per-episode number for dNBP with the
+paper's schedule, the env's ``paper`` policy, on the episodes ``env.reset(seed=s)`` draws for
+each s in ``seeds`` (the scenario's own sampler), through the same estimator code as the Monte
+Carlo above; a test checks that it equals what ``coloc evaluate`` reports for the ``paper``
+policy on the same seeds.
 """
 
 from __future__ import annotations
@@ -126,16 +132,14 @@ def run_baselines(config: GpsDeniedNbpConfig, episodes) -> dict[str, np.ndarray]
     return out
 
 
-def evaluate_point(overrides: dict, base: dict, runs: int, seed: int) -> dict:
-    """dNBP, LS and DR on ``runs`` common-random-number runs of one configuration."""
-    config = build_config(GpsDeniedNbpConfig, {**base, **overrides})
-    world_seeds = [[seed, r] for r in range(runs)]
-    estimator_seeds = [[seed, ESTIMATOR_SEED_OFFSET + r] for r in range(runs)]
-    episodes = [sample_episode(config, np.random.default_rng(s)) for s in world_seeds]
+def run_dnbp(config: GpsDeniedNbpConfig, episodes: list, estimator_rngs: list) -> tuple:
+    """dNBP with the paper's schedule (every broadcast the schedule allows) on ``episodes``, one batched
+    call per step, episode r's particle randomness from ``estimator_rngs[r]``. Returns the errors
+    (R, T, N), the messages and broadcasts of all runs and the seconds spent."""
+    runs, T, N = len(episodes), config.horizon, config.num_uavs
     scenario = GpsDeniedNbpScenario(config, batch=runs)
     start = time.perf_counter()
-    scenario.start(None, episodes, [np.random.default_rng(s) for s in estimator_seeds])
-    T, N = config.horizon, config.num_uavs
+    scenario.start(None, episodes, estimator_rngs)
     errors = np.zeros((runs, T, N))
     messages = broadcasts = 0
     always = np.ones((runs, N, config.num_iterations), bool)
@@ -144,10 +148,37 @@ def evaluate_point(overrides: dict, base: dict, runs: int, seed: int) -> dict:
         errors[:, k] = scenario.errors
         messages += int(scenario.delivered.sum())
         broadcasts += int(scenario.broadcasts.sum())
-    elapsed = time.perf_counter() - start
+    return errors, messages, broadcasts, time.perf_counter() - start
+
+
+def paper_policy_costs(seeds, config: GpsDeniedNbpConfig | None = None) -> np.ndarray:
+    """Per-episode mean error of dNBP (the env's ``paper`` policy: the paper's schedule) over the
+    (step, UAV) pairs with a faulty GPS (0 for an episode without any), on the episodes the env
+    draws for ``seeds``.
+
+    As ``env.reset(seed=seeds[e])`` does, episode e is :func:`sample_episode` of
+    ``rng = default_rng(seeds[e])`` and its estimator generator ``rng.spawn(1)[0]`` after that;
+    dNBP runs by this reproduction's own path (:func:`run_dnbp`).
+    """
+    config = config or build_config(GpsDeniedNbpConfig, {})
+    rngs = [np.random.default_rng(s) for s in seeds]
+    episodes = [sample_episode(config, rng) for rng in rngs]
+    errors, *_ = run_dnbp(config, episodes, [rng.spawn(1)[0] for rng in rngs])
+    fault = ~np.stack([e.gps_normal for e in episodes])
+    return np.array([float(errors[r][fault[r]].mean()) if fault[r].any() else 0.0 for r in range(len(errors))])
+
+
+def evaluate_point(overrides: dict, base: dict, runs: int, seed: int) -> dict:
+    """dNBP, LS and DR on ``runs`` common-random-number runs of one configuration."""
+    config = build_config(GpsDeniedNbpConfig, {**base, **overrides})
+    world_seeds = [[seed, r] for r in range(runs)]
+    estimator_seeds = [[seed, ESTIMATOR_SEED_OFFSET + r] for r in range(runs)]
+    episodes = [sample_episode(config, np.random.default_rng(s)) for s in world_seeds]
+    errors, messages, broadcasts, elapsed = run_dnbp(config, episodes,
+                                                     [np.random.default_rng(s) for s in estimator_seeds])
     fault = ~np.stack([e.gps_normal for e in episodes])
     baselines = run_baselines(config, episodes)
-    steps = runs * T
+    steps = runs * config.horizon
     return {
         "overrides": overrides,
         "world_seeds": world_seeds,

@@ -18,6 +18,12 @@ plus ``report.md`` and PNG figures. Every Monte Carlo block draws its runs
 from ``np.random.default_rng([seed, block])``; the same blocks are reused for
 every p and Q model (common random numbers: the measurement schedules are
 nested across p, because one uniform per step is compared with p).
+
+``paper_policy_costs(seeds)`` gives this reproduction's per-episode number for UKF-DCL under the
+paper's policy, with that policy's own generator, on the episodes ``env.reset(seed=s)`` draws
+for each s in ``seeds`` (the scenario's own sampler), through the same estimator code as the
+Monte Carlo above; a test checks that it equals what ``coloc evaluate`` reports for the
+``paper`` policy on the same seeds.
 """
 
 from __future__ import annotations
@@ -56,6 +62,15 @@ def monte_carlo_block(block: int, runs: int, seed: int, config: RelayUKFConfig) 
     at each measurement time k = 0..K-1.
     """
     copies, policy_rng = _block_generators(seed, block, runs)
+    return {"block": block, **simulate_runs(config, copies, policy_rng)}
+
+
+def simulate_runs(config: RelayUKFConfig, copies: list, policy_rng: np.random.Generator) -> dict:
+    """The runs of :func:`monte_carlo_block` on given generators: copy r of the scenario reset with
+    ``copies[r]``, the paper policy's random partners drawn from ``policy_rng`` (one call per step
+    for all runs). ``per_run`` (3, runs): each run's error averaged over k = 0..K-1 and the platforms,
+    rows :data:`ESTIMATORS`."""
+    runs = len(copies)
     scenario = RelayUKFScenario(config, batch=runs)
     scenario.reset(copies)
     K, N = config.horizon, config.num_platforms
@@ -91,7 +106,6 @@ def monte_carlo_block(block: int, runs: int, seed: int, config: RelayUKFConfig) 
                                        heading_var)
         il_x, _ = ukf.time_update(il_x, None, speed, heading, config.dt, 0.0)
     return {
-        "block": block,
         "per_run": errors.mean(axis=(1, 3)),  # (3, runs): time- and platform-averaged
         "curves": errors.mean(axis=2),  # (3, K, N): mean over this block's runs
         "runs": runs,
@@ -100,6 +114,26 @@ def monte_carlo_block(block: int, runs: int, seed: int, config: RelayUKFConfig) 
         "chains": chains,
         "tracks": tracks,
     }
+
+
+def paper_policy_costs(seeds, config: RelayUKFConfig | None = None, policy_seed: int | None = None) -> np.ndarray:
+    """Per-episode mean distance error of UKF-DCL under the paper's policy (the env's ``paper``: random
+    partner, nearest-not-yet-reached relay until the chain is complete) on the episodes the env plays
+    for ``seeds``: the error at each measurement time k = 0..K-1 after its update, averaged over the
+    steps and platforms (this reproduction's ``mean_distance_error`` of one run).
+
+    Episode e is the scenario reset with ``default_rng(seeds[e])``, as ``env.reset(seed=seeds[e])``.
+    The paper policy draws its partners from its own generator, seeded ``policy_seed`` (default
+    ``seeds[0]``, as ``coloc evaluate`` seeds it with its seed base) and continued over the episodes
+    in order, one draw per step; so the episodes run one after another through
+    :func:`simulate_runs` (a batch would interleave their draws).
+    """
+    config = config or build_config(RelayUKFConfig, {})
+    seeds = list(seeds)
+    policy_rng = np.random.default_rng(seeds[0] if policy_seed is None else policy_seed)
+    dcl = ESTIMATORS.index("DCL")
+    return np.array([simulate_runs(config, [np.random.default_rng(s)], policy_rng)["per_run"][dcl, 0]
+                     for s in seeds])
 
 
 def filterpy_ccl_update(estimate: np.ndarray, cov: np.ndarray, measuring: int, measured: int, z: float,

@@ -11,6 +11,12 @@ Writes ``OUT/zhao2020/metrics.json`` with
   communication and of the centralized Kalman predictor with all measurements
 
 plus ``report.md`` (claim, our number, holds or not) and PNG figures.
+
+``paper_policy_costs(seeds)`` gives this reproduction's per-episode number for the tables T1P1
+of the env's ``paper`` policy; J_K without its k = 0 term, which :func:`initial_term` gives, on
+the episodes ``env.reset(seed=s)`` draws for each s in ``seeds`` (the scenario's own sampler),
+through the same estimator code as the Monte Carlo above; a test checks that it equals what
+``coloc evaluate`` reports for the ``paper`` policy on the same seeds.
 """
 
 from __future__ import annotations
@@ -20,11 +26,12 @@ import os
 import numpy as np
 
 import estimators.bandwidth_fusion as bf
-from agents.bandwidth_fusion import greedy_selection, oracle_static_search
+from agents.bandwidth_fusion import greedy_selection, oracle_static_search, parse_tables
 from coloc_env.config import build_config
 from coloc_env.scenarios.bandwidth_fusion import (
     BandwidthFusionConfig,
     BandwidthFusionScenario,
+    draw_episode,
     paper_selection,
     paper_weights,
 )
@@ -35,19 +42,26 @@ KEY = "zhao2020"
 RUNS = 500
 QUICK_RUNS = 500  # the full reproduction takes ~20 s on 2 cores: quick mode keeps every run
 PAIRS = ("T1P1", "T1P2", "T1P3", "T2P1", "T3P1")
+PAPER_PAIR = "".join(parse_tables(None))  # the tables of the env's ``paper`` policy (T1P1)
 
 
 def _tables(pair: str) -> tuple[np.ndarray, np.ndarray]:
     return paper_selection(pair[:2]), paper_weights(pair[2:])
 
 
-def monte_carlo_block(pair: str, runs: int, seed: int, config: BandwidthFusionConfig) -> dict:
-    """``runs`` realizations of one (T, P) pair; the generator is seeded by (seed, pair index)."""
+def simulate_pair(pair: str, config: BandwidthFusionConfig, runs: int, rng: np.random.Generator | None = None,
+                  noise: tuple | None = None) -> dict:
+    """``runs`` realizations of one (T, P) pair by :func:`estimators.bandwidth_fusion.simulate`, their
+    noise drawn from ``rng`` (batched) or given as ``noise`` (x(0), w, v) (see ``simulate``)."""
     model = config.fusion_model()
     selection, weights = _tables(pair)
-    rng = np.random.default_rng([seed, PAIRS.index(pair)])
-    sim = bf.simulate(model, np.asarray(config.initial_state, float), np.asarray(config.initial_cov, float),
-                      selection, weights, config.horizon, rng, runs)
+    return bf.simulate(model, np.asarray(config.initial_state, float), np.asarray(config.initial_cov, float),
+                       selection, weights, config.horizon, rng, runs, noise=noise)
+
+
+def monte_carlo_block(pair: str, runs: int, seed: int, config: BandwidthFusionConfig) -> dict:
+    """``runs`` realizations of one (T, P) pair; the generator is seeded by (seed, pair index)."""
+    sim = simulate_pair(pair, config, runs, rng=np.random.default_rng([seed, PAIRS.index(pair)]))
     per_run = sim["squared_error"].sum(axis=(0, 2))  # J_50 of each realization
     return {
         "pair": pair,
@@ -56,6 +70,32 @@ def monte_carlo_block(pair: str, runs: int, seed: int, config: BandwidthFusionCo
         "example_truth": sim["truth"][:, 0],
         "example_estimate": sim["estimate"][:, 0],
     }
+
+
+def paper_policy_costs(seeds, config: BandwidthFusionConfig | None = None) -> np.ndarray:
+    """Per-episode cost of the env's ``paper`` policy (:data:`PAPER_PAIR`) on the episodes the env
+    draws for ``seeds``, computed by this reproduction's Monte Carlo path (:func:`simulate_pair`).
+
+    Episode e's randomness is :func:`coloc_env.scenarios.bandwidth_fusion.draw_episode` of
+    ``default_rng(seeds[e])``, what ``env.reset(seed=seeds[e])`` draws. Returns, per episode, the
+    sum over k = 1..K and the nodes of ||xhat_i(k) - x(k)||^2: J_K without its k = 0 term, which an
+    env episode does not contain (its expectation is :func:`initial_term`).
+    """
+    config = config or build_config(BandwidthFusionConfig, {})
+    episodes = [draw_episode(config, np.random.default_rng(s)) for s in seeds]
+    noise = (np.stack([e["initial_state"] for e in episodes]),
+             np.stack([e["process_noise"] for e in episodes], axis=1),
+             np.stack([e["measurement_noise"] for e in episodes], axis=1))
+    sim = simulate_pair(PAPER_PAIR, config, len(episodes), noise=noise)
+    return sim["squared_error"][1:].sum(axis=(0, 2))
+
+
+def initial_term(config: BandwidthFusionConfig | None = None, pair: str = PAPER_PAIR) -> float:
+    """The k = 0 term of J_K, sum_i tr Sigma_i(0), from the exact covariance of ``pair`` (eq. 14)."""
+    config = config or build_config(BandwidthFusionConfig, {})
+    selection, weights = _tables(pair)
+    exact, _ = bf.expected_cost(config.fusion_model(), np.asarray(config.initial_cov, float), selection, weights, 0)
+    return float(exact[0].sum())
 
 
 def kalman_predictor_cost(config: BandwidthFusionConfig, nodes_pooled: int) -> np.ndarray:

@@ -1,0 +1,81 @@
+"""Policies for ``mrclam_relay`` (UTIAS MRCLAM replay).
+
+* ``paper``: every robot that recorded other robots this step uses one of those
+  measurements, the lowest-index robot it recorded (the observation lists whom
+  it recorded, not in which order); each chain is the complete one of
+  ``coloc reproduce mrclam`` and of ``relay_ukf``'s paper setting: m -> n ->
+  the other robots in ascending order, so every robot is reached and (without
+  losses or a hop budget) UKF-DCL equals UKF-CCL.
+* ``no_relay``: the same measurement choice; every chain stops at the measured
+  robot (only m and n update, with the consistent cross-covariance update).
+
+Both are deterministic and read only the observations (the "recorded" flags).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from agents.base import Policy
+
+
+def paper_partners(recorded: np.ndarray) -> np.ndarray:
+    """(B, N) the lowest-index robot each robot recorded, itself where none. ``recorded`` (B, N, N) bool."""
+    recorded = np.asarray(recorded, bool)
+    B, N = recorded.shape[:2]
+    own = np.broadcast_to(np.arange(N), (B, N))
+    return np.where(recorded.any(axis=-1), np.argmax(recorded, axis=-1), own)
+
+
+def complete_chain_routing(partner: np.ndarray) -> np.ndarray:
+    """Routing tables (B, N holders, N sources) of the chains m -> partner[m] -> others ascending (N = stop).
+
+    Sources without a partner (partner[m] == m) and the last robot of each chain stop.
+    """
+    partner = np.asarray(partner, int)
+    B, N = partner.shape
+    routing = np.full((B, N, N), N)
+    for b in range(B):
+        for m in range(N):
+            n = int(partner[b, m])
+            if n == m:
+                continue
+            order = [n] + [i for i in range(N) if i not in (m, n)]
+            for holder, target in zip(order[:-1], order[1:], strict=True):
+                routing[b, holder, m] = target
+    return routing
+
+
+def paper_actions(recorded: np.ndarray, relay: bool = True) -> np.ndarray:
+    """Actions (B, N, 1 + N) int64 of ``paper`` (``relay=False``: ``no_relay``) from the recorded flags."""
+    recorded = np.asarray(recorded, bool)
+    B, N = recorded.shape[:2]
+    partner = paper_partners(recorded)
+    actions = np.empty((B, N, 1 + N), dtype=np.int64)
+    actions[..., 0] = partner
+    actions[..., 1:] = complete_chain_routing(partner) if relay else N
+    return actions
+
+
+class PaperPolicy(Policy):
+    """The lowest-index recorded robot; complete chains m -> n -> the others ascending."""
+
+    relay = True
+
+    def act(self, observations):
+        order = list(self.env.possible_agents)
+        N = len(order)
+        obs = np.stack([np.asarray(observations[a], float) if a in observations else np.zeros(3 * N + 3)
+                        for a in order])
+        recorded = obs[:, N:2 * N] > 0.5
+        actions = paper_actions(recorded[None], relay=self.relay)[0]
+        return {a: actions[order.index(a)] for a in observations}
+
+
+class NoRelayPolicy(PaperPolicy):
+    """The same measurements; every chain stops at the measured robot."""
+
+    relay = False
+
+
+POLICIES = {"paper": PaperPolicy, "no_relay": NoRelayPolicy}

@@ -1,0 +1,548 @@
+"""``mrclam_relay``: relay decisions on real robot data (UTIAS MRCLAM), replayed step by step.
+
+Data: Leung K.Y.K., Halpern Y., Barfoot T.D., Liu H.H.T., "The UTIAS
+multi-robot cooperative localization and mapping dataset", IJRR
+30(8):969-974, 2011 (cite it with results on the data). Loader:
+:mod:`coloc_env.data.mrclam`; estimator: :mod:`estimators.ukf_relay_se2`
+(UKF-DCL of wang2019 on planar robots with heading, range and bearing,
+Roumeliotis-Bekey factored cross-covariances); relay links:
+:mod:`coloc_env.world.relay` (the link model of ``relay_ukf``).
+
+The world is the recorded run: five robots in a 15 m x 8 m room, their
+odometry, their camera measurements (range, bearing) of each other and of 15
+landmarks, and the Vicon ground truth, on the loader's grid of ``dt`` seconds.
+An episode replays a window of ``window_steps`` steps starting at a random
+offset s, drawn at reset uniformly from [0, T - 1 - window_steps] (T = steps
+of the run; the last step needs the Vicon pose at s + window_steps). Nothing
+is simulated except the links: the motion, the measurements and the truth are
+the data's.
+
+Each env step is one data step k -> k+1 (absolute step a = s + k):
+
+1. each robot m that recorded measurements of other robots at a chooses one of
+   them (action index 0); its location information travels along a relay chain
+   m -> n -> ... through the link model (loss, hop budget, comm range, hop
+   cost), each holder passing it on by its action for m's chain (below);
+2. the estimator applies, in file order within step a (robot by robot, each
+   robot's lines in the order of its file): every landmark sighting, to the
+   robot that saw it (UKF-DCL on the chain [m] alone: no communication, the
+   exact truncated-chain update, always used), and every chosen robot
+   measurement whose chain reached the measured robot (UKF-DCL along the
+   chain actually delivered; a chain that reaches everyone gives exactly the
+   centralized UKF-CCL). Observations whose normalized innovation exceeds
+   ``gate`` are rejected (the dataset holds misread barcodes);
+3. every robot predicts to a + 1 from its recorded odometry (factored DCL time
+   update), and the error is taken against the Vicon pose at a + 1.
+
+Several robots may measure in one step, each starting its own chain, so the
+relay decision is per source: a routing table (one next hop per measuring
+robot), not one next hop per agent as in ``relay_ukf`` (where only one
+platform measures per step). With a single next hop per agent, two chains
+passing the same holder could not both be complete.
+
+Noise (R, Q): :func:`coloc_env.data.mrclam.calibrate_noise` over the first
+``calibration_s`` seconds of the run (robust standard deviations against
+Vicon; computed once per data path and cached). Episodes may overlap the
+calibration window. Initial estimate: the Vicon pose at the window start, with
+covariance diag(``initial_position_std``^2, same, ``initial_heading_std``^2)
+per robot and no cross-correlation.
+
+Action (per agent, ``MultiDiscrete([N] + [N + 1] * N)``, int64, N = 5, absolute robot indices)
+-------------------------------------------------------------------------------------------
+| index      | meaning                                                                        |
+|------------|--------------------------------------------------------------------------------|
+| 0          | which robot it recorded a measurement of at this step to use (one per step);   |
+|            | itself, or a robot it has no measurement of this step = none                   |
+| 1 + m      | for the chain of robot m's measurement, if it reaches this agent: whom to pass |
+|            | it to next; N or itself = stop. A robot already reached, beyond                |
+|            | ``comm_range``, a spent hop budget or a lost packet also ends the chain.       |
+|            | The measuring robot always sends to the measured one first, so index 1 + i     |
+|            | of agent i is not used                                                         |
+
+If a robot recorded the same robot twice in one step, the first line in file
+order is the one used (dataset 6 has no such case). Non-integer or
+out-of-range actions and NaN/inf are a ``ValueError``.
+
+Observation (per agent, ``Box(-inf, inf, shape=(3N + 3,), float32)``)
+--------------------------------------------------------------------
+| index             | meaning                                                                 |
+|-------------------|-------------------------------------------------------------------------|
+| ``[0, N)``        | one-hot of the agent's own index (shared policy, absolute actions)       |
+| ``[N, 2N)``       | 1 where the agent recorded a measurement of robot j at this step (the    |
+|                   | choices of action index 0), else 0                                      |
+| ``[2N]``          | landmark sightings it recorded at this step                             |
+| ``[2N+1, 3N+1)``  | distance to each robot / 10 m (Vicon; 0 for itself): link-layer          |
+|                   | knowledge, as in ``relay_ukf``                                           |
+| ``[3N+1]``        | log tr of its own position covariance (m^2)                             |
+| ``[3N+2]``        | step fraction k / window_steps                                          |
+
+After the last step the measurement entries are 0. ``state()`` (centralized
+critic): every agent's observation, then the log of the diagonal of each
+robot's own covariance block (x, y, theta; 3N values).
+
+Reward (team: one agent's decisions move every robot's estimate)
+----------------------------------------------------------------
+| ``reward=`` | value for every agent after step k -> k+1 (metres; a distance, as in ``relay_ukf``)  |
+|-------------|--------------------------------------------------------------------------------------|
+| ``"error"`` | -mean_i ||p_hat_i(k+1) - p_i(k+1)|| against Vicon - the hop cost of this step's hops   |
+| ``"trace"`` | -mean_i sqrt(tr P_ii^pos(k+1)) (the filter's own RMS error) - the same hop cost        |
+
+Termination: none; truncation after ``window_steps`` steps. The episode metric
+(``episode_error``) is the mean distance error over the steps and robots.
+
+``infos[agent]``: ``true_position`` (Vicon), ``estimated_position``, ``error``
+(distance, m), ``heading_error`` (|wrapped|, rad), ``trace`` (tr of the
+position block, m^2), ``dead_reckoning_error`` (the same robot by odometry
+alone from the window start, m), ``measured`` (robots it recorded this step),
+``partner`` (the robot whose measurement it chose, -1), ``used`` (that
+measurement reached the measured robot and passed the gate), ``landmarks``
+(landmark sightings applied to it), ``rejected`` (its observations refused by
+the gate), ``chain_length`` (robots its chain reached, 0 without a chain),
+``chain_stop`` (index into :data:`coloc_env.world.relay.STOP_REASONS`, -1
+without a chain), ``communication`` (hops it delivered this step over all
+chains; summed over agents = hops), ``hops`` and ``hop_cost`` (the team's,
+this step), ``step``.
+
+Arguments (fields of :class:`MrclamRelayConfig`)
+------------------------------------------------
+| field                | default        | allowed                                                      |
+|----------------------|----------------|--------------------------------------------------------------|
+| data                 | None           | a dataset folder (``MRCLAM_DatasetK``); None = the           |
+|                      |                | environment variable ``COLOC_MRCLAM_DATA`` (error if unset)  |
+| dt                   | 0.1            | (0, 1] s, the step grid of the loader                        |
+| window_steps         | 600            | 1..T-1 steps (600 = 60 s at dt 0.1)                          |
+| calibration_s        | 60.0           | (0, 3600] s of the run's start used to fit the noise         |
+| initial_position_std | 0.01           | > 0 m                                                        |
+| initial_heading_std  | 0.01           | > 0 rad                                                      |
+| gate                 | 13.8155        | > 0 (chi-square(2) 99.9 %, as ``coloc reproduce mrclam``);   |
+|                      |                | None = apply every observation                               |
+| comm_range           | inf            | > 0 m                                                        |
+| max_hops             | None           | 1..N-1 hops per chain, None = no limit                       |
+| loss_at_zero         | 0.0            | [0, 1]                                                       |
+| loss_length          | inf            | > 0 m (p_loss(d) = 1 - (1 - loss_at_zero) e^(-d/loss_length))|
+| hop_cost             | 0.0            | >= 0 per delivered hop                                       |
+| hop_cost_per_m2      | 0.0            | >= 0 per hop and squared metre                               |
+| ukf_lambda           | 0.0            | > -3N                                                        |
+| reward               | "error"        | "error", "trace"                                             |
+
+Randomness: per episode, the offset s, then the loss uniforms of every step,
+source and hop (drawn at reset, so the same seed gives the same window and
+the same losses whatever the policy and the loss probability).
+
+Batching: the estimator (:mod:`estimators.ukf_relay_se2`) has no batch axis,
+so the estimator updates loop over the copies; the relay chains of every copy
+and source are resolved in one vectorized call, and the state is held in
+arrays indexed by copy.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+from dataclasses import dataclass
+
+import gymnasium
+import numpy as np
+
+import estimators.ukf_relay_se2 as se2
+from coloc_env.config import check_choice, check_range
+from coloc_env.data import mrclam
+from coloc_env.rendering import Link, Scene
+from coloc_env.scenarios.base import Scenario
+from coloc_env.world.relay import STOP_REASONS, RelayChain, RelayChainLinks
+
+NUM_ROBOTS = mrclam.NUM_ROBOTS
+DISTANCE_SCALE = 10.0  # metres per unit in the observation
+GATE = 13.815510557964274  # chi-square(2) 0.999 quantile, the gate of ``coloc reproduce mrclam``
+
+
+@dataclass(frozen=True)
+class ReplayTables:
+    """One dataset with what every episode needs, computed once per (path, dt, calibration_s).
+
+    ``first_index`` (T, N, N): index into the measurement arrays of the first line (file order)
+    in which robot i recorded robot j at step t, -1 if none; ``landmark_count`` (T, N).
+    """
+
+    data: mrclam.MrclamData
+    noise: dict
+    first_index: np.ndarray
+    landmark_count: np.ndarray
+    extent: tuple[float, float, float, float]
+
+
+@functools.lru_cache(maxsize=4)
+def _tables(path: str, dt: float, calibration_s: float) -> ReplayTables:
+    d = mrclam.load_cached(path, dt)
+    noise = mrclam.calibrate_noise(d, calibration_s)
+    N, T = NUM_ROBOTS, d.steps
+    robot = np.flatnonzero(d.meas_subject <= N)
+    keys = (d.meas_step[robot] * N + d.meas_robot[robot]) * N + (d.meas_subject[robot] - 1)
+    unique, first = np.unique(keys, return_index=True)  # first occurrence = first in file order
+    first_index = np.full(T * N * N, -1)
+    first_index[unique] = robot[first]
+    landmark = d.meas_subject > N
+    landmark_count = np.zeros((T, N))
+    np.add.at(landmark_count, (d.meas_step[landmark], d.meas_robot[landmark]), 1.0)
+    points = np.concatenate([d.groundtruth[..., :2].reshape(-1, 2), d.landmarks])
+    lo, hi = points.min(axis=0) - 0.5, points.max(axis=0) + 0.5
+    for array in (first_index, landmark_count):
+        array.flags.writeable = False
+    return ReplayTables(d, dict(noise), first_index.reshape(T, N, N), landmark_count,
+                        (float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1])))
+
+
+@dataclass(frozen=True)
+class MrclamRelayConfig:
+    """Configuration of ``mrclam_relay`` (see the module docstring for the table)."""
+
+    data: str | None = None
+    dt: float = 0.1
+    window_steps: int = 600
+    calibration_s: float = 60.0
+    initial_position_std: float = 0.01
+    initial_heading_std: float = 0.01
+    gate: float | None = GATE
+    comm_range: float = float("inf")
+    max_hops: int | None = None
+    loss_at_zero: float = 0.0
+    loss_length: float = float("inf")
+    hop_cost: float = 0.0
+    hop_cost_per_m2: float = 0.0
+    ukf_lambda: float = 0.0
+    reward: str = "error"
+
+    @property
+    def links(self) -> RelayChainLinks:
+        return RelayChainLinks(self.comm_range, self.max_hops, self.loss_at_zero, self.loss_length,
+                               self.hop_cost, self.hop_cost_per_m2)
+
+    @property
+    def path(self) -> str:
+        """The dataset folder: ``data``, else ``$COLOC_MRCLAM_DATA`` (ValueError naming ``data``)."""
+        if self.data is not None and not isinstance(self.data, (str, os.PathLike)):
+            raise ValueError(f"data must be a path to an MRCLAM dataset folder or None, got {self.data!r}")
+        return os.path.realpath(mrclam.resolve_data_path(self.data))
+
+    def tables(self) -> ReplayTables:
+        path = self.path
+        try:
+            return _tables(path, float(self.dt), float(self.calibration_s))
+        except ValueError as exc:
+            raise ValueError(f"data: {exc}") from exc
+
+    def validate(self) -> None:
+        N = NUM_ROBOTS
+        check_range("dt", self.dt, 0.0, 1.0, low_open=True)
+        check_range("window_steps", self.window_steps, 1, 10**9, integer=True)
+        check_range("calibration_s", self.calibration_s, 0.0, 3600.0, low_open=True)
+        check_range("initial_position_std", self.initial_position_std, 0.0, 1e3, low_open=True)
+        check_range("initial_heading_std", self.initial_heading_std, 0.0, 10.0, low_open=True)
+        if self.gate is not None:
+            check_range("gate", self.gate, 0.0, 1e12, low_open=True)
+        self.links.validate(N)
+        check_range("ukf_lambda", self.ukf_lambda, -3.0 * N, 1e6, low_open=True)
+        check_choice("reward", self.reward, ("error", "trace"))
+        steps = self.tables().data.steps
+        if self.window_steps > steps - 1:
+            raise ValueError(f"window_steps must be in [1, {steps - 1}] for this run of {steps} steps "
+                             f"(the last step needs the next Vicon pose), got {self.window_steps}")
+
+
+@dataclass
+class StepEvent:
+    """What happened at the last step of each copy (B copies, N robots; chains are indexed by source)."""
+
+    partner: np.ndarray  # (B, N) robot whose measurement each robot chose, -1 none
+    relay: RelayChain  # rows B * N: the chain of source m in copy b at row b * N + m
+    used: np.ndarray  # (B, N) bool: the chosen measurement was applied
+    landmarks: np.ndarray  # (B, N) landmark sightings applied
+    rejected: np.ndarray  # (B, N) observations refused by the gate
+    measured: np.ndarray  # (B, N) robots recorded
+    cost: np.ndarray  # (B,) hop cost
+
+
+class MrclamRelayScenario(Scenario):
+    """Batched core of ``mrclam_relay``; see the module docstring for the tables."""
+
+    name = "mrclam_relay"
+    paper = "mrclam"
+    Config = MrclamRelayConfig
+    agent_prefix = "robot"
+
+    def __init__(self, config: MrclamRelayConfig, batch: int = 1):
+        super().__init__(config, batch)
+        N, B, W = self.num_agents, self.batch, self.horizon
+        self.tables = config.tables()
+        self.data = self.tables.data
+        self.noise = dict(self.tables.noise)
+        self.R = np.diag([self.noise["sigma_range"] ** 2, self.noise["sigma_bearing"] ** 2])
+        self.Q = (self.noise["sigma_v"] ** 2, self.noise["sigma_w"] ** 2)
+        self.links = config.links
+        std = np.array([config.initial_position_std, config.initial_position_std, config.initial_heading_std])
+        self._initial = se2.factor(np.diag(np.tile(std**2, N)))
+        self.start = np.zeros(B, dtype=int)
+        self.k = np.zeros(B, dtype=int)
+        self.estimate = np.zeros((B, N, 3))
+        self.P_ii = np.zeros((B, N, 3, 3))
+        self.phi = np.zeros((B, N, 3, 3))
+        self.sigma = np.zeros((B, N, N, 3, 3))
+        self.dead_reckoning = np.zeros((B, N, 3))
+        self._loss_uniforms = np.zeros((B, W, N, N - 1))
+        self.event = self._empty_event(B)
+        self._reward = np.zeros((B, N))
+
+    # --- description ------------------------------------------------------------
+    @property
+    def num_agents(self) -> int:
+        return NUM_ROBOTS
+
+    @property
+    def horizon(self) -> int:
+        return self.config.window_steps
+
+    @property
+    def obs_dim(self) -> int:
+        return 3 * self.num_agents + 3
+
+    def observation_space(self):
+        return gymnasium.spaces.Box(-np.inf, np.inf, shape=(self.obs_dim,), dtype=np.float32)
+
+    def action_space(self):
+        N = self.num_agents
+        return gymnasium.spaces.MultiDiscrete([N] + [N + 1] * N, dtype=np.int64)
+
+    def state_space(self):
+        dim = self.num_agents * self.obs_dim + 3 * self.num_agents
+        return gymnasium.spaces.Box(-np.inf, np.inf, shape=(dim,), dtype=np.float32)
+
+    # --- dynamics ------------------------------------------------------------------
+    def reset(self, rngs, env_index=None) -> None:
+        idx = self._indices(env_index)
+        if len(rngs) != len(idx):
+            raise ValueError(f"reset needs one generator per copy: {len(idx)} copies, {len(rngs)} generators")
+        N, W = self.num_agents, self.horizon
+        span = self.data.steps - W  # offsets 0 .. T - 1 - W
+        for c, rng in enumerate(rngs):
+            b = idx[c]
+            self.start[b] = rng.integers(0, span)
+            self._loss_uniforms[b] = rng.random((W, N, N - 1))
+            self.k[b] = 0
+            self.estimate[b] = self.data.groundtruth[self.start[b]]
+            self.dead_reckoning[b] = self.data.groundtruth[self.start[b]]
+            self.P_ii[b], self.phi[b], self.sigma[b] = self._initial.P_ii, self._initial.phi, self._initial.sigma
+        fresh = self._empty_event(len(idx))
+        for name in ("partner", "used", "landmarks", "rejected", "measured", "cost"):
+            getattr(self.event, name)[idx] = getattr(fresh, name)
+        rows = (idx[:, None] * N + np.arange(N)).ravel()
+        for name in ("chain", "length", "hop_distance", "stop"):
+            getattr(self.event.relay, name)[rows] = getattr(fresh.relay, name)
+        self._reward[idx] = 0.0
+
+    def _empty_event(self, count: int) -> StepEvent:
+        N = self.num_agents
+        relay = RelayChain(chain=np.full((count * N, N), -1), length=np.zeros(count * N, dtype=int),
+                           hop_distance=np.full((count * N, N - 1), np.nan), stop=np.full(count * N, -1))
+        zeros = np.zeros((count, N))
+        return StepEvent(partner=np.full((count, N), -1), relay=relay, used=np.zeros((count, N), dtype=bool),
+                         landmarks=zeros.copy(), rejected=zeros.copy(), measured=zeros.copy(), cost=np.zeros(count))
+
+    def decode_actions(self, actions) -> np.ndarray:
+        """Actions (B, N, 1 + N) -> int array, after checking finiteness, integrality and range."""
+        arr = self.check_actions(actions)
+        if np.any(arr != np.round(arr)):
+            raise ValueError("actions must be integers (MultiDiscrete)")
+        N = self.num_agents
+        if np.any((arr[..., 0] < 0) | (arr[..., 0] > N - 1)):
+            raise ValueError(f"action[0] (whose measurement to use) must be in [0, {N - 1}]")
+        if np.any((arr[..., 1:] < 0) | (arr[..., 1:] > N)):
+            raise ValueError(f"action[1:] (whom to relay each source's chain to, {N} = stop) must be in [0, {N}]")
+        return arr.astype(int)
+
+    def absolute_step(self) -> np.ndarray:
+        """The data step a = s + k of each copy (B,)."""
+        return self.start + self.k
+
+    def step(self, actions) -> None:
+        if np.any(self.k >= self.horizon):
+            raise RuntimeError("step() on a copy whose episode is over; reset it first")
+        decoded = self.decode_actions(actions)
+        event = self.resolve_chains(decoded)
+        self.measurement_update(event)
+        self.time_update()
+
+    def resolve_chains(self, actions: np.ndarray) -> StepEvent:
+        """Partners and relay chains of every copy and source from decoded actions (B, N, 1 + N)."""
+        B, N = self.batch, self.num_agents
+        a = self.absolute_step()
+        ids = np.arange(N)
+        choice = actions[..., 0]  # (B, N)
+        first = self.tables.first_index[a]  # (B, N, N)
+        recorded = first[np.arange(B)[:, None], ids[None, :], choice] >= 0
+        attempt = (choice != ids[None, :]) & recorded
+        partner = np.where(attempt, choice, -1)
+        positions = self.data.groundtruth[a, :, :2]  # (B, N, 2)
+        # row (b, m): the chain of source m; holder h passes to actions[b, h, 1 + m]
+        routing = np.swapaxes(actions[..., 1:], 1, 2).reshape(B * N, N)
+        relay = self.links.resolve(np.repeat(positions, N, axis=0), np.tile(ids, B),
+                                   np.where(attempt, choice, ids[None, :]).ravel(), routing,
+                                   self._loss_uniforms[np.arange(B), self.k].reshape(B * N, N - 1))
+        off = ~attempt.ravel()
+        relay.chain[off] = -1
+        relay.length[off] = 0
+        relay.hop_distance[off] = np.nan
+        relay.stop[off] = -1
+        cost = self.links.cost(relay.hop_distance).sum(axis=-1).reshape(B, N).sum(axis=-1)
+        measured = (first >= 0).sum(axis=-1).astype(float)
+        zeros = np.zeros((B, N))
+        return StepEvent(partner=partner, relay=relay, used=np.zeros((B, N), dtype=bool), landmarks=zeros.copy(),
+                         rejected=zeros.copy(), measured=measured, cost=cost)
+
+    def measurement_update(self, event: StepEvent) -> None:
+        """UKF-DCL of every copy: landmark sightings and delivered robot measurements, in file order."""
+        d, N, gate, lam = self.data, self.num_agents, self.config.gate, self.config.ukf_lambda
+        self.event = event
+        a = self.absolute_step()
+        for b in range(self.batch):
+            chosen = self.tables.first_index[a[b], np.arange(N), np.maximum(event.partner[b], 0)]
+            chosen = np.where(event.partner[b] >= 0, chosen, -1)
+            x = self.estimate[b]
+            f = se2.FactoredCov(self.P_ii[b], self.phi[b], self.sigma[b])
+            s = d.measurements_at(int(a[b]))
+            for j in range(s.start, s.stop):
+                m, subject = int(d.meas_robot[j]), int(d.meas_subject[j])
+                z = np.array([d.meas_range[j], d.meas_bearing[j]])
+                if subject > N:
+                    x, f, ok = se2.dcl_update(x, f, [m], z, self.R, measured_in_chain=False,
+                                              landmark=d.landmarks[subject - N - 1], lam=lam, gate=gate)
+                    event.landmarks[b, m] += ok
+                    event.rejected[b, m] += not ok
+                    continue
+                row = b * N + m
+                if chosen[m] != j or event.relay.length[row] < 2:
+                    continue
+                chain = event.relay.chain[row, :event.relay.length[row]]
+                x, f, ok = se2.dcl_update(x, f, chain, z, self.R, lam=lam, gate=gate)
+                event.used[b, m] = ok
+                event.rejected[b, m] += not ok
+            self.estimate[b], self.P_ii[b], self.phi[b], self.sigma[b] = x, f.P_ii, f.phi, f.sigma
+
+    def time_update(self) -> None:
+        """Every robot predicts a -> a+1 from its recorded odometry; rewards against Vicon at a+1."""
+        a = self.absolute_step()
+        u = self.data.odometry[a]  # (B, N, 2)
+        for b in range(self.batch):
+            f = se2.FactoredCov(self.P_ii[b], self.phi[b], self.sigma[b])
+            x, f = se2.time_update_factored(self.estimate[b], f, u[b], self.data.dt, self.Q)
+            self.estimate[b], self.P_ii[b], self.phi[b], self.sigma[b] = x, f.P_ii, f.phi, f.sigma
+            self.dead_reckoning[b] = se2.motion(self.dead_reckoning[b], u[b], self.data.dt)[0]
+        self.k = self.k + 1
+        if self.config.reward == "error":
+            loss = self.position_error().mean(axis=-1)
+        else:
+            loss = np.sqrt(self.own_traces()).mean(axis=-1)
+        self._reward = np.repeat((-loss - self.event.cost)[:, None], self.num_agents, axis=1)
+
+    # --- views -------------------------------------------------------------------------
+    def truth(self) -> np.ndarray:
+        """Vicon poses (B, N, 3) at the current step."""
+        return self.data.groundtruth[self.absolute_step()]
+
+    def position_error(self) -> np.ndarray:
+        """||p_hat_i - p_i|| (B, N), metres, against Vicon."""
+        return np.linalg.norm(self.estimate[..., :2] - self.truth()[..., :2], axis=-1)
+
+    def own_traces(self) -> np.ndarray:
+        """tr of each robot's position covariance (B, N), m^2."""
+        return self.P_ii[..., 0, 0] + self.P_ii[..., 1, 1]
+
+    def joint_cov(self, b: int) -> np.ndarray:
+        """The joint covariance (3N, 3N) of copy b that the factors stand for."""
+        return se2.FactoredCov(self.P_ii[b], self.phi[b], self.sigma[b]).joint()
+
+    def distances(self) -> np.ndarray:
+        """Vicon distances between robots at the current step (B, N, N)."""
+        p = self.truth()[..., :2]
+        return np.linalg.norm(p[:, :, None, :] - p[:, None, :, :], axis=-1)
+
+    def observation(self) -> np.ndarray:
+        B, N = self.batch, self.num_agents
+        live = (self.k < self.horizon)[:, None]
+        a = self.absolute_step()
+        measured = (self.tables.first_index[a] >= 0) & live[..., None]
+        landmarks = np.where(live, self.tables.landmark_count[a], 0.0)
+        frac = np.broadcast_to((self.k / self.horizon)[:, None], (B, N))
+        obs = np.concatenate([np.broadcast_to(np.eye(N), (B, N, N)), measured.astype(float), landmarks[..., None],
+                              self.distances() / DISTANCE_SCALE, np.log(self.own_traces())[..., None],
+                              frac[..., None]], axis=-1)
+        return obs.astype(np.float32)
+
+    def episode_error(self, errors: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
+        """Mean distance error ||p_hat_i - p_i|| over the steps and robots (as ``relay_ukf``)."""
+        return np.asarray(errors, float).mean(axis=(-2, -1))
+
+    def reward(self) -> np.ndarray:
+        return self._reward.copy()
+
+    def done(self) -> np.ndarray:
+        return self.k >= self.horizon
+
+    def state(self) -> np.ndarray:
+        log_var = np.log(np.diagonal(self.P_ii, axis1=-2, axis2=-1)).reshape(self.batch, -1)
+        return np.concatenate([self.observation().reshape(self.batch, -1), log_var], axis=-1).astype(np.float32)
+
+    def info(self) -> dict[str, np.ndarray]:
+        B, N = self.batch, self.num_agents
+        event = self.event
+        truth = self.truth()
+        delivered = event.relay.next_hop(N).reshape(B, N, N) >= 0  # (copy, source, holder)
+        team = lambda values: np.repeat(np.asarray(values)[:, None], N, axis=1)  # noqa: E731
+        return {
+            "true_position": truth[..., :2].copy(),
+            "estimated_position": self.estimate[..., :2].copy(),
+            "error": self.position_error(),
+            "heading_error": np.abs(se2.wrap(self.estimate[..., 2] - truth[..., 2])),
+            "trace": self.own_traces(),
+            "dead_reckoning_error": np.linalg.norm(self.dead_reckoning[..., :2] - truth[..., :2], axis=-1),
+            "measured": event.measured.copy(),
+            "partner": event.partner.copy(),
+            "used": event.used.copy(),
+            "landmarks": event.landmarks.copy(),
+            "rejected": event.rejected.copy(),
+            "chain_length": event.relay.length.reshape(B, N).copy(),
+            "chain_stop": event.relay.stop.reshape(B, N).copy(),
+            "communication": delivered.sum(axis=1).astype(float),
+            "hops": team(event.relay.hops.reshape(B, N).sum(axis=-1)),
+            "hop_cost": team(event.cost),
+            "step": team(self.k),
+        }
+
+    def scene(self, b: int) -> Scene:
+        N, k, start = self.num_agents, int(self.k[b]), int(self.start[b])
+        truth = self.data.groundtruth[start + k, :, :2]
+        x0, x1, y0, y1 = self.tables.extent
+        links, notes = [], []
+        for m in range(N):
+            row = b * N + m
+            hops = [int(p) for p in self.event.relay.chain[row] if p >= 0]
+            links += [Link(source=p, target=q, value=1.0, label=(f"{m}:range" if h == 0 else f"{m}:{h + 1}"))
+                      for h, (p, q) in enumerate(zip(hops[:-1], hops[1:], strict=True))]
+            if hops:
+                notes.append(f"chain {' -> '.join(map(str, hops))} ({STOP_REASONS[self.event.relay.stop[row]]})")
+        notes.append(f"mean error {self.position_error()[b].mean():.2f} m, "
+                     f"{int(self.event.landmarks[b].sum())} landmark sightings")
+        centre = np.array([0.5 * (x0 + x1), 0.5 * (y0 + y1)])
+        return Scene(
+            title=f"mrclam_relay  t = {(start + k) * self.data.dt:.1f} s (window step {k})",
+            truth=truth,
+            estimates=self.estimate[b, :, :2],
+            covariances=self.P_ii[b, :, :2, :2],
+            trails=np.swapaxes(self.data.groundtruth[start:start + k + 1, :, :2], 0, 1),
+            node_positions=(truth - centre) / max(x1 - x0, y1 - y0),
+            node_labels=self.agent_names,
+            links=links,
+            link_value_max=1.0,
+            link_value_name="relay hop of the last step (source:hop)",
+            extent=self.tables.extent,
+            notes=notes[-4:],
+        )
