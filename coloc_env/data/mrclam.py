@@ -30,6 +30,16 @@ Time alignment on a fixed step ``dt`` (:func:`load`):
   not in ``Barcodes.dat`` (a handful of misreads in the data) are dropped and
   counted in ``dropped_unknown_barcode``.
 
+Noise model (:func:`calibrate_noise`, :class:`NoiseModel`): the one model of the
+odometry and measurement noise that ``coloc reproduce mrclam`` and the
+``mrclam_relay`` scenario both apply, fitted against Vicon on a calibration
+window at the start of the run (:func:`calibration_seconds`: the first
+``CALIBRATION_FRACTION`` = 10 % of the run and at least ``CALIBRATION_MIN_S`` =
+60 s; the baseline model, 60 s). ``NoiseModel.calibrate(d)`` fits and builds it;
+per step it gives the corrected odometry of an absolute step, that
+odometry's variances (the time update's Q) and R of each observation from its
+measured range.
+
 Errors: a missing path, a folder that is not a dataset (missing file), a
 malformed line (wrong number of fields, a non-number, a non-finite value,
 time going backwards), an unknown subject in ``Barcodes.dat`` or
@@ -42,13 +52,14 @@ from __future__ import annotations
 import functools
 import os
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 __all__ = [
-    "ENV_VAR", "NUM_LANDMARKS", "NUM_ROBOTS", "MrclamData", "calibrate_noise", "load", "load_cached",
-    "resolve_data_path",
+    "BASELINE_CALIBRATION_S", "CALIBRATION_FRACTION", "CALIBRATION_MIN_S", "ENV_VAR", "GATE_999", "NOISE_MODELS",
+    "NUM_LANDMARKS", "NUM_ROBOTS", "MrclamData", "NoiseModel", "calibrate_noise", "calibration_seconds", "load",
+    "load_cached", "resolve_data_path",
 ]
 
 ENV_VAR = "COLOC_MRCLAM_DATA"
@@ -502,6 +513,135 @@ def calibrate_noise(d: MrclamData, seconds: float = 60.0, gate: float = GATE_999
         "odometry_lag1_autocorr": lag1,
         "odometry_raw_mean": [float(np.mean(d.odometry[:k, :, 0] - v_gt)), float(np.mean(d.odometry[:k, :, 1] - w_gt))],
     }
+
+
+CALIBRATION_FRACTION = 0.1  # calibration window of the calibrated model: the first 10 % of the run ...
+CALIBRATION_MIN_S = 60.0  # ... and at least 60 s
+BASELINE_CALIBRATION_S = 60.0  # the baseline model (before issue 9): the first 60 s
+NOISE_MODELS = ("calibrated", "baseline")
+
+
+def calibration_seconds(d: MrclamData, kind: str = "calibrated") -> float:
+    """Seconds at the start of ``d`` that :func:`calibrate_noise` fits model ``kind`` on.
+
+    ``"calibrated"``: max(``CALIBRATION_MIN_S``, ``CALIBRATION_FRACTION`` x the duration of
+    ``d``) (75.6 s of dataset 6; 60 s for a run shorter than 600 s); ``"baseline"``:
+    ``BASELINE_CALIBRATION_S``. No ground truth after the window enters a filter.
+    """
+    _check_kind(kind)
+    if kind == "baseline":
+        return BASELINE_CALIBRATION_S
+    return max(CALIBRATION_MIN_S, CALIBRATION_FRACTION * d.steps * d.dt)
+
+
+def _check_kind(kind) -> None:
+    if kind not in NOISE_MODELS:
+        raise ValueError(f"noise_model must be one of {NOISE_MODELS}, got {kind!r}")
+
+
+@dataclass(frozen=True)
+class NoiseModel:
+    """The noise model the MRCLAM filters apply, per step: odometry u', its variances Q(u'), R(range).
+
+    One parametric family holds both models of :func:`calibrate_noise`'s output
+    (``kind``), so the filters apply either through the same three methods:
+
+    * :meth:`odometry` ``(d, k)``: u'[k] = s * u[max(k - n, 0)] for absolute step(s) k
+      of the run ``d`` (n = ``odometry_delay_steps``, s = ``odometry_scale``; the rule of
+      :func:`estimators.ukf_relay_se2.correct_odometry`: the command logged at step k
+      moves the robot from k + n on; before the run's first command it is held). A
+      replay that starts at step s > 0 thus uses the commands logged before s, as the
+      robots did; it never indexes before step 0.
+    * :meth:`odometry_var` ``(u')``: per robot and step, sigma_c^2 = r_c (a_c + b_c u'_c^2)
+      (:func:`estimators.ukf_relay_se2.odometry_variance`; a = ``odometry_var0``,
+      b = ``odometry_var_gain``, r = ``odometry_inflation``): the ``odometry_var`` (N, 2) of
+      :func:`~estimators.ukf_relay_se2.time_update` / ``time_update_factored``.
+    * :meth:`measurement_cov` ``(range)``: R = diag(r_range (a_r + b_r z_r^2), sigma_b^2)
+      from the MEASURED range z_r (the filter knows no other); ``bearing_var`` holds
+      sigma_b^2 with its inflation applied.
+
+    ``kind="calibrated"`` (:meth:`from_calibration`): every parameter as fitted by the rules
+    documented in :func:`calibrate_noise` (delay and scale, speed-dependent variance,
+    inflation for errors correlated over the correction horizon, range-dependent
+    sigma_r, 68.27th-percentile sigma_b, burst inflation of R; ``inflate_measurements=False``
+    leaves the last out, the ablation of ``coloc reproduce mrclam``).
+    ``kind="baseline"``: the model before issue 9, the same family with n = 0, s = 1,
+    b = 0, r = 1, a = (sigma_v^2, sigma_w^2), sigma_r^2 = ``sigma_range``^2 (b_r = 0) and
+    sigma_b = ``sigma_bearing`` (1.4826 x MAD, raw commands, constant white noise; these
+    special values make each formula return the baseline's numbers exactly).
+    ``calibration`` keeps the :func:`calibrate_noise` dict it was built from.
+    """
+
+    kind: str
+    odometry_delay_steps: int
+    odometry_scale: tuple[float, float]
+    odometry_var0: tuple[float, float]
+    odometry_var_gain: tuple[float, float]
+    odometry_inflation: tuple[float, float]
+    range_var: tuple[float, float]
+    range_inflation: float
+    bearing_var: float
+    calibration: dict | None = field(default=None, compare=False, repr=False)
+
+    def __post_init__(self):
+        _check_kind(self.kind)
+        if isinstance(self.odometry_delay_steps, bool) or int(self.odometry_delay_steps) != self.odometry_delay_steps \
+                or self.odometry_delay_steps < 0:
+            raise ValueError(f"odometry_delay_steps must be an integer >= 0, got {self.odometry_delay_steps!r}")
+        for name, rule in (("odometry_scale", "finite"), ("odometry_var0", ">= 0"), ("odometry_var_gain", ">= 0"),
+                           ("odometry_inflation", "> 0"), ("range_var", ">= 0")):
+            value = np.asarray(getattr(self, name), float)
+            bad = value < 0 if rule == ">= 0" else (value <= 0 if rule == "> 0" else np.zeros(value.shape, bool))
+            if value.shape != (2,) or not np.all(np.isfinite(value)) or np.any(bad):
+                condition = "" if rule == "finite" else f" {rule}"
+                raise ValueError(f"{name} must be 2 finite numbers{condition}, got {getattr(self, name)!r}")
+        if not (np.isfinite(self.range_inflation) and self.range_inflation > 0):
+            raise ValueError(f"range_inflation must be > 0, got {self.range_inflation!r}")
+        if not (np.isfinite(self.bearing_var) and self.bearing_var >= 0):
+            raise ValueError(f"bearing_var must be >= 0, got {self.bearing_var!r}")
+
+    @classmethod
+    def from_calibration(cls, noise: dict, kind: str = "calibrated", inflate_measurements: bool = True) -> NoiseModel:
+        """The model ``kind`` from a :func:`calibrate_noise` dict (see the class docstring)."""
+        _check_kind(kind)
+        if kind == "baseline":
+            return cls(kind, 0, (1.0, 1.0), (noise["sigma_v"] ** 2, noise["sigma_w"] ** 2), (0.0, 0.0), (1.0, 1.0),
+                       (noise["sigma_range"] ** 2, 0.0), 1.0, noise["sigma_bearing"] ** 2, calibration=noise)
+        r_r, r_b = noise["measurement_inflation"] if inflate_measurements else (1.0, 1.0)
+        return cls(kind, int(noise["odometry_delay_steps"]), tuple(noise["odometry_scale"]),
+                   tuple(noise["odometry_var0"]), tuple(noise["odometry_var_gain"]),
+                   tuple(noise["odometry_inflation"]), tuple(noise["range_var"]), r_r,
+                   r_b * noise["sigma_bearing_p68"] ** 2, calibration=noise)
+
+    @classmethod
+    def calibrate(cls, d: MrclamData, kind: str = "calibrated", seconds: float | None = None,
+                  gate: float = GATE_999) -> NoiseModel:
+        """Fit on the start of ``d`` (``seconds``, default :func:`calibration_seconds` of ``kind``) and build."""
+        _check_kind(kind)
+        seconds = calibration_seconds(d, kind) if seconds is None else seconds
+        return cls.from_calibration(calibrate_noise(d, seconds, gate=gate), kind)
+
+    def odometry(self, d: MrclamData, k) -> np.ndarray:
+        """Corrected odometry u'[k] (..., N, 2) at absolute step(s) ``k`` (int or int array) of the run ``d``."""
+        k = np.asarray(k)
+        if k.dtype.kind not in "iu" or np.any(k < 0) or np.any(k >= d.steps):
+            raise ValueError(f"odometry: steps must be integers in [0, {d.steps}), got {k!r}")
+        return d.odometry[np.maximum(k - int(self.odometry_delay_steps), 0)] * np.asarray(self.odometry_scale, float)
+
+    def odometry_var(self, u) -> np.ndarray:
+        """Per-step (sigma_v^2, sigma_w^2) of corrected odometry ``u`` (..., 2), same shape."""
+        from estimators.ukf_relay_se2 import odometry_variance
+
+        return odometry_variance(u, self.odometry_var0, self.odometry_var_gain, self.odometry_inflation)
+
+    def measurement_cov(self, measured_range) -> np.ndarray:
+        """R (..., 2, 2) of a (range, bearing) observation whose measured range is ``measured_range`` (...)."""
+        r = np.asarray(measured_range, float)
+        a, b = self.range_var
+        R = np.zeros((*r.shape, 2, 2))
+        R[..., 0, 0] = self.range_inflation * (a + b * r * r)
+        R[..., 1, 1] = self.bearing_var
+        return R
 
 
 @functools.lru_cache(maxsize=4)

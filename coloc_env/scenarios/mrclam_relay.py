@@ -31,8 +31,9 @@ Each env step is one data step k -> k+1 (absolute step a = s + k):
    chain actually delivered; a chain that reaches everyone gives exactly the
    centralized UKF-CCL). Observations whose normalized innovation exceeds
    ``gate`` are rejected (the dataset holds misread barcodes);
-3. every robot predicts to a + 1 from its recorded odometry (factored DCL time
-   update), and the error is taken against the Vicon pose at a + 1.
+3. every robot predicts to a + 1 from its odometry (factored DCL time update;
+   the noise model's corrected odometry of the absolute step a, below), and
+   the error is taken against the Vicon pose at a + 1.
 
 Several robots may measure in one step, each starting its own chain, so the
 relay decision is per source: a routing table (one next hop per measuring
@@ -40,10 +41,28 @@ robot), not one next hop per agent as in ``relay_ukf`` (where only one
 platform measures per step). With a single next hop per agent, two chains
 passing the same holder could not both be complete.
 
-Noise (R, Q): :func:`coloc_env.data.mrclam.calibrate_noise` over the first
-``calibration_s`` seconds of the run (robust standard deviations against
-Vicon; computed once per data path and cached). Episodes may overlap the
-calibration window. Initial estimate: the Vicon pose at the window start, with
+Noise: :class:`coloc_env.data.mrclam.NoiseModel`, the model (and the code
+applying it) of ``coloc reproduce mrclam``, fitted by
+:func:`coloc_env.data.mrclam.calibrate_noise` against Vicon on the start of
+the whole run (computed once per data path, ``dt``, ``noise_model`` and
+``calibration_s``, and cached; episodes may overlap the calibration window).
+
+* ``noise_model="calibrated"`` (default), fitted on the first
+  :func:`~coloc_env.data.mrclam.calibration_seconds` (10 % of the run, at
+  least 60 s: 75.6 s of dataset 6): the robots move as the command logged
+  n = ``odometry_delay_steps`` (2 at dt 0.1) earlier times a scale c; the
+  step a -> a + 1 integrates u'[a] = c * u[max(a - n, 0)] with a the absolute
+  step: a command logged before the window start s when a - n < s, never one
+  before step 0 of the run; per step and robot Q = diag(r_v (a_v + b_v v'^2),
+  r_w (a_w + b_w w'^2)) (speed-dependent, inflated for errors correlated over
+  steps); each observation's R = diag(r_range (a_r + b_r z_r^2), sigma_b^2)
+  from its measured range z_r.
+* ``noise_model="baseline"``: the model before it (first 60 s; constant
+  1.4826 x MAD noise, raw commands). It is overconfident: with the paper
+  policy its gate refuses 5-30 % of the observations of a 150-step window of
+  dataset 6, the calibrated model's none (tests/coloc_env/test_mrclam_relay.py).
+
+Initial estimate: the Vicon pose at the window start, with
 covariance diag(``initial_position_std``^2, same, ``initial_heading_std``^2)
 per robot and no cross-correlation.
 
@@ -92,8 +111,8 @@ Termination: none; truncation after ``window_steps`` steps. The episode metric
 
 ``infos[agent]``: ``true_position`` (Vicon), ``estimated_position``, ``error``
 (distance, m), ``heading_error`` (|wrapped|, rad), ``trace`` (tr of the
-position block, m^2), ``dead_reckoning_error`` (the same robot by odometry
-alone from the window start, m), ``measured`` (robots it recorded this step),
+position block, m^2), ``dead_reckoning_error`` (the same robot by the noise
+model's odometry alone from the window start, m), ``measured`` (robots it recorded this step),
 ``partner`` (the robot whose measurement it chose, -1), ``used`` (that
 measurement reached the measured robot and passed the gate), ``landmarks``
 (landmark sightings applied to it), ``rejected`` (its observations refused by
@@ -111,7 +130,10 @@ Arguments (fields of :class:`MrclamRelayConfig`)
 |                      |                | environment variable ``COLOC_MRCLAM_DATA`` (error if unset)  |
 | dt                   | 0.1            | (0, 1] s, the step grid of the loader                        |
 | window_steps         | 600            | 1..T-1 steps (600 = 60 s at dt 0.1)                          |
-| calibration_s        | 60.0           | (0, 3600] s of the run's start used to fit the noise         |
+| noise_model          | "calibrated"   | "calibrated", "baseline" (see Noise)                         |
+| calibration_s        | None           | (0, 3600] s of the run's start used to fit the noise; None = |
+|                      |                | the model's rule (calibrated: max(60 s, 10 % of the run);    |
+|                      |                | baseline: 60 s)                                              |
 | initial_position_std | 0.01           | > 0 m                                                        |
 | initial_heading_std  | 0.01           | > 0 rad                                                      |
 | gate                 | 13.8155        | > 0 (chi-square(2) 99.9 %, as ``coloc reproduce mrclam``);   |
@@ -153,28 +175,34 @@ from coloc_env.world.relay import STOP_REASONS, RelayChain, RelayChainLinks
 
 NUM_ROBOTS = mrclam.NUM_ROBOTS
 DISTANCE_SCALE = 10.0  # metres per unit in the observation
-GATE = 13.815510557964274  # chi-square(2) 0.999 quantile, the gate of ``coloc reproduce mrclam``
+GATE = mrclam.GATE_999  # chi-square(2) 0.999 quantile, the gate of ``coloc reproduce mrclam``
 
 
 @dataclass(frozen=True)
 class ReplayTables:
-    """One dataset with what every episode needs, computed once per (path, dt, calibration_s).
+    """One dataset with what every episode needs, computed once per (path, dt, noise_model, calibration_s).
 
-    ``first_index`` (T, N, N): index into the measurement arrays of the first line (file order)
-    in which robot i recorded robot j at step t, -1 if none; ``landmark_count`` (T, N).
+    ``noise`` the :func:`~coloc_env.data.mrclam.calibrate_noise` dict, ``noise_model`` the
+    :class:`~coloc_env.data.mrclam.NoiseModel` built from it, ``measurement_cov`` (M, 2, 2) its R
+    of every measurement line (from the measured range); ``first_index`` (T, N, N): index into
+    the measurement arrays of the first line (file order) in which robot i recorded robot j at
+    step t, -1 if none; ``landmark_count`` (T, N).
     """
 
     data: mrclam.MrclamData
     noise: dict
+    noise_model: mrclam.NoiseModel
+    measurement_cov: np.ndarray
     first_index: np.ndarray
     landmark_count: np.ndarray
     extent: tuple[float, float, float, float]
 
 
 @functools.lru_cache(maxsize=4)
-def _tables(path: str, dt: float, calibration_s: float) -> ReplayTables:
+def _tables(path: str, dt: float, noise_model: str, calibration_s: float | None) -> ReplayTables:
     d = mrclam.load_cached(path, dt)
-    noise = mrclam.calibrate_noise(d, calibration_s)
+    model = mrclam.NoiseModel.calibrate(d, noise_model, calibration_s)
+    measurement_cov = model.measurement_cov(d.meas_range)
     N, T = NUM_ROBOTS, d.steps
     robot = np.flatnonzero(d.meas_subject <= N)
     keys = (d.meas_step[robot] * N + d.meas_robot[robot]) * N + (d.meas_subject[robot] - 1)
@@ -186,9 +214,10 @@ def _tables(path: str, dt: float, calibration_s: float) -> ReplayTables:
     np.add.at(landmark_count, (d.meas_step[landmark], d.meas_robot[landmark]), 1.0)
     points = np.concatenate([d.groundtruth[..., :2].reshape(-1, 2), d.landmarks])
     lo, hi = points.min(axis=0) - 0.5, points.max(axis=0) + 0.5
-    for array in (first_index, landmark_count):
+    for array in (measurement_cov, first_index, landmark_count):
         array.flags.writeable = False
-    return ReplayTables(d, dict(noise), first_index.reshape(T, N, N), landmark_count,
+    return ReplayTables(d, dict(model.calibration), model, measurement_cov, first_index.reshape(T, N, N),
+                        landmark_count,
                         (float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1])))
 
 
@@ -199,7 +228,8 @@ class MrclamRelayConfig:
     data: str | None = None
     dt: float = 0.1
     window_steps: int = 600
-    calibration_s: float = 60.0
+    noise_model: str = "calibrated"
+    calibration_s: float | None = None
     initial_position_std: float = 0.01
     initial_heading_std: float = 0.01
     gate: float | None = GATE
@@ -227,7 +257,8 @@ class MrclamRelayConfig:
     def tables(self) -> ReplayTables:
         path = self.path
         try:
-            return _tables(path, float(self.dt), float(self.calibration_s))
+            calibration_s = None if self.calibration_s is None else float(self.calibration_s)
+            return _tables(path, float(self.dt), self.noise_model, calibration_s)
         except ValueError as exc:
             raise ValueError(f"data: {exc}") from exc
 
@@ -235,7 +266,9 @@ class MrclamRelayConfig:
         N = NUM_ROBOTS
         check_range("dt", self.dt, 0.0, 1.0, low_open=True)
         check_range("window_steps", self.window_steps, 1, 10**9, integer=True)
-        check_range("calibration_s", self.calibration_s, 0.0, 3600.0, low_open=True)
+        check_choice("noise_model", self.noise_model, mrclam.NOISE_MODELS)
+        if self.calibration_s is not None:
+            check_range("calibration_s", self.calibration_s, 0.0, 3600.0, low_open=True)
         check_range("initial_position_std", self.initial_position_std, 0.0, 1e3, low_open=True)
         check_range("initial_heading_std", self.initial_heading_std, 0.0, 10.0, low_open=True)
         if self.gate is not None:
@@ -276,8 +309,7 @@ class MrclamRelayScenario(Scenario):
         self.tables = config.tables()
         self.data = self.tables.data
         self.noise = dict(self.tables.noise)
-        self.R = np.diag([self.noise["sigma_range"] ** 2, self.noise["sigma_bearing"] ** 2])
-        self.Q = (self.noise["sigma_v"] ** 2, self.noise["sigma_w"] ** 2)
+        self.noise_model = self.tables.noise_model
         self.links = config.links
         std = np.array([config.initial_position_std, config.initial_position_std, config.initial_heading_std])
         self._initial = se2.factor(np.diag(np.tile(std**2, N)))
@@ -412,8 +444,9 @@ class MrclamRelayScenario(Scenario):
             for j in range(s.start, s.stop):
                 m, subject = int(d.meas_robot[j]), int(d.meas_subject[j])
                 z = np.array([d.meas_range[j], d.meas_bearing[j]])
+                R = self.tables.measurement_cov[j]  # from the measured range
                 if subject > N:
-                    x, f, ok = se2.dcl_update(x, f, [m], z, self.R, measured_in_chain=False,
+                    x, f, ok = se2.dcl_update(x, f, [m], z, R, measured_in_chain=False,
                                               landmark=d.landmarks[subject - N - 1], lam=lam, gate=gate)
                     event.landmarks[b, m] += ok
                     event.rejected[b, m] += not ok
@@ -422,18 +455,19 @@ class MrclamRelayScenario(Scenario):
                 if chosen[m] != j or event.relay.length[row] < 2:
                     continue
                 chain = event.relay.chain[row, :event.relay.length[row]]
-                x, f, ok = se2.dcl_update(x, f, chain, z, self.R, lam=lam, gate=gate)
+                x, f, ok = se2.dcl_update(x, f, chain, z, R, lam=lam, gate=gate)
                 event.used[b, m] = ok
                 event.rejected[b, m] += not ok
             self.estimate[b], self.P_ii[b], self.phi[b], self.sigma[b] = x, f.P_ii, f.phi, f.sigma
 
     def time_update(self) -> None:
-        """Every robot predicts a -> a+1 from its recorded odometry; rewards against Vicon at a+1."""
+        """Every robot predicts a -> a+1 from the model's odometry of step a; rewards against Vicon at a+1."""
         a = self.absolute_step()
-        u = self.data.odometry[a]  # (B, N, 2)
+        u = self.noise_model.odometry(self.data, a)  # (B, N, 2) corrected u'[a] (earlier raw steps, >= 0)
+        q = self.noise_model.odometry_var(u)  # (B, N, 2) per-step, per-robot variances
         for b in range(self.batch):
             f = se2.FactoredCov(self.P_ii[b], self.phi[b], self.sigma[b])
-            x, f = se2.time_update_factored(self.estimate[b], f, u[b], self.data.dt, self.Q)
+            x, f = se2.time_update_factored(self.estimate[b], f, u[b], self.data.dt, q[b])
             self.estimate[b], self.P_ii[b], self.phi[b], self.sigma[b] = x, f.P_ii, f.phi, f.sigma
             self.dead_reckoning[b] = se2.motion(self.dead_reckoning[b], u[b], self.data.dt)[0]
         self.k = self.k + 1

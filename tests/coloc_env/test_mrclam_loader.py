@@ -146,3 +146,81 @@ def test_bad_dt(tmp_path):
     _write_minimal(tmp_path)
     with pytest.raises(ValueError, match="dt"):
         mrclam.load(tmp_path, dt=0.0)
+
+
+# ---------------------------------------------------------------- the shared noise model
+
+
+def test_calibration_window_rule(dataset6):
+    d = dataset6
+    assert mrclam.calibration_seconds(d) == max(60.0, 0.1 * d.steps * d.dt)
+    assert mrclam.calibration_seconds(d) > 75.0  # dataset 6: 10 % of the run
+    assert mrclam.calibration_seconds(d.window(0, 1500)) == 60.0  # a short run: at least 60 s
+    assert mrclam.calibration_seconds(d, "baseline") == 60.0
+    with pytest.raises(ValueError, match="noise_model"):
+        mrclam.calibration_seconds(d, "white")
+
+
+def test_noise_model_applies_the_calibration_per_step(dataset6):
+    """Calibrated: the estimator's correct_odometry / odometry_variance rules, R from the measured range;
+    baseline: exactly the constant 1.4826 x MAD noise on the raw commands."""
+    import estimators.ukf_relay_se2 as se2
+
+    d = dataset6
+    noise = mrclam.calibrate_noise(d, mrclam.calibration_seconds(d))
+    model = mrclam.NoiseModel.from_calibration(noise)
+    assert model == mrclam.NoiseModel.calibrate(d) and model.calibration is noise
+    n, scale = noise["odometry_delay_steps"], np.asarray(noise["odometry_scale"])
+    assert n == 2
+    every = np.arange(d.steps)
+    u = model.odometry(d, every)
+    np.testing.assert_array_equal(u, se2.correct_odometry(d.odometry, scale, n))
+    # absolute steps: the command logged n steps earlier, held at the run's start (never before step 0)
+    np.testing.assert_array_equal(model.odometry(d, [0, 1, 2, 3]), d.odometry[[0, 0, 0, 1]] * scale)
+    np.testing.assert_array_equal(model.odometry(d, 500), d.odometry[498] * scale)
+    np.testing.assert_array_equal(model.odometry(d, np.array([[500, 7]])), u[None, [500, 7]])
+    for bad in (-1, d.steps, 2.0):
+        with pytest.raises(ValueError, match="steps"):
+            model.odometry(d, bad)
+    q = model.odometry_var(u[500])
+    assert q.shape == (5, 2)
+    np.testing.assert_array_equal(q, se2.odometry_variance(u[500], noise["odometry_var0"],
+                                                           noise["odometry_var_gain"], noise["odometry_inflation"]))
+    (a, b), (r_r, r_b) = noise["range_var"], noise["measurement_inflation"]
+    R = model.measurement_cov(2.5)
+    np.testing.assert_array_equal(R, np.diag([r_r * (a + b * 2.5 * 2.5), r_b * noise["sigma_bearing_p68"] ** 2]))
+    assert model.measurement_cov(4.0)[0, 0] > R[0, 0] > model.measurement_cov(0.5)[0, 0]  # grows with the range
+    stacked = model.measurement_cov(d.meas_range[:50])
+    assert stacked.shape == (50, 2, 2)
+    np.testing.assert_array_equal(stacked[7], model.measurement_cov(float(d.meas_range[7])))
+    plain = mrclam.NoiseModel.from_calibration(noise, inflate_measurements=False)
+    assert plain.measurement_cov(2.5)[1, 1] == noise["sigma_bearing_p68"] ** 2
+
+    base_noise = mrclam.calibrate_noise(d, mrclam.calibration_seconds(d, "baseline"))
+    base = mrclam.NoiseModel.from_calibration(base_noise, "baseline")
+    assert base == mrclam.NoiseModel.calibrate(d, "baseline") != model
+    np.testing.assert_array_equal(base.odometry(d, every), d.odometry)
+    np.testing.assert_array_equal(base.odometry_var(u), np.broadcast_to(
+        [base_noise["sigma_v"] ** 2, base_noise["sigma_w"] ** 2], u.shape))
+    for rng in (0.3, 4.0):
+        np.testing.assert_array_equal(base.measurement_cov(rng),
+                                      np.diag([base_noise["sigma_range"] ** 2, base_noise["sigma_bearing"] ** 2]))
+
+
+@pytest.mark.parametrize("change, field", [
+    ({"kind": "white"}, "noise_model"),
+    ({"odometry_delay_steps": -1}, "odometry_delay_steps"),
+    ({"odometry_delay_steps": 1.5}, "odometry_delay_steps"),
+    ({"odometry_var0": (-1.0, 0.0)}, "odometry_var0"),
+    ({"odometry_inflation": (0.0, 1.0)}, "odometry_inflation"),
+    ({"odometry_scale": (np.nan, 1.0)}, "odometry_scale"),
+    ({"range_var": (1.0,)}, "range_var"),
+    ({"range_inflation": 0.0}, "range_inflation"),
+    ({"bearing_var": -1.0}, "bearing_var"),
+])
+def test_noise_model_validates_its_fields(change, field):
+    import dataclasses
+
+    good = mrclam.NoiseModel("calibrated", 2, (0.9, 0.8), (1e-4, 1e-3), (0.1, 0.1), (2.0, 2.0), (1e-3, 1e-3), 3.0, 1e-4)
+    with pytest.raises(ValueError, match=field):
+        dataclasses.replace(good, **change)

@@ -85,6 +85,8 @@ def test_data_path_from_the_environment_variable(monkeypatch):
     ({"gate": 0.0}, "gate"),
     ({"initial_position_std": 0.0}, "initial_position_std"),
     ({"calibration_s": -1.0}, "calibration_s"),
+    ({"noise_model": "white"}, "noise_model"),
+    ({"noise_model": None}, "noise_model"),
     ({"dt": 0.0}, "dt"),
     ({"reward": "rmse"}, "reward"),
     ({"data": os.path.join(DATASET6, "nowhere")}, "data"),
@@ -132,14 +134,30 @@ def test_same_seed_gives_identical_episodes_and_reset_continues_the_generator():
     assert env_a.scenario.start[0] != start[0] and not np.array_equal(env_a.scenario._loss_uniforms, uniforms)
 
 
-def test_paper_policy_without_losses_equals_ukf_ccl_on_the_same_window():
-    """Complete chains: the scenario's UKF-DCL estimates are UKF-CCL's (landmarks: the robot that saw them)."""
-    env = make(window_steps=80)
+@pytest.mark.parametrize("noise_model", ["calibrated", "baseline"])
+def test_paper_policy_without_losses_equals_ukf_ccl_under_the_reproductions_noise_model(noise_model):
+    """Complete chains: the scenario's UKF-DCL estimates are UKF-CCL's (landmarks: the robot that saw them).
+
+    The reference applies the noise model as ``coloc reproduce mrclam`` (``run_filters``) does: fitted
+    afresh by the shared window rule, the corrected odometry series of the whole run (so the window's
+    first steps integrate the commands logged before it), per-step Q, R from each measured range.
+    (``run_filters`` on ``d.window(start, W)`` itself is no reference: it applies every landmark
+    sighting to all robots, the scenario to the robot that saw it, and holds the window's first command
+    where the scenario uses the earlier ones.)
+    """
+    env = make(window_steps=80, noise_model=noise_model)
     policy = agents.make_policy("paper", env)
     observations, _ = env.reset(seed=3)
     scenario = env.scenario
-    d, R, Q, gate = scenario.data, scenario.R, scenario.Q, scenario.config.gate
+    d, gate = scenario.data, scenario.config.gate
+    model = mrclam.NoiseModel.calibrate(d, noise_model)  # calibration_seconds(d, noise_model) of the run
+    assert model == scenario.noise_model and model.kind == noise_model
+    odometry = model.odometry(d, np.arange(d.steps))  # the series run_filters integrates
+    Q = model.odometry_var(odometry)
     start = int(scenario.start[0])
+    delay = 2 if noise_model == "calibrated" else 0
+    assert model.odometry_delay_steps == delay and start >= delay
+    np.testing.assert_array_equal(odometry[start], d.odometry[start - delay] * np.asarray(model.odometry_scale))
     x, P = d.groundtruth[start].copy(), 1e-4 * np.eye(3 * N)
     applied = {"robot": 0, "landmark": 0}
     for k in range(80):
@@ -151,6 +169,7 @@ def test_paper_policy_without_losses_equals_ukf_ccl_on_the_same_window():
         for j in range(s.start, s.stop):
             m, subject = int(d.meas_robot[j]), int(d.meas_subject[j])
             z = np.array([d.meas_range[j], d.meas_bearing[j]])
+            R = model.measurement_cov(float(d.meas_range[j]))
             if subject > N:
                 x, P, ok = se2.ccl_update(x, P, m, z, R, landmark=d.landmarks[subject - N - 1],
                                           reached=np.arange(N) == m, gate=gate)
@@ -161,12 +180,42 @@ def test_paper_policy_without_losses_equals_ukf_ccl_on_the_same_window():
                 x, P, ok = se2.ccl_update(x, P, m, z, R, measured=subject - 1, gate=gate)
                 applied["robot"] += ok
                 assert infos[f"robot_{m}"]["chain_length"] == N  # complete chain
-        x, P = se2.time_update(x, P, d.odometry[a], d.dt, Q)
+        x, P = se2.time_update(x, P, odometry[a], d.dt, Q[a])
         np.testing.assert_allclose(scenario.estimate[0], x, atol=1e-9, rtol=0)
         np.testing.assert_allclose(scenario.joint_cov(0), P, atol=1e-9, rtol=0)
         errors = np.linalg.norm(x[:, :2] - d.groundtruth[a + 1, :, :2], axis=-1)
         assert rewards["robot_0"] == pytest.approx(-errors.mean(), abs=1e-9)
     assert applied["robot"] > 5 and applied["landmark"] > 20
+
+
+def _replay(seed, window_steps, **config):
+    """Paper policy, no loss: (observations rejected by the gate, applied, mean position error [m])."""
+    env = make(window_steps=window_steps, **config)
+    policy = agents.make_policy("paper", env)
+    observations, _ = env.reset(seed=seed)
+    rejected = applied = 0
+    errors = []
+    while env.agents:
+        observations, _, _, _, infos = env.step(policy.act(observations))
+        rejected += sum(int(infos[a]["rejected"]) for a in infos)
+        applied += sum(int(infos[a]["used"]) + int(infos[a]["landmarks"]) for a in infos)
+        errors.append([infos[a]["error"] for a in infos])
+    return int(env.scenario.start[0]), rejected, applied, float(np.mean(errors))
+
+
+def test_calibrated_noise_model_rejects_fewer_observations_than_the_baseline():
+    """The baseline (constant MAD noise, raw commands) is overconfident: its gate refuses a large share."""
+    rows = []
+    for seed in (0, 1, 2):
+        start, rej_c, app_c, err_c = _replay(seed, 150)
+        start_b, rej_b, app_b, err_b = _replay(seed, 150, noise_model="baseline")
+        assert start_b == start  # the same window
+        rows.append((rej_c, rej_b))
+        print(f"seed {seed} window [{start}, {start + 150}): rejected calibrated {rej_c}/{rej_c + app_c}, "
+              f"baseline {rej_b}/{rej_b + app_b}; mean error calibrated {err_c:.4f} m, baseline {err_b:.4f} m")
+        assert rej_c <= rej_b
+    rejected = np.sum(rows, axis=0)
+    assert rejected[1] > 50 and rejected[0] < 0.2 * rejected[1]
 
 
 def test_relay_choices_truncate_the_chain_and_hop_costs_enter_the_reward():

@@ -22,10 +22,12 @@ quantile are rejected (the same in CCL and DCL). The evaluation runs over
 the whole run, the calibration window included; no ground truth after the
 calibration window enters the filters.
 
-Noise model (issue 9), every parameter from the calibration window (the
-first ``CALIBRATION_FRACTION`` = 10 % of the run, at least 60 s: 75.6 s of
-dataset 6) against Vicon by the rules of
-:func:`coloc_env.data.mrclam.calibrate_noise`:
+Noise model (issue 9), every parameter from the calibration window
+(:func:`coloc_env.data.mrclam.calibration_seconds`: the first 10 % of the
+run, at least 60 s: 75.6 s of dataset 6, 60 s of a ``--quick`` run) against
+Vicon by the rules of :func:`coloc_env.data.mrclam.calibrate_noise`, applied
+per step by :class:`coloc_env.data.mrclam.NoiseModel` (the same code as the
+``mrclam_relay`` scenario):
 
 * odometry: the robots move as the command logged ``odometry_delay_steps``
   earlier (0.2 s) times a scale (``odometry_scale``: they turn ~18 % and
@@ -43,7 +45,8 @@ dataset 6) against Vicon by the rules of
   the same burst-sum rule over bursts of sightings.
 
 The model before issue 9 (``*_baseline`` in metrics.json: constant
-1.4826 x MAD noise over the first 60 s, raw commands) runs too, and so does
+1.4826 x MAD noise over the first 60 s, raw commands; ``NoiseModel`` of kind
+``"baseline"``) runs too, and so does
 the calibrated model without the measurement inflation
 (``ablation_no_measurement_inflation``), so the report shows NEES, RMSE and
 the rejected fraction for each.
@@ -75,37 +78,24 @@ KEY = "mrclam"
 RUNS = 1  # the data is one recorded run: no Monte Carlo
 QUICK_RUNS = 1
 QUICK_STEPS = 1500  # --quick: the first 150 s
-CALIBRATION_FRACTION = 0.1  # calibration window: the first 10 % of the run ...
-CALIBRATION_MIN_S = 60.0  # ... and at least 60 s (a --quick run calibrates on 60 s)
-BASELINE_CALIBRATION_S = 60.0  # the model before issue 9 (reported as *_baseline)
 INITIAL_STD = (0.01, 0.01, 0.01)
-GATE = 13.815510557964274  # chi-square(2) 0.999 quantile
+GATE = mrclam.GATE_999  # chi-square(2) 0.999 quantile
 N = mrclam.NUM_ROBOTS
-
-
-def _noise_model(d: mrclam.MrclamData, noise: dict, baseline: bool, inflate_measurements: bool = True):
-    """Odometry (T, N, 2) the filters integrate, per-step odometry variances (T, N, 2), R(range) callable."""
-    if baseline:  # constant white noise, 1.4826 x MAD, the raw commands
-        q = np.broadcast_to([noise["sigma_v"] ** 2, noise["sigma_w"] ** 2], d.odometry.shape)
-        R = np.diag([noise["sigma_range"] ** 2, noise["sigma_bearing"] ** 2])
-        return d.odometry, q, lambda rng: R
-    u = se2.correct_odometry(d.odometry, noise["odometry_scale"], noise["odometry_delay_steps"])
-    q = se2.odometry_variance(u, noise["odometry_var0"], noise["odometry_var_gain"], noise["odometry_inflation"])
-    a, b = noise["range_var"]
-    r_r, r_b = noise["measurement_inflation"] if inflate_measurements else (1.0, 1.0)
-    var_b = r_b * noise["sigma_bearing_p68"] ** 2
-    return u, q, lambda rng: np.diag([r_r * (a + b * rng * rng), var_b])  # R from the measured range
 
 
 def run_filters(d: mrclam.MrclamData, noise: dict, progress=None, baseline: bool = False,
                 inflate_measurements: bool = True) -> dict:
     """IL, CCL and DCL over the whole of ``d``; estimates (T, N, 3) and own-block covariances (T, N, 3, 3).
 
-    ``baseline``: the constant 1.4826 x MAD noise on the raw commands (the model before
-    issue 9), else the calibrated model of :func:`coloc_env.data.mrclam.calibrate_noise`
+    ``noise``: a :func:`coloc_env.data.mrclam.calibrate_noise` dict, applied by
+    :class:`coloc_env.data.mrclam.NoiseModel`: ``baseline`` the constant 1.4826 x MAD noise on the
+    raw commands (the model before issue 9), else the calibrated model
     (``inflate_measurements=False``: without its measurement inflation, for the ablation).
     """
-    odometry, Q, R_of = _noise_model(d, noise, baseline, inflate_measurements)
+    model = mrclam.NoiseModel.from_calibration(noise, "baseline" if baseline else "calibrated",
+                                               inflate_measurements=inflate_measurements)
+    odometry = model.odometry(d, np.arange(d.steps))  # corrected u'[k] (T, N, 2)
+    Q = model.odometry_var(odometry)  # per-step, per-robot variances (T, N, 2)
     P0 = np.diag(np.tile(np.square(INITIAL_STD), N))
     x_il, P_il = d.groundtruth[0].copy(), P0.copy()
     x_c, P_c = x_il.copy(), P0.copy()
@@ -120,7 +110,7 @@ def run_filters(d: mrclam.MrclamData, noise: dict, progress=None, baseline: bool
         s = d.measurements_at(k)
         for r, sub, rg, b in zip(d.meas_robot[s], d.meas_subject[s], d.meas_range[s], d.meas_bearing[s], strict=True):
             z = np.array([rg, b])
-            R = R_of(float(rg))
+            R = model.measurement_cov(float(rg))  # R from the measured range
             if sub <= N:
                 n = int(sub) - 1
                 chain = [int(r), n] + [i for i in range(N) if i not in (r, n)]
@@ -197,9 +187,8 @@ def run(out: str, runs: int = RUNS, seed: int = 0, quick: bool = False, executor
         d = d.window(0, min(QUICK_STEPS, d.steps))
     if progress:
         progress(f"loaded {d.path}: {d.steps} steps of {d.dt} s")
-    calibration_s = max(CALIBRATION_MIN_S, CALIBRATION_FRACTION * d.steps * d.dt)
-    noise = mrclam.calibrate_noise(d, calibration_s)
-    noise_baseline = mrclam.calibrate_noise(d, BASELINE_CALIBRATION_S)
+    noise = mrclam.calibrate_noise(d, mrclam.calibration_seconds(d, "calibrated"))
+    noise_baseline = mrclam.calibrate_noise(d, mrclam.calibration_seconds(d, "baseline"))
     results = {"calibrated": run_filters(d, noise, progress),
                "baseline": run_filters(d, noise_baseline, progress, baseline=True),
                "odometry_only": run_filters(d, noise, progress, inflate_measurements=False)}
