@@ -36,10 +36,13 @@ def test_quick_reproduce_on_dataset6(tmp_path, monkeypatch):
     monkeypatch.setattr(mrclam, "QUICK_STEPS", 600)
     metrics = mrclam.run(str(tmp_path), quick=True, data=DATASET6)
     folder = tmp_path / "mrclam"
-    for name in ("metrics.json", "report.md", "trajectories.png", "error_over_time.png", "nees.png"):
+    for name in ("metrics.json", "report.md", "trajectories.png", "error_over_time.png", "nees.png",
+                 "nbp_error_over_time.png"):
         assert (folder / name).is_file()
     stored = json.loads((folder / "metrics.json").read_text())
     assert set(stored["rmse_position"]) == {"IL", "CCL", "DCL"}
+    assert "dnbp_beats_dead_reckoning" in stored["dnbp_landmark_normal"]["claims"]
+    assert "dNBP" in (folder / "report.md").read_text()
     assert set(stored["rmse_position"]["CCL"]) == {f"robot{i}" for i in range(1, 6)} | {"mean"}
     assert stored["steps"] == 600
     assert metrics["max_abs_diff_dcl_ccl"] < 1e-9
@@ -52,6 +55,13 @@ def test_quick_reproduce_on_dataset6(tmp_path, monkeypatch):
     assert metrics["observations"]["rejected"] < metrics["observations_baseline"]["rejected"]
     report = (folder / "report.md").read_text()
     assert "before (baseline)" in report and "68.27th percentile" in report
+    # lossy links: a short seeded window in --quick, every setting and IL, its figure and report section
+    assert set(stored["lossy_links"]) == set(mrclam.link_settings()) | {"IL"}
+    setup = stored["lossy_links_setup"]
+    assert setup["window_steps"] == min(mrclam.QUICK_STUDY_STEPS, 600) and not setup["whole_run"]
+    assert stored["lossy_links"]["lossless"]["delivered_fraction"] == 1.0
+    assert stored["claims"]["lossy_hops_fall_with_loss"]
+    assert (folder / "lossy_links.png").is_file() and "lossy / hop-limited links" in report
 
 
 # ---------------------------------------------------------------- calibrate_noise on synthetic data
@@ -149,3 +159,48 @@ def test_correlated_errors_are_inflated():
     assert n["odometry_inflation"][0] > 2.5 and n["odometry_inflation"][1] > 2.5
     # a constant error per (robot, landmark) pair of 2 sigma: bursts of sightings share it
     assert min(n["measurement_inflation"]) > 2.0
+
+
+# ---------------------------------------------------------------- DCL over lossy / hop-limited links
+
+
+def test_lossy_link_study_lossless_is_the_paper_policy_and_losses_cut_hops():
+    """On a short seeded window: the lossless setting is the scenario under ``agents``' paper policy (1e-9),
+    coupled losses never deliver more hops, and a hop budget of 1 delivers exactly the first hop of each chain."""
+    if not os.path.isdir(DATASET6):
+        pytest.skip(f"MRCLAM dataset 6 not found at {DATASET6}")
+    import agents
+    import coloc_env
+    from train.reproduce import mrclam
+
+    W, seed, N = 120, 4, 5
+    study = mrclam.lossy_link_study(DATASET6, W, seed)
+    links = study["settings"]
+    assert set(links) == set(mrclam.link_settings()) | {"IL"}
+    env = coloc_env.parallel_env("mrclam_relay", data=DATASET6, window_steps=W)
+    policy = agents.make_policy("paper", env)
+    observations, infos = env.reset(seed=seed)
+    assert int(env.scenario.start[0]) == study["window_start"]
+    errors = [np.array([infos[f"robot_{i}"]["error"] for i in range(N)])]
+    dead_reckoning = [np.zeros(N)]
+    hops = 0
+    while env.agents:
+        observations, _, _, _, infos = env.step(policy.act(observations))
+        errors.append(np.array([infos[f"robot_{i}"]["error"] for i in range(N)]))
+        dead_reckoning.append(np.array([infos[f"robot_{i}"]["dead_reckoning_error"] for i in range(N)]))
+        hops += int(infos["robot_0"]["hops"])
+    rmse = lambda e: float(np.sqrt(np.mean(np.square(e), axis=0)).mean())  # noqa: E731
+    lossless = links["lossless"]
+    assert lossless["rmse_position_mean"] == pytest.approx(rmse(errors), abs=1e-9)
+    assert links["IL"]["rmse_position_mean"] == pytest.approx(rmse(dead_reckoning), abs=1e-9)
+    assert lossless["hops_per_step"] == pytest.approx(hops / W, abs=1e-12)
+    assert lossless["delivered_fraction"] == lossless["complete_fraction"] == lossless["used_fraction"] == 1.0
+    # coupled uniforms: more loss never delivers more hops; some loss drops some hops
+    loss = [links[name] for name in ("lossless", "loss_0.3", "loss_0.6", "loss_0.9")]
+    assert all(b["hops_per_step"] <= a["hops_per_step"] for a, b in zip(loss, loss[1:], strict=False))
+    assert loss[-1]["hops_per_step"] < lossless["hops_per_step"]
+    assert all(row["chains_per_step"] == lossless["chains_per_step"] > 0 for row in loss)
+    budget = links["hops_1"]
+    assert budget["hops_per_step"] == pytest.approx(budget["chains_per_step"])
+    assert budget["delivered_fraction"] == pytest.approx(1 / (N - 1)) and budget["complete_fraction"] == 0.0
+    assert all(np.isfinite(row["nees_mean"]) and row["nees_mean"] > 0 for row in links.values())
