@@ -9,7 +9,14 @@
 * ``no_relay``: the same random partner, but the chain stops at the measured
   platform: only m and n update (with the consistent cross-covariance update).
 
-Both read only the observations: the measuring flag and the distances.
+* ``nearest_local``: a rule that needs only the agent's OWN observation (what a
+  shared decentralized policy sees): the measuring platform ranges with its
+  nearest platform, and every holder relays to its own nearest platform (the
+  chain stops where that one was already reached). It shows what the
+  observation allows without knowing who measured and who was reached.
+
+``paper`` and ``no_relay`` read every agent's observation (the measuring flag
+and the distances), so they know m and can compute the whole chain.
 """
 
 from __future__ import annotations
@@ -95,4 +102,20 @@ class NoRelayPolicy(PaperPolicy):
     relay = False
 
 
-POLICIES = {"paper": PaperPolicy, "no_relay": NoRelayPolicy}
+class NearestLocalPolicy(Policy):
+    """Each agent from its own observation: range with the nearest, relay to the nearest."""
+
+    def act(self, observations):
+        N = len(self.env.possible_agents)
+        actions = {}
+        for agent, obs in observations.items():
+            obs = np.asarray(obs, float)
+            own = int(np.argmax(obs[:N]))
+            distances = obs[N + 1:2 * N + 1].copy()
+            distances[own] = np.inf
+            nearest = int(np.argmin(distances))
+            actions[agent] = np.array([nearest if obs[N] > 0.5 else own, nearest], dtype=np.int64)
+        return actions
+
+
+POLICIES = {"paper": PaperPolicy, "no_relay": NoRelayPolicy, "nearest_local": NearestLocalPolicy}

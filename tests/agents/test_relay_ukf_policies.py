@@ -54,7 +54,7 @@ def test_paper_policy_is_reproducible_from_its_seed_and_unknown_names_fail():
     assert draws[0] == draws[1] and draws[0] != draws[2]
     with pytest.raises(ValueError, match="unknown policy"):
         agents.make_policy("oracle", env)
-    assert set(agents.available_policies(NAME)) == {"random", "paper", "no_relay"}
+    assert set(agents.available_policies(NAME)) == {"random", "paper", "no_relay", "nearest_local"}
 
 
 def test_paper_actions_batch_equals_single_calls():
@@ -82,3 +82,18 @@ def test_training_smoke_then_the_saved_model_acts(tmp_path):
         assert all(env.action_space(a).contains(np.asarray(actions[a])) for a in actions)
         observations, rewards, *_ = env.step(actions)
     assert all(np.isfinite(list(rewards.values())))
+
+
+def test_nearest_local_reads_only_each_agents_own_observation():
+    env = coloc_env.parallel_env(NAME, horizon=5)
+    observations, _ = env.reset(seed=3)
+    policy = agents.make_policy("nearest_local", env)
+    actions = policy.act(observations)
+    N = len(env.possible_agents)
+    for i, agent in enumerate(env.possible_agents):
+        alone = policy.act({agent: observations[agent]})[agent]  # the same choice without the others' views
+        np.testing.assert_array_equal(alone, actions[agent])
+        distances = observations[agent][N + 1:2 * N + 1].astype(float)
+        distances[i] = np.inf
+        assert actions[agent][1] == np.argmin(distances)
+        assert actions[agent][0] == (np.argmin(distances) if observations[agent][N] > 0.5 else i)
