@@ -65,6 +65,8 @@ def build_parser() -> argparse.ArgumentParser:
                          "trained models under --models)")
     ev.add_argument("--models", default="results/train", help="where --policy all looks for SCENARIO/seed*/model.zip")
     ev.add_argument("--episodes", type=_positive, default=100)
+    ev.add_argument("--stochastic", action="store_true",
+                    help="trained models sample their actions (seeded) instead of taking the most likely")
     ev.add_argument("--out", default="results")
 
     be = sub.add_parser("bench", help="throughput of estimators and envs")
@@ -153,7 +155,8 @@ def cmd_evaluate(args) -> int:
             with Progress(console=console, transient=True) as bar:
                 task = bar.add_task(f"{scenario} / {policy}", total=args.episodes)
                 result = evaluate_policy(scenario, policy, args.episodes,
-                                         progress=lambda task=task: bar.advance(task))
+                                         progress=lambda task=task: bar.advance(task),
+                                         stochastic=args.stochastic and policy.endswith(".zip"))
             path = record(result, args.out, SCENARIO_TO_PAPER.get(scenario, scenario))
             console.print(
                 f"{scenario} {policy}: mean realized cost {result['mean_cost']:.3f} "

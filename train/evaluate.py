@@ -45,12 +45,13 @@ def summarize(scenario, policy_name: str, costs, comms, seed_base: int, initial_
 
 
 def evaluate_policy(scenario: str, policy_name: str, episodes: int, seed_base: int = EVAL_SEED_BASE,
-                    progress=None) -> dict:
+                    progress=None, stochastic: bool = False) -> dict:
     """A trained model (``.zip``) on the batched core, any other policy through the PettingZoo env.
 
     The two paths give the same episodes (``vector_env`` equals ``parallel_env``
     copy for copy; a test checks the costs agree); the batched one runs every
-    episode in one call per step.
+    episode in one call per step. ``stochastic``: a model samples its actions
+    (torch seeded with ``seed_base``) and is recorded as ``PATH.zip (stochastic)``.
     """
     if not policy_name.endswith(".zip"):
         return run_episodes(scenario, policy_name, episodes, seed_base, progress)
@@ -60,11 +61,11 @@ def evaluate_policy(scenario: str, policy_name: str, episodes: int, seed_base: i
     if episodes < 2:
         raise ValueError(f"episodes must be >= 2 for a confidence interval, got {episodes}")
     policy = agents.make_policy(policy_name, coloc_env.parallel_env(scenario))  # checks scenario and spaces
-    result = run_model_batched(policy.model, scenario, episodes, seed_base)
+    result = run_model_batched(policy.model, scenario, episodes, seed_base, deterministic=not stochastic)
     if progress:
         for _ in range(episodes):
             progress()
-    return dict(result, policy=policy_name)
+    return dict(result, policy=policy_name + (" (stochastic)" if stochastic else ""))
 
 
 def run_episodes(scenario: str, policy_name: str, episodes: int, seed_base: int = EVAL_SEED_BASE,
@@ -95,12 +96,19 @@ def run_episodes(scenario: str, policy_name: str, episodes: int, seed_base: int 
     return summarize(scenario, policy_name, costs, comms, seed_base, env.scenario.initial_cost())
 
 
-def run_model_batched(model, scenario: str, episodes: int, seed_base: int, **env_config) -> dict:
+def run_model_batched(model, scenario: str, episodes: int, seed_base: int, deterministic: bool = True,
+                      **env_config) -> dict:
     """An SB3 model on ``episodes`` copies of the batched core at once (copy e seeded ``seed_base + e``).
 
     Steps the scenario core directly rather than the VecEnv, whose auto-reset
-    would discard the last step's infos. Deterministic actions.
+    would discard the last step's infos. Deterministic actions by default; sampled
+    ones (``deterministic=False``) draw from torch's generator, seeded here with
+    ``seed_base`` so that the run repeats.
     """
+    if not deterministic:
+        import torch
+
+        torch.manual_seed(seed_base)
     import coloc_env
     from coloc_env.config import build_config
 
@@ -112,7 +120,7 @@ def run_model_batched(model, scenario: str, episodes: int, seed_base: int, **env
     while not core.done().all():
         observation = core.observation()
         actions, _ = model.predict(observation.reshape(episodes * core.num_agents, *observation.shape[2:]),
-                                   deterministic=True)
+                                   deterministic=deterministic)
         core.step(np.asarray(actions, dtype=float).reshape(episodes, core.num_agents, *shape))
         info = core.info()
         errors.append(info[core.metric_error_key])

@@ -27,12 +27,20 @@ def record(result: dict, out: str, key: str) -> str:
     return path
 
 
-def _trained_summary(table: dict) -> dict | None:
-    models = [r for name, r in table.items() if name.endswith(".zip")]
+STOCHASTIC = " (stochastic)"  # suffix of a model evaluated with sampled actions (``evaluate --stochastic``)
+
+
+def _is_model(name: str) -> bool:
+    return name.endswith(".zip") or name.endswith(".zip" + STOCHASTIC)
+
+
+def _trained_summary(table: dict, suffix: str = "") -> dict | None:
+    models = [r for name, r in table.items() if name.endswith(".zip" + suffix)]
     if not models:
         return None
     means = np.array([r["mean_cost"] for r in models])
-    return {"policy": f"trained (mean of {len(models)} seed{'s' if len(models) > 1 else ''})",
+    label = "trained" + (", stochastic" if suffix else "")
+    return {"policy": f"{label} (mean of {len(models)} seed{'s' if len(models) > 1 else ''})",
             "mean_cost": float(means.mean()), "ci95": float(np.mean([r["ci95"] for r in models])),
             "paper_cost": float(np.mean([r["paper_cost"] for r in models])),
             "communication_per_step": float(np.mean([r["communication_per_step"] for r in models])),
@@ -60,7 +68,7 @@ def target_verdict(scenario: str, table: dict) -> str | None:
         return None
     text, references, fewer_messages, margin = TARGETS[scenario]
     trained = _trained_summary(table)
-    candidates = [r for name, r in table.items() if not name.endswith(".zip")
+    candidates = [r for name, r in table.items() if not _is_model(name)
                   and any(name == ref or name.startswith(ref + ":") for ref in references)]
     if not candidates:
         return f"Target: {text}. No reference row evaluated yet."
@@ -84,10 +92,10 @@ def target_verdict(scenario: str, table: dict) -> str | None:
 
 def rows(table: dict) -> list[dict]:
     """Named policies, each trained model, then the trained summary; best first within each group."""
-    named = sorted((r for n, r in table.items() if not n.endswith(".zip")), key=lambda r: r["mean_cost"])
-    models = sorted((r for n, r in table.items() if n.endswith(".zip")), key=lambda r: r["mean_cost"])
-    summary = _trained_summary(table)
-    return named + models + ([summary] if summary else [])
+    named = sorted((r for n, r in table.items() if not _is_model(n)), key=lambda r: r["mean_cost"])
+    models = sorted((r for n, r in table.items() if _is_model(n)), key=lambda r: r["mean_cost"])
+    summaries = [_trained_summary(table, suffix) for suffix in ("", STOCHASTIC)]
+    return named + models + [s for s in summaries if s]
 
 
 def bar_chart(table: dict, path: str, key: str) -> None:
@@ -96,7 +104,7 @@ def bar_chart(table: dict, path: str, key: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    entries = [r for r in rows(table) if not r["policy"].endswith(".zip")]
+    entries = [r for r in rows(table) if not _is_model(r["policy"])]
     fig, ax = plt.subplots(figsize=(max(5, 1.3 * len(entries)), 4))
     names = [r["policy"] for r in entries]
     ax.bar(range(len(entries)), [r["mean_cost"] for r in entries], yerr=[r["ci95"] for r in entries],

@@ -66,6 +66,10 @@ def test_batched_model_evaluation_equals_the_env_loop(tmp_path):
     looped = run_episodes("bandwidth_fusion", path, 4, seed_base=77)
     assert batched["mean_cost"] == pytest.approx(looped["mean_cost"], rel=1e-6)
     assert batched["communication_per_step"] == looped["communication_per_step"]
+    model = PPO.load(path, device="cpu")
+    sampled = [run_model_batched(model, "bandwidth_fusion", 4, seed_base=77, deterministic=False)["mean_cost"]
+               for _ in range(2)]
+    assert sampled[0] == sampled[1] != batched["mean_cost"]  # seeded sampling repeats, and it does sample
     assert agents.available_policies("bandwidth_fusion")[0] == "random"
     assert coloc_env.SCENARIOS
 

@@ -29,3 +29,14 @@ def test_verdict_uses_the_best_constant_horizon_and_skips_untrained_tables():
     line = target_verdict("nlos_horizon", table)
     assert "constant:6 2.7" in line and "**not met, within noise**" in line
     assert target_verdict("nlos_horizon", {"paper": _row("paper", 3.0)}) is None
+
+
+def test_stochastic_models_get_their_own_summary_and_do_not_count_for_the_target():
+    from train.leaderboard import rows
+
+    table = {"paper": _row("paper", 1.5, comm=1.5), "a.zip": _row("a.zip", 1.6, comm=0.8),
+             "a.zip (stochastic)": _row("a.zip (stochastic)", 1.4, comm=0.8)}
+    names = [r["policy"] for r in rows(table)]
+    assert names == ["paper", "a.zip (stochastic)", "a.zip", "trained (mean of 1 seed)",
+                     "trained, stochastic (mean of 1 seed)"]
+    assert "Trained 1.6 " in target_verdict("relay_ukf", table)
