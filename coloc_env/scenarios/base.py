@@ -127,3 +127,19 @@ class Scenario(abc.ABC):
                 f"actions must be finite; non-finite action for (copy, agent) {bad[0].tolist()}"
             )
         return arr
+
+    def check_discrete_actions(self, actions, labels=()) -> np.ndarray:
+        """MultiDiscrete actions as int64 (B, N, k): finite (:meth:`check_actions`), integral and in
+        [0, nvec). A value out of range is a ValueError naming its index by ``labels[i]`` (what index
+        i chooses; default ``action[i]``)."""
+        arr = self.check_actions(actions)
+        if np.any(arr != np.round(arr)):
+            raise ValueError("actions must be integers (MultiDiscrete)")
+        nvec = np.asarray(self.action_space().nvec)
+        outside = (arr < 0) | (arr >= nvec)
+        if np.any(outside):
+            i = int(np.argwhere(outside)[0][-1])
+            label = labels[i] if i < len(labels) else f"action[{i}]"
+            value = arr[..., i][outside[..., i]][0]
+            raise ValueError(f"{label} must be integers in [0, {nvec[i] - 1}], got {value:g}")
+        return arr.astype(np.int64)

@@ -381,15 +381,9 @@ class MrclamRelayScenario(Scenario):
 
     def decode_actions(self, actions) -> np.ndarray:
         """Actions (B, N, 1 + N) -> int array, after checking finiteness, integrality and range."""
-        arr = self.check_actions(actions)
-        if np.any(arr != np.round(arr)):
-            raise ValueError("actions must be integers (MultiDiscrete)")
         N = self.num_agents
-        if np.any((arr[..., 0] < 0) | (arr[..., 0] > N - 1)):
-            raise ValueError(f"action[0] (whose measurement to use) must be in [0, {N - 1}]")
-        if np.any((arr[..., 1:] < 0) | (arr[..., 1:] > N)):
-            raise ValueError(f"action[1:] (whom to relay each source's chain to, {N} = stop) must be in [0, {N}]")
-        return arr.astype(int)
+        relay = f"action[1:] (whom to relay each source's chain to, {N} = stop)"
+        return self.check_discrete_actions(actions, ("action[0] (whose measurement to use)", *[relay] * N))
 
     def absolute_step(self) -> np.ndarray:
         """The data step a = s + k of each copy (B,)."""

@@ -532,20 +532,17 @@ class NlosHorizonScenario(Scenario):
     # --- dynamics ----------------------------------------------------------------
     def decode_actions(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Actions (B, N, 1 + J) -> horizons (B, N) and the neighbour mask (B, N, J) (absolute order)."""
-        space = self.action_space()
-        if np.any(actions != np.round(actions)) or np.any(actions < 0) or np.any(actions >= space.nvec):
-            raise ValueError(f"actions must be integers in [0, nvec) with nvec = {space.nvec.tolist()}")
-        a = actions.astype(np.int64)
+        a = self.check_discrete_actions(
+            actions, ("action[0] (horizon N - N_min)", *[f"action[1:{1 + self.J}] (keep 1 / drop 0)"] * self.J))
         window = self.config.window_min + a[..., 0]
         mask = np.zeros((self.batch, self.num_agents, self.J), bool)
         np.put_along_axis(mask, self.pending["slots"], a[..., 1:] == 1, axis=-1)
         return window, mask
 
     def step(self, actions) -> None:
-        actions = self.check_actions(actions)
+        window, mask = self.decode_actions(actions)  # a bad action is a ValueError before anything else
         if np.any(self.k >= self.horizon):
             raise RuntimeError("step() on a copy whose episode is over; reset it first")
-        window, mask = self.decode_actions(actions)
         self.advance(window, mask)
 
     def advance(self, window: np.ndarray, mask: np.ndarray) -> None:

@@ -350,15 +350,9 @@ class RelayUKFScenario(Scenario):
 
     def decode_actions(self, actions) -> np.ndarray:
         """Actions (B, N, 2) -> int array, after checking finiteness, integrality and range."""
-        arr = self.check_actions(actions)
-        if np.any(arr != np.round(arr)):
-            raise ValueError("actions must be integers (MultiDiscrete)")
         N = self.num_agents
-        if np.any((arr[..., 0] < 0) | (arr[..., 0] > N - 1)):
-            raise ValueError(f"action[0] (whom to range with) must be in [0, {N - 1}]")
-        if np.any((arr[..., 1] < 0) | (arr[..., 1] > N)):
-            raise ValueError(f"action[1] (whom to relay to, {N} = stop) must be in [0, {N}]")
-        return arr.astype(int)
+        return self.check_discrete_actions(
+            actions, ("action[0] (whom to range with)", f"action[1] (whom to relay to, {N} = stop)"))
 
     def step(self, actions) -> None:
         if np.any(self.k >= self.horizon):
