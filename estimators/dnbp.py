@@ -72,6 +72,8 @@ Departures from the spec
   spec's defaults, it protects against inconsistent inputs.
 * A UAV counts as broadcasting only when its broadcast reaches at least one
   eligible receiver (:class:`coloc_env`'s medium counts the same way).
+  Delivery itself is the caller's network (the ``deliver`` argument of
+  :func:`step`); the estimator only decides who may send and who listens.
 * In the parallel schedule the reverse-message correction is still applied
   to fault<->fault links only (spec §5 states it for every schedule).
 * Kernel sums: exponents below -600 are clipped before ``exp`` (libm is ~10x
@@ -90,12 +92,13 @@ at M = 400); unimodal tracking beliefs are not affected (h_rot ~ 1 m).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
 __all__ = [
+    "Deliver",
     "DnbpModel",
     "DnbpState",
     "StepResult",
@@ -109,6 +112,9 @@ __all__ = [
     "predict",
     "step",
 ]
+
+# deliver(senders (B, N), listening (B, N, N)) -> delivered (B, N, N): the caller's network (see :func:`step`)
+Deliver = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
 _CHUNK_ELEMENTS = 1 << 16  # kernel entries per chunk (512 kB): stays in cache, bounds memory at any batch
 
@@ -568,13 +574,20 @@ def predict(model: DnbpModel, belief: np.ndarray, accel: np.ndarray, rngs: Seque
 
 
 # --- Algorithm 4 -------------------------------------------------------------------------------------------------
-def step(model: DnbpModel, state: DnbpState, gps_normal: np.ndarray, gps_fix: np.ndarray, adjacency: np.ndarray,
+def step(model: DnbpModel, state: DnbpState, gps_normal: np.ndarray, gps_fix: np.ndarray, deliver: Deliver,
          ranges: np.ndarray, accel: np.ndarray, rngs: Sequence[np.random.Generator],
          broadcast: np.ndarray | None = None, record: bool = False) -> tuple[DnbpState, StepResult]:
     """One time step tau of dNBP (Algorithm 4) for B copies.
 
     gps_normal (B, N) bool; gps_fix (B, N, 2) (ignored where faulty);
-    adjacency (B, N, N) bool; ranges (B, N, N) measured d_st on edges;
+    ``deliver`` the caller's network for this step, called once per
+    iteration as ``deliver(senders, listening) -> delivered``: senders
+    (B, N) bool, the UAVs that transmit in this iteration (allowed by the
+    schedule and deciding to broadcast); listening (B, N, N) bool [t, s]:
+    s takes t's message under the schedule (never t = s); delivered
+    (B, N, N) bool [t, s]: t's message reaches s. A delivery where senders
+    or listening say no raises ValueError;
+    ranges (B, N, N) measured d_st, read only where delivered;
     accel (B, N, 2) the readings a_hat(tau) used to predict tau + 1;
     broadcast (B, N, n_iter) bool: whether each UAV broadcasts in each
     iteration when the schedule allows it (None = always, the paper's
@@ -636,7 +649,15 @@ def step(model: DnbpModel, state: DnbpState, gps_normal: np.ndarray, gps_fix: np
                 qualified, threshold = fault_senders(fault, heard.sum(axis=1), qualified, threshold)
                 allowed = qualified & fault
             listening = np.broadcast_to(fault[:, None, :], (B, N, N))
-        delivered = (allowed & broadcast[:, :, n])[:, :, None] & adjacency & listening & ~eye
+        senders = allowed & broadcast[:, :, n]
+        listening = listening & ~eye
+        may = senders[:, :, None] & listening  # formed before the call: deliver cannot widen it
+        delivered = np.asarray(deliver(senders, listening))
+        if delivered.shape != (B, N, N) or delivered.dtype != bool:
+            raise ValueError(f"deliver must return a ({B}, {N}, {N}) bool array, got {delivered.dtype} "
+                             f"{delivered.shape}")
+        if (delivered & ~may).any():
+            raise ValueError("deliver returned a delivery the schedule did not allow")
         delivered_all[:, n] = delivered
         broadcasts += delivered.any(axis=2)
         b_idx, t_idx, s_idx = np.nonzero(delivered)

@@ -107,6 +107,14 @@ def _gps_denied_nbp_episode(batch: int, num_particles: int = 100):
     return config, model, stack, initial_beliefs(config, model, episodes, rngs), rngs
 
 
+def _gps_denied_nbp_inputs(stack: dict, k: int) -> tuple:
+    """dNBP's per-step inputs of step k: (gps_normal, gps_fix, deliver over the adjacency, ranges, accel)."""
+    from coloc_env.world.broadcast_medium import BroadcastMedium
+
+    return (stack["gps_normal"][:, k], stack["gps_fix"][:, k], BroadcastMedium().over(stack["adjacency"][:, k]),
+            stack["ranges"][:, k], stack["accel"][:, k])
+
+
 def _gps_denied_nbp_estimator_step(batch: int, num_particles: int = 100) -> Callable[[], None]:
     """One dNBP time step (:func:`estimators.dnbp.step`, paper schedule) for B copies, cycling the episode."""
     import estimators.dnbp as dn
@@ -116,9 +124,7 @@ def _gps_denied_nbp_estimator_step(batch: int, num_particles: int = 100) -> Call
 
     def step() -> None:
         k = box["k"] % config.horizon
-        box["state"], _ = dn.step(model, box["state"], *(stack[key][:, k] for key in
-                                                         ("gps_normal", "gps_fix", "adjacency", "ranges", "accel")),
-                                  rngs)
+        box["state"], _ = dn.step(model, box["state"], *_gps_denied_nbp_inputs(stack, k), rngs)
         box["k"] += 1
 
     return step
@@ -141,8 +147,7 @@ def _gps_denied_nbp_particle_rows(min_seconds: float, batch: int | None = None, 
         elapsed, fault_steps = 0.0, 0
         for k in range(steps):
             start = time.perf_counter()
-            state, _ = dn.step(model, state, *(stack[key][:, k] for key in
-                                               ("gps_normal", "gps_fix", "adjacency", "ranges", "accel")), rngs)
+            state, _ = dn.step(model, state, *_gps_denied_nbp_inputs(stack, k), rngs)
             elapsed += time.perf_counter() - start
             fault_steps += int((~stack["gps_normal"][:, k]).sum())
         rate = steps / elapsed

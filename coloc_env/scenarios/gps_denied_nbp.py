@@ -355,8 +355,9 @@ class GpsDeniedNbpScenario(Scenario):
         k = self.k
         normal = self._slice(self.gps_normal, k)
         self.belief_state, result = dn.step(
-            self.model, self.belief_state, normal, self._slice(self.gps_fix, k), self._slice(self.adjacency, k),
-            self._slice(self.ranges, k), self._slice(self.accel, k), self.estimator_rngs, broadcast)
+            self.model, self.belief_state, normal, self._slice(self.gps_fix, k),
+            self.medium.over(self._slice(self.adjacency, k)), self._slice(self.ranges, k), self._slice(self.accel, k),
+            self.estimator_rngs, broadcast)
         truth = self._slice(self.truth, k)[..., :2]
         self.estimate = result.estimate
         self.errors = np.linalg.norm(result.estimate - truth, axis=-1)

@@ -7,6 +7,7 @@ A sender with no eligible listener transmits nothing and is not counted.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,6 +41,20 @@ class BroadcastMedium:
         if listening is not None:
             delivered &= np.asarray(listening, bool)
         return delivered, delivered.any(axis=-1).astype(int)
+
+    def over(self, adjacency: np.ndarray) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+        """The ``deliver(senders, listening) -> delivered`` of one step's ``adjacency`` (..., N, N).
+
+        senders (..., N) bool, listening (..., N, N) bool [t, s]; delivered (..., N, N) bool [t, s] =
+        t sends, s is adjacent to t and listens (:meth:`deliver`). This is the network an estimator
+        such as :func:`estimators.dnbp.step` is handed.
+        """
+        adjacency = np.asarray(adjacency, bool)
+
+        def deliver(senders: np.ndarray, listening: np.ndarray) -> np.ndarray:
+            return self.deliver(senders, adjacency, listening)[0]
+
+        return deliver
 
     def payload(self, messages: np.ndarray, items: int) -> np.ndarray:
         """Floats carried by ``messages`` deliveries of ``items`` items each (plus one bandwidth each)."""

@@ -12,6 +12,7 @@ import coloc_env
 import estimators.dnbp as dn
 from coloc_env.config import build_config
 from coloc_env.scenarios.gps_denied_nbp import GpsDeniedNbpConfig, initial_beliefs, sample_episode
+from coloc_env.world.broadcast_medium import BroadcastMedium
 from tests.helpers import play
 
 NAME = "gps_denied_nbp"
@@ -114,8 +115,8 @@ def test_env_with_paper_policy_equals_the_estimator_called_directly():
     for k in range(config.horizon):
         observations, rewards, _, _, infos = env.step(policy.act(observations))
         state, result = dn.step(model, state, episode.gps_normal[k][None], episode.gps_fix[k][None],
-                                episode.adjacency[k][None], episode.ranges[k][None], episode.accel[k][None],
-                                [estimator_rng])
+                                BroadcastMedium().over(episode.adjacency[k][None]), episode.ranges[k][None],
+                                episode.accel[k][None], [estimator_rng])
         for i, agent in enumerate(env.possible_agents):
             np.testing.assert_array_equal(infos[agent]["estimated_position"], result.estimate[0, i])
             np.testing.assert_array_equal(infos[agent]["true_position"], episode.truth[k, i, :2])

@@ -10,6 +10,11 @@ import estimators.dnbp as dn
 ANCHORS_AND_TARGET = np.array([[0.0, 0.0], [300.0, 0.0], [0.0, 300.0], [120.0, 150.0]])
 
 
+def over(adjacency):
+    """The deliver callable of a plain radio network over ``adjacency`` (B, N, N): the estimator's caller's job."""
+    return lambda senders, listening: senders[..., :, None] & adjacency & listening
+
+
 def _ranges(positions, rng, std):
     d = np.linalg.norm(positions[:, None] - positions[None], axis=-1)
     noise = np.triu(std * rng.standard_normal(d.shape), 1)
@@ -27,7 +32,7 @@ def test_three_anchors_and_a_flat_prior_converge_below_three_sigma_d():
         for k in range(5):
             adjacency, ranges = _ranges(ANCHORS_AND_TARGET, rng, model.range_std)
             state, result = dn.step(model, state, np.array([[True, True, True, False]]), ANCHORS_AND_TARGET[None],
-                                    adjacency[None], ranges[None], np.zeros((1, 4, 2)), [rng])
+                                    over(adjacency[None]), ranges[None], np.zeros((1, 4, 2)), [rng])
             error = np.linalg.norm(result.estimate[0, 3] - ANCHORS_AND_TARGET[3])
             (first if k == 0 else last).append(error) if k in (0, 4) else None
     assert max(last) < 3 * model.range_std
@@ -72,7 +77,8 @@ def test_case_study_schedule_sends_the_papers_messages():
     _, ranges = _ranges(CASE, rng, 2.0)
     state = dn.initial_state(model, [rng], "cold", np.zeros((1, 6, 2)), np.zeros((1, 6, 2)), 0.0)
     normal = np.array([[True, True, True, False, False, False]])
-    _, result = dn.step(model, state, normal, CASE[None], adjacency[None], ranges[None], np.zeros((1, 6, 2)), [rng])
+    _, result = dn.step(model, state, normal, CASE[None], over(adjacency[None]), ranges[None], np.zeros((1, 6, 2)),
+                        [rng])
 
     def sent(n):
         return sorted((int(t) + 1, int(s) + 1) for t, s in zip(*np.nonzero(result.delivered[0, n]), strict=True))
@@ -147,7 +153,7 @@ def test_copy_b_of_a_batch_equals_the_copy_alone_and_seeds_reproduce(schedule):
         state = dn.initial_state(model, rngs, "warm", pos[copies], np.zeros((len(copies), N, 2)), 1.0)
         out = []
         for _ in range(2):
-            state, result = dn.step(model, state, normal[copies], pos[copies], adjacency[copies], ranges[copies],
+            state, result = dn.step(model, state, normal[copies], pos[copies], over(adjacency[copies]), ranges[copies],
                                     accel[copies], rngs, bits[copies])
             out.append((result.estimate, result.delivered, state.prior))
         return out
@@ -174,12 +180,26 @@ def test_parallel_schedule_lets_normal_uavs_absorb_messages_and_silence_is_dead_
     ranges = np.where(adjacency, np.linalg.norm(pos[:, :, None] - pos[:, None], axis=-1), 0)
     state = dn.initial_state(model, [np.random.default_rng(0)], "warm", pos, np.zeros((1, 5, 2)), 1.0)
     par = dataclasses.replace(model, schedule="parallel")
-    _, result = dn.step(par, state, normal, pos, adjacency, ranges, accel, [np.random.default_rng(1)])
+    _, result = dn.step(par, state, normal, pos, over(adjacency), ranges, accel, [np.random.default_rng(1)])
     assert result.delivered[0, :, :, 0].any()  # a normal UAV received
     assert result.delivered[0, 0, 2].any() and result.broadcasts[0].tolist() == [2] * 5
-    _, modified = dn.step(model, state, normal, pos, adjacency, ranges, accel, [np.random.default_rng(1)])
+    _, modified = dn.step(model, state, normal, pos, over(adjacency), ranges, accel, [np.random.default_rng(1)])
     assert not modified.delivered[0][:, :, normal[0]].any()  # no message into a normal UAV
     silent = np.zeros((1, 5, 2), bool)
-    _, quiet = dn.step(model, state, normal, pos, adjacency, ranges, accel, [np.random.default_rng(1)], silent)
+    _, quiet = dn.step(model, state, normal, pos, over(adjacency), ranges, accel, [np.random.default_rng(1)], silent)
     assert not quiet.delivered.any() and quiet.broadcasts.sum() == 0
     np.testing.assert_array_equal(quiet.belief[0, 2], state.prior[0, 2])  # fault UAV keeps its prior
+
+
+def test_deliver_is_the_callers_network_and_may_not_exceed_the_schedule():
+    model = dn.DnbpModel(num_particles=20, num_iterations=2)
+    pos, normal, adjacency, ranges, accel = _random_world(np.random.default_rng(6), 1, 5)
+    normal[:] = [[True, True, False, False, True]]
+    state = dn.initial_state(model, [np.random.default_rng(0)], "warm", pos, np.zeros((1, 5, 2)), 1.0)
+    with pytest.raises(ValueError, match="deliver returned a delivery the schedule did not allow"):
+        dn.step(model, state, normal, pos, lambda s, listening: np.ones((1, 5, 5), bool), ranges, accel,
+                [np.random.default_rng(1)])
+    # a network that loses every message: allowed, and nothing is delivered or counted
+    _, lost = dn.step(model, state, normal, pos, lambda s, listening: np.zeros_like(listening), ranges, accel,
+                      [np.random.default_rng(1)])
+    assert not lost.delivered.any() and lost.broadcasts.sum() == 0

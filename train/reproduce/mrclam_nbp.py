@@ -96,6 +96,7 @@ import estimators.dnbp as dn
 import estimators.range_ls as ls
 import estimators.ukf_relay_se2 as se2
 from coloc_env.data import mrclam
+from coloc_env.world.broadcast_medium import BroadcastMedium
 
 SLICE_STEPS = 10  # data steps per slice: Delta t = 1 s
 PARTICLES = 100
@@ -282,6 +283,7 @@ def run_dnbp(sl: Slices, particles: int, seed: int) -> tuple[np.ndarray, dict]:
     state = dn.initial_state(init_model, [rng], "warm", sl.initial[None, :, :2], np.zeros((1, N, 2)), INITIAL_STD)
     out = np.empty((len(sl), N, 2))
     messages = broadcasts = gated = 0
+    medium = BroadcastMedium()
     for t in range(len(sl)):
         model = _slice_model(base, sl, t)
         state.prior[..., 2:] = sl.velocity[t][None, :, None, :]  # the displacement through the velocity slot
@@ -294,7 +296,7 @@ def run_dnbp(sl: Slices, particles: int, seed: int) -> tuple[np.ndarray, dict]:
             keep = adjacency & (nu2 <= RANGE_GATE)
             gated += int((adjacency & ~keep).sum()) // 2
             adjacency = keep
-        state, res = dn.step(model, state, sl.normal[t][None], sl.fix[t][None], adjacency[None],
+        state, res = dn.step(model, state, sl.normal[t][None], sl.fix[t][None], medium.over(adjacency[None]),
                              sl.ranges[t][None], np.zeros((1, N, 2)), [rng])
         out[t] = res.estimate[0]
         messages += int(res.delivered.sum())

@@ -40,6 +40,7 @@ import estimators.dnbp as dn
 import estimators.range_ls as rl
 from coloc_env.config import build_config
 from coloc_env.scenarios.gps_denied_nbp import GpsDeniedNbpConfig, GpsDeniedNbpScenario, sample_episode
+from coloc_env.world.broadcast_medium import BroadcastMedium
 from train.executor import map_tasks
 from train.io import claims_table, save_figure, write_json, write_text
 
@@ -205,8 +206,8 @@ def case_study(config: GpsDeniedNbpConfig, seed: int) -> dict:
     adjacency = (distances <= config.comm_range) & ~np.eye(N, dtype=bool)
     ranges = np.where(adjacency, distances + noise, 0.0)
     fix = CASE_POSITIONS + config.gps.sample_noise(rng, (N,))
-    _, result = dn.step(model, state, CASE_NORMAL[None], fix[None], adjacency[None], ranges[None],
-                        np.zeros((1, N, 2)), [rng], record=True)
+    _, result = dn.step(model, state, CASE_NORMAL[None], fix[None], BroadcastMedium().over(adjacency[None]),
+                        ranges[None], np.zeros((1, N, 2)), [rng], record=True)
     sent = {n: sorted((int(t) + 1, int(s) + 1) for t, s in zip(*np.nonzero(result.delivered[0, n]), strict=True))
             for n in range(model.num_iterations)}
     spreads, errors = [], []
