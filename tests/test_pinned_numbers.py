@@ -1,0 +1,325 @@
+"""Pinned numbers of commit 6f148d7, taken before the composable-core refactor (issue 14).
+
+Every scenario of :data:`coloc_env.SCENARIOS` is about to move onto a new composable core. This
+file pins what the code of 6f148d7 computes today, through the public API only, so that every
+step of that refactor proves it changed nothing:
+
+* ``test_seeded_rollout``: per scenario, ``parallel_env(name, **OVERRIDES[name])`` reset with
+  seed 3 and played for at most 25 steps (or until the episode ends) by ``paper`` and by
+  ``random`` (both ``make_policy(..., seed=0)``); pinned are the number of steps, the sum of all
+  rewards, the sum over steps and agents of ``infos[a]["position_error"]`` (or ``"error"`` where
+  that key is absent, as it is in every scenario today), the sum of ``infos[a]["trace"]``
+  (``None``: no agent ever reports it) and the sum of the first agent's final observation.
+* ``test_vector_env``: per scenario, ``vector_env(name, num_envs=3, seed=5, **OVERRIDES[name])``
+  reset and stepped 10 times with actions drawn, one per sub-env and step, from its
+  ``action_space`` seeded with ``action_space.seed(0)``; pinned are the sum of the rewards and
+  of the final observation.
+* ``test_reproduction``: a few numbers of the paper reproductions (``train/reproduce/``),
+  from their own public functions on small run counts with fixed seeds.
+
+Bit-identity pins: every pin except the three marked ``deterministic`` in
+:data:`REPRODUCTION` is a pin of a random stream (the rollouts, the vector env and the seeded
+Monte Carlo reproductions). They hold only while every generator is seeded and consumed exactly
+as today: a change in what is drawn, in which order or from which generator moves them by far
+more than the tolerance. The tolerance (``rel=1e-9, abs=1e-12``) only absorbs floating-point
+reassociation (a sum or a matmul done in another order or batch), not a different draw. The
+three ``deterministic`` pins (zhao2020's exact and greedy J_50, fu2017's covariance traces) use
+no random numbers at all.
+
+A change that alters any of these values must say why in its commit message. A deliberate
+change to a random stream (or to a model) gets a new pin together with its reason: run
+``.venv/bin/python -m tests.test_pinned_numbers`` to print the current values as the literals
+below. mrclam_relay needs the MRCLAM dataset 6 (``../shared/data/mrclam/MRCLAM_Dataset6`` next
+to the repository, as ``tests/coloc_env/test_mrclam_relay.py`` finds it); its cases skip
+without it.
+
+Notes: the ``paper`` policy of relay_ukf draws its random partners from its own generator, so
+it is built with ``seed=0`` here (``make_policy("paper", env)`` without a seed would draw
+fresh entropy and give a different rollout every run). Observation sums are taken in float64
+of the float32 observations, rewards likewise.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+
+import agents
+import coloc_env
+from coloc_env.config import build_config
+
+REPO_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+DATASET6 = os.path.join(REPO_ROOT, "..", "shared", "data", "mrclam", "MRCLAM_Dataset6")
+REL, ABS = 1e-9, 1e-12
+
+RESET_SEED = 3
+MAX_STEPS = 25
+POLICY_SEED = 0
+VEC_COPIES, VEC_SEED, VEC_STEPS, VEC_ACTION_SEED = 3, 5, 10, 0
+
+# small configs where a default episode is slow; the same for the rollout and the vector env
+OVERRIDES = {
+    "bandwidth_fusion": {},
+    "lossy_fusion": {},
+    "relay_ukf": {"horizon": 60},
+    "gps_denied_nbp": {"num_particles": 50, "horizon": 10},
+    "nlos_horizon": {"horizon": 60},
+    "mrclam_relay": {"data": DATASET6, "window_steps": 30},
+}
+
+
+def _needs_data(name: str) -> None:
+    if name == "mrclam_relay" and not os.path.isdir(DATASET6):
+        pytest.skip(f"MRCLAM dataset 6 not found at {DATASET6}")
+
+
+def _config(name: str, **overrides):
+    return build_config(coloc_env.scenario_class(name).Config, overrides)
+
+
+# --- what is computed --------------------------------------------------------------------------
+def seeded_rollout(name: str, policy_name: str) -> dict:
+    env = coloc_env.parallel_env(name, **OVERRIDES[name])
+    policy = agents.make_policy(policy_name, env, seed=POLICY_SEED)
+    first = env.possible_agents[0]
+    observations, _ = env.reset(seed=RESET_SEED)
+    steps, reward, error, trace = 0, 0.0, 0.0, None
+    while env.agents and steps < MAX_STEPS:
+        observations, rewards, _, _, infos = env.step(policy.act(observations))
+        steps += 1
+        for agent in env.possible_agents:
+            if agent in rewards:
+                reward += float(rewards[agent])
+            if agent in infos:
+                info = infos[agent]
+                error += float(info["position_error"] if "position_error" in info else info["error"])
+                if "trace" in info:
+                    trace = (trace or 0.0) + float(info["trace"])
+    obs_sum = float(np.sum(np.asarray(observations[first], dtype=np.float64)))
+    return {"steps": steps, "reward": reward, "error": error, "trace": trace, "obs_sum": obs_sum}
+
+
+def vector_rollout(name: str) -> dict:
+    venv = coloc_env.vector_env(name, num_envs=VEC_COPIES, seed=VEC_SEED, **OVERRIDES[name])
+    venv.action_space.seed(VEC_ACTION_SEED)
+    observation = venv.reset()
+    reward = 0.0
+    for _ in range(VEC_STEPS):
+        actions = np.stack([venv.action_space.sample() for _ in range(venv.num_envs)])
+        observation, rewards, _, _ = venv.step(actions)
+        reward += float(np.sum(np.asarray(rewards, dtype=np.float64)))
+    venv.close()
+    return {"reward": reward, "obs_sum": float(np.sum(np.asarray(observation, dtype=np.float64)))}
+
+
+def _zhao2020_exact_j50(which: int) -> float:
+    import estimators.bandwidth_fusion as bf
+    from coloc_env.scenarios.bandwidth_fusion import paper_selection, paper_weights
+
+    config = _config("bandwidth_fusion")
+    curves = bf.expected_cost(config.fusion_model(), np.asarray(config.initial_cov, float), paper_selection("T1"),
+                              paper_weights("P1"), config.horizon)
+    return float(curves[which].sum())
+
+
+def _zhao2020_greedy_j50() -> float:
+    from train.reproduce import zhao2020
+
+    return float(zhao2020.greedy_exact_curve(_config("bandwidth_fusion")).sum())
+
+
+def _zhao2020_paper_policy_costs() -> float:
+    from train.reproduce import zhao2020
+
+    return float(zhao2020.paper_policy_costs([0, 1, 2, 3], _config("bandwidth_fusion")).sum())
+
+
+def _fu2017_block(key: str, name: str) -> float:
+    from train.reproduce import fu2017
+
+    block = fu2017.monte_carlo_block(2, 5, 7, 0, _config("lossy_fusion"))  # L = 2, 5 runs, seed 7, block 0
+    return float(np.sum(block[key][name])) if key == "own" else float(np.mean(block[key][name]))
+
+
+def _wang2019_block(estimator: str) -> float:
+    from train.reproduce import wang2019
+
+    block = wang2019.monte_carlo_block(0, 2, 0, _config("relay_ukf", horizon=100))  # block 0, 2 runs, seed 0
+    return float(block["per_run"][wang2019.ESTIMATORS.index(estimator)].mean())
+
+
+def _wan2014_paper_policy_costs() -> float:
+    from train.reproduce import wan2014
+
+    return float(wan2014.paper_policy_costs([0, 1], _config("gps_denied_nbp", horizon=10, num_particles=50)).sum())
+
+
+def _wan2014_point_dnbp() -> float:
+    from train.reproduce import wan2014
+
+    base = {"num_uavs": 6, "horizon": 4, "num_particles": 30, "num_normal": 3}
+    return float(wan2014.evaluate_point({}, base, 2, 0)["dnbp"]["err_fault"])  # 2 runs, seed 0
+
+
+def _gao2016_paper_policy_costs() -> float:
+    from train.reproduce import gao2016
+
+    return float(gao2016.paper_policy_costs([0, 1], _config("nlos_horizon", horizon=300, num_uavs=2)).sum())
+
+
+# id -> (function, kind)
+REPRODUCTION = {
+    "zhao2020_exact_J50_T1P1": (lambda: _zhao2020_exact_j50(0), "deterministic"),
+    "zhao2020_greedy_exact_J50": (_zhao2020_greedy_j50, "deterministic"),
+    "zhao2020_paper_policy_costs_seeds0-3_sum": (_zhao2020_paper_policy_costs, "random stream"),
+    "fu2017_centralized_own_trace_sum_L2": (lambda: _fu2017_block("own", "centralized"), "deterministic"),
+    "fu2017_distributed_mse_L2_5runs_seed7": (lambda: _fu2017_block("errors", "distributed"), "random stream"),
+    "wang2019_DCL_error_2runs_seed0_K100": (lambda: _wang2019_block("DCL"), "random stream"),
+    "wang2019_IL_error_2runs_seed0_K100": (lambda: _wang2019_block("IL"), "random stream"),
+    "wan2014_paper_policy_costs_seeds0-1_sum": (_wan2014_paper_policy_costs, "random stream"),
+    "wan2014_evaluate_point_dnbp_err_fault": (_wan2014_point_dnbp, "random stream"),
+    "gao2016_paper_policy_costs_seeds0-1_sum": (_gao2016_paper_policy_costs, "random stream"),
+}
+
+# --- the pins (commit 6f148d7) -----------------------------------------------------------------
+PINNED_ROLLOUTS = {
+    "bandwidth_fusion": {
+        "paper": {"steps": 25, "reward": -17.268696353831736, "error": 17.268696353831736, "trace": None,
+                  "obs_sum": 0.094229552894830704},
+        "random": {"steps": 25, "reward": -21.09272043628452, "error": 21.09272043628452, "trace": None,
+                   "obs_sum": -6.0589263513684273},
+    },
+    "lossy_fusion": {
+        "paper": {"steps": 25, "reward": -2862.9214189709883, "error": 2862.9214189709883, "trace": None,
+                  "obs_sum": 18.225183486938477},
+        "random": {"steps": 25, "reward": -44865.420633849048, "error": 44865.420633849048, "trace": None,
+                   "obs_sum": 18.414474010467529},
+    },
+    "relay_ukf": {
+        "paper": {"steps": 25, "reward": -54.656640250591714, "error": 54.656640250591735,
+                  "trace": 64.637742502185972, "obs_sum": 4.0193506041541696},
+        "random": {"steps": 25, "reward": -53.720614082882371, "error": 53.720614082882378,
+                   "trace": 71.076467009166166, "obs_sum": 4.2395842671394348},
+    },
+    "gps_denied_nbp": {
+        "paper": {"steps": 10, "reward": -604.36789432768023, "error": 518.1200318608345, "trace": None,
+                  "obs_sum": 5.5783190429210663},
+        "random": {"steps": 10, "reward": -653.50566017278948, "error": 549.57412264842856, "trace": None,
+                   "obs_sum": 5.1912388205528259},
+    },
+    "nlos_horizon": {
+        "paper": {"steps": 25, "reward": -12665.388557209946, "error": 12665.388557209946,
+                  "trace": 21428.217590022519, "obs_sum": 17.687415421009064},
+        "random": {"steps": 25, "reward": -17950.827898872838, "error": 17950.827898872838,
+                   "trace": 25090.8630278622, "obs_sum": 25.912256985902786},
+    },
+    "mrclam_relay": {
+        "paper": {"steps": 25, "reward": -1.4354103416799124, "error": 1.4354103416799122,
+                  "trace": 0.057701297776787661, "obs_sum": -4.1268091201782227},
+        "random": {"steps": 25, "reward": -1.3734166102313323, "error": 1.3734166102313321,
+                   "trace": 0.05865494495909393, "obs_sum": -4.0507316589355469},
+    },
+}
+
+PINNED_VECTOR = {
+    "bandwidth_fusion": {"reward": -21.77453984785825, "obs_sum": -79.099833246320486},
+    "lossy_fusion": {"reward": -42402.865634441376, "obs_sum": 67.235168360173702},
+    "relay_ukf": {"reward": -62.415704756975174, "obs_sum": 43.797087430953979},
+    "gps_denied_nbp": {"reward": -2632.9592549800873, "obs_sum": 91.455002918839455},
+    "nlos_horizon": {"reward": -834546.28728863597, "obs_sum": 233.06724616553402},
+    "mrclam_relay": {"reward": -0.73232610011473298, "obs_sum": -77.301276981830597},
+}
+
+PINNED_REPRODUCTION = {
+    "zhao2020_exact_J50_T1P1": 30.564674250432525,
+    "zhao2020_greedy_exact_J50": 27.972655455118463,
+    "zhao2020_paper_policy_costs_seeds0-3_sum": 107.08535205212901,
+    "fu2017_centralized_own_trace_sum_L2": 2038.8361504805816,
+    "fu2017_distributed_mse_L2_5runs_seed7": 192.6891521209501,
+    "wang2019_DCL_error_2runs_seed0_K100": 1.2267641113962275,
+    "wang2019_IL_error_2runs_seed0_K100": 1.5412870579730336,
+    "wan2014_paper_policy_costs_seeds0-1_sum": 10.415701635341382,
+    "wan2014_evaluate_point_dnbp_err_fault": 6.4800918732193233,
+    "gao2016_paper_policy_costs_seeds0-1_sum": 9.4594521472072284,
+}
+
+
+# --- the tests ---------------------------------------------------------------------------------
+def _assert_pinned(actual: dict, pinned: dict) -> None:
+    assert set(actual) == set(pinned)
+    for key, value in pinned.items():
+        if value is None or isinstance(value, int):
+            assert actual[key] == value, key
+        else:
+            assert actual[key] == pytest.approx(value, rel=REL, abs=ABS), key
+
+
+@pytest.mark.parametrize("name", coloc_env.SCENARIOS, ids=coloc_env.SCENARIOS)
+def test_seeded_rollout(name):
+    _needs_data(name)
+    for policy_name in ("paper", "random"):
+        _assert_pinned(seeded_rollout(name, policy_name), PINNED_ROLLOUTS[name][policy_name])
+
+
+@pytest.mark.parametrize("name", coloc_env.SCENARIOS, ids=coloc_env.SCENARIOS)
+def test_vector_env(name):
+    _needs_data(name)
+    _assert_pinned(vector_rollout(name), PINNED_VECTOR[name])
+
+
+@pytest.mark.parametrize("case", list(REPRODUCTION), ids=list(REPRODUCTION))
+def test_reproduction(case):
+    function, _kind = REPRODUCTION[case]
+    assert function() == pytest.approx(PINNED_REPRODUCTION[case], rel=REL, abs=ABS)
+
+
+def test_every_scenario_is_pinned():
+    assert set(PINNED_ROLLOUTS) == set(PINNED_VECTOR) == set(coloc_env.SCENARIOS) == set(OVERRIDES)
+    assert set(PINNED_REPRODUCTION) == set(REPRODUCTION)
+
+
+# --- re-pinning: print the current values as the literals above ----------------------------------
+def _literal(value, indent: int = 0) -> str:
+    """``value`` as a Python literal, floats with 17 significant digits, dicts wrapped at 120 columns."""
+    if isinstance(value, float):
+        return f"{value:.17g}"
+    if isinstance(value, dict):
+        lines, line = [], "{"
+        for k, v in value.items():
+            item = f'"{k}": {_literal(v)}, '
+            if len(line) + len(item) + indent > 118:
+                lines.append(line.rstrip())
+                line = " " * (indent + 1)
+            line += item
+        return "\n".join([*lines, line[:-2] + "}"])
+    return repr(value)
+
+
+def _print_pins() -> None:
+    have_data = os.path.isdir(DATASET6)
+    print("PINNED_ROLLOUTS = {")
+    for name in coloc_env.SCENARIOS:
+        if name == "mrclam_relay" and not have_data:
+            print(f"    # {name}: no data at {DATASET6}")
+            continue
+        print(f'    "{name}": {{')
+        for policy_name in ("paper", "random"):
+            head = f'        "{policy_name}": '
+            print(f"{head}{_literal(seeded_rollout(name, policy_name), len(head))},")
+        print("    },")
+    print("}\n\nPINNED_VECTOR = {")
+    for name in coloc_env.SCENARIOS:
+        if name == "mrclam_relay" and not have_data:
+            continue
+        head = f'    "{name}": '
+        print(f"{head}{_literal(vector_rollout(name), len(head))},")
+    print("}\n\nPINNED_REPRODUCTION = {")
+    for case, (function, _kind) in REPRODUCTION.items():
+        print(f'    "{case}": {_literal(function())},')
+    print("}")
+
+
+if __name__ == "__main__":
+    _print_pins()
