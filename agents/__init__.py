@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import inspect
 
-from agents import bandwidth_fusion, gps_denied_nbp, lossy_fusion, mrclam_relay, nlos_horizon, relay_ukf
+from agents import bandwidth_fusion, generic, gps_denied_nbp, lossy_fusion, mrclam_relay, nlos_horizon, relay_ukf
 from agents.base import FixedActionPolicy, Policy, RandomPolicy
 
 SCENARIO_POLICIES = {"bandwidth_fusion": bandwidth_fusion.POLICIES, "lossy_fusion": lossy_fusion.POLICIES,
@@ -18,7 +18,10 @@ SCENARIO_POLICIES = {"bandwidth_fusion": bandwidth_fusion.POLICIES, "lossy_fusio
 
 
 def available_policies(scenario: str) -> list[str]:
-    return ["random", *SCENARIO_POLICIES.get(scenario, {})]
+    """Policy names for a preset, or for a composition's name ``world/network/backend``."""
+    if scenario in SCENARIO_POLICIES:
+        return ["random", *SCENARIO_POLICIES[scenario]]
+    return ["random", *generic.POLICIES]
 
 
 def make_policy(name: str, env, seed: int | None = None, **kwargs) -> Policy:
@@ -32,7 +35,7 @@ def make_policy(name: str, env, seed: int | None = None, **kwargs) -> Policy:
     if name == "random":
         return RandomPolicy(env, seed=seed)
     base, _, variant = name.partition(":")
-    table = SCENARIO_POLICIES.get(scenario, {})
+    table = SCENARIO_POLICIES.get(scenario, generic.POLICIES)
     if base not in table:
         raise ValueError(f"unknown policy {name!r} for {scenario}; available: {available_policies(scenario)} or a .zip")
     if variant:

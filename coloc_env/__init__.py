@@ -1,42 +1,76 @@
 """coloc_env: PettingZoo environments for communication-aware cooperative localization.
 
 >>> import coloc_env
->>> env = coloc_env.parallel_env("bandwidth_fusion")
+>>> env = coloc_env.parallel_env("bandwidth_fusion")                 # a preset (a paper scenario)
+>>> spec = coloc_env.compose(world="circles", network="relay", backend="ukf_dcl")
+>>> env = coloc_env.parallel_env(spec)                                # any compatible composition
 >>> observations, infos = env.reset(seed=0)
+
+``WORLDS``, ``NETWORKS`` and ``BACKENDS`` name the composable parts;
+``compatibility()`` says which combinations run and why the others do not;
+``PRESETS[name]`` is the Composition each scenario name stands for.
 """
 
 from __future__ import annotations
 
 from pettingzoo.utils.conversions import parallel_to_aec
 
+import coloc_env.backends as backends
+import coloc_env.networks as networks
+import coloc_env.worlds as worlds
+from coloc_env.composition import Composition, compatibility, compose
 from coloc_env.env import CoLocParallelEnv
+from coloc_env.parts import BACKENDS as _BACKENDS
+from coloc_env.parts import NETWORKS as _NETWORKS
+from coloc_env.parts import WORLDS as _WORLDS
+from coloc_env.presets import PRESETS
 from coloc_env.scenarios import REGISTRY
+from coloc_env.scenarios.composed import ComposedScenario
 
-SCENARIOS: tuple[str, ...] = tuple(REGISTRY)
+SCENARIOS: tuple[str, ...] = tuple(PRESETS)
+WORLDS: tuple[str, ...] = tuple(_WORLDS)
+NETWORKS: tuple[str, ...] = tuple(_NETWORKS)
+BACKENDS: tuple[str, ...] = tuple(_BACKENDS)
 
 
 def scenario_class(name: str):
     """The :class:`~coloc_env.scenarios.base.Scenario` subclass registered as ``name``."""
-    if name not in REGISTRY:
-        raise ValueError(f"unknown scenario {name!r}; available: {list(SCENARIOS)}")
+    if not isinstance(name, str) or name not in REGISTRY:
+        raise ValueError(f"unknown scenario {name!r}; available: {list(SCENARIOS)} (or a coloc_env.compose(...))")
     return REGISTRY[name]
 
 
-def parallel_env(name: str, render_mode: str | None = None, **config) -> CoLocParallelEnv:
-    """The PettingZoo ``ParallelEnv`` of scenario ``name``; ``config`` = the scenario's dataclass fields."""
-    return CoLocParallelEnv(scenario_class(name), render_mode=render_mode, **config)
+def _spec(name_or_spec, config: dict):
+    """(scenario class, composition or None) for a preset name or a Composition."""
+    if isinstance(name_or_spec, Composition):
+        if name_or_spec.preset is not None:
+            return scenario_class(name_or_spec.preset), None, {**dict(name_or_spec.preset_config), **config}
+        if config:
+            raise ValueError(f"a Composition takes no keywords here, got {sorted(config)}; set a part's field in "
+                             "compose(world={'name': ..., field: value}, ...)")
+        return ComposedScenario, name_or_spec, {}
+    return scenario_class(name_or_spec), None, config
 
 
-def vector_env(name: str, num_envs: int = 1, seed: int | None = None, **config):
+def parallel_env(name, render_mode: str | None = None, **config) -> CoLocParallelEnv:
+    """The PettingZoo ``ParallelEnv`` of a preset name (``config`` = its dataclass fields) or a Composition."""
+    cls, spec, config = _spec(name, config)
+    return CoLocParallelEnv(cls, render_mode=render_mode, composition=spec, **config)
+
+
+def vector_env(name, num_envs: int = 1, seed: int | None = None, **config):
     """An SB3 ``VecEnv`` of ``num_envs`` copies x N agents in one batched core (see :mod:`coloc_env.vector`)."""
     from coloc_env.vector import CoLocVecEnv
 
-    return CoLocVecEnv(scenario_class(name), num_envs=num_envs, seed=seed, **config)
+    cls, spec, config = _spec(name, config)
+    return CoLocVecEnv(cls, num_envs=num_envs, seed=seed, composition=spec, **config)
 
 
-def env(name: str, render_mode: str | None = None, **config):
+def env(name, render_mode: str | None = None, **config):
     """The AEC view of :func:`parallel_env` (``pettingzoo.utils.parallel_to_aec``)."""
     return parallel_to_aec(parallel_env(name, render_mode=render_mode, **config))
 
 
-__all__ = ["SCENARIOS", "CoLocParallelEnv", "env", "parallel_env", "scenario_class", "vector_env"]
+__all__ = ["BACKENDS", "NETWORKS", "PRESETS", "SCENARIOS", "WORLDS", "CoLocParallelEnv", "Composition",
+           "backends", "compatibility", "compose", "env", "networks", "parallel_env", "scenario_class",
+           "vector_env", "worlds"]

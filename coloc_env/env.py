@@ -22,9 +22,12 @@ class CoLocParallelEnv(ParallelEnv):
 
     metadata = {"render_modes": [None, "rgb_array", "human"], "is_parallelizable": True, "render_fps": 5}
 
-    def __init__(self, scenario_cls: type[Scenario], render_mode: str | None = None, **config):
-        self.scenario = scenario_cls(build_config(scenario_cls.Config, config), batch=1)
-        self.metadata = dict(self.metadata, name=scenario_cls.name)
+    def __init__(self, scenario_cls: type[Scenario], render_mode: str | None = None, *, composition=None, **config):
+        if composition is not None:  # a composition's scenario validates its own config
+            self.scenario = scenario_cls(composition, batch=1)
+        else:
+            self.scenario = scenario_cls(build_config(scenario_cls.Config, config), batch=1)
+        self.metadata = dict(self.metadata, name=self.scenario.name)
         self._renderer = Renderer(render_mode)
         self.render_mode = render_mode
         self.possible_agents = self.scenario.agent_names

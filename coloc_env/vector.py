@@ -35,10 +35,13 @@ class CoLocVecEnv(VecEnv):
     """B copies x N agents of ``scenario_cls`` as ``B * N`` SB3 sub-envs."""
 
     def __init__(self, scenario_cls: type[Scenario], num_envs: int, seed: int | None = None,
-                 render_mode: str | None = None, **config):
-        if not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
+                 render_mode: str | None = None, *, composition=None, **config):
+        if not isinstance(num_envs, (int, np.integer)) or isinstance(num_envs, bool) or num_envs < 1:
             raise ValueError(f"num_envs must be a positive integer (copies of the scenario), got {num_envs!r}")
-        self.scenario = scenario_cls(build_config(scenario_cls.Config, config), batch=int(num_envs))
+        if composition is not None:
+            self.scenario = scenario_cls(composition, batch=int(num_envs))
+        else:
+            self.scenario = scenario_cls(build_config(scenario_cls.Config, config), batch=int(num_envs))
         self.num_copies = int(num_envs)
         self.num_agents = self.scenario.num_agents
         self.render_mode = render_mode

@@ -1,4 +1,4 @@
-"""The ``coloc`` command line: reproduce | train | evaluate | bench."""
+"""The ``coloc`` command line: reproduce | train | evaluate | bench | list."""
 
 from __future__ import annotations
 
@@ -73,6 +73,8 @@ def build_parser() -> argparse.ArgumentParser:
     be.add_argument("--quick", action="store_true")
     be.add_argument("--out", default="results")
     be.add_argument("--scenarios", nargs="+", default=None, help="only these scenarios (default: all)")
+
+    sub.add_parser("list", help="worlds, networks, backends, presets and the compatibility table")
     return parser
 
 
@@ -178,9 +180,31 @@ def cmd_bench(args) -> int:
     return 0
 
 
+def cmd_list(args) -> int:
+    """Print the parts, the presets and one line per (world, network, backend): ok, or why not."""
+    import coloc_env
+
+    print("worlds:   " + ", ".join(coloc_env.WORLDS))
+    print("networks: " + ", ".join(coloc_env.NETWORKS))
+    print("backends: " + ", ".join(coloc_env.BACKENDS))
+    print("presets:")
+    for name, spec in coloc_env.PRESETS.items():
+        parts = [getattr(spec, part).name if getattr(spec, part) is not None else "(binding only)"
+                 for part in ("world", "network", "backend")]
+        print(f"  {name:<18} {' / '.join(parts)}")
+    rows = coloc_env.compatibility()
+    print(f"compositions ({sum(r['ok'] for r in rows)} of {len(rows)} compatible):")
+    width = max(len(f"{r['world']}/{r['network']}/{r['backend']}") for r in rows)
+    for r in rows:
+        label = f"{r['world']}/{r['network']}/{r['backend']}"
+        print(f"  {label:<{width}}  {'ok' if r['ok'] else 'no: ' + r['reason']}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    handlers = {"reproduce": cmd_reproduce, "train": cmd_train, "evaluate": cmd_evaluate, "bench": cmd_bench}
+    handlers = {"reproduce": cmd_reproduce, "train": cmd_train, "evaluate": cmd_evaluate, "bench": cmd_bench,
+                "list": cmd_list}
     try:
         return handlers[args.command](args)
     except ValueError as exc:

@@ -207,3 +207,17 @@ def test_all_skips_a_scenario_whose_data_is_missing(monkeypatch, capsys):
     names = _runnable_scenarios(Console())
     assert "mrclam_relay" not in names and set(names) == set(coloc_env.SCENARIOS) - {"mrclam_relay"}
     assert "mrclam_relay: skipped (data" in capsys.readouterr().out
+
+
+def test_list_prints_every_composition_with_its_verdict(capsys):
+    import coloc_env
+    from train.cli import main
+
+    assert main(["list"]) == 0
+    out = capsys.readouterr().out
+    rows = coloc_env.compatibility()
+    assert f"compositions ({sum(r['ok'] for r in rows)} of {len(rows)} compatible)" in out
+    for r in rows:
+        verdict = "ok" if r["ok"] else "no: " + r["reason"]
+        assert f"{r['world']}/{r['network']}/{r['backend']}" in out and verdict in out
+    assert "relay_ukf          circles / relay / ukf_dcl" in out

@@ -1,0 +1,91 @@
+"""The backend of a composition: one adapter per estimator of :mod:`estimators`.
+
+A backend's config class declares what it needs, so that :func:`coloc_env.compatibility`
+can say in words why a combination cannot run:
+
+| attribute          | meaning                                                                   |
+|--------------------|---------------------------------------------------------------------------|
+| estimand           | ``"self"`` (each agent's own position) or ``"target"`` (a shared state)   |
+| motion_kinds       | the :mod:`estimators.models` kinds it can run on                          |
+| requires           | groups of measurement kinds; the world must offer one kind of each group  |
+| message_kind       | what it sends over the network (:mod:`coloc_env.networks.base`)            |
+
+At each step the composition hands it the world's :class:`~coloc_env.worlds.base.Readings`
+of time k and the decoded backend decisions; the backend updates (asking the
+network for every delivery), keeps the posterior of time k (what the infos
+report), then predicts to k + 1 with the readings' inputs.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from coloc_env.parts import Block
+
+
+class Backend:
+    """Runtime of one backend for B copies; its config class carries the declarations above."""
+
+    def __init__(self, config, world, network, batch: int):
+        self.config = config
+        self.world = world
+        self.network = network
+        self.batch = int(batch)
+        self.num_agents = world.num_agents
+        B, N = self.batch, self.num_agents
+        self.posterior_position = np.zeros((B, N, 2))
+        self.posterior_position_cov: np.ndarray | None = None
+
+    def decision_blocks(self) -> list[Block]:
+        return []
+
+    def reset(self, rngs, idx: np.ndarray) -> None:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def step(self, readings, decisions: np.ndarray) -> None:
+        self.update(readings, decisions)
+        self.posterior_position = self.position().copy()
+        cov = self.position_cov()
+        self.posterior_position_cov = None if cov is None else cov.copy()
+        self.predict(readings.inputs)
+
+    def update(self, readings, decisions: np.ndarray) -> None:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def predict(self, inputs: np.ndarray) -> None:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def position(self) -> np.ndarray:  # pragma: no cover - interface
+        """Current position estimates (B, N, 2)."""
+        raise NotImplementedError
+
+    def position_cov(self) -> np.ndarray | None:
+        """Current per-agent position covariance (B, N, 2, 2); None where the backend has none."""
+        return None
+
+    def observation_features(self) -> np.ndarray:
+        return np.zeros((self.batch, self.num_agents, 0))
+
+    def feature_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        return np.zeros(0), np.zeros(0)
+
+    def particles(self, b: int) -> np.ndarray | None:
+        return None
+
+
+def position_blocks(cov: np.ndarray, num_agents: int, d: int) -> np.ndarray:
+    """The (B, N, 2, 2) position blocks of a joint covariance (B, N d, N d) with positions first in each block."""
+    B = cov.shape[0]
+    blocks = cov.reshape(B, num_agents, d, num_agents, d)
+    idx = np.arange(num_agents)
+    return blocks[:, idx, :2, idx, :2].transpose(1, 0, 2, 3)
+
+
+def measurement_list(valid: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Valid (B, N, N) -> per copy the j-th valid (m, n) pair in row-major order: (count (B,), m (B, J), n (B, J))."""
+    B, N = valid.shape[:2]
+    flat = valid.reshape(B, N * N)
+    count = flat.sum(axis=1)
+    J = int(count.max()) if B else 0
+    order = np.argsort(~flat, axis=1, kind="stable")[:, :J]
+    return count, order // N, order % N

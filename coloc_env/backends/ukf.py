@@ -1,0 +1,187 @@
+"""Backends ``ukf_ccl`` and ``ukf_dcl`` (wang2019): the joint UKF, centralized or over relay chains.
+
+Both keep the joint Gaussian of every agent's state (:mod:`estimators.ukf_relay`;
+the joint covariance array stands for the platforms' rows in the distributed
+filter). Time update: :func:`estimators.models.predict_joint` on the world's
+motion model. Measurement updates, in a fixed order (ranges in row-major order
+of (measuring, measured), then position fixes by agent):
+
+* a range m -> n: **ukf_ccl** sends it from m to the fusion centre (agent 0,
+  message kind ``central``); if it arrives, the centre applies the UKF-CCL
+  update (eqs. 5-12, 17). **ukf_dcl** starts a relay chain m -> n -> ... on
+  the network (kind ``chain``); if n is reached, the UKF-DCL update runs
+  along the chain (Algorithms 1-2) and the platforms not reached keep their
+  estimates (``truncation``: the consistent cross-covariance rule by default,
+  the paper's rule on request).
+* a position fix of agent i (an anchor, a normal GPS): a linear update of the
+  joint state (:func:`estimators.kalman.joseph_update`). ukf_ccl sends it to
+  the centre; ukf_dcl relays its location information from i like a range's,
+  and only the reached platforms update (the gain of the others is zero, the
+  Joseph form keeps P the true covariance).
+
+Over ``ideal`` every chain reaches everyone and every message the centre, so
+ukf_dcl equals ukf_ccl (to rounding; the tests check 1e-9).
+
+A lost or late update is skipped (nothing is buffered). ``ukf_ccl``'s agents
+read their estimates at the centre (the return path is not charged).
+
+| quantity      | value                                                                  |
+|---------------|------------------------------------------------------------------------|
+| estimand      | self                                                                   |
+| motion kinds  | ``odometry_displacement`` (the position-only state of wang2019)        |
+| needs         | ``range``                                                              |
+| messages      | ukf_ccl: ``central`` (a range 1 float, a fix 2); ukf_dcl: ``chain`` (below)          |
+
+A ukf_dcl hop h carries S_m (10 floats) and the A_i row blocks and Pxz^i of
+the r = h + 1 platforms reached so far: 10 + 5 r + 2 r (r - 1) floats.
+| decisions     | none                                                                   |
+
+Arguments (``coloc_env.backends.UkfCcl`` / ``UkfDcl``)
+
+| field       | default      | allowed                                           |
+|-------------|--------------|---------------------------------------------------|
+| ukf_lambda  | 0.0          | > -2N (the paper gives none; 0 = filterpy's)      |
+| truncation  | "consistent" | ukf_dcl only: "consistent", "paper"               |
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+import estimators.ukf_relay as ukf
+from coloc_env.backends.base import Backend, measurement_list, position_blocks
+from coloc_env.networks.base import CENTRE
+from coloc_env.parts import BACKENDS, PartConfig, check_choice, check_range
+from estimators.kalman import joseph_update
+from estimators.models import predict_joint
+
+
+def _dcl_floats(hop: int) -> float:
+    r = hop + 1
+    return 10 + 5 * r + 2 * r * (r - 1)
+
+
+@BACKENDS.register
+@dataclass(frozen=True)
+class UkfCcl(PartConfig):
+    name = "ukf_ccl"
+    estimand = "self"
+    motion_kinds = frozenset({"odometry_displacement"})
+    requires = (frozenset({"range"}),)
+    message_kind = "central"
+    ukf_lambda: float = 0.0
+
+    def check(self, prefix: str) -> None:
+        check_range(f"{prefix}ukf_lambda", self.ukf_lambda, -2.0, 1e6, low_open=True)
+
+    def build(self, world, network, batch: int) -> Backend:
+        return JointUkfBackend(self, world, network, batch, distributed=False)
+
+
+@BACKENDS.register
+@dataclass(frozen=True)
+class UkfDcl(PartConfig):
+    name = "ukf_dcl"
+    estimand = "self"
+    motion_kinds = frozenset({"odometry_displacement"})
+    requires = (frozenset({"range"}),)
+    message_kind = "chain"
+    ukf_lambda: float = 0.0
+    truncation: str = "consistent"
+
+    def check(self, prefix: str) -> None:
+        check_range(f"{prefix}ukf_lambda", self.ukf_lambda, -2.0, 1e6, low_open=True)
+        check_choice(f"{prefix}truncation", self.truncation, ("consistent", "paper"))
+
+    def build(self, world, network, batch: int) -> Backend:
+        return JointUkfBackend(self, world, network, batch, distributed=True)
+
+
+class JointUkfBackend(Backend):
+    def __init__(self, config, world, network, batch, distributed: bool):
+        super().__init__(config, world, network, batch)
+        self.distributed = distributed
+        N = self.num_agents
+        if config.ukf_lambda <= -2 * N:
+            raise ValueError(f"backend.ukf_lambda must be > -2N = {-2 * N}, got {config.ukf_lambda!r}")
+        self.mean = np.zeros((self.batch, N, 2))
+        self.cov = np.zeros((self.batch, 2 * N, 2 * N))
+
+    def reset(self, rngs, idx) -> None:
+        mean, cov = self.world.initial_belief()
+        N = self.num_agents
+        self.mean[idx] = mean[idx]
+        joint = np.zeros((len(idx), 2 * N, 2 * N))
+        for i in range(N):
+            joint[:, 2 * i:2 * i + 2, 2 * i:2 * i + 2] = cov[idx, i]
+        self.cov[idx] = joint
+        self.posterior_position[idx] = mean[idx]
+
+    def _to_centre(self, senders: np.ndarray, floats: float, slot: int) -> np.ndarray:
+        """(B,) bool: the message of ``senders`` (B,) reached the centre (the centre's own is local)."""
+        B, N = self.batch, self.num_agents
+        rows = np.arange(B)
+        remote = senders >= 0
+        one_hot = np.zeros((B, N), dtype=bool)
+        one_hot[rows[remote], senders[remote]] = True
+        listening = np.zeros((B, N, N), dtype=bool)
+        listening[:, :, CENTRE] = True
+        delivered = self.network.broadcast(one_hot & (np.arange(N) != CENTRE), listening, floats, slot)
+        return remote & ((senders == CENTRE) | delivered[rows, np.maximum(senders, 0), CENTRE])
+
+    def update(self, readings, decisions) -> None:
+        B, N = self.batch, self.num_agents
+        rows = np.arange(B)
+        lam = self.config.ukf_lambda
+        count, m, n = measurement_list(readings.range_valid)
+        for j in range(m.shape[1]):
+            has = count > j
+            mj, nj = np.where(has, m[:, j], -1), n[:, j]
+            z = readings.range[rows, np.maximum(mj, 0), nj]
+            if self.distributed:
+                chain = self.network.relay(mj, np.where(has, nj, -1), _dcl_floats, slot=j)
+                used = np.flatnonzero(has & (chain.length >= 2))
+                if len(used):
+                    self.mean[used], self.cov[used] = ukf.dcl_update(
+                        self.mean[used], self.cov[used], chain.chain[used], chain.length[used], z[used],
+                        self.world.range_noise_var(), lam, self.config.truncation)
+            else:
+                used = np.flatnonzero(self._to_centre(mj, 1.0, slot=j))
+                if len(used):
+                    self.mean[used], self.cov[used] = ukf.ccl_update(
+                        self.mean[used], self.cov[used], mj[used], nj[used], z[used],
+                        self.world.range_noise_var(), lam)
+        if readings.fix_valid.any():
+            R = self.world.fix_noise_var() * np.eye(2)
+            for i in range(N):
+                has = readings.fix_valid[:, i]
+                if not has.any():
+                    continue
+                source = np.where(has, i, -1)
+                if self.distributed:
+                    chain = self.network.relay(source, np.full(B, -1), _dcl_floats, slot=N * N + i)
+                    reached = np.zeros((B, N), dtype=bool)
+                    valid_c, valid_p = np.nonzero(chain.chain >= 0)
+                    reached[valid_c, chain.chain[valid_c, valid_p]] = True
+                    used = np.flatnonzero(has)
+                    keep = np.repeat(reached[used], 2, axis=-1)
+                else:
+                    used = np.flatnonzero(self._to_centre(source, 2.0, slot=N * N + i))
+                    keep = None
+                if len(used):
+                    H = np.zeros((2, 2 * N))
+                    H[:, 2 * i:2 * i + 2] = np.eye(2)
+                    flat, cov = joseph_update(self.mean[used].reshape(len(used), 2 * N), self.cov[used], H,
+                                              readings.fix[used, i], R, keep)
+                    self.mean[used], self.cov[used] = flat.reshape(len(used), N, 2), cov
+
+    def predict(self, inputs) -> None:
+        self.mean, self.cov = predict_joint(self.world.motion_model, self.mean, self.cov, inputs)
+
+    def position(self) -> np.ndarray:
+        return self.mean
+
+    def position_cov(self) -> np.ndarray:
+        return position_blocks(self.cov, self.num_agents, 2)

@@ -1,0 +1,118 @@
+"""Compositions: a world, a network and a backend combined into one environment.
+
+>>> import coloc_env
+>>> spec = coloc_env.compose(world="circles", network="relay", backend="ukf_dcl")
+>>> env = coloc_env.parallel_env(spec)
+
+A part is a name (its defaults), its validated config object
+(``coloc_env.worlds.Circles(num_agents=4)``) or a dict ``{"name": ..., field:
+value}``. The other keywords are composition-level:
+
+| option              | default   | meaning                                                              |
+|---------------------|-----------|----------------------------------------------------------------------|
+| reward              | "error"   | "error": minus the agent's own position error (m) after this step's |
+|                     |           | update; "trace": minus sqrt(tr P_ii) (m), the backend's own RMS      |
+| communication_cost  | 0.0       | >= 0, subtracted per message the agent sent this step                |
+| horizon             | None      | steps per episode; None = the world's                                |
+
+A :class:`Composition` is frozen and picklable (it travels to Ray workers)
+and builds nothing until an env is made. A preset (``PRESETS[name]``) is a
+Composition that also names the scenario binding whose action codec and
+observation it carries (:attr:`Composition.preset`) and its flat config
+(:attr:`Composition.preset_config`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any
+
+from coloc_env.config import check_choice, check_range
+from coloc_env.parts import BACKENDS, NETWORKS, WORLDS, PartConfig
+
+COMPOSITION_OPTIONS = ("reward", "communication_cost", "horizon")
+
+
+@dataclass(frozen=True)
+class Composition:
+    """A validated (world, network, backend) triple plus composition-level options."""
+
+    world: PartConfig
+    network: PartConfig
+    backend: PartConfig
+    reward: str = "error"
+    communication_cost: float = 0.0
+    horizon: int | None = None
+    preset: str | None = None
+    preset_config: tuple = field(default=(), compare=True)
+
+    def validate(self) -> None:
+        for part in (self.world, self.network, self.backend):
+            part.validate()
+        check_choice("reward", self.reward, ("error", "trace"))
+        check_range("communication_cost", self.communication_cost, 0.0, 1e12)
+        if self.horizon is not None:
+            check_range("horizon", self.horizon, 1, 1_000_000, integer=True)
+        reason = incompatibility(self.world, self.network, self.backend)
+        if reason:
+            raise ValueError(reason)
+
+    @property
+    def name(self) -> str:
+        return self.preset or f"{self.world.name}/{self.network.name}/{self.backend.name}"
+
+    @property
+    def episode_steps(self) -> int:
+        return self.world.horizon if self.horizon is None else self.horizon
+
+    def replace(self, **changes) -> Composition:
+        new = dataclasses.replace(self, **changes)
+        new.validate()
+        return new
+
+
+def compose(world: Any, network: Any, backend: Any, **options) -> Composition:
+    """A :class:`Composition` of the three parts; ``options`` are composition-level fields only."""
+    unknown = sorted(set(options) - set(COMPOSITION_OPTIONS))
+    if unknown:
+        raise ValueError(f"unknown composition option(s) {unknown}; allowed: {list(COMPOSITION_OPTIONS)} "
+                         "(a part's own field goes into that part: {'name': ..., field: value})")
+    spec = Composition(world=WORLDS.resolve(world), network=NETWORKS.resolve(network),
+                       backend=BACKENDS.resolve(backend), **options)
+    spec.validate()
+    return spec
+
+
+def _kinds(kinds) -> str:
+    return " or ".join(sorted(kinds))
+
+
+def incompatibility(world: PartConfig, network: PartConfig, backend: PartConfig) -> str:
+    """Why the three cannot run together, in words; "" when they can."""
+    if world.estimand != backend.estimand:
+        what = {"self": "each agent's own position", "target": "a shared target state"}
+        return (f"{backend.name} estimates {what[backend.estimand]}; world {world.name} asks for "
+                f"{what[world.estimand]}")
+    if world.motion_kind not in backend.motion_kinds:
+        return (f"{backend.name} runs on {_kinds(backend.motion_kinds)} motion; world {world.name} moves by "
+                f"{world.motion_kind}")
+    for group in backend.requires:
+        if not group & world.measurements:
+            return (f"{backend.name} needs {_kinds(group)} measurements; world {world.name} has "
+                    f"{_kinds(world.measurements) or 'none'}")
+    if backend.message_kind != "none" and backend.message_kind not in network.carries:
+        return f"{backend.name} sends {backend.message_kind} messages; network {network.name} cannot carry them"
+    return ""
+
+
+def compatibility() -> list[dict[str, Any]]:
+    """One row per (world, network, backend) of the registries: ``world``, ``network``, ``backend``, ``ok``,
+    ``reason`` ("" where ok), on each part's defaults."""
+    rows = []
+    for w, wcls in WORLDS.items():
+        for n, ncls in NETWORKS.items():
+            for b, bcls in BACKENDS.items():
+                reason = incompatibility(wcls(), ncls(), bcls())
+                rows.append({"world": w, "network": n, "backend": b, "ok": not reason, "reason": reason})
+    return rows

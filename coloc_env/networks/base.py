@@ -1,0 +1,179 @@
+"""The network of a composition: who can send what to whom, what arrives, and what it cost.
+
+A backend never decides delivery: it asks its network. Three message patterns
+(a backend's *message kind*) cover the papers:
+
+| kind        | what moves                                                        | network call           |
+|-------------|-------------------------------------------------------------------|------------------------|
+| ``none``    | nothing (dead reckoning)                                          | -                      |
+| ``broadcast`` | one transmission per sender and round, heard by its neighbours (dNBP) | :meth:`Network.broadcast` |
+| ``chain``   | a measurement's location information relayed holder to holder (UKF-DCL) | :meth:`Network.relay`  |
+| ``central`` | each measurement sent to the fusion centre, agent 0 (UKF-CCL)     | ``broadcast`` to agent 0 |
+
+Every network accounts at the sender, in one unit for every backend: a
+*message* is one transmission (a broadcast heard by several neighbours is one
+message; each relay hop is one message) and *floats* are the numbers it
+carried (the backend states its payload). ``messages_sent`` and
+``floats_sent`` are per agent and step.
+
+Packet loss is drawn by :mod:`coloc_env.draws` from a key the network draws
+from its own generator at reset: the value for (step, round, sender,
+receiver) does not depend on the batch, so a copy equals itself run alone.
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import numpy as np
+
+from coloc_env.draws import draw_keys, uniforms
+from coloc_env.parts import Block
+from coloc_env.world.relay import RelayChain
+
+MESSAGE_KINDS = ("none", "broadcast", "chain", "central")
+CENTRE = 0  # the fusion centre of ``central`` backends
+
+
+class Network:
+    """Batched delivery and accounting; subclasses set the link rules (``usable``, ``loss``, decisions)."""
+
+    carries: ClassVar[frozenset] = frozenset(MESSAGE_KINDS)
+
+    def __init__(self, config, num_agents: int, batch: int, message_kind: str, rounds: int = 1):
+        self.config = config
+        self.num_agents = int(num_agents)
+        self.batch = int(batch)
+        self.message_kind = message_kind
+        self.rounds = int(rounds)
+        self.keys = np.zeros(self.batch, dtype=np.uint64)
+        B, N = self.batch, self.num_agents
+        self.messages_sent = np.zeros((B, N))
+        self.floats_sent = np.zeros((B, N))
+        self.delivered = np.zeros((B, N, N), dtype=bool)  # union over this step's rounds, for the renderer
+        self.last_chain: RelayChain | None = None
+        self._positions = np.zeros((B, N, 2))
+        self._decisions = np.zeros((B, N, 0), dtype=np.int64)
+        self._k = np.zeros(B, dtype=int)
+
+    # --- description ---------------------------------------------------------------------
+    def transport_blocks(self) -> list[Block]:
+        """The network's part of the action for this backend's message kind; none by default."""
+        return []
+
+    # --- rules (subclasses) -------------------------------------------------------------------
+    def usable(self, distance: np.ndarray) -> np.ndarray:
+        """Links that can carry a packet at this distance (range limit); all by default."""
+        return np.ones(np.shape(distance), dtype=bool)
+
+    def loss_probability(self, distance: np.ndarray) -> np.ndarray:
+        return np.zeros(np.shape(distance))
+
+    def max_hops(self) -> int:
+        return self.num_agents - 1
+
+    def transmits(self, round_index: int) -> np.ndarray:
+        """(B, N) bool: the agents' decision to transmit in this round (always, by default)."""
+        return np.ones((self.batch, self.num_agents), dtype=bool)
+
+    def next_hop_choice(self) -> np.ndarray | None:
+        """(B, N) the holders' relay choices (N = stop, N + 1 = nearest not yet reached); None = nearest first."""
+        return None
+
+    # --- per episode and step ------------------------------------------------------------------
+    def reset(self, rngs, idx: np.ndarray) -> None:
+        self.keys[idx] = draw_keys(rngs)
+
+    def begin(self, k: np.ndarray, positions: np.ndarray, decisions: np.ndarray) -> None:
+        """Start step k: the link state (true positions, which the radios sense) and the decisions."""
+        self._k = np.asarray(k)
+        self._positions = np.asarray(positions, float)
+        self._decisions = decisions
+        self.messages_sent = np.zeros_like(self.messages_sent)
+        self.floats_sent = np.zeros_like(self.floats_sent)
+        self.delivered = np.zeros_like(self.delivered)
+        self.last_chain = None
+
+    def distances(self) -> np.ndarray:
+        p = self._positions
+        return np.sqrt(np.sum((p[:, :, None, :] - p[:, None, :, :]) ** 2, axis=-1))
+
+    def broadcast(self, senders: np.ndarray, listening: np.ndarray, floats: float, slot: int = 0) -> np.ndarray:
+        """One round: senders (B, N) that want to transmit, listening (B, N, N) [t, s] = s takes t's message.
+
+        ``slot`` names the round within the step (0, 1, ... for a backend's iterations; any fixed
+        number for one-off messages): the loss draws depend on (step, slot), never on how many
+        calls the other copies of the batch made, and ``transmit`` decisions are read at ``slot``.
+        Returns delivered (B, N, N) [t, s]. The agents' transmit decision, the range limit and the
+        loss apply here; a sender whose transmission reaches nobody is not counted.
+        """
+        N = self.num_agents
+        distance = self.distances()
+        want = (np.asarray(senders, bool) & self.transmits(slot))[:, :, None] & np.asarray(listening, bool)
+        want &= ~np.eye(N, dtype=bool) & self.usable(distance)
+        u = uniforms(self.keys, (self._k, 0, slot), (N, N))
+        delivered = want & (u >= self.loss_probability(distance))
+        sent = delivered.any(axis=-1)
+        self.messages_sent += sent
+        self.floats_sent += floats * sent
+        self.delivered |= delivered
+        return delivered
+
+    def relay(self, source: np.ndarray, first: np.ndarray, floats_per_hop, slot: int = 0) -> RelayChain:
+        """Relay chains source -> first -> ... (B,), following the holders' choices (or nearest first).
+
+        ``first`` < 0: the first hop follows the source's choice too.
+        Stop reasons are those of :data:`coloc_env.world.relay.STOP_REASONS`. ``floats_per_hop(h)``
+        is the payload of hop h (0-based). A copy with ``source < 0`` has no chain. ``slot`` names the
+        chain within the step (see :meth:`broadcast`).
+        """
+        B, N = self.batch, self.num_agents
+        rows = np.arange(B)
+        source, first = np.asarray(source, int), np.asarray(first, int)
+        active = source >= 0
+        src = np.maximum(source, 0)
+        distance = self.distances()
+        choice = self.next_hop_choice()
+        u = uniforms(self.keys, (self._k, 1, slot), (N,))
+        chain = np.full((B, N), -1)
+        chain[active, 0] = src[active]
+        reached = np.zeros((B, N), dtype=bool)
+        reached[rows[active], src[active]] = True
+        length = active.astype(int)
+        hop_distance = np.full((B, max(N - 1, 1)), np.nan)
+        stop = np.where(active, 0, -1)
+        holder, going = src.copy(), active.copy()
+        limit = self.max_hops()
+        for hop in range(N - 1):
+            wish = np.full(B, N + 1) if choice is None else choice[rows, holder]
+            nearest = np.argmin(np.where(reached, np.inf, distance[rows, holder]), axis=-1)
+            target = np.where(wish == N + 1, nearest, wish)
+            if hop == 0:  # a range's chain goes to the measured platform first; a fix's follows the choice
+                target = np.where(first >= 0, first, target)
+            valid = (target >= 0) & (target < N) & (target != holder)
+            safe = np.where(valid, target, 0)
+            d = distance[rows, holder, safe]
+            reasons = [np.full(B, hop >= limit), ~valid, valid & reached[rows, safe], ~self.usable(d),
+                       u[:, hop] < self.loss_probability(d)]
+            failed = np.zeros(B, dtype=bool)
+            for code, condition in enumerate(reasons, start=1):
+                new = going & ~failed & condition
+                stop[new] = code
+                failed |= new
+            ok = going & ~failed
+            chain[ok, hop + 1] = target[ok]
+            reached[rows[ok], target[ok]] = True
+            hop_distance[ok, hop] = d[ok]
+            self.messages_sent[rows[ok], holder[ok]] += 1
+            self.floats_sent[rows[ok], holder[ok]] += floats_per_hop(hop)
+            self.delivered[rows[ok], holder[ok], target[ok]] = True
+            length += ok
+            holder = np.where(ok, target, holder)
+            going = ok
+        stop[(length == N) & active] = 0
+        self.last_chain = RelayChain(chain=chain, length=length, hop_distance=hop_distance, stop=stop)
+        return self.last_chain
+
+    def observation_features(self) -> np.ndarray:
+        """(B, N, f) the link state each agent senses; none by default."""
+        return np.zeros((self.batch, self.num_agents, 0))

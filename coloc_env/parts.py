@@ -1,0 +1,126 @@
+"""The three kinds of composable part (world, network, backend): configs, registries, action blocks.
+
+A part is described by a frozen config dataclass (its defaults, its
+validation) and built into a batched runtime object when an env is made. A
+config names its registry entry with the class attribute ``name`` and its
+kind with ``kind``; ``validate()`` raises ``ValueError`` naming the part and
+field, ``network.loss_at_zero must be in [0, 1], got 1.5``.
+
+An agent's action in a composition is the concatenation of *blocks*, in the
+order world (sensing choices), network (transport decisions), backend
+(estimator decisions). A block is ``Block(name, size, choices)``: ``size``
+integers in ``[0, choices)`` (a discrete block) or, with ``choices=None``,
+``size`` floats in ``[low, high]`` (a continuous block).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+
+from coloc_env.config import check_choice, check_range
+
+
+@dataclass(frozen=True)
+class Block:
+    """One named block of the action vector: ``size`` entries, each an integer in ``[0, choices)`` or,
+    with ``choices`` None, a float in ``[low, high]``. ``default`` is the backend's or network's
+    default decision (used by the generic ``always`` / ``silent`` policies); ``maximum`` the value
+    that sends the most (``always``), ``minimum`` the one that sends nothing (``silent``)."""
+
+    name: str
+    size: int
+    choices: int | None
+    meaning: str
+    low: float = 0.0
+    high: float = 1.0
+    default: float | None = None
+    maximum: float | None = None
+    minimum: float | None = None
+
+    @property
+    def discrete(self) -> bool:
+        return self.choices is not None
+
+
+class PartConfig:
+    """Base of every part config (a frozen dataclass). Subclasses set ``name`` and ``kind``."""
+
+    name: ClassVar[str]
+    kind: ClassVar[str]  # "world", "network" or "backend"
+
+    def check(self, prefix: str) -> None:  # pragma: no cover - interface
+        """Raise ``ValueError`` naming ``prefix + field`` for a bad value."""
+
+    def validate(self) -> None:
+        self.check(f"{self.kind}.")
+
+    def replace(self, **changes) -> PartConfig:
+        """A validated copy with ``changes`` (unknown fields are a ``ValueError`` naming the part)."""
+        return make_config(type(self), {**dataclasses.asdict(self), **changes}, self.kind)
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"name": self.name, **dataclasses.asdict(self)}
+
+
+def make_config(cls: type, fields: dict[str, Any], kind: str) -> PartConfig:
+    """``cls(**fields)`` after refusing unknown fields, then validated."""
+    allowed = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(fields) - allowed)
+    if unknown:
+        raise ValueError(f"unknown {kind} field(s) {unknown} for {kind} {cls.name!r}; allowed: {sorted(allowed)}")
+    config = cls(**fields)
+    config.validate()
+    return config
+
+
+class Registry(dict):
+    """Name -> config class of one kind of part, filled by the ``register`` decorator."""
+
+    def __init__(self, kind: str):
+        super().__init__()
+        self.kind = kind
+
+    def register(self, cls: type) -> type:
+        if cls.name in self:
+            raise ValueError(f"{self.kind} {cls.name!r} registered twice")
+        cls.kind = self.kind
+        self[cls.name] = cls
+        return cls
+
+    def resolve(self, part: Any) -> PartConfig:
+        """A validated config from a name, a config object or a dict ``{"name": ..., field: value}``."""
+        if isinstance(part, str):
+            return make_config(self._class(part), {}, self.kind)
+        if isinstance(part, dict):
+            fields = dict(part)
+            if "name" not in fields:
+                raise ValueError(f"a {self.kind} given as a dict needs a 'name' key, one of {sorted(self)}")
+            return make_config(self._class(fields.pop("name")), fields, self.kind)
+        if isinstance(part, PartConfig) and getattr(part, "kind", None) == self.kind:
+            part.validate()
+            return part
+        raise ValueError(f"{self.kind} must be a name (one of {sorted(self)}), a {self.kind} config or a dict, "
+                         f"got {part!r}")
+
+    def _class(self, name: Any) -> type:
+        if not isinstance(name, str) or name not in self:
+            raise ValueError(f"unknown {self.kind} {name!r}; available: {sorted(self)}")
+        return self[name]
+
+
+WORLDS = Registry("world")
+NETWORKS = Registry("network")
+BACKENDS = Registry("backend")
+
+
+def check_flag(name: str, value: Any) -> None:
+    if not isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"{name} must be True or False, got {value!r}")
+
+
+__all__ = ["BACKENDS", "NETWORKS", "WORLDS", "Block", "PartConfig", "Registry", "check_choice", "check_flag",
+           "check_range", "make_config"]

@@ -1,0 +1,275 @@
+"""The scenario of any composition: world, network and backend stepped as one batched core.
+
+Built by ``coloc_env.parallel_env(coloc_env.compose(world=..., network=..., backend=...))``.
+Every agent is the same: its action concatenates the world's sensing blocks,
+the network's transport blocks and the backend's decision blocks (each part's
+module documents its blocks); its observation is what it can know locally.
+
+Step k: the world reports the readings of time k (given the sensing choices);
+the network takes the link state of time k (the radios sense true distances)
+and the transport decisions; the backend updates its estimates of time k,
+asking the network for every delivery, then predicts to k + 1; the world
+moves to k + 1. The infos report time k's truth and the posterior of k.
+
+Action (per agent, the blocks in order world, network, backend)
+---------------------------------------------------------------
+``MultiDiscrete(choices of every entry)`` when every block is discrete, else a
+``Box`` whose discrete entries decode by rounding. A value outside its block's
+range, a non-integer in a MultiDiscrete, NaN or inf is a ``ValueError`` naming
+the block.
+
+Observation (per agent, ``Box(float32)``)
+------------------------------------------
+| index             | meaning                                                        | bounds      |
+|-------------------|----------------------------------------------------------------|-------------|
+| ``[0, N)``        | one-hot of the agent's own index                               | [0, 1]      |
+| ``[N]``           | log tr P_ii of its own position estimate (m^2), clipped; 0 without a covariance | [-50, 50] |
+| ``[N+1, 2N+1)``   | 1 for each agent it received a message from last step           | [0, 1]      |
+| ``[2N+1, 3N+1)``  | distance to each agent / 100 m (link-layer knowledge), 0 itself | [0, inf)    |
+| ``[3N+1]``        | step fraction k / horizon                                      | [0, 1]      |
+| then              | the world's features, then the backend's                       | their own   |
+
+Reward (per agent, its own estimate)
+------------------------------------
+``reward="error"``: minus its position error (m) at time k after the update;
+``"trace"``: minus sqrt(tr P_ii) (m), the backend's own RMS error where it has a
+covariance (else the realized error); both minus ``communication_cost`` per
+message it sent this step.
+
+Termination: none; truncation after ``horizon`` steps.
+
+``infos[agent]``: ``true_position``, ``estimated_position`` (posterior of k),
+``position_error`` (m), ``error`` (the reward's error term, m), ``trace`` (m^2,
+nan without a covariance), ``messages_sent``, ``floats_sent``,
+``communication`` (= messages_sent), ``step``.
+"""
+
+from __future__ import annotations
+
+import gymnasium
+import numpy as np
+
+from coloc_env.rendering import Link, Scene
+from coloc_env.scenarios.base import Scenario
+
+LOG_TRACE_BOUND = 50.0
+DISTANCE_SCALE = 100.0
+
+
+class ComposedScenario(Scenario):
+    """Batched core of a :class:`~coloc_env.composition.Composition`."""
+
+    name = "composed"
+    paper = "-"
+    Config = None
+
+    def __init__(self, config, batch: int = 1):
+        super().__init__(config, batch)
+        self.name = config.name
+        self.world = config.world.build(self.batch, config.episode_steps)
+        self.agent_prefix = self.world.agent_prefix
+        self.network = config.network.build(self.world.num_agents, self.batch, config.backend.message_kind,
+                                            getattr(config.backend, "rounds", 1))
+        self.backend = config.backend.build(self.world, self.network, self.batch)
+        self.blocks = [*self.world.sensing_blocks(), *self.network.transport_blocks(),
+                       *self.backend.decision_blocks()]
+        self.block_parts = (["world"] * len(self.world.sensing_blocks())
+                            + ["network"] * len(self.network.transport_blocks())
+                            + ["backend"] * len(self.backend.decision_blocks()))
+        sizes = [blk.size for blk in self.blocks]
+        self._splits = np.cumsum(sizes)[:-1] if sizes else []
+        self._n_world = sum(blk.size for blk in self.world.sensing_blocks())
+        self._n_network = sum(blk.size for blk in self.network.transport_blocks())
+        self._action_space = self._build_action_space()
+        B, N = self.batch, self.num_agents
+        self.k = np.zeros(B, dtype=int)
+        self._truth = np.zeros((B, N, 2))
+        self._received = np.zeros((B, N, N))
+        self._reward = np.zeros((B, N))
+
+    # --- description ------------------------------------------------------------
+    @property
+    def num_agents(self) -> int:
+        return self.world.num_agents
+
+    @property
+    def horizon(self) -> int:
+        return self.config.episode_steps
+
+    def _build_action_space(self):
+        if not self.blocks:
+            return gymnasium.spaces.MultiDiscrete([1], dtype=np.int64)
+        if all(blk.discrete for blk in self.blocks):
+            nvec = [blk.choices for blk in self.blocks for _ in range(blk.size)]
+            return gymnasium.spaces.MultiDiscrete(nvec, dtype=np.int64)
+        low = [0.0 if blk.discrete else blk.low for blk in self.blocks for _ in range(blk.size)]
+        high = [blk.choices - 1.0 if blk.discrete else blk.high for blk in self.blocks for _ in range(blk.size)]
+        return gymnasium.spaces.Box(np.array(low, np.float32), np.array(high, np.float32), dtype=np.float32)
+
+    def action_space(self):
+        return self._action_space
+
+    @property
+    def obs_dim(self) -> int:
+        return 3 * self.num_agents + 2 + self.world.feature_bounds()[0].size + self.backend.feature_bounds()[0].size
+
+    def observation_space(self):
+        N = self.num_agents
+        wl, wh = self.world.feature_bounds()
+        bl, bh = self.backend.feature_bounds()
+        low = np.concatenate([np.zeros(N), [-LOG_TRACE_BOUND], np.zeros(N), np.zeros(N), [0.0], wl, bl])
+        high = np.concatenate([np.ones(N), [LOG_TRACE_BOUND], np.ones(N), np.full(N, np.inf), [1.0], wh, bh])
+        return gymnasium.spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
+
+    def state_space(self):
+        return gymnasium.spaces.Box(-np.inf, np.inf, shape=(self.num_agents * self.obs_dim,), dtype=np.float32)
+
+    def action_vector(self, which: str) -> np.ndarray:
+        """One agent's action with every block at its ``default``, ``maximum`` or ``minimum`` (the generic
+        ``always`` / ``silent`` policies: transport at its maximum / minimum, everything else at its default)."""
+        values = []
+        for blk, part in zip(self.blocks, self.block_parts, strict=True):
+            value = blk.default
+            if part == "network" and which in ("maximum", "minimum"):
+                value = getattr(blk, which)
+            if value is None:
+                value = blk.low if not blk.discrete else 0
+            values.extend([value] * blk.size)
+        if not values:
+            values = [0]
+        return np.asarray(values, dtype=self._action_space.dtype)
+
+    # --- dynamics ------------------------------------------------------------------
+    def reset(self, rngs, env_index=None) -> None:
+        idx = self._indices(env_index)
+        if len(rngs) != len(idx):
+            raise ValueError(f"reset needs one generator per copy: {len(idx)} copies, {len(rngs)} generators")
+        # Each part draws from its own child generator: the same world and seed give every backend the
+        # same truth and readings, whatever the network and backend draw.
+        children = [rng.spawn(3) for rng in rngs]
+        self.world.reset([c[0] for c in children], idx)
+        self.network.reset([c[1] for c in children], idx)
+        self.backend.reset([c[2] for c in children], idx)
+        self.k[idx] = 0
+        self._truth[idx] = self.world.positions()[idx]
+        self._received[idx] = 0.0
+        self._reward[idx] = 0.0
+
+    def decode_actions(self, actions) -> np.ndarray:
+        arr = self.check_actions(actions)
+        flat = arr.reshape(self.batch, self.num_agents, -1)
+        out = []
+        for blk, part, values in zip(self.blocks, self.block_parts, np.split(flat, self._splits, axis=-1),
+                                     strict=True):
+            label = f"{part} block {blk.name!r} ({blk.meaning})"
+            if blk.discrete:
+                integral = isinstance(self._action_space, gymnasium.spaces.MultiDiscrete)
+                if integral and np.any(values != np.round(values)):
+                    raise ValueError(f"{label} must be integers, got {values[values != np.round(values)][0]:g}")
+                values = np.round(values)
+                bad = (values < 0) | (values > blk.choices - 1)
+                if np.any(bad):
+                    raise ValueError(f"{label} must be integers in [0, {blk.choices - 1}], got {values[bad][0]:g}")
+            else:
+                bad = (values < blk.low) | (values > blk.high)
+                if np.any(bad):
+                    raise ValueError(f"{label} must be in [{blk.low}, {blk.high}], got {values[bad][0]:g}")
+            out.append(values)
+        return np.concatenate(out, axis=-1) if out else flat[..., :0]
+
+    def step(self, actions) -> None:
+        if np.any(self.k >= self.horizon):
+            raise RuntimeError("step() on a copy whose episode is over; reset it first")
+        decoded = self.decode_actions(actions)
+        nw, nn = self._n_world, self._n_network
+        sensing = decoded[..., :nw].astype(np.int64)
+        transport = decoded[..., nw:nw + nn].astype(np.int64)
+        decisions = decoded[..., nw + nn:]
+        readings = self.world.readings(sensing)
+        truth = self.world.positions().copy()
+        self.network.begin(self.world.k, truth, transport)
+        self.backend.step(readings, decisions)
+        self._truth = truth
+        self._received = self.network.delivered.transpose(0, 2, 1)  # [s, t]: s heard t
+        self.world.advance()
+        self.k = self.k + 1
+        if self.config.reward == "error":
+            loss = self.position_error()
+        else:
+            trace = self.posterior_traces()
+            loss = self.position_error() if trace is None else np.sqrt(trace)
+        self._reward = -loss - self.config.communication_cost * self.network.messages_sent
+
+    # --- views -------------------------------------------------------------------------
+    def position_error(self) -> np.ndarray:
+        return np.linalg.norm(self.backend.posterior_position - self._truth, axis=-1)
+
+    def posterior_traces(self) -> np.ndarray | None:
+        cov = self.backend.posterior_position_cov
+        return None if cov is None else np.trace(cov, axis1=-2, axis2=-1)
+
+    def observation(self) -> np.ndarray:
+        B, N = self.batch, self.num_agents
+        identity = np.broadcast_to(np.eye(N), (B, N, N))
+        cov = self.backend.position_cov()
+        if cov is None:
+            log_trace = np.zeros((B, N))
+        else:
+            log_trace = np.clip(np.log(np.maximum(np.trace(cov, axis1=-2, axis2=-1), 1e-300)),
+                                -LOG_TRACE_BOUND, LOG_TRACE_BOUND)
+        p = self.world.positions()
+        distance = np.linalg.norm(p[:, :, None, :] - p[:, None, :, :], axis=-1) / DISTANCE_SCALE
+        frac = np.broadcast_to((self.k / self.horizon)[:, None], (B, N))
+        obs = np.concatenate([identity, log_trace[..., None], self._received.astype(float), distance, frac[..., None],
+                              self.world.observation_features(), self.backend.observation_features()], axis=-1)
+        return obs.astype(np.float32)
+
+    def reward(self) -> np.ndarray:
+        return self._reward.copy()
+
+    def done(self) -> np.ndarray:
+        return self.k >= self.horizon
+
+    def state(self) -> np.ndarray:
+        return self.observation().reshape(self.batch, -1)
+
+    def info(self) -> dict[str, np.ndarray]:
+        B, N = self.batch, self.num_agents
+        trace = self.posterior_traces()
+        error = self.position_error()
+        return {
+            "true_position": self._truth.copy(),
+            "estimated_position": self.backend.posterior_position.copy(),
+            "position_error": error,
+            "error": error.copy(),
+            "trace": np.full((B, N), np.nan) if trace is None else trace,
+            "messages_sent": self.network.messages_sent.copy(),
+            "floats_sent": self.network.floats_sent.copy(),
+            "communication": self.network.messages_sent.copy(),
+            "step": np.repeat(self.k[:, None], N, axis=1),
+        }
+
+    def episode_error(self, errors: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
+        """The mean position error over the steps and agents (m)."""
+        return np.asarray(errors, float).mean(axis=(-2, -1))
+
+    def scene(self, b: int) -> Scene:
+        reach = self.world.extent()
+        delivered = self.network.delivered[b]
+        links = [Link(source=int(t), target=int(s), value=1.0) for t, s in zip(*np.nonzero(delivered), strict=True)]
+        cov = self.backend.posterior_position_cov
+        return Scene(
+            title=f"{self.name}  step {int(self.k[b])}",
+            truth=self._truth[b],
+            estimates=self.backend.posterior_position[b],
+            covariances=None if cov is None else cov[b],
+            particles=self.backend.particles(b),
+            node_positions=self._truth[b] / reach,
+            node_labels=self.agent_names,
+            links=links,
+            link_value_max=1.0,
+            link_value_name="delivered this step",
+            extent=(-reach, reach, -reach, reach),
+            notes=[f"mean error {self.position_error()[b].mean():.2f} m",
+                   f"messages this step {int(self.network.messages_sent[b].sum())}"],
+        )

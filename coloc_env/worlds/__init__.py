@@ -1,0 +1,6 @@
+"""Worlds: truth and sensors, batched. ``coloc_env.WORLDS`` lists the registered names."""
+
+from coloc_env.parts import WORLDS
+from coloc_env.worlds.circles import Circles
+
+__all__ = ["WORLDS", "Circles"]

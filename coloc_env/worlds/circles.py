@@ -1,0 +1,207 @@
+"""World ``circles`` (wang2019): platforms on circles, odometry dead reckoning, ranges between platforms.
+
+N platforms fly circles at constant speed and turn rate (wang2019 Sec. 4;
+the layout of :func:`coloc_env.scenarios.relay_ukf.default_layout`) and
+measure their own speed and turn rate (odometry). At each step, with
+probability ``measurement_probability``, one platform m (drawn uniformly)
+measures its range to the platform its sensing choice names (none if it names
+itself or a platform beyond ``sensing_range``). The first ``num_anchors``
+platforms also get a position fix (GPS grade, ``fix_noise_std``) at every
+step: the paper has none (its preset sets 0); the world's default of 3 of 6
+gives least-squares and particle backends the anchors they need.
+
+| quantity       | value                                                                            |
+|----------------|----------------------------------------------------------------------------------|
+| motion model   | :class:`estimators.models.OdometryDisplacement` (state: position, 2)            |
+| measurements   | ``range`` (one per step at most), ``position_fix`` (anchors)                     |
+| anchors        | platforms 0..num_anchors-1 (fixes every step)                                    |
+| sensing action | ``Discrete(N + 1)`` per agent: whom to range with if it measures (itself: none, N: nearest) |
+| observation    | 1 if this agent measures at this step                                            |
+
+Arguments (``coloc_env.worlds.Circles``)
+
+| field                   | default | allowed                                           |
+|-------------------------|---------|---------------------------------------------------|
+| num_agents              | 6       | 2..16                                             |
+| speed                   | 1.0     | (0, 1e4] m/s                                      |
+| turn_rate               | 0.015   | (0, pi/dt] rad/s                                  |
+| dt                      | 0.5     | (0, 3600] s                                       |
+| horizon                 | 800     | 1..1000000 steps (the composition's default)      |
+| speed_noise_std         | 0.5     | [0, 1000] m/s                                     |
+| turn_rate_noise_std     | 1e-3    | [0, 10] rad/s                                     |
+| range_noise_var         | 1.0     | (0, 1e6] m^2                                      |
+| measurement_probability | 0.5     | [0, 1]                                            |
+| sensing_range           | inf     | > 0 m                                             |
+| num_anchors             | 3       | 0..num_agents                                     |
+| fix_noise_std           | 1.0     | (0, 1e4] m                                        |
+| initial_position_std    | 0.1     | (0, 1e6] m: the prior the agents start with       |
+| heading_noise           | True    | False: the model the backends assume omits the integrated-heading term of Q |
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from coloc_env.parts import WORLDS, Block, PartConfig, check_flag, check_range
+from coloc_env.world.odometry import OdometrySensor, RangeSensor
+from coloc_env.world.relay import check_distance
+from coloc_env.world.unicycle import CircularTracks, UnicycleMotion
+from coloc_env.worlds.base import Readings, World
+from estimators.models import OdometryDisplacement
+
+
+def default_layout(num_platforms: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Centres (N, 2), start angles (N,), directions (N,): wang2019's four circles for N = 4, a ring otherwise."""
+    i = np.arange(num_platforms)
+    theta = -0.75 * np.pi + 2 * np.pi * i / num_platforms
+    centres = np.round(8.0 * np.sqrt(2.0) * np.stack([np.cos(theta), np.sin(theta)], axis=-1), 12)
+    return centres, 2 * np.pi * i / num_platforms, np.where(i == 1, -1.0, 1.0)
+
+
+@WORLDS.register
+@dataclass(frozen=True)
+class Circles(PartConfig):
+    """Config of the ``circles`` world (see the module table)."""
+
+    name = "circles"
+    estimand = "self"
+    motion_kind = OdometryDisplacement.kind
+    measurements = frozenset({"range", "position_fix"})
+    anchors = "platforms 0..num_anchors-1 (a position fix every step)"
+    num_agents: int = 6
+    speed: float = 1.0
+    turn_rate: float = 0.015
+    dt: float = 0.5
+    horizon: int = 800
+    speed_noise_std: float = 0.5
+    turn_rate_noise_std: float = 1e-3
+    range_noise_var: float = 1.0
+    measurement_probability: float = 0.5
+    sensing_range: float = float("inf")
+    num_anchors: int = 3
+    fix_noise_std: float = 1.0
+    initial_position_std: float = 0.1
+    heading_noise: bool = True
+
+    def check(self, prefix: str) -> None:
+        check_range(f"{prefix}num_agents", self.num_agents, 2, 16, integer=True)
+        check_range(f"{prefix}dt", self.dt, 0.0, 3600.0, low_open=True)
+        check_range(f"{prefix}speed", self.speed, 0.0, 1e4, low_open=True)
+        check_range(f"{prefix}turn_rate", self.turn_rate, 0.0, np.pi / self.dt, low_open=True)
+        check_range(f"{prefix}horizon", self.horizon, 1, 1_000_000, integer=True)
+        OdometrySensor(self.speed_noise_std, self.turn_rate_noise_std).validate(prefix)
+        check_range(f"{prefix}range_noise_var", self.range_noise_var, 0.0, 1e6, low_open=True)
+        check_range(f"{prefix}measurement_probability", self.measurement_probability, 0.0, 1.0)
+        check_distance(f"{prefix}sensing_range", self.sensing_range)
+        check_range(f"{prefix}num_anchors", self.num_anchors, 0, self.num_agents, integer=True)
+        check_range(f"{prefix}fix_noise_std", self.fix_noise_std, 0.0, 1e4, low_open=True)
+        check_range(f"{prefix}initial_position_std", self.initial_position_std, 0.0, 1e6, low_open=True)
+        check_flag(f"{prefix}heading_noise", self.heading_noise)
+
+    def build(self, batch: int, horizon: int) -> CirclesWorld:
+        return CirclesWorld(self, batch, horizon)
+
+
+class CirclesWorld(World):
+    agent_prefix = "platform"
+
+    def __init__(self, config: Circles, batch: int, horizon: int):
+        super().__init__(config, batch, horizon)
+        N, K, B = config.num_agents, self.horizon, self.batch
+        centres, angles, directions = default_layout(N)
+        self.tracks = CircularTracks(centres, angles, directions, config.speed, config.turn_rate, config.dt)
+        self.truth, self.true_heading, self._speed, self._turn_rate = self.tracks.trajectory(K)
+        self.odometry = OdometrySensor(config.speed_noise_std, config.turn_rate_noise_std)
+        self.range_sensor = RangeSensor(config.range_noise_var, config.sensing_range)
+        self.motion_model = OdometryDisplacement(config.dt, config.speed_noise_std**2)
+        self.measured_speed = np.zeros((B, K, N))
+        self.measured_heading = np.zeros((B, K, N))
+        self.schedule = np.full((B, K), -1)
+        self.range_noise = np.zeros((B, K))
+        self.fix_noise = np.zeros((B, K, config.num_anchors, 2))
+
+    def sensing_blocks(self) -> list[Block]:
+        N = self.num_agents
+        return [Block("partner", 1, N + 1, f"whom to range with if this agent measures now: a platform, itself = "
+                      f"no measurement, {N} = the nearest", default=N, maximum=N, minimum=N)]
+
+    def range_noise_var(self) -> float:
+        return self.config.range_noise_var
+
+    def fix_noise_var(self) -> float:
+        return self.config.fix_noise_std**2
+
+    def draw_episode(self, rngs, idx) -> None:
+        N, K, A = self.num_agents, self.horizon, self.config.num_anchors
+        speed_noise = np.empty((len(idx), K, N))
+        turn_noise = np.empty((len(idx), K, N))
+        for c, rng in enumerate(rngs):
+            speed_noise[c], turn_noise[c] = self.odometry.sample_noise(rng, (K, N))
+            occurs = rng.random(K)
+            who = rng.integers(0, N, size=K)
+            self.schedule[idx[c]] = np.where(occurs < self.config.measurement_probability, who, -1)
+            self.range_noise[idx[c]] = self.range_sensor.sample_noise(rng, (K,))
+            self.fix_noise[idx[c]] = self.config.fix_noise_std * rng.standard_normal((K, A, 2))
+        speed, turn = self.odometry.measure(self._speed, self._turn_rate, speed_noise, turn_noise)
+        self.measured_speed[idx] = speed
+        heading = UnicycleMotion(self.config.dt).headings(self.true_heading[0][None, :], np.swapaxes(turn, 1, 2))
+        self.measured_heading[idx] = np.swapaxes(heading, 1, 2)
+
+    def positions(self) -> np.ndarray:
+        return self.truth[self.k]
+
+    def initial_belief(self):
+        B, N = self.batch, self.num_agents
+        mean = np.broadcast_to(self.truth[0], (B, N, 2)).copy()
+        cov = np.broadcast_to(self.config.initial_position_std**2 * np.eye(2), (B, N, 2, 2)).copy()
+        return mean, cov
+
+    def heading_variance(self, k: np.ndarray) -> np.ndarray:
+        if not self.config.heading_noise:
+            return np.zeros(np.shape(k))
+        return self.odometry.heading_variance(k, self.config.dt)
+
+    def measuring(self) -> np.ndarray:
+        """The measuring platform at k (B,), -1 for none (and after the horizon)."""
+        k = np.minimum(self.k, self.horizon - 1)
+        who = self.schedule[np.arange(self.batch), k]
+        return np.where(self.k < self.horizon, who, -1)
+
+    def readings(self, sensing: np.ndarray) -> Readings:
+        B, N = self.batch, self.num_agents
+        rows, k = np.arange(B), self.k
+        positions = self.positions()
+        measuring = self.schedule[rows, k]
+        source = np.maximum(measuring, 0)
+        partner = sensing[rows, source, 0].astype(int)
+        distance = np.linalg.norm(positions[rows, source][:, None, :] - positions, axis=-1)
+        distance[rows, source] = np.inf
+        partner = np.where(partner == N, np.argmin(distance, axis=-1), partner)
+        in_view = self.range_sensor.in_range(positions[rows, source], positions[rows, partner])
+        attempt = (measuring >= 0) & (partner != source) & in_view
+        valid = np.zeros((B, N, N), dtype=bool)
+        valid[rows[attempt], source[attempt], partner[attempt]] = True
+        ranges = np.full((B, N, N), np.nan)
+        ranges[rows, source, partner] = np.where(
+            attempt, self.range_sensor.measure(positions[rows, source], positions[rows, partner],
+                                               self.range_noise[rows, k]), np.nan)
+        fix = np.zeros((B, N, 2))
+        A = self.config.num_anchors
+        fix[:, :A] = positions[:, :A] + self.fix_noise[rows, k]
+        fix_valid = np.zeros((B, N), dtype=bool)
+        fix_valid[:, :A] = True
+        inputs = np.stack([self.measured_speed[rows, k], self.measured_heading[rows, k],
+                           np.broadcast_to(self.heading_variance(k)[:, None], (B, N))], axis=-1)
+        return Readings(inputs=inputs, range=ranges, range_valid=valid, fix=fix, fix_valid=fix_valid)
+
+    def observation_features(self) -> np.ndarray:
+        ids = np.arange(self.num_agents)[None, :]
+        return (ids == self.measuring()[:, None]).astype(float)[..., None]
+
+    def feature_bounds(self):
+        return np.zeros(1), np.ones(1)
+
+    def extent(self) -> float:
+        return float(np.abs(self.truth).max()) + 10.0
