@@ -11,7 +11,7 @@ actions.
 | bandwidth_fusion   | zhao2020  | (drift)      | (bandwidth)      | (bandwidth_fusion)        |
 | lossy_fusion       | fu2017    | (target_cv)  | (bernoulli_delay)| (prediction_compensation) |
 | relay_ukf          | wang2019  | circles      | relay            | ukf_dcl                   |
-| gps_denied_nbp     | wan2014   | (gps_denied) | (broadcast)      | (dnbp)                    |
+| gps_denied_nbp     | wan2014   | gps_denied   | broadcast        | dnbp                      |
 | nlos_horizon       | gao2016   | (nlos_orbit) | (random_delay)   | (afge)                    |
 | mrclam_relay       | MRCLAM    | (mrclam)     | (relay)          | (ukf_se2)                 |
 
@@ -22,14 +22,18 @@ at a time onto the core); until then that preset's ``world`` / ``network`` /
 
 from __future__ import annotations
 
-from coloc_env.backends import UkfDcl
+from coloc_env.backends.particles import Dnbp
+from coloc_env.backends.ukf import UkfDcl
 from coloc_env.composition import Composition
-from coloc_env.networks import Relay
+from coloc_env.networks import Broadcast, Relay
 from coloc_env.scenarios import REGISTRY
 from coloc_env.worlds import Circles
+from coloc_env.worlds.gps_denied import GpsDenied
 
 _PARTS = {
     "relay_ukf": (Circles(num_agents=4, num_anchors=0), Relay(loss_at_zero=0.0), UkfDcl()),
+    # dnbp over this broadcast network gives the scenario's estimates exactly (test_gps_denied_composition)
+    "gps_denied_nbp": (GpsDenied(), Broadcast(comm_range=300.0), Dnbp()),
 }
 
 PRESETS: dict[str, Composition] = {

@@ -158,6 +158,10 @@ class ComposedScenario(Scenario):
     def decode_actions(self, actions) -> np.ndarray:
         arr = self.check_actions(actions)
         flat = arr.reshape(self.batch, self.num_agents, -1)
+        if not self.blocks:  # nothing to decide: the action space is a placeholder MultiDiscrete([1])
+            if np.any(flat != 0):
+                raise ValueError("this composition has no decisions; its only action is 0")
+            return flat[..., :0]
         out = []
         for blk, part, values in zip(self.blocks, self.block_parts, np.split(flat, self._splits, axis=-1),
                                      strict=True):

@@ -1,0 +1,249 @@
+"""Backends ``dnbp`` and ``range_ls`` (wan2014): dynamic NBP, and least squares against GPS-normal neighbours.
+
+**dnbp** adapts :func:`estimators.dnbp.step` (Algorithm 4, the paper's modified
+schedule by default): per step, GPS-normal UAVs fuse their fix, then
+``num_iterations`` NBP iterations run, iteration n being one
+:meth:`~coloc_env.networks.base.Network.broadcast` round (``slot`` n) in which
+the UAVs the schedule allows broadcast their particle message to the fault
+UAVs that listen; a receiver listens only to a sender it has a range to (the
+message is built from that range). Then every belief is propagated to k + 1
+through the accelerometer reading. The particle randomness comes from the
+backend's own generator, one per copy.
+
+**range_ls** adapts :func:`estimators.range_ls.step` (ref. [7] of wan2014): a
+Kalman filter per UAV on the constant-velocity model, updated with its GPS
+fix when normal; a fault UAV with at least ``min_anchors`` GPS-normal
+neighbours whose estimate it received computes a Gauss-Newton fix against
+their KF estimates and its ranges, gated, then used as a pseudo-measurement.
+Per step one broadcast round (slot 0): every GPS-normal UAV broadcasts its
+KF position estimate (2 floats) to everyone; the delivered links with a range
+are the anchors of the fault UAVs.
+
+| quantity      | dnbp                                        | range_ls                                       |
+|---------------|---------------------------------------------|------------------------------------------------|
+| estimand      | self                                        | self                                           |
+| motion kinds  | ``cv_accel``                                | ``cv_accel``                                   |
+| needs         | ``range``                                   | ``range`` and ``position_fix``                 |
+| messages      | ``broadcast``, ``num_iterations`` rounds    | ``broadcast``, 1 round                         |
+| payload       | M centres (2), M log-weights, 1 bandwidth:  | a KF position estimate: 2 floats               |
+|               | 3 M + 1 floats per message                  |                                                |
+| lost message  | not heard in that iteration: the receiver's | that anchor cannot serve this step             |
+|               | belief is not updated with it, and the      |                                                |
+|               | schedule counts the sender as not heard     |                                                |
+| under-determined | a fault UAV that hears nobody keeps its  | fewer than ``min_anchors`` anchors, or a fix   |
+|               | prior (prediction only, dead reckoning)     | that fails the gate: the KF prediction         |
+| decisions     | none (the network's ``transmit`` per round) | none (the network's ``transmit``, round 0)     |
+| position cov  | the belief particles' sample covariance     | the KF posterior covariance                    |
+
+Arguments (``coloc_env.backends.Dnbp``; defaults = ``gps_denied_nbp``'s)
+
+| field              | default    | allowed                |
+|--------------------|------------|------------------------|
+| num_particles      | 100        | 2..5000                |
+| num_iterations     | 5          | 1..20 (the rounds)     |
+| oversampling       | 2          | 1..16                  |
+| defensive_weight   | 0.01       | [0, 0.999]             |
+| box_margin         | 150        | [0, 1e7] m             |
+| min_bandwidth      | 0.5        | (0, 1e4] m             |
+| initial_threshold  | 3          | 1..64 (at most N)      |
+| schedule           | "modified" | "modified", "parallel" |
+
+The defensive box is the world's flight area, ``[-box_margin, area + box_margin + |v_nom| dt horizon]``
+per axis, as in the scenario. Warm start only: particles drawn around the world's initial belief.
+
+Arguments (``coloc_env.backends.RangeLs``; defaults = :class:`estimators.range_ls.LsParams`)
+
+| field        | default | allowed          |
+|--------------|---------|------------------|
+| min_anchors  | 3       | 1..64            |
+| max_rms      | 3.0     | (0, 1e6] sigma_d |
+| max_std      | 10.0    | (0, 1e6] sigma_d |
+| gate_chi2    | 13.8    | (0, 1e12]        |
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+import estimators.dnbp as dn
+import estimators.range_ls as rl
+from coloc_env.backends.base import Backend
+from coloc_env.parts import BACKENDS, PartConfig, check_choice, check_range
+
+
+@BACKENDS.register
+@dataclass(frozen=True)
+class Dnbp(PartConfig):
+    name = "dnbp"
+    estimand = "self"
+    motion_kinds = frozenset({"cv_accel"})
+    requires = (frozenset({"range"}),)
+    message_kind = "broadcast"
+    num_particles: int = 100
+    num_iterations: int = 5
+    oversampling: int = 2
+    defensive_weight: float = 0.01
+    box_margin: float = 150.0
+    min_bandwidth: float = 0.5
+    initial_threshold: int = 3
+    schedule: str = "modified"
+
+    @property
+    def rounds(self) -> int:
+        return self.num_iterations
+
+    def check(self, prefix: str) -> None:
+        check_range(f"{prefix}num_particles", self.num_particles, 2, 5000, integer=True)
+        check_range(f"{prefix}num_iterations", self.num_iterations, 1, 20, integer=True)
+        check_range(f"{prefix}oversampling", self.oversampling, 1, 16, integer=True)
+        check_range(f"{prefix}defensive_weight", self.defensive_weight, 0.0, 0.999)
+        check_range(f"{prefix}box_margin", self.box_margin, 0.0, 1e7)
+        check_range(f"{prefix}min_bandwidth", self.min_bandwidth, 0.0, 1e4, low_open=True)
+        check_range(f"{prefix}initial_threshold", self.initial_threshold, 1, 64, integer=True)
+        check_choice(f"{prefix}schedule", self.schedule, ("modified", "parallel"))
+
+    def build(self, world, network, batch: int) -> Backend:
+        return DnbpBackend(self, world, network, batch)
+
+
+@BACKENDS.register
+@dataclass(frozen=True)
+class RangeLs(PartConfig):
+    name = "range_ls"
+    estimand = "self"
+    motion_kinds = frozenset({"cv_accel"})
+    requires = (frozenset({"range"}), frozenset({"position_fix"}))
+    message_kind = "broadcast"
+    rounds = 1
+    min_anchors: int = 3
+    max_rms: float = 3.0
+    max_std: float = 10.0
+    gate_chi2: float = 13.8
+
+    def check(self, prefix: str) -> None:
+        check_range(f"{prefix}min_anchors", self.min_anchors, 1, 64, integer=True)
+        check_range(f"{prefix}max_rms", self.max_rms, 0.0, 1e6, low_open=True)
+        check_range(f"{prefix}max_std", self.max_std, 0.0, 1e6, low_open=True)
+        check_range(f"{prefix}gate_chi2", self.gate_chi2, 0.0, 1e12, low_open=True)
+
+    def build(self, world, network, batch: int) -> Backend:
+        return RangeLsBackend(self, world, network, batch)
+
+
+def _world_field(world, name: str):
+    value = getattr(world.config, name, None)
+    if value is None:
+        raise ValueError(f"backend needs a world with a {name!r} field (world {world.config.name!r} has none)")
+    return value
+
+
+class DnbpBackend(Backend):
+    def __init__(self, config: Dnbp, world, network, batch):
+        super().__init__(config, world, network, batch)
+        B, N, M = self.batch, self.num_agents, config.num_particles
+        if config.initial_threshold > N:
+            raise ValueError(f"backend.initial_threshold must be <= the number of agents {N}, "
+                             f"got {config.initial_threshold}")
+        area, velocity = _world_field(world, "area"), _world_field(world, "nominal_velocity")
+        travel = float(np.linalg.norm(velocity)) * world.dt * world.horizon
+        m = config.box_margin
+        self.model = dn.DnbpModel(
+            dt=world.dt, accel_noise_std=float(np.sqrt(world.motion_model.accel_noise_var)),
+            gps_std=float(np.sqrt(world.fix_noise_var())), range_std=float(np.sqrt(world.range_noise_var())),
+            num_particles=M, num_iterations=config.num_iterations, oversampling=config.oversampling,
+            defensive_weight=config.defensive_weight, defensive_box=(-m, area + m + travel), cold_box=(-m, area + m),
+            min_bandwidth=config.min_bandwidth, initial_threshold=config.initial_threshold,
+            schedule=config.schedule)
+        particles = np.zeros((B, N, M, 4))
+        self.state = dn.DnbpState(prior=particles, prior_bandwidth=np.ones((B, N)),
+                                  prior_uniform=np.zeros((B, N), bool), belief=particles.copy(),
+                                  estimate=np.zeros((B, N, 2)))
+        self.rngs: list = [None] * self.batch
+        self.floats = 3 * M + 1
+
+    def reset(self, rngs, idx) -> None:
+        idx = np.asarray(idx)
+        for b, rng in zip(idx, rngs, strict=True):
+            self.rngs[b] = rng
+        mean, _ = self.world.initial_belief()
+        fresh = dn.initial_state(self.model, list(rngs), "warm", mean[idx, :, :2], mean[idx, :, 2:],
+                                 float(_world_field(self.world, "velocity_spread")))
+        for name in ("prior", "prior_bandwidth", "prior_uniform", "belief", "estimate"):
+            getattr(self.state, name)[idx] = getattr(fresh, name)
+        self.posterior_position[idx] = fresh.estimate
+
+    def update(self, readings, decisions) -> None:
+        counter = [0]
+        range_valid = np.asarray(readings.range_valid, bool)
+
+        def deliver(senders: np.ndarray, listening: np.ndarray) -> np.ndarray:
+            n = counter[0]
+            counter[0] += 1
+            # s takes t's message only if it holds the range to t the message is built from
+            return self.network.broadcast(senders, listening & range_valid.transpose(0, 2, 1), self.floats, slot=n)
+
+        ranges = np.where(range_valid, np.nan_to_num(readings.range), 0.0)
+        self.state, _ = dn.step(self.model, self.state, readings.fix_valid, readings.fix, deliver, ranges,
+                                readings.inputs, self.rngs)
+
+    def predict(self, inputs) -> None:
+        return None  # dn.step has propagated the beliefs to k + 1 already (with the same readings' inputs)
+
+    def position(self) -> np.ndarray:
+        return self.state.estimate
+
+    def position_cov(self) -> np.ndarray:
+        points = self.state.belief[..., :2]
+        centred = points - points.mean(axis=2, keepdims=True)
+        return np.einsum("bnmi,bnmj->bnij", centred, centred) / points.shape[2]
+
+    def particles(self, b: int) -> np.ndarray:
+        return self.state.belief[b, :, :, :2]
+
+
+class RangeLsBackend(Backend):
+    def __init__(self, config: RangeLs, world, network, batch):
+        super().__init__(config, world, network, batch)
+        c = config
+        self.params = rl.LsParams(min_anchors=c.min_anchors, max_rms=c.max_rms, max_std=c.max_std,
+                                  gate_chi2=c.gate_chi2)
+        model = world.motion_model
+        self.F, self.G, self.Q = model.transition, model.input_matrix, model.process_noise
+        B, N = self.batch, self.num_agents
+        self.state = rl.KalmanState(np.zeros((B, N, 4)), np.zeros((B, N, 4, 4)))
+        self.estimate = np.zeros((B, N, 2))
+        self.estimate_cov = np.zeros((B, N, 2, 2))
+
+    def reset(self, rngs, idx) -> None:
+        mean, cov = self.world.initial_belief()
+        self.state.mean[idx], self.state.cov[idx] = mean[idx], cov[idx]
+        self.estimate[idx] = mean[idx, :, :2]
+        self.estimate_cov[idx] = cov[idx, :, :2, :2]
+        self.posterior_position[idx] = mean[idx, :, :2]
+
+    def update(self, readings, decisions) -> None:
+        B, N = self.batch, self.num_agents
+        normal = np.asarray(readings.fix_valid, bool)
+        listening = np.broadcast_to(~np.eye(N, dtype=bool), (B, N, N))
+        delivered = self.network.broadcast(normal, listening, 2.0, slot=0)  # [k, s]: k's estimate reached s
+        adjacency = delivered.transpose(0, 2, 1) & np.asarray(readings.range_valid, bool)  # [s, k]
+        ranges = np.where(adjacency, np.nan_to_num(readings.range), 0.0)
+        fix = np.where(normal[..., None], readings.fix, np.nan)
+        gps_std, range_std = np.sqrt(self.world.fix_noise_var()), np.sqrt(self.world.range_noise_var())
+        self.state, self.estimate, _ = rl.step(self.params, self.state, normal, fix, adjacency, ranges,
+                                               readings.inputs, self.F, self.G, self.Q, gps_std, range_std)
+        # rl.step returns the prediction of k + 1 only; its posterior of k is F^-1 (P(k+1) - Q) F^-T (F invertible)
+        Finv = np.linalg.inv(self.F)
+        post = Finv @ (self.state.cov - self.Q) @ Finv.T
+        self.estimate_cov = 0.5 * (post[..., :2, :2] + np.swapaxes(post[..., :2, :2], -1, -2))
+
+    def predict(self, inputs) -> None:
+        return None  # rl.step has predicted to k + 1 already (with the same readings' inputs)
+
+    def position(self) -> np.ndarray:
+        return self.estimate
+
+    def position_cov(self) -> np.ndarray:
+        return self.estimate_cov
