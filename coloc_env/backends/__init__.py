@@ -1,8 +1,15 @@
-"""Backends: one adapter per estimator of :mod:`estimators`. ``coloc_env.BACKENDS`` lists them."""
+"""Backends: one adapter per estimator of :mod:`estimators`. ``coloc_env.BACKENDS`` lists them.
 
-from coloc_env.backends.dead_reckoning import DeadReckoning
-from coloc_env.backends.particles import Dnbp, RangeLs  # noqa: F401 (registers them)
-from coloc_env.backends.ukf import UkfCcl, UkfDcl
+Every module of this package is imported (and so registers its backends) when the package loads.
+"""
+
 from coloc_env.parts import BACKENDS
+from coloc_env.parts_discovery import import_parts
 
-__all__ = ["BACKENDS", "DeadReckoning", "UkfCcl", "UkfDcl"]
+import_parts(__name__, __path__, ("fusion", "kalman", "ukf", "ukf_se2", "particles", "nlos", "dead_reckoning"))
+
+from coloc_env.backends.dead_reckoning import DeadReckoning  # noqa: E402
+from coloc_env.backends.particles import Dnbp, RangeLs  # noqa: E402
+from coloc_env.backends.ukf import UkfCcl, UkfDcl  # noqa: E402
+
+__all__ = ["BACKENDS", "DeadReckoning", "Dnbp", "RangeLs", "UkfCcl", "UkfDcl"]

@@ -1,8 +1,15 @@
-"""Networks: who can send what to whom, what arrives, and what it cost. ``coloc_env.NETWORKS`` lists them."""
+"""Networks: who can send what to whom, what arrives, and what it cost. ``coloc_env.NETWORKS`` lists them.
 
-from coloc_env.networks.broadcast import Broadcast
-from coloc_env.networks.ideal import Ideal
-from coloc_env.networks.relay import Relay
+Every module of this package is imported (and so registers its network) when the package loads.
+"""
+
 from coloc_env.parts import NETWORKS
+from coloc_env.parts_discovery import import_parts
+
+import_parts(__name__, __path__, ("ideal", "bernoulli_delay", "bandwidth", "relay", "broadcast", "random_delay"))
+
+from coloc_env.networks.broadcast import Broadcast  # noqa: E402
+from coloc_env.networks.ideal import Ideal  # noqa: E402
+from coloc_env.networks.relay import Relay  # noqa: E402
 
 __all__ = ["NETWORKS", "Broadcast", "Ideal", "Relay"]

@@ -9,6 +9,8 @@ A backend never decides delivery: it asks its network. Three message patterns
 | ``broadcast`` | one transmission per sender and round, heard by its neighbours (dNBP) | :meth:`Network.broadcast` |
 | ``chain``   | a measurement's location information relayed holder to holder (UKF-DCL) | :meth:`Network.relay`  |
 | ``central`` | each measurement sent to the fusion centre, agent 0 (UKF-CCL)     | ``broadcast`` to agent 0 |
+| ``packets`` | one stamped packet per sender and step, to the receivers it names; | :meth:`Network.packets`  |
+|             | each arrives after a delay of 0..D steps or is lost (fu2017, gao2016) |                      |
 
 Every network accounts at the sender, in one unit for every backend: a
 *message* is one transmission (a broadcast heard by several neighbours is one
@@ -31,7 +33,7 @@ from coloc_env.draws import draw_keys, uniforms
 from coloc_env.parts import Block
 from coloc_env.world.relay import RelayChain
 
-MESSAGE_KINDS = ("none", "broadcast", "chain", "central")
+MESSAGE_KINDS = ("none", "broadcast", "chain", "central", "packets")
 CENTRE = 0  # the fusion centre of ``central`` backends
 
 
@@ -68,6 +70,15 @@ class Network:
 
     def loss_probability(self, distance: np.ndarray) -> np.ndarray:
         return np.zeros(np.shape(distance))
+
+    def packet_delays(self, distance: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """Delay in steps (int, 0 = on time) of packets over links at ``distance``, or -1 for a lost one,
+        given one uniform ``u`` per packet; by default lost with :meth:`loss_probability`, else on time."""
+        return np.where(u < self.loss_probability(distance), -1, 0)
+
+    def max_delay(self) -> int:
+        """The longest delay :meth:`packet_delays` can give (a receiver's buffer length D)."""
+        return 0
 
     def max_hops(self) -> int:
         return self.num_agents - 1
@@ -118,6 +129,28 @@ class Network:
         self.floats_sent += floats * sent
         self.delivered |= delivered
         return delivered
+
+    def packets(self, senders: np.ndarray, listening: np.ndarray, floats: float, slot: int = 0) -> np.ndarray:
+        """One stamped packet per sender at this step: senders (B, N), listening (B, N, N) [t, s] = t sends to s.
+
+        Returns delay (B, N, N) int [t, s]: the packet of t reaches s after that many steps (0 = this
+        step), or -1 (not sent, out of range, or lost); the receiver buffers what arrives late. The
+        loss and delay draws depend on (step, slot) only, as in :meth:`broadcast`; the transmit
+        decision is read at ``slot``. Unlike a broadcast, a packet counts as sent (one message per
+        sender, ``floats`` floats) when it is transmitted, whether it arrives or not: the radio
+        spent the air time.
+        """
+        N = self.num_agents
+        distance = self.distances()
+        want = (np.asarray(senders, bool) & self.transmits(slot))[:, :, None] & np.asarray(listening, bool)
+        want &= ~np.eye(N, dtype=bool) & self.usable(distance)
+        u = uniforms(self.keys, (self._k, 2, slot), (N, N))
+        delay = np.where(want, self.packet_delays(distance, u), -1).astype(np.int64)
+        sent = want.any(axis=-1)
+        self.messages_sent += sent
+        self.floats_sent += floats * sent
+        self.delivered |= delay == 0
+        return delay
 
     def relay(self, source: np.ndarray, first: np.ndarray, floats_per_hop, slot: int = 0) -> RelayChain:
         """Relay chains source -> first -> ... (B,), following the holders' choices (or nearest first).

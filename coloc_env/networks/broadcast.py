@@ -2,7 +2,7 @@
 
 | quantity   | value                                                                                |
 |------------|--------------------------------------------------------------------------------------|
-| carries    | ``broadcast``, ``central``, ``chain`` (chains relay nearest first, hop by hop in range) |
+| carries    | ``broadcast``, ``central``, ``packets``, ``chain`` (chains relay nearest first, in range) |
 | decisions  | ``transmit`` MultiDiscrete([2] * rounds) per agent: broadcast in each round or not    |
 | always     | broadcast at every opportunity                                                       |
 | silent     | never broadcast                                                                      |
@@ -32,7 +32,7 @@ class Broadcast(PartConfig):
     """Config of the ``broadcast`` network (see the module table)."""
 
     name = "broadcast"
-    carries = frozenset({"broadcast", "chain", "central"})
+    carries = frozenset({"broadcast", "chain", "central", "packets"})
     comm_range: float = 200.0
     loss: float = 0.0
 
@@ -46,7 +46,7 @@ class Broadcast(PartConfig):
 
 class BroadcastNetwork(Network):
     def transport_blocks(self) -> list[Block]:
-        if self.message_kind in ("broadcast", "central"):
+        if self.message_kind in ("broadcast", "central", "packets"):
             return [Block("transmit", self.rounds, 2, "broadcast in this round (1) or not (0)", default=1,
                           maximum=1, minimum=0)]
         return []
@@ -58,6 +58,6 @@ class BroadcastNetwork(Network):
         return np.full(np.shape(distance), float(self.config.loss))
 
     def transmits(self, round_index: int) -> np.ndarray:
-        if self.message_kind not in ("broadcast", "central"):
+        if self.message_kind not in ("broadcast", "central", "packets"):
             return super().transmits(round_index)
         return self._decisions[:, :, min(round_index, self.rounds - 1)].astype(bool)

@@ -2,7 +2,7 @@
 
 | quantity          | value                                                  |
 |-------------------|--------------------------------------------------------|
-| carries           | ``broadcast``, ``chain``, ``central``                  |
+| carries           | ``broadcast``, ``chain``, ``central``, ``packets``     |
 | decisions         | none                                                   |
 | delivery          | every message, on time                                 |
 | accounting        | messages and floats at the sender (see the base)       |
@@ -24,7 +24,7 @@ class Ideal(PartConfig):
     """Config of the ``ideal`` network (no fields)."""
 
     name = "ideal"
-    carries = frozenset({"broadcast", "chain", "central"})
+    carries = frozenset({"broadcast", "chain", "central", "packets"})
 
     def check(self, prefix: str) -> None:
         return None

@@ -5,7 +5,7 @@ A hop of length d is lost with p_loss(d) = 1 - (1 - loss_at_zero) exp(-d / loss_
 
 | quantity   | value                                                                                     |
 |------------|-------------------------------------------------------------------------------------------|
-| carries    | ``chain``, ``broadcast``, ``central``                                                     |
+| carries    | ``chain``, ``broadcast``, ``central``, ``packets`` (one hop, lost with p_loss(d))         |
 | decisions  | ``chain``: ``next_hop`` Discrete(N + 2) per agent: a platform, N = stop,                 |
 |            | N + 1 = the nearest not yet reached; ``broadcast``: ``transmit`` ([2] * rounds)          |
 | always     | nearest-first relay, transmit in every round                                             |
@@ -38,7 +38,7 @@ class Relay(PartConfig):
     """Config of the ``relay`` network (see the module table)."""
 
     name = "relay"
-    carries = frozenset({"broadcast", "chain", "central"})
+    carries = frozenset({"broadcast", "chain", "central", "packets"})
     comm_range: float = float("inf")
     max_hops: int | None = None
     loss_at_zero: float = 0.1
@@ -65,7 +65,7 @@ class RelayNetwork(Network):
         if self.message_kind == "chain":
             return [Block("next_hop", 1, N + 2, f"whom to relay to: a platform, {N} = stop, {N + 1} = nearest "
                           "not yet reached", default=N + 1, maximum=N + 1, minimum=N)]
-        if self.message_kind in ("broadcast", "central"):
+        if self.message_kind in ("broadcast", "central", "packets"):
             return [Block("transmit", self.rounds, 2, "transmit in this round (1) or not (0)", default=1,
                           maximum=1, minimum=0)]
         return []

@@ -1,7 +1,14 @@
-"""Worlds: truth and sensors, batched. ``coloc_env.WORLDS`` lists the registered names."""
+"""Worlds: truth and sensors, batched. ``coloc_env.WORLDS`` lists the registered names.
+
+Every module of this package is imported (and so registers its world) when the package loads.
+"""
 
 from coloc_env.parts import WORLDS
-from coloc_env.worlds.circles import Circles
-from coloc_env.worlds.gps_denied import GpsDenied as GpsDenied
+from coloc_env.parts_discovery import import_parts
 
-__all__ = ["WORLDS", "Circles"]
+import_parts(__name__, __path__, ("drift", "target_cv", "circles", "gps_denied", "nlos_orbit", "mrclam"))
+
+from coloc_env.worlds.circles import Circles  # noqa: E402
+from coloc_env.worlds.gps_denied import GpsDenied  # noqa: E402
+
+__all__ = ["WORLDS", "Circles", "GpsDenied"]
