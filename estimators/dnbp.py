@@ -115,6 +115,7 @@ __all__ = [
 
 # deliver(senders (B, N), listening (B, N, N)) -> delivered (B, N, N): the caller's network (see :func:`step`)
 Deliver = Callable[[np.ndarray, np.ndarray], np.ndarray]
+Propagate = Callable[[np.ndarray, Sequence[np.random.Generator]], np.ndarray]
 
 _CHUNK_ELEMENTS = 1 << 16  # kernel entries per chunk (512 kB): stays in cache, bounds memory at any batch
 
@@ -576,7 +577,8 @@ def predict(model: DnbpModel, belief: np.ndarray, accel: np.ndarray, rngs: Seque
 # --- Algorithm 4 -------------------------------------------------------------------------------------------------
 def step(model: DnbpModel, state: DnbpState, gps_normal: np.ndarray, gps_fix: np.ndarray, deliver: Deliver,
          ranges: np.ndarray, accel: np.ndarray, rngs: Sequence[np.random.Generator],
-         broadcast: np.ndarray | None = None, record: bool = False) -> tuple[DnbpState, StepResult]:
+         broadcast: np.ndarray | None = None, record: bool = False,
+         propagate: Propagate | None = None) -> tuple[DnbpState, StepResult]:
     """One time step tau of dNBP (Algorithm 4) for B copies.
 
     gps_normal (B, N) bool; gps_fix (B, N, 2) (ignored where faulty);
@@ -591,7 +593,10 @@ def step(model: DnbpModel, state: DnbpState, gps_normal: np.ndarray, gps_fix: np
     accel (B, N, 2) the readings a_hat(tau) used to predict tau + 1;
     broadcast (B, N, n_iter) bool: whether each UAV broadcasts in each
     iteration when the schedule allows it (None = always, the paper's
-    schedule); ``rngs``: one generator per copy. Returns the state of
+    schedule); ``rngs``: one generator per copy; ``propagate`` replaces
+    Algorithm 3 for another motion model: ``propagate(belief, rngs)`` returns
+    the particles of rho(tau+1) (B, N, M, d), position first (None: the
+    constant-velocity model of ``model``, with ``accel``). Returns the state of
     tau + 1 (prior = rho(tau+1), belief/estimate of tau) and a
     :class:`StepResult`.
     """
@@ -685,7 +690,11 @@ def step(model: DnbpModel, state: DnbpState, gps_normal: np.ndarray, gps_fix: np
             history.append(belief.copy())
 
     estimate = belief[..., :2].mean(axis=2)
-    prior, h_rho = predict(model, belief, accel, rngs)
+    if propagate is None:
+        prior, h_rho = predict(model, belief, accel, rngs)
+    else:
+        prior = np.asarray(propagate(belief, rngs), float)
+        h_rho = rule_of_thumb_bandwidth(prior[..., :2])
     new_state = DnbpState(prior=prior, prior_bandwidth=h_rho, prior_uniform=np.zeros((B, N), bool), belief=belief,
                           estimate=estimate)
     return new_state, StepResult(estimate=estimate, belief=belief, delivered=delivered_all, broadcasts=broadcasts,

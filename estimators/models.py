@@ -62,8 +62,12 @@ class OdometryDisplacement:
         return process_noise(inputs[..., 0], inputs[..., 1], self.dt, self.speed_var, inputs[..., 2])
 
     def rvs(self, rng: np.random.Generator, state: np.ndarray, inputs: np.ndarray) -> np.ndarray:
-        """One draw of w per agent, shape like ``state``."""
-        factor = np.linalg.cholesky(self.covar(state, inputs) + 1e-300 * np.eye(2))
+        """One draw of w per agent, shape like ``state``.
+
+        Q is often singular (rank 1 at k = 0, where the heading is known exactly), so the square root
+        is the symmetric one from the eigendecomposition, not a Cholesky factor."""
+        values, vectors = np.linalg.eigh(self.covar(state, inputs))
+        factor = vectors * np.sqrt(np.maximum(values, 0.0))[..., None, :]
         return np.einsum("...ij,...j->...i", factor, rng.standard_normal(np.shape(state)))
 
     @staticmethod

@@ -87,15 +87,18 @@ def predict(state: KalmanState, accel: np.ndarray, F: np.ndarray, G: np.ndarray,
 
 
 def update_position(state: KalmanState, z: np.ndarray, R: np.ndarray, mask: np.ndarray) -> KalmanState:
-    """Joseph-form update with a position measurement z (B, N, 2), covariance R (B, N, 2, 2), where ``mask``."""
-    H = np.zeros((2, 4))
+    """Joseph-form update with a position measurement z (B, N, 2), covariance R (B, N, 2, 2), where ``mask``.
+
+    The state is any (B, N, d) with the position first (H = [I2 0])."""
+    d = state.mean.shape[-1]
+    H = np.zeros((2, d))
     H[0, 0] = H[1, 1] = 1.0
     P = state.cov
     S = P[..., :2, :2] + R
     K = np.linalg.solve(S, P[..., :2, :]).swapaxes(-1, -2)  # P H^T S^-1 (S symmetric)
     innovation = np.where(mask[..., None], z - state.mean[..., :2], 0.0)
     mean = state.mean + np.einsum("...ij,...j->...i", K, innovation)
-    IKH = np.eye(4) - K @ H
+    IKH = np.eye(d) - K @ H
     cov = _sym(IKH @ P @ IKH.swapaxes(-1, -2) + K @ R @ K.swapaxes(-1, -2))
     return KalmanState(np.where(mask[..., None], mean, state.mean), np.where(mask[..., None, None], cov, P))
 
@@ -174,6 +177,19 @@ def step(params: LsParams, state: KalmanState, gps_normal: np.ndarray, gps_fix: 
 
     ``state`` holds the predictions of tau. Returns (state of tau + 1,
     estimates (B, N, 2), fixed (B, N) bool: fault UAVs whose fix passed the gate).
+    :func:`update` followed by :func:`predict` with the linear model (F, G, Q).
+    """
+    posterior, estimate, fixed = update(params, state, gps_normal, gps_fix, adjacency, ranges, gps_std, range_std)
+    return predict(posterior, accel, F, G, Q), estimate, fixed
+
+
+def update(params: LsParams, state: KalmanState, gps_normal: np.ndarray, gps_fix: np.ndarray, adjacency: np.ndarray,
+           ranges: np.ndarray, gps_std: float, range_std: float) -> tuple[KalmanState, np.ndarray, np.ndarray]:
+    """The measurement half of :func:`step`: GPS updates, then the gated LS fixes of fault UAVs.
+
+    ``state`` (any state dimension d >= 2, position first) holds the predictions of tau. Returns the
+    posterior of tau, the estimates (B, N, 2) and ``fixed`` (B, N). The caller predicts with its own
+    motion model (:func:`predict` for the linear constant-velocity one).
     """
     gps_normal = np.asarray(gps_normal, bool)
     B, N = gps_normal.shape
@@ -205,4 +221,4 @@ def step(params: LsParams, state: KalmanState, gps_normal: np.ndarray, gps_fix: 
         z[fb, fs], R[fb, fs] = p[accept], cov[accept]
         posterior = update_position(posterior, z, R, fixed)
         estimate[fb, fs] = p[accept]
-    return predict(posterior, accel, F, G, Q), estimate, fixed
+    return posterior, estimate, fixed

@@ -71,6 +71,8 @@ import estimators.dnbp as dn
 import estimators.range_ls as rl
 from coloc_env.backends.base import Backend
 from coloc_env.parts import BACKENDS, PartConfig, check_choice, check_range
+from estimators.kalman import symmetrize
+from estimators.models import predict_joint
 
 
 @BACKENDS.register
@@ -78,7 +80,7 @@ from coloc_env.parts import BACKENDS, PartConfig, check_choice, check_range
 class Dnbp(PartConfig):
     name = "dnbp"
     estimand = "self"
-    motion_kinds = frozenset({"cv_accel"})
+    motion_kinds = frozenset({"cv_accel", "odometry_displacement", "se2_odometry"})
     requires = (frozenset({"range"}),)
     message_kind = "broadcast"
     num_particles: int = 100
@@ -113,7 +115,7 @@ class Dnbp(PartConfig):
 class RangeLs(PartConfig):
     name = "range_ls"
     estimand = "self"
-    motion_kinds = frozenset({"cv_accel"})
+    motion_kinds = frozenset({"cv_accel", "odometry_displacement", "se2_odometry"})
     requires = (frozenset({"range"}), frozenset({"position_fix"}))
     message_kind = "broadcast"
     rounds = 1
@@ -146,17 +148,23 @@ class DnbpBackend(Backend):
         if config.initial_threshold > N:
             raise ValueError(f"backend.initial_threshold must be <= the number of agents {N}, "
                              f"got {config.initial_threshold}")
-        area, velocity = _world_field(world, "area"), _world_field(world, "nominal_velocity")
-        travel = float(np.linalg.norm(velocity)) * world.dt * world.horizon
+        motion = world.motion_model
+        # wan2014's own model keeps Algorithm 3 (and the gps_denied_nbp scenario's draws); any other motion
+        # model propagates each particle through the model's function and one draw of its process noise
+        self.constant_velocity = motion.kind == "cv_accel"
+        start, episode = world.region()
         m = config.box_margin
+        accel_std = float(np.sqrt(motion.accel_noise_var)) if self.constant_velocity else 0.0
         self.model = dn.DnbpModel(
-            dt=world.dt, accel_noise_std=float(np.sqrt(world.motion_model.accel_noise_var)),
-            gps_std=float(np.sqrt(world.fix_noise_var())), range_std=float(np.sqrt(world.range_noise_var())),
+            dt=world.dt, accel_noise_std=accel_std,
+            gps_std=float(np.sqrt(world.fix_noise_var())) if "position_fix" in world.config.measurements else 1.0,
+            range_std=float(np.sqrt(world.range_noise_var())),
             num_particles=M, num_iterations=config.num_iterations, oversampling=config.oversampling,
-            defensive_weight=config.defensive_weight, defensive_box=(-m, area + m + travel), cold_box=(-m, area + m),
-            min_bandwidth=config.min_bandwidth, initial_threshold=config.initial_threshold,
-            schedule=config.schedule)
-        particles = np.zeros((B, N, M, 4))
+            defensive_weight=config.defensive_weight, defensive_box=(episode[0] - m, episode[1] + m),
+            cold_box=(start[0] - m, start[1] + m), min_bandwidth=config.min_bandwidth,
+            initial_threshold=config.initial_threshold, schedule=config.schedule)
+        d = motion.state_dim
+        particles = np.zeros((B, N, M, d))
         self.state = dn.DnbpState(prior=particles, prior_bandwidth=np.ones((B, N)),
                                   prior_uniform=np.zeros((B, N), bool), belief=particles.copy(),
                                   estimate=np.zeros((B, N, 2)))
@@ -167,12 +175,32 @@ class DnbpBackend(Backend):
         idx = np.asarray(idx)
         for b, rng in zip(idx, rngs, strict=True):
             self.rngs[b] = rng
-        mean, _ = self.world.initial_belief()
-        fresh = dn.initial_state(self.model, list(rngs), "warm", mean[idx, :, :2], mean[idx, :, 2:],
-                                 float(_world_field(self.world, "velocity_spread")))
+        mean, cov = self.world.initial_belief()
+        if self.constant_velocity:
+            fresh = dn.initial_state(self.model, list(rngs), "warm", mean[idx, :, :2], mean[idx, :, 2:],
+                                     float(_world_field(self.world, "velocity_spread")))
+        else:  # warm start: M draws from each agent's initial belief N(mean, cov)
+            M = self.model.num_particles
+            factor = np.linalg.cholesky(cov[idx])
+            normal = np.stack([rng.standard_normal((self.num_agents, M, mean.shape[-1])) for rng in rngs])
+            points = mean[idx][:, :, None, :] + np.einsum("bnij,bnmj->bnmi", factor, normal)
+            fresh = dn.DnbpState(prior=points, prior_bandwidth=dn.rule_of_thumb_bandwidth(points[..., :2]),
+                                 prior_uniform=np.zeros(points.shape[:2], bool), belief=points.copy(),
+                                 estimate=points[..., :2].mean(axis=2))
         for name in ("prior", "prior_bandwidth", "prior_uniform", "belief", "estimate"):
             getattr(self.state, name)[idx] = getattr(fresh, name)
         self.posterior_position[idx] = fresh.estimate
+
+    def _propagate(self, inputs):
+        motion = self.world.motion_model
+
+        def propagate(belief, rngs):
+            u = np.asarray(inputs, float)[:, :, None, :]
+            moved = motion.function(belief, u)
+            noise = np.stack([motion.rvs(rng, belief[b], u[b]) for b, rng in enumerate(rngs)])
+            return moved + noise
+
+        return propagate
 
     def update(self, readings, decisions) -> None:
         counter = [0]
@@ -184,9 +212,12 @@ class DnbpBackend(Backend):
             # s takes t's message only if it holds the range to t the message is built from
             return self.network.broadcast(senders, listening & range_valid.transpose(0, 2, 1), self.floats, slot=n)
 
-        ranges = np.where(range_valid, np.nan_to_num(readings.range), 0.0)
+        # dn.step reads the range of message t -> s at [t, s]; the reading is the receiver's own, [s, t]
+        held = range_valid.transpose(0, 2, 1)
+        ranges = np.where(held, np.nan_to_num(readings.range).transpose(0, 2, 1), 0.0)
+        propagate = None if self.constant_velocity else self._propagate(readings.inputs)
         self.state, _ = dn.step(self.model, self.state, readings.fix_valid, readings.fix, deliver, ranges,
-                                readings.inputs, self.rngs)
+                                readings.inputs, self.rngs, propagate=propagate)
 
     def predict(self, inputs) -> None:
         return None  # dn.step has propagated the beliefs to k + 1 already (with the same readings' inputs)
@@ -210,9 +241,11 @@ class RangeLsBackend(Backend):
         self.params = rl.LsParams(min_anchors=c.min_anchors, max_rms=c.max_rms, max_std=c.max_std,
                                   gate_chi2=c.gate_chi2)
         model = world.motion_model
-        self.F, self.G, self.Q = model.transition, model.input_matrix, model.process_noise
-        B, N = self.batch, self.num_agents
-        self.state = rl.KalmanState(np.zeros((B, N, 4)), np.zeros((B, N, 4, 4)))
+        self.linear = model.kind == "cv_accel"
+        if self.linear:
+            self.F, self.G, self.Q = model.transition, model.input_matrix, model.process_noise
+        B, N, d = self.batch, self.num_agents, model.state_dim
+        self.state = rl.KalmanState(np.zeros((B, N, d)), np.zeros((B, N, d, d)))
         self.estimate = np.zeros((B, N, 2))
         self.estimate_cov = np.zeros((B, N, 2, 2))
 
@@ -232,15 +265,18 @@ class RangeLsBackend(Backend):
         ranges = np.where(adjacency, np.nan_to_num(readings.range), 0.0)
         fix = np.where(normal[..., None], readings.fix, np.nan)
         gps_std, range_std = np.sqrt(self.world.fix_noise_var()), np.sqrt(self.world.range_noise_var())
-        self.state, self.estimate, _ = rl.step(self.params, self.state, normal, fix, adjacency, ranges,
-                                               readings.inputs, self.F, self.G, self.Q, gps_std, range_std)
-        # rl.step returns the prediction of k + 1 only; its posterior of k is F^-1 (P(k+1) - Q) F^-T (F invertible)
-        Finv = np.linalg.inv(self.F)
-        post = Finv @ (self.state.cov - self.Q) @ Finv.T
-        self.estimate_cov = 0.5 * (post[..., :2, :2] + np.swapaxes(post[..., :2, :2], -1, -2))
+        self.state, self.estimate, _ = rl.update(self.params, self.state, normal, fix, adjacency, ranges,
+                                                 gps_std, range_std)
+        self.estimate_cov = self.state.cov[..., :2, :2].copy()
 
     def predict(self, inputs) -> None:
-        return None  # rl.step has predicted to k + 1 already (with the same readings' inputs)
+        if self.linear:  # wan2014's constant-velocity KF, exactly as estimators.range_ls.step predicts
+            self.state = rl.predict(self.state, inputs, self.F, self.G, self.Q)
+            return
+        # any other motion model: the EKF time update of each agent's own Gaussian
+        mean, cov = predict_joint(self.world.motion_model, self.state.mean[:, :, None, :], self.state.cov,
+                                  np.asarray(inputs, float)[:, :, None, :])
+        self.state = rl.KalmanState(mean[:, :, 0, :], symmetrize(cov))
 
     def position(self) -> np.ndarray:
         return self.estimate

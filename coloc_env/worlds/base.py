@@ -113,6 +113,12 @@ class World:
         """What the agents know at k = 0: mean (B, N, d) and per-agent covariance (B, N, d, d)."""
         raise NotImplementedError
 
+    def region(self) -> tuple[tuple[float, float], tuple[float, float]]:
+        """What the agents are told of the flight area, for estimators that need a support (dNBP's
+        defensive and cold-start boxes): ``(start, episode)``, each ``(lo, hi)`` per axis (metres),
+        the square holding the agents at k = 0 and the one holding them over the whole episode."""
+        raise NotImplementedError(f"world {self.config.name!r} does not declare its flight region")
+
     def observation_features(self) -> np.ndarray:
         """(B, N, f) what each agent senses of the world at k (e.g. 'I measure now'); none by default."""
         return np.zeros((self.batch, self.num_agents, 0))

@@ -203,5 +203,10 @@ class CirclesWorld(World):
     def feature_bounds(self):
         return np.zeros(1), np.ones(1)
 
+    def region(self):
+        # the tracks are the mission plan, known in advance: the square around them, with 10 m to spare
+        square = (float(self.truth.min()) - 10.0, float(self.truth.max()) + 10.0)
+        return square, square
+
     def extent(self) -> float:
         return float(np.abs(self.truth).max()) + 10.0

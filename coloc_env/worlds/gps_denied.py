@@ -185,5 +185,10 @@ class GpsDeniedWorld(World):
     def feature_bounds(self):
         return np.zeros(1), np.ones(1)
 
+    def region(self):
+        c = self.config
+        travel = float(np.linalg.norm(c.nominal_velocity)) * self.dt * self.horizon
+        return (0.0, float(c.area)), (0.0, float(c.area) + travel)
+
     def extent(self) -> float:
         return float(np.abs(self.truth[..., :2]).max()) + 50.0
