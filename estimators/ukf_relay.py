@@ -180,10 +180,10 @@ def time_update(estimate: np.ndarray, cov: np.ndarray | None, speed: np.ndarray,
     return estimate, cov
 
 
-def _block_index(platforms: np.ndarray) -> np.ndarray:
-    """State indices of the blocks of ``platforms`` (..., k) -> (..., 2k)."""
+def _block_index(platforms: np.ndarray, d: int = 2) -> np.ndarray:
+    """State indices of the d-blocks of ``platforms`` (..., k) -> (..., d k)."""
     platforms = np.asarray(platforms)
-    return (2 * platforms[..., :, None] + np.arange(2)).reshape(*platforms.shape[:-1], -1)
+    return (d * platforms[..., :, None] + np.arange(d)).reshape(*platforms.shape[:-1], -1)
 
 
 def reorder_first(num_platforms: int, measuring: np.ndarray, measured: np.ndarray) -> np.ndarray:
@@ -223,8 +223,8 @@ def ccl_update(estimate: np.ndarray, cov: np.ndarray, measuring, measured, z, ra
     with the sign corrected) when every platform is reached. Returns new
     ``(estimate, cov)``.
     """
-    N = np.shape(estimate)[-2]
-    L = 2 * N
+    N, d = np.shape(estimate)[-2:]
+    L = d * N
     if reached is None:
         reached = np.ones((*np.shape(measuring), N), dtype=bool)
     batch, (x, P, m, n, zz, reach) = _flatten_batch(
@@ -233,17 +233,17 @@ def ccl_update(estimate: np.ndarray, cov: np.ndarray, measuring, measured, z, ra
     if np.any(m == n):
         raise ValueError("measuring and measured platforms must differ")
     order = reorder_first(N, m, n)
-    idx = _block_index(order)  # (B, L)
+    idx = _block_index(order, d)  # (B, L)
     x_r = np.take_along_axis(x.reshape(-1, L), idx, axis=-1)
     P_r = np.take_along_axis(np.take_along_axis(P, idx[:, :, None], axis=1), idx[:, None, :], axis=2)
     chi = sigma_points(x_r, P_r, lam)  # (B, 2L+1, L)
     w = ukf_weights(L, lam)
-    z_sigma = range_of(chi[..., 0:2], chi[..., 2:4])  # (B, 2L+1)
+    z_sigma = range_of(chi[..., 0:2], chi[..., d:d + 2])  # (B, 2L+1): positions lead each block
     z_bar = z_sigma @ w
     dz = z_sigma - z_bar[:, None]
     Pz = (dz**2) @ w + range_var
     Pxz = np.einsum("p,bpl,bp->bl", w, chi - x_r[:, None, :], dz)
-    gain = Pxz / Pz[:, None] * np.repeat(np.take_along_axis(reach, order, axis=-1), 2, axis=-1)
+    gain = Pxz / Pz[:, None] * np.repeat(np.take_along_axis(reach, order, axis=-1), d, axis=-1)
     x_r = x_r + gain * (zz - z_bar)[:, None]
     outer_kx = gain[:, :, None] * Pxz[:, None, :]
     P_r = P_r - outer_kx - np.swapaxes(outer_kx, -1, -2) + Pz[:, None, None] * gain[:, :, None] * gain[:, None, :]
@@ -251,17 +251,17 @@ def ccl_update(estimate: np.ndarray, cov: np.ndarray, measuring, measured, z, ra
     inverse = np.argsort(idx, axis=-1)
     x_new = np.take_along_axis(x_r, inverse, axis=-1).reshape(x.shape)
     P_new = np.take_along_axis(np.take_along_axis(P_r, inverse[:, :, None], axis=1), inverse[:, None, :], axis=2)
-    return x_new.reshape(*batch, N, 2), P_new.reshape(*batch, L, L)
+    return x_new.reshape(*batch, N, d), P_new.reshape(*batch, L, L)
 
 
-def _gather_blocks(P: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
-    """P[b, blocks of rows[b]][:, blocks of cols[b]] for each copy b: rows (B, r), cols (B, c) -> (B, 2r, 2c)."""
-    ri, ci = _block_index(rows), _block_index(cols)
+def _gather_blocks(P: np.ndarray, rows: np.ndarray, cols: np.ndarray, d: int = 2) -> np.ndarray:
+    """P[b, blocks of rows[b]][:, blocks of cols[b]] for each copy b: rows (B, r), cols (B, c) -> (B, d r, d c)."""
+    ri, ci = _block_index(rows, d), _block_index(cols, d)
     return P[np.arange(len(P))[:, None, None], ri[:, :, None], ci[:, None, :]]
 
 
-def _add_blocks(P: np.ndarray, rows: np.ndarray, cols: np.ndarray, values: np.ndarray) -> None:
-    ri, ci = _block_index(rows), _block_index(cols)
+def _add_blocks(P: np.ndarray, rows: np.ndarray, cols: np.ndarray, values: np.ndarray, d: int = 2) -> None:
+    ri, ci = _block_index(rows, d), _block_index(cols, d)
     P[np.arange(len(P))[:, None, None], ri[:, :, None], ci[:, None, :]] += values
 
 
@@ -284,8 +284,8 @@ def dcl_update(estimate: np.ndarray, cov: np.ndarray, chain: np.ndarray, chain_l
     """
     if truncation not in ("consistent", "paper"):
         raise ValueError(f"truncation must be 'consistent' or 'paper', got {truncation!r}")
-    N = np.shape(estimate)[-2]
-    L = 2 * N
+    N, d = np.shape(estimate)[-2:]
+    L = d * N
     batch, (x, P, chain, length, zz) = _flatten_batch(
         estimate, cov, chain, chain_length, z, core_ndims=(2, 2, 1, 0, 0))
     x, P = x.astype(float).copy(), P.astype(float).copy()
@@ -312,12 +312,12 @@ def dcl_update(estimate: np.ndarray, cov: np.ndarray, chain: np.ndarray, chain_l
     def own_row_block(sub, i):
         """Receiver chain[sub, i]'s row block A_i from its own P blocks and A_{<i} (eqs. 15-16)."""
         receiver = chain[sub, i:i + 1]
-        P_ii = _gather_blocks(P[sub], receiver, receiver)
+        P_ii = _gather_blocks(P[sub], receiver, receiver, d)
         if i == 0:
             return None, _cholesky(P_ii, "P_mm")
         upstream = chain[sub, :i]
-        own = _gather_blocks(P[sub], receiver, upstream)  # (b, 2, 2i) = [P_{c_i c_1} ... P_{c_i c_{i-1}}]
-        left = np.swapaxes(_lower_solve(A[sub, : 2 * i, : 2 * i], np.swapaxes(own, -1, -2)), -1, -2)
+        own = _gather_blocks(P[sub], receiver, upstream, d)  # (b, d, d i) = [P_{c_i c_1} ... P_{c_i c_{i-1}}]
+        left = np.swapaxes(_lower_solve(A[sub, : d * i, : d * i], np.swapaxes(own, -1, -2)), -1, -2)
         schur = P_ii - left @ np.swapaxes(left, -1, -2)
         return left, _cholesky(0.5 * (schur + np.swapaxes(schur, -1, -2)), f"the Schur complement at hop {i}")
 
@@ -325,11 +325,11 @@ def dcl_update(estimate: np.ndarray, cov: np.ndarray, chain: np.ndarray, chain_l
     for i in (0, 1):
         left, diag = own_row_block(rows, i)
         if left is not None:
-            A[:, 2 * i:2 * i + 2, : 2 * i] = left
-        A[:, 2 * i:2 * i + 2, 2 * i:2 * i + 2] = diag
+            A[:, d * i:d * i + d, : d * i] = left
+        A[:, d * i:d * i + d, d * i:d * i + d] = diag
     m, n = chain[:, 0], chain[:, 1]
-    dev_m, dev_n = scale * A[:, 0:2, :], scale * A[:, 2:4, :]  # (B, 2, L) sigma deviations (18)
-    x_m, x_n = x[rows, m], x[rows, n]
+    dev_m, dev_n = scale * A[:, 0:2, :], scale * A[:, d:d + 2, :]  # (B, 2, L) position sigma deviations (18)
+    x_m, x_n = x[rows, m, :2], x[rows, n, :2]
     z0 = range_of(x_m, x_n)
     z_plus = range_of((x_m[:, :, None] + dev_m - x_n[:, :, None] - dev_n).transpose(0, 2, 1), 0.0)
     z_minus = range_of((x_m[:, :, None] - dev_m - x_n[:, :, None] + dev_n).transpose(0, 2, 1), 0.0)
@@ -341,43 +341,43 @@ def dcl_update(estimate: np.ndarray, cov: np.ndarray, chain: np.ndarray, chain_l
 
     if truncation == "consistent":
         # m and n: P_zj = g^T A_mn^-1 [P_mj; P_nj] for every platform j, carried in the message.
-        mn_rows = _gather_blocks(P, chain[:, :2], np.broadcast_to(np.arange(N), (B, N)))  # (B, 4, L)
-        P_zj = np.einsum("bq,bqc->bc", g[:, :4], _lower_solve(A[:, :4, :4], mn_rows)).reshape(B, N, 2)
+        mn_rows = _gather_blocks(P, chain[:, :2], np.broadcast_to(np.arange(N), (B, N)), d)  # (B, 2d, L)
+        P_zj = np.einsum("bq,bqc->bc", g[:, :2 * d], _lower_solve(A[:, :2 * d, :2 * d], mn_rows)).reshape(B, N, d)
 
-    update_weight = np.zeros((B, N, 2))  # Pxz^{c_j} in chain order, appended by each receiver
+    update_weight = np.zeros((B, N, d))  # Pxz^{c_j} in chain order, appended by each receiver
     for i in range(N):
         sub = np.flatnonzero(length > i)
         if len(sub) == 0:
             break
         if i >= 2:  # Algorithm 2 (1): the receiver's row block from the message
             left, diag = own_row_block(sub, i)
-            A[sub, 2 * i:2 * i + 2, : 2 * i] = left
-            A[sub, 2 * i:2 * i + 2, 2 * i:2 * i + 2] = diag
-        own_columns = 2 * (i + 1)
-        Pxz_i = np.einsum("bac,bc->ba", A[sub, 2 * i:2 * i + 2, :own_columns], g[sub, :own_columns])  # (20)
+            A[sub, d * i:d * i + d, : d * i] = left
+            A[sub, d * i:d * i + d, d * i:d * i + d] = diag
+        own_columns = d * (i + 1)
+        Pxz_i = np.einsum("bac,bc->ba", A[sub, d * i:d * i + d, :own_columns], g[sub, :own_columns])  # (20)
         update_weight[sub, i] = Pxz_i
         receiver = chain[sub, i]
         x[sub, receiver] += Pxz_i / Pz[sub, None] * innovation[sub, None]  # (21)
         # (22)-(23): Delta P_{c_i c_j} = Pxz^i Pz^-1 (Pxz^j)^T for the up-neighbours and itself
-        upstream = update_weight[sub, : i + 1]  # (b, i+1, 2)
+        upstream = update_weight[sub, : i + 1]  # (b, i+1, d)
         delta = Pxz_i[:, :, None, None] * upstream[:, None, :, :] / Pz[sub, None, None, None]
-        delta = delta.reshape(len(sub), 2, 2 * (i + 1))  # columns: blocks c_1..c_i
+        delta = delta.reshape(len(sub), d, d * (i + 1))  # columns: blocks c_1..c_i
         P_sub = P[sub]
-        _add_blocks(P_sub, receiver[:, None], chain[sub, : i + 1], -delta)
+        _add_blocks(P_sub, receiver[:, None], chain[sub, : i + 1], -delta, d)
         if i > 0:
-            _add_blocks(P_sub, chain[sub, :i], receiver[:, None], -np.swapaxes(delta[:, :, : 2 * i], -1, -2))
+            _add_blocks(P_sub, chain[sub, :i], receiver[:, None], -np.swapaxes(delta[:, :, : d * i], -1, -2), d)
         P[sub] = P_sub
 
     if truncation == "consistent":
         unreached = ~reached_mask
         partial = np.flatnonzero(unreached.any(axis=1))
         if len(partial):
-            gain = np.zeros((B, N, 2))  # K_r = Pxz^r / Pz in absolute platform order
+            gain = np.zeros((B, N, d))  # K_r = Pxz^r / Pz in absolute platform order
             gain[hop_copy, valid[hop_copy, hop_position]] = update_weight[hop_copy, hop_position]
             gain = gain / Pz[:, None, None]
-            cross = gain[:, :, None, :, None] * P_zj[:, None, :, None, :]  # (B, r, u, 2, 2) = K_r P_zu
+            cross = gain[:, :, None, :, None] * P_zj[:, None, :, None, :]  # (B, r, u, d, d) = K_r P_zu
             mask = (reached_mask[:, :, None] & unreached[:, None, :])[:, :, :, None, None]
             cross = np.where(mask, cross, 0.0).transpose(0, 1, 3, 2, 4).reshape(B, L, L)
             P[partial] -= cross[partial] + np.swapaxes(cross[partial], -1, -2)
     P = 0.5 * (P + np.swapaxes(P, -1, -2))
-    return x.reshape(*batch, N, 2), P.reshape(*batch, L, L)
+    return x.reshape(*batch, N, d), P.reshape(*batch, L, L)

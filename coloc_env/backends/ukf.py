@@ -28,12 +28,16 @@ read their estimates at the centre (the return path is not charged).
 | quantity      | value                                                                  |
 |---------------|------------------------------------------------------------------------|
 | estimand      | self                                                                   |
-| motion kinds  | ``odometry_displacement`` (the position-only state of wang2019)        |
+| motion kinds  | ``odometry_displacement`` (wang2019's position-only state), ``cv_accel`` |
+|               | (wan2014's [p, v] blocks: the range's sigma points span every block)   |
 | needs         | ``range``                                                              |
 | messages      | ukf_ccl: ``central`` (a range 1 float, a fix 2); ukf_dcl: ``chain`` (below)          |
 
 A ukf_dcl hop h carries S_m (10 floats) and the A_i row blocks and Pxz^i of
-the r = h + 1 platforms reached so far: 10 + 5 r + 2 r (r - 1) floats.
+the r = h + 1 platforms reached so far: 10 + 5 r + 2 r (r - 1) floats for
+position-only blocks (:func:`dcl_floats` for d-dimensional ones). In a world
+whose range readings are symmetric (``gps_denied``: one measurement per edge,
+known to both ends) each pair is fused once, m < n.
 | decisions     | none                                                                   |
 
 Arguments (``coloc_env.backends.UkfCcl`` / ``UkfDcl``)
@@ -58,9 +62,13 @@ from estimators.kalman import joseph_update
 from estimators.models import predict_joint
 
 
-def _dcl_floats(hop: int) -> float:
+def dcl_floats(hop: int, d: int = 2) -> float:
+    """Payload of ukf_dcl hop ``hop`` (0-based) with d-dimensional platform blocks: S_m (2 + 4 d floats),
+    then for the r = hop + 1 platforms reached so far their row blocks A_i of the lower block-triangular
+    factor (r d (d + 1) / 2 + d^2 r (r - 1) / 2) and their update weights Pxz^i (r d); 10 + 5 r + 2 r (r - 1)
+    for wang2019's d = 2."""
     r = hop + 1
-    return 10 + 5 * r + 2 * r * (r - 1)
+    return 2 + 4 * d + r * d * (d + 1) / 2 + d * d * r * (r - 1) / 2 + r * d
 
 
 @BACKENDS.register
@@ -68,7 +76,7 @@ def _dcl_floats(hop: int) -> float:
 class UkfCcl(PartConfig):
     name = "ukf_ccl"
     estimand = "self"
-    motion_kinds = frozenset({"odometry_displacement"})
+    motion_kinds = frozenset({"odometry_displacement", "cv_accel"})
     requires = (frozenset({"range"}),)
     message_kind = "central"
     ukf_lambda: float = 0.0
@@ -85,7 +93,7 @@ class UkfCcl(PartConfig):
 class UkfDcl(PartConfig):
     name = "ukf_dcl"
     estimand = "self"
-    motion_kinds = frozenset({"odometry_displacement"})
+    motion_kinds = frozenset({"odometry_displacement", "cv_accel"})
     requires = (frozenset({"range"}),)
     message_kind = "chain"
     ukf_lambda: float = 0.0
@@ -104,20 +112,23 @@ class JointUkfBackend(Backend):
         super().__init__(config, world, network, batch)
         self.distributed = distributed
         N = self.num_agents
+        d = self.d = world.motion_model.state_dim
         if config.ukf_lambda <= -2 * N:
             raise ValueError(f"backend.ukf_lambda must be > -2N = {-2 * N}, got {config.ukf_lambda!r}")
-        self.mean = np.zeros((self.batch, N, 2))
-        self.cov = np.zeros((self.batch, 2 * N, 2 * N))
+        self.mean = np.zeros((self.batch, N, d))
+        self.cov = np.zeros((self.batch, d * N, d * N))
+        # a world whose reading [m, n] is also [n, m] (one measurement known to both) is fused once per pair
+        self.one_per_pair = bool(getattr(world, "symmetric_ranges", False))
 
     def reset(self, rngs, idx) -> None:
         mean, cov = self.world.initial_belief()
-        N = self.num_agents
+        N, d = self.num_agents, self.d
         self.mean[idx] = mean[idx]
-        joint = np.zeros((len(idx), 2 * N, 2 * N))
+        joint = np.zeros((len(idx), d * N, d * N))
         for i in range(N):
-            joint[:, 2 * i:2 * i + 2, 2 * i:2 * i + 2] = cov[idx, i]
+            joint[:, d * i:d * i + d, d * i:d * i + d] = cov[idx, i]
         self.cov[idx] = joint
-        self.posterior_position[idx] = mean[idx]
+        self.posterior_position[idx] = mean[idx, :, :2]
 
     def _to_centre(self, senders: np.ndarray, floats: float, slot: int) -> np.ndarray:
         """(B,) bool: the message of ``senders`` (B,) reached the centre (the centre's own is local)."""
@@ -135,13 +146,17 @@ class JointUkfBackend(Backend):
         B, N = self.batch, self.num_agents
         rows = np.arange(B)
         lam = self.config.ukf_lambda
-        count, m, n = measurement_list(readings.range_valid)
+        valid = np.asarray(readings.range_valid, bool)
+        if self.one_per_pair:
+            valid = valid & np.triu(np.ones((N, N), dtype=bool), 1)
+        count, m, n = measurement_list(valid)
+        d = self.d
         for j in range(m.shape[1]):
             has = count > j
             mj, nj = np.where(has, m[:, j], -1), n[:, j]
             z = readings.range[rows, np.maximum(mj, 0), nj]
             if self.distributed:
-                chain = self.network.relay(mj, np.where(has, nj, -1), _dcl_floats, slot=j)
+                chain = self.network.relay(mj, np.where(has, nj, -1), lambda h: dcl_floats(h, d), slot=j)
                 used = np.flatnonzero(has & (chain.length >= 2))
                 if len(used):
                     self.mean[used], self.cov[used] = ukf.dcl_update(
@@ -161,27 +176,27 @@ class JointUkfBackend(Backend):
                     continue
                 source = np.where(has, i, -1)
                 if self.distributed:
-                    chain = self.network.relay(source, np.full(B, -1), _dcl_floats, slot=N * N + i)
+                    chain = self.network.relay(source, np.full(B, -1), lambda h: dcl_floats(h, d), slot=N * N + i)
                     reached = np.zeros((B, N), dtype=bool)
                     valid_c, valid_p = np.nonzero(chain.chain >= 0)
                     reached[valid_c, chain.chain[valid_c, valid_p]] = True
                     used = np.flatnonzero(has)
-                    keep = np.repeat(reached[used], 2, axis=-1)
+                    keep = np.repeat(reached[used], d, axis=-1)
                 else:
                     used = np.flatnonzero(self._to_centre(source, 2.0, slot=N * N + i))
                     keep = None
                 if len(used):
-                    H = np.zeros((2, 2 * N))
-                    H[:, 2 * i:2 * i + 2] = np.eye(2)
-                    flat, cov = joseph_update(self.mean[used].reshape(len(used), 2 * N), self.cov[used], H,
+                    H = np.zeros((2, d * N))
+                    H[:, d * i:d * i + 2] = np.eye(2)
+                    flat, cov = joseph_update(self.mean[used].reshape(len(used), d * N), self.cov[used], H,
                                               readings.fix[used, i], R, keep)
-                    self.mean[used], self.cov[used] = flat.reshape(len(used), N, 2), cov
+                    self.mean[used], self.cov[used] = flat.reshape(len(used), N, d), cov
 
     def predict(self, inputs) -> None:
         self.mean, self.cov = predict_joint(self.world.motion_model, self.mean, self.cov, inputs)
 
     def position(self) -> np.ndarray:
-        return self.mean
+        return self.mean[..., :2]
 
     def position_cov(self) -> np.ndarray:
-        return position_blocks(self.cov, self.num_agents, 2)
+        return position_blocks(self.cov, self.num_agents, self.d)

@@ -59,6 +59,8 @@ class World:
     """
 
     agent_prefix: ClassVar[str] = "uav"
+    # True where range[m, n] and range[n, m] are one measurement known to both ends (fuse it once)
+    symmetric_ranges: ClassVar[bool] = False
 
     def __init__(self, config, batch: int, horizon: int):
         self.config = config

@@ -116,6 +116,7 @@ class GpsDenied(PartConfig):
 
 
 class GpsDeniedWorld(World):
+    symmetric_ranges = True
     agent_prefix = "uav"
 
     def __init__(self, config: GpsDenied, batch: int, horizon: int):

@@ -46,8 +46,15 @@ def test_the_matrix_has_the_rows_the_issue_names():
     assert all(set(r) == {"world", "network", "backend", "ok", "reason"} for r in coloc_env.compatibility())
 
 
-def test_ukf_dcl_over_an_ideal_network_equals_ukf_ccl():
-    runs = {b: _rollout(coloc_env.compose(world="circles", network="ideal", backend=b), "always", 4, 150)
+BOTH_UKFS = sorted({r["world"] for r in OK_ROWS if r["network"] == "ideal" and r["backend"] == "ukf_dcl"}
+                   & {r["world"] for r in OK_ROWS if r["network"] == "ideal" and r["backend"] == "ukf_ccl"})
+UKF_STEPS = {"circles": 150}  # the others are slower per step (every pair ranges): fewer steps
+
+
+@pytest.mark.parametrize("world", BOTH_UKFS)
+def test_ukf_dcl_over_an_ideal_network_equals_ukf_ccl(world):
+    steps = UKF_STEPS.get(world, 12)
+    runs = {b: _rollout(coloc_env.compose(world=world, network="ideal", backend=b), "always", 4, steps)
             for b in ("ukf_ccl", "ukf_dcl")}
     (_, truth_c, est_c, env_c), (_, truth_d, est_d, env_d) = runs["ukf_ccl"], runs["ukf_dcl"]
     np.testing.assert_array_equal(truth_c, truth_d)
@@ -55,9 +62,13 @@ def test_ukf_dcl_over_an_ideal_network_equals_ukf_ccl():
     np.testing.assert_allclose(env_d.unwrapped.scenario.backend.cov, env_c.unwrapped.scenario.backend.cov,
                                rtol=0, atol=1e-9)
     # the fixes of the anchors and the ranges did move the estimates away from dead reckoning
-    _, _, est_dr, _ = _rollout(coloc_env.compose(world="circles", network="ideal", backend="dead_reckoning"),
-                               "always", 4, 150)
+    _, _, est_dr, _ = _rollout(coloc_env.compose(world=world, network="ideal", backend="dead_reckoning"),
+                               "always", 4, steps)
     assert np.abs(est_dr - est_c).max() > 1.0
+
+
+def test_the_ukfs_run_on_gps_denied_with_the_gps_normal_uavs_as_anchors():
+    assert "gps_denied" in BOTH_UKFS
 
 
 @pytest.mark.parametrize("network", ["ideal", "relay", "broadcast"])
