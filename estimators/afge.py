@@ -93,6 +93,7 @@ __all__ = [
     "select_strongest",
     "fuse_fixes",
     "fused_fix",
+    "fuse_packets",
     "dfir_batch",
     "information_predict",
     "empty_stack",
@@ -345,6 +346,26 @@ def fused_fix(Y: np.ndarray, y: np.ndarray, gamma: np.ndarray):
     R = _inv2(safe)
     z = np.einsum("...ab,...b->...a", R, np.where(gamma[..., None], y, 0.0))
     return z, R
+
+
+def fuse_packets(signal: SignalModel, rss, aoa, nav, modes, delays, lags, keep, n_strongest: int,
+                 mode_info: str = "known", weighting: str = "distance", min_packets: int = 1):
+    """Steps 1-2 for buffered stamps: the fused observation of each stamp from its packets
+    known now (spec §4-5) [paper/reconstructed]; :func:`known_at_lag`, :func:`select_strongest`,
+    :func:`mode_weight`, :func:`packet_fixes` and :func:`fuse_fixes` in that order.
+
+    Packets on the last axis J: ``rss``/``aoa``/``modes``/``delays`` (..., J), ``nav`` (..., J, 2)
+    the senders' position estimates; ``lags`` (...) how long ago each stamp was (negative: not
+    yet sent); ``keep`` (..., J) a selection mask applied before the ``n_strongest`` rule.
+    Returns ``(Y, y, gamma, used)``.
+    """
+    lags = np.asarray(lags)
+    known = known_at_lag(delays, np.where(lags >= 0, lags, -1)[..., None]) & (lags >= 0)[..., None]
+    used = select_strongest(rss, known & keep, n_strongest)
+    m = mode_weight(mode_info, modes, signal.p_nlos)
+    z, R, r_hat = packet_fixes(signal, nav, rss, aoa, m)
+    Y, y, gamma, _ = fuse_fixes(z, R, r_hat, used, weighting, min_packets)
+    return Y, y, gamma, used
 
 
 # --------------------------------------------------------------------------------------

@@ -32,7 +32,7 @@ from estimators.models import predict_joint
 class DeadReckoning(PartConfig):
     name = "dead_reckoning"
     estimand = "self"
-    motion_kinds = frozenset({"odometry_displacement", "cv_accel", "se2_odometry"})
+    motion_kinds = frozenset({"odometry_displacement", "cv_accel", "se2_odometry", "cv_white_accel"})
     requires = ()
     message_kind = "none"
 

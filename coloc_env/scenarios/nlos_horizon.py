@@ -356,12 +356,8 @@ def fuse_buffer(config: NlosHorizonConfig, rss, aoa, nav, modes, delays, lags, k
     (..., J, 2); ``lags`` (...) how long ago each stamp was (negative: not yet sent);
     ``keep`` (..., J) the agent's mask. Returns (Y, y, gamma, used).
     """
-    known = af.known_at_lag(delays, np.where(lags >= 0, lags, -1)[..., None]) & (lags >= 0)[..., None]
-    used = af.select_strongest(rss, known & keep, config.n_strongest)
-    m = af.mode_weight(config.mode_info, modes, config.p_nlos)
-    z, R, r_hat = af.packet_fixes(config.signal, nav, rss, aoa, m)
-    Y, y, gamma, _ = af.fuse_fixes(z, R, r_hat, used, config.weighting, config.min_packets)
-    return Y, y, gamma, used
+    return af.fuse_packets(config.signal, rss, aoa, nav, modes, delays, lags, keep, config.n_strongest,
+                           config.mode_info, config.weighting, config.min_packets)
 
 
 def fused_by_stamp_and_lag(config: NlosHorizonConfig, episode: Episode):

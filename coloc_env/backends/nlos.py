@@ -1,0 +1,417 @@
+"""Backends ``afge`` and ``dfir`` (gao2016): finite-horizon estimation from neighbours' delayed RSS/AOA packets.
+
+Both adapt :mod:`estimators.afge` (no second copy of its math): each agent is a target that
+fuses the packets of its J world neighbours (:mod:`coloc_env.worlds.nlos_orbit`'s readings).
+Per step k, for each agent:
+
+1. the packets stamped k (one per neighbour that measured the target) go to the network
+   (:func:`coloc_env.networks.random_delay.node_packets`, slot 0), which returns each one's
+   delay tau (or lost); the backend buffers stamps k-D..k (D = the network's
+   :meth:`~coloc_env.networks.base.Network.max_delay`), a packet becoming known at k when
+   tau <= k - s (Step 1, :func:`estimators.afge.known_at_lag`);
+2. the known packets of each buffered stamp are fused (Step 2, eqs. 21-27, Def. 6:
+   :func:`estimators.afge.fuse_packets`, the ``n_strongest`` by RSS among the kept ones);
+3. the DFIR stack of every horizon N = 1..S (Lemma 7 in recursive form) is re-run from the
+   last final stamp k - D (:func:`estimators.afge.buffer_step`, :func:`~estimators.afge.stack_estimates`);
+4. the output x_hat(k) is the chosen horizon's estimate; without one (fewer than two
+   observed stamps in it) the prediction A x_hat(k-1) (``afge``: horizon chosen by AHG,
+   Algorithm 10, :func:`estimators.afge.ahg_select`, or by the agent; ``dfir``: ``horizon``);
+5. ``predict``: x_hat <- A x_hat, P <- A P A^T + Gam (spec §2), the fallback of step k + 1.
+
+With the ``always`` policy (horizon decision 0 = AHG, every neighbour kept) ``afge`` is the
+``nlos_horizon`` scenario under its ``paper`` policy: the same estimates to 1e-9 given the
+same episode and the same delays (``tests/coloc_env/test_nlos_composition.py``).
+
+| quantity        | afge                                           | dfir                                       |
+|-----------------|------------------------------------------------|--------------------------------------------|
+| estimand        | self (each target its own state [p; v])        | self                                       |
+| motion kinds    | ``cv_white_accel``                             | ``cv_white_accel``                         |
+| needs           | ``rss`` and ``aoa`` (+ ``los_nlos`` with ``mode_info="known"``) | the same                  |
+| messages        | ``packets``: one per neighbour that measured, world node -> agent; the agents send none | the same |
+| payload         | nav estimate 2 + RSS 1 + AOA 1 + stamp 1 (+ mode flag 1 with ``known``) floats | the same   |
+| lost message    | never known: that stamp is fused without it; a stamp with fewer than ``min_packets`` | the same |
+|                 | packets has gamma = 0 (no observation)         |                                            |
+| late message    | buffered: stamp s is re-fused when it arrives (tau <= D) and the last D stamps are | the same |
+|                 | re-filtered from the final stamp k - D (the delay-aware re-run, spec §6) |                  |
+| under-determined | a horizon with fewer than two observed stamps has no estimate: the output is the | the same |
+|                 | prediction A x_hat(k-1) (AHG: a group without a valid member) |                     |
+| decisions       | ``horizon`` Discrete(N_max - N_min + 2): 0 = AHG (default), v = horizon N_min + v - 1; | none |
+|                 | ``keep`` MultiDiscrete([2] * J): keep (1, default) / drop (0) the packets of RSS slot s |   |
+| position cov    | P of the output's horizon (or the predicted P) | the same                                   |
+| observation     | packets of stamp k - l known / J (l = 0..D); per RSS slot: present, | packets of stamp k - l   |
+|                 | (RSS + 80) / 10, mode (+1 NLOS / -1 LOS with ``known``, else 0);    | known / J (l = 0..D);    |
+|                 | log(1 + NIS); last horizon / N_max; log tr P_N over the AHG group   | 1 if the output had an   |
+|                 | of the last horizon (14 where invalid)                              | estimate of its own      |
+
+RSS slots (``keep``): the neighbours ordered by the RSS of their packet of the newest stamp
+known at the end of the previous step (what the agent's observation showed; strongest
+first, then the neighbours without one, by index); the bit applies to that neighbour's
+packets of every buffered stamp. As in the scenario, ``n_strongest`` is applied after the
+mask. AHG's centre runs every step, also while the agent overrides the horizon.
+
+Arguments (``coloc_env.backends.Afge``; defaults = ``nlos_horizon``'s, spec §9)
+
+| field          | default      | allowed                                           |
+|----------------|--------------|---------------------------------------------------|
+| n_strongest    | 4            | 1..32 (at most J)                                 |
+| min_packets    | 1            | 1..32 (at most J), n_min                          |
+| weighting      | "distance"   | "distance" (Def. 6), "information"                |
+| mode_info      | "known"      | "known", "mean", "blind"                          |
+| window_min     | 4            | N_min: 2..N_max and >= D + 1 (checked at build)   |
+| window_max     | 30           | N_max: 2..1000                                    |
+| window_step    | 2            | dN >= 1; N_max - N_min >= (M - 1) dN              |
+| group_size     | 5            | M, odd                                            |
+| window_centre  | 12           | N_c(0) in [N_min, N_max]                          |
+| likelihood     | "predictive" | "predictive", "paper", "smoothed"                 |
+| smoothing      | 0.8          | lam in (0, 1)                                     |
+
+Arguments (``coloc_env.backends.Dfir``)
+
+| field          | default      | allowed                                           |
+|----------------|--------------|---------------------------------------------------|
+| horizon        | 12           | N: 2..1000 (the paper's best constant N)          |
+| n_strongest, min_packets, weighting, mode_info | as ``afge`` | as ``afge``              |
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+import estimators.afge as af
+from coloc_env.backends.base import Backend
+from coloc_env.networks.random_delay import node_packets
+from coloc_env.parts import BACKENDS, Block, PartConfig, check_choice, check_range
+from coloc_env.world.random_delay import NEVER
+
+INVALID_LOG_TRACE = 14.0  # log tr P shown for a horizon without an estimate (the scenario's value)
+LOG_BOUND = 50.0
+RSS_BOUND = 20.0
+
+
+class _PacketFirConfig(PartConfig):
+    """Fields and declarations shared by ``afge`` and ``dfir``."""
+
+    estimand = "self"
+    motion_kinds = frozenset({"cv_white_accel"})
+    message_kind = "packets"
+
+    @property
+    def requires(self) -> tuple:
+        groups = (frozenset({"rss"}), frozenset({"aoa"}))
+        return groups + ((frozenset({"los_nlos"}),) if self.mode_info == "known" else ())
+
+    @property
+    def payload(self) -> float:
+        """Floats per packet: nav estimate 2, RSS 1, AOA 1, stamp 1, and the mode flag with ``known``."""
+        return 5.0 + (self.mode_info == "known")
+
+    def check_packets(self, prefix: str) -> None:
+        check_range(f"{prefix}n_strongest", self.n_strongest, 1, 32, integer=True)
+        check_range(f"{prefix}min_packets", self.min_packets, 1, 32, integer=True)
+        check_choice(f"{prefix}weighting", self.weighting, af.WEIGHTINGS)
+        check_choice(f"{prefix}mode_info", self.mode_info, af.MODE_INFOS)
+
+
+@BACKENDS.register
+@dataclass(frozen=True)
+class Afge(_PacketFirConfig):
+    name = "afge"
+    n_strongest: int = 4
+    min_packets: int = 1
+    weighting: str = "distance"
+    mode_info: str = "known"
+    window_min: int = 4
+    window_max: int = 30
+    window_step: int = 2
+    group_size: int = 5
+    window_centre: int = 12
+    likelihood: str = "predictive"
+    smoothing: float = 0.8
+
+    @property
+    def ahg(self) -> af.AHGParams:
+        return af.AHGParams(self.window_min, self.window_max, self.window_step, self.group_size,
+                            self.window_centre, self.likelihood, float(self.smoothing))
+
+    def check(self, prefix: str) -> None:
+        p = prefix
+        self.check_packets(p)
+        check_range(f"{p}window_max", self.window_max, 2, 1000, integer=True)
+        check_range(f"{p}window_min", self.window_min, 2, self.window_max, integer=True)
+        check_range(f"{p}window_step", self.window_step, 1, 1000, integer=True)
+        check_range(f"{p}group_size", self.group_size, 1, 999, integer=True)
+        if self.group_size % 2 != 1:
+            raise ValueError(f"{p}group_size must be odd (M = 2h + 1), got {self.group_size}")
+        if self.window_max - self.window_min < (self.group_size - 1) * self.window_step:
+            raise ValueError(f"{p}window_max - window_min must be >= (group_size - 1) * window_step = "
+                             f"{(self.group_size - 1) * self.window_step}, got {self.window_max - self.window_min}")
+        check_range(f"{p}window_centre", self.window_centre, self.window_min, self.window_max, integer=True)
+        check_choice(f"{p}likelihood", self.likelihood, af.LIKELIHOODS)
+        check_range(f"{p}smoothing", self.smoothing, 0.0, 1.0, low_open=True)
+        if self.smoothing >= 1.0:
+            raise ValueError(f"{p}smoothing must be in (0, 1), got {self.smoothing}")
+
+    def build(self, world, network, batch: int) -> Backend:
+        return AfgeBackend(self, world, network, batch)
+
+
+@BACKENDS.register
+@dataclass(frozen=True)
+class Dfir(_PacketFirConfig):
+    name = "dfir"
+    horizon: int = 12
+    n_strongest: int = 4
+    min_packets: int = 1
+    weighting: str = "distance"
+    mode_info: str = "known"
+
+    def check(self, prefix: str) -> None:
+        self.check_packets(prefix)
+        check_range(f"{prefix}horizon", self.horizon, 2, 1000, integer=True)
+
+    def build(self, world, network, batch: int) -> Backend:
+        return DfirBackend(self, world, network, batch)
+
+
+class PacketFirBackend(Backend):
+    """Buffer, fusion and DFIR stack of :mod:`estimators.afge` for B copies x N targets; ``_choose`` picks N."""
+
+    def __init__(self, config, world, network, batch: int, stack_size: int):
+        super().__init__(config, world, network, batch)
+        J = getattr(world, "num_neighbours", None)
+        if J is None:
+            raise ValueError(f"backend {config.name} needs a world with neighbour packets (world "
+                             f"{world.config.name!r} has none)")
+        for name in ("n_strongest", "min_packets"):
+            if getattr(config, name) > J:
+                raise ValueError(f"backend.{name} must be <= the number of neighbours {J}, "
+                                 f"got {getattr(config, name)}")
+        self.J, self.S = int(J), int(stack_size)
+        self.D = int(network.max_delay())
+        self.motion = world.motion_model.afge
+        self.signal = world.signal
+        B, N, D1 = self.batch, self.num_agents, self.D + 1
+        self.rss = np.zeros((B, N, D1, J))
+        self.aoa = np.zeros((B, N, D1, J))
+        self.nav = np.zeros((B, N, D1, J, 2))
+        self.modes = np.zeros((B, N, D1, J), np.int8)
+        self.delays = np.full((B, N, D1, J), NEVER, np.int64)
+        self.last_delays = np.full((B, N, J), -1, np.int64)  # the network's answer for stamp k (-1: none)
+        self.final = af.empty_stack((B, N), self.S)
+        self.prev_x = np.zeros((B, N, self.S, 4))
+        self.prev_P = np.broadcast_to(np.eye(4), (B, N, self.S, 4, 4)).copy()
+        self.prev_valid = np.zeros((B, N, self.S), bool)
+        self.pred_x, self.out_x = np.zeros((B, N, 4)), np.zeros((B, N, 4))
+        self.pred_P = np.broadcast_to(np.eye(4), (B, N, 4, 4)).copy()
+        self.out_P = self.pred_P.copy()
+        self.slots = np.broadcast_to(np.arange(J), (B, N, J)).copy()
+        self.horizon_used = np.zeros((B, N), np.int64)
+        self.valid_used = np.zeros((B, N), bool)
+        self.packets_used = np.zeros((B, N))
+        self.packets_arrived = np.zeros((B, N))
+        self._features = np.zeros((B, N, self.feature_bounds()[0].size))
+        self._features[:] = self.feature_defaults()
+
+    # --- episode -------------------------------------------------------------------------
+    def reset(self, rngs, idx) -> None:
+        idx = np.asarray(idx)
+        mean, cov = self.world.initial_belief()
+        n, N = len(idx), self.num_agents
+        empty = af.empty_stack((n, N), self.S)
+        self.final.info[idx], self.final.vector[idx], self.final.stamps[idx] = empty.info, empty.vector, empty.stamps
+        self.prev_x[idx], self.prev_P[idx], self.prev_valid[idx] = 0.0, np.eye(4), False
+        self.pred_x[idx], self.pred_P[idx] = mean[idx], cov[idx]
+        self.out_x[idx], self.out_P[idx] = mean[idx], cov[idx]
+        self.delays[idx] = NEVER
+        self.last_delays[idx] = -1
+        self.slots[idx] = np.arange(self.J)
+        self.horizon_used[idx], self.valid_used[idx] = 0, False
+        self.packets_used[idx], self.packets_arrived[idx] = 0.0, 0.0
+        self._features[idx] = self.feature_defaults()
+        self.posterior_position[idx] = mean[idx, :, :2]
+        if self.posterior_position_cov is None:
+            self.posterior_position_cov = np.zeros((self.batch, N, 2, 2))
+        self.posterior_position_cov[idx] = cov[idx, :, :2, :2]
+        self._reset_choice(idx)
+
+    def _reset_choice(self, idx) -> None:
+        return None
+
+    # --- step -----------------------------------------------------------------------------
+    def _receive(self, readings) -> None:
+        """Stamp k's packets to the network, into the buffer (oldest first)."""
+        extra = readings.extra
+        sending = np.asarray(extra["measured"], bool)
+        delay = node_packets(self.network, sending, self.world.neighbour_distances(), self.config.payload, slot=0)
+        self.last_delays = delay
+        for name, new in (("rss", extra["rss"]), ("aoa", extra["aoa"]), ("nav", extra["nav"]),
+                          ("modes", extra.get("mode", np.zeros(sending.shape, np.int8))),
+                          ("delays", np.where(delay >= 0, delay, NEVER))):
+            buf = getattr(self, name)
+            buf[:, :, :-1] = buf[:, :, 1:].copy()
+            buf[:, :, -1] = new
+
+    def _lags(self) -> np.ndarray:
+        """(B, N, D+1): k - s for the buffer stamps s = k-D..k, -1 for stamps before 0."""
+        k = np.asarray(self.world.k)[:, None]
+        stamps = k + np.arange(-self.D, 1)
+        lags = np.where(stamps >= 0, k - stamps, -1)
+        return np.broadcast_to(lags[:, None, :], (self.batch, self.num_agents, self.D + 1))
+
+    def update(self, readings, decisions) -> None:
+        self._receive(readings)
+        lags = self._lags()
+        mask = self._mask(decisions)
+        c = self.config
+        Y, y, gamma, used = af.fuse_packets(self.signal, self.rss, self.aoa, self.nav, self.modes, self.delays, lags,
+                                            mask[:, :, None, :], c.n_strongest, c.mode_info, c.weighting,
+                                            c.min_packets)
+        k = np.asarray(self.world.k)[:, None]
+        final, current = af.buffer_step(self.motion, self.final, k, Y, y, gamma)
+        x, P, valid = af.stack_estimates(current)
+        fresh = gamma[..., -1]
+        z, R = af.fused_fix(Y[..., -1, :, :], y[..., -1, :], fresh)
+        window = self._choose(decisions, x, P, valid, fresh, z, R)
+        idx = (window - 1)[..., None]
+        valid_w = np.take_along_axis(valid, idx, axis=-1)[..., 0]
+        x_w = np.take_along_axis(x, idx[..., None], axis=-2)[..., 0, :]
+        P_w = np.take_along_axis(P, idx[..., None, None], axis=-3)[..., 0, :, :]
+        e = z - self.pred_x[..., :2]
+        nis = np.einsum("...a,...ab,...b->...", e, np.linalg.inv(self.pred_P[..., :2, :2] + R), e)
+        self.out_x = np.where(valid_w[..., None], x_w, self.pred_x)
+        self.out_P = np.where(valid_w[..., None, None], P_w, self.pred_P)
+        self.horizon_used, self.valid_used = np.asarray(window, np.int64), valid_w
+        arrived = (self.delays == lags[..., None]) & (lags[..., None] >= 0)
+        self.packets_used = (used & arrived).sum(axis=(-1, -2)).astype(float)
+        self.packets_arrived = arrived.sum(axis=(-1, -2)).astype(float)
+        self.final = final
+        self.prev_x, self.prev_P, self.prev_valid = x, P, valid
+        newest = self.delays[..., -1, :] == 0
+        key = np.where(newest, self.rss[..., -1, :], -np.inf)
+        self.slots = np.argsort(-key, axis=-1, kind="stable")
+        self._features = self._make_features(lags, np.where(fresh, nis, 0.0), P, valid)
+
+    def _mask(self, decisions) -> np.ndarray:
+        return np.ones((self.batch, self.num_agents, self.J), bool)
+
+    def _choose(self, decisions, x, P, valid, fresh, z, R) -> np.ndarray:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def predict(self, inputs) -> None:
+        A = self.motion.transition
+        self.pred_x = self.out_x @ A.T
+        self.pred_P = A @ self.out_P @ A.T + self.motion.process_cov
+
+    def position(self) -> np.ndarray:
+        return self.out_x[..., :2]
+
+    def position_cov(self) -> np.ndarray:
+        return self.out_P[..., :2, :2]
+
+    # --- observation ------------------------------------------------------------------------
+    def _per_lag(self, lags) -> np.ndarray:
+        known = (self.delays <= lags[..., None]) & (lags[..., None] >= 0)
+        return known.sum(axis=-1)[..., ::-1] / self.J  # lag 0 first
+
+    def feature_defaults(self) -> np.ndarray:
+        return np.zeros(self.feature_bounds()[0].size)
+
+    def observation_features(self) -> np.ndarray:
+        return self._features.copy()
+
+
+class AfgeBackend(PacketFirBackend):
+    def __init__(self, config: Afge, world, network, batch):
+        self.ahg = config.ahg
+        self.M = config.group_size
+        super().__init__(config, world, network, batch, config.window_max)
+        if config.window_min < self.D + 1:
+            raise ValueError(f"backend.window_min must be >= the network's buffer length + 1 = {self.D + 1} "
+                             f"(the group reflects the possible delay, spec §7), got {config.window_min}")
+        B, N = self.batch, self.num_agents
+        self.centre = np.full((B, N), config.window_centre, np.int64)
+        self.raw = np.zeros((B, N, self.S))
+        self.count = np.zeros((B, N, self.S), np.int64)
+
+    def decision_blocks(self) -> list[Block]:
+        c = self.config
+        n = c.window_max - c.window_min + 2
+        return [Block("horizon", 1, n, f"0 = AHG (Algorithm 10), v = horizon N_min + v - 1 (N_min = {c.window_min})",
+                      default=0, maximum=0, minimum=0),
+                Block("keep", self.J, 2, "keep (1) / drop (0) the packets of RSS slot s", default=1, maximum=1,
+                      minimum=1)]
+
+    def _reset_choice(self, idx) -> None:
+        self.centre[idx] = self.config.window_centre
+        self.raw[idx], self.count[idx] = 0.0, 0
+
+    def _mask(self, decisions) -> np.ndarray:
+        bits = np.asarray(decisions)[..., 1:1 + self.J] == 1
+        mask = np.zeros((self.batch, self.num_agents, self.J), bool)
+        np.put_along_axis(mask, self.slots, bits, axis=-1)
+        return mask
+
+    def _choose(self, decisions, x, P, valid, fresh, z, R) -> np.ndarray:
+        c = self.config
+        if c.likelihood == "paper":
+            costs = af.in_sample_costs(x, valid, z, R)
+        else:
+            costs = af.predictive_costs(self.motion, self.prev_x, self.prev_P, self.prev_valid, z, R)
+            if c.likelihood == "smoothed":
+                self.raw, self.count, costs = af.smooth_costs(self.raw, self.count, costs, c.smoothing)
+        chosen, centre = af.ahg_select(self.ahg, self.centre, costs, valid, fresh)
+        # chosen = 0: no group member has an estimate; the centre (also without one) outputs the prediction
+        adaptive = np.where(chosen > 0, chosen, self.centre)
+        self.centre = centre
+        pick = np.asarray(decisions)[..., 0].astype(np.int64)
+        return np.where(pick == 0, adaptive, c.window_min + pick - 1)
+
+    def feature_bounds(self):
+        D1, J, M = self.D + 1, self.J, self.M
+        low = np.concatenate([np.zeros(D1), np.tile([0.0, -RSS_BOUND, -1.0], J), [0.0, 0.0],
+                              np.full(M, -LOG_BOUND)])
+        high = np.concatenate([np.ones(D1), np.tile([1.0, RSS_BOUND, 1.0], J), [LOG_BOUND, 1.0],
+                               np.full(M, LOG_BOUND)])
+        return low, high
+
+    def feature_defaults(self) -> np.ndarray:
+        out = np.zeros(self.feature_bounds()[0].size)
+        out[-self.M:] = INVALID_LOG_TRACE
+        return out
+
+    def _make_features(self, lags, nis, P, valid) -> np.ndarray:
+        c = self.config
+        B, N, J = self.batch, self.num_agents, self.J
+        present = np.take_along_axis(self.delays[..., -1, :] == 0, self.slots, axis=-1)
+        rss = np.take_along_axis(self.rss[..., -1, :], self.slots, axis=-1)
+        mode = np.take_along_axis(self.modes[..., -1, :], self.slots, axis=-1)
+        flag = np.where(mode == 1, 1.0, -1.0) if c.mode_info == "known" else np.zeros((B, N, J))
+        slots = np.stack([present.astype(float),
+                          np.where(present, np.clip((rss + 80.0) / 10.0, -RSS_BOUND, RSS_BOUND), 0.0),
+                          np.where(present, flag, 0.0)], axis=-1).reshape(B, N, 3 * J)
+        h = self.ahg.half * c.window_step
+        centre = np.clip(self.horizon_used, c.window_min + h, c.window_max - h)
+        group = af.ahg_group(self.ahg, centre)
+        trace = np.trace(P[..., :2, :2], axis1=-2, axis2=-1)
+        log_trace = np.where(valid, np.clip(np.log(np.maximum(trace, 1e-300)), -LOG_BOUND, LOG_BOUND),
+                             INVALID_LOG_TRACE)
+        last = np.stack([np.minimum(np.log1p(nis), LOG_BOUND), self.horizon_used / c.window_max], axis=-1)
+        return np.concatenate([self._per_lag(lags), slots, last, np.take_along_axis(log_trace, group - 1, axis=-1)],
+                              axis=-1)
+
+
+class DfirBackend(PacketFirBackend):
+    def __init__(self, config: Dfir, world, network, batch):
+        super().__init__(config, world, network, batch, config.horizon)
+
+    def _choose(self, decisions, x, P, valid, fresh, z, R) -> np.ndarray:
+        return np.full((self.batch, self.num_agents), self.config.horizon, np.int64)
+
+    def feature_bounds(self):
+        D1 = self.D + 1
+        return np.zeros(D1 + 1), np.ones(D1 + 1)
+
+    def _make_features(self, lags, nis, P, valid) -> np.ndarray:
+        return np.concatenate([self._per_lag(lags), self.valid_used[..., None].astype(float)], axis=-1)
