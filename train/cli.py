@@ -1,4 +1,4 @@
-"""The ``coloc`` command line: reproduce | train | evaluate | bench | list."""
+"""The ``coloc`` command line: reproduce | train | evaluate | bench | study | list."""
 
 from __future__ import annotations
 
@@ -74,8 +74,61 @@ def build_parser() -> argparse.ArgumentParser:
     be.add_argument("--out", default="results")
     be.add_argument("--scenarios", nargs="+", default=None, help="only these scenarios (default: all)")
 
+    _add_study_parser(sub)
+
     sub.add_parser("list", help="worlds, networks, backends, presets and the compatibility table")
     return parser
+
+
+STUDY_EPILOG = """\
+Every backend runs on the same seeded episodes (episode e: env.reset(seed=S + e), policy seeded S + e) for
+each sweep value, so the backends compare on paired episodes. Writes OUT/study/NAME/ with
+  metrics.json        {"world", "network", "reference", "backends": {BACKEND: {VALUE or "default":
+                      {"position_error": {"mean", "ci95"}, "messages_per_step", "floats_per_step", "nees",
+                      "per_episode_error"}}}, "paired": {BACKEND: {VALUE: {"mean", "ci95", "verdict"}}},
+                      "config": {...}}  (errors in metres; paired = BACKEND - the first backend, per episode;
+                      verdict lower | higher | no difference, from the 95 % t-interval; nees = mean of
+                      e^T P^-1 e with the backend's 2x2 position covariance, null without one)
+  report.md           a table per metric, the paired table, the command line
+  position_error.png  error vs the swept value, one line per backend with 95 % bands (no sweep: bars)
+Everything is checked before any episode runs (bad input: exit 2 and nothing written).
+Example: coloc study --world circles --network relay --backends ukf_dcl,dead_reckoning \\
+           --sweep network.loss_at_zero=0,0.2,0.4 --episodes 30
+"""
+
+
+def _add_study_parser(sub) -> None:
+    st = sub.add_parser("study", help="compare backends on the same seeded episodes, optionally over a sweep",
+                        description="Run every backend of one world and network on the same seeded episodes "
+                                    "(see train/study.py).",
+                        epilog=STUDY_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    st.add_argument("--world", required=True, help="a world (coloc list), at its defaults")
+    st.add_argument("--network", required=True, help="a network (coloc list), at its defaults")
+    st.add_argument("--backends", required=True,
+                    help="comma-separated backends, e.g. ukf_dcl,dead_reckoning; the first is the reference of "
+                         "the paired differences")
+    st.add_argument("--sweep", default=None, metavar="PART.FIELD=V1,V2,...",
+                    help="PART in world|network|backend (for backend: every backend's field); values parse as "
+                         "true/false, none, int, float (inf), else text. Without it: one run at the defaults, "
+                         "key 'default'")
+    st.add_argument("--policy", choices=["always", "silent", "random", "paper"], default="always",
+                    help="always: every transport decision at its maximum; silent: nothing sent; random: "
+                         "uniform, seeded S + e; paper: where the composition has one (default: always)")
+    st.add_argument("--episodes", type=_positive, default=30, help="episodes per (backend, value), >= 2 "
+                    "(default: 30)")
+    st.add_argument("--seed", type=int, default=0, help="S: episode e is seeded S + e (default: 0)")
+    st.add_argument("--horizon", type=_positive, default=None,
+                    help="steps per episode (compose(horizon=...); default: the world's)")
+    st.add_argument("--batched", action="store_true",
+                    help="run each cell's episodes as one batched core (always/silent/random only): faster, "
+                         "equal to the default per-episode env run up to floating-point rounding")
+    st.add_argument("--executor", choices=["local", "ray"], default="local",
+                    help="ray: each (backend, value) cell is one Ray task, with the same numbers as local")
+    st.add_argument("--address", default=None, help="Ray cluster address (default: a local Ray)")
+    st.add_argument("--out", default="results", help="writes OUT/study/NAME/ (default: results)")
+    st.add_argument("--name", default=None,
+                    help="NAME (default: WORLD_NETWORK, plus _PART.FIELD with a sweep, e.g. "
+                         "circles_relay_network.loss_at_zero)")
 
 
 def cmd_reproduce(args) -> int:
@@ -180,6 +233,35 @@ def cmd_bench(args) -> int:
     return 0
 
 
+def cmd_study(args) -> int:
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+    from train.study import run_study
+
+    console = Console()
+    with Progress(TextColumn("study {task.description}"), BarColumn(), MofNCompleteColumn(),
+                  TimeRemainingColumn(), console=console, transient=True) as bar:
+        task = bar.add_task(f"{args.world}/{args.network}", total=None)
+        metrics, folder = run_study(
+            args.world, args.network, args.backends, sweep=args.sweep, policy=args.policy, episodes=args.episodes,
+            seed=args.seed, horizon=args.horizon, batched=args.batched, executor=args.executor,
+            address=args.address, out=args.out, name=args.name,
+            progress=lambda done, total: bar.update(task, completed=done, total=total))
+    console.print(f"wrote {folder}/ (metrics.json, report.md, position_error.png)", soft_wrap=True)
+    reference = metrics["reference"]
+    for backend, cells in metrics["backends"].items():
+        for key, cell in cells.items():
+            line = (f"  {backend:<16} {key:>10}: error {cell['position_error']['mean']:.4g} "
+                    f"+- {cell['position_error']['ci95']:.2g} m, {cell['messages_per_step']:.3g} messages and "
+                    f"{cell['floats_per_step']:.3g} floats per agent-step")
+            if backend != reference:
+                pair = metrics["paired"][backend][key]
+                line += f"; vs {reference} {pair['mean']:+.3g} +- {pair['ci95']:.2g} m ({pair['verdict']})"
+            console.print(line, highlight=False, soft_wrap=True)
+    return 0
+
+
 def cmd_list(args) -> int:
     """Print the parts, the presets and one line per (world, network, backend): ok, or why not."""
     import coloc_env
@@ -204,7 +286,7 @@ def cmd_list(args) -> int:
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     handlers = {"reproduce": cmd_reproduce, "train": cmd_train, "evaluate": cmd_evaluate, "bench": cmd_bench,
-                "list": cmd_list}
+                "study": cmd_study, "list": cmd_list}
     try:
         return handlers[args.command](args)
     except ValueError as exc:

@@ -1,0 +1,551 @@
+"""``coloc study``: every backend on the same seeded episodes of one world and network, per sweep value.
+
+>>> from train.study import run_study
+>>> metrics, folder = run_study("circles", "relay", ["ukf_dcl", "dead_reckoning"],
+...                             sweep="network.loss_at_zero=0,0.2,0.4", episodes=30, seed=0)
+
+Arguments (``coloc study --help`` says the same)
+-------------------------------------------------
+| argument        | default      | meaning                                                                  |
+|-----------------|--------------|--------------------------------------------------------------------------|
+| ``--world``     | (required)   | a name of ``coloc_env.WORLDS``, at its defaults                          |
+| ``--network``   | (required)   | a name of ``coloc_env.NETWORKS``, at its defaults                        |
+| ``--backends``  | (required)   | ``a,b,c``: names of ``coloc_env.BACKENDS``; the first is the reference   |
+|                 |              | of the paired differences                                                |
+| ``--sweep``     | none         | ``PART.FIELD=v1,v2,...``, PART one of world, network, backend; each      |
+|                 |              | value sets that field of that part (of every backend for PART=backend).  |
+|                 |              | Values parse as bool (true/false), None (none/null), int, float          |
+|                 |              | (inf too), else a string; an int given to a float field becomes a float. |
+|                 |              | Without it every backend runs once at its defaults, key ``"default"``    |
+| ``--policy``    | ``always``   | always / silent / random (``agents.make_policy``), or paper where the    |
+|                 |              | composition has one                                                      |
+| ``--episodes``  | 30           | E >= 2 episodes per (backend, value)                                     |
+| ``--seed``      | 0            | S: episode e is ``env.reset(seed=S + e)`` and the policy is              |
+|                 |              | ``make_policy(P, env, seed=S + e)``: the same truth and sensor readings  |
+|                 |              | for every backend and value (paired episodes)                            |
+| ``--horizon``   | the world's  | steps per episode (``compose(horizon=...)``)                             |
+| ``--batched``   | off          | run a cell's E episodes as one batched core (``ComposedScenario`` with   |
+|                 |              | batch E; always / silent / random only): much faster, and equal to the   |
+|                 |              | default per-episode run up to floating-point rounding (~1e-14 m on the   |
+|                 |              | UKFs; a particle backend can drift further where rounding flips a        |
+|                 |              | resampling draw). Off: each episode steps ``coloc_env.parallel_env``     |
+|                 |              | itself, bit-identical to a user's own env loop                           |
+| ``--executor``  | ``local``    | local, or ray: each (backend, value) cell is one Ray task                |
+|                 |              | (:mod:`train.executor`), bit-identical to local                          |
+| ``--address``   | a local Ray  | Ray cluster address                                                      |
+| ``--out``       | ``results``  | the study goes to ``OUT/study/<name>/``                                  |
+| ``--name``      | see below    | ``<name>``; default ``{world}_{network}``, plus ``_{PART}.{FIELD}`` with |
+|                 |              | a sweep (``circles_relay_network.loss_at_zero``)                         |
+
+Every input is checked (compositions composed, policies built, the output
+folder probed for writing) before any episode runs; a bad one is a
+``ValueError`` naming it, and nothing is written.
+
+Metrics of each (backend, value) cell, over the E episodes
+------------------------------------------------------------
+| key                 | meaning                                                                          |
+|---------------------|----------------------------------------------------------------------------------|
+| position_error      | ``{"mean": m, "ci95": h}``: each episode's mean over steps and agents of          |
+|                     | ``infos[agent]["position_error"]`` (m), then the mean over episodes and the       |
+|                     | half-width of its 95 % Student-t interval                                         |
+| messages_per_step   | mean of ``infos[agent]["messages_sent"]`` over episodes, steps and agents         |
+| floats_per_step     | the same for ``floats_sent``                                                      |
+| nees                | mean over episodes, steps and agents of e^T P^-1 e (e: estimate - truth, P:       |
+|                     | ``backend.posterior_position_cov``, 2 x 2; about 2 for a consistent filter);      |
+|                     | null where the backend has no covariance                                          |
+| per_episode_error   | the E episode means behind ``position_error`` (m), in seed order                  |
+
+``paired[b][value]`` for every backend b after the first (the reference):
+the per-episode difference ``error_b - error_reference`` (m) over the same
+seeds, ``{"mean", "ci95", "verdict"}`` with verdict "lower" (the interval is
+below 0: b is more accurate), "higher", or "no difference" (the interval
+contains 0, or both ends lie within 1e-9 m of it: numerically equal backends).
+
+Outputs in ``OUT/study/<name>/`` (each written atomically, :mod:`train.io`)
+--------------------------------------------------------------------------
+| file                 | contents                                                                      |
+|----------------------|-------------------------------------------------------------------------------|
+| metrics.json         | ``{"world", "network", "reference", "backends": {b: {value: cell}}, "paired",  |
+|                      | "config": {seed, episodes, policy, sweep, horizon, batched, compositions}}``  |
+| report.md            | one markdown table per metric (backends x values), the paired table, the      |
+|                      | command line                                                                  |
+| position_error.png   | error vs the swept value, one line per backend with its 95 % band; without a  |
+|                      | sweep a bar chart with 95 % error bars                                        |
+
+``metrics.json`` depends only on the inputs that change numbers (not on
+``--out``, ``--executor`` or ``--address``): the same command reproduces it
+byte for byte.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import shlex
+import tempfile
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+
+PARTS = ("world", "network", "backend")
+POLICIES = ("always", "silent", "random", "paper")
+BATCHABLE_POLICIES = ("always", "silent", "random")  # their actions never read the env's state
+MAX_EPISODES = 1_000_000
+MAX_SEED = 2**62  # S + e must stay a valid numpy seed
+EQUAL_TOLERANCE = 1e-9  # m: a paired interval within this of 0 is "no difference" (rounding, not a result)
+FIGURE = "position_error.png"
+
+
+# --- argument parsing and checks --------------------------------------------------------------------------
+def parse_value(token: str) -> Any:
+    """A sweep value from its text: bool, None, int, float, else the string itself."""
+    text = token.strip()
+    if not text:
+        raise ValueError("--sweep has an empty value; give PART.FIELD=v1,v2,...")
+    lower = text.lower()
+    if lower in ("true", "false"):
+        return lower == "true"
+    if lower in ("none", "null"):
+        return None
+    if re.fullmatch(r"[+-]?\d+", text):
+        return int(text)
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
+def parse_sweep(sweep: str | None) -> tuple[str, str, list[str], list[Any]] | None:
+    """``"PART.FIELD=v1,v2"`` -> (part, field, value texts, parsed values); None for no sweep."""
+    if sweep is None:
+        return None
+    if not isinstance(sweep, str) or "=" not in sweep:
+        raise ValueError(f"--sweep must look like PART.FIELD=v1,v2,... (PART one of {list(PARTS)}), got {sweep!r}")
+    target, _, values = sweep.partition("=")
+    part, dot, field = target.strip().partition(".")
+    if part not in PARTS or not dot:
+        raise ValueError(f"--sweep PART must be one of {list(PARTS)} (as PART.FIELD=...), got {target.strip()!r}")
+    if not field.isidentifier():
+        raise ValueError(f"--sweep FIELD must be a field name of the {part}, got {field!r}")
+    if field == "name":
+        raise ValueError(f"--sweep cannot change {part}.name; choose the part with --{part}"
+                         f"{'s' if part == 'backend' else ''}")
+    texts = [t.strip() for t in values.split(",")]
+    parsed = [parse_value(t) for t in texts]
+    seen = []
+    for text, value in zip(texts, parsed, strict=True):
+        if any(value == v and type(value) is type(v) for v in seen):
+            raise ValueError(f"--sweep {part}.{field} lists the value {text!r} twice")
+        seen.append(value)
+    return part, field, texts, parsed
+
+
+def _coerce(value: Any, default: Any) -> Any:
+    """An int given to a float field becomes a float; a field whose default is a string keeps the text."""
+    if isinstance(default, float) and isinstance(value, int) and not isinstance(value, bool):
+        return float(value)
+    return value
+
+
+def _check_int(name: str, value: Any, low: int, high: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not low <= value <= high:
+        raise ValueError(f"{name} must be an integer in [{low}, {high}], got {value!r}")
+    return int(value)
+
+
+def _backend_list(backends: str | Sequence[str]) -> list[str]:
+    if isinstance(backends, str):
+        backends = backends.split(",")
+    if isinstance(backends, (bytes, dict)) or not isinstance(backends, Sequence):
+        raise ValueError(f"backends must be a comma-separated string or a list of names, got {backends!r}")
+    names = [b.strip() if isinstance(b, str) else b for b in backends]
+    if not names or any(not isinstance(b, str) or not b for b in names):
+        raise ValueError(f"backends must be one or more backend names (a,b,c), got {backends!r}")
+    duplicated = sorted({b for b in names if names.count(b) > 1})
+    if duplicated:
+        raise ValueError(f"backends lists {duplicated} more than once")
+    return names
+
+
+def _check_name(name: str) -> str:
+    if (not isinstance(name, str) or not name or name in (".", "..") or "/" in name or "\\" in name
+            or name != name.strip()):
+        raise ValueError(f"name must be a non-empty folder name without path separators, got {name!r}")
+    return name
+
+
+def study_name(world: str, network: str, sweep: tuple | None) -> str:
+    """The default ``<name>``: ``{world}_{network}``, plus ``_{PART}.{FIELD}`` with a sweep."""
+    base = f"{world}_{network}"
+    return base if sweep is None else f"{base}_{sweep[0]}.{sweep[1]}"
+
+
+def build_cells(world: str, network: str, backends: list[str], sweep: tuple | None, horizon: int | None):
+    """``{(backend, value key): Composition}``, composing every cell (so that every ValueError comes first)."""
+    import coloc_env
+    from coloc_env.parts import BACKENDS, NETWORKS, WORLDS
+
+    registries = {"world": WORLDS, "network": NETWORKS, "backend": BACKENDS}
+    for kind, name in (("world", world), ("network", network), *(("backend", b) for b in backends)):
+        registries[kind]._class(name)  # "unknown world 'x'; available: [...]"
+    options = {} if horizon is None else {"horizon": horizon}
+    cells = {}
+    for backend in backends:
+        names = {"world": world, "network": network, "backend": backend}
+        if sweep is None:
+            cells[backend, "default"] = coloc_env.compose(**names, **options)
+            continue
+        part, field, texts, values = sweep
+        cls = registries[part][names[part]]
+        default = getattr(cls, field, None)
+        for text, value in zip(texts, values, strict=True):
+            parts = dict(names)
+            parts[part] = {"name": names[part], field: _coerce(value, default)}
+            try:
+                cells[backend, text] = coloc_env.compose(**parts, **options)
+            except ValueError as exc:
+                raise ValueError(f"--sweep {part}.{field}={text} with backend {backend}: {exc}") from exc
+    return cells
+
+
+def _check_writable(folder: str) -> None:
+    try:
+        os.makedirs(folder, exist_ok=True)
+        fd, probe = tempfile.mkstemp(dir=folder, prefix=".probe-")
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        raise ValueError(f"output folder {folder!r} is not writable: {exc}") from exc
+
+
+# --- running one cell: E paired episodes of one composition --------------------------------------------------
+def _nees(error: np.ndarray, cov: np.ndarray) -> np.ndarray:
+    """e^T P^-1 e over the leading axes of ``error`` (..., 2) and ``cov`` (..., 2, 2); pinv where P is singular."""
+    try:
+        solved = np.linalg.solve(cov, error[..., None])[..., 0]
+    except np.linalg.LinAlgError:
+        solved = np.einsum("...ij,...j->...i", np.linalg.pinv(cov), error)
+    return np.einsum("...i,...i->...", error, solved)
+
+
+def _episode_summary(errors: list, messages: list, floats: list, nees: list | None) -> tuple:
+    """One episode's (mean error, mean messages, mean floats, mean NEES or nan) from per-step (N,) rows."""
+    return (float(np.mean(np.array(errors, dtype=float))), float(np.mean(np.array(messages, dtype=float))),
+            float(np.mean(np.array(floats, dtype=float))),
+            float("nan") if nees is None else float(np.mean(np.array(nees, dtype=float))))
+
+
+def run_cell(spec, policy: str, episodes: int, seed: int, batched: bool = False,
+             progress: Callable[[], None] | None = None) -> dict[str, np.ndarray]:
+    """E episodes of ``spec``; episode e is ``env.reset(seed=seed + e)`` with ``make_policy(policy, env,
+    seed=seed + e)``. Returns per-episode arrays ``error``, ``messages``, ``floats`` and ``nees`` (nan
+    without a covariance). ``progress()`` is called once per episode (per cell if batched)."""
+    run = _run_batched if batched else _run_env
+    rows = run(spec, policy, episodes, seed, progress)
+    error, messages, floats, nees = (np.array(column, dtype=float) for column in zip(*rows, strict=True))
+    return {"error": error, "messages": messages, "floats": floats, "nees": nees}
+
+
+def _run_env(spec, policy_name, episodes, seed, progress):
+    import agents
+    import coloc_env
+
+    env = coloc_env.parallel_env(spec)
+    agents_order = env.possible_agents
+    rows = []
+    for e in range(episodes):
+        policy = agents.make_policy(policy_name, env, seed=seed + e)
+        observations, _ = env.reset(seed=seed + e)
+        errors, messages, floats, nees = [], [], [], []
+        while env.agents:
+            observations, _, _, _, infos = env.step(policy.act(observations))
+            info = [infos[a] for a in agents_order]
+            errors.append([i["position_error"] for i in info])
+            messages.append([i["messages_sent"] for i in info])
+            floats.append([i["floats_sent"] for i in info])
+            cov = env.scenario.backend.posterior_position_cov
+            if cov is None:
+                nees = None
+            elif nees is not None:
+                diff = np.array([i["estimated_position"] for i in info]) - np.array([i["true_position"] for i in info])
+                nees.append(_nees(diff, cov[0]))
+        rows.append(_episode_summary(errors, messages, floats, nees))
+        if progress:
+            progress()
+    env.close()
+    return rows
+
+
+def _run_batched(spec, policy_name, episodes, seed, progress):
+    import agents
+    import coloc_env
+    from coloc_env.scenarios.composed import ComposedScenario
+
+    view = coloc_env.parallel_env(spec)  # the policies' action spaces (B = 1); never stepped
+    policies = [agents.make_policy(policy_name, view, seed=seed + e) for e in range(episodes)]
+    core = ComposedScenario(spec, batch=episodes)
+    core.reset([np.random.default_rng(seed + e) for e in range(episodes)])
+    order = view.possible_agents
+    blind = dict.fromkeys(order)  # these policies never read observations
+    errors, messages, floats, nees = [], [], [], []
+    while not core.done().all():
+        actions = np.stack([np.stack([np.asarray(act[a], dtype=float) for a in order])
+                            for act in (p.act(blind) for p in policies)])
+        core.step(actions)
+        info = core.info()
+        errors.append(info["position_error"])
+        messages.append(info["messages_sent"])
+        floats.append(info["floats_sent"])
+        cov = core.backend.posterior_position_cov
+        if cov is None:
+            nees = None
+        elif nees is not None:
+            nees.append(_nees(info["estimated_position"] - info["true_position"], cov))
+    view.close()
+    if progress:
+        progress()
+    return [_episode_summary([x[e] for x in errors], [x[e] for x in messages], [x[e] for x in floats],
+                             None if nees is None else [x[e] for x in nees]) for e in range(episodes)]
+
+
+# --- statistics --------------------------------------------------------------------------------------------
+def mean_ci95(values: np.ndarray) -> tuple[float, float]:
+    """Mean and the half-width of its 95 % Student-t interval (n >= 2)."""
+    from scipy import stats
+
+    values = np.asarray(values, dtype=float)
+    half = stats.t.ppf(0.975, len(values) - 1) * values.std(ddof=1) / math.sqrt(len(values))
+    return float(values.mean()), float(half)
+
+
+def verdict(mean: float, half: float) -> str:
+    """"lower" / "higher" where the 95 % interval excludes 0 (beyond rounding), else "no difference"."""
+    if abs(mean) + half <= EQUAL_TOLERANCE:
+        return "no difference"
+    if mean + half < 0:
+        return "lower"
+    if mean - half > 0:
+        return "higher"
+    return "no difference"
+
+
+def cell_metrics(result: dict[str, np.ndarray]) -> dict[str, Any]:
+    mean, half = mean_ci95(result["error"])
+    nees = result["nees"]
+    return {"position_error": {"mean": mean, "ci95": half},
+            "messages_per_step": float(result["messages"].mean()),
+            "floats_per_step": float(result["floats"].mean()),
+            "nees": float(nees.mean()) if not np.any(np.isnan(nees)) else None,
+            "per_episode_error": [float(x) for x in result["error"]]}
+
+
+def paired_metrics(results: dict, backends: list[str], keys: list[str]) -> dict[str, dict]:
+    reference = backends[0]
+    paired = {}
+    for backend in backends[1:]:
+        paired[backend] = {}
+        for key in keys:
+            mean, half = mean_ci95(results[backend, key]["error"] - results[reference, key]["error"])
+            paired[backend][key] = {"mean": mean, "ci95": half, "verdict": verdict(mean, half)}
+    return paired
+
+
+# --- outputs -----------------------------------------------------------------------------------------------
+def _finite(value: Any) -> Any:
+    """JSON-safe: non-finite floats as strings ("inf"), recursively."""
+    if isinstance(value, dict):
+        return {str(k): _finite(v) for k, v in value.items()}
+    if isinstance(value, np.ndarray):
+        value = value.tolist()
+    if isinstance(value, (list, tuple, set, frozenset)):
+        return [_finite(v) for v in (sorted(value, key=repr) if isinstance(value, (set, frozenset)) else value)]
+    if isinstance(value, (float, np.floating)) and not math.isfinite(value):
+        return str(float(value))
+    return value
+
+
+def command_line(world, network, backends, sweep_text, policy, episodes, seed, horizon, batched, executor,
+                 address, out, name) -> str:
+    args = ["coloc", "study", "--world", world, "--network", network, "--backends", ",".join(backends)]
+    if sweep_text is not None:
+        args += ["--sweep", sweep_text]
+    args += ["--policy", policy, "--episodes", str(episodes), "--seed", str(seed)]
+    if horizon is not None:
+        args += ["--horizon", str(horizon)]
+    if batched:
+        args.append("--batched")
+    args += ["--executor", executor]
+    if address:
+        args += ["--address", address]
+    return shlex.join([*args, "--out", out, "--name", name])
+
+
+def _table(title: str, backends, keys, cell: Callable[[str, str], str], header: str) -> list[str]:
+    lines = [f"## {title}", "", f"| backend | {' | '.join(keys)} |", "|---|" + "---|" * len(keys)]
+    lines += [f"| {b} | {' | '.join(cell(b, k) for k in keys)} |" for b in backends]
+    return [*lines, "", header, ""] if header else [*lines, ""]
+
+
+def report(metrics: dict, command: str) -> str:
+    backends = list(metrics["backends"])
+    keys = list(metrics["backends"][backends[0]])
+    sweep = metrics["config"]["sweep"]
+    column = "default" if sweep is None else f"{sweep['part']}.{sweep['field']}"
+    cells = metrics["backends"]
+    config = metrics["config"]
+    lines = [f"# coloc study: {metrics['world']} over {metrics['network']}", "",
+             f"Backends {', '.join(backends)}; policy `{config['policy']}`; {config['episodes']} episodes per cell, "
+             f"episode e seeded {config['seed']} + e (the same episodes for every backend and value); columns: "
+             f"{column}.", ""]
+    lines += _table("Position error (m), mean ± 95 % interval over episodes", backends, keys,
+                    lambda b, k: f"{cells[b][k]['position_error']['mean']:.4g} ± "
+                                 f"{cells[b][k]['position_error']['ci95']:.2g}", "")
+    lines += _table("Messages per agent per step", backends, keys,
+                    lambda b, k: f"{cells[b][k]['messages_per_step']:.4g}", "")
+    lines += _table("Floats per agent per step", backends, keys,
+                    lambda b, k: f"{cells[b][k]['floats_per_step']:.4g}", "")
+    lines += _table("NEES (mean of e^T P^-1 e, 2 for a consistent 2-D estimate; - without a covariance)",
+                    backends, keys, lambda b, k: "-" if cells[b][k]["nees"] is None else f"{cells[b][k]['nees']:.3g}",
+                    "")
+    if len(backends) > 1:
+        paired = metrics["paired"]
+        lines += _table(f"Paired difference in position error against {backends[0]} (m, backend - "
+                        f"{backends[0]}, same episodes)", backends[1:], keys,
+                        lambda b, k: f"{paired[b][k]['mean']:+.4g} ± {paired[b][k]['ci95']:.2g} "
+                                     f"({paired[b][k]['verdict']})", "")
+    lines += ["## Command", "", "```", command, "```", ""]
+    return "\n".join(lines)
+
+
+def figure(metrics: dict):
+    """Error vs the swept value (one line per backend, 95 % band), or a bar chart without a sweep."""
+    import matplotlib
+
+    if not os.environ.get("MPLBACKEND"):
+        matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    backends = list(metrics["backends"])
+    keys = list(metrics["backends"][backends[0]])
+    sweep = metrics["config"]["sweep"]
+    fig, ax = plt.subplots(figsize=(5.6, 3.8))
+    means = {b: np.array([metrics["backends"][b][k]["position_error"]["mean"] for k in keys]) for b in backends}
+    halves = {b: np.array([metrics["backends"][b][k]["position_error"]["ci95"] for k in keys]) for b in backends}
+    if sweep is None:
+        x = np.arange(len(backends))
+        ax.bar(x, [means[b][0] for b in backends], yerr=[halves[b][0] for b in backends], capsize=4,
+               color=[f"C{i}" for i in range(len(backends))])
+        ax.set_xticks(x, backends, rotation=20)
+        ax.set_xlabel("backend")
+    else:
+        values = sweep["values"]
+        numeric = all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in values)
+        x = np.array(values, dtype=float) if numeric else np.arange(len(keys))
+        for i, b in enumerate(backends):
+            ax.plot(x, means[b], marker="o", color=f"C{i}", label=b)
+            ax.fill_between(x, means[b] - halves[b], means[b] + halves[b], color=f"C{i}", alpha=0.2)
+        if not numeric:
+            ax.set_xticks(x, keys)
+        ax.set_xlabel(f"{sweep['part']}.{sweep['field']}")
+        ax.legend()
+    ax.set_ylabel("position error (m), 95 % interval")
+    config = metrics["config"]
+    ax.set_title(f"{metrics['world']} / {metrics['network']}: {config['policy']}, {config['episodes']} episodes")
+    ax.grid(alpha=0.3)
+    return fig
+
+
+# --- the study ---------------------------------------------------------------------------------------------
+def run_study(world: str, network: str, backends: str | Sequence[str], sweep: str | None = None,
+              policy: str = "always", episodes: int = 30, seed: int = 0, horizon: int | None = None,
+              batched: bool = False, executor: str = "local", address: str | None = None, out: str = "results",
+              name: str | None = None, progress: Callable[[int, int], None] | None = None) -> tuple[dict, str]:
+    """Run the study (see the module docstring) and write its three files; returns (metrics, folder).
+
+    ``progress(done, total)`` is called as episodes finish (per cell with ``batched`` or Ray)."""
+    import agents
+    import coloc_env
+
+    # 1. every check, before anything is computed or written
+    for label, value in (("world", world), ("network", network)):
+        if not isinstance(value, str):
+            raise ValueError(f"{label} must be a name, one of {list(getattr(coloc_env, label.upper() + 'S'))}, "
+                             f"got {value!r}")
+    backends = _backend_list(backends)
+    parsed = parse_sweep(sweep)
+    if not isinstance(policy, str) or policy not in POLICIES:
+        raise ValueError(f"policy must be one of {list(POLICIES)}, got {policy!r}")
+    if not isinstance(batched, (bool, np.bool_)):
+        raise ValueError(f"batched must be True or False, got {batched!r}")
+    if batched and policy not in BATCHABLE_POLICIES:
+        raise ValueError(f"batched runs support the policies {list(BATCHABLE_POLICIES)} (their actions never read "
+                         f"the env), got {policy!r}; run it without batched")
+    episodes = _check_int("episodes", episodes, 2, MAX_EPISODES)
+    seed = _check_int("seed", seed, 0, MAX_SEED)
+    if executor not in ("local", "ray"):
+        raise ValueError(f"executor must be 'local' or 'ray', got {executor!r}")
+    if not isinstance(out, (str, os.PathLike)):
+        raise ValueError(f"out must be a folder path, got {out!r}")
+    name = _check_name(study_name(world, network, parsed) if name is None else name)
+    cells = build_cells(world, network, backends, parsed, horizon)
+    keys = ["default"] if parsed is None else parsed[2]
+    for backend in backends:  # the policy exists for each backend's composition (paper: only where defined)
+        view = coloc_env.parallel_env(cells[backend, keys[0]])
+        agents.make_policy(policy, view, seed=seed)
+        view.close()
+    folder = os.path.join(os.fspath(out), "study", name)
+    _check_writable(folder)
+
+    # 2. the cells: (backend, value) -> per-episode arrays, the same seeds everywhere
+    order = [(b, k) for b in backends for k in keys]
+    total = len(order) * (1 if batched else episodes)
+    done = 0
+
+    def tick():
+        nonlocal done
+        done += 1
+        if progress:
+            progress(done, total)
+
+    if executor == "local":
+        results = {cell: run_cell(cells[cell], policy, episodes, seed, batched, tick) for cell in order}
+    else:
+        from train.executor import map_tasks
+
+        outputs = map_tasks(run_cell, [(cells[cell], policy, episodes, seed, batched) for cell in order], "ray",
+                            address)
+        results = dict(zip(order, outputs, strict=True))
+        if progress:
+            progress(total, total)
+
+    # 3. metrics, report, figure
+    spec0 = cells[order[0]]
+    sweep_config = None if parsed is None else {"part": parsed[0], "field": parsed[1], "values": parsed[3],
+                                                "keys": parsed[2]}
+    metrics = {
+        "world": world,
+        "network": network,
+        "reference": backends[0],
+        "backends": {b: {k: cell_metrics(results[b, k]) for k in keys} for b in backends},
+        "paired": paired_metrics(results, backends, keys),
+        "config": {"seed": seed, "episodes": episodes, "episode_seeds": f"{seed} + e, e = 0..{episodes - 1}",
+                   "policy": policy, "sweep": sweep_config, "horizon": horizon,
+                   "episode_steps": spec0.episode_steps, "batched": bool(batched),
+                   "compositions": {b: {k: {part: getattr(cells[b, k], part).as_dict() for part in PARTS}
+                                        for k in keys} for b in backends}},
+    }
+    metrics = _finite(metrics)
+    command = command_line(world, network, backends, sweep, policy, episodes, seed, horizon, batched, executor,
+                           address, os.fspath(out), name)
+    from train.io import save_figure, write_json, write_text
+
+    write_json(os.path.join(folder, "metrics.json"), metrics)
+    write_text(os.path.join(folder, "report.md"), report(metrics, command))
+    save_figure(os.path.join(folder, FIGURE), figure(metrics))
+    return metrics, folder
+
+
+__all__ = ["FIGURE", "PARTS", "POLICIES", "build_cells", "cell_metrics", "mean_ci95", "parse_sweep", "parse_value",
+           "run_cell", "run_study", "study_name", "verdict"]
