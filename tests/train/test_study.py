@@ -274,3 +274,15 @@ def test_ray_cells_equal_local(tmp_path):
     with open(os.path.join(folder_ray, "metrics.json"), "rb") as a, \
             open(os.path.join(folder_local, "metrics.json"), "rb") as b:
         assert a.read() == b.read()
+
+
+def test_result_files_get_the_users_permissions(tmp_path):
+    import os
+
+    from train.io import write_text
+
+    path = tmp_path / "report.md"
+    write_text(str(path), "x")
+    mask = os.umask(0)
+    os.umask(mask)
+    assert (path.stat().st_mode & 0o777) == (0o666 & ~mask)
