@@ -143,6 +143,9 @@ __all__ = [
     "kalman_update",
     "kalman_filter",
     "informed_filter",
+    "informed_initial",
+    "informed_matrices",
+    "informed_update",
     "AugmentedMatrices",
     "augmented_matrices",
     "link_moment",
@@ -293,39 +296,60 @@ def kalman_filter(model: LossyModel, x0_mean, P0, measurements: np.ndarray, uavs
     return estimates, covariances
 
 
+def informed_matrices(model: LossyModel) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """F, Qa, H_now, H_before of the informed filter's state [x(k); x(k-1)] (see :func:`informed_filter`)."""
+    n = model.state_dim
+    H = np.asarray(model.measurement, float)
+    Phi, Q = np.asarray(model.transition, float), np.asarray(model.process_noise, float)
+    F = np.block([[Phi, np.zeros((n, n))], [np.eye(n), np.zeros((n, n))]])
+    Qa = scipy.linalg.block_diag(Q, np.zeros((n, n)))
+    return F, Qa, np.hstack([H, np.zeros_like(H)]), np.hstack([np.zeros_like(H), H])
+
+
+def informed_initial(model: LossyModel, x0_mean, P0, batch_shape: tuple = ()):
+    """(mean (..., 2n), cov (..., 2n, 2n), used_before (..., L)) of the informed filter before slot 0."""
+    n, L = model.state_dim, model.num_uavs
+    x0 = np.asarray(x0_mean, float)
+    mean = np.broadcast_to(np.concatenate([x0, x0]), (*batch_shape, 2 * n)).copy()
+    cov = np.broadcast_to(scipy.linalg.block_diag(P0, P0), (*batch_shape, 2 * n, 2 * n)).copy()
+    used_before = np.ones((*batch_shape, L), bool)  # z(-1) is the known buffer: no information
+    return mean, cov, used_before
+
+
+def informed_update(model: LossyModel, mean, cov, used_before, y_k: np.ndarray, code: np.ndarray, mats=None):
+    """One slot's updates of the informed filter: y_k (..., L, p), code (..., L) -> (mean, cov, used_before)."""
+    R = np.asarray(model.measurement_noise, float)
+    _, _, H_now, H_before = informed_matrices(model) if mats is None else mats
+    for i in range(model.num_uavs):
+        mean, cov = kalman_update(mean, cov, y_k[..., i, :], H_now, R[i], code[..., i] == ON_TIME)
+        late_new = (code[..., i] == LATE) & ~used_before[..., i]
+        mean, cov = kalman_update(mean, cov, y_k[..., i, :], H_before, R[i], late_new)
+    return mean, cov, code == ON_TIME
+
+
 def informed_filter(model: LossyModel, x0_mean, P0, y: np.ndarray, outcome: np.ndarray):
     """Kalman filter that knows every packet's age (an informed bound on (A)).
 
     State [x(k); x(k-1)]: an on-time y_i(k) = z_i(k) measures x(k), a late one
     y_i(k) = z_i(k-1) measures x(k-1) unless z_i(k-1) was already delivered on
     time at k-1 (a duplicate) or k = 0 (the known buffer). Returns estimates
-    (..., K, n) and covariances (..., K, n, n).
+    (..., K, n) and covariances (..., K, n, n). One slot is :func:`informed_update`
+    (after the time update x -> F x, P -> F P F^T + Qa of :func:`informed_matrices`).
     """
-    n, L = model.state_dim, model.num_uavs
-    H, R = np.asarray(model.measurement, float), np.asarray(model.measurement_noise, float)
-    Phi, Q = np.asarray(model.transition, float), np.asarray(model.process_noise, float)
+    n = model.state_dim
     y, outcome = np.asarray(y, float), np.asarray(outcome)
     K = y.shape[-3]
     batch = y.shape[:-3]
-    F = np.block([[Phi, np.zeros((n, n))], [np.eye(n), np.zeros((n, n))]])
-    Qa = scipy.linalg.block_diag(Q, np.zeros((n, n)))
-    H_now = np.hstack([H, np.zeros_like(H)])
-    H_before = np.hstack([np.zeros_like(H), H])
-    x0 = np.asarray(x0_mean, float)
-    mean = np.broadcast_to(np.concatenate([x0, x0]), (*batch, 2 * n)).copy()
-    cov = np.broadcast_to(scipy.linalg.block_diag(P0, P0), (*batch, 2 * n, 2 * n)).copy()
-    used_before = np.ones((*batch, L), bool)  # z(-1) is the known buffer: no information
+    mats = informed_matrices(model)
+    F, Qa = mats[0], mats[1]
+    mean, cov, used_before = informed_initial(model, x0_mean, P0, batch)
     estimates = np.empty((*batch, K, n))
     covariances = np.empty((*batch, K, n, n))
     for k in range(K):
         if k:
             mean, cov = mean @ F.T, _sym(F @ cov @ F.T + Qa)
-        code = outcome[..., k, :]
-        for i in range(L):
-            mean, cov = kalman_update(mean, cov, y[..., k, i, :], H_now, R[i], code[..., i] == ON_TIME)
-            late_new = (code[..., i] == LATE) & ~used_before[..., i]
-            mean, cov = kalman_update(mean, cov, y[..., k, i, :], H_before, R[i], late_new)
-        used_before = code == ON_TIME
+        mean, cov, used_before = informed_update(model, mean, cov, used_before, y[..., k, :, :], outcome[..., k, :],
+                                                 mats)
         estimates[..., k, :], covariances[..., k, :, :] = mean[..., :n], cov[..., :n, :n]
     return estimates, covariances
 

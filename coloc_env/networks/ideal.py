@@ -24,7 +24,7 @@ class Ideal(PartConfig):
     """Config of the ``ideal`` network (no fields)."""
 
     name = "ideal"
-    carries = frozenset({"broadcast", "chain", "central", "packets"})
+    carries = frozenset({"broadcast", "chain", "central", "packets", "components"})
 
     def check(self, prefix: str) -> None:
         return None

@@ -11,6 +11,20 @@ and the transport decisions; the backend updates its estimates of time k,
 asking the network for every delivery, then predicts to k + 1; the world
 moves to k + 1. The infos report time k's truth and the posterior of k.
 
+Two estimands (the world's ``estimand``, which the backend must share):
+
+* ``self``: each agent estimates its own position; the truth is
+  ``world.positions()`` (B, N, 2).
+* ``target``: every agent estimates one shared state x of the world (a
+  target, a drift state); its "position" is the two state components the
+  world's docstring names (``world.position_index``), repeated per agent, and
+  the world's ``error`` is ||M (xhat_i - x)||^2 over the components its
+  ``metric`` M names, in the unit its docstring states (the paper's metric:
+  m^2). Every backend reports its estimate of x(k) at step k, so the same
+  world and seed give every backend the same ``true_position``. The agents'
+  own positions (``world.positions()``, the link state) are the
+  world's formation.
+
 Action (per agent, the blocks in order world, network, backend)
 ---------------------------------------------------------------
 ``MultiDiscrete(choices of every entry)`` when every block is discrete, else a
@@ -18,30 +32,39 @@ Action (per agent, the blocks in order world, network, backend)
 range, a non-integer in a MultiDiscrete, NaN or inf is a ``ValueError`` naming
 the block.
 
-Observation (per agent, ``Box(float32)``)
-------------------------------------------
+Observation (per agent, ``Box(float32)``; both estimands)
+---------------------------------------------------------
 | index             | meaning                                                        | bounds      |
 |-------------------|----------------------------------------------------------------|-------------|
 | ``[0, N)``        | one-hot of the agent's own index                               | [0, 1]      |
-| ``[N]``           | log tr P_ii of its own position estimate (m^2), clipped; 0 without a covariance | [-50, 50] |
+| ``[N]``           | log tr of its own estimate's position covariance (m^2: its own | [-50, 50]   |
+|                   | position, or the target's position components), clipped; 0     |             |
+|                   | without a covariance; the local one where the backend's exact  |             |
+|                   | covariance is not (bandwidth_fusion: the bound M_i, eq. 19)     |             |
 | ``[N+1, 2N+1)``   | 1 for each agent it received a message from last step           | [0, 1]      |
 | ``[2N+1, 3N+1)``  | distance to each agent / 100 m (link-layer knowledge), 0 itself | [0, inf)    |
 | ``[3N+1]``        | step fraction k / horizon                                      | [0, 1]      |
 | then              | the world's features, then the backend's                       | their own   |
 
-Reward (per agent, its own estimate)
-------------------------------------
-``reward="error"``: minus its position error (m) at time k after the update;
-``"trace"``: minus sqrt(tr P_ii) (m), the backend's own RMS error where it has a
-covariance (else the realized error); both minus ``communication_cost`` per
-message it sent this step.
+Reward (per agent, its own estimate; a shared estimate gives every agent the team's)
+------------------------------------------------------------------------------------
+| estimand | ``reward="error"``                              | ``reward="trace"``                                 |
+|----------|-------------------------------------------------|----------------------------------------------------|
+| self     | minus its position error (m) at time k after    | minus sqrt(tr P_ii) (m), the backend's own RMS     |
+|          | the update                                      | (the realized error without a covariance)          |
+| target   | minus the world's ``error`` of its estimate     | minus tr(M P_i M^T) (m^2), the backend's own       |
+|          | (m^2, the paper's metric; see the world)        | covariance over the same components (exact where  |
+|          |                                                 | the backend computes it: bandwidth_fusion's Sigma_i) |
+
+both minus ``communication_cost`` per message it sent this step.
 
 Termination: none; truncation after ``horizon`` steps.
 
-``infos[agent]``: ``true_position``, ``estimated_position`` (posterior of k),
-``position_error`` (m), ``error`` (the reward's error term, m), ``trace`` (m^2,
-nan without a covariance), ``messages_sent``, ``floats_sent``,
-``communication`` (= messages_sent), ``step``.
+``infos[agent]``: ``true_position`` (its own position, or the target's), ``estimated_position``
+(its estimate of time k: the posterior, or a predictor's xhat(k)), ``position_error`` (m), ``error``
+(the reward's error term: m for ``self``, the world's unit for ``target``), ``trace``
+(m^2, the position block of its covariance, nan without one), ``messages_sent``,
+``floats_sent``, ``communication`` (= messages_sent), ``step``.
 """
 
 from __future__ import annotations
@@ -82,8 +105,10 @@ class ComposedScenario(Scenario):
         self._n_network = sum(blk.size for blk in self.network.transport_blocks())
         self._action_space = self._build_action_space()
         B, N = self.batch, self.num_agents
+        self.estimand = getattr(config.world, "estimand", "self")
         self.k = np.zeros(B, dtype=int)
         self._truth = np.zeros((B, N, 2))
+        self._truth_state = np.zeros((B, getattr(self.world, "state_dim", 0)))
         self._received = np.zeros((B, N, N))
         self._reward = np.zeros((B, N))
 
@@ -151,7 +176,11 @@ class ComposedScenario(Scenario):
         self.network.reset([c[1] for c in children], idx)
         self.backend.reset([c[2] for c in children], idx)
         self.k[idx] = 0
-        self._truth[idx] = self.world.positions()[idx]
+        if self.estimand == "target":
+            self._truth_state[idx] = self.world.target_state()[idx]
+            self._truth[idx] = self._target_truth()[idx]
+        else:
+            self._truth[idx] = self.world.positions()[idx]
         self._received[idx] = 0.0
         self._reward[idx] = 0.0
 
@@ -193,11 +222,20 @@ class ComposedScenario(Scenario):
         truth = self.world.positions().copy()
         self.network.begin(self.world.k, truth, transport)
         self.backend.step(readings, decisions)
-        self._truth = truth
+        if self.estimand == "target":
+            self._truth_state = self.world.target_state().copy()
+            self._truth = self._target_truth()
+        else:
+            self._truth = truth
         self._received = self.network.delivered.transpose(0, 2, 1)  # [s, t]: s heard t
         self.world.advance()
         self.k = self.k + 1
-        if self.config.reward == "error":
+        if self.estimand == "target":
+            loss = self.target_error()
+            if self.config.reward == "trace":
+                trace = self.metric_traces()
+                loss = loss if trace is None else trace
+        elif self.config.reward == "error":
             loss = self.position_error()
         else:
             trace = self.posterior_traces()
@@ -205,8 +243,25 @@ class ComposedScenario(Scenario):
         self._reward = -loss - self.config.communication_cost * self.network.messages_sent
 
     # --- views -------------------------------------------------------------------------
+    def _target_truth(self, offset: int = 0) -> np.ndarray:
+        """The target's true position (B, N, 2), repeated for every agent."""
+        p = self.world.target_position(offset)
+        return np.repeat(p[:, None, :], self.num_agents, axis=1)
+
     def position_error(self) -> np.ndarray:
         return np.linalg.norm(self.backend.posterior_position - self._truth, axis=-1)
+
+    def target_error(self) -> np.ndarray:
+        """The world's error of each agent's estimate of the target state (the unit its docstring states)."""
+        return self.world.error(self.backend.posterior_state, self._truth_state)
+
+    def metric_traces(self) -> np.ndarray | None:
+        """tr(M P_i M^T) of each agent's state covariance over the world's error components (M = world.metric)."""
+        cov = self.backend.posterior_state_cov
+        if cov is None:
+            return None
+        M = self.world.metric
+        return np.trace(M @ cov @ M.T, axis1=-2, axis2=-1)
 
     def posterior_traces(self) -> np.ndarray | None:
         cov = self.backend.posterior_position_cov
@@ -215,7 +270,8 @@ class ComposedScenario(Scenario):
     def observation(self) -> np.ndarray:
         B, N = self.batch, self.num_agents
         identity = np.broadcast_to(np.eye(N), (B, N, N))
-        cov = self.backend.position_cov()
+        # what the agent itself can compute (a backend whose exact covariance is not local says so)
+        cov = getattr(self.backend, "local_position_cov", self.backend.position_cov)()
         if cov is None:
             log_trace = np.zeros((B, N))
         else:
@@ -245,7 +301,7 @@ class ComposedScenario(Scenario):
             "true_position": self._truth.copy(),
             "estimated_position": self.backend.posterior_position.copy(),
             "position_error": error,
-            "error": error.copy(),
+            "error": self.target_error() if self.estimand == "target" else error.copy(),
             "trace": np.full((B, N), np.nan) if trace is None else trace,
             "messages_sent": self.network.messages_sent.copy(),
             "floats_sent": self.network.floats_sent.copy(),
@@ -262,13 +318,14 @@ class ComposedScenario(Scenario):
         delivered = self.network.delivered[b]
         links = [Link(source=int(t), target=int(s), value=1.0) for t, s in zip(*np.nonzero(delivered), strict=True)]
         cov = self.backend.posterior_position_cov
+        target = self.estimand == "target"
         return Scene(
             title=f"{self.name}  step {int(self.k[b])}",
-            truth=self._truth[b],
+            truth=self._truth[b, :1] if target else self._truth[b],
             estimates=self.backend.posterior_position[b],
             covariances=None if cov is None else cov[b],
             particles=self.backend.particles(b),
-            node_positions=self._truth[b] / reach,
+            node_positions=(self.world.positions()[b] if target else self._truth[b]) / reach,
             node_labels=self.agent_names,
             links=links,
             link_value_max=1.0,

@@ -1,0 +1,110 @@
+"""Network ``bernoulli_delay`` (fu2017 eq. 3): each slot a link delivers on time, one slot late, or nothing.
+
+Fu, Bi, Gao 2017, eq. (3): at slot k the receiver holds y_i(k) = xi1 z_i(k) +
+xi2 z_i(k-1) + (1 - xi1 - xi2) y_i(k-1): one outcome per link and slot, on time
+(probability alpha1 = ``on_time_probability``), late (alpha2 =
+``late_probability``: the previous slot's packet arrives now) or lost; the
+outcomes are i.i.d. over slots and links and exclusive (the paper's xi1, xi2;
+see :class:`coloc_env.world.delay_links.BernoulliDelayLink`).
+
+Reading built (the paper's per-slot outcome, exactly): the outcome of slot k
+on link t -> s is one uniform u_k (the base's counter-based draw of step k);
+packet k is on time (delay 0) if u_k < alpha1; otherwise it arrives one step
+late (delay 1) if the *next* slot's outcome is "late", alpha1 <= u_{k+1} <
+alpha1 + alpha2 (u_{k+1} is the same counter-based draw the next step makes),
+else it is lost (-1). So at most one packet per link arrives in a slot and
+the held sequence is eq. (3)'s. The one difference from (3) as printed: a
+late outcome after an on-time packet would re-deliver the packet already
+held (a duplicate); a packet has one delay, so it is not delivered again. The
+held value and its age are the same either way. Per packet, P(delay 0) =
+alpha1, P(delay 1) = (1 - alpha1) alpha2.
+
+| quantity   | value                                                                                     |
+|------------|-------------------------------------------------------------------------------------------|
+| carries    | ``packets`` (delays 0 or 1, or lost), ``components`` (a component message is one packet:  |
+|            | on time, or late / lost; a backend that cannot use a late one drops it)                   |
+| decisions  | ``transmit`` MultiDiscrete([2] * rounds) per agent: send this slot (1) or not (0)         |
+| always     | transmit every slot                                                                       |
+| silent     | transmit nothing                                                                          |
+| accounting | at the sender when transmitted, delivered or not (the base's ``packets``)                 |
+| statistics | :meth:`BernoulliDelayNetwork.slot_probabilities`: (alpha1, alpha2) per link, what fu2017's |
+|            | estimators assume                                                                          |
+
+Arguments (``coloc_env.networks.BernoulliDelay``; defaults = the paper's)
+
+| field                | default | allowed                                              |
+|----------------------|---------|------------------------------------------------------|
+| on_time_probability  | 0.4     | [0, 1] (alpha1)                                      |
+| late_probability     | 0.3     | [0, 1] (alpha2); alpha1 + alpha2 in (0, 1]           |
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from coloc_env.draws import uniforms
+from coloc_env.networks.base import Network
+from coloc_env.parts import NETWORKS, Block, PartConfig, check_range
+
+
+@NETWORKS.register
+@dataclass(frozen=True)
+class BernoulliDelay(PartConfig):
+    """Config of the ``bernoulli_delay`` network (see the module table)."""
+
+    name = "bernoulli_delay"
+    carries = frozenset({"packets", "components"})
+    on_time_probability: float = 0.4
+    late_probability: float = 0.3
+
+    def check(self, prefix: str) -> None:
+        check_range(f"{prefix}on_time_probability", self.on_time_probability, 0.0, 1.0)
+        check_range(f"{prefix}late_probability", self.late_probability, 0.0, 1.0)
+        total = float(self.on_time_probability) + float(self.late_probability)
+        if not 0.0 < total <= 1.0 + 1e-12:
+            raise ValueError(f"{prefix}on_time_probability + {prefix}late_probability must be in (0, 1] "
+                             f"(a link must deliver sometimes), got {total!r}")
+
+    def build(self, num_agents: int, batch: int, message_kind: str, rounds: int = 1) -> Network:
+        return BernoulliDelayNetwork(self, num_agents, batch, message_kind, rounds)
+
+
+class BernoulliDelayNetwork(Network):
+    """The base's ``packets`` with fu2017's per-slot outcomes as packet delays."""
+
+    def __init__(self, config: BernoulliDelay, num_agents, batch, message_kind, rounds=1):
+        super().__init__(config, num_agents, batch, message_kind, rounds)
+        self._slot = 0
+
+    def transport_blocks(self) -> list[Block]:
+        if self.message_kind in ("packets", "components"):
+            return [Block("transmit", self.rounds, 2, "transmit this slot (1) or not (0)", default=1, maximum=1,
+                          minimum=0)]
+        return []
+
+    def transmits(self, round_index: int) -> np.ndarray:
+        if self.message_kind not in ("packets", "components"):
+            return super().transmits(round_index)
+        return self._decisions[:, :, min(round_index, self.rounds - 1)].astype(bool)
+
+    def packets(self, senders, listening, floats, slot: int = 0):
+        self._slot = slot  # packet_delays reads the next slot's draw of the same (round) slot
+        return super().packets(senders, listening, floats, slot)
+
+    def max_delay(self) -> int:
+        return 1
+
+    def packet_delays(self, distance: np.ndarray, u: np.ndarray) -> np.ndarray:
+        a1 = float(self.config.on_time_probability)
+        a2 = float(self.config.late_probability)
+        u_next = uniforms(self.keys, (self._k + 1, 2, self._slot), np.shape(u)[-2:])
+        late = (u_next >= a1) & (u_next < a1 + a2)
+        return np.where(u < a1, 0, np.where(late, 1, -1))
+
+    def slot_probabilities(self, distance: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(alpha1, alpha2) per link at ``distance``: the per-slot outcome probabilities of eq. (3)."""
+        shape = np.shape(distance)
+        return (np.full(shape, float(self.config.on_time_probability)),
+                np.full(shape, float(self.config.late_probability)))

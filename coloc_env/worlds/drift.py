@@ -1,0 +1,228 @@
+"""World ``drift`` (zhao2020): one linear drift state x, observed by every agent through a linear sensor.
+
+Zhao, Liu, Zhao, Gao 2020 (seed ``001_c743ba0d1c0e3ecf.txt``), simulation of
+Sec. 2: x(k+1) = A x(k) + B + w(k) (eqs. 1, 22), y_j(k) = C x(k) + v_j(k)
+(eqs. 2, 23); the paper linearizes each UAV's UWB ranges to four anchors into
+C = I, so x is a 3-D position [x, y, z] (m) and B = v dt its known drift. Every
+agent estimates the same x (estimand ``target``). The episode's x(0) ~ N(xhat(0),
+M(0)), w(0..K-1) and v_j(0..K-1) are drawn at reset from the world's
+generator by :func:`coloc_env.scenarios.bandwidth_fusion.draw_episode` (the
+scenario's own sampler, in its order), so a composition of this world sees
+the ``bandwidth_fusion`` scenario's episodes; x(0..K) is kept (K + 1 states: x(K)
+is the state after the last step, which the last observation and the renderer read).
+
+The paper does not say where the UAVs fly (its links do not depend on
+distance); the agents hold a fixed ring of radius ``formation_radius`` about
+the origin, which only the link state of distance-dependent networks
+(``relay``, ``broadcast``) and the observation's distance entries read.
+
+| quantity          | value                                                                             |
+|-------------------|-----------------------------------------------------------------------------------|
+| estimand          | ``target``: the shared state x (n = 3 by default)                                 |
+| motion model      | :class:`estimators.linear_models.LinearGaussian` (A, B, W), kind ``linear_gaussian`` |
+| measurements      | ``linear_observation``: y_j = C x + v_j at every step, every agent                 |
+| anchors           | none among the agents: the sensor C x is absolute (the paper's UWB anchors are folded into C) |
+| sensing action    | none                                                                              |
+| observation       | none                                                                              |
+| "position"        | the first two state components (x, y of the paper's 3-D position), metres         |
+| ``error``         | ||xhat_i - x||^2 over every state component (m^2): the summand of J_K, eq. (12)    |
+| prior             | every agent starts from xhat(0) with covariance M(0)                              |
+
+Arguments (``coloc_env.worlds.Drift``; defaults = the paper's Sec. 2)
+
+| field              | default                | allowed                                         |
+|--------------------|------------------------|-------------------------------------------------|
+| num_agents         | 4                      | 2..16                                           |
+| transition         | I_3                    | (n, n) finite, n in 2..16                       |
+| drift              | (0.5, 0.5, 0.5)        | (n,) finite (m per step)                        |
+| measurement        | I_3                    | (m, n) finite, m in 1..16                       |
+| process_noise      | diag(0.02, 0.05, 0.03) | (n, n) PSD (m^2)                                |
+| measurement_noise  | diag(0.03, 0.04, 0.02) | (m, m) or (num_agents, m, m) PD (m^2)           |
+| initial_state      | (10, 10, 10)           | (n,): xhat(0); x(0) ~ N(this, initial_cov)      |
+| initial_cov        | diag(0.19, 0.09, 0.08) | (n, n) PSD: M(0)                                |
+| horizon            | 50                     | 1..100000 steps (the composition's default)     |
+| formation_radius   | 10.0                   | [0, 1e6] m: the agents' fixed ring              |
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from coloc_env.config import as_array, check_psd, check_range
+from coloc_env.parts import WORLDS, PartConfig
+from coloc_env.world.sensors import LinearSensor
+from coloc_env.worlds.base import Readings, World
+from estimators.linear_models import LinearGaussian, LinearObservation
+
+
+def _eye(n):
+    return tuple(tuple(float(i == j) for j in range(n)) for i in range(n))
+
+
+def _diag(*values):
+    return tuple(tuple(v if i == j else 0.0 for j in range(len(values))) for i, v in enumerate(values))
+
+
+def ring(num_agents: int, radius: float) -> np.ndarray:
+    """(N, 2) agent positions on a ring of ``radius`` about the origin, agent 0 on the +x axis."""
+    angle = 2.0 * np.pi * np.arange(num_agents) / num_agents
+    return radius * np.stack([np.cos(angle), np.sin(angle)], axis=-1)
+
+
+class TargetWorld(World):
+    """Common runtime of the target worlds: the episode's states x(0..K) (B, K+1, n) and readings y (B, K, N, m).
+
+    Subclasses fill ``truth``, ``observations`` in :meth:`draw_episode` and set ``motion_model``,
+    ``measurement_model``, ``position_index`` (the two state components called "position"),
+    ``metric`` (p, n) (``error`` = ||metric (xhat - x)||^2) and the prior.
+    """
+
+    position_index: tuple[int, int] = (0, 1)
+
+    def __init__(self, config, batch: int, horizon: int, n: int, m: int, metric: np.ndarray):
+        super().__init__(config, batch, horizon)
+        B, N, K = self.batch, self.num_agents, self.horizon
+        self.state_dim, self.measurement_dim = n, m
+        self.metric = np.asarray(metric, float)
+        self.truth = np.zeros((B, K + 1, n))
+        self.observations = np.zeros((B, K, N, m))
+        self._ring = ring(N, float(config.formation_radius))
+
+    # --- what backends read ---------------------------------------------------------------
+    def prior(self) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - interface
+        """(x0 mean (n,), P0 (n, n)): what every agent knows of x(0)."""
+        raise NotImplementedError
+
+    def initial_belief(self):
+        B, N = self.batch, self.num_agents
+        mean, cov = self.prior()
+        return (np.broadcast_to(mean, (B, N, mean.size)).copy(),
+                np.broadcast_to(cov, (B, N, *cov.shape)).copy())
+
+    def target_state(self, offset: int = 0) -> np.ndarray:
+        """True x(k + offset), (B, n) (clipped to the last state drawn)."""
+        k = np.minimum(self.k + offset, self.horizon)
+        return self.truth[np.arange(self.batch), k]
+
+    def target_position(self, offset: int = 0) -> np.ndarray:
+        return self.target_state(offset)[:, list(self.position_index)]
+
+    def error(self, estimate: np.ndarray, truth: np.ndarray) -> np.ndarray:
+        """||metric (estimate - truth)||^2, (B, N): estimate (B, N, n), truth (B, n)."""
+        return np.sum(((estimate - truth[:, None, :]) @ self.metric.T) ** 2, axis=-1)
+
+    def positions(self) -> np.ndarray:
+        """The agents' positions (B, N, 2): the fixed ring (what the radios sense)."""
+        return np.broadcast_to(self._ring, (self.batch, self.num_agents, 2)).copy()
+
+    def readings(self, sensing: np.ndarray) -> Readings:
+        B, N = self.batch, self.num_agents
+        k = np.minimum(self.k, self.horizon - 1)
+        y = self.observations[np.arange(B), k]
+        return Readings(inputs=np.zeros((B, N, 0)), range=np.full((B, N, N), np.nan),
+                        range_valid=np.zeros((B, N, N), bool), fix=np.zeros((B, N, 2)),
+                        fix_valid=np.zeros((B, N), bool),
+                        extra={"linear": y, "linear_valid": np.ones((B, N), bool)})
+
+    def extent(self) -> float:
+        return float(max(np.abs(self.target_position()).max(), float(self.config.formation_radius))) + 10.0
+
+
+def check_linear_world(prefix: str, config) -> tuple[int, int]:
+    """Shared checks of a (transition, measurement, noises) world; returns (n, m)."""
+    A = as_array(f"{prefix}transition", config.transition, ndim=2)
+    n = A.shape[0]
+    if A.shape != (n, n) or not 2 <= n <= 16:
+        raise ValueError(f"{prefix}transition must be a square (n, n) matrix with n in [2, 16], got shape {A.shape}")
+    as_array(f"{prefix}drift", config.drift, shape=(n,))
+    C = as_array(f"{prefix}measurement", config.measurement, ndim=2)
+    if C.shape[1] != n or not 1 <= C.shape[0] <= 16:
+        raise ValueError(f"{prefix}measurement must have shape (m, {n}) with m in [1, 16], got {C.shape}")
+    check_psd(f"{prefix}process_noise", config.process_noise, n)
+    V = as_array(f"{prefix}measurement_noise", config.measurement_noise)
+    if V.ndim == 3 and V.shape[0] != config.num_agents:
+        raise ValueError(f"{prefix}measurement_noise must be (m, m) or ({config.num_agents}, m, m), got {V.shape}")
+    for j, Vj in enumerate(V if V.ndim == 3 else V[None]):
+        check_psd(f"{prefix}measurement_noise" + (f"[{j}]" if V.ndim == 3 else ""), Vj, C.shape[0], strict=True)
+    as_array(f"{prefix}initial_state", config.initial_state, shape=(n,))
+    check_psd(f"{prefix}initial_cov", config.initial_cov, n)
+    return n, C.shape[0]
+
+
+@WORLDS.register
+@dataclass(frozen=True)
+class Drift(PartConfig):
+    """Config of the ``drift`` world (see the module table)."""
+
+    name = "drift"
+    estimand = "target"
+    motion_kind = LinearGaussian.kind
+    measurements = frozenset({"linear_observation"})
+    anchors = "none among the agents: every agent's linear sensor C x is absolute"
+    num_agents: int = 4
+    transition: tuple = _eye(3)
+    drift: tuple = (0.5, 0.5, 0.5)
+    measurement: tuple = _eye(3)
+    process_noise: tuple = _diag(0.02, 0.05, 0.03)
+    measurement_noise: tuple = _diag(0.03, 0.04, 0.02)
+    initial_state: tuple = (10.0, 10.0, 10.0)
+    initial_cov: tuple = _diag(0.19, 0.09, 0.08)
+    horizon: int = 50
+    formation_radius: float = 10.0
+
+    def check(self, prefix: str) -> None:
+        check_range(f"{prefix}num_agents", self.num_agents, 2, 16, integer=True)
+        check_linear_world(prefix, self)
+        check_range(f"{prefix}horizon", self.horizon, 1, 100_000, integer=True)
+        check_range(f"{prefix}formation_radius", self.formation_radius, 0.0, 1e6)
+
+    def scenario_config(self, horizon: int | None = None):
+        """The ``bandwidth_fusion`` scenario's config with this world's system (its sampler draws the episodes)."""
+        from coloc_env.scenarios.bandwidth_fusion import BandwidthFusionConfig
+
+        fields = {f: getattr(self, f) for f in ("transition", "drift", "measurement", "process_noise",
+                                                "measurement_noise", "initial_state", "initial_cov")}
+        return BandwidthFusionConfig(num_uavs=self.num_agents, horizon=self.horizon if horizon is None else horizon,
+                                     **fields)
+
+    def build(self, batch: int, horizon: int) -> DriftWorld:
+        return DriftWorld(self, batch, horizon)
+
+
+class DriftWorld(TargetWorld):
+    position_index = (0, 1)
+
+    def __init__(self, config: Drift, batch: int, horizon: int):
+        n = np.asarray(config.transition).shape[0]
+        m = np.asarray(config.measurement).shape[0]
+        super().__init__(config, batch, horizon, n, m, np.eye(n))
+        self.motion_model = LinearGaussian(config.transition, config.drift, config.process_noise)
+        V = np.asarray(config.measurement_noise, float)
+        self.measurement_model = LinearObservation(config.measurement, V if V.ndim == 3 else V)
+        self._scenario_config = config.scenario_config(self.horizon)
+        self._sensor = LinearSensor(np.asarray(config.measurement, float), np.eye(m))
+        from coloc_env.scenarios.bandwidth_fusion import noise_factors
+
+        self._factors = noise_factors(self._scenario_config)
+
+    def prior(self):
+        return np.asarray(self.config.initial_state, float), np.asarray(self.config.initial_cov, float)
+
+    def draw_episode(self, rngs, idx) -> None:
+        from coloc_env.scenarios.bandwidth_fusion import draw_episode
+
+        A = self.motion_model
+        for c, rng in enumerate(rngs):
+            episode = draw_episode(self._scenario_config, rng, self._factors)
+            b = idx[c]
+            self.truth[b, 0] = episode["initial_state"]
+            for k in range(self.horizon):  # x(k+1) = A x(k) + B + w(k), as LinearMotion.step computes it
+                self.truth[b, k + 1] = (np.einsum("ab,b->a", A.transition, self.truth[b, k]) + A.drift
+                                        + episode["process_noise"][k])
+            self.observations[b] = self._sensor.measure(self.truth[b, :self.horizon, None, :],
+                                                        episode["measurement_noise"])
+
+
+__all__ = ["Drift", "DriftWorld", "TargetWorld", "check_linear_world", "ring"]

@@ -1,0 +1,289 @@
+"""Target estimation in the composable core (issue 14): worlds drift / target_cv, networks bandwidth /
+bernoulli_delay, backends bandwidth_fusion, centralized_lmmse, prediction_compensation, kalman."""
+
+import numpy as np
+import pytest
+
+import agents
+import coloc_env
+import estimators.bandwidth_fusion as bf
+import estimators.lossy_fusion as lf
+from coloc_env.draws import uniforms
+from coloc_env.scenarios.bandwidth_fusion import BandwidthFusionScenario, paper_selection, paper_weights
+from coloc_env.scenarios.lossy_fusion import LossyFusionConfig, LossyFusionScenario
+
+OK = {(r["world"], r["network"], r["backend"]) for r in coloc_env.compatibility() if r["ok"]}
+
+
+def _episode(spec, actions_of, seed, steps=None):
+    """Per-step infos (list of dicts agent -> info), rewards, and the env, for ``actions_of(env, k)``."""
+    env = coloc_env.parallel_env(spec)
+    env.reset(seed=seed)
+    infos, rewards, k = [], [], 0
+    while env.agents and (steps is None or k < steps):
+        _, reward, _, _, info = env.step(actions_of(env, k))
+        infos.append(info)
+        rewards.append(reward)
+        k += 1
+    return infos, rewards, env
+
+
+def _stack(infos, key, env):
+    return np.array([[info[a][key] for a in env.possible_agents] for info in infos])
+
+
+def _always(env, k):
+    return agents.make_policy("always", env).act({a: None for a in env.possible_agents})
+
+
+def _world_rng(seed):
+    return np.random.default_rng(seed).spawn(3)[0]  # the composition's world child of the episode seed
+
+
+def test_the_matrix_has_the_target_rows_the_issue_names():
+    assert ("drift", "bernoulli_delay", "bandwidth_fusion") in OK
+    assert ("drift", "ideal", "prediction_compensation") in OK
+    assert ("drift", "ideal", "centralized_lmmse") in OK
+    for world in ("drift", "target_cv"):
+        backends = {b for w, _, b in OK if w == world}
+        assert len(backends) >= 3, backends
+    reasons = {(r["world"], r["network"], r["backend"]): r["reason"] for r in coloc_env.compatibility()}
+    assert reasons[("drift", "ideal", "ukf_dcl")] == ("ukf_dcl estimates each agent's own position; world drift "
+                                                      "asks for a shared target state")
+    assert "cannot carry" in reasons[("drift", "bandwidth", "kalman")]
+
+
+def test_bandwidth_fusion_over_the_bandwidth_network_is_the_scenario():
+    """drift (paper defaults) + bandwidth (budget 5) + bandwidth_fusion with the tables T1, P1 gives the
+    bandwidth_fusion scenario's estimates, errors and rewards on the same episode (1e-9)."""
+    seed = 5
+    spec = coloc_env.compose(world="drift", network="bandwidth", backend="bandwidth_fusion")
+    probe = coloc_env.parallel_env(spec)
+    probe.reset(seed=seed)
+    links = probe.unwrapped.scenario.network.links
+    relative = links.relative_selection(paper_selection("T1"))
+    index = links.index_of(relative)
+    assert np.all(index >= 0)
+    N = len(probe.possible_agents)
+
+    def actions(env, k):
+        return {a: np.concatenate([[index[i]], np.zeros(N)]).astype(np.float32)
+                for i, a in enumerate(env.possible_agents)}
+
+    infos, rewards, env = _episode(spec, actions, seed)
+    scenario = BandwidthFusionScenario(env.unwrapped.scenario.world.config.scenario_config())
+    scenario.reset([_world_rng(seed)])
+    weights = paper_weights("P1")[None]
+    # step k reports xhat_i(k) (data up to k-1, the pairing of J_K) where the scenario reports xhat_i(k+1)
+    # after its step k: the composition's step k is the scenario after k steps
+    first = infos[0]
+    np.testing.assert_allclose(_stack([first], "true_position", env)[0], scenario.info()["true_position"][0][:, :2],
+                               rtol=0, atol=1e-9)
+    np.testing.assert_allclose(_stack([first], "estimated_position", env)[0], np.full((N, 2), 10.0), rtol=0, atol=0)
+    for k, info in enumerate(infos[1:], start=1):
+        scenario.advance(relative[None], weights)
+        ref = scenario.info()
+        np.testing.assert_allclose(_stack([info], "true_position", env)[0], ref["true_position"][0][:, :2],
+                                   rtol=0, atol=1e-9)
+        np.testing.assert_allclose(_stack([info], "estimated_position", env)[0], ref["estimated_position"][0][:, :2],
+                                   rtol=0, atol=1e-9)
+        np.testing.assert_allclose(_stack([info], "error", env)[0], ref["error"][0], rtol=0, atol=1e-9)
+        np.testing.assert_allclose([rewards[k][a] for a in env.possible_agents], scenario.reward()[0],
+                                   rtol=0, atol=1e-9)
+        np.testing.assert_allclose(_stack([info], "trace", env)[0], _position_trace(scenario), rtol=0, atol=1e-9)
+    # every receiver took exactly its budget: 5 components a step, counted at the senders
+    floats = _stack(infos, "floats_sent", env)
+    assert np.all(floats.sum(axis=1) == N * 5)
+    assert len(infos) == 50
+
+
+def _position_trace(scenario):
+    cov = bf.node_covariances(scenario.fusion.error_cov, scenario.num_agents)[0]
+    return cov[:, 0, 0] + cov[:, 1, 1]
+
+
+def _uniform_outcomes(env, steps):
+    """fu2017's per-slot codes of each follower's link to the leader, from the network's own uniforms."""
+    net = env.unwrapped.scenario.network
+    a1, a2 = net.config.on_time_probability, net.config.late_probability
+    u = np.stack([uniforms(net.keys, (np.array([k]), 2, 0), (net.num_agents, net.num_agents))[0, :, 0]
+                  for k in range(steps)])
+    codes = np.where(u < a1, lf.ON_TIME, np.where(u < a1 + a2, lf.LATE, lf.LOST)).astype(np.int8)
+    codes[:, 0] = lf.ON_TIME
+    return codes
+
+
+def test_prediction_compensation_over_bernoulli_delay_is_the_lossy_fusion_scenario():
+    """target_cv + bernoulli_delay + prediction_compensation with the paper's decisions gives the lossy_fusion
+    scenario's fused estimates and errors (1e-9) when the scenario is fed the same episode and the link
+    outcomes the network drew (the network draws them from its own generator, the scenario from the episode's)."""
+    seed = 3
+    spec = coloc_env.compose(world="target_cv", network="bernoulli_delay", backend="prediction_compensation")
+    infos, rewards, env = _episode(spec, _always, seed)
+    K = len(infos)
+    config = LossyFusionConfig()
+    scenario = LossyFusionScenario(config)
+    scenario.reset([_world_rng(seed)])
+    np.testing.assert_array_equal(scenario.truth[0], env.unwrapped.scenario.world.truth[0, :K])
+    scenario.outcome[0] = _uniform_outcomes(env, K)
+    assert {lf.ON_TIME, lf.LATE, lf.LOST} <= set(np.unique(scenario.outcome[0, :, 1]))
+    paper = scenario.paper_actions()[None]
+    for k, info in enumerate(infos):
+        scenario.step(paper)
+        ref = scenario.info()
+        np.testing.assert_allclose(_stack([info], "true_position", env)[0], ref["true_position"][0][:, :2],
+                                   rtol=0, atol=1e-9)
+        np.testing.assert_allclose(_stack([info], "estimated_position", env)[0], ref["estimated_position"][0][:, :2],
+                                   rtol=0, atol=1e-9)
+        np.testing.assert_allclose(_stack([info], "error", env)[0], ref["error"][0], rtol=0, atol=1e-9)
+        np.testing.assert_allclose([rewards[k][a] for a in env.possible_agents], scenario.reward()[0],
+                                   rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("backend,reference", [
+    ({"name": "centralized_lmmse"}, "centralized"),
+    ({"name": "centralized_lmmse", "gain": "paper"}, "centralized_paper_gain"),
+    ({"name": "kalman", "variant": "naive"}, "naive_kf"),
+    ({"name": "kalman", "variant": "informed"}, "informed_kf"),
+    ({"name": "kalman", "variant": "leader_only"}, "leader_only_kf"),
+    ({"name": "kalman", "variant": "ideal"}, "ideal_kf"),
+])
+def test_fu2017_backends_equal_the_reproduction_filters(backend, reference):
+    """On the episode and link outcomes the composition drew, each backend gives the filter of
+    estimators.lossy_fusion.run_filters (the reproduction's) to 1e-9, with L = 3 UAVs."""
+    seed, L = 11, 3
+    spec = coloc_env.compose(world={"name": "target_cv", "num_agents": L, "horizon": 40}, network="bernoulli_delay",
+                             backend=backend)
+    infos, _, env = _episode(spec, _always, seed)
+    world = env.unwrapped.scenario.world
+    K = len(infos)
+    outcome = _uniform_outcomes(env, K)
+    model = LossyFusionConfig(num_uavs=L, horizon=K).lossy_model()
+    x0, P0 = world.prior()
+    estimates, _ = lf.run_filters(model, x0, P0, world.observations[0], outcome, filters=(reference,))[reference]
+    got = _stack(infos, "estimated_position", env)
+    for i in range(L):  # the leader's estimate, reported by every agent
+        np.testing.assert_allclose(got[:, i], estimates[:, [0, 2]], rtol=0, atol=1e-9)
+
+
+def test_bernoulli_delay_delivers_at_most_one_packet_a_slot_with_the_papers_frequencies():
+    spec = coloc_env.compose(world={"name": "target_cv", "num_agents": 8, "horizon": 400}, network="bernoulli_delay",
+                             backend="kalman")
+    env = coloc_env.parallel_env(spec)
+    env.reset(seed=0)
+    net = env.unwrapped.scenario.network
+    senders = np.zeros((1, 8), bool)
+    senders[0, 1:] = True
+    listening = np.zeros((1, 8, 8), bool)
+    listening[0, 1:, 0] = True
+    positions = env.unwrapped.scenario.world.positions()
+    delays = []
+    for k in range(400):
+        net.begin(np.array([k]), positions, np.ones((1, 8, 1), np.int64))
+        delays.append(net.packets(senders, listening, 1.0)[0, 1:, 0])
+    delays = np.array(delays)  # (K, followers)
+    both = (delays[1:] == 0) & (delays[:-1] == 1)
+    assert not both.any()
+    assert abs((delays == 0).mean() - 0.4) < 0.03
+    assert abs((delays == 1).mean() - 0.6 * 0.3) < 0.03
+    assert set(np.unique(delays)) == {-1, 0, 1}
+
+
+def _mean_error(spec, seeds, policy="always"):
+    errors = []
+    for seed in seeds:
+        env = coloc_env.parallel_env(spec)
+        pol = agents.make_policy(policy, env, seed=0)
+        observations, _ = env.reset(seed=seed)
+        per_step = []
+        while env.agents:
+            observations, _, _, _, infos = env.step(pol.act(observations))
+            per_step.append([infos[a]["error"] for a in env.possible_agents])
+        errors.append(np.mean(per_step))
+    return np.array(errors)
+
+
+def test_kalman_ideal_informed_naive_ordering_over_seeded_runs():
+    """Over a lossy network, ideal <= informed <= naive in mean squared error (fu2017 Sec. 4), paired seeds."""
+    world = {"name": "target_cv", "num_agents": 3, "horizon": 40}
+    errors = {v: _mean_error(coloc_env.compose(world=world, network="bernoulli_delay",
+                                               backend={"name": "kalman", "variant": v}), range(4))
+              for v in ("ideal", "informed", "naive")}
+    assert errors["ideal"].mean() < errors["informed"].mean() < errors["naive"].mean(), errors
+
+
+def test_bandwidth_fusion_loses_accuracy_over_bernoulli_delay_on_drift():
+    ideal = _mean_error(coloc_env.compose(world="drift", network="ideal", backend="bandwidth_fusion"), range(4))
+    lossy = _mean_error(coloc_env.compose(world="drift", network="bernoulli_delay", backend="bandwidth_fusion"),
+                        range(4))
+    assert np.all(lossy > ideal), (ideal, lossy)
+
+
+def test_fu2017_backends_on_drift_follow_the_known_input():
+    """On drift (known input B = v dt) the fu2017 filters, written for B = 0, run by the change of variables:
+    over ideal links the LMMSE equals the Kalman filter with every measurement, and both stay unbiased."""
+    runs = {}
+    for backend in ("centralized_lmmse", {"name": "kalman", "variant": "ideal"}, "prediction_compensation"):
+        spec = coloc_env.compose(world="drift", network="ideal", backend=backend)
+        infos, _, env = _episode(spec, _always, 2)
+        runs[spec.backend.name] = (_stack(infos, "estimated_position", env), _stack(infos, "position_error", env))
+    np.testing.assert_allclose(runs["centralized_lmmse"][0], runs["kalman"][0], rtol=0, atol=1e-9)
+    # the drift moves the target 25 m over the episode; the estimates track it to centimetres
+    assert runs["kalman"][1].mean() < 0.2 and runs["prediction_compensation"][1].mean() < 0.3
+
+
+def test_the_same_seed_gives_every_target_backend_the_same_truth():
+    truths = []
+    for backend in ("bandwidth_fusion", "centralized_lmmse", "prediction_compensation", "kalman"):
+        infos, _, env = _episode(coloc_env.compose(world="target_cv", network="bernoulli_delay", backend=backend),
+                                 _always, 4, steps=20)
+        truths.append(_stack(infos, "true_position", env))
+        np.testing.assert_array_equal(truths[-1][:, 0], env.unwrapped.scenario.world.truth[0, :20][:, [0, 2]])
+    for other in truths[1:]:
+        np.testing.assert_array_equal(truths[0], other)
+
+
+def test_target_infos_and_trace_reward():
+    spec = coloc_env.compose(world="target_cv", network="ideal", backend="prediction_compensation", reward="trace")
+    infos, rewards, env = _episode(spec, _always, 0, steps=5)
+    scenario = env.unwrapped.scenario
+    cov = scenario.backend.posterior_state_cov[0, 0]
+    H = scenario.world.metric
+    assert rewards[-1]["uav_0"] == pytest.approx(-np.trace(H @ cov @ H.T), rel=1e-12)
+    info = infos[-1]["uav_1"]
+    assert info["true_position"].shape == (2,) and info["trace"] == pytest.approx(cov[0, 0] + cov[2, 2])
+    np.testing.assert_allclose(info["position_error"],
+                               np.linalg.norm(info["estimated_position"] - info["true_position"]))
+
+
+def test_bad_target_options_name_the_part_and_field():
+    with pytest.raises(ValueError, match=r"network\.on_time_probability \+ network\.late_probability must be in"):
+        coloc_env.compose(world="target_cv", network={"name": "bernoulli_delay", "on_time_probability": 0.8,
+                                                     "late_probability": 0.5}, backend="kalman")
+    with pytest.raises(ValueError, match=r"world\.horizon must be an integer"):
+        coloc_env.compose(world={"name": "drift", "horizon": 2.5}, network="ideal", backend="kalman")
+    with pytest.raises(ValueError, match=r"world\.initial_cov must be a \(3, 3\) covariance"):
+        coloc_env.compose(world={"name": "drift", "initial_cov": ((1.0, 0.0), (0.0, 1.0))}, network="ideal",
+                          backend="kalman")
+    with pytest.raises(ValueError, match=r"backend\.variant must be one of"):
+        coloc_env.compose(world="drift", network="ideal", backend={"name": "kalman", "variant": "smart"})
+    spec = coloc_env.compose(world="drift", network={"name": "bandwidth", "budget": 10}, backend="bandwidth_fusion")
+    with pytest.raises(ValueError, match=r"network\.budget must be in \[3, 9\], got 10"):
+        coloc_env.parallel_env(spec)
+
+
+def test_vector_env_copy_b_is_the_env_reset_with_seed_plus_b():
+    spec = coloc_env.compose(world="drift", network="bernoulli_delay", backend="centralized_lmmse", horizon=20)
+    venv = coloc_env.vector_env(spec, num_envs=3, seed=10)
+    venv.reset()
+    N = 4
+    for _ in range(20):
+        _, rewards, _, _ = venv.step(np.ones((3 * N, 1), np.int64))
+        last = rewards.reshape(3, N)
+    for b in range(3):
+        env = coloc_env.parallel_env(spec)
+        env.reset(seed=10 + b)
+        for _ in range(20):
+            _, rewards, _, _, _ = env.step({a: np.array([1]) for a in env.possible_agents})
+        np.testing.assert_allclose([rewards[a] for a in env.possible_agents], last[b], rtol=1e-6)
+    assert len(set(last[:, 0])) == 3  # three different episodes
