@@ -8,32 +8,54 @@ actions.
 
 | preset             | paper     | world        | network          | backend                   |
 |--------------------|-----------|--------------|------------------|---------------------------|
-| bandwidth_fusion   | zhao2020  | (drift)      | (bandwidth)      | (bandwidth_fusion)        |
-| lossy_fusion       | fu2017    | (target_cv)  | (bernoulli_delay)| (prediction_compensation) |
+| bandwidth_fusion   | zhao2020  | drift        | bandwidth        | bandwidth_fusion          |
+| lossy_fusion       | fu2017    | target_cv    | bernoulli_delay  | prediction_compensation   |
 | relay_ukf          | wang2019  | circles      | relay            | ukf_dcl                   |
 | gps_denied_nbp     | wan2014   | gps_denied   | broadcast        | dnbp                      |
-| nlos_horizon       | gao2016   | (nlos_orbit) | (random_delay)   | (afge)                    |
+| nlos_horizon       | gao2016   | nlos_orbit   | random_delay     | afge                      |
 | mrclam_relay       | MRCLAM    | (mrclam)     | (relay)          | (ukf_se2)                 |
 
-Parts in parentheses are not in the registries yet (issue 14 moves one paper
-at a time onto the core); until then that preset's ``world`` / ``network`` /
-``backend`` fields are None and its binding alone defines it.
+How exactly the parts reproduce each binding (tests/coloc_env):
+
+* relay_ukf, gps_denied_nbp: the composition of the parts gives the scenario's estimates on the
+  same seed (test_compositions, test_gps_denied_composition);
+* bandwidth_fusion: drift / bandwidth / bandwidth_fusion with the paper's component tables gives
+  the scenario's estimates to 1e-9, reported one step earlier (the composition scores the one-step
+  prediction xhat(k) against x(k), eq. 12's pairing; test_target_compositions);
+* lossy_fusion, nlos_horizon: equal to 1e-9 when the scenario is handed the link outcomes (delays,
+  losses) the network drew; on its own seed the scenario draws them from its single episode
+  generator, while a network draws from its own child generator, so that every backend sees the
+  same world (test_target_compositions, test_nlos_composition).
+
+Parts in parentheses are not in the registries yet; until then that preset's ``world`` /
+``network`` / ``backend`` fields are None and its binding alone defines it.
 """
 
 from __future__ import annotations
 
+from coloc_env.backends.fusion import BandwidthFusion, PredictionCompensation
+from coloc_env.backends.nlos import Afge
 from coloc_env.backends.particles import Dnbp
 from coloc_env.backends.ukf import UkfDcl
 from coloc_env.composition import Composition
 from coloc_env.networks import Broadcast, Relay
+from coloc_env.networks.bandwidth import Bandwidth
+from coloc_env.networks.bernoulli_delay import BernoulliDelay
+from coloc_env.networks.random_delay import RandomDelay
 from coloc_env.scenarios import REGISTRY
 from coloc_env.worlds import Circles
+from coloc_env.worlds.drift import Drift
 from coloc_env.worlds.gps_denied import GpsDenied
+from coloc_env.worlds.nlos_orbit import NlosOrbit
+from coloc_env.worlds.target_cv import TargetCv
 
 _PARTS = {
+    "bandwidth_fusion": (Drift(), Bandwidth(), BandwidthFusion()),
+    "lossy_fusion": (TargetCv(), BernoulliDelay(), PredictionCompensation()),
     "relay_ukf": (Circles(num_agents=4, num_anchors=0), Relay(loss_at_zero=0.0), UkfDcl()),
     # dnbp over this broadcast network gives the scenario's estimates exactly (test_gps_denied_composition)
     "gps_denied_nbp": (GpsDenied(), Broadcast(comm_range=300.0), Dnbp()),
+    "nlos_horizon": (NlosOrbit(), RandomDelay(), Afge()),
 }
 
 PRESETS: dict[str, Composition] = {

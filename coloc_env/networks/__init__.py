@@ -8,8 +8,11 @@ from coloc_env.parts_discovery import import_parts
 
 import_parts(__name__, __path__, ("ideal", "bernoulli_delay", "bandwidth", "relay", "broadcast", "random_delay"))
 
+from coloc_env.networks.bandwidth import Bandwidth  # noqa: E402
+from coloc_env.networks.bernoulli_delay import BernoulliDelay  # noqa: E402
 from coloc_env.networks.broadcast import Broadcast  # noqa: E402
 from coloc_env.networks.ideal import Ideal  # noqa: E402
+from coloc_env.networks.random_delay import RandomDelay  # noqa: E402
 from coloc_env.networks.relay import Relay  # noqa: E402
 
-__all__ = ["NETWORKS", "Broadcast", "Ideal", "Relay"]
+__all__ = ["NETWORKS", "Bandwidth", "BernoulliDelay", "Broadcast", "Ideal", "RandomDelay", "Relay"]
