@@ -14,6 +14,7 @@ from coloc_env.backends.kalman import Kalman  # noqa: E402
 from coloc_env.backends.nlos import Afge, Dfir  # noqa: E402
 from coloc_env.backends.particles import Dnbp, RangeLs  # noqa: E402
 from coloc_env.backends.ukf import UkfCcl, UkfDcl  # noqa: E402
+from coloc_env.backends.ukf_se2 import UkfSe2  # noqa: E402
 
 __all__ = ["BACKENDS", "Afge", "BandwidthFusion", "CentralizedLmmse", "DeadReckoning", "Dfir", "Dnbp", "Kalman",
-           "PredictionCompensation", "RangeLs", "UkfCcl", "UkfDcl"]
+           "PredictionCompensation", "RangeLs", "UkfCcl", "UkfDcl", "UkfSe2"]

@@ -11,7 +11,8 @@ import_parts(__name__, __path__, ("drift", "target_cv", "circles", "gps_denied",
 from coloc_env.worlds.circles import Circles  # noqa: E402
 from coloc_env.worlds.drift import Drift  # noqa: E402
 from coloc_env.worlds.gps_denied import GpsDenied  # noqa: E402
+from coloc_env.worlds.mrclam import Mrclam  # noqa: E402
 from coloc_env.worlds.nlos_orbit import NlosOrbit  # noqa: E402
 from coloc_env.worlds.target_cv import TargetCv  # noqa: E402
 
-__all__ = ["WORLDS", "Circles", "Drift", "GpsDenied", "NlosOrbit", "TargetCv"]
+__all__ = ["WORLDS", "Circles", "Drift", "GpsDenied", "Mrclam", "NlosOrbit", "TargetCv"]

@@ -111,48 +111,13 @@ N = mrclam.NUM_ROBOTS
 
 
 # --------------------------------------------------------------------------------------------- data -> slices
-def pseudo_fix(landmark, measured_range, bearing, heading, offset=0.0) -> np.ndarray:
-    """Position of the observer from a sighting of a known landmark: l - r [cos(theta + b), sin(theta + b)] + offset."""
-    angle = np.asarray(heading, float) + np.asarray(bearing, float)
-    r = np.asarray(measured_range, float)[..., None]
-    return (np.asarray(landmark, float) - r * np.stack([np.cos(angle), np.sin(angle)], axis=-1)
-            + np.asarray(offset, float))
-
-
-def fix_std(measured_range, range_var, bearing_var, heading_var, landmark_var=0.0) -> np.ndarray:
-    """Isotropic std of a pseudo-fix: sqrt(max(sigma_r^2, r^2 (sigma_b^2 + sigma_theta^2)) + sigma_landmark^2)."""
-    r = np.asarray(measured_range, float)
-    return np.sqrt(np.maximum(range_var, r * r * (bearing_var + heading_var)) + landmark_var)
+pseudo_fix = mrclam.pseudo_fix  # moved to coloc_env.data.mrclam (shared with the mrclam world's pseudo-fixes)
+fix_std = mrclam.fix_std
 
 
 def own_navigation(d: mrclam.MrclamData, model: mrclam.NoiseModel, x0: np.ndarray):
-    """Per-robot UKF on (x, y, theta), odometry + its own landmark sightings only (no robot-robot data).
-
-    Returns poses (T, N, 3) and covariances (T, N, 3, 3) after the step's updates, and
-    ``accepted`` (n_meas,) bool: landmark sightings the gate let in (robot-robot entries False).
-    """
-    u = model.odometry(d, np.arange(d.steps))
-    q = model.odometry_var(u)
-    x = np.array(x0, float)
-    P = np.broadcast_to(np.eye(3) * INITIAL_STD**2, (N, 3, 3)).copy()
-    poses, covs = np.empty((d.steps, N, 3)), np.empty((d.steps, N, 3, 3))
-    accepted = np.zeros(len(d.meas_step), bool)
-    for k in range(d.steps):
-        s = d.measurements_at(k)
-        for i in range(s.start, s.stop):
-            sub = int(d.meas_subject[i])
-            if sub <= N:
-                continue
-            r = int(d.meas_robot[i])
-            z = np.array([d.meas_range[i], d.meas_bearing[i]])
-            xr, Pr, ok = se2.ccl_update(x[r:r + 1], P[r], 0, z, model.measurement_cov(float(z[0])),
-                                        landmark=d.landmarks[sub - N - 1], gate=mrclam.GATE_999)
-            x[r], P[r], accepted[i] = xr[0], Pr, ok
-        poses[k], covs[k] = x, P
-        new, F, G = se2.motion(x, u[k], d.dt)
-        P = F @ P @ np.swapaxes(F, -1, -2) + np.einsum("nab,nb,ncb->nac", G, q[k], G)
-        x, P = new, 0.5 * (P + np.swapaxes(P, -1, -2))
-    return poses, covs, accepted
+    """:func:`coloc_env.data.mrclam.own_navigation` from ``INITIAL_STD`` (poses, covariances, accepted)."""
+    return mrclam.own_navigation(d, model, x0, INITIAL_STD)
 
 
 def dead_reckoning(d: mrclam.MrclamData, model: mrclam.NoiseModel, x0: np.ndarray) -> np.ndarray:

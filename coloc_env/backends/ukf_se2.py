@@ -1,0 +1,173 @@
+"""Backend ``ukf_se2``: UKF-DCL of wang2019 on planar robots with heading, range and bearing, and landmarks.
+
+Adapter over :mod:`estimators.ukf_relay_se2` (its docstring has the
+equations: the SE(2) unicycle time update, the 2-vector range+bearing
+observation through the UT on the joint state L = 3N, the Roumeliotis-Bekey
+factored cross-covariances P_ij = Phi_i sigma_ij Phi_j^T, the look-up
+Cholesky along the relay chain, the exact update of robots a truncated chain
+does not reach, the chi-square outlier gate). Each copy keeps its robots'
+estimates (B, N, 3) and the factors P_ii, Phi_i, sigma_ij; the estimator has no
+batch axis, so the updates loop over the copies.
+
+Step k, in the world's file order (``Readings.extra["obs_*"]``, see
+:mod:`coloc_env.worlds.mrclam`):
+
+* a landmark sighting by robot m: ``dcl_update`` on the chain [m] alone (the
+  exact truncated-chain update: m and, through the cross terms, everyone's
+  sigma rows change; no communication);
+* a robot m's range+bearing of robot n: a relay chain m -> n -> ... on the
+  network (message kind ``chain``, :meth:`coloc_env.networks.base.Network.relay`,
+  one slot per observation); if n is reached, ``dcl_update`` along the chain
+  actually delivered (a chain that reaches everyone gives exactly UKF-CCL);
+  a chain that does not reach n applies nothing;
+* (the world's ``position_fix`` pseudo-fixes are not used: they are made from the
+  same landmark sightings, and using both would count them twice);
+* then every robot predicts with its odometry input (``time_update_factored``,
+  Q = G diag(var_v, var_omega) G^T per robot and step: the world's input).
+
+This is the loop of the hand-wired ``mrclam_relay`` scenario (its
+``measurement_update`` / ``time_update``); over an ideal network, or a loss-free
+relay whose chains are complete, a composition reproduces its estimates
+(tests/coloc_env/test_mrclam_composition.py checks 1e-9).
+
+| quantity         | value                                                                                |
+|------------------|--------------------------------------------------------------------------------------|
+| estimand         | self (x, y and heading of each robot; the position is reported)                      |
+| motion kinds     | ``se2_odometry``                                                                     |
+| needs            | ``landmark_range_bearing`` (robot-robot range+bearing are used where the world has them) |
+| messages         | ``chain``; hop h (r = h + 1 robots reached) carries nu and Pz (2 + 3), the 3q x 2    |
+|                  | update weights g (12, q = 2), the reached robots' rows of A (3r(3r + 1)/2), their    |
+|                  | Pxz and Phi (6 + 9 each) and the unreached robots' r_U (6 each):                     |
+|                  | 17 + 3r(3r + 1)/2 + 15 r + 6 (N - r) floats                                          |
+| lost message     | the chain stops there; the reached robots update with the exact truncated-chain     |
+|                  | rule (the unreached keep their estimates); a chain that misses n applies nothing     |
+| under-determined | nothing to solve: a step without observations is a time update only                 |
+| outliers         | normalized innovation nu^T Pz^-1 nu > ``gate``: the observation is not applied       |
+| decisions        | none (the relay next hop is the network's)                                           |
+
+Arguments (``coloc_env.backends.UkfSe2``)
+
+| field      | default  | allowed                                                                  |
+|------------|----------|--------------------------------------------------------------------------|
+| ukf_lambda | 0.0      | (-15, 1e6] and > -3N at build (the UT's lambda; 0 = filterpy's)          |
+| gate       | 13.8155  | > 0 (chi-square(2) 99.9 %, ``coloc reproduce mrclam``); None = apply all |
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+import estimators.ukf_relay_se2 as se2
+from coloc_env.backends.base import Backend
+from coloc_env.data.mrclam import GATE_999
+from coloc_env.parts import BACKENDS, PartConfig, check_range
+
+
+def hop_floats(hop: int, num_agents: int) -> float:
+    """Floats of relay hop ``hop`` (0-based) of an SE(2) DCL chain over ``num_agents`` robots (module table)."""
+    r = hop + 1
+    return 17 + 3 * r * (3 * r + 1) / 2 + 15 * r + 6 * (num_agents - r)
+
+
+@BACKENDS.register
+@dataclass(frozen=True)
+class UkfSe2(PartConfig):
+    """Config of the ``ukf_se2`` backend (see the module tables)."""
+
+    name = "ukf_se2"
+    estimand = "self"
+    motion_kinds = frozenset({"se2_odometry"})
+    requires = (frozenset({"landmark_range_bearing"}),)
+    message_kind = "chain"
+    ukf_lambda: float = 0.0
+    gate: float | None = GATE_999
+
+    def check(self, prefix: str) -> None:
+        check_range(f"{prefix}ukf_lambda", self.ukf_lambda, -15.0, 1e6, low_open=True)
+        if self.gate is not None:
+            check_range(f"{prefix}gate", self.gate, 0.0, 1e12, low_open=True)
+
+    def build(self, world, network, batch: int) -> Backend:
+        return UkfSe2Backend(self, world, network, batch)
+
+
+class UkfSe2Backend(Backend):
+    def __init__(self, config: UkfSe2, world, network, batch: int):
+        super().__init__(config, world, network, batch)
+        B, N = self.batch, self.num_agents
+        if config.ukf_lambda <= -3 * N:
+            raise ValueError(f"backend.ukf_lambda must be > -3N = {-3 * N}, got {config.ukf_lambda!r}")
+        self.estimate = np.zeros((B, N, 3))
+        self.P_ii = np.zeros((B, N, 3, 3))
+        self.phi = np.zeros((B, N, 3, 3))
+        self.sigma = np.zeros((B, N, N, 3, 3))
+        self.applied = np.zeros((B, N))  # observations applied to each observer at the last step
+        self.rejected = np.zeros((B, N))  # refused by the gate
+
+    def reset(self, rngs, idx) -> None:
+        mean, cov = self.world.initial_belief()
+        N = self.num_agents
+        for b in idx:
+            joint = np.zeros((3 * N, 3 * N))
+            for i in range(N):
+                joint[3 * i:3 * i + 3, 3 * i:3 * i + 3] = cov[b, i]
+            f = se2.factor(joint)
+            self.estimate[b], self.P_ii[b], self.phi[b], self.sigma[b] = mean[b], f.P_ii, f.phi, f.sigma
+        self.posterior_position[idx] = mean[idx, :, :2]
+        self.applied[idx] = 0.0
+        self.rejected[idx] = 0.0
+
+    def _factors(self, b: int) -> se2.FactoredCov:
+        return se2.FactoredCov(self.P_ii[b], self.phi[b], self.sigma[b])
+
+    def _store(self, b: int, x: np.ndarray, f: se2.FactoredCov) -> None:
+        self.estimate[b], self.P_ii[b], self.phi[b], self.sigma[b] = x, f.P_ii, f.phi, f.sigma
+
+    def update(self, readings, decisions) -> None:
+        N = self.num_agents
+        extra = readings.extra
+        observer, subject = extra["obs_observer"], extra["obs_subject"]
+        lam, gate = self.config.ukf_lambda, self.config.gate
+        self.applied[:] = 0.0
+        self.rejected[:] = 0.0
+        floats = lambda hop: hop_floats(hop, N)  # noqa: E731
+        for j in range(observer.shape[1]):
+            robot = (observer[:, j] >= 0) & (subject[:, j] >= 0)
+            chain = None
+            if robot.any():
+                chain = self.network.relay(np.where(robot, observer[:, j], -1), np.where(robot, subject[:, j], -1),
+                                           floats, slot=j)
+            for b in np.flatnonzero(observer[:, j] >= 0):
+                m = int(observer[b, j])
+                z, R = extra["obs_z"][b, j], extra["obs_cov"][b, j]
+                if robot[b]:
+                    if chain.length[b] < 2:
+                        continue
+                    path = chain.chain[b, :chain.length[b]]
+                    x, f, ok = se2.dcl_update(self.estimate[b], self._factors(b), path, z, R, lam=lam, gate=gate)
+                else:
+                    x, f, ok = se2.dcl_update(self.estimate[b], self._factors(b), [m], z, R,
+                                              measured_in_chain=False, landmark=extra["obs_target"][b, j],
+                                              lam=lam, gate=gate)
+                self._store(b, x, f)
+                self.applied[b, m] += ok
+                self.rejected[b, m] += not ok
+
+    def predict(self, inputs) -> None:
+        dt = self.world.motion_model.dt
+        for b in range(self.batch):
+            x, f = se2.time_update_factored(self.estimate[b], self._factors(b), inputs[b, :, :2], dt,
+                                            inputs[b, :, 2:4])
+            self._store(b, x, f)
+
+    def position(self) -> np.ndarray:
+        return self.estimate[..., :2]
+
+    def position_cov(self) -> np.ndarray:
+        return self.P_ii[..., :2, :2]
+
+    def joint_cov(self, b: int) -> np.ndarray:
+        """The joint covariance (3N, 3N) of copy b that the factors stand for."""
+        return self._factors(b).joint()

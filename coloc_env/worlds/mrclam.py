@@ -1,0 +1,356 @@
+"""World ``mrclam``: the recorded UTIAS MRCLAM run (odometry, camera range+bearing, Vicon truth), replayed.
+
+Data: Leung K.Y.K., Halpern Y., Barfoot T.D., Liu H.H.T., "The UTIAS
+multi-robot cooperative localization and mapping dataset", IJRR
+30(8):969-974, 2011 (cite it with results on the data). Loader and noise
+model: :mod:`coloc_env.data.mrclam` (:func:`~coloc_env.data.mrclam.load_cached`,
+:class:`~coloc_env.data.mrclam.NoiseModel`), through the replay tables of the
+hand-wired ``mrclam_relay`` scenario (:func:`coloc_env.scenarios.mrclam_relay._tables`,
+imported at build time, cached per data path), so the readings are exactly the
+ones that scenario applies. Nothing is simulated: the motion inputs, the
+measurements and the truth are the data's, on the loader's grid of ``dt``
+seconds (``dt`` is the slice length: the loader averages the odometry over
+each slice and bins every measurement to its nearest slice).
+
+Episodes: a batch copy replays a window of ``horizon`` steps of the run
+starting at data step s, absolute step a = s + k at env step k. With
+``start=None`` s is drawn at reset from the copy's world generator, uniformly
+in [0, T - 1 - horizon] (T = steps of the run; the last step needs the Vicon
+pose at s + horizon), so the copies of a batch replay different offsets of
+the recording; ``start=S`` fixes it (every copy, every episode).
+
+| quantity       | value                                                                                |
+|----------------|--------------------------------------------------------------------------------------|
+| motion model   | :class:`estimators.se2_models.SE2Odometry` (state x, y, theta; input v, omega and    |
+|                | their variances: the noise model's corrected odometry u'[a] and Q(u'))               |
+| measurements   | ``range``, ``bearing`` (robot-robot camera sightings), ``landmark_range_bearing``    |
+|                | (sightings of the 15 surveyed landmarks), ``position_fix`` (landmark pseudo-fixes)   |
+| anchors        | none of the robots; the 15 landmarks (known positions) seen by the robots' cameras,  |
+|                | also turned into pseudo position fixes of the robot that saw them (below)            |
+| region         | the room: the square holding the landmarks and the run's Vicon track, 0.5 m spare    |
+| truth          | Vicon (x, y) of the N robots at a; initial belief: the Vicon pose at s, covariance   |
+|                | diag(initial_position_std^2, same, initial_heading_std^2), no cross terms            |
+| sensing action | ``Discrete(N + 1)`` per agent: which robot it recorded at this step to use (itself:  |
+|                | none; N: every robot it recorded); landmark sightings are always reported           |
+| observation    | fraction of the other robots it recorded at this step; 1 if it sighted a landmark    |
+
+Readings of step k (absolute a): ``inputs`` (B, N, 4) = (v', omega', var_v, var_omega)
+(:meth:`~coloc_env.data.mrclam.NoiseModel.odometry` and ``odometry_var`` at a: the
+command logged ``odometry_delay_steps`` earlier, scaled). ``range``/``range_valid``
+(B, N, N): [m, n] the range of the first line (file order) in which robot m recorded
+robot n at a, where the sensing choice of m selects n. ``fix``/``fix_valid`` (B, N):
+the landmark pseudo-fix of ``coloc reproduce mrclam_nbp`` (:func:`~coloc_env.data.mrclam.pseudo_fix`,
+the rule of :mod:`train.reproduce.mrclam_nbp` at a single step): each robot runs its own
+navigation filter, a UKF on (x, y, theta) from its odometry and its own landmark sightings
+only (:func:`~coloc_env.data.mrclam.own_nav_update` / ``own_nav_predict``, started at the
+episode's initial belief, chi-square(2) 99.9 % gate; no robot-robot data, no Vicon after
+the start). A robot whose filter accepted landmark sightings at a gets
+p = l - r [cos(theta + b), sin(theta + b)] per sighting (theta: its filter's heading after
+the step's updates), combined by inverse variance, with variance the smallest single
+sigma_fix^2 = max(sigma_r^2, r^2 (sigma_b^2 + sigma_theta^2)) + |sigma_landmark|^2 (no 1/n
+reduction: the sightings share the heading error) in ``extra["fix_var"]``;
+``fix_noise_var()`` is one variance for backends that take a constant (the median over
+the run's sightings at the initial heading variance). ``ukf_se2`` uses the sightings
+themselves and ignores the fixes (using both would count them twice). ``extra`` keys:
+
+| key                    | shape         | meaning                                                           |
+|------------------------|---------------|-------------------------------------------------------------------|
+| ``bearing``            | (B, N, N)     | bearing (rad) of the ``range`` reading [m, n], nan elsewhere      |
+| ``range_bearing_cov``  | (B, N, N, 2, 2) | its R = diag(r_range (a_r + b_r z_r^2), sigma_b^2) (noise model)|
+| ``obs_observer``       | (B, J)        | the step's selected observations in file order (robot by robot,   |
+|                        |               | each robot's lines in its file's order): the observer, -1 = none  |
+| ``obs_subject``        | (B, J)        | the observed robot, -1 for a landmark                              |
+| ``obs_landmark``       | (B, J)        | the landmark index 0..14, -1 for a robot                           |
+| ``obs_target``         | (B, J, 2)     | the landmark's surveyed position, nan for a robot                  |
+| ``obs_z``              | (B, J, 2)     | (range m, bearing rad)                                             |
+| ``obs_cov``            | (B, J, 2, 2)  | R from the measured range                                          |
+| ``fix_var``            | (B, N)        | variance per axis of the pseudo-fix (m^2), where ``fix_valid``     |
+
+Arguments (``coloc_env.worlds.Mrclam``)
+
+| field                | default      | allowed                                                           |
+|----------------------|--------------|-------------------------------------------------------------------|
+| data                 | None         | an MRCLAM dataset folder; None = ``$COLOC_MRCLAM_DATA`` at build   |
+|                      |              | time (no data is read before an env is built)                     |
+| num_agents           | 5            | 2..5: robots 0..N-1 (the others' sightings are left out)          |
+| dt                   | 0.1          | (0, 1] s: the slice length of the loader's grid                   |
+| horizon              | 600          | 1..T-1-start steps (checked against the run at build time)        |
+| start                | None         | None = drawn per episode; 0..T-1-horizon = a fixed first step     |
+| noise_model          | "calibrated" | "calibrated", "baseline" (:class:`~coloc_env.data.mrclam.NoiseModel`) |
+| calibration_s        | None         | (0, 3600] s of the run's start the noise is fitted on; None = the model's rule |
+| initial_position_std | 0.01         | (0, 1000] m                                                       |
+| initial_heading_std  | 0.01         | (0, 10] rad                                                       |
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from coloc_env.data import mrclam
+from coloc_env.parts import WORLDS, Block, PartConfig, check_choice, check_range
+from coloc_env.worlds.base import Readings, World
+from estimators.se2_models import RangeBearingModel, SE2Odometry
+
+NUM_ROBOTS = mrclam.NUM_ROBOTS
+
+
+@WORLDS.register
+@dataclass(frozen=True)
+class Mrclam(PartConfig):
+    """Config of the ``mrclam`` world (see the module tables). Validation reads no data."""
+
+    name = "mrclam"
+    estimand = "self"
+    motion_kind = SE2Odometry.kind
+    measurements = frozenset({"range", "bearing", "landmark_range_bearing", "position_fix"})
+    anchors = ("none of the robots; 15 surveyed landmarks seen by the robots' cameras (range + bearing), "
+               "also given as pseudo position fixes of the robot that saw them")
+    data: str | None = None
+    num_agents: int = NUM_ROBOTS
+    dt: float = 0.1
+    horizon: int = 600
+    start: int | None = None
+    noise_model: str = "calibrated"
+    calibration_s: float | None = None
+    initial_position_std: float = 0.01
+    initial_heading_std: float = 0.01
+
+    def check(self, prefix: str) -> None:
+        if self.data is not None and not isinstance(self.data, (str, os.PathLike)):
+            raise ValueError(f"{prefix}data must be a path to an MRCLAM dataset folder or None, got {self.data!r}")
+        check_range(f"{prefix}num_agents", self.num_agents, 2, NUM_ROBOTS, integer=True)
+        check_range(f"{prefix}dt", self.dt, 0.0, 1.0, low_open=True)
+        check_range(f"{prefix}horizon", self.horizon, 1, 10**9, integer=True)
+        if self.start is not None:
+            check_range(f"{prefix}start", self.start, 0, 10**9, integer=True)
+        check_choice(f"{prefix}noise_model", self.noise_model, mrclam.NOISE_MODELS)
+        if self.calibration_s is not None:
+            check_range(f"{prefix}calibration_s", self.calibration_s, 0.0, 3600.0, low_open=True)
+        check_range(f"{prefix}initial_position_std", self.initial_position_std, 0.0, 1e3, low_open=True)
+        check_range(f"{prefix}initial_heading_std", self.initial_heading_std, 0.0, 10.0, low_open=True)
+
+    def tables(self, prefix: str = "world."):
+        """The replay tables of the run (loaded and calibrated once per path; ValueError naming ``data``)."""
+        from coloc_env.scenarios.mrclam_relay import _tables
+
+        try:
+            path = os.path.realpath(mrclam.resolve_data_path(self.data))
+            calibration_s = None if self.calibration_s is None else float(self.calibration_s)
+            return _tables(path, float(self.dt), self.noise_model, calibration_s)
+        except ValueError as exc:  # a missing or malformed dataset: name the field
+            raise ValueError(f"{prefix}data: {str(exc).removeprefix('data: ')}") from exc
+
+    def build(self, batch: int, horizon: int) -> MrclamWorld:
+        return MrclamWorld(self, batch, horizon)
+
+
+class MrclamWorld(World):
+    agent_prefix = "robot"
+
+    def __init__(self, config: Mrclam, batch: int, horizon: int):
+        super().__init__(config, batch, horizon)
+        self.tables = config.tables()
+        self.data = self.tables.data
+        self.noise_model = self.tables.noise_model
+        T, K = self.data.steps, self.horizon
+        if K > T - 1:
+            raise ValueError(f"world.horizon must be in [1, {T - 1}] for this run of {T} steps (the last step "
+                             f"needs the next Vicon pose), got {K}")
+        if config.start is not None and config.start > T - 1 - K:
+            raise ValueError(f"world.start must be in [0, {T - 1 - K}] for a horizon of {K} steps in this run "
+                             f"of {T} steps, got {config.start}")
+        self.motion_model = SE2Odometry(self.data.dt)
+        self.landmarks = np.asarray(self.data.landmarks)
+        B, N = self.batch, self.num_agents
+        self.start = np.zeros(B, dtype=int)
+        # the robots' own navigation filters (the heading source of the pseudo-fixes) and the fixes of step a
+        self.nav_pose = np.zeros((B, N, 3))
+        self.nav_cov = np.zeros((B, N, 3, 3))
+        self.fix = np.zeros((B, N, 2))
+        self.fix_var = np.zeros((B, N))
+        self.fix_valid = np.zeros((B, N), dtype=bool)
+        self._accepted = np.zeros(len(self.data.meas_step), dtype=bool)
+
+    # --- description --------------------------------------------------------------------
+    @property
+    def dt(self) -> float:
+        return self.data.dt
+
+    def sensing_blocks(self) -> list[Block]:
+        N = self.num_agents
+        return [Block("partner", 1, N + 1, f"which robot it recorded at this step to use: a robot, itself = none, "
+                      f"{N} = every robot it recorded", default=N, maximum=N, minimum=N)]
+
+    def measurement_model(self) -> RangeBearingModel:
+        """The noise model's R as a :class:`~estimators.se2_models.RangeBearingModel` (R at the measured range)."""
+        m = self.noise_model
+        a, b = m.range_var
+        return RangeBearingModel(m.range_inflation * a, m.bearing_var, m.range_inflation * b)
+
+    def fix_noise_var(self) -> float:
+        """Variance per axis (m^2) of a pseudo-fix: the median over the run's landmark sightings of
+        :func:`~coloc_env.data.mrclam.fix_std`^2 with the heading variance at initial_heading_std^2 (the
+        per-reading value, with the own-navigation heading variance of the step, is ``extra["fix_var"]``)."""
+        d = self.data
+        lines = np.flatnonzero(d.meas_subject > NUM_ROBOTS)
+        if not len(lines):
+            return float(self.config.initial_position_std**2)
+        R = self.tables.measurement_cov[lines]
+        landmark_var = np.sum(d.landmark_std[d.meas_subject[lines] - NUM_ROBOTS - 1] ** 2, axis=-1)
+        sd = mrclam.fix_std(d.meas_range[lines], R[:, 0, 0], R[:, 1, 1], self.config.initial_heading_std**2,
+                            landmark_var)
+        return float(np.median(sd**2))
+
+    def range_noise_var(self) -> float:
+        """Variance (m^2) of a robot-robot range at the median recorded range (R varies with the range;
+        the per-reading value is ``extra["range_bearing_cov"]``)."""
+        d = self.data
+        robot = d.meas_subject <= NUM_ROBOTS
+        r = float(np.median(d.meas_range[robot])) if robot.any() else 0.0
+        return float(self.noise_model.measurement_cov(r)[0, 0])
+
+    # --- dynamics -------------------------------------------------------------------------
+    def draw_episode(self, rngs, idx) -> None:
+        span = self.data.steps - self.horizon  # offsets 0 .. T - 1 - horizon
+        for c, rng in enumerate(rngs):
+            self.start[idx[c]] = rng.integers(0, span) if self.config.start is None else self.config.start
+        mean, cov = self.initial_belief()
+        self.nav_pose[idx], self.nav_cov[idx] = mean[idx], cov[idx]
+        for b in idx:
+            self._navigate(int(b))
+
+    def _navigate(self, b: int) -> None:
+        """Copy b's own-navigation landmark updates of step a (file order) and the pseudo-fixes they give."""
+        d, N = self.data, self.num_agents
+        a = int(self.start[b] + self.k[b])
+        x, P = self.nav_pose[b], self.nav_cov[b]
+        mrclam.own_nav_update(d, self.noise_model, a, x, P, self._accepted, robots=N)
+        s = d.measurements_at(a)
+        lines = np.arange(s.start, s.stop)[self._accepted[s]]
+        self._accepted[s] = False
+        self.fix_valid[b] = False
+        if not len(lines):
+            return
+        r = d.meas_robot[lines]
+        landmark = d.meas_subject[lines] - NUM_ROBOTS - 1
+        p = mrclam.pseudo_fix(self.landmarks[landmark], d.meas_range[lines], d.meas_bearing[lines], x[r, 2])
+        R = self.tables.measurement_cov[lines]
+        sd = mrclam.fix_std(d.meas_range[lines], R[:, 0, 0], R[:, 1, 1], P[r, 2, 2],
+                            np.sum(d.landmark_std[landmark] ** 2, axis=-1))
+        w = 1.0 / sd**2
+        for i in np.unique(r):
+            mine = r == i
+            self.fix[b, i] = (w[mine, None] * p[mine]).sum(axis=0) / w[mine].sum()
+            self.fix_var[b, i] = float(np.min(sd[mine])) ** 2
+            self.fix_valid[b, i] = True
+
+    def advance(self) -> None:
+        """k -> k + 1: the own-navigation filters predict with u'[a], then take the sightings of a + 1."""
+        a = self.absolute_step()
+        N = self.num_agents
+        u = self.noise_model.odometry(self.data, a)[:, :N]
+        q = self.noise_model.odometry_var(u)
+        for b in range(self.batch):
+            self.nav_pose[b], self.nav_cov[b] = mrclam.own_nav_predict(self.nav_pose[b], self.nav_cov[b], u[b], q[b],
+                                                                       self.data.dt)
+        super().advance()
+        for b in np.flatnonzero(self.k <= self.horizon):
+            self._navigate(int(b))
+
+    def absolute_step(self) -> np.ndarray:
+        """The data step a = s + k of each copy (B,)."""
+        return self.start + self.k
+
+    def poses(self) -> np.ndarray:
+        """Vicon poses (B, N, 3) at the current step."""
+        return self.data.groundtruth[self.absolute_step(), :self.num_agents]
+
+    def positions(self) -> np.ndarray:
+        return self.poses()[..., :2].copy()
+
+    def initial_belief(self):
+        B, N = self.batch, self.num_agents
+        c = self.config
+        mean = self.data.groundtruth[self.start, :N].copy()
+        std = np.array([c.initial_position_std, c.initial_position_std, c.initial_heading_std])
+        cov = np.broadcast_to(np.diag(std**2), (B, N, 3, 3)).copy()
+        return mean, cov
+
+    def _lines(self, a: int, choice: np.ndarray) -> np.ndarray:
+        """Indices of the measurement lines of step a that copy's robots report, in file order."""
+        d, N = self.data, self.num_agents
+        s = d.measurements_at(int(a))
+        lines = np.arange(s.start, s.stop)
+        m, subject = d.meas_robot[lines], d.meas_subject[lines]
+        keep = m < N
+        robot = subject <= NUM_ROBOTS
+        n = np.clip(subject - 1, 0, NUM_ROBOTS - 1)
+        first = self.tables.first_index[a, np.minimum(m, NUM_ROBOTS - 1), n] == lines
+        chosen = (choice[np.minimum(m, N - 1)] == N) | (choice[np.minimum(m, N - 1)] == n)
+        keep &= ~robot | ((n < N) & first & chosen & (n != m))
+        return lines[keep]
+
+    def readings(self, sensing: np.ndarray) -> Readings:
+        B, N, d = self.batch, self.num_agents, self.data
+        a = self.absolute_step()
+        choice = np.asarray(sensing, int).reshape(B, N, -1)[..., 0]
+        u = self.noise_model.odometry(d, a)[:, :N]  # (B, N, 2): u'[a]
+        inputs = np.concatenate([u, self.noise_model.odometry_var(u)], axis=-1)
+        per_copy = [self._lines(a[b], choice[b]) for b in range(B)]
+        J = max((len(x) for x in per_copy), default=0)
+        observer = np.full((B, J), -1)
+        subject = np.full((B, J), -1)
+        landmark = np.full((B, J), -1)
+        target = np.full((B, J, 2), np.nan)
+        z = np.full((B, J, 2), np.nan)
+        cov = np.zeros((B, J, 2, 2))
+        ranges = np.full((B, N, N), np.nan)
+        bearing = np.full((B, N, N), np.nan)
+        pair_cov = np.zeros((B, N, N, 2, 2))
+        valid = np.zeros((B, N, N), dtype=bool)
+        for b, lines in enumerate(per_copy):
+            n = len(lines)
+            sub = d.meas_subject[lines]
+            is_robot = sub <= NUM_ROBOTS
+            observer[b, :n] = d.meas_robot[lines]
+            subject[b, :n] = np.where(is_robot, sub - 1, -1)
+            landmark[b, :n] = np.where(is_robot, -1, sub - NUM_ROBOTS - 1)
+            target[b, :n][~is_robot] = self.landmarks[sub[~is_robot] - NUM_ROBOTS - 1]
+            z[b, :n, 0], z[b, :n, 1] = d.meas_range[lines], d.meas_bearing[lines]
+            cov[b, :n] = self.tables.measurement_cov[lines]
+            rm, rn = d.meas_robot[lines][is_robot], sub[is_robot] - 1
+            valid[b, rm, rn] = True
+            ranges[b, rm, rn] = d.meas_range[lines][is_robot]
+            bearing[b, rm, rn] = d.meas_bearing[lines][is_robot]
+            pair_cov[b, rm, rn] = self.tables.measurement_cov[lines][is_robot]
+        extra = {"bearing": bearing, "range_bearing_cov": pair_cov, "obs_observer": observer,
+                 "obs_subject": subject, "obs_landmark": landmark, "obs_target": target, "obs_z": z, "obs_cov": cov}
+        extra["fix_var"] = self.fix_var.copy()
+        return Readings(inputs=inputs, range=ranges, range_valid=valid, fix=self.fix.copy(),
+                        fix_valid=self.fix_valid.copy(), extra=extra)
+
+    def observation_features(self) -> np.ndarray:
+        N = self.num_agents
+        a = np.minimum(self.absolute_step(), self.data.steps - 1)
+        recorded = self.tables.first_index[a][:, :N, :N] >= 0  # (B, N, N)
+        sighted = self.tables.landmark_count[a][:, :N] > 0
+        live = (self.k < self.horizon)[:, None]
+        fraction = np.where(live, recorded.sum(axis=-1) / (N - 1), 0.0)
+        return np.stack([fraction, np.where(live, sighted, False).astype(float)], axis=-1)
+
+    def feature_bounds(self):
+        return np.zeros(2), np.ones(2)
+
+    def region(self):
+        """The room, known in advance (a map, not a track): the square holding the 15 landmarks and the whole
+        run's Vicon positions, 0.5 m to spare; the same square at the start and over the episode."""
+        points = np.concatenate([self.data.groundtruth[..., :2].reshape(-1, 2), self.landmarks])
+        square = (float(points.min()) - 0.5, float(points.max()) + 0.5)
+        return square, square
+
+    def extent(self) -> float:
+        points = np.concatenate([self.data.groundtruth[..., :2].reshape(-1, 2), self.landmarks])
+        return float(np.abs(points).max()) + 0.5
