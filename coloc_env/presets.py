@@ -13,7 +13,7 @@ actions.
 | relay_ukf          | wang2019  | circles      | relay            | ukf_dcl                   |
 | gps_denied_nbp     | wan2014   | gps_denied   | broadcast        | dnbp                      |
 | nlos_horizon       | gao2016   | nlos_orbit   | random_delay     | afge                      |
-| mrclam_relay       | MRCLAM    | (mrclam)     | (relay)          | (ukf_se2)                 |
+| mrclam_relay       | MRCLAM    | mrclam       | relay            | ukf_se2                   |
 
 How exactly the parts reproduce each binding (tests/coloc_env):
 
@@ -26,9 +26,15 @@ How exactly the parts reproduce each binding (tests/coloc_env):
   losses) the network drew; on its own seed the scenario draws them from its single episode
   generator, while a network draws from its own child generator, so that every backend sees the
   same world (test_target_compositions, test_nlos_composition).
-
-Parts in parentheses are not in the registries yet; until then that preset's ``world`` /
-``network`` / ``backend`` fields are None and its binding alone defines it.
+* mrclam_relay: mrclam / relay (``routing="per_source"``: the scenario's routing table, one next hop per
+  measuring robot) / ukf_se2, with the scenario's action vector passed verbatim, gives the scenario's
+  estimates and covariance factors to 1e-9 when the scenario replays the window the world drew and gets
+  the loss uniforms the network drew (the scenario draws the offset and the losses from its episode
+  generator; the world and the network from their own children), and the same messages per holder and
+  hop cost per step (test_mrclam_preset_parts). Its reward stays the binding's: the team's mean error
+  after the time update minus the team's hop cost (a composition: each agent's own error after the
+  measurement update, minus ``communication_cost`` per message; the relay network accounts the hop cost
+  in ``cost_sent`` but the composed reward does not subtract it); so does its observation.
 """
 
 from __future__ import annotations
@@ -37,6 +43,7 @@ from coloc_env.backends.fusion import BandwidthFusion, PredictionCompensation
 from coloc_env.backends.nlos import Afge
 from coloc_env.backends.particles import Dnbp
 from coloc_env.backends.ukf import UkfDcl
+from coloc_env.backends.ukf_se2 import UkfSe2
 from coloc_env.composition import Composition
 from coloc_env.networks import Broadcast, Relay
 from coloc_env.networks.bandwidth import Bandwidth
@@ -46,6 +53,7 @@ from coloc_env.scenarios import REGISTRY
 from coloc_env.worlds import Circles
 from coloc_env.worlds.drift import Drift
 from coloc_env.worlds.gps_denied import GpsDenied
+from coloc_env.worlds.mrclam import Mrclam
 from coloc_env.worlds.nlos_orbit import NlosOrbit
 from coloc_env.worlds.target_cv import TargetCv
 
@@ -56,6 +64,9 @@ _PARTS = {
     # dnbp over this broadcast network gives the scenario's estimates exactly (test_gps_denied_composition)
     "gps_denied_nbp": (GpsDenied(), Broadcast(comm_range=300.0), Dnbp()),
     "nlos_horizon": (NlosOrbit(), RandomDelay(), Afge()),
+    # data=None: $COLOC_MRCLAM_DATA is read only when an env is built; a loss-free relay with the scenario's
+    # per-source routing table (test_mrclam_preset_parts)
+    "mrclam_relay": (Mrclam(), Relay(loss_at_zero=0.0, routing="per_source"), UkfSe2()),
 }
 
 PRESETS: dict[str, Composition] = {

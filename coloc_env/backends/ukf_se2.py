@@ -28,7 +28,11 @@ Step k, in the world's file order (``Readings.extra["obs_*"]``, see
 This is the loop of the hand-wired ``mrclam_relay`` scenario (its
 ``measurement_update`` / ``time_update``); over an ideal network, or a loss-free
 relay whose chains are complete, a composition reproduces its estimates
-(tests/coloc_env/test_mrclam_composition.py checks 1e-9).
+(tests/coloc_env/test_mrclam_composition.py checks 1e-9); over a relay with
+``routing="per_source"`` (the scenario's routing table) it reproduces them for
+any routing, hop budget, range limit and loss, given the scenario the network's
+loss uniforms (tests/coloc_env/test_mrclam_preset_parts.py, 1e-9): the parts of
+``PRESETS["mrclam_relay"]``.
 
 | quantity         | value                                                                                |
 |------------------|--------------------------------------------------------------------------------------|

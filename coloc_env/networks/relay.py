@@ -6,19 +6,42 @@ A hop of length d is lost with p_loss(d) = 1 - (1 - loss_at_zero) exp(-d / loss_
 | quantity   | value                                                                                     |
 |------------|-------------------------------------------------------------------------------------------|
 | carries    | ``chain``, ``broadcast``, ``central``, ``packets`` (one hop, lost with p_loss(d))         |
-| decisions  | ``chain``: ``next_hop`` Discrete(N + 2) per agent: a platform, N = stop,                 |
-|            | N + 1 = the nearest not yet reached; ``broadcast``: ``transmit`` ([2] * rounds)          |
+| decisions  | ``chain``: ``next_hop``, Discrete(N + 2) entries per agent: a platform, N = stop,        |
+|            | N + 1 = the nearest not yet reached; one entry (``routing="per_holder"``) or N entries,  |
+|            | entry m for the chain whose source is platform m (``routing="per_source"``);             |
+|            | ``broadcast``: ``transmit`` ([2] * rounds)                                                |
 | always     | nearest-first relay, transmit in every round                                             |
 | silent     | stop at once (the measured platform alone), transmit nothing                             |
+| accounting | one message per delivered hop, at its holder (:mod:`coloc_env.networks.base`); the hop    |
+|            | cost ``hop_cost + hop_cost_per_m2 d^2`` of every delivered hop at its holder, in         |
+|            | ``RelayNetwork.cost_sent`` (B, N), per step                                              |
+
+Routing. ``per_holder`` (wang2019's ``relay_ukf``: one platform measures per
+step): a holder passes every chain it holds to the same next hop.
+``per_source`` (``mrclam_relay``: several robots measure in one step, each
+starting a chain): each holder keeps a routing table, one next hop per source,
+so two chains that pass the same holder can take different routes (with one
+next hop per holder they could not both be complete).
+
+Hop cost. The price of a hop's radio energy (free-space energy grows like
+d^2), in the unit of the reward it is charged to (the ``mrclam_relay`` and
+``relay_ukf`` bindings subtract the team's total from every agent's reward,
+in metres). The network accounts it at the sender in ``cost_sent``; a
+composition's reward (:mod:`coloc_env.scenarios.composed`) subtracts only
+``communication_cost`` per message and does not read ``cost_sent``: the hop
+cost changes no estimate and no delivery, only what the accounting reports.
 
 Arguments (``coloc_env.networks.Relay``)
 
-| field        | default | allowed                                         |
-|--------------|---------|-------------------------------------------------|
-| comm_range   | inf     | > 0 m                                           |
-| max_hops     | None    | >= 1 hops per chain, None = no limit            |
-| loss_at_zero | 0.1     | [0, 1]                                          |
-| loss_length  | inf     | > 0 m                                           |
+| field           | default      | allowed                                                     |
+|-----------------|--------------|-------------------------------------------------------------|
+| comm_range      | inf          | > 0 m                                                       |
+| max_hops        | None         | >= 1 hops per chain, None = no limit                        |
+| loss_at_zero    | 0.1          | [0, 1]                                                      |
+| loss_length     | inf          | > 0 m                                                       |
+| routing         | "per_holder" | "per_holder", "per_source" (see Routing)                    |
+| hop_cost        | 0.0          | [0, 1e12] per delivered hop (the reward's unit)             |
+| hop_cost_per_m2 | 0.0          | [0, 1e12] per delivered hop and squared metre of its length |
 """
 
 from __future__ import annotations
@@ -28,8 +51,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from coloc_env.networks.base import Network
-from coloc_env.parts import NETWORKS, Block, PartConfig, check_range
+from coloc_env.parts import NETWORKS, Block, PartConfig, check_choice, check_range
 from coloc_env.world.relay import RelayChainLinks, check_distance
+
+ROUTINGS = ("per_holder", "per_source")
 
 
 @NETWORKS.register
@@ -43,6 +68,9 @@ class Relay(PartConfig):
     max_hops: int | None = None
     loss_at_zero: float = 0.1
     loss_length: float = float("inf")
+    routing: str = "per_holder"
+    hop_cost: float = 0.0
+    hop_cost_per_m2: float = 0.0
 
     def check(self, prefix: str) -> None:
         check_distance(f"{prefix}comm_range", self.comm_range)
@@ -50,6 +78,9 @@ class Relay(PartConfig):
             check_range(f"{prefix}max_hops", self.max_hops, 1, 1000, integer=True)
         check_range(f"{prefix}loss_at_zero", self.loss_at_zero, 0.0, 1.0)
         check_distance(f"{prefix}loss_length", self.loss_length)
+        check_choice(f"{prefix}routing", self.routing, ROUTINGS)
+        check_range(f"{prefix}hop_cost", self.hop_cost, 0.0, 1e12)
+        check_range(f"{prefix}hop_cost_per_m2", self.hop_cost_per_m2, 0.0, 1e12)
 
     def build(self, num_agents: int, batch: int, message_kind: str, rounds: int = 1) -> Network:
         return RelayNetwork(self, num_agents, batch, message_kind, rounds)
@@ -58,11 +89,18 @@ class Relay(PartConfig):
 class RelayNetwork(Network):
     def __init__(self, config: Relay, num_agents, batch, message_kind, rounds=1):
         super().__init__(config, num_agents, batch, message_kind, rounds)
-        self.links = RelayChainLinks(config.comm_range, config.max_hops, config.loss_at_zero, config.loss_length)
+        self.links = RelayChainLinks(config.comm_range, config.max_hops, config.loss_at_zero, config.loss_length,
+                                     config.hop_cost, config.hop_cost_per_m2)
+        self.cost_sent = np.zeros((self.batch, self.num_agents))
+        self._source = np.zeros(self.batch, dtype=int)
 
     def transport_blocks(self) -> list[Block]:
         N = self.num_agents
         if self.message_kind == "chain":
+            if self.config.routing == "per_source":
+                return [Block("next_hop", N, N + 2, f"entry m: whom to relay the chain of source m to: a platform, "
+                              f"{N} = stop, {N + 1} = nearest not yet reached", default=N + 1, maximum=N + 1,
+                              minimum=N)]
             return [Block("next_hop", 1, N + 2, f"whom to relay to: a platform, {N} = stop, {N + 1} = nearest "
                           "not yet reached", default=N + 1, maximum=N + 1, minimum=N)]
         if self.message_kind in ("broadcast", "central", "packets"):
@@ -85,5 +123,27 @@ class RelayNetwork(Network):
             return super().transmits(round_index)
         return self._decisions[:, :, min(round_index, self.rounds - 1)].astype(bool)
 
+    def begin(self, k, positions, decisions) -> None:
+        super().begin(k, positions, decisions)
+        self.cost_sent = np.zeros_like(self.cost_sent)
+
     def next_hop_choice(self):
-        return self._decisions[:, :, 0] if self.message_kind == "chain" else None
+        """(B, N) each holder's next hop for the chain being resolved: its only entry (``per_holder``), or its
+        entry for that chain's source (``per_source``)."""
+        if self.message_kind != "chain":
+            return None
+        if self.config.routing == "per_source":
+            return self._decisions[np.arange(self.batch), :, self._source]
+        return self._decisions[:, :, 0]
+
+    def relay(self, source, first, floats_per_hop, slot: int = 0):
+        """:meth:`Network.relay` with the routing entry of each copy's source, and the hop costs accounted."""
+        self._source = np.maximum(np.asarray(source, int), 0)
+        chain = super().relay(source, first, floats_per_hop, slot)
+        cost = self.links.cost(chain.hop_distance)  # (B, N - 1); 0 where no hop was delivered
+        rows = np.arange(self.batch)
+        for hop in range(cost.shape[1]):
+            holder = chain.chain[:, hop]
+            done = ~np.isnan(chain.hop_distance[:, hop])
+            self.cost_sent[rows[done], holder[done]] += cost[done, hop]
+        return chain
