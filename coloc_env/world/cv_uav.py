@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from coloc_env.config import check_range
+from estimators.cv_models import ConstantVelocityAccel
 
 
 @dataclass(frozen=True)
@@ -40,22 +41,24 @@ class ConstantVelocityUAVs:
         check_range(f"{prefix}accel_noise_std", self.accel_noise_std, 0.0, 1e3)
 
     @property
+    def model(self) -> ConstantVelocityAccel:
+        """The model an estimator driven by the readings assumes (:mod:`estimators.cv_models`)."""
+        return ConstantVelocityAccel(self.dt, self.accel_noise_std**2)
+
+    @property
     def transition(self) -> np.ndarray:
         """F (4, 4)."""
-        F = np.eye(4)
-        F[0, 2] = F[1, 3] = self.dt
-        return F
+        return self.model.transition
 
     @property
     def input_matrix(self) -> np.ndarray:
         """G (4, 2)."""
-        return np.vstack([0.5 * self.dt**2 * np.eye(2), self.dt * np.eye(2)])
+        return self.model.input_matrix
 
     @property
     def process_noise(self) -> np.ndarray:
         """Q = sigma_acc^2 G G^T, the noise an estimator driven by the readings sees."""
-        G = self.input_matrix
-        return self.accel_noise_std**2 * G @ G.T
+        return self.model.process_noise
 
     def sample_accelerations(self, rng: np.random.Generator, size: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
         """(true accelerations, accelerometer readings), each ``(*size, 2)``; truth drawn first."""
