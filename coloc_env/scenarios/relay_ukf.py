@@ -136,18 +136,9 @@ from coloc_env.scenarios.base import Scenario
 from coloc_env.world.odometry import OdometrySensor, RangeSensor
 from coloc_env.world.relay import STOP_REASONS, RelayChain, RelayChainLinks, check_distance
 from coloc_env.world.unicycle import CircularTracks, UnicycleMotion
+from coloc_env.worlds.circles import default_layout
 
 DISTANCE_SCALE = 100.0  # metres per unit in the observation
-
-
-def default_layout(num_platforms: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Centres (N, 2), start angles (N,), directions (N,) of the default layout (see the module docstring)."""
-    i = np.arange(num_platforms)
-    theta = -0.75 * np.pi + 2 * np.pi * i / num_platforms
-    centres = 8.0 * np.sqrt(2.0) * np.stack([np.cos(theta), np.sin(theta)], axis=-1)
-    centres = np.round(centres, 12)
-    directions = np.where(i == 1, -1.0, 1.0)
-    return centres, 2 * np.pi * i / num_platforms, directions
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,7 @@
 """World ``circles`` (wang2019): platforms on circles, odometry dead reckoning, ranges between platforms.
 
 N platforms fly circles at constant speed and turn rate (wang2019 Sec. 4;
-the layout of :func:`coloc_env.scenarios.relay_ukf.default_layout`) and
+the layout of :func:`default_layout`, shared with the relay_ukf preset) and
 measure their own speed and turn rate (odometry). At each step, with
 probability ``measurement_probability``, one platform m (drawn uniformly)
 measures its range to the platform its sensing choice names (none if it names
