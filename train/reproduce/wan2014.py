@@ -18,12 +18,19 @@ Writes ``OUT/wan2014/metrics.json`` (spec §7):
 Seeding (common random numbers, spec §7): run r draws its world from
 ``default_rng([seed, r])`` and its dNBP randomness from
 ``default_rng([seed, 100000 + r])`` at every point, so curves are comparable
-point by point. A point's runs are one batched dNBP call (vectorized over
-runs); points are the independent tasks of :func:`train.executor.map_tasks`.
+point by point. A point's runs are one batch (vectorized over runs); points
+are the independent tasks of :func:`train.executor.map_tasks`.
+
+The Monte Carlo runs drive the composable parts (issue 14, :class:`Rig`): the
+``gps_denied`` world, the ``broadcast`` medium and the backends ``dnbp``
+(dNBP), ``range_ls`` (LS of ref. [7]) and ``range_ls`` with nobody
+transmitting (DR: each UAV's own GPS/accelerometer Kalman filter). Only the
+case study (one intraslice update with its belief history, Fig. 4) calls
+:func:`estimators.dnbp.step` itself.
 
 ``paper_policy_costs(seeds)`` gives this reproduction's per-episode number for dNBP with the
 paper's schedule, the env's ``paper`` policy, on the episodes ``env.reset(seed=s)`` draws for
-each s in ``seeds`` (the scenario's own sampler), through the same estimator code as the Monte
+each s in ``seeds`` (the scenario's own sampler), through the same backend as the Monte
 Carlo above; a test checks that it equals what ``coloc evaluate`` reports for the ``paper``
 policy on the same seeds.
 """
@@ -38,9 +45,14 @@ import numpy as np
 
 import estimators.dnbp as dn
 import estimators.range_ls as rl
+from coloc_env.backends import Dnbp, RangeLs
+from coloc_env.composition import compose
 from coloc_env.config import build_config
-from coloc_env.scenarios.gps_denied_nbp import GpsDeniedNbpConfig, GpsDeniedNbpScenario, sample_episode
+from coloc_env.networks import Broadcast
+from coloc_env.networks.broadcast import BroadcastNetwork
+from coloc_env.scenarios.gps_denied_nbp import GpsDeniedNbpConfig
 from coloc_env.world.broadcast_medium import BroadcastMedium
+from coloc_env.worlds import GpsDenied
 from train.executor import map_tasks
 from train.io import claims_table, save_figure, write_json, write_text
 
@@ -104,52 +116,125 @@ def summarize(errors: np.ndarray, fault: np.ndarray) -> dict:
     }
 
 
-def run_baselines(config: GpsDeniedNbpConfig, episodes) -> dict[str, np.ndarray]:
-    """Errors (R, T, N) of the LS method of ref. [7] and of dead reckoning on the same episodes."""
-    motion = config.motion
-    F, G, Q = motion.transition, motion.input_matrix, motion.process_noise
-    stack = {name: np.stack([getattr(e, name) for e in episodes]) for name in
-             ("truth", "accel", "gps_normal", "gps_fix", "adjacency", "ranges", "init_position", "init_velocity")}
-    R, T, N = stack["gps_normal"].shape
-    if config.init == "warm":
-        mean = np.concatenate([stack["init_position"], stack["init_velocity"]], axis=-1)
-        var = [config.gps_std**2] * 2 + [config.velocity_spread**2] * 2
-    else:
-        width = config.area + 2 * config.box_margin
-        centre = np.full((R, N, 2), config.area / 2)
-        mean = np.concatenate([centre, np.broadcast_to(np.asarray(config.nominal_velocity, float), (R, N, 2))], -1)
-        var = [width**2 / 12] * 2 + [config.velocity_spread**2] * 2
-    out = {}
-    for name, cooperative in (("ls", True), ("dr", False)):
-        params = rl.LsParams(cooperative=cooperative)
-        state = rl.initial_state(mean, np.diag(var))
-        errors = np.zeros((R, T, N))
-        for k in range(T):
-            state, estimate, _ = rl.step(params, state, stack["gps_normal"][:, k], stack["gps_fix"][:, k],
-                                         stack["adjacency"][:, k], stack["ranges"][:, k], stack["accel"][:, k],
-                                         F, G, Q, config.gps_std, config.range_std)
-            errors[:, k] = np.linalg.norm(estimate - stack["truth"][:, k, :, :2], axis=-1)
-        out[name] = errors
-    return out
+METHODS = ("dnbp", "ls", "dr")
 
 
-def run_dnbp(config: GpsDeniedNbpConfig, episodes: list, estimator_rngs: list) -> tuple:
-    """dNBP with the paper's schedule (every broadcast the schedule allows) on ``episodes``, one batched
-    call per step, episode r's particle randomness from ``estimator_rngs[r]``. Returns the errors
-    (R, T, N), the messages and broadcasts of all runs and the seconds spent."""
-    runs, T, N = len(episodes), config.horizon, config.num_uavs
-    scenario = GpsDeniedNbpScenario(config, batch=runs)
-    start = time.perf_counter()
-    scenario.start(None, episodes, estimator_rngs)
-    errors = np.zeros((runs, T, N))
-    messages = broadcasts = 0
-    always = np.ones((runs, N, config.num_iterations), bool)
+def composition_parts(config: GpsDeniedNbpConfig) -> tuple:
+    """The composable parts this reproduction drives for ``config``: the ``gps_denied`` world and, per
+    method of :data:`METHODS`, a (network, backend, transmit) triple over wan2014's ``broadcast`` medium
+    (the ranging radius is the communication radius, no loss):
+
+    * ``dnbp``: the ``dnbp`` backend, every UAV broadcasting in every iteration (the paper's schedule);
+    * ``ls``: ``range_ls`` (ref. [7]), every GPS-normal UAV broadcasting its KF estimate;
+    * ``dr``: ``range_ls`` with nobody transmitting: each UAV's own KF on its accelerometer and, while
+      its GPS is normal, its fixes (the paper's non-cooperative "DR / GPS-only" reference; the
+      ``dead_reckoning`` backend would ignore the fixes too).
+    """
+    if config.init != "warm":
+        raise ValueError(f"the gps_denied world gives the warm start only; init must be 'warm', got {config.init!r}")
+    world = GpsDenied(num_agents=config.num_uavs, horizon=config.horizon, dt=config.dt, area=config.area,
+                      nominal_velocity=tuple(config.nominal_velocity), velocity_spread=config.velocity_spread,
+                      accel_std=config.accel_std, accel_noise_std=config.accel_noise_std, gps_std=config.gps_std,
+                      range_std=config.range_std, comm_range=config.comm_range,
+                      p_normal_to_fault=config.p_normal_to_fault, p_fault_to_normal=config.p_fault_to_normal,
+                      num_normal=config.num_normal)
+    medium = Broadcast(comm_range=config.comm_range, loss=0.0)
+    dnbp = Dnbp(num_particles=config.num_particles, num_iterations=config.num_iterations,
+                oversampling=config.oversampling, defensive_weight=config.defensive_weight,
+                box_margin=config.box_margin, min_bandwidth=config.min_bandwidth,
+                initial_threshold=config.initial_threshold, schedule=config.schedule)
+    ls = RangeLs(min_anchors=rl.LsParams.min_anchors, max_rms=rl.LsParams.max_rms, max_std=rl.LsParams.max_std,
+                 gate_chi2=rl.LsParams.gate_chi2)
+    return world, {"dnbp": (medium, dnbp, 1), "ls": (medium, ls, 1), "dr": (medium, ls, 0)}
+
+
+class CountingBroadcast(BroadcastNetwork):
+    """wan2014's broadcast medium that also counts the delivered (sender, receiver) links: ``links``,
+    this reproduction's messages (``msgs_per_step``); a broadcast is one message at the sender
+    (``messages_sent``), this reproduction's ``broadcasts_per_step``."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.links = 0
+
+    def broadcast(self, senders, listening, floats, slot=0):
+        delivered = super().broadcast(senders, listening, floats, slot)
+        self.links += int(delivered.sum())
+        return delivered
+
+
+class Rig:
+    """One ``gps_denied`` world and the (network, backend) pair of each method, stepped on the same readings.
+
+    Each step is :meth:`coloc_env.scenarios.composed.ComposedScenario.step`'s: the world's readings of
+    time k, the network's link state of time k and its transmit decisions, the backend's update of k (the
+    estimate scored at k) and its prediction to k + 1, then the world moves. The world of copy r is reset
+    with ``world_rngs[r]`` itself (the draws of ``gps_denied_nbp.sample_episode``, in its order), dnbp
+    with ``estimator_rngs[r]``; the networks (lossless: no draw matters) get a child of the world's
+    generator.
+    ``seconds`` accumulates each method's time in its network and backend calls.
+    """
+
+    def __init__(self, config: GpsDeniedNbpConfig, batch: int, names=METHODS):
+        world, parts = composition_parts(config)
+        self.batch, self.num_agents = batch, config.num_uavs
+        self.world = None
+        self.networks, self.backends, self.transmit = {}, {}, {}
+        for name in names:
+            network_config, backend_config, transmit = parts[name]
+            spec = compose(world=world, network=network_config, backend=backend_config)
+            if self.world is None:
+                self.world = spec.world.build(batch, spec.episode_steps)
+            rounds = getattr(spec.backend, "rounds", 1)
+            network = CountingBroadcast(spec.network, self.num_agents, batch, spec.backend.message_kind, rounds)
+            self.networks[name] = network
+            self.backends[name] = spec.backend.build(self.world, network, batch)
+            self.transmit[name] = np.full((batch, self.num_agents, rounds), transmit, np.int64)
+        self.seconds = dict.fromkeys(self.networks, 0.0)
+
+    def reset(self, world_rngs: list, estimator_rngs: list) -> None:
+        idx = np.arange(self.batch)
+        self.world.reset(list(world_rngs), idx)
+        for name, network in self.networks.items():
+            start = time.perf_counter()
+            network.reset([rng.spawn(1)[0] for rng in world_rngs], idx)
+            self.backends[name].reset(list(estimator_rngs), idx)
+            self.seconds[name] += time.perf_counter() - start
+
+    def step(self) -> np.ndarray:
+        """One step; returns the truth of time k (B, N, 2)."""
+        B, N = self.batch, self.num_agents
+        readings = self.world.readings(np.zeros((B, N, 0), np.int64))
+        truth = self.world.positions().copy()
+        none = np.zeros((B, N, 0))
+        for name, network in self.networks.items():
+            start = time.perf_counter()
+            network.begin(self.world.k, truth, self.transmit[name])
+            self.backends[name].step(readings, none)
+            self.seconds[name] += time.perf_counter() - start
+        self.world.advance()
+        return truth
+
+
+def run_methods(config: GpsDeniedNbpConfig, world_rngs: list, estimator_rngs: list, names=METHODS) -> dict:
+    """dNBP, LS and DR (:class:`Rig`) on the episodes of ``world_rngs``, dNBP's particle randomness of run r
+    from ``estimator_rngs[r]``, all runs batched. Returns ``errors`` {method: (R, T, N)}, ``fault``
+    (R, T, N), dNBP's ``messages`` (delivered links) and ``broadcasts`` over all runs, and ``seconds``
+    {method: time spent in its network and backend}."""
+    runs, T, N = len(world_rngs), config.horizon, config.num_uavs
+    rig = Rig(config, runs, names)
+    rig.reset(world_rngs, estimator_rngs)
+    errors = {name: np.zeros((runs, T, N)) for name in names}
+    broadcasts = 0
     for k in range(T):
-        scenario.advance(always)
-        errors[:, k] = scenario.errors
-        messages += int(scenario.delivered.sum())
-        broadcasts += int(scenario.broadcasts.sum())
-    return errors, messages, broadcasts, time.perf_counter() - start
+        truth = rig.step()
+        for name in names:
+            errors[name][:, k] = np.linalg.norm(rig.backends[name].posterior_position - truth, axis=-1)
+        if "dnbp" in rig.networks:
+            broadcasts += int(rig.networks["dnbp"].messages_sent.sum())
+    messages = rig.networks["dnbp"].links if "dnbp" in rig.networks else 0
+    return {"errors": errors, "fault": ~rig.world.gps_normal.copy(), "messages": messages, "broadcasts": broadcasts,
+            "seconds": rig.seconds}
 
 
 def paper_policy_costs(seeds, config: GpsDeniedNbpConfig | None = None) -> np.ndarray:
@@ -157,15 +242,16 @@ def paper_policy_costs(seeds, config: GpsDeniedNbpConfig | None = None) -> np.nd
     (step, UAV) pairs with a faulty GPS (0 for an episode without any), on the episodes the env
     draws for ``seeds``.
 
-    As ``env.reset(seed=seeds[e])`` does, episode e is :func:`sample_episode` of
-    ``rng = default_rng(seeds[e])`` and its estimator generator ``rng.spawn(1)[0]`` after that;
-    dNBP runs by this reproduction's own path (:func:`run_dnbp`).
+    As ``env.reset(seed=seeds[e])`` does, episode e is drawn from ``rng = default_rng(seeds[e])`` (the
+    ``gps_denied`` world draws ``gps_denied_nbp.sample_episode``'s blocks in its order) and its
+    estimator generator is ``rng.spawn(1)[0]``; dNBP runs through the ``dnbp`` backend
+    (:func:`run_methods`).
     """
     config = config or build_config(GpsDeniedNbpConfig, {})
     rngs = [np.random.default_rng(s) for s in seeds]
-    episodes = [sample_episode(config, rng) for rng in rngs]
-    errors, *_ = run_dnbp(config, episodes, [rng.spawn(1)[0] for rng in rngs])
-    fault = ~np.stack([e.gps_normal for e in episodes])
+    estimator_rngs = [rng.spawn(1)[0] for rng in rngs]
+    out = run_methods(config, rngs, estimator_rngs, names=("dnbp",))
+    errors, fault = out["errors"]["dnbp"], out["fault"]
     return np.array([float(errors[r][fault[r]].mean()) if fault[r].any() else 0.0 for r in range(len(errors))])
 
 
@@ -174,22 +260,18 @@ def evaluate_point(overrides: dict, base: dict, runs: int, seed: int) -> dict:
     config = build_config(GpsDeniedNbpConfig, {**base, **overrides})
     world_seeds = [[seed, r] for r in range(runs)]
     estimator_seeds = [[seed, ESTIMATOR_SEED_OFFSET + r] for r in range(runs)]
-    episodes = [sample_episode(config, np.random.default_rng(s)) for s in world_seeds]
-    errors, messages, broadcasts, elapsed = run_dnbp(config, episodes,
-                                                     [np.random.default_rng(s) for s in estimator_seeds])
-    fault = ~np.stack([e.gps_normal for e in episodes])
-    baselines = run_baselines(config, episodes)
+    out = run_methods(config, [np.random.default_rng(s) for s in world_seeds],
+                      [np.random.default_rng(s) for s in estimator_seeds])
+    fault, elapsed = out["fault"], out["seconds"]["dnbp"]
     steps = runs * config.horizon
     return {
         "overrides": overrides,
         "world_seeds": world_seeds,
         "estimator_seeds": estimator_seeds,
         "fault_fraction": float(fault.mean()),
-        "dnbp": summarize(errors, fault),
-        "ls": summarize(baselines["ls"], fault),
-        "dr": summarize(baselines["dr"], fault),
-        "msgs_per_step": messages / steps,
-        "broadcasts_per_step": broadcasts / steps,
+        **{name: summarize(out["errors"][name], fault) for name in METHODS},
+        "msgs_per_step": out["messages"] / steps,
+        "broadcasts_per_step": out["broadcasts"] / steps,
         "time_per_step_s": elapsed / steps,
         "time_per_fault_uav_step_s": elapsed / max(int(fault.sum()), 1),
     }

@@ -14,14 +14,17 @@ Writes ``OUT/wang2019/metrics.json`` with
 * ``truncated_chain``        hop budget 1: the paper's rule for unreached cross-covariances vs ours
 * ``claims``                 each claim -> holds (bool)
 
-plus ``report.md`` and PNG figures. Every Monte Carlo block draws its runs
+plus ``report.md`` and PNG figures. The estimators are the composable backends (issue 14) on
+the ``circles`` world (:class:`Rig`): IL = ``dead_reckoning``, CCL = ``ukf_ccl`` over ``ideal``,
+DCL = ``ukf_dcl`` over ``relay``; the filterpy comparison runs filterpy's update beside the
+``ukf_ccl`` backend. Every Monte Carlo block draws its runs
 from ``np.random.default_rng([seed, block])``; the same blocks are reused for
 every p and Q model (common random numbers: the measurement schedules are
 nested across p, because one uniform per step is compared with p).
 
 ``paper_policy_costs(seeds)`` gives this reproduction's per-episode number for UKF-DCL under the
 paper's policy, with that policy's own generator, on the episodes ``env.reset(seed=s)`` draws
-for each s in ``seeds`` (the scenario's own sampler), through the same estimator code as the
+for each s in ``seeds`` (the scenario's own sampler), through the same backends as the
 Monte Carlo above; a test checks that it equals what ``coloc evaluate`` reports for the
 ``paper`` policy on the same seeds.
 """
@@ -35,9 +38,14 @@ import numpy as np
 
 import estimators.ukf_relay as ukf
 from agents.relay_ukf import paper_actions
+from coloc_env.backends import DeadReckoning, UkfCcl, UkfDcl
+from coloc_env.composition import compose
 from coloc_env.config import build_config
-from coloc_env.scenarios.relay_ukf import RelayUKFConfig, RelayUKFScenario
+from coloc_env.networks import Ideal, Relay
+from coloc_env.scenarios.relay_ukf import RelayUKFConfig
 from coloc_env.world.relay import STOP_REASONS
+from coloc_env.worlds import Circles
+from estimators.models import predict_joint
 from train.executor import map_tasks
 from train.io import claims_table, save_figure, write_json, write_text
 
@@ -54,57 +62,124 @@ def _block_generators(seed: int, block: int, runs: int):
     return rng.spawn(runs), rng.spawn(1)[0]
 
 
+def composition_parts(config: RelayUKFConfig) -> tuple:
+    """The composable parts this reproduction drives for ``config``: the ``circles`` world of the
+    paper's Sec. 4 (4 platforms, no anchors) and, per estimator of :data:`ESTIMATORS`, a
+    (network, backend) pair: IL = ``dead_reckoning`` over ``ideal``, CCL = ``ukf_ccl`` over ``ideal``
+    (every range reaches the fusion centre), DCL = ``ukf_dcl`` over ``relay`` with the config's links.
+    """
+    if any(getattr(config, name) is not None for name in ("centres", "start_angles", "directions")):
+        raise ValueError("the circles world flies the default layout: centres, start_angles and directions "
+                         "must be None")
+    world = Circles(num_agents=config.num_platforms, speed=config.speed, turn_rate=config.turn_rate, dt=config.dt,
+                    horizon=config.horizon, speed_noise_std=config.speed_noise_std,
+                    turn_rate_noise_std=config.turn_rate_noise_std, range_noise_var=config.range_noise_var,
+                    measurement_probability=config.measurement_probability, sensing_range=config.sensing_range,
+                    num_anchors=0, initial_position_std=config.initial_position_std,
+                    heading_noise=config.heading_noise)
+    links = Relay(comm_range=config.comm_range, max_hops=config.max_hops, loss_at_zero=config.loss_at_zero,
+                  loss_length=config.loss_length)
+    pairs = {"IL": (Ideal(), DeadReckoning()),
+             "CCL": (Ideal(), UkfCcl(ukf_lambda=config.ukf_lambda)),
+             "DCL": (links, UkfDcl(ukf_lambda=config.ukf_lambda, truncation=config.truncation))}
+    return world, pairs
+
+
+class Rig:
+    """One ``circles`` world and several (network, backend) pairs stepped on the same readings.
+
+    Each step is :meth:`coloc_env.scenarios.composed.ComposedScenario.step`'s: the world's readings
+    of time k, the network's link state of time k (true positions) and transport decisions, the
+    backend's update of k (the posterior the errors score) and its prediction to k + 1, then the
+    world moves. The world is reset with the caller's generators themselves (the draws of the
+    ``relay_ukf`` scenario, in its order: the same odometry noise, schedules and range noise as
+    ``env.reset(seed=...)``); each network and backend gets a child of the copy's generator.
+    """
+
+    def __init__(self, config: RelayUKFConfig, batch: int, names=ESTIMATORS):
+        world, pairs = composition_parts(config)
+        self.batch, self.num_agents = batch, config.num_platforms
+        self.world = None
+        self.networks, self.backends = {}, {}
+        for name in names:
+            spec = compose(world=world, network=pairs[name][0], backend=pairs[name][1])
+            if self.world is None:
+                self.world = spec.world.build(batch, spec.episode_steps)
+            network = spec.network.build(self.num_agents, batch, spec.backend.message_kind)
+            self.networks[name] = network
+            self.backends[name] = spec.backend.build(self.world, network, batch)
+
+    def reset(self, copies: list) -> None:
+        idx = np.arange(self.batch)
+        self.world.reset(list(copies), idx)
+        for name, network in self.networks.items():
+            children = [rng.spawn(2) for rng in copies]
+            network.reset([c[0] for c in children], idx)
+            self.backends[name].reset([c[1] for c in children], idx)
+
+    @property
+    def schedule(self) -> np.ndarray:
+        return self.world.schedule
+
+    def distances(self) -> np.ndarray:
+        p = self.world.positions()
+        return np.linalg.norm(p[:, :, None, :] - p[:, None, :, :], axis=-1)
+
+    def step(self, actions: np.ndarray, with_readings: bool = False):
+        """One step under ``relay_ukf`` actions (B, N, 2) (whom to range with, whom to relay to; N = stop):
+        the first is the world's sensing choice, the second the relay network's next hop. Returns the
+        truth of time k (B, N, 2) (and the world's readings of k with ``with_readings``); each backend's
+        ``posterior_position`` is its estimate of time k."""
+        B, N = self.batch, self.num_agents
+        actions = np.asarray(actions, np.int64)
+        readings = self.world.readings(actions[..., :1])
+        truth = self.world.positions().copy()
+        none = np.zeros((B, N, 0), np.int64)
+        for name, network in self.networks.items():
+            transport = actions[..., 1:2] if network.transport_blocks() else none
+            network.begin(self.world.k, truth, transport)
+            self.backends[name].step(readings, none)
+        self.world.advance()
+        return (truth, readings) if with_readings else truth
+
+
 def monte_carlo_block(block: int, runs: int, seed: int, config: RelayUKFConfig) -> dict:
     """``runs`` realizations under the paper's policy: IL, UKF-CCL and UKF-DCL on the same data.
 
-    DCL is the scenario's own estimator; CCL and IL run alongside on the
-    scenario's odometry and measurement events. Errors are posterior ones,
-    at each measurement time k = 0..K-1.
+    The three are the composable backends ``dead_reckoning``, ``ukf_ccl`` and ``ukf_dcl`` on one
+    ``circles`` world (:class:`Rig`). Errors are posterior ones, at each measurement time k = 0..K-1.
     """
     copies, policy_rng = _block_generators(seed, block, runs)
     return {"block": block, **simulate_runs(config, copies, policy_rng)}
 
 
 def simulate_runs(config: RelayUKFConfig, copies: list, policy_rng: np.random.Generator) -> dict:
-    """The runs of :func:`monte_carlo_block` on given generators: copy r of the scenario reset with
+    """The runs of :func:`monte_carlo_block` on given generators: copy r of the world reset with
     ``copies[r]``, the paper policy's random partners drawn from ``policy_rng`` (one call per step
     for all runs). ``per_run`` (3, runs): each run's error averaged over k = 0..K-1 and the platforms,
     rows :data:`ESTIMATORS`."""
     runs = len(copies)
-    scenario = RelayUKFScenario(config, batch=runs)
-    scenario.reset(copies)
+    rig = Rig(config, runs)
+    rig.reset(copies)
     K, N = config.horizon, config.num_platforms
-    ccl_x, ccl_P = scenario.estimate.copy(), scenario.cov.copy()
-    il_x = scenario.estimate.copy()
+    il, ccl, dcl = (rig.backends[e] for e in ESTIMATORS)
     errors = np.zeros((3, K, runs, N))
     nees = np.zeros((K, runs, N))
     max_diff = 0.0
     chains = np.full((K, N), -1)
     tracks = np.zeros((2, K, N, 2))  # IL and DCL estimates of run 0
     for k in range(K):
-        actions = paper_actions(scenario.distances(), scenario.schedule[:, k], policy_rng)
-        event = scenario.measurement_event(actions)
-        scenario.measurement_update(event)
-        used = np.flatnonzero(event.used)
-        if len(used):
-            reached = event.relay.position_of(N)[used] >= 0
-            ccl_x[used], ccl_P[used] = ukf.ccl_update(
-                ccl_x[used], ccl_P[used], event.measuring[used], event.partner[used], event.range[used],
-                config.range_noise_var, config.ukf_lambda, reached)
-        truth = scenario.truth[k]
-        for e, estimate in enumerate((il_x, ccl_x, scenario.estimate)):
-            errors[e, k] = np.linalg.norm(estimate - truth, axis=-1)
-        max_diff = max(max_diff, float(np.abs(ccl_x - scenario.estimate).max()))
-        residual = ccl_x - truth
-        blocks = np.stack([ccl_P[:, 2 * i:2 * i + 2, 2 * i:2 * i + 2] for i in range(N)], axis=1)
+        truth = rig.step(paper_actions(rig.distances(), rig.schedule[:, k], policy_rng))
+        for e, backend in enumerate((il, ccl, dcl)):
+            errors[e, k] = np.linalg.norm(backend.posterior_position - truth, axis=-1)
+        max_diff = max(max_diff, float(np.abs(ccl.posterior_position - dcl.posterior_position).max()))
+        residual = ccl.posterior_position - truth
+        blocks = ccl.posterior_position_cov
         nees[k] = np.einsum("rni,rni->rn", residual, np.linalg.solve(blocks, residual[..., None])[..., 0])
-        chains[k] = event.relay.chain[0]
-        tracks[0, k], tracks[1, k] = il_x[0], scenario.estimate[0]
-        speed, heading, heading_var = scenario.odometry()
-        scenario.time_update()
-        ccl_x, ccl_P = ukf.time_update(ccl_x, ccl_P, speed, heading, config.dt, config.speed_noise_std**2,
-                                       heading_var)
-        il_x, _ = ukf.time_update(il_x, None, speed, heading, config.dt, 0.0)
+        chain = rig.networks["DCL"].last_chain
+        if chain is not None:
+            chains[k] = chain.chain[0]
+        tracks[0, k], tracks[1, k] = il.posterior_position[0], dcl.posterior_position[0]
     return {
         "per_run": errors.mean(axis=(1, 3)),  # (3, runs): time- and platform-averaged
         "curves": errors.mean(axis=2),  # (3, K, N): mean over this block's runs
@@ -122,7 +197,7 @@ def paper_policy_costs(seeds, config: RelayUKFConfig | None = None, policy_seed:
     for ``seeds``: the error at each measurement time k = 0..K-1 after its update, averaged over the
     steps and platforms (this reproduction's ``mean_distance_error`` of one run).
 
-    Episode e is the scenario reset with ``default_rng(seeds[e])``, as ``env.reset(seed=seeds[e])``.
+    Episode e is the world reset with ``default_rng(seeds[e])``, as ``env.reset(seed=seeds[e])`` resets the scenario.
     The paper policy draws its partners from its own generator, seeded ``policy_seed`` (default
     ``seeds[0]``, as ``coloc evaluate`` seeds it with its seed base) and continued over the episodes
     in order, one draw per step; so the episodes run one after another through
@@ -165,53 +240,42 @@ def filterpy_ccl_update(estimate: np.ndarray, cov: np.ndarray, measuring: int, m
 
 
 def ccl_filterpy_difference(config: RelayUKFConfig, seed: int) -> float:
-    """Largest |CCL - filterpy| position difference over one run of the paper's policy (both filters
-    run separately from the same start; the linear time update is shared code)."""
+    """Largest |CCL - filterpy| position difference over one run of the paper's policy: the ``ukf_ccl``
+    backend on the ``circles`` world (:class:`Rig`) and filterpy's update on the same ranges, each
+    from the same start (the linear time update of the filterpy side is the world's motion model)."""
     copies, policy_rng = _block_generators(seed, 0, 1)
-    scenario = RelayUKFScenario(config, batch=1)
-    scenario.reset(copies)
-    N = config.num_platforms
-    x, P = scenario.estimate.copy(), scenario.cov.copy()
-    fx, fP = x[0].copy(), P[0].copy()
+    rig = Rig(config, 1, names=("CCL",))
+    rig.reset(copies)
+    ccl = rig.backends["CCL"]
+    fx, fP = ccl.mean[0].copy(), ccl.cov[0].copy()
     worst = 0.0
     for k in range(config.horizon):
-        event = scenario.measurement_event(paper_actions(scenario.distances(), scenario.schedule[:, k], policy_rng))
-        if event.used[0]:
-            reached = event.relay.position_of(N) >= 0
-            if not reached.all():
-                raise ValueError("the filterpy comparison needs complete chains")
-            x, P = ukf.ccl_update(x, P, event.measuring, event.partner, event.range, config.range_noise_var,
-                                  config.ukf_lambda)
-            fx, fP = filterpy_ccl_update(fx, fP, int(event.measuring[0]), int(event.partner[0]),
-                                         float(event.range[0]), config.range_noise_var, config.ukf_lambda)
-        worst = max(worst, float(np.abs(x[0] - fx).max()))
-        speed, heading, heading_var = scenario.odometry()
-        scenario.time_update()
-        x, P = ukf.time_update(x, P, speed, heading, config.dt, config.speed_noise_std**2, heading_var)
-        fx, fP = ukf.time_update(fx, fP, speed[0], heading[0], config.dt, config.speed_noise_std**2,
-                                 heading_var[0])
+        _, readings = rig.step(paper_actions(rig.distances(), rig.schedule[:, k], policy_rng), with_readings=True)
+        for m, n in np.argwhere(readings.range_valid[0]):
+            fx, fP = filterpy_ccl_update(fx, fP, int(m), int(n), float(readings.range[0, m, n]),
+                                         config.range_noise_var, config.ukf_lambda)
+        worst = max(worst, float(np.abs(ccl.posterior_position[0] - fx).max()))
+        fx, fP = predict_joint(rig.world.motion_model, fx, fP, readings.inputs[0])
     return worst
 
 
 def truncated_chain_study(config: RelayUKFConfig, seed: int, copies: int = 8, max_hops: int = 1) -> dict:
-    """Smallest eigenvalue of P per step with a hop budget, for the paper's rule and ours."""
+    """Smallest eigenvalue of P per step with a hop budget, for the paper's rule and ours (the ``ukf_dcl``
+    backend over a ``relay`` network with that budget)."""
     out = {"max_hops": max_hops, "copies": copies}
     for rule in ("paper", "consistent"):
         cfg = dataclasses.replace(config, max_hops=max_hops, truncation=rule)
         generators, policy_rng = _block_generators(seed, 10_000, copies)
-        scenario = RelayUKFScenario(cfg, batch=copies)
-        scenario.reset(generators)
+        rig = Rig(cfg, copies, names=("DCL",))
+        rig.reset(generators)
         smallest, failed = [], None
         for k in range(cfg.horizon):
             try:
-                event = scenario.measurement_event(
-                    paper_actions(scenario.distances(), scenario.schedule[:, k], policy_rng))
-                scenario.measurement_update(event)
+                rig.step(paper_actions(rig.distances(), rig.schedule[:, k], policy_rng))
             except np.linalg.LinAlgError:
                 failed = k
                 break
-            scenario.time_update()
-            smallest.append(float(np.linalg.eigvalsh(scenario.cov).min()))
+            smallest.append(float(np.linalg.eigvalsh(rig.backends["DCL"].cov).min()))
         negative = [k for k, v in enumerate(smallest) if v < 0]
         out[rule] = {
             "min_eigenvalue": float(min(smallest)) if smallest else float("nan"),
@@ -389,8 +453,7 @@ def _figures(folder: str, summary: dict, truncation: dict, config: RelayUKFConfi
 
     from coloc_env.rendering import AGENT_COLOURS
 
-    scenario = RelayUKFScenario(config, batch=1)
-    truth = scenario.truth
+    truth = Rig(config, 1, names=("IL",)).world.truth
     K, N, dt = config.horizon, config.num_platforms, config.dt
     p0 = config.measurement_probability
     main = summary.get(("default", p0), summary[("default", 0.5)])
