@@ -1,17 +1,23 @@
-"""Policies that work on any composition: ``always`` and ``silent`` (``random`` is :class:`agents.base.RandomPolicy`).
+"""Policies that work on any composition: ``always``, ``silent`` and ``greedy`` (``random`` is
+:class:`agents.base.RandomPolicy`).
 
 ``always`` plays every transport decision at its maximum (the full relay chain
 nearest first, a broadcast at every opportunity, every packet transmitted);
 ``silent`` sends nothing; both keep the world's and the backend's default
 decisions (the paper's weights, horizon, the nearest ranging partner). They
 read only the composition's action blocks (:meth:`ComposedScenario.action_vector`).
+``greedy`` (:class:`GreedyPolicy`) looks one step ahead with the backend's own
+covariance, where the backend has one.
 """
 
 from __future__ import annotations
 
+import copy
+import itertools
+
 import numpy as np
 
-from agents.base import FixedActionPolicy
+from agents.base import FixedActionPolicy, Policy
 
 
 def _fixed(env, which: str) -> FixedActionPolicy:
@@ -33,4 +39,92 @@ def silent(env) -> FixedActionPolicy:
     return _fixed(env, "minimum")
 
 
-POLICIES = {"always": always, "silent": silent}
+class GreedyPolicy(Policy):
+    """One-step look-ahead of the backend's own covariance (privileged: it copies the env's batched core).
+
+    At each step it starts from the ``always`` action and, agent by agent in index order (the others
+    at their choice so far), tries every candidate of that agent's discrete transport and backend
+    entries on a copy of the core, keeping the candidate with the least team cost after this step's
+    update
+
+        J = sum_i tr P_i  +  communication_cost * (messages sent this step),
+
+    tr P_i the trace the composition's ``reward="trace"`` uses (each agent's position covariance, or
+    for a target world tr(M P_i M^T)). Ties keep the earlier candidate, so the result is never worse
+    in J than ``always``. The copy steps with the readings of time k (what the agents have measured
+    when they decide) and J reads only the backend's covariance, never the truth. Candidates: every
+    combination of the agent's discrete network and backend entries when there are at most
+    ``max_candidates`` of them, else each entry alone with the others fixed (coordinate search);
+    sensing choices and continuous entries stay at their defaults.
+    """
+
+    def __init__(self, env, max_candidates: int = 64):
+        super().__init__(env)
+        core = env.unwrapped.scenario
+        if not hasattr(core, "action_vector"):
+            raise ValueError(f"policy 'greedy' needs a composition (coloc_env.compose); {core.name} is a preset "
+                             "with its own policies")
+        self.max_candidates = int(max_candidates)
+        self.start = core.action_vector("maximum")
+        entries, choices = [], []
+        position = 0
+        for blk, part in zip(core.blocks, core.block_parts, strict=True):
+            for _ in range(blk.size):
+                if blk.discrete and part in ("network", "backend") and blk.choices > 1:
+                    entries.append(position)
+                    choices.append(blk.choices)
+                position += 1
+        if not entries:
+            raise ValueError(f"policy 'greedy' needs a decision to make; {core.name} has no transport or "
+                             "backend decisions")
+        self.entries = entries
+        if int(np.prod(choices, dtype=float)) <= self.max_candidates:
+            self.candidates = [dict(zip(entries, values, strict=True))
+                               for values in itertools.product(*[range(c) for c in choices])]
+        else:
+            self.candidates = [{e: v} for e, c in zip(entries, choices, strict=True) for v in range(c)]
+        if self._team_cost(core, np.tile(self.start, (core.num_agents, 1))) is None:
+            raise ValueError(f"policy 'greedy' needs a backend with a covariance; {core.name}'s has none")
+
+    @staticmethod
+    def _team_cost(core, actions: np.ndarray) -> float | None:
+        trial = copy.deepcopy(core)
+        trial.step(actions[None])
+        if getattr(trial, "estimand", "self") == "target":
+            trace = trial.metric_traces()
+        else:
+            trace = trial.posterior_traces()
+        if trace is None:
+            return None
+        return float(trace[0].sum() + trial.config.communication_cost * trial.network.messages_sent[0].sum())
+
+    @staticmethod
+    def _messages(core, actions: np.ndarray) -> float:
+        trial = copy.deepcopy(core)
+        trial.step(actions[None])
+        return float(trial.network.messages_sent[0].sum())
+
+    def act(self, observations: dict) -> dict:
+        core = self.env.unwrapped.scenario
+        actions = np.tile(self.start, (core.num_agents, 1))
+        best = self._team_cost(core, actions)
+        for agent in range(core.num_agents):
+            for candidate in self.candidates:
+                trial = actions.copy()
+                for entry, value in candidate.items():
+                    trial[agent, entry] = value
+                if np.array_equal(trial, actions):
+                    continue
+                cost = self._team_cost(core, trial)
+                if cost < best:
+                    best, actions = cost, trial
+        names = self.env.possible_agents
+        return {a: actions[names.index(a)] for a in observations}
+
+
+def greedy(env) -> GreedyPolicy:
+    """One-step look-ahead of the backend's own covariance plus the communication cost (see :class:`GreedyPolicy`)."""
+    return GreedyPolicy(env)
+
+
+POLICIES = {"always": always, "silent": silent, "greedy": greedy}
