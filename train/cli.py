@@ -73,6 +73,9 @@ def build_parser() -> argparse.ArgumentParser:
     be.add_argument("--quick", action="store_true")
     be.add_argument("--out", default="results")
     be.add_argument("--scenarios", nargs="+", default=None, help="only these scenarios (default: all)")
+    be.add_argument("--against", metavar="REF", default=None,
+                    help="also measure git commit REF (e.g. HEAD~3, a tag) side by side in the same run and print "
+                         "both rates and the ratio current / REF (OUT/bench/against.json)")
 
     _add_study_parser(sub)
 
@@ -225,11 +228,15 @@ def cmd_bench(args) -> int:
     from rich.console import Console
 
     import coloc_env
-    from train.bench import run
+    from train.bench import run, run_against
 
     for name in args.scenarios or []:
         coloc_env.scenario_class(name)
-    run(args.out, quick=args.quick, scenarios=args.scenarios or _runnable_scenarios(Console()))
+    scenarios = args.scenarios or _runnable_scenarios(Console())
+    if args.against:
+        run_against(args.out, args.against, quick=args.quick, scenarios=scenarios)
+    else:
+        run(args.out, quick=args.quick, scenarios=scenarios)
     return 0
 
 

@@ -1,0 +1,124 @@
+"""dNBP's compiled kernels (numba) compute what the numpy kernels compute: the same mixture log-densities up to
+float rounding, the same velocity draws exactly, on any batch and thread count, and the same seeded episodes."""
+
+import numpy as np
+import pytest
+
+import estimators.dnbp as dn
+
+pytest.importorskip("numba")
+
+
+def _mixtures(rng, J=6, P=70, K=40, spread=200.0):
+    """Mixtures at kilometre coordinates: rings and clusters, non-uniform weights, points near, far and between."""
+    centre = 900.0 + rng.normal(size=(J, 1, 2)) * 50
+    angle = rng.random((J, K)) * 2 * np.pi
+    radius = np.where(np.arange(J)[:, None] % 2 == 0, 150.0 + rng.normal(size=(J, K)), rng.random((J, K)) * 5)
+    centres = centre + radius[..., None] * np.stack([np.cos(angle), np.sin(angle)], axis=-1)
+    points = centre + rng.normal(size=(J, P, 2)) * spread
+    log_w = np.log(rng.dirichlet(np.ones(K) * 0.5, size=J))
+    h = rng.choice([0.5, 1.5, 6.0, 20.0], size=J)
+    return points, centres, log_w, h
+
+
+def test_compiled_mixture_kernel_matches_the_numpy_kernel_and_the_log_domain():
+    rng = np.random.default_rng(0)
+    points, centres, log_w, h = _mixtures(rng)
+    compiled = dn.mixture_logpdf(points, centres, log_w, h, exact=False)
+    numpy = dn.mixture_logpdf(points, centres, log_w, h, exact=False, compiled=False)
+    exact = dn.mixture_logpdf(points, centres, log_w, h, exact=True)
+    finite = np.isfinite(numpy)
+    assert 0.2 < finite.mean() < 0.95  # both near and far (density counted as 0) points are exercised
+    np.testing.assert_array_equal(np.isfinite(compiled), finite)
+    np.testing.assert_allclose(compiled[finite], numpy[finite], rtol=0, atol=1e-9)
+    # the log domain has no floor: near it (~-600) the fast kernels' floored terms e^-600 count, above it not
+    above = finite & (exact > -500)
+    np.testing.assert_allclose(compiled[above], exact[above], rtol=0, atol=1e-7)
+
+
+def test_rows_near_the_floor_sum_every_term_as_the_numpy_kernel_does():
+    """Points whose nearest component sits 30..40 bandwidths away: the sum is compared with 2 K e^-600 there."""
+    K = 30
+    centres = np.zeros((1, K, 2)) + np.linspace(0, 1, K)[None, :, None]
+    h = np.ones(1)
+    distance = np.linspace(33.0, 36.0, 200)  # exponents from about -545 to -650
+    points = np.stack([distance, np.zeros_like(distance)], axis=-1)[None]
+    log_w = np.full((1, K), -np.log(K))
+    compiled = dn.mixture_logpdf(points, centres, log_w, h, exact=False)
+    numpy = dn.mixture_logpdf(points, centres, log_w, h, exact=False, compiled=False)
+    assert np.isfinite(numpy).any() and not np.isfinite(numpy).all()
+    np.testing.assert_array_equal(np.isfinite(compiled), np.isfinite(numpy))
+    finite = np.isfinite(numpy)
+    np.testing.assert_allclose(compiled[finite], numpy[finite], rtol=1e-12)
+
+
+def test_compiled_velocity_draws_equal_the_numpy_draws():
+    rng = np.random.default_rng(1)
+    R, M = 7, 50
+    prior = np.concatenate([rng.normal(size=(R, M, 2)) * 4 + 700, rng.normal(size=(R, M, 2))], axis=-1)
+    positions = prior[:, :, :2] + rng.normal(size=(R, M, 2)) * 3
+    bandwidth = rng.choice([0.3, 1.0, 3.0], size=R)
+    uniform = np.arange(R) % 3 == 0
+    u = rng.random((R, M))
+    compiled = dn._velocity_index(positions, prior, bandwidth, uniform, u)
+    numpy = dn._velocity_index(positions, prior, bandwidth, uniform, u, compiled=False)
+    assert compiled.dtype.kind == "i" and compiled.shape == (R, M)
+    np.testing.assert_array_equal(compiled, numpy)
+
+
+def test_threads_and_batches_do_not_change_the_compiled_results(monkeypatch):
+    rng = np.random.default_rng(2)
+    points, centres, log_w, h = _mixtures(rng, J=12, P=90, K=60)
+    monkeypatch.setattr(dn, "_PARALLEL_ELEMENTS", 1)
+    threaded = dn.mixture_logpdf(points, centres, log_w, h, exact=False)
+    monkeypatch.setattr(dn, "_PARALLEL_ELEMENTS", 1 << 62)
+    serial = dn.mixture_logpdf(points, centres, log_w, h, exact=False)
+    alone = np.concatenate([dn.mixture_logpdf(points[j:j + 1], centres[j:j + 1], log_w[j:j + 1], h[j:j + 1],
+                                              exact=False) for j in range(len(h))])
+    np.testing.assert_array_equal(threaded, serial)
+    np.testing.assert_array_equal(alone, serial)
+
+
+def _episode(steps=4):
+    import coloc_env
+
+    env = coloc_env.vector_env("gps_denied_nbp", num_envs=3, seed=7, num_particles=40, horizon=steps)
+    env.reset()
+    actions = np.ones((env.num_envs, 5), dtype=np.int8)  # one row per (copy, agent)
+    out = []
+    for _ in range(steps - 1):
+        _, reward, _, _ = env.step(actions)
+        out.append(reward)
+    return np.array(out)
+
+
+def test_a_seeded_env_episode_is_the_same_with_the_numpy_kernels(monkeypatch):
+    """The kernels' rounding differences (~1e-10 in a log density) do not move a seeded episode."""
+    compiled = _episode()
+    monkeypatch.setattr(dn, "_KERNELS", {})
+    numpy = _episode()
+    np.testing.assert_allclose(compiled, numpy, rtol=1e-9)
+
+
+def test_compiled_importance_weights_equal_the_numpy_combination():
+    """log pi - log q from the prior and the present messages, absent slots and far proposals included."""
+    rng = np.random.default_rng(3)
+    model = dn.DnbpModel(num_particles=20)
+    R, S, M, C = 5, 4, 20, 45
+    prior = np.concatenate([rng.normal(size=(R, M, 2)) * 3 + 300, rng.normal(size=(R, M, 2))], axis=-1)
+    proposals = 300 + rng.normal(size=(R, C, 2)) * np.where(rng.random((R, C, 1)) < 0.3, 200.0, 4.0)
+    centres = 300 + rng.normal(size=(R, S, M, 2)) * 30
+    log_weights = np.log(rng.dirichlet(np.ones(M), size=(R, S)))
+    bandwidth = rng.choice([1.0, 5.0], size=(R, S))
+    present = rng.random((R, S)) < 0.6
+    present[0] = False
+    K_r = present.sum(axis=1)
+    valid = np.arange(C)[None, :] < rng.integers(C // 2, C + 1, size=R)[:, None]
+    args = (model, proposals, prior, np.full(R, 1.0), np.arange(R) == 1, centres, log_weights, bandwidth, present,
+            valid, K_r)
+    compiled = dn._importance_log_weights(*args, exact=False)
+    numpy = dn._importance_log_weights(*args, exact=False, compiled=False)
+    finite = np.isfinite(numpy)
+    assert finite.any() and not finite.all()
+    np.testing.assert_array_equal(np.isfinite(compiled), finite)
+    np.testing.assert_allclose(compiled[finite], numpy[finite], rtol=0, atol=1e-9)

@@ -1,0 +1,54 @@
+"""``coloc bench --against REF``: the plumbing (export, one subprocess per tree, the joined table), not a speed."""
+
+import json
+import os
+import shutil
+import subprocess
+
+import pytest
+
+from train import bench
+
+pytestmark = pytest.mark.skipif(shutil.which("git") is None or subprocess.run(
+    ["git", "-C", os.path.dirname(bench.__file__), "rev-parse", "HEAD"], capture_output=True).returncode != 0,
+    reason="needs the git repository")
+
+
+def test_against_head_measures_both_trees_in_subprocesses_and_joins_the_rows(tmp_path, monkeypatch):
+    monkeypatch.setattr(bench, "SCENARIO_BATCHES", {"lossy_fusion": (1,)})
+    rows = bench.run_against(str(tmp_path), "HEAD", scenarios=["lossy_fusion"], min_seconds=0.01, extras=False,
+                             rounds=1)
+    whats = {(r["what"], r["batch"]) for r in rows}
+    assert ("vector_env", 1) in whats and ("estimator step", 1) in whats
+    for row in rows:
+        assert row["current_env_steps_per_s"] > 0 and row["reference_env_steps_per_s"] > 0
+        assert row["ratio"] == pytest.approx(row["current_env_steps_per_s"] / row["reference_env_steps_per_s"])
+    saved = json.loads((tmp_path / "bench" / "against.json").read_text())
+    assert saved["reference"] == "HEAD" and len(saved["reference_commit"]) == 40 and saved["errors"] == {}
+    assert saved["rows"] == rows
+
+
+def test_the_reference_tree_is_what_its_subprocess_imports(tmp_path):
+    commit = bench.export_commit("HEAD", str(tmp_path))
+    assert (tmp_path / "train" / "bench.py").exists() and len(commit) == 40
+    failed = bench.bench_tree(str(tmp_path), "no_such_scenario", 0.01, (1,), extras=False)
+    assert "error" in failed and "no_such_scenario" in failed["error"]
+
+
+def test_rounds_keep_each_rows_best_rate():
+    first = [{"scenario": "s", "what": "w", "batch": 1, "env_steps_per_s": 3.0},
+             {"scenario": "s", "what": "w", "batch": 2, "env_steps_per_s": 9.0}]
+    second = [{"scenario": "s", "what": "w", "batch": 1, "env_steps_per_s": 5.0},
+              {"scenario": "s", "what": "w", "batch": 2, "env_steps_per_s": 1.0}]
+    assert {r["batch"]: r["env_steps_per_s"] for r in bench._best([first, second])} == {1: 5.0, 2: 9.0}
+
+
+def test_compare_rows_joins_on_scenario_what_and_batch():
+    current = [{"scenario": "s", "what": "w", "batch": 1, "env_steps_per_s": 30.0},
+               {"scenario": "s", "what": "new", "batch": 1, "env_steps_per_s": 5.0}]
+    reference = [{"scenario": "s", "what": "w", "batch": 1, "env_steps_per_s": 10.0},
+                 {"scenario": "s", "what": "gone", "batch": 4, "env_steps_per_s": 2.0}]
+    rows = {(r["what"], r["batch"]): r for r in bench.compare_rows(current, reference)}
+    assert rows[("w", 1)]["ratio"] == pytest.approx(3.0)
+    assert rows[("new", 1)]["ratio"] is None and rows[("new", 1)]["reference_env_steps_per_s"] is None
+    assert rows[("gone", 4)]["ratio"] is None and rows[("gone", 4)]["current_env_steps_per_s"] is None
