@@ -9,6 +9,7 @@ refuses unknown keys, so a typo never passes silently.
 from __future__ import annotations
 
 import dataclasses
+import numbers
 from typing import Any, TypeVar
 
 import numpy as np
@@ -25,28 +26,114 @@ def build_config(config_cls: type[C], kwargs: dict[str, Any]) -> C:
             f"unknown config key(s) {unknown} for {config_cls.__name__}; allowed keys: {sorted(names)}"
         )
     config = config_cls(**kwargs)
-    config.validate()
+    validate_fields(config)
     return config
 
 
-def as_array(name: str, value: Any, shape: tuple[int, ...] | None = None, ndim: int | None = None) -> np.ndarray:
-    """A finite float array of the given shape, or ``ValueError`` naming ``name``."""
+def is_real(value: Any) -> bool:
+    """A real number: int, float, a numpy integer or floating scalar (or 0-d array); never a bool,
+    a string, None or a complex number."""
+    if isinstance(value, (bool, np.bool_)):
+        return False
+    if isinstance(value, numbers.Real):
+        return True
+    return isinstance(value, np.ndarray) and value.ndim == 0 and value.dtype.kind in "iuf"
+
+
+def is_integer(value: Any) -> bool:
+    return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
+
+
+def field_type_problem(config: Any, prefix: str = "") -> str:
+    """The first field of the dataclass ``config`` whose value is not of its annotated kind, in words
+    (``"speed must be a number, got 'abc'"``); "" when every field is. ``float`` fields take real
+    numbers, ``int`` fields integers, ``bool`` fields True/False, ``str`` fields strings, a ``tuple``
+    field a numeric array (when its default is one); ``| None`` allows None."""
+    for f in dataclasses.fields(config):
+        value = getattr(config, f.name)
+        annotation = str(f.type)
+        optional = "None" in annotation
+        if value is None and optional:
+            continue
+        base = annotation.replace("| None", "").replace("None |", "").strip()
+        name = f"{prefix}{f.name}"
+        if base == "float" and not is_real(value):
+            return f"{name} must be a number, got {value!r}"
+        if base == "int" and not is_integer(value):
+            return f"{name} must be an integer, got {value!r}"
+        if base == "bool" and not isinstance(value, (bool, np.bool_)):
+            return f"{name} must be True or False, got {value!r}"
+        if base == "str" and not isinstance(value, str):
+            return f"{name} must be a string, got {value!r}"
+        if base == "tuple" and f.default is not dataclasses.MISSING and f.default is not None:
+            try:
+                numeric_default = np.asarray(f.default).dtype.kind in "iuf"
+            except (TypeError, ValueError):
+                numeric_default = False
+            if numeric_default:
+                try:
+                    kind = np.asarray(value).dtype.kind
+                except (TypeError, ValueError):
+                    kind = "O"
+                if kind not in "iuf":
+                    return f"{name} must be a numeric array, got {value!r}"
+    return ""
+
+
+def validate_fields(config: Any, prefix: str = "", validate=None) -> None:
+    """``config.validate()`` (or ``validate()``), turning any error that a wrongly typed field caused
+    (a ``TypeError`` in a derived value, numpy's "could not convert") into a ``ValueError`` naming the
+    field. A ``ValueError`` that already names that field is kept as it is (it states the range)."""
     try:
-        arr = np.asarray(value, dtype=float)
+        (validate or config.validate)()
+    except Exception as exc:
+        problem = field_type_problem(config, prefix)
+        if not problem:
+            raise
+        field = problem.split(" must ", 1)[0]
+        if isinstance(exc, ValueError) and field in str(exc):
+            raise
+        raise ValueError(problem) from exc
+
+
+def as_array(name: str, value: Any, shape: tuple[int, ...] | None = None, ndim: int | None = None,
+             bound: float | None = None) -> np.ndarray:
+    """A finite float array of the given shape, or ``ValueError`` naming ``name``.
+
+    Only real numbers: strings (numeric or not), booleans, None and complex numbers are refused, never
+    coerced."""
+    try:
+        raw = np.asarray(value)
+        if raw.dtype.kind not in "iuf":
+            raise TypeError(f"dtype {raw.dtype}")
+        arr = raw.astype(float)
     except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} must be numeric, got {value!r}") from exc
+        raise ValueError(f"{name} must be an array of real numbers, got {value!r}") from exc
     if shape is not None and arr.shape != tuple(shape):
         raise ValueError(f"{name} must have shape {tuple(shape)}, got {arr.shape}")
     if ndim is not None and arr.ndim != ndim:
         raise ValueError(f"{name} must be a {ndim}-d array, got shape {arr.shape}")
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} must be finite, got {value!r}")
+    if bound is not None and arr.size and np.abs(arr).max() > bound:
+        raise ValueError(f"{name} entries must be in [-{bound:g}, {bound:g}], got {np.abs(arr).max():g}")
     return arr
 
 
-def check_psd(name: str, value: Any, n: int | None = None, strict: bool = False) -> np.ndarray:
-    """A symmetric positive (semi-)definite ``(n, n)`` matrix, or ``ValueError`` naming ``name``."""
-    arr = as_array(name, value, ndim=2)
+def check_stable(name: str, matrix: np.ndarray, max_radius: float = 1.001) -> None:
+    """A transition matrix whose spectral radius is at most ``max_radius`` (a state and covariance that
+    stay finite over 1e5 steps), or ``ValueError`` naming ``name``."""
+    radius = float(np.abs(np.linalg.eigvals(matrix)).max())
+    if radius > max_radius:
+        raise ValueError(f"{name} must have spectral radius <= {max_radius:g} (the state and covariance stay "
+                         f"finite over the horizon), got {radius:.6g}")
+
+
+def check_psd(name: str, value: Any, n: int | None = None, strict: bool = False,
+              bound: float | None = None) -> np.ndarray:
+    """A symmetric positive (semi-)definite ``(n, n)`` matrix (entries at most ``bound`` in magnitude), or
+    ``ValueError`` naming ``name``."""
+    arr = as_array(name, value, ndim=2, bound=bound)
     if arr.shape[0] != arr.shape[1] or (n is not None and arr.shape[0] != n):
         expected = f"({n}, {n})" if n is not None else "square"
         raise ValueError(f"{name} must be a {expected} covariance matrix, got shape {arr.shape}")
@@ -61,19 +148,35 @@ def check_psd(name: str, value: Any, n: int | None = None, strict: bool = False)
 
 def check_range(name: str, value: Any, low: float, high: float, integer: bool = False,
                 low_open: bool = False) -> None:
-    """``low <= value <= high`` (``low < value`` if ``low_open``), or ``ValueError`` naming ``name``."""
-    if integer and (isinstance(value, bool) or not isinstance(value, (int, np.integer))):
-        raise ValueError(f"{name} must be an integer in [{low}, {high}], got {value!r}")
-    try:
-        v = float(value)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} must be a number in [{low}, {high}], got {value!r}") from exc
+    """``low <= value <= high`` (``low < value`` if ``low_open``), or ``ValueError`` naming ``name``.
+
+    The value must be a real number (an integer if ``integer``): a string (even "1.0"), a boolean,
+    None or a complex number is refused, never coerced. ``low`` and ``high`` are in the field's own
+    unit (a ``*_deg`` field is checked in degrees)."""
+    bracket = "(" if low_open else "["
+    if integer and not is_integer(value):
+        raise ValueError(f"{name} must be an integer in {bracket}{low}, {high}], got {value!r}")
+    if not is_real(value):
+        raise ValueError(f"{name} must be a number in {bracket}{low}, {high}], got {value!r}")
+    v = float(value)
     below = v <= low if low_open else v < low
     if not np.isfinite(v) or below or v > high:
-        bracket = "(" if low_open else "["
         raise ValueError(f"{name} must be in {bracket}{low}, {high}], got {value!r}")
 
 
+def check_step_windows(name: str, value: Any, windows: np.ndarray, high: int = 10_000_000) -> None:
+    """[start, end) windows of integer steps: ``0 <= start < end <= high``, or ``ValueError`` naming ``name``."""
+    kind = np.asarray(value).dtype.kind
+    if kind not in "iu" or np.any(windows < 0) or np.any(windows > high) or np.any(windows[..., 1] <= windows[..., 0]):
+        raise ValueError(f"{name} must be [start, end) integer steps with 0 <= start < end <= {high}, got {value!r}")
+
+
 def check_choice(name: str, value: Any, choices: tuple) -> None:
-    if value not in choices:
+    """``value`` is one of ``choices`` (and of the same type: ``True`` is not ``1``), or ``ValueError``."""
+    try:
+        ok = any((isinstance(value, str) if isinstance(c, str) else type(value) is type(c)) and value == c
+                 for c in choices)
+    except Exception:  # noqa: BLE001 - an array compared with a choice
+        ok = False
+    if not ok:
         raise ValueError(f"{name} must be one of {choices}, got {value!r}")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+from collections.abc import Mapping
 
 import numpy as np
 from pettingzoo import ParallelEnv
@@ -66,10 +67,7 @@ class CoLocParallelEnv(ParallelEnv):
     def step(self, actions):
         if not self.agents:
             raise RuntimeError("step() called on a finished episode; call reset() first")
-        missing = [a for a in self.agents if a not in actions]
-        if missing:
-            raise ValueError(f"actions missing for agents {missing}")
-        stacked = np.stack([np.asarray(actions[a], dtype=float) for a in self.possible_agents])
+        stacked = self._stack_actions(actions)
         self.scenario.step(stacked[None])
         rewards = self.scenario.reward()[0]
         done = bool(self.scenario.done()[0])
@@ -81,6 +79,32 @@ class CoLocParallelEnv(ParallelEnv):
         if done:
             self.agents = []
         return observations, rewards, terminations, truncations, infos
+
+    def _stack_actions(self, actions) -> np.ndarray:
+        """The action dict as a float array (N, *action_shape), or a ValueError naming the agent."""
+        if not isinstance(actions, Mapping):
+            raise ValueError(f"actions must be a dict {{agent: action}} for agents {self.agents}, "
+                             f"got {type(actions).__name__}")
+        unknown = [a for a in actions if a not in self.possible_agents]
+        if unknown:
+            raise ValueError(f"actions for unknown agent(s) {unknown!r}; the agents are {self.possible_agents}")
+        missing = [a for a in self.agents if a not in actions]
+        if missing:
+            raise ValueError(f"actions missing for agents {missing}")
+        shape = tuple(self._action_space.shape)
+        rows = []
+        for a in self.possible_agents:
+            value = actions[a]
+            try:
+                raw = np.asarray(value)
+            except (TypeError, ValueError) as exc:
+                raise ValueError(f"action of {a} must be an array of shape {shape}, got {value!r}") from exc
+            if raw.dtype.kind not in "biuf":
+                raise ValueError(f"action of {a} must be real numbers of shape {shape}, got {value!r}")
+            if raw.shape != shape:
+                raise ValueError(f"action of {a} must have shape {shape}, got shape {raw.shape}: {value!r}")
+            rows.append(raw.astype(float))
+        return np.stack(rows)
 
     def _observations(self):
         obs = self.scenario.observation()[0]

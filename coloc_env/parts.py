@@ -21,7 +21,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from coloc_env.config import check_choice, check_range
+from coloc_env.config import check_choice, check_range, validate_fields
 
 
 @dataclass(frozen=True)
@@ -56,7 +56,10 @@ class PartConfig:
         """Raise ``ValueError`` naming ``prefix + field`` for a bad value."""
 
     def validate(self) -> None:
-        self.check(f"{self.kind}.")
+        """``check`` with the kind as prefix; a wrongly typed field is a ``ValueError`` naming it even where
+        ``check`` computes a derived value first (:func:`coloc_env.config.validate_fields`)."""
+        prefix = f"{self.kind}."
+        validate_fields(self, prefix, lambda: self.check(prefix))
 
     def replace(self, **changes) -> PartConfig:
         """A validated copy with ``changes`` (unknown fields are a ``ValueError`` naming the part)."""

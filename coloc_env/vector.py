@@ -82,6 +82,10 @@ class CoLocVecEnv(VecEnv):
     def step_wait(self):
         actions = np.asarray(self._actions)
         shape = self.action_space.shape
+        expected = (self.num_envs, *shape)
+        if actions.shape != expected:
+            raise ValueError(f"actions must have shape {expected} (copies x agents = {self.num_envs} sub-envs, "
+                             f"*action_shape), got {actions.shape}")
         self.scenario.step(actions.reshape(self.num_copies, self.num_agents, *shape))
         observation = self._flat_observation()
         rewards = self.scenario.reward().reshape(self.num_envs).astype(np.float32)

@@ -66,7 +66,7 @@ class Bandwidth(PartConfig):
         high = 16 if self.max_per_link is None else self.max_per_link
         if self.max_per_link is not None:
             check_range(f"{prefix}max_per_link", self.max_per_link, 0, 16, integer=True)
-        check_range(f"{prefix}min_per_link", self.min_per_link, 0, high, integer=True)
+        check_range(f"{prefix}min_per_link (at most {prefix}max_per_link)", self.min_per_link, 0, high, integer=True)
         check_flag(f"{prefix}exact_budget", self.exact_budget)
 
     def budget_for(self, num_agents: int, dim: int, prefix: str = "network.") -> BandwidthBudget:

@@ -73,20 +73,23 @@ Arguments (fields of :class:`BandwidthFusionConfig`, defaults = the paper)
 | field               | default                  | allowed                                   |
 |---------------------|--------------------------|-------------------------------------------|
 | num_uavs            | 4                        | 2..16                                     |
-| transition          | I_3                      | (n, n)                                    |
-| drift               | (0.5, 0.5, 0.5)          | (n,)                                      |
-| measurement         | I_3                      | (m, n)                                    |
-| process_noise       | diag(0.02, 0.05, 0.03)   | (n, n) PSD                                |
-| measurement_noise   | diag(0.03, 0.04, 0.02)   | (m, m) or (N, m, m) PD                    |
-| initial_state       | (10, 10, 10)             | (n,): xhat_i(0); x(0) ~ N(this, M(0))     |
-| initial_cov         | diag(0.19, 0.09, 0.08)   | (n, n) PSD: M_i(0) = Sigma_i(0)           |
+| transition          | I_3                      | (n, n), entries in [-1e6, 1e6], spectral  |
+|                     |                          | radius <= 1.001 (finite over the horizon) |
+| drift               | (0.5, 0.5, 0.5)          | (n,), entries in [-1e6, 1e6]              |
+| measurement         | I_3                      | (m, n), entries in [-1e6, 1e6]            |
+| process_noise       | diag(0.02, 0.05, 0.03)   | (n, n) PSD, entries <= 1e12               |
+| measurement_noise   | diag(0.03, 0.04, 0.02)   | (m, m) or (N, m, m) PD, entries <= 1e12   |
+| initial_state       | (10, 10, 10)             | (n,) in [-1e6, 1e6]: xhat_i(0); x(0) ~ N  |
+| initial_cov         | diag(0.19, 0.09, 0.08)   | (n, n) positive definite, entries <= 1e12:|
+|                     |                          | M_i(0) = Sigma_i(0) (the observation      |
+|                     |                          | divides by it: a singular one is refused) |
 | budget              | 5                        | (N-1)*min_per_link .. (N-1)*max_per_link  |
 | min_per_link        | 1                        | 0..max_per_link                           |
 | max_per_link        | 3                        | 0..n                                      |
 | exact_budget        | True                     | False: sum_j t_ji <= budget               |
 | horizon             | 50                       | 1..100000                                 |
 | reward              | "error"                  | "error", "trace"                          |
-| component_cost      | 0.0                      | >= 0, per received component per step     |
+| component_cost      | 0.0                      | [0, 1e12], per received component per step|
 | weight_logit_scale  | 4.0                      | > 0                                       |
 """
 
@@ -191,7 +194,10 @@ class BandwidthFusionConfig:
                                self.min_per_link, self.max_per_link, self.exact_budget)
 
     def validate(self) -> None:
+        from coloc_env.worlds.drift import check_linear_world  # the drift world's checks (its raw fields first)
+
         check_range("num_uavs", self.num_uavs, 2, 16, integer=True)
+        check_linear_world("", self, strict_prior=True)
         self.motion.validate()
         n = self.motion.dim
         C = as_array("measurement", self.measurement, ndim=2)
@@ -204,11 +210,15 @@ class BandwidthFusionConfig:
         for j, Vj in enumerate(per_node):
             LinearSensor(C, Vj).validate(n, noise_name="measurement_noise" + (f"[{j}]" if V.ndim == 3 else ""))
         as_array("initial_state", self.initial_state, shape=(n,))
-        check_psd("initial_cov", self.initial_cov, n)
-        self.links.validate()
+        check_psd("initial_cov", self.initial_cov, n, strict=True)
+        try:
+            self.links.validate()
+        except ValueError as exc:  # a cross-field range: name the fields it depends on
+            raise ValueError(f"{exc} (with budget={self.budget}, min_per_link={self.min_per_link}, "
+                             f"max_per_link={self.max_per_link}, num_uavs={self.num_uavs})") from exc
         check_range("horizon", self.horizon, 1, 100_000, integer=True)
         check_choice("reward", self.reward, ("error", "trace"))
-        check_range("component_cost", self.component_cost, 0.0, np.inf)
+        check_range("component_cost", self.component_cost, 0.0, 1e12)
         check_range("weight_logit_scale", self.weight_logit_scale, 0.0, 1e3, low_open=True)
 
     def fusion_model(self) -> bf.FusionModel:

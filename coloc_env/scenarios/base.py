@@ -9,11 +9,13 @@ cartpole-style table in their module docstring.
 from __future__ import annotations
 
 import abc
+import dataclasses
 from typing import ClassVar
 
 import gymnasium
 import numpy as np
 
+from coloc_env.config import validate_fields
 from coloc_env.rendering import Scene
 
 
@@ -32,7 +34,10 @@ class Scenario(abc.ABC):
     def __init__(self, config, batch: int = 1):
         if not isinstance(batch, (int, np.integer)) or batch < 1:
             raise ValueError(f"batch must be a positive integer, got {batch!r}")
-        config.validate()
+        if dataclasses.is_dataclass(config) and not hasattr(config, "world"):
+            validate_fields(config)
+        else:
+            config.validate()
         self.config = config
         self.batch = int(batch)
 
@@ -115,9 +120,13 @@ class Scenario(abc.ABC):
 
     # --- helpers for subclasses ----------------------------------------------
     def check_actions(self, actions) -> np.ndarray:
-        """Actions as a float array (B, N, *shape); a NaN/inf or a wrong shape is a ValueError."""
+        """Actions as a float array (B, N, *shape); a NaN/inf, a wrong shape, a string or a complex number is
+        a ValueError."""
         space = self.action_space()
-        arr = np.asarray(actions, dtype=float)
+        raw = np.asarray(actions)
+        if raw.dtype.kind not in "biuf":  # strings (even "1"), complex numbers, None, objects: refused
+            raise ValueError(f"actions must be real numbers, got an array of dtype {raw.dtype}")
+        arr = raw.astype(float)
         expected = (self.batch, self.num_agents, *space.shape)
         if arr.shape != expected:
             raise ValueError(f"actions must have shape {expected} (batch, agents, *action_shape), got {arr.shape}")

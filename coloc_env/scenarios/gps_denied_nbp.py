@@ -103,7 +103,7 @@ Arguments (fields of :class:`GpsDeniedNbpConfig`, defaults = spec §1)
 | initial_threshold  | 3           | 1..N                      | theta_0 [paper]                              |
 | schedule           | "modified"  | "modified", "parallel"    | Sec. 3.4 [paper]; parallel = ablation        |
 | reward             | "team"      | "team", "own"             | see the reward table                         |
-| broadcast_cost     | 0.0         | >= 0                      | lambda_c, metres per broadcast               |
+| broadcast_cost     | 0.0         | [0, 1e12]                 | lambda_c, metres per broadcast               |
 """
 
 from __future__ import annotations
@@ -192,7 +192,7 @@ class GpsDeniedNbpConfig:
         check_range("initial_threshold", self.initial_threshold, 1, self.num_uavs, integer=True)
         check_choice("schedule", self.schedule, ("modified", "parallel"))
         check_choice("reward", self.reward, ("team", "own"))
-        check_range("broadcast_cost", self.broadcast_cost, 0.0, np.inf)
+        check_range("broadcast_cost", self.broadcast_cost, 0.0, 1e12)
 
     def estimator_model(self) -> dn.DnbpModel:
         """The dNBP parameters; the defensive box covers the whole flight (spec §4.3)."""
@@ -309,7 +309,7 @@ class GpsDeniedNbpScenario(Scenario):
         return gymnasium.spaces.Box(-np.inf, np.inf, shape=(OBS_DIM,), dtype=np.float32)
 
     def action_space(self):
-        return gymnasium.spaces.MultiBinary(self.config.num_iterations)
+        return gymnasium.spaces.MultiBinary(int(self.config.num_iterations))
 
     def state_space(self):
         return gymnasium.spaces.Box(-np.inf, np.inf, shape=(self.num_agents * (OBS_DIM + 1),), dtype=np.float32)
@@ -346,6 +346,11 @@ class GpsDeniedNbpScenario(Scenario):
 
     def step(self, actions) -> None:
         actions = self.check_actions(actions)
+        outside = (actions != 0) & (actions != 1)
+        if np.any(outside):  # MultiBinary: exactly 0 or 1, as MultiDiscrete refuses a value out of range
+            copy, agent, i = np.argwhere(outside)[0]
+            raise ValueError(f"action[{i}] (broadcast in NBP iteration {i}) of {self.agent_names[agent]} must be "
+                             f"0 or 1 (MultiBinary), got {actions[copy, agent, i]:g}")
         if np.any(self.k >= self.horizon):
             raise RuntimeError("step() on a copy whose episode is over; reset it first")
         self.advance(actions > 0.5)

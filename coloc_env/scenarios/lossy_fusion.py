@@ -86,14 +86,15 @@ Arguments (fields of :class:`LossyFusionConfig`, defaults = the paper)
 | num_uavs             | 2                                | 2..16 (L, leader included)               |
 | period               | 1.0                              | > 0 (T, seconds)                         |
 | accel_noise          | 5.0                              | >= 0 (q, m^2/s^4 per axis)               |
-| measurement_noise    | 10.0                             | > 0 (r, m^2 per axis)                    |
-| initial_state        | (100, 10, 100, 10, 100, 0)       | (6,): X0, x(0) ~ N(X0, P0)               |
-| initial_cov          | diag(100, 5, 100, 5, 100, 5)     | (6, 6) PSD: P0                           |
+| measurement_noise    | 10.0                             | [1e-6, 1e12] (r, m^2 per axis)           |
+| initial_state        | (100, 10, 100, 10, 100, 0)       | (6,) in [-1e6, 1e6]: X0, x(0) ~ N(X0, P0)|
+| initial_cov          | diag(100, 5, 100, 5, 100, 5)     | (6, 6) positive definite (the observation|
+|                      |                                  | divides by it), entries <= 1e12: P0      |
 | on_time_probability  | 0.4                              | [0, 1] (alpha1)                          |
 | late_probability     | 0.3                              | [0, 1] (alpha2), alpha1 + alpha2 in (0, 1]|
 | horizon              | 100                              | 1..100000                                |
 | reward               | "error"                          | "error", "trace"                         |
-| message_cost         | 0.0                              | >= 0, per packet sent                    |
+| message_cost         | 0.0                              | [0, 1e12], per packet sent               |
 | weight_logit_scale   | 3.0                              | (0, 50]                                  |
 """
 
@@ -152,13 +153,13 @@ class LossyFusionConfig:
     def validate(self) -> None:
         check_range("num_uavs", self.num_uavs, 2, 16, integer=True)
         self.target.validate()
-        check_range("measurement_noise", self.measurement_noise, 0.0, 1e12, low_open=True)
-        as_array("initial_state", self.initial_state, shape=(6,))
-        check_psd("initial_cov", self.initial_cov, 6)
+        check_range("measurement_noise", self.measurement_noise, 1e-6, 1e12)
+        as_array("initial_state", self.initial_state, shape=(6,), bound=1e6)
+        check_psd("initial_cov", self.initial_cov, 6, strict=True, bound=1e12)
         self.link.validate("on_time_probability", "late_probability")
         check_range("horizon", self.horizon, 1, 100_000, integer=True)
         check_choice("reward", self.reward, ("error", "trace"))
-        check_range("message_cost", self.message_cost, 0.0, np.inf)
+        check_range("message_cost", self.message_cost, 0.0, 1e12)
         check_range("weight_logit_scale", self.weight_logit_scale, 0.0, 50.0, low_open=True)
 
     def lossy_model(self) -> lf.LossyModel:

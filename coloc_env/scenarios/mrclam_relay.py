@@ -128,14 +128,15 @@ Arguments (fields of :class:`MrclamRelayConfig`)
 |----------------------|----------------|--------------------------------------------------------------|
 | data                 | None           | a dataset folder (``MRCLAM_DatasetK``); None = the           |
 |                      |                | environment variable ``COLOC_MRCLAM_DATA`` (error if unset)  |
-| dt                   | 0.1            | (0, 1] s, the step grid of the loader                        |
+| dt                   | 0.1            | [0.01, 1] s, the step grid of the loader (finer: too many    |
+|                      |                | steps to hold)                                               |
 | window_steps         | 600            | 1..T-1 steps (600 = 60 s at dt 0.1)                          |
 | noise_model          | "calibrated"   | "calibrated", "baseline" (see Noise)                         |
 | calibration_s        | None           | (0, 3600] s of the run's start used to fit the noise; None = |
 |                      |                | the model's rule (calibrated: max(60 s, 10 % of the run);    |
 |                      |                | baseline: 60 s)                                              |
-| initial_position_std | 0.01           | > 0 m                                                        |
-| initial_heading_std  | 0.01           | > 0 rad                                                      |
+| initial_position_std | 0.01           | [1e-6, 1e3] m (smaller: P(0) not numerically definite)       |
+| initial_heading_std  | 0.01           | [1e-6, 10] rad                                               |
 | gate                 | 13.8155        | > 0 (chi-square(2) 99.9 %, as ``coloc reproduce mrclam``);   |
 |                      |                | None = apply every observation                               |
 | comm_range           | inf            | > 0 m                                                        |
@@ -264,13 +265,13 @@ class MrclamRelayConfig:
 
     def validate(self) -> None:
         N = NUM_ROBOTS
-        check_range("dt", self.dt, 0.0, 1.0, low_open=True)
+        check_range("dt", self.dt, 0.01, 1.0)
         check_range("window_steps", self.window_steps, 1, 10**9, integer=True)
         check_choice("noise_model", self.noise_model, mrclam.NOISE_MODELS)
         if self.calibration_s is not None:
             check_range("calibration_s", self.calibration_s, 0.0, 3600.0, low_open=True)
-        check_range("initial_position_std", self.initial_position_std, 0.0, 1e3, low_open=True)
-        check_range("initial_heading_std", self.initial_heading_std, 0.0, 10.0, low_open=True)
+        check_range("initial_position_std", self.initial_position_std, 1e-6, 1e3)
+        check_range("initial_heading_std", self.initial_heading_std, 1e-6, 10.0)
         if self.gate is not None:
             check_range("gate", self.gate, 0.0, 1e12, low_open=True)
         self.links.validate(N)

@@ -83,11 +83,11 @@ Arguments (fields of :class:`NlosHorizonConfig`, defaults = spec §9)
 | num_uavs            | 4                            | 1..64 agents (targets) [chosen]                   |
 | num_neighbours      | 8                            | 1..32, J [chosen]                                 |
 | horizon             | 1000                         | 1..100000 steps (1000 s flight [paper])           |
-| period              | 1.0                          | > 0, T (s) [chosen]                               |
-| accel_sigma         | 0.3                          | > 0, sigma_a of the estimator's Q [chosen]        |
+| period              | 1.0                          | [1e-3, 1e4], T (s) [chosen]                       |
+| accel_sigma         | 0.3                          | [1e-6, 1e3], sigma_a of the estimator's Q [chosen]|
 | speed               | 20.0                         | >= 0 m/s [chosen]                                 |
-| turn_rates_deg      | (3, -3, 3, -6)               | deg/s per turn [chosen]                           |
-| turn_windows        | (200,260) (500,560) (700,730) (850,880) | [start, end) steps [chosen]            |
+| turn_rates_deg      | (3, -3, 3, -6)               | deg/s per turn, in [-1e4, 1e4] [chosen]           |
+| turn_windows        | (200,260) (500,560) (700,730) (850,880) | [start, end) integer steps, <= 1e7 [chosen] |
 | target_spacing      | 3000.0                       | >= 0 m: uav_i starts at (0, i * spacing) [chosen] |
 | schedule_shift      | 40                           | >= 0 steps: uav_i's turns start i * shift later   |
 | orbit_radius        | (150, 900)                   | rho0 ~ U(.) m [chosen]                            |
@@ -96,10 +96,11 @@ Arguments (fields of :class:`NlosHorizonConfig`, defaults = spec §9)
 | orbit_bearing_rate  | 0.01                         | om ~ U(-., .) rad/s [chosen]                      |
 | r_inf, r_sup        | 30, 1000                     | 0 < r_inf < r_sup (m) [chosen]                    |
 | sigma_nav           | 2.0                          | > 0 m per axis [chosen]                           |
-| tx_power_dbm        | 20.0                         | P_T [chosen]                                      |
-| frequency_hz        | 2.4e9                        | f > 0 [chosen]                                    |
-| d0                  | 1.0                          | > 0 m [chosen]                                    |
-| path_loss_exponent  | 2.2                          | n > 0 [chosen]                                    |
+| tx_power_dbm        | 20.0                         | P_T in [-200, 200] dBm [chosen]                   |
+| frequency_hz        | 2.4e9                        | f in [1, 1e13] Hz [chosen]                        |
+| d0                  | 1.0                          | [1e-3, 1e6] m [chosen]                            |
+| path_loss_exponent  | 2.2                          | n in [0.5, 10] (smaller: the RSS-inverted range   |
+|                     |                              | overflows) [chosen]                               |
 | sigma_db            | 2.0                          | > 0 dB, LOS [chosen]                              |
 | sigma_theta_deg     | 0.1                          | > 0 deg, LOS [paper]                              |
 | nlos_bias_db        | 6.0                          | mu_db [chosen]                                    |
@@ -123,7 +124,7 @@ Arguments (fields of :class:`NlosHorizonConfig`, defaults = spec §9)
 | smoothing           | 0.8                          | lam in (0, 1) [chosen]                            |
 | prior_std           | (50, 50, 5, 5)               | > 0; x_hat before any estimate = truth + N(0, P0) |
 | reward              | "error"                      | "error", "trace"                                  |
-| packet_cost         | 0.0                          | >= 0 per packet used                              |
+| packet_cost         | 0.0                          | [0, 1e12] per packet used                         |
 
 "horizon" is the episode length as in every scenario; the paper's horizon size N is
 called the *window* here.
@@ -138,7 +139,7 @@ import gymnasium
 import numpy as np
 
 import estimators.afge as af
-from coloc_env.config import as_array, check_choice, check_range
+from coloc_env.config import as_array, check_choice, check_range, check_step_windows
 from coloc_env.rendering import Link, Scene
 from coloc_env.scenarios.base import Scenario
 from coloc_env.world.flight import OrbitingNeighbours, OrbitParameters, TurnSchedulePath
@@ -248,14 +249,15 @@ class NlosHorizonConfig:
     def validate(self) -> None:
         check_range("num_uavs", self.num_uavs, 1, 64, integer=True)
         check_range("horizon", self.horizon, 1, 100_000, integer=True)
-        check_range("period", self.period, 0.0, 1e4, low_open=True)
-        check_range("accel_sigma", self.accel_sigma, 0.0, 1e3, low_open=True)
+        check_range("period", self.period, 1e-3, 1e4)
+        check_range("accel_sigma", self.accel_sigma, 1e-6, 1e3)
         check_range("speed", self.speed, 0.0, 1e4)
-        rates = as_array("turn_rates_deg", self.turn_rates_deg, ndim=1)
+        rates = as_array("turn_rates_deg", self.turn_rates_deg, ndim=1, bound=1e4)
         windows = as_array("turn_windows", self.turn_windows)
         if windows.shape != (len(rates), 2):
             raise ValueError(f"turn_windows must have shape ({len(rates)}, 2), one [start, end) per turn rate, "
                              f"got {windows.shape}")
+        check_step_windows("turn_windows", self.turn_windows, windows)
         self.path.validate()
         check_range("target_spacing", self.target_spacing, 0.0, 1e7)
         check_range("schedule_shift", self.schedule_shift, 0, 100_000, integer=True)
@@ -266,14 +268,31 @@ class NlosHorizonConfig:
                 raise ValueError(f"{name} must be (low, high) with 0 <= low <= high, got {getattr(self, name)}")
         check_range("orbit_wobble", self.orbit_wobble, 0.0, 1e6)
         check_range("orbit_bearing_rate", self.orbit_bearing_rate, 0.0, 10.0)
+        check_range("r_inf", self.r_inf, 0.0, 1e9, low_open=True)
+        check_range("r_sup", self.r_sup, 0.0, 1e9, low_open=True)
         self.area.validate()
         check_range("sigma_nav", self.sigma_nav, 0.0, 1e4, low_open=True)
+        # the signal's own fields, in their own units, before the derived SignalModel converts them
+        check_range("tx_power_dbm", self.tx_power_dbm, -200.0, 200.0)
+        check_range("frequency_hz", self.frequency_hz, 1.0, 1e13)
+        check_range("d0", self.d0, 1e-3, 1e6)
+        check_range("path_loss_exponent", self.path_loss_exponent, 0.5, 10.0)
+        check_range("sigma_db", self.sigma_db, 0.0, 100.0, low_open=True)
+        check_range("sigma_theta_deg", self.sigma_theta_deg, 0.0, 180.0, low_open=True)
+        check_range("nlos_bias_db", self.nlos_bias_db, -100.0, 100.0)
+        check_range("nlos_sigma_db", self.nlos_sigma_db, 0.0, 100.0)
+        check_range("nlos_bias_deg", self.nlos_bias_deg, -180.0, 180.0)
+        check_range("nlos_sigma_deg", self.nlos_sigma_deg, 0.0, 180.0)
+        check_range("p_nlos", self.p_nlos, 0.0, 1.0)
+        check_range("p10", self.p10, 0.0, 1.0)
         RssAoaSensor(self.signal).validate()
         self.chain.validate()
+        check_range("buffer_length", self.buffer_length, 0, 1000, integer=True)
+        as_array("delay_probs", self.delay_probs, ndim=1)
         self.delay.validate()
         J = self.num_neighbours
-        check_range("n_strongest", self.n_strongest, 1, J, integer=True)
-        check_range("min_packets", self.min_packets, 1, J, integer=True)
+        check_range("n_strongest (at most num_neighbours)", self.n_strongest, 1, J, integer=True)
+        check_range("min_packets (at most num_neighbours)", self.min_packets, 1, J, integer=True)
         check_choice("weighting", self.weighting, af.WEIGHTINGS)
         check_choice("mode_info", self.mode_info, af.MODE_INFOS)
         check_range("window_max", self.window_max, 2, 1000, integer=True)
@@ -297,7 +316,7 @@ class NlosHorizonConfig:
         if np.any(std <= 0):
             raise ValueError(f"prior_std must be > 0 (P0 positive definite), got {self.prior_std}")
         check_choice("reward", self.reward, ("error", "trace"))
-        check_range("packet_cost", self.packet_cost, 0.0, np.inf)
+        check_range("packet_cost", self.packet_cost, 0.0, 1e12)
 
 
 @dataclass

@@ -24,8 +24,9 @@ Arguments (``coloc_env.worlds.Circles``)
 |-------------------------|---------|---------------------------------------------------|
 | num_agents              | 6       | 2..16                                             |
 | speed                   | 1.0     | (0, 1e4] m/s                                      |
-| turn_rate               | 0.015   | (0, pi/dt] rad/s                                  |
-| dt                      | 0.5     | (0, 3600] s                                       |
+| turn_rate               | 0.015   | [1e-6, pi/dt] rad/s (smaller: a circle too large  |
+|                         |         | to be finite)                                     |
+| dt                      | 0.5     | [1e-6, 3600] s                                    |
 | horizon                 | 800     | 1..1000000 steps (the composition's default)      |
 | speed_noise_std         | 0.5     | [0, 1000] m/s                                     |
 | turn_rate_noise_std     | 1e-3    | [0, 10] rad/s                                     |
@@ -34,7 +35,7 @@ Arguments (``coloc_env.worlds.Circles``)
 | sensing_range           | inf     | > 0 m                                             |
 | num_anchors             | 3       | 0..num_agents                                     |
 | fix_noise_std           | 1.0     | (0, 1e4] m                                        |
-| initial_position_std    | 0.1     | (0, 1e6] m: the prior the agents start with       |
+| initial_position_std    | 0.1     | [1e-6, 1e6] m: the prior the agents start with    |
 | heading_noise           | True    | False: the model the backends assume omits the integrated-heading term of Q |
 """
 
@@ -87,9 +88,9 @@ class Circles(PartConfig):
 
     def check(self, prefix: str) -> None:
         check_range(f"{prefix}num_agents", self.num_agents, 2, 16, integer=True)
-        check_range(f"{prefix}dt", self.dt, 0.0, 3600.0, low_open=True)
+        check_range(f"{prefix}dt", self.dt, 1e-6, 3600.0)
         check_range(f"{prefix}speed", self.speed, 0.0, 1e4, low_open=True)
-        check_range(f"{prefix}turn_rate", self.turn_rate, 0.0, np.pi / self.dt, low_open=True)
+        check_range(f"{prefix}turn_rate", self.turn_rate, 1e-6, np.pi / self.dt)
         check_range(f"{prefix}horizon", self.horizon, 1, 1_000_000, integer=True)
         OdometrySensor(self.speed_noise_std, self.turn_rate_noise_std).validate(prefix)
         check_range(f"{prefix}range_noise_var", self.range_noise_var, 0.0, 1e6, low_open=True)
@@ -97,7 +98,7 @@ class Circles(PartConfig):
         check_distance(f"{prefix}sensing_range", self.sensing_range)
         check_range(f"{prefix}num_anchors", self.num_anchors, 0, self.num_agents, integer=True)
         check_range(f"{prefix}fix_noise_std", self.fix_noise_std, 0.0, 1e4, low_open=True)
-        check_range(f"{prefix}initial_position_std", self.initial_position_std, 0.0, 1e6, low_open=True)
+        check_range(f"{prefix}initial_position_std", self.initial_position_std, 1e-6, 1e6)
         check_flag(f"{prefix}heading_noise", self.heading_noise)
 
     def build(self, batch: int, horizon: int) -> CirclesWorld:

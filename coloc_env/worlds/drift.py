@@ -33,13 +33,14 @@ Arguments (``coloc_env.worlds.Drift``; defaults = the paper's Sec. 2)
 | field              | default                | allowed                                         |
 |--------------------|------------------------|-------------------------------------------------|
 | num_agents         | 4                      | 2..16                                           |
-| transition         | I_3                    | (n, n) finite, n in 2..16                       |
-| drift              | (0.5, 0.5, 0.5)        | (n,) finite (m per step)                        |
-| measurement        | I_3                    | (m, n) finite, m in 1..16                       |
-| process_noise      | diag(0.02, 0.05, 0.03) | (n, n) PSD (m^2)                                |
-| measurement_noise  | diag(0.03, 0.04, 0.02) | (m, m) or (num_agents, m, m) PD (m^2)           |
-| initial_state      | (10, 10, 10)           | (n,): xhat(0); x(0) ~ N(this, initial_cov)      |
-| initial_cov        | diag(0.19, 0.09, 0.08) | (n, n) PSD: M(0)                                |
+| transition         | I_3                    | (n, n), n in 2..16, entries in [-1e6, 1e6],     |
+|                    |                        | spectral radius <= 1.001                        |
+| drift              | (0.5, 0.5, 0.5)        | (n,) in [-1e6, 1e6] (m per step)                |
+| measurement        | I_3                    | (m, n), m in 1..16, entries in [-1e6, 1e6]      |
+| process_noise      | diag(0.02, 0.05, 0.03) | (n, n) PSD, entries <= 1e12 (m^2)               |
+| measurement_noise  | diag(0.03, 0.04, 0.02) | (m, m) or (num_agents, m, m) PD, <= 1e12 (m^2)  |
+| initial_state      | (10, 10, 10)           | (n,) in [-1e6, 1e6]: xhat(0); x(0) ~ N(this, .) |
+| initial_cov        | diag(0.19, 0.09, 0.08) | (n, n) PSD, entries <= 1e12: M(0)               |
 | horizon            | 50                     | 1..100000 steps (the composition's default)     |
 | formation_radius   | 10.0                   | [0, 1e6] m: the agents' fixed ring              |
 """
@@ -50,7 +51,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from coloc_env.config import as_array, check_psd, check_range
+from coloc_env.config import as_array, check_psd, check_range, check_stable
 from coloc_env.parts import WORLDS, PartConfig
 from coloc_env.world.sensors import LinearSensor
 from coloc_env.worlds.base import Readings, World
@@ -130,24 +131,33 @@ class TargetWorld(World):
         return float(max(np.abs(self.target_position()).max(), float(self.config.formation_radius))) + 10.0
 
 
-def check_linear_world(prefix: str, config) -> tuple[int, int]:
-    """Shared checks of a (transition, measurement, noises) world; returns (n, m)."""
-    A = as_array(f"{prefix}transition", config.transition, ndim=2)
+# The magnitudes the mathematics supports over a 1e5-step horizon (larger ones overflow or make the
+# innovation covariance numerically singular); the Arguments tables state them.
+VALUE_BOUND = 1e6   # |entries| of drift, measurement, initial_state
+COV_BOUND = 1e12    # |entries| of the noise and prior covariances (m^2)
+
+
+def check_linear_world(prefix: str, config, strict_prior: bool = False) -> tuple[int, int]:
+    """Shared checks of a (transition, measurement, noises) world; returns (n, m). ``strict_prior``: the
+    prior covariance must be positive definite (a scenario whose observation divides by it)."""
+    A = as_array(f"{prefix}transition", config.transition, ndim=2, bound=VALUE_BOUND)
     n = A.shape[0]
     if A.shape != (n, n) or not 2 <= n <= 16:
         raise ValueError(f"{prefix}transition must be a square (n, n) matrix with n in [2, 16], got shape {A.shape}")
-    as_array(f"{prefix}drift", config.drift, shape=(n,))
-    C = as_array(f"{prefix}measurement", config.measurement, ndim=2)
+    check_stable(f"{prefix}transition", A)
+    as_array(f"{prefix}drift", config.drift, shape=(n,), bound=VALUE_BOUND)
+    C = as_array(f"{prefix}measurement", config.measurement, ndim=2, bound=VALUE_BOUND)
     if C.shape[1] != n or not 1 <= C.shape[0] <= 16:
         raise ValueError(f"{prefix}measurement must have shape (m, {n}) with m in [1, 16], got {C.shape}")
-    check_psd(f"{prefix}process_noise", config.process_noise, n)
-    V = as_array(f"{prefix}measurement_noise", config.measurement_noise)
-    if V.ndim == 3 and V.shape[0] != config.num_agents:
-        raise ValueError(f"{prefix}measurement_noise must be (m, m) or ({config.num_agents}, m, m), got {V.shape}")
+    check_psd(f"{prefix}process_noise", config.process_noise, n, bound=COV_BOUND)
+    V = as_array(f"{prefix}measurement_noise", config.measurement_noise, bound=COV_BOUND)
+    agents = getattr(config, "num_agents", getattr(config, "num_uavs", None))
+    if V.ndim not in (2, 3) or (V.ndim == 3 and V.shape[0] != agents):
+        raise ValueError(f"{prefix}measurement_noise must be (m, m) or ({agents}, m, m), got {V.shape}")
     for j, Vj in enumerate(V if V.ndim == 3 else V[None]):
         check_psd(f"{prefix}measurement_noise" + (f"[{j}]" if V.ndim == 3 else ""), Vj, C.shape[0], strict=True)
-    as_array(f"{prefix}initial_state", config.initial_state, shape=(n,))
-    check_psd(f"{prefix}initial_cov", config.initial_cov, n)
+    as_array(f"{prefix}initial_state", config.initial_state, shape=(n,), bound=VALUE_BOUND)
+    check_psd(f"{prefix}initial_cov", config.initial_cov, n, strict=strict_prior, bound=COV_BOUND)
     return n, C.shape[0]
 
 

@@ -73,13 +73,13 @@ Arguments (``coloc_env.worlds.Mrclam``)
 | data                 | None         | an MRCLAM dataset folder; None = ``$COLOC_MRCLAM_DATA`` at build   |
 |                      |              | time (no data is read before an env is built)                     |
 | num_agents           | 5            | 2..5: robots 0..N-1 (the others' sightings are left out)          |
-| dt                   | 0.1          | (0, 1] s: the slice length of the loader's grid                   |
+| dt                   | 0.1          | [0.01, 1] s: the slice length of the loader's grid                |
 | horizon              | 600          | 1..T-1-start steps (checked against the run at build time)        |
 | start                | None         | None = drawn per episode; 0..T-1-horizon = a fixed first step     |
 | noise_model          | "calibrated" | "calibrated", "baseline" (:class:`~coloc_env.data.mrclam.NoiseModel`) |
 | calibration_s        | None         | (0, 3600] s of the run's start the noise is fitted on; None = the model's rule |
-| initial_position_std | 0.01         | (0, 1000] m                                                       |
-| initial_heading_std  | 0.01         | (0, 10] rad                                                       |
+| initial_position_std | 0.01         | [1e-6, 1000] m (smaller: P(0) not numerically definite)           |
+| initial_heading_std  | 0.01         | [1e-6, 10] rad                                                    |
 """
 
 from __future__ import annotations
@@ -122,15 +122,15 @@ class Mrclam(PartConfig):
         if self.data is not None and not isinstance(self.data, (str, os.PathLike)):
             raise ValueError(f"{prefix}data must be a path to an MRCLAM dataset folder or None, got {self.data!r}")
         check_range(f"{prefix}num_agents", self.num_agents, 2, NUM_ROBOTS, integer=True)
-        check_range(f"{prefix}dt", self.dt, 0.0, 1.0, low_open=True)
+        check_range(f"{prefix}dt", self.dt, 0.01, 1.0)
         check_range(f"{prefix}horizon", self.horizon, 1, 10**9, integer=True)
         if self.start is not None:
             check_range(f"{prefix}start", self.start, 0, 10**9, integer=True)
         check_choice(f"{prefix}noise_model", self.noise_model, mrclam.NOISE_MODELS)
         if self.calibration_s is not None:
             check_range(f"{prefix}calibration_s", self.calibration_s, 0.0, 3600.0, low_open=True)
-        check_range(f"{prefix}initial_position_std", self.initial_position_std, 0.0, 1e3, low_open=True)
-        check_range(f"{prefix}initial_heading_std", self.initial_heading_std, 0.0, 10.0, low_open=True)
+        check_range(f"{prefix}initial_position_std", self.initial_position_std, 1e-6, 1e3)
+        check_range(f"{prefix}initial_heading_std", self.initial_heading_std, 1e-6, 10.0)
 
     def tables(self, prefix: str = "world."):
         """The replay tables of the run (loaded and calibrated once per path; ValueError naming ``data``)."""

@@ -50,11 +50,12 @@ Arguments (``coloc_env.worlds.NlosOrbit``; defaults = ``nlos_horizon``'s, spec Â
 | num_agents          | 4                            | 1..64 targets                                    |
 | num_neighbours      | 8                            | 1..32, J                                         |
 | horizon             | 1000                         | 1..100000 steps (the composition's default)      |
-| period              | 1.0                          | (0, 1e4] s, T                                    |
-| accel_sigma         | 0.3                          | (0, 1000] m/s^2: sigma_a of the model the backends assume |
+| period              | 1.0                          | [1e-3, 1e4] s, T                                 |
+| accel_sigma         | 0.3                          | [1e-6, 1000] m/s^2: sigma_a of the model the backends assume |
 | speed               | 20.0                         | [0, 1e4] m/s                                     |
 | turn_rates_deg      | (3, -3, 3, -6)               | deg/s per turn, finite                           |
-| turn_windows        | (200,260) (500,560) (700,730) (850,880) | one [start, end), 0 <= start < end, per turn |
+| turn_windows        | (200,260) (500,560) (700,730) (850,880) | one [start, end) per turn: integer    |
+|                     |                              | steps, 0 <= start < end <= 1e7                   |
 | target_spacing      | 3000.0                       | [0, 1e7] m                                       |
 | schedule_shift      | 40                           | 0..100000 steps                                  |
 | orbit_radius        | (150, 900)                   | (low, high), 0 <= low <= high, m                 |
@@ -64,9 +65,10 @@ Arguments (``coloc_env.worlds.NlosOrbit``; defaults = ``nlos_horizon``'s, spec Â
 | r_inf, r_sup        | 30, 1000                     | 0 < r_inf < r_sup <= 1e9 m (RSA)                 |
 | sigma_nav           | 2.0                          | (0, 1e4] m per axis                              |
 | tx_power_dbm        | 20.0                         | [-200, 200] dBm                                  |
-| frequency_hz        | 2.4e9                        | (0, 1e13] Hz                                     |
-| d0                  | 1.0                          | (0, 1e6] m                                       |
-| path_loss_exponent  | 2.2                          | (0, 10]                                          |
+| frequency_hz        | 2.4e9                        | [1, 1e13] Hz                                     |
+| d0                  | 1.0                          | [1e-3, 1e6] m                                    |
+| path_loss_exponent  | 2.2                          | [0.5, 10] (smaller: the RSS-inverted range       |
+|                     |                              | overflows)                                       |
 | sigma_db            | 2.0                          | (0, 100] dB, LOS                                 |
 | sigma_theta_deg     | 0.1                          | (0, 180] deg, LOS                                |
 | nlos_bias_db        | 6.0                          | [-100, 100] dB                                   |
@@ -86,7 +88,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from coloc_env.config import as_array
+from coloc_env.config import as_array, check_step_windows
 from coloc_env.parts import WORLDS, PartConfig, check_flag, check_range
 from coloc_env.scenarios.nlos_horizon import NlosHorizonConfig, draw_episode
 from coloc_env.world.flight import OrbitParameters
@@ -167,16 +169,15 @@ class NlosOrbit(PartConfig):
         check_range(f"{p}num_agents", self.num_agents, 1, 64, integer=True)
         check_range(f"{p}num_neighbours", self.num_neighbours, 1, 32, integer=True)
         check_range(f"{p}horizon", self.horizon, 1, 100_000, integer=True)
-        check_range(f"{p}period", self.period, 0.0, 1e4, low_open=True)
-        check_range(f"{p}accel_sigma", self.accel_sigma, 0.0, 1e3, low_open=True)
+        check_range(f"{p}period", self.period, 1e-3, 1e4)
+        check_range(f"{p}accel_sigma", self.accel_sigma, 1e-6, 1e3)
         check_range(f"{p}speed", self.speed, 0.0, 1e4)
         rates = as_array(f"{p}turn_rates_deg", self.turn_rates_deg, ndim=1)
         windows = as_array(f"{p}turn_windows", self.turn_windows)
         if windows.shape != (len(rates), 2):
             raise ValueError(f"{p}turn_windows must have shape ({len(rates)}, 2), one [start, end) per turn rate, "
                              f"got {windows.shape}")
-        if np.any(windows[:, 1] <= windows[:, 0]) or np.any(windows < 0):
-            raise ValueError(f"{p}turn_windows must be [start, end) with 0 <= start < end, got {self.turn_windows}")
+        check_step_windows(f"{p}turn_windows", self.turn_windows, windows)
         check_range(f"{p}target_spacing", self.target_spacing, 0.0, 1e7)
         check_range(f"{p}schedule_shift", self.schedule_shift, 0, 100_000, integer=True)
         for name in ("orbit_radius", "orbit_wobble_rate"):
@@ -188,9 +189,9 @@ class NlosOrbit(PartConfig):
         ReceiveSearchArea(self.r_inf, self.r_sup).validate(f"{p}r_inf", f"{p}r_sup")
         check_range(f"{p}sigma_nav", self.sigma_nav, 0.0, 1e4, low_open=True)
         check_range(f"{p}tx_power_dbm", self.tx_power_dbm, -200.0, 200.0)
-        check_range(f"{p}frequency_hz", self.frequency_hz, 0.0, 1e13, low_open=True)
-        check_range(f"{p}d0", self.d0, 0.0, 1e6, low_open=True)
-        check_range(f"{p}path_loss_exponent", self.path_loss_exponent, 0.0, 10.0, low_open=True)
+        check_range(f"{p}frequency_hz", self.frequency_hz, 1.0, 1e13)
+        check_range(f"{p}d0", self.d0, 1e-3, 1e6)
+        check_range(f"{p}path_loss_exponent", self.path_loss_exponent, 0.5, 10.0)
         check_range(f"{p}sigma_db", self.sigma_db, 0.0, 100.0, low_open=True)
         check_range(f"{p}sigma_theta_deg", self.sigma_theta_deg, 0.0, 180.0, low_open=True)
         check_range(f"{p}nlos_bias_db", self.nlos_bias_db, -100.0, 100.0)

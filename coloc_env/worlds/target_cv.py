@@ -36,11 +36,13 @@ Arguments (``coloc_env.worlds.TargetCv``; defaults = the paper's Sec. 4)
 | field              | default                          | allowed                                  |
 |--------------------|----------------------------------|------------------------------------------|
 | num_agents         | 2                                | 2..16 (L; agent 0 is the leader)         |
-| period             | 1.0                              | (0, 1e4] s (T)                           |
+| period             | 1.0                              | (0, 1e4] s (T); with accel_noise, the    |
+|                    |                                  | singular Q = q G G^T must pass the       |
+|                    |                                  | model's PSD check (a large q T^4 fails)  |
 | accel_noise        | 5.0                              | [0, 1e12] m^2/s^4 per axis (q)           |
-| measurement_noise  | 10.0                             | (0, 1e12] m^2 per axis (r)               |
-| initial_state      | (100, 10, 100, 10, 100, 0)       | (6,): X0; x(0) ~ N(X0, P0)               |
-| initial_cov        | diag(100, 5, 100, 5, 100, 5)     | (6, 6) PSD: P0                           |
+| measurement_noise  | 10.0                             | [1e-6, 1e12] m^2 per axis (r)            |
+| initial_state      | (100, 10, 100, 10, 100, 0)       | (6,) in [-1e6, 1e6]: X0; x(0) ~ N(X0, P0)|
+| initial_cov        | diag(100, 5, 100, 5, 100, 5)     | (6, 6) PSD, entries <= 1e12: P0          |
 | horizon            | 100                              | 1..100000 steps (the composition's default) |
 | formation_radius   | 10.0                             | [0, 1e6] m: the agents' fixed ring       |
 """
@@ -85,9 +87,16 @@ class TargetCv(PartConfig):
     def check(self, prefix: str) -> None:
         check_range(f"{prefix}num_agents", self.num_agents, 2, 16, integer=True)
         self.target.validate(prefix)
-        check_range(f"{prefix}measurement_noise", self.measurement_noise, 0.0, 1e12, low_open=True)
-        as_array(f"{prefix}initial_state", self.initial_state, shape=(6,))
-        check_psd(f"{prefix}initial_cov", self.initial_cov, 6)
+        target = self.target
+        try:  # the model the world builds: its covariance check is absolute, so a large q T^4 fails it
+            LinearGaussian(target.transition, np.zeros(6), target.process_noise)
+        except ValueError as exc:
+            raise ValueError(f"{prefix}period={self.period!r} with {prefix}accel_noise={self.accel_noise!r} gives a "
+                             f"process noise q G G^T (rank 3) that rounding makes indefinite ({exc}); choose a smaller "
+                             f"period or accel_noise") from exc
+        check_range(f"{prefix}measurement_noise", self.measurement_noise, 1e-6, 1e12)
+        as_array(f"{prefix}initial_state", self.initial_state, shape=(6,), bound=1e6)
+        check_psd(f"{prefix}initial_cov", self.initial_cov, 6, bound=1e12)
         check_range(f"{prefix}horizon", self.horizon, 1, 100_000, integer=True)
         check_range(f"{prefix}formation_radius", self.formation_radius, 0.0, 1e6)
 
