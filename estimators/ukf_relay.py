@@ -129,6 +129,19 @@ def ukf_weights(dim: int, lam: float) -> np.ndarray:
     return w
 
 
+PAPER_RULE_WARNING = (
+    "truncation='paper' is wang2019's rule (P_RU left unchanged on a truncated chain): it loses positive "
+    "definiteness within tens of steps of truncated chains (coloc reproduce wang2019 measures where), and the "
+    "next update then raises a ValueError naming it. It is kept for the reproduction; use "
+    "truncation='consistent' (the default) for episodes that must run.")
+
+
+def paper_rule_failure(exc: Exception, step) -> np.linalg.LinAlgError:
+    """The error an env raises when the paper's truncation rule has broken the covariance (a ValueError)."""
+    return np.linalg.LinAlgError(f"truncation='paper' lost positive definiteness at step {step}: {exc}. "
+                                 "Use truncation='consistent' (the default) for episodes that must run.")
+
+
 def _cholesky(matrix: np.ndarray, what: str) -> np.ndarray:
     try:
         return np.linalg.cholesky(matrix)

@@ -50,6 +50,7 @@ Arguments (``coloc_env.backends.UkfCcl`` / ``UkfDcl``)
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -117,6 +118,8 @@ class JointUkfBackend(Backend):
             raise ValueError(f"backend.ukf_lambda must be > -2N = {-2 * N}, got {config.ukf_lambda!r}")
         self.mean = np.zeros((self.batch, N, d))
         self.cov = np.zeros((self.batch, d * N, d * N))
+        if distributed and config.truncation == "paper":
+            warnings.warn(ukf.PAPER_RULE_WARNING, UserWarning, stacklevel=2)
         # a world whose reading [m, n] is also [n, m] (one measurement known to both) is fused once per pair
         self.one_per_pair = bool(getattr(world, "symmetric_ranges", False))
 
@@ -159,9 +162,14 @@ class JointUkfBackend(Backend):
                 chain = self.network.relay(mj, np.where(has, nj, -1), lambda h: dcl_floats(h, d), slot=j)
                 used = np.flatnonzero(has & (chain.length >= 2))
                 if len(used):
-                    self.mean[used], self.cov[used] = ukf.dcl_update(
-                        self.mean[used], self.cov[used], chain.chain[used], chain.length[used], z[used],
-                        self.world.range_noise_var(), lam, self.config.truncation)
+                    try:
+                        self.mean[used], self.cov[used] = ukf.dcl_update(
+                            self.mean[used], self.cov[used], chain.chain[used], chain.length[used], z[used],
+                            self.world.range_noise_var(), lam, self.config.truncation)
+                    except np.linalg.LinAlgError as exc:
+                        if self.config.truncation != "paper":
+                            raise
+                        raise ukf.paper_rule_failure(exc, int(self.world.k.max())) from exc
             else:
                 used = np.flatnonzero(self._to_centre(mj, 1.0, slot=j))
                 if len(used):

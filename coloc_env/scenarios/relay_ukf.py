@@ -125,6 +125,7 @@ UKF-DCL update (each vectorized over the copies whose chain reaches it).
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import gymnasium
@@ -242,6 +243,8 @@ class RelayUKFScenario(Scenario):
 
     def __init__(self, config: RelayUKFConfig, batch: int = 1):
         super().__init__(config, batch)
+        if config.truncation == "paper":
+            warnings.warn(ukf.PAPER_RULE_WARNING, UserWarning, stacklevel=2)
         N, K, B = self.num_agents, self.horizon, self.batch
         self.tracks = config.tracks
         self.odometry_sensor = config.odometry
@@ -383,9 +386,14 @@ class RelayUKFScenario(Scenario):
         sub = np.flatnonzero(event.used)
         if len(sub) == 0:
             return
-        self.estimate[sub], self.cov[sub] = ukf.dcl_update(
-            self.estimate[sub], self.cov[sub], event.relay.chain[sub], event.relay.length[sub], event.range[sub],
-            self.config.range_noise_var, self.config.ukf_lambda, self.config.truncation)
+        try:
+            self.estimate[sub], self.cov[sub] = ukf.dcl_update(
+                self.estimate[sub], self.cov[sub], event.relay.chain[sub], event.relay.length[sub],
+                event.range[sub], self.config.range_noise_var, self.config.ukf_lambda, self.config.truncation)
+        except np.linalg.LinAlgError as exc:
+            if self.config.truncation != "paper":
+                raise
+            raise ukf.paper_rule_failure(exc, int(self.k[sub].max())) from exc
 
     def time_update(self) -> None:
         """Every platform predicts k -> k+1 from its odometry (eq. 1); the truth moves; rewards.

@@ -233,7 +233,10 @@ def test_truncated_chains_keep_p_positive_definite_only_with_the_consistent_upda
     smallest = {}
     for rule in ("consistent", "paper"):
         config = build_config(RelayUKFConfig, {"max_hops": 1, "truncation": rule})
-        scenario = RelayUKFScenario(config, batch=4)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            scenario = RelayUKFScenario(config, batch=4)
+        assert any("truncation='paper'" in str(w.message) for w in caught) == (rule == "paper")
         rng = np.random.default_rng(0)
         scenario.reset(rng.spawn(4))
         values = []
@@ -260,3 +263,22 @@ def test_rgb_render_draws_trajectories_and_the_chain():
     assert [link.target for link in scene.links[:-1]] == [link.source for link in scene.links[1:]]
     frame = env.render()
     assert frame.ndim == 3 and frame.shape[2] == 3 and frame.dtype == np.uint8 and frame.std() > 10
+
+
+def test_the_papers_truncation_rule_warns_when_chosen_and_fails_with_a_clear_error():
+    """wang2019's rule (P_RU unchanged on a truncated chain) loses positive definiteness; the env says so
+    when the rule is chosen and, when it happens, raises a ValueError naming the option (issue 17)."""
+    with pytest.warns(UserWarning, match="truncation='paper'.*loses positive definiteness"):
+        env = coloc_env.parallel_env("relay_ukf", truncation="paper", max_hops=1, horizon=300)
+    policy = agents.make_policy("paper", env, seed=0)
+    observations, _ = env.reset(seed=0)
+    with pytest.raises(ValueError, match="truncation='paper' lost positive definiteness at step"):
+        while env.agents:
+            observations, *_ = env.step(policy.act(observations))
+    # the default rule runs the same episode to its end
+    env = coloc_env.parallel_env("relay_ukf", max_hops=1, horizon=300)
+    policy = agents.make_policy("paper", env, seed=0)
+    observations, _ = env.reset(seed=0)
+    while env.agents:
+        observations, rewards, *_ = env.step(policy.act(observations))
+    assert all(np.isfinite(list(rewards.values())))
