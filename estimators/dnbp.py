@@ -116,6 +116,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from estimators.cv_models import ConstantVelocityAccel
+
 __all__ = [
     "Deliver",
     "DnbpModel",
@@ -185,14 +187,17 @@ class DnbpModel:
             raise ValueError("num_particles >= 2, num_iterations >= 1 and oversampling >= 1 are required")
 
     @property
+    def motion(self) -> ConstantVelocityAccel:
+        """The constant-velocity model of Algorithm 3 (wan2014 eq. 1) in the shape of :mod:`estimators.cv_models`."""
+        return ConstantVelocityAccel(self.dt, self.accel_noise_std**2)
+
+    @property
     def transition(self) -> np.ndarray:
-        F = np.eye(4)
-        F[0, 2] = F[1, 3] = self.dt
-        return F
+        return self.motion.transition
 
     @property
     def input_matrix(self) -> np.ndarray:
-        return np.vstack([0.5 * self.dt**2 * np.eye(2), self.dt * np.eye(2)])
+        return self.motion.input_matrix
 
     @property
     def proposal_capacity(self) -> int:
