@@ -88,12 +88,13 @@ class ComposedScenario(Scenario):
 
     def __init__(self, config, batch: int = 1):
         super().__init__(config, batch)
-        self.name = config.name
-        self.world = config.world.build(self.batch, config.episode_steps)
+        spec = self.composition = self.compose(config)
+        self.name = spec.name
+        self.world = spec.world.build(self.batch, spec.episode_steps)
         self.agent_prefix = self.world.agent_prefix
-        self.network = config.network.build(self.world.num_agents, self.batch, config.backend.message_kind,
-                                            getattr(config.backend, "rounds", 1))
-        self.backend = config.backend.build(self.world, self.network, self.batch)
+        self.network = spec.network.build(self.world.num_agents, self.batch, spec.backend.message_kind,
+                                          getattr(spec.backend, "rounds", 1))
+        self.backend = spec.backend.build(self.world, self.network, self.batch)
         self.blocks = [*self.world.sensing_blocks(), *self.network.transport_blocks(),
                        *self.backend.decision_blocks()]
         self.block_parts = (["world"] * len(self.world.sensing_blocks())
@@ -105,12 +106,19 @@ class ComposedScenario(Scenario):
         self._n_network = sum(blk.size for blk in self.network.transport_blocks())
         self._action_space = self._build_action_space()
         B, N = self.batch, self.num_agents
-        self.estimand = getattr(config.world, "estimand", "self")
+        self.estimand = getattr(spec.world, "estimand", "self")
         self.k = np.zeros(B, dtype=int)
         self._truth = np.zeros((B, N, 2))
         self._truth_state = np.zeros((B, getattr(self.world, "state_dim", 0)))
         self._received = np.zeros((B, N, N))
         self._reward = np.zeros((B, N))
+        self.readings = None
+
+    @classmethod
+    def compose(cls, config):
+        """The :class:`~coloc_env.composition.Composition` this scenario steps: the config itself here; a
+        preset binding (:mod:`coloc_env.scenarios.binding`) builds it from its flat config."""
+        return config
 
     # --- description ------------------------------------------------------------
     @property
@@ -119,7 +127,7 @@ class ComposedScenario(Scenario):
 
     @property
     def horizon(self) -> int:
-        return self.config.episode_steps
+        return self.composition.episode_steps
 
     def _build_action_space(self):
         if not self.blocks:
@@ -169,12 +177,10 @@ class ComposedScenario(Scenario):
         idx = self._indices(env_index)
         if len(rngs) != len(idx):
             raise ValueError(f"reset needs one generator per copy: {len(idx)} copies, {len(rngs)} generators")
-        # Each part draws from its own child generator: the same world and seed give every backend the
-        # same truth and readings, whatever the network and backend draw.
-        children = [rng.spawn(3) for rng in rngs]
-        self.world.reset([c[0] for c in children], idx)
-        self.network.reset([c[1] for c in children], idx)
-        self.backend.reset([c[2] for c in children], idx)
+        generators = [self.part_generators(rng) for rng in rngs]
+        self.world.reset([g[0] for g in generators], idx)
+        self.network.reset([g[1] for g in generators], idx)
+        self.backend.reset([g[2] for g in generators], idx)
         self.k[idx] = 0
         if self.estimand == "target":
             self._truth_state[idx] = self.world.target_state()[idx]
@@ -184,7 +190,16 @@ class ComposedScenario(Scenario):
         self._received[idx] = 0.0
         self._reward[idx] = 0.0
 
+    def part_generators(self, rng: np.random.Generator) -> tuple:
+        """The generators of the world, the network and the backend for one copy's episode.
+
+        Each part draws from its own child of the episode's generator, so the same world and seed give
+        every backend the same truth and readings, whatever the network and the backend draw.
+        """
+        return tuple(rng.spawn(3))
+
     def decode_actions(self, actions) -> np.ndarray:
+        """The agents' actions (B, N, *shape) checked and decoded into the blocks' values (B, N, total size)."""
         arr = self.check_actions(actions)
         flat = arr.reshape(self.batch, self.num_agents, -1)
         if not self.blocks:  # nothing to decide: the action space is a placeholder MultiDiscrete([1])
@@ -213,12 +228,16 @@ class ComposedScenario(Scenario):
     def step(self, actions) -> None:
         if np.any(self.k >= self.horizon):
             raise RuntimeError("step() on a copy whose episode is over; reset it first")
-        decoded = self.decode_actions(actions)
+        self.advance(self.decode_actions(actions))
+        self._reward = self.compute_reward()
+
+    def advance(self, decoded: np.ndarray) -> None:
+        """One step k -> k + 1 of every copy under decoded actions (B, N, total size of the blocks)."""
         nw, nn = self._n_world, self._n_network
         sensing = decoded[..., :nw].astype(np.int64)
         transport = decoded[..., nw:nw + nn].astype(np.int64)
         decisions = decoded[..., nw + nn:]
-        readings = self.world.readings(sensing)
+        readings = self.readings = self.world.readings(sensing)
         truth = self.world.positions().copy()
         self.network.begin(self.world.k, truth, transport)
         self.backend.step(readings, decisions)
@@ -230,17 +249,20 @@ class ComposedScenario(Scenario):
         self._received = self.network.delivered.transpose(0, 2, 1)  # [s, t]: s heard t
         self.world.advance()
         self.k = self.k + 1
+
+    def compute_reward(self) -> np.ndarray:
+        """The reward table of the module docstring, after :meth:`advance`: (B, N)."""
         if self.estimand == "target":
             loss = self.target_error()
-            if self.config.reward == "trace":
+            if self.composition.reward == "trace":
                 trace = self.metric_traces()
                 loss = loss if trace is None else trace
-        elif self.config.reward == "error":
+        elif self.composition.reward == "error":
             loss = self.position_error()
         else:
             trace = self.posterior_traces()
             loss = self.position_error() if trace is None else np.sqrt(trace)
-        self._reward = -loss - self.config.communication_cost * self.network.messages_sent
+        return -loss - self.composition.communication_cost * self.network.messages_sent
 
     # --- views -------------------------------------------------------------------------
     def _target_truth(self, offset: int = 0) -> np.ndarray:

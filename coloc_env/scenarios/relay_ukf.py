@@ -45,17 +45,21 @@ out-of-range actions and NaN/inf are a ``ValueError``. Whether a measurement
 happens and who measures is drawn by the env: a policy cannot measure more
 often than ``measurement_probability``.
 
-Observation (per agent, ``Box(-inf, inf, shape=(2N + 3,), float32)``)
---------------------------------------------------------------------
-| index            | meaning                                                               |
-|------------------|-----------------------------------------------------------------------|
-| ``[0, N)``       | one-hot of the agent's own index (shared policy, absolute actions)     |
-| ``[N]``          | 1 if this agent is the measuring platform this step, else 0           |
-| ``[N+1, 2N+1)``  | distance to each platform / 100 m (0 for itself). Link-layer knowledge: |
-|                  | the paper's topology rule ("communicate with the closest neighbour")  |
-|                  | assumes each platform knows which neighbour is closest                |
-| ``[2N+1]``       | log tr P_ii, the agent's own covariance (m^2)                         |
-| ``[2N+2]``       | step fraction k / horizon                                             |
+Observation (per agent, ``Box(shape=(2N + 3,), float32)``)
+---------------------------------------------------------
+| index            | meaning                                                               | bounds     |
+|------------------|-----------------------------------------------------------------------|------------|
+| ``[0, N)``       | one-hot of the agent's own index (shared policy, absolute actions)     | [0, 1]     |
+| ``[N]``          | 1 if this agent is the measuring platform this step, else 0           | [0, 1]     |
+| ``[N+1, 2N+1)``  | distance to each platform / 100 m (0 for itself). Link-layer knowledge: | [0, inf)  |
+|                  | the paper's topology rule ("communicate with the closest neighbour")  |            |
+|                  | assumes each platform knows which neighbour is closest                |            |
+| ``[2N+1]``       | log tr P_ii, the agent's own covariance (m^2)                         | unbounded  |
+| ``[2N+2]``       | step fraction k / horizon                                             | [0, 1]     |
+
+(Before the composable core every entry was unbounded; the one-hots, the flag and the fraction now
+carry their bounds. The distances are unbounded because ``centres`` may be anywhere; log tr P_ii is
+unbounded because dead reckoning without measurements grows P without limit.)
 
 ``state()`` (centralized critic): every agent's observation, then log of the
 diagonal of the joint covariance P (2N values).
@@ -76,14 +80,17 @@ distance error of the estimate at each measurement time k = 0..K-1 after its upd
 prediction to k + 1, so an episode's mean reward differs from the metric by the odometry
 drift of one step.
 
-``infos[agent]``: ``true_position``, ``estimated_position``, ``error`` (distance, m),
+``infos[agent]``: ``true_position``, ``estimated_position`` (time k + 1, after the prediction),
+``position_error`` and ``error`` (the same distance, m),
 ``posterior_error`` (the distance error at time k right after this step's measurement
 update, before the prediction to k + 1: what the paper's metric averages), ``trace``
 (tr P_ii, m^2), ``dead_reckoning_error`` (the same platform by odometry alone, m),
 ``measuring`` (this agent measured this step), ``partner`` (whom it ranged, -1),
 ``chain_position`` (its place in this step's chain, 0 = m, -1 not reached),
 ``relay_target`` (whom it passed to, -1), ``communication`` (hops it delivered this
-step, 0 or 1; summed over agents = hops), ``hops`` and ``hop_cost`` (the team's, this
+step, 0 or 1; summed over agents = hops), ``messages_sent`` (= ``communication``: one message
+per delivered hop, at its holder) and ``floats_sent`` (that hop's payload, :func:`coloc_env.backends.ukf.dcl_floats`:
+10 + 5 r + 2 r (r - 1) floats with r platforms reached), ``hops`` and ``hop_cost`` (the team's, this
 step), ``chain_stop`` (index into :data:`coloc_env.world.relay.STOP_REASONS`, -1 without
 a measurement), ``step``.
 
@@ -121,24 +128,38 @@ Arguments (fields of :class:`RelayUKFConfig`, defaults = the paper's Sec. 4 / Ta
 Batching: everything is vectorized over copies; two loops remain, over the
 at most N-1 hops of a chain and over the at most N chain positions of the
 UKF-DCL update (each vectorized over the copies whose chain reaches it).
+
+Composition: this preset is a binding (:mod:`coloc_env.scenarios.binding`) on the composable
+core: world ``circles`` (``num_anchors=0``, the config's layout and noise), network ``relay``
+(``routing="per_holder"``, the config's links and hop costs) and backend ``ukf_dcl``;
+``coloc_env.PRESETS["relay_ukf"]`` is that composition. The binding keeps the paper's action
+codec (index 0 is the world's sensing choice, index 1 the network's next hop), its observation,
+its team reward after the prediction, and its infos. Seeding: the world draws from the episode's
+generator itself, in the order this scenario drew before the core (odometry noise, schedule,
+range noise), so seeded episodes keep their readings; the relay's losses come from the network's
+own counter-based draws (a child generator), no longer from the episode generator, so with
+``loss_at_zero > 0`` or a finite ``loss_length`` the losses of a seed differ from earlier versions
+(same distribution), as do the draws of a second episode after ``reset()`` without a seed.
 """
 
 from __future__ import annotations
 
-import warnings
 from dataclasses import dataclass
 
 import gymnasium
 import numpy as np
 
 import estimators.ukf_relay as ukf
+from coloc_env.backends.ukf import UkfDcl
+from coloc_env.composition import Composition
 from coloc_env.config import as_array, check_choice, check_range
+from coloc_env.networks.relay import Relay
 from coloc_env.rendering import Link, Scene
-from coloc_env.scenarios.base import Scenario
+from coloc_env.scenarios.binding import PresetScenario
 from coloc_env.world.odometry import OdometrySensor, RangeSensor
 from coloc_env.world.relay import STOP_REASONS, RelayChain, RelayChainLinks, check_distance
-from coloc_env.world.unicycle import CircularTracks, UnicycleMotion
-from coloc_env.worlds.circles import default_layout
+from coloc_env.world.unicycle import CircularTracks
+from coloc_env.worlds.circles import Circles, default_layout
 
 DISTANCE_SCALE = 100.0  # metres per unit in the observation
 
@@ -194,6 +215,21 @@ class RelayUKFConfig:
         return RelayChainLinks(self.comm_range, self.max_hops, self.loss_at_zero, self.loss_length,
                                self.hop_cost, self.hop_cost_per_m2)
 
+    def parts(self) -> tuple:
+        """The (world, network, backend) configs this flat config stands for: ``circles`` without anchors,
+        ``relay`` with one next hop per holder, ``ukf_dcl``."""
+        world = Circles(num_agents=self.num_platforms, centres=self.centres, start_angles=self.start_angles,
+                        directions=self.directions, speed=self.speed, turn_rate=self.turn_rate, dt=self.dt,
+                        horizon=self.horizon, speed_noise_std=self.speed_noise_std,
+                        turn_rate_noise_std=self.turn_rate_noise_std, range_noise_var=self.range_noise_var,
+                        measurement_probability=self.measurement_probability, sensing_range=self.sensing_range,
+                        num_anchors=0, initial_position_std=self.initial_position_std,
+                        heading_noise=self.heading_noise)
+        network = Relay(comm_range=self.comm_range, max_hops=self.max_hops, loss_at_zero=self.loss_at_zero,
+                        loss_length=self.loss_length, routing="per_holder", hop_cost=self.hop_cost,
+                        hop_cost_per_m2=self.hop_cost_per_m2)
+        return world, network, UkfDcl(ukf_lambda=self.ukf_lambda, truncation=self.truncation)
+
     def validate(self) -> None:
         check_range("num_platforms", self.num_platforms, 2, 16, integer=True)
         N = self.num_platforms
@@ -220,20 +256,9 @@ class RelayUKFConfig:
         check_choice("reward", self.reward, ("error", "trace"))
 
 
-@dataclass
-class MeasurementEvent:
-    """What happened at time k in each copy: who measured whom, the chain, the range."""
-
-    measuring: np.ndarray  # (B,) platform m, -1 if no measurement was scheduled
-    partner: np.ndarray  # (B,) platform n chosen by m, -1 without a measurement
-    used: np.ndarray  # (B,) bool: the chain reached n, the estimator updated
-    relay: RelayChain  # length 0 where no measurement was taken
-    range: np.ndarray  # (B,) measured range z (nan where unused)
-    cost: np.ndarray  # (B,) hop cost of the delivered hops
-
-
-class RelayUKFScenario(Scenario):
-    """Batched core of ``relay_ukf``; see the module docstring for the tables."""
+class RelayUKFScenario(PresetScenario):
+    """``relay_ukf`` as a binding: ``circles`` / ``relay`` / ``ukf_dcl`` with the paper's action codec,
+    observation, team reward and infos (module docstring)."""
 
     name = "relay_ukf"
     paper = "wang2019"
@@ -243,41 +268,73 @@ class RelayUKFScenario(Scenario):
 
     def __init__(self, config: RelayUKFConfig, batch: int = 1):
         super().__init__(config, batch)
-        if config.truncation == "paper":
-            warnings.warn(ukf.PAPER_RULE_WARNING, UserWarning, stacklevel=2)
-        N, K, B = self.num_agents, self.horizon, self.batch
-        self.tracks = config.tracks
-        self.odometry_sensor = config.odometry
-        self.range_sensor = config.range_sensor
-        self.links = config.links
-        # The truth has no process noise: every copy flies the same circles.
-        self.truth, self.true_heading, self._speed, self._turn_rate = self.tracks.trajectory(K)
-        self._initial_cov = config.initial_position_std**2 * np.eye(2 * N)
-        self.k = np.zeros(B, dtype=int)
-        self.estimate = np.zeros((B, N, 2))
-        self.cov = np.zeros((B, 2 * N, 2 * N))
+        B, N = self.batch, self.num_agents
         self.dead_reckoning = np.zeros((B, N, 2))
-        self.measured_speed = np.zeros((B, K, N))
-        self.measured_heading = np.zeros((B, K, N))
-        self.schedule = np.full((B, K), -1)  # measuring platform at each step, -1 none
-        self._range_noise = np.zeros((B, K))
-        self._loss_uniforms = np.zeros((B, K, max(N - 1, 1)))
-        self.event = self._empty_event(B)
-        self._reward = np.zeros((B, N))
         self.posterior_error = np.zeros((B, N))
+
+    @classmethod
+    def compose(cls, config: RelayUKFConfig) -> Composition:
+        spec = Composition(*config.parts(), reward=config.reward, horizon=config.horizon, preset=cls.name)
+        spec.validate()
+        return spec
+
+    # --- the paper scenario's names for the parts' state (tests, policies, the reproduction) ---------------
+    @property
+    def truth(self) -> np.ndarray:
+        """True positions (K + 1, N, 2): every copy flies the same circles (no process noise)."""
+        return self.world.truth
+
+    @property
+    def true_heading(self) -> np.ndarray:
+        return self.world.true_heading
+
+    @property
+    def schedule(self) -> np.ndarray:
+        """The measuring platform of each step (B, K), -1 for none."""
+        return self.world.schedule
+
+    @property
+    def measured_speed(self) -> np.ndarray:
+        return self.world.measured_speed
+
+    @property
+    def measured_heading(self) -> np.ndarray:
+        return self.world.measured_heading
+
+    @property
+    def estimate(self) -> np.ndarray:
+        """Each platform's current estimate (B, N, 2): after a step, the prediction to k + 1."""
+        return self.backend.mean
+
+    @property
+    def cov(self) -> np.ndarray:
+        """The joint covariance (B, 2N, 2N) (the distributed filter's rows, held together)."""
+        return self.backend.cov
+
+    @property
+    def chain(self) -> RelayChain:
+        """This step's relay chain (length 0 where no measurement was taken)."""
+        chain = self.network.last_chain
+        if chain is None:
+            B, N = self.batch, self.num_agents
+            chain = RelayChain(chain=np.full((B, N), -1), length=np.zeros(B, dtype=int),
+                               hop_distance=np.full((B, max(N - 1, 1)), np.nan), stop=np.full(B, -1))
+        return chain
 
     # --- description ------------------------------------------------------------
     @property
     def num_agents(self) -> int:
         return self.config.num_platforms
 
-
     @property
     def obs_dim(self) -> int:
         return 2 * self.num_agents + 3
 
     def observation_space(self):
-        return gymnasium.spaces.Box(-np.inf, np.inf, shape=(self.obs_dim,), dtype=np.float32)
+        N = self.num_agents
+        low = np.concatenate([np.zeros(N + 1), np.zeros(N), [-np.inf], [0.0]])
+        high = np.concatenate([np.ones(N + 1), np.full(N, np.inf), [np.inf], [1.0]])
+        return gymnasium.spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
 
     def action_space(self):
         N = self.num_agents
@@ -287,152 +344,68 @@ class RelayUKFScenario(Scenario):
         dim = self.num_agents * self.obs_dim + 2 * self.num_agents
         return gymnasium.spaces.Box(-np.inf, np.inf, shape=(dim,), dtype=np.float32)
 
-    def heading_variance(self, k: np.ndarray) -> np.ndarray:
-        """sigma_phi^2 of the heading used at step k (0 when ``heading_noise`` is off), shape like k."""
-        if not self.config.heading_noise:
-            return np.zeros(np.shape(k))
-        return self.odometry_sensor.heading_variance(k, self.config.dt)
-
     def odometry(self, k: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Measured speed (B, N), integrated heading (B, N) and heading variance (B, 1) at step ``k`` (default: now)."""
         k = self.k if k is None else np.asarray(k)
         rows = np.arange(self.batch)
-        return (self.measured_speed[rows, k], self.measured_heading[rows, k],
-                self.heading_variance(k)[:, None])
+        return (self.world.measured_speed[rows, k], self.world.measured_heading[rows, k],
+                self.world.heading_variance(k)[:, None])
 
     # --- dynamics ------------------------------------------------------------------
+    def part_generators(self, rng):
+        # The world draws from the episode's generator itself, in the order the paper scenario always drew
+        # (odometry noise, the schedule, the range noise), so that seeded episodes keep their readings; the
+        # network and the backend draw from children.
+        network, backend = rng.spawn(2)
+        return rng, network, backend
+
     def reset(self, rngs, env_index=None) -> None:
+        super().reset(rngs, env_index)
         idx = self._indices(env_index)
-        if len(rngs) != len(idx):
-            raise ValueError(f"reset needs one generator per copy: {len(idx)} copies, {len(rngs)} generators")
-        N, K = self.num_agents, self.horizon
-        speed_noise = np.empty((len(idx), K, N))
-        turn_noise = np.empty((len(idx), K, N))
-        occurs = np.empty((len(idx), K))
-        who = np.empty((len(idx), K), dtype=int)
-        for c, rng in enumerate(rngs):
-            # One block per episode, in a fixed order, so that stepping never loops over copies.
-            speed_noise[c], turn_noise[c] = self.odometry_sensor.sample_noise(rng, (K, N))
-            occurs[c] = rng.random(K)
-            who[c] = rng.integers(0, N, size=K)
-            self._range_noise[idx[c]] = self.range_sensor.sample_noise(rng, (K,))
-            self._loss_uniforms[idx[c]] = rng.random((K, self._loss_uniforms.shape[-1]))
-        speed, turn = self.odometry_sensor.measure(self._speed, self._turn_rate, speed_noise, turn_noise)
-        self.measured_speed[idx] = speed
-        # Known initial heading; the platform integrates its measured turn rate (Sec. 1).
-        heading = UnicycleMotion(self.config.dt).headings(self.true_heading[0][None, :],
-                                                          np.swapaxes(turn, 1, 2))
-        self.measured_heading[idx] = np.swapaxes(heading, 1, 2)
-        # Uniforms compared with p: the same draws give nested schedules across p.
-        self.schedule[idx] = np.where(occurs < self.config.measurement_probability, who, -1)
-        self.k[idx] = 0
-        self.estimate[idx] = self.truth[0]
-        self.dead_reckoning[idx] = self.truth[0]
-        self.cov[idx] = self._initial_cov
-        fresh = self._empty_event(len(idx))
-        for name in ("measuring", "partner", "used", "range", "cost"):
-            getattr(self.event, name)[idx] = getattr(fresh, name)
-        for name in ("chain", "length", "hop_distance", "stop"):
-            getattr(self.event.relay, name)[idx] = getattr(fresh.relay, name)
-        self._reward[idx] = 0.0
+        self.dead_reckoning[idx] = self.world.truth[0]
         self.posterior_error[idx] = 0.0  # the estimates start at the truth
 
-    def _empty_event(self, count: int) -> MeasurementEvent:
-        N = self.num_agents
-        relay = RelayChain(chain=np.full((count, N), -1), length=np.zeros(count, dtype=int),
-                           hop_distance=np.full((count, max(N - 1, 1)), np.nan), stop=np.full(count, -1))
-        return MeasurementEvent(measuring=np.full(count, -1), partner=np.full(count, -1),
-                                used=np.zeros(count, dtype=bool), relay=relay, range=np.full(count, np.nan),
-                                cost=np.zeros(count))
-
     def decode_actions(self, actions) -> np.ndarray:
-        """Actions (B, N, 2) -> int array, after checking finiteness, integrality and range."""
+        """Actions (B, N, 2) -> the parts' blocks: whom to range with (the world's sensing choice; never its
+        ``nearest`` entry) and whom to relay to (the network's next hop; N = stop, as the network's)."""
         N = self.num_agents
         return self.check_discrete_actions(
             actions, ("action[0] (whom to range with)", f"action[1] (whom to relay to, {N} = stop)"))
 
-    def step(self, actions) -> None:
-        if np.any(self.k >= self.horizon):
-            raise RuntimeError("step() on a copy whose episode is over; reset it first")
-        event = self.measurement_event(self.decode_actions(actions))
-        self.measurement_update(event)
-        self.time_update()
-
-    def measurement_event(self, actions: np.ndarray) -> MeasurementEvent:
-        """Resolve this step's measurement and relay chain from decoded actions (B, N, 2)."""
-        B, N = self.batch, self.num_agents
-        rows = np.arange(B)
-        positions = np.broadcast_to(self.truth[self.k], (B, N, 2))
-        measuring = self.schedule[rows, self.k]
-        source = np.maximum(measuring, 0)
-        partner = np.where(measuring >= 0, actions[rows, source, 0], -1)
-        in_view = self.range_sensor.in_range(positions[rows, source], positions[rows, np.maximum(partner, 0)])
-        attempt = (measuring >= 0) & (partner != measuring) & in_view
-        relay = self.links.resolve(positions, source, np.where(attempt, partner, source), actions[..., 1],
-                                   self._loss_uniforms[rows, self.k])
-        relay.chain[~attempt] = -1
-        relay.length[~attempt] = 0
-        relay.hop_distance[~attempt] = np.nan
-        relay.stop[~attempt] = -1
-        used = relay.length >= 2
-        z = np.where(used, self.range_sensor.measure(positions[rows, source], positions[rows, np.maximum(partner, 0)],
-                                                     self._range_noise[rows, self.k]), np.nan)
-        cost = self.links.cost(relay.hop_distance).sum(axis=-1)
-        return MeasurementEvent(measuring=measuring, partner=partner, used=used, relay=relay, range=z, cost=cost)
-
-    def measurement_update(self, event: MeasurementEvent) -> None:
-        """UKF-DCL along each copy's chain (copies without a used measurement keep their estimates)."""
-        self.event = event
-        sub = np.flatnonzero(event.used)
-        if len(sub) == 0:
-            return
-        try:
-            self.estimate[sub], self.cov[sub] = ukf.dcl_update(
-                self.estimate[sub], self.cov[sub], event.relay.chain[sub], event.relay.length[sub],
-                event.range[sub], self.config.range_noise_var, self.config.ukf_lambda, self.config.truncation)
-        except np.linalg.LinAlgError as exc:
-            if self.config.truncation != "paper":
-                raise
-            raise ukf.paper_rule_failure(exc, int(self.k[sub].max())) from exc
-
-    def time_update(self) -> None:
-        """Every platform predicts k -> k+1 from its odometry (eq. 1); the truth moves; rewards.
-
-        First records ``posterior_error``, the error at time k after its measurement update.
-        """
+    def advance(self, decoded) -> None:
+        super().advance(decoded)
         self.posterior_error = self.position_error()
-        speed, heading, heading_var = self.odometry()
-        self.estimate, self.cov = ukf.time_update(self.estimate, self.cov, speed, heading, self.config.dt,
-                                                  self.config.speed_noise_std**2, heading_var)
+        speed, heading = self.readings.inputs[..., 0], self.readings.inputs[..., 1]
         self.dead_reckoning, _ = ukf.time_update(self.dead_reckoning, None, speed, heading, self.config.dt, 0.0)
-        self.k = self.k + 1
+
+    def compute_reward(self) -> np.ndarray:
+        """The team's: minus the mean over platforms of the error (or RMS) after the prediction to k + 1, minus
+        the hop cost of the step's chain."""
         if self.config.reward == "error":
-            loss = self.position_error().mean(axis=-1)
+            loss = self.prior_error().mean(axis=-1)
         else:
             loss = np.sqrt(self.own_traces()).mean(axis=-1)
-        self._reward = np.repeat((-loss - self.event.cost)[:, None], self.num_agents, axis=1)
+        cost = self.network.cost_sent.sum(axis=-1)
+        return np.repeat((-loss - cost)[:, None], self.num_agents, axis=1)
 
     # --- views -------------------------------------------------------------------------
-    def position_error(self) -> np.ndarray:
-        """||xhat_i - x_i|| (B, N), metres."""
-        return np.linalg.norm(self.estimate - self.truth[self.k], axis=-1)
+    def prior_error(self) -> np.ndarray:
+        """||xhat_i(k+1) - x_i(k+1)|| (B, N), metres: the current estimate after a step's prediction."""
+        return np.linalg.norm(self.backend.mean - self.world.positions(), axis=-1)
 
     def own_traces(self) -> np.ndarray:
-        """tr P_ii (B, N)."""
-        diag = np.diagonal(self.cov, axis1=-2, axis2=-1)
-        return diag.reshape(self.batch, self.num_agents, 2).sum(axis=-1)
+        """tr P_ii (B, N) of the current estimate."""
+        return np.trace(self.backend.position_cov(), axis1=-2, axis2=-1)
 
     def distances(self) -> np.ndarray:
         """True distances between platforms at the current step (B, N, N)."""
-        positions = self.truth[self.k]
+        positions = self.world.positions()
         return np.linalg.norm(positions[:, :, None, :] - positions[:, None, :, :], axis=-1)
 
     def observation(self) -> np.ndarray:
         B, N = self.batch, self.num_agents
         identity = np.broadcast_to(np.eye(N), (B, N, N))
-        k_now = np.minimum(self.k, self.horizon - 1)
-        measuring = self.schedule[np.arange(B), k_now]
-        flag = ((np.arange(N)[None, :] == measuring[:, None]) & (self.k < self.horizon)[:, None]).astype(float)
+        flag = (np.arange(N)[None, :] == self.world.measuring()[:, None]).astype(float)
         frac = np.broadcast_to((self.k / self.horizon)[:, None], (B, N))
         obs = np.concatenate([identity, flag[..., None], self.distances() / DISTANCE_SCALE,
                               np.log(self.own_traces())[..., None], frac[..., None]], axis=-1)
@@ -446,38 +419,40 @@ class RelayUKFScenario(Scenario):
         """
         return np.asarray(errors, float).mean(axis=(-2, -1))
 
-    def reward(self) -> np.ndarray:
-        return self._reward.copy()
-
-    def done(self) -> np.ndarray:
-        return self.k >= self.horizon
-
     def state(self) -> np.ndarray:
-        log_var = np.log(np.diagonal(self.cov, axis1=-2, axis2=-1))
+        log_var = np.log(np.diagonal(self.backend.cov, axis1=-2, axis2=-1))
         return np.concatenate([self.observation().reshape(self.batch, -1), log_var], axis=-1).astype(np.float32)
 
     def info(self) -> dict[str, np.ndarray]:
         B, N = self.batch, self.num_agents
-        event = self.event
+        chain = self.chain
         ids = np.arange(N)[None, :]
-        measuring = (ids == event.measuring[:, None]) & (event.relay.length[:, None] > 0)
-        relay_target = event.relay.next_hop(N)
+        measuring_platform = np.where(chain.length > 0, chain.chain[:, 0], -1)
+        measuring = ids == measuring_platform[:, None]
+        partner = np.where(chain.length > 0, np.argmax(self.readings.range_valid.any(axis=1), axis=-1), -1) \
+            if self.readings is not None else np.full(B, -1)
+        relay_target = chain.next_hop(N)
         team = lambda values: np.repeat(np.asarray(values)[:, None], N, axis=1)  # noqa: E731
+        truth = np.broadcast_to(self.world.positions(), (B, N, 2)).copy()
+        error = self.prior_error()
         return {
-            "true_position": np.broadcast_to(self.truth[self.k], (B, N, 2)).copy(),
-            "estimated_position": self.estimate.copy(),
-            "error": self.position_error(),
+            "true_position": truth,
+            "estimated_position": self.backend.mean.copy(),
+            "position_error": error,
+            "error": error.copy(),
             "posterior_error": self.posterior_error.copy(),
             "trace": self.own_traces(),
-            "dead_reckoning_error": np.linalg.norm(self.dead_reckoning - self.truth[self.k], axis=-1),
+            "dead_reckoning_error": np.linalg.norm(self.dead_reckoning - truth, axis=-1),
             "measuring": measuring,
-            "partner": np.where(measuring, event.partner[:, None], -1),
-            "chain_position": event.relay.position_of(N),
+            "partner": np.where(measuring, partner[:, None], -1),
+            "chain_position": chain.position_of(N),
             "relay_target": relay_target,
             "communication": (relay_target >= 0).astype(float),
-            "hops": team(event.relay.hops),
-            "hop_cost": team(event.cost),
-            "chain_stop": team(event.relay.stop),
+            "messages_sent": self.network.messages_sent.copy(),
+            "floats_sent": self.network.floats_sent.copy(),
+            "hops": team(chain.hops),
+            "hop_cost": team(self.network.cost_sent.sum(axis=-1)),
+            "chain_stop": team(chain.stop),
             "step": team(self.k),
         }
 
@@ -485,11 +460,11 @@ class RelayUKFScenario(Scenario):
         N, k = self.num_agents, int(self.k[b])
         positions = self.truth[k]
         reach = float(np.abs(self.truth).max()) + 10.0
-        chain = self.event.relay.chain[b]
+        chain = self.chain.chain[b]
         hops = [int(p) for p in chain if p >= 0]
         links = [Link(source=a, target=c, value=1.0, label=("range" if h == 0 else str(h + 1)))
                  for h, (a, c) in enumerate(zip(hops[:-1], hops[1:], strict=True))]
-        reason = STOP_REASONS[self.event.relay.stop[b]] if self.event.relay.stop[b] >= 0 else "no measurement"
+        reason = STOP_REASONS[self.chain.stop[b]] if self.chain.stop[b] >= 0 else "no measurement"
         cov_blocks = np.stack([self.cov[b, 2 * i:2 * i + 2, 2 * i:2 * i + 2] for i in range(N)])
         return Scene(
             title=f"relay_ukf (wang2019)  t = {k * self.config.dt:.1f} s",
@@ -504,5 +479,5 @@ class RelayUKFScenario(Scenario):
             link_value_name="relay hop of the last step",
             extent=(-reach, reach, -reach, reach),
             notes=[f"chain {' -> '.join(map(str, hops)) or '-'} ({reason})",
-                   f"mean error {self.position_error()[b].mean():.2f} m"],
+                   f"mean error {self.prior_error()[b].mean():.2f} m"],
         )

@@ -23,6 +23,9 @@ Arguments (``coloc_env.worlds.Circles``)
 | field                   | default | allowed                                           |
 |-------------------------|---------|---------------------------------------------------|
 | num_agents              | 6       | 2..16                                             |
+| centres                 | None    | (N, 2) metres; None = :func:`default_layout`      |
+| start_angles            | None    | (N,) rad; None = 2 pi i / N                       |
+| directions              | None    | (N,) of +1 (ccw) / -1 (cw); None = platform 1 cw  |
 | speed                   | 1.0     | (0, 1e4] m/s                                      |
 | turn_rate               | 0.015   | [1e-6, pi/dt] rad/s (smaller: a circle too large  |
 |                         |         | to be finite)                                     |
@@ -45,6 +48,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from coloc_env.config import as_array
 from coloc_env.parts import WORLDS, Block, PartConfig, check_flag, check_range
 from coloc_env.world.odometry import OdometrySensor, RangeSensor
 from coloc_env.world.relay import check_distance
@@ -72,6 +76,9 @@ class Circles(PartConfig):
     measurements = frozenset({"range", "position_fix"})
     anchors = "platforms 0..num_anchors-1 (a position fix every step)"
     num_agents: int = 6
+    centres: tuple | None = None
+    start_angles: tuple | None = None
+    directions: tuple | None = None
     speed: float = 1.0
     turn_rate: float = 0.015
     dt: float = 0.5
@@ -91,6 +98,12 @@ class Circles(PartConfig):
         check_range(f"{prefix}dt", self.dt, 1e-6, 3600.0)
         check_range(f"{prefix}speed", self.speed, 0.0, 1e4, low_open=True)
         check_range(f"{prefix}turn_rate", self.turn_rate, 1e-6, np.pi / self.dt)
+        N = self.num_agents
+        for name in ("centres", "start_angles", "directions"):
+            value = getattr(self, name)
+            if value is not None:
+                as_array(f"{prefix}{name}", value, shape=(N, 2) if name == "centres" else (N,))
+        self.tracks.validate(prefix)
         check_range(f"{prefix}horizon", self.horizon, 1, 1_000_000, integer=True)
         OdometrySensor(self.speed_noise_std, self.turn_rate_noise_std).validate(prefix)
         check_range(f"{prefix}range_noise_var", self.range_noise_var, 0.0, 1e6, low_open=True)
@@ -100,6 +113,16 @@ class Circles(PartConfig):
         check_range(f"{prefix}fix_noise_std", self.fix_noise_std, 0.0, 1e4, low_open=True)
         check_range(f"{prefix}initial_position_std", self.initial_position_std, 1e-6, 1e6)
         check_flag(f"{prefix}heading_noise", self.heading_noise)
+
+    @property
+    def tracks(self) -> CircularTracks:
+        """The circles flown: the given layout, :func:`default_layout` where a field is None."""
+        centres, angles, directions = default_layout(self.num_agents)
+        return CircularTracks(
+            centres=centres if self.centres is None else np.asarray(self.centres, float),
+            start_angles=angles if self.start_angles is None else np.asarray(self.start_angles, float),
+            directions=directions if self.directions is None else np.asarray(self.directions, float),
+            speed=self.speed, turn_rate=self.turn_rate, dt=self.dt)
 
     def build(self, batch: int, horizon: int) -> CirclesWorld:
         return CirclesWorld(self, batch, horizon)
@@ -111,8 +134,7 @@ class CirclesWorld(World):
     def __init__(self, config: Circles, batch: int, horizon: int):
         super().__init__(config, batch, horizon)
         N, K, B = config.num_agents, self.horizon, self.batch
-        centres, angles, directions = default_layout(N)
-        self.tracks = CircularTracks(centres, angles, directions, config.speed, config.turn_rate, config.dt)
+        self.tracks = config.tracks
         self.truth, self.true_heading, self._speed, self._turn_rate = self.tracks.trajectory(K)
         self.odometry = OdometrySensor(config.speed_noise_std, config.turn_rate_noise_std)
         self.range_sensor = RangeSensor(config.range_noise_var, config.sensing_range)

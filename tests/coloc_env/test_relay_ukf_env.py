@@ -145,7 +145,7 @@ def test_env_with_paper_policy_equals_the_estimator_called_directly():
     x = np.array([infos[a]["true_position"] for a in env.possible_agents])
     P = 0.01 * np.eye(8)
     speed, heading = scenario.measured_speed[0].copy(), scenario.measured_heading[0].copy()
-    schedule, noise = scenario.schedule[0].copy(), scenario._range_noise[0].copy()
+    schedule, noise = scenario.schedule[0].copy(), scenario.world.range_noise[0].copy()
     truth = scenario.truth
     updates, k = 0, 0
     while env.agents:
@@ -247,7 +247,7 @@ def test_truncated_chains_keep_p_positive_definite_only_with_the_consistent_upda
         except np.linalg.LinAlgError as exc:
             assert rule == "paper" and "positive definite" in str(exc)
         smallest[rule] = np.array(values)
-        assert np.all(scenario.event.relay.length <= 2)
+        assert np.all(scenario.chain.length <= 2)
     assert len(smallest["consistent"]) == 800 and smallest["consistent"].min() > 0
     assert smallest["paper"].min() < 0
 

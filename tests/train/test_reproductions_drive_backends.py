@@ -2,7 +2,8 @@
 compute what the validated estimator code computes on the same draws.
 
 The references here are the estimators' own functions, run on the episodes the scenarios draw from the
-same generators (``relay_ukf``'s :class:`RelayUKFScenario` with ``estimators.ukf_relay``; ``gps_denied_nbp``'s
+same generators (``relay_ukf``'s draws and relay rules, :class:`coloc_env.world.relay.RelayChainLinks`, with
+``estimators.ukf_relay``; ``gps_denied_nbp``'s
 ``sample_episode`` with ``estimators.range_ls.step``), so a change in the backends, the worlds or the
 seeding that moved a reproduction's numbers fails here.
 """
@@ -15,33 +16,56 @@ import estimators.ukf_relay as ukf
 from agents.relay_ukf import paper_actions
 from coloc_env.config import build_config
 from coloc_env.scenarios.gps_denied_nbp import GpsDeniedNbpConfig, sample_episode
-from coloc_env.scenarios.relay_ukf import RelayUKFConfig, RelayUKFScenario
+from coloc_env.scenarios.relay_ukf import RelayUKFConfig
+from coloc_env.world.unicycle import UnicycleMotion
 from train.reproduce import wan2014, wang2019
 
 
 def _reference_wang2019(config, copies, policy_rng):
-    """Errors (3, K, runs, N) of IL, CCL and DCL by the estimator functions on the relay_ukf scenario's draws."""
-    runs = len(copies)
-    scenario = RelayUKFScenario(config, batch=runs)
-    scenario.reset(copies)
-    K, N = config.horizon, config.num_platforms
-    ccl_x, ccl_P, il_x = scenario.estimate.copy(), scenario.cov.copy(), scenario.estimate.copy()
+    """Errors (3, K, runs, N) of IL, CCL and DCL by the estimator functions on the episodes drawn from
+    ``copies`` in the relay_ukf scenario's order (odometry noise, schedule, range noise), with the chains
+    resolved by :class:`coloc_env.world.relay.RelayChainLinks` (the paper scenario's own delivery code,
+    not the network the backends ask)."""
+    runs, K, N, dt = len(copies), config.horizon, config.num_platforms, config.dt
+    truth, true_heading, true_speed, true_turn = config.tracks.trajectory(K)
+    odometry, range_sensor, links = config.odometry, config.range_sensor, config.links
+    speed, turn = np.empty((runs, K, N)), np.empty((runs, K, N))
+    schedule, noise = np.empty((runs, K), dtype=int), np.empty((runs, K))
+    for c, rng in enumerate(copies):
+        speed_noise, turn_noise = odometry.sample_noise(rng, (K, N))
+        occurs, who = rng.random(K), rng.integers(0, N, size=K)
+        noise[c] = range_sensor.sample_noise(rng, (K,))
+        speed[c], turn[c] = odometry.measure(true_speed, true_turn, speed_noise, turn_noise)
+        schedule[c] = np.where(occurs < config.measurement_probability, who, -1)
+    heading = np.swapaxes(UnicycleMotion(dt).headings(true_heading[0][None, :], np.swapaxes(turn, 1, 2)), 1, 2)
+    rows = np.arange(runs)
+    dcl_x = np.broadcast_to(truth[0], (runs, N, 2)).copy()
+    dcl_P = np.broadcast_to(config.initial_position_std**2 * np.eye(2 * N), (runs, 2 * N, 2 * N)).copy()
+    ccl_x, ccl_P, il_x = dcl_x.copy(), dcl_P.copy(), dcl_x.copy()
     errors = np.zeros((3, K, runs, N))
     for k in range(K):
-        event = scenario.measurement_event(paper_actions(scenario.distances(), scenario.schedule[:, k], policy_rng))
-        scenario.measurement_update(event)
-        used = np.flatnonzero(event.used)
+        positions = np.broadcast_to(truth[k], (runs, N, 2))
+        distances = np.linalg.norm(positions[:, :, None] - positions[:, None], axis=-1)
+        actions = paper_actions(distances, schedule[:, k], policy_rng)
+        measuring = schedule[:, k]
+        source = np.maximum(measuring, 0)
+        partner = np.where(measuring >= 0, actions[rows, source, 0], source)
+        relay = links.resolve(positions, source, partner, actions[..., 1], np.zeros((runs, N - 1)))
+        used = np.flatnonzero((measuring >= 0) & (partner != source) & (relay.length >= 2))
         if len(used):
-            ccl_x[used], ccl_P[used] = ukf.ccl_update(ccl_x[used], ccl_P[used], event.measuring[used],
-                                                      event.partner[used], event.range[used],
+            z = range_sensor.measure(positions[used, source[used]], positions[used, partner[used]], noise[used, k])
+            dcl_x[used], dcl_P[used] = ukf.dcl_update(dcl_x[used], dcl_P[used], relay.chain[used],
+                                                      relay.length[used], z, config.range_noise_var,
+                                                      config.ukf_lambda, config.truncation)
+            ccl_x[used], ccl_P[used] = ukf.ccl_update(ccl_x[used], ccl_P[used], source[used], partner[used], z,
                                                       config.range_noise_var, config.ukf_lambda)
-        for e, estimate in enumerate((il_x, ccl_x, scenario.estimate)):
-            errors[e, k] = np.linalg.norm(estimate - scenario.truth[k], axis=-1)
-        speed, heading, heading_var = scenario.odometry()
-        scenario.time_update()
-        ccl_x, ccl_P = ukf.time_update(ccl_x, ccl_P, speed, heading, config.dt, config.speed_noise_std**2,
-                                       heading_var)
-        il_x, _ = ukf.time_update(il_x, None, speed, heading, config.dt, 0.0)
+        for e, estimate in enumerate((il_x, ccl_x, dcl_x)):
+            errors[e, k] = np.linalg.norm(estimate - truth[k], axis=-1)
+        heading_var = odometry.heading_variance(np.full(runs, k), dt)[:, None]
+        q = config.speed_noise_std**2
+        dcl_x, dcl_P = ukf.time_update(dcl_x, dcl_P, speed[:, k], heading[:, k], dt, q, heading_var)
+        ccl_x, ccl_P = ukf.time_update(ccl_x, ccl_P, speed[:, k], heading[:, k], dt, q, heading_var)
+        il_x, _ = ukf.time_update(il_x, None, speed[:, k], heading[:, k], dt, 0.0)
     return errors
 
 

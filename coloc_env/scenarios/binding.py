@@ -1,0 +1,42 @@
+"""A paper scenario as a binding on the composable core.
+
+A preset (``relay_ukf``, ...) is a :class:`~coloc_env.scenarios.composed.ComposedScenario`
+whose parts come from the preset's flat config (:meth:`PresetScenario.compose`).
+The core owns what every scenario shares: the guards, the batched step of world,
+network and backend, the episode generators, ``done``, and the info keys of the
+contract (``position_error`` in metres, ``messages_sent`` and ``floats_sent`` as the
+network counts them). A binding fills in the small hooks where its paper fixes
+something the generic composition leaves open:
+
+| hook                          | what a binding gives                                               |
+|-------------------------------|--------------------------------------------------------------------|
+| ``compose(config)``           | the world, network and backend configs of its flat config          |
+| ``action_space`` /            | its action codec: the paper's action, decoded into the parts'      |
+| ``decode_actions``            | blocks                                                             |
+| ``observation`` (+ ``_space``)| its observation features                                           |
+| ``compute_reward``            | its reward (team or own, the paper's error, its costs)             |
+| ``info``                      | the core's keys plus its own                                       |
+| ``part_generators``           | which generator each part draws from (a binding may keep the draws |
+|                               | of its paper scenario's world on the episode generator itself)     |
+"""
+
+from __future__ import annotations
+
+import abc
+from typing import ClassVar
+
+from coloc_env.scenarios.composed import ComposedScenario
+
+
+class PresetScenario(ComposedScenario, abc.ABC):
+    """Batched core of a preset: its flat config (``self.config``) bound to the composition of its parts
+    (``self.composition``)."""
+
+    name: ClassVar[str]
+    paper: ClassVar[str]
+    Config: ClassVar[type]
+
+    @classmethod
+    @abc.abstractmethod
+    def compose(cls, config):
+        """The validated :class:`~coloc_env.composition.Composition` of the flat ``config``'s parts."""
