@@ -9,7 +9,6 @@ seeding that moved a reproduction's numbers fails here.
 """
 
 import numpy as np
-import pytest
 
 import estimators.range_ls as rl
 import estimators.ukf_relay as ukf
@@ -87,10 +86,17 @@ def test_wang2019_backends_give_the_estimator_functions_numbers_on_the_same_draw
     assert np.all(result["per_run"][0] > result["per_run"][2])
 
 
-def test_wang2019_rig_refuses_a_layout_the_circles_world_cannot_fly():
-    config = build_config(RelayUKFConfig, {"horizon": 10, "directions": (1.0, 1.0, 1.0, 1.0)})
-    with pytest.raises(ValueError, match="default layout"):  # refused, not silently replaced
-        wang2019.Rig(config, 1)
+def test_wang2019_rig_flies_the_configured_layout_and_matches_the_reference_on_it():
+    directions = (1.0, 1.0, 1.0, 1.0)  # not the paper's (platform 1 flies clockwise there)
+    config = build_config(RelayUKFConfig, {"horizon": 40, "directions": directions, "measurement_probability": 0.8})
+    rig = wang2019.Rig(config, 1)
+    np.testing.assert_array_equal(rig.world.truth, config.tracks.trajectory(40)[0])
+    assert not np.array_equal(rig.world.truth, build_config(RelayUKFConfig, {"horizon": 40}).tracks.trajectory(40)[0])
+    copies, policy_rng = wang2019._block_generators(2, 0, 2)
+    reference = _reference_wang2019(config, copies, policy_rng)
+    copies, policy_rng = wang2019._block_generators(2, 0, 2)
+    result = wang2019.simulate_runs(config, copies, policy_rng)
+    np.testing.assert_allclose(result["curves"], reference.mean(axis=2), rtol=1e-12, atol=1e-12)
 
 
 def test_wan2014_ls_and_dr_backends_equal_the_estimator_on_the_same_episodes():

@@ -39,13 +39,12 @@ import numpy as np
 
 import estimators.ukf_relay as ukf
 from agents.relay_ukf import paper_actions
-from coloc_env.backends import DeadReckoning, UkfCcl, UkfDcl
+from coloc_env.backends import DeadReckoning, UkfCcl
 from coloc_env.composition import compose
 from coloc_env.config import build_config
-from coloc_env.networks import Ideal, Relay
+from coloc_env.networks import Ideal
 from coloc_env.scenarios.relay_ukf import RelayUKFConfig
 from coloc_env.world.relay import STOP_REASONS
-from coloc_env.worlds import Circles
 from estimators.models import predict_joint
 from train.executor import map_tasks
 from train.io import claims_table, save_figure, write_json, write_text
@@ -65,24 +64,15 @@ def _block_generators(seed: int, block: int, runs: int):
 
 def composition_parts(config: RelayUKFConfig) -> tuple:
     """The composable parts this reproduction drives for ``config``: the ``circles`` world of the
-    paper's Sec. 4 (4 platforms, no anchors) and, per estimator of :data:`ESTIMATORS`, a
+    paper's Sec. 4 (4 platforms, no anchors; the relay_ukf preset's, :meth:`RelayUKFConfig.parts`) and,
+    per estimator of :data:`ESTIMATORS`, a
     (network, backend) pair: IL = ``dead_reckoning`` over ``ideal``, CCL = ``ukf_ccl`` over ``ideal``
     (every range reaches the fusion centre), DCL = ``ukf_dcl`` over ``relay`` with the config's links.
     """
-    if any(getattr(config, name) is not None for name in ("centres", "start_angles", "directions")):
-        raise ValueError("the circles world flies the default layout: centres, start_angles and directions "
-                         "must be None")
-    world = Circles(num_agents=config.num_platforms, speed=config.speed, turn_rate=config.turn_rate, dt=config.dt,
-                    horizon=config.horizon, speed_noise_std=config.speed_noise_std,
-                    turn_rate_noise_std=config.turn_rate_noise_std, range_noise_var=config.range_noise_var,
-                    measurement_probability=config.measurement_probability, sensing_range=config.sensing_range,
-                    num_anchors=0, initial_position_std=config.initial_position_std,
-                    heading_noise=config.heading_noise)
-    links = Relay(comm_range=config.comm_range, max_hops=config.max_hops, loss_at_zero=config.loss_at_zero,
-                  loss_length=config.loss_length)
+    world, links, dcl = config.parts()  # the relay_ukf preset's parts
     pairs = {"IL": (Ideal(), DeadReckoning()),
              "CCL": (Ideal(), UkfCcl(ukf_lambda=config.ukf_lambda)),
-             "DCL": (links, UkfDcl(ukf_lambda=config.ukf_lambda, truncation=config.truncation))}
+             "DCL": (links, dcl)}
     return world, pairs
 
 
