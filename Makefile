@@ -11,10 +11,23 @@ $(PY):
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 
-# torch is pinned to the CPU build on this machine; installing it first keeps
-# pip from resolving a CUDA wheel for stable-baselines3's torch requirement.
+# torch comes first, from TORCH_INDEX, so that pip does not resolve stable-baselines3's torch requirement
+# to PyPI's default Linux wheel (a CUDA build of several GB). TORCH_VERSION is pyproject.toml's pin
+# (tests/test_docs.py checks that it, this Makefile and the README agree). TORCH_INDEX:
+#   default                    PyTorch's CPU index: what an ordinary machine needs;
+#   make test TORCH_INDEX=     pip's own configuration: a machine whose pip already serves a CPU wheel
+#                              (a mirror, a wheel cache), or macOS, where PyPI's wheel is the CPU build;
+#   TORCH_INDEX=https://download.pytorch.org/whl/cu128   a CUDA build instead.
+# A machine that cannot reach the CPU index still installs with the default from its own configured
+# sources (pip's extra indexes and find-links stay active); --retries 1 keeps an unreachable index from
+# costing a minute of retries there (TORCH_INDEX= skips it altogether).
+# An installed torch==$(TORCH_VERSION) is kept as it is: pip does not query any index for it.
+TORCH_VERSION := 2.13.0
+TORCH_INDEX ?= https://download.pytorch.org/whl/cpu
+TORCH_INDEX_OPTION := $(if $(strip $(TORCH_INDEX)),--index-url $(TORCH_INDEX))
+
 $(STAMP): $(PY) pyproject.toml
-	$(PY) -m pip install --quiet torch==2.13.0
+	$(PY) -m pip install --quiet --retries 1 torch==$(TORCH_VERSION) $(TORCH_INDEX_OPTION)
 	$(PY) -m pip install --quiet -e '.[test,ray]'
 	touch $(STAMP)
 

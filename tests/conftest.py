@@ -1,9 +1,37 @@
+import os
+
 import numpy as np
 import pytest
 
 import estimators.bandwidth_fusion as bf
 from coloc_env.config import build_config
 from coloc_env.scenarios.bandwidth_fusion import BandwidthFusionConfig
+
+# Where the MRCLAM tests look for UTIAS MRCLAM dataset 6 (their pinned numbers are dataset 6's): the folder
+# COLOC_MRCLAM_DATA names if it is set, else ../shared/data/mrclam/MRCLAM_Dataset6 beside the clone (the
+# developers' layout). The data are not shipped: http://asrl.utias.utoronto.ca/datasets/mrclam/
+REPO_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+MRCLAM_DATA_ENV = "COLOC_MRCLAM_DATA"
+MRCLAM_DATASET6 = os.environ.get(MRCLAM_DATA_ENV) or os.path.normpath(
+    os.path.join(REPO_ROOT, "..", "shared", "data", "mrclam", "MRCLAM_Dataset6"))
+MRCLAM_SKIP_REASON = (f"MRCLAM dataset 6 not found at {MRCLAM_DATASET6} (set {MRCLAM_DATA_ENV} to a MRCLAM_Dataset6 "
+                      "folder from http://asrl.utias.utoronto.ca/datasets/mrclam/)")
+needs_mrclam = pytest.mark.skipif(not os.path.isdir(MRCLAM_DATASET6), reason=MRCLAM_SKIP_REASON)
+
+
+def pytest_report_header(config):
+    """The first lines of every run say where the MRCLAM tests look for their data, and whether it is there."""
+    found = "found" if os.path.isdir(MRCLAM_DATASET6) else "not found: the MRCLAM tests skip"
+    source = f"${MRCLAM_DATA_ENV}" if os.environ.get(MRCLAM_DATA_ENV) else f"default; set ${MRCLAM_DATA_ENV} to change"
+    return f"MRCLAM dataset 6: {MRCLAM_DATASET6} ({source}; {found})"
+
+
+@pytest.fixture
+def mrclam_dataset6():
+    """The dataset-6 folder, or a skip that names the path looked at and the environment variable."""
+    if not os.path.isdir(MRCLAM_DATASET6):
+        pytest.skip(MRCLAM_SKIP_REASON)
+    return MRCLAM_DATASET6
 
 
 @pytest.fixture
@@ -28,4 +56,4 @@ def random_weights(rng, N=4):
     return w / w.sum(axis=1, keepdims=True)
 
 
-__all__ = ["bf", "random_selection", "random_weights"]
+__all__ = ["MRCLAM_DATASET6", "MRCLAM_SKIP_REASON", "bf", "needs_mrclam", "random_selection", "random_weights"]

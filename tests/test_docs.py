@@ -1,0 +1,162 @@
+"""The project explains itself: README.md and docs/ link only to files a user has, the presets table is
+complete, and the install instructions of the README, the Makefile and pyproject.toml agree."""
+
+from __future__ import annotations
+
+import glob
+import os
+import re
+import shutil
+import subprocess
+import tomllib
+
+import pytest
+
+import coloc_env
+from coloc_env.scenarios import REGISTRY
+
+REPO_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+README = os.path.join(REPO_ROOT, "README.md")
+DOCS = os.path.join(REPO_ROOT, "docs")
+MAKEFILE = os.path.join(REPO_ROOT, "Makefile")
+PYPROJECT = os.path.join(REPO_ROOT, "pyproject.toml")
+DOC_PAGES = ("architecture.md", "presets.md", "wan2014.md", "gao2016.md", "compositions.md")
+
+# [text](target) outside code; an image ![alt](target) has the same target syntax
+LINK = re.compile(r"\[[^\]]*\]\(([^)\s]+)(?:\s+\"[^\"]*\")?\)")
+EXTERNAL = re.compile(r"^(?:[a-z][a-z0-9+.-]*:|#)", re.IGNORECASE)
+
+
+def read(path: str) -> str:
+    with open(path, encoding="utf-8") as handle:
+        return handle.read()
+
+
+def markdown_files() -> list[str]:
+    return [README, *sorted(glob.glob(os.path.join(DOCS, "*.md")))]
+
+
+def without_code(text: str) -> str:
+    """The text with fenced code blocks and inline code removed: links are only read from prose."""
+    text = re.sub(r"^```.*?^```", "", text, flags=re.DOTALL | re.MULTILINE)
+    return re.sub(r"`[^`\n]*`", "", text)
+
+
+def relative_links(path: str) -> list[str]:
+    return [target for target in LINK.findall(without_code(read(path))) if not EXTERNAL.match(target)]
+
+
+def test_every_documentation_page_exists_and_the_readme_links_it():
+    readme_links = {os.path.normpath(target.split("#")[0]) for target in relative_links(README)}
+    for page in DOC_PAGES:
+        assert os.path.isfile(os.path.join(DOCS, page)), f"docs/{page} is missing"
+        assert os.path.normpath(f"docs/{page}") in readme_links, f"README.md does not link docs/{page}"
+
+
+@pytest.mark.parametrize("path", markdown_files(), ids=lambda p: os.path.relpath(p, REPO_ROOT))
+def test_every_relative_link_resolves(path):
+    links = relative_links(path)
+    missing = [target for target in links
+               if not os.path.exists(os.path.join(os.path.dirname(path), target.split("#")[0]))]
+    assert not missing, f"{os.path.relpath(path, REPO_ROOT)} links to files that do not exist: {missing}"
+
+
+@pytest.mark.parametrize("path", markdown_files(), ids=lambda p: os.path.relpath(p, REPO_ROOT))
+def test_documentation_names_no_file_a_user_does_not_have(path):
+    """The shared design notes, the reconstruction specs and the issue tracker are not in the clone."""
+    text = read(path)
+    for pattern in (r"DESIGN\.md", r"shared/", r"specs/", r"spec §", r"\bissue \d+"):
+        hits = [line.strip() for line in text.splitlines() if re.search(pattern, line)]
+        assert not hits, f"{os.path.relpath(path, REPO_ROOT)} refers to {pattern!r}: {hits[:3]}"
+
+
+def presets_table() -> dict[str, str]:
+    """{preset: paper key} from the first table of docs/presets.md (its first two columns)."""
+    rows = {}
+    lines = read(os.path.join(DOCS, "presets.md")).splitlines()
+    start = next(i for i, line in enumerate(lines) if line.startswith("| preset |"))
+    for line in lines[start + 2:]:
+        if not line.startswith("|"):
+            break
+        cells = [cell.strip().strip("`") for cell in line.strip("|").split("|")]
+        rows[cells[0]] = cells[1]
+    return rows
+
+
+def test_presets_table_lists_every_preset_with_its_paper_key():
+    table = presets_table()
+    assert set(table) == set(coloc_env.PRESETS), (
+        f"docs/presets.md's table has {sorted(table)}, coloc_env.PRESETS has {sorted(coloc_env.PRESETS)}")
+    for name in coloc_env.PRESETS:
+        assert table[name] == REGISTRY[name].paper, (
+            f"docs/presets.md gives {name} the paper key {table[name]!r}; the scenario says {REGISTRY[name].paper!r}")
+
+
+def readme_torch_install() -> tuple[str, str]:
+    """(version, index URL) of the README's `pip install torch==X --index-url URL`."""
+    found = re.findall(r"pip install torch==(\S+) --index-url (\S+)", read(README))
+    assert len(found) == 1, f"expected one torch install command in README.md, found {found}"
+    return found[0]
+
+
+def test_readme_makefile_and_pyproject_agree_on_the_torch_pin_and_index():
+    version, index = readme_torch_install()
+    makefile = read(MAKEFILE)
+    make_version = re.search(r"^TORCH_VERSION\s*:?=\s*(\S+)", makefile, re.MULTILINE)
+    make_index = re.search(r"^TORCH_INDEX\s*\?=\s*(\S*)", makefile, re.MULTILINE)
+    assert make_version and make_index, "the Makefile sets TORCH_VERSION and TORCH_INDEX ?= ..."
+    assert make_version.group(1) == version, f"Makefile torch {make_version.group(1)}, README torch {version}"
+    assert make_index.group(1) == index, f"Makefile TORCH_INDEX {make_index.group(1)}, README --index-url {index}"
+    with open(PYPROJECT, "rb") as handle:
+        project = tomllib.load(handle)["project"]
+    pins = [dep for dep in project["dependencies"] if re.match(r"torch\b", dep)]
+    assert pins == [f"torch=={version}"], f"pyproject.toml pins {pins}, the README installs torch=={version}"
+
+
+def test_pyproject_names_no_index_and_ray_only_in_its_extra():
+    text = read(PYPROJECT)
+    assert "index-url" not in text and "download.pytorch.org" not in text
+    with open(PYPROJECT, "rb") as handle:
+        project = tomllib.load(handle)["project"]
+    assert not [dep for dep in project["dependencies"] if re.match(r"ray\b", dep)]
+    assert [dep for dep in project["optional-dependencies"]["ray"] if re.match(r"ray\b", dep)]
+    assert not [dep for name, deps in project["optional-dependencies"].items() if name != "ray"
+                for dep in deps if re.match(r"ray\b", dep)]
+
+
+@pytest.mark.skipif(shutil.which("make") is None, reason="make is not installed")
+@pytest.mark.parametrize("override", [None, ""], ids=["default", "TORCH_INDEX="])
+def test_makefile_installs_the_readme_torch(override):
+    """`make -n` prints the install commands without running them: the default installs the README's
+    torch from the README's index; `TORCH_INDEX=` leaves the index to pip's own configuration."""
+    version, index = readme_torch_install()
+    command = ["make", "-n", "-B", "install"] + ([] if override is None else [f"TORCH_INDEX={override}"])
+    printed = subprocess.run(command, cwd=REPO_ROOT, capture_output=True, text=True, check=True).stdout
+    torch_lines = [line for line in printed.splitlines() if "pip install" in line and "torch==" in line]
+    assert len(torch_lines) == 1, printed
+    words = torch_lines[0].split()
+    assert f"torch=={version}" in words
+    if override is None:
+        assert words[words.index("--index-url") + 1] == index
+    else:
+        assert "--index-url" not in words and "--extra-index-url" not in words
+
+
+def test_readme_ppo_snippet_states_its_rollout_size():
+    """The README's PPO snippet says how many SB3 envs and transitions per rollout it makes: check both."""
+    text = read(README)
+    snippet = re.search(r"```python\n(from stable_baselines3 import PPO\n.*?)```", text, re.DOTALL).group(1)
+    name, copies = re.search(r'vector_env\("(\w+)", num_envs=(\d+)', snippet).groups()
+    n_steps = int(re.search(r"n_steps=(\d+)", snippet).group(1))
+    stated_copies, stated_agents, stated_envs = map(int, re.search(
+        r"# (\d+) copies x (\d+) agents = (\d+) SB3 envs", snippet).groups())
+    envs, steps, transitions = re.search(r"(\d+) envs x (\d+) steps = ([\d,]+) transitions", snippet).groups()
+    venv = coloc_env.vector_env(name, num_envs=int(copies), seed=0)
+    try:
+        agents = len(coloc_env.parallel_env(name).possible_agents)
+        assert (stated_copies, stated_agents) == (int(copies), agents)
+        assert stated_envs == venv.num_envs == int(copies) * agents
+        assert (int(envs), int(steps)) == (venv.num_envs, n_steps)
+        assert int(transitions.replace(",", "")) == venv.num_envs * n_steps
+    finally:
+        venv.close()
