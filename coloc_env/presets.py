@@ -20,8 +20,7 @@ How exactly the parts reproduce each binding (tests/coloc_env):
 * relay_ukf: a binding on the core (:mod:`coloc_env.scenarios.binding`): its scenario *is* the
   composition of circles (no anchors) / relay / ukf_dcl with the paper's action codec, observation and
   team reward; ``PRESETS["relay_ukf"]`` is :meth:`RelayUKFScenario.compose` of the default config;
-* gps_denied_nbp: the composition of the parts gives the scenario's estimates on the
-  same seed (test_gps_denied_composition);
+* gps_denied_nbp: a binding too: gps_denied / broadcast (the ranging radius, no loss) / dnbp;
 * bandwidth_fusion: drift / bandwidth / bandwidth_fusion with the paper's component tables gives
   the scenario's estimates to 1e-9, reported one step earlier (the composition scores the one-step
   prediction xhat(k) against x(k), eq. 12's pairing; test_target_compositions);
@@ -44,16 +43,15 @@ from __future__ import annotations
 
 from coloc_env.backends.fusion import BandwidthFusion, PredictionCompensation
 from coloc_env.backends.nlos import Afge
-from coloc_env.backends.particles import Dnbp
 from coloc_env.backends.ukf_se2 import UkfSe2
 from coloc_env.composition import Composition
-from coloc_env.networks import Broadcast, Relay
+from coloc_env.networks import Relay
 from coloc_env.networks.bandwidth import Bandwidth
 from coloc_env.networks.bernoulli_delay import BernoulliDelay
 from coloc_env.networks.random_delay import RandomDelay
 from coloc_env.scenarios import REGISTRY
+from coloc_env.scenarios.binding import PresetScenario
 from coloc_env.worlds.drift import Drift
-from coloc_env.worlds.gps_denied import GpsDenied
 from coloc_env.worlds.mrclam import Mrclam
 from coloc_env.worlds.nlos_orbit import NlosOrbit
 from coloc_env.worlds.target_cv import TargetCv
@@ -61,8 +59,6 @@ from coloc_env.worlds.target_cv import TargetCv
 _PARTS = {
     "bandwidth_fusion": (Drift(), Bandwidth(), BandwidthFusion()),
     "lossy_fusion": (TargetCv(), BernoulliDelay(), PredictionCompensation()),
-    # dnbp over this broadcast network gives the scenario's estimates exactly (test_gps_denied_composition)
-    "gps_denied_nbp": (GpsDenied(), Broadcast(comm_range=300.0), Dnbp()),
     "nlos_horizon": (NlosOrbit(), RandomDelay(), Afge()),
     # data=None: $COLOC_MRCLAM_DATA is read only when an env is built; a loss-free relay with the scenario's
     # per-source routing table (test_mrclam_preset_parts)
@@ -73,7 +69,7 @@ _PARTS = {
 
 def _preset(name: str) -> Composition:
     cls = REGISTRY[name]
-    if hasattr(cls, "compose") and name not in _PARTS:  # a binding on the core: its parts come from its config
+    if issubclass(cls, PresetScenario):  # a binding on the core: its parts come from its config
         return cls.compose(cls.Config())
     return Composition(*_PARTS.get(name, (None, None, None)), preset=name)
 

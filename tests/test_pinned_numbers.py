@@ -203,11 +203,17 @@ PINNED_ROLLOUTS = {
         "random": {"steps": 25, "reward": -53.720614082882371, "error": 53.720614082882378,
                    "trace": 71.076467009166166, "obs_sum": 4.2395842671394348},
     },
+    # gps_denied_nbp became a binding on the composable core (issue 14): its infos now report the belief's
+    # "trace" (the pins above said None), and its action space is MultiDiscrete([2] * n_iter) instead of
+    # MultiBinary(n_iter), so the random policy and action_space.sample() draw other actions ("random" and
+    # the vector pin are new). The paper rollout's reward, error and observations are 6f148d7's to 1e-14;
+    # on the same actions the binding is bit-identical to the scenario it replaced (checked then, with the
+    # actions of 2 seeded episodes, in a worktree of c5d50d6).
     "gps_denied_nbp": {
-        "paper": {"steps": 10, "reward": -604.36789432768023, "error": 518.1200318608345, "trace": None,
-                  "obs_sum": 5.5783190429210663},
-        "random": {"steps": 10, "reward": -653.50566017278948, "error": 549.57412264842856, "trace": None,
-                   "obs_sum": 5.1912388205528259},
+        "paper": {"steps": 10, "reward": -604.3678943276825, "error": 518.1200318608358, "trace": 4785.748565134399,
+                  "obs_sum": 5.578319042921066},
+        "random": {"steps": 10, "reward": -551.7500809058329, "error": 481.1705238086633, "trace": 11974.192581420139,
+                   "obs_sum": 5.73525170981884},
     },
     "nlos_horizon": {
         "paper": {"steps": 25, "reward": -12665.388557209946, "error": 12665.388557209946,
@@ -227,7 +233,7 @@ PINNED_VECTOR = {
     "bandwidth_fusion": {"reward": -21.77453984785825, "obs_sum": -79.099833246320486},
     "lossy_fusion": {"reward": -42402.865634441376, "obs_sum": 67.235168360173702},
     "relay_ukf": {"reward": -62.415704756975174, "obs_sum": 43.797087430953979},
-    "gps_denied_nbp": {"reward": -2632.9592549800873, "obs_sum": 91.455002918839455},
+    "gps_denied_nbp": {"reward": -2558.9879417419434, "obs_sum": 91.82473330199718},  # MultiDiscrete since issue 14
     "nlos_horizon": {"reward": -834546.28728863597, "obs_sum": 233.06724616553402},
     "mrclam_relay": {"reward": -0.73232610011473298, "obs_sum": -77.301276981830597},
 }

@@ -43,6 +43,8 @@ Arguments (``coloc_env.backends.Dnbp``; defaults = ``gps_denied_nbp``'s)
 | num_iterations     | 5          | 1..20 (the rounds)     |
 | oversampling       | 2          | 1..16                  |
 | defensive_weight   | 0.01       | [0, 0.999]             |
+| init               | "warm"     | "warm": particles from the initial belief; "cold": uniform over the |
+|                    |            | world's start region (wan2014's cold start; cv_accel worlds only)   |
 | box_margin         | 150        | [0, 1e7] m             |
 | min_bandwidth      | 0.5        | (0, 1e4] m             |
 | initial_threshold  | 3          | 1..64 (at most N)      |
@@ -91,6 +93,7 @@ class Dnbp(PartConfig):
     min_bandwidth: float = 0.5
     initial_threshold: int = 3
     schedule: str = "modified"
+    init: str = "warm"
 
     @property
     def rounds(self) -> int:
@@ -105,6 +108,7 @@ class Dnbp(PartConfig):
         check_range(f"{prefix}min_bandwidth", self.min_bandwidth, 0.0, 1e4, low_open=True)
         check_range(f"{prefix}initial_threshold", self.initial_threshold, 1, 64, integer=True)
         check_choice(f"{prefix}schedule", self.schedule, ("modified", "parallel"))
+        check_choice(f"{prefix}init", self.init, ("warm", "cold"))
 
     def build(self, world, network, batch: int) -> Backend:
         return DnbpBackend(self, world, network, batch)
@@ -170,6 +174,11 @@ class DnbpBackend(Backend):
                                   estimate=np.zeros((B, N, 2)))
         self.rngs: list = [None] * self.batch
         self.floats = 3 * M + 1
+        if config.init == "cold" and not self.constant_velocity:
+            raise ValueError(f"backend.init='cold' needs cv_accel motion (the nominal velocity); world "
+                             f"{world.config.name!r} moves by {motion.kind}")
+        # the last step's schedule outcome (estimators.dnbp.StepResult): broadcasts, deliveries per iteration
+        self.last_result = None
 
     def reset(self, rngs, idx) -> None:
         idx = np.asarray(idx)
@@ -177,7 +186,11 @@ class DnbpBackend(Backend):
             self.rngs[b] = rng
         mean, cov = self.world.initial_belief()
         if self.constant_velocity:
-            fresh = dn.initial_state(self.model, list(rngs), "warm", mean[idx, :, :2], mean[idx, :, 2:],
+            velocity = mean[idx, :, 2:]
+            if self.config.init == "cold":  # nothing known but the nominal velocity
+                velocity = np.broadcast_to(np.asarray(_world_field(self.world, "nominal_velocity"), float),
+                                           velocity.shape)
+            fresh = dn.initial_state(self.model, list(rngs), self.config.init, mean[idx, :, :2], velocity,
                                      float(_world_field(self.world, "velocity_spread")))
         else:  # warm start: M draws from each agent's initial belief N(mean, cov)
             M = self.model.num_particles
@@ -216,8 +229,8 @@ class DnbpBackend(Backend):
         held = range_valid.transpose(0, 2, 1)
         ranges = np.where(held, np.nan_to_num(readings.range).transpose(0, 2, 1), 0.0)
         propagate = None if self.constant_velocity else self._propagate(readings.inputs)
-        self.state, _ = dn.step(self.model, self.state, readings.fix_valid, readings.fix, deliver, ranges,
-                                readings.inputs, self.rngs, propagate=propagate)
+        self.state, self.last_result = dn.step(self.model, self.state, readings.fix_valid, readings.fix, deliver,
+                                               ranges, readings.inputs, self.rngs, propagate=propagate)
 
     def predict(self, inputs) -> None:
         return None  # dn.step has propagated the beliefs to k + 1 already (with the same readings' inputs)

@@ -142,13 +142,19 @@ class Scenario(abc.ABC):
         [0, nvec). A value out of range is a ValueError naming its index by ``labels[i]`` (what index
         i chooses; default ``action[i]``)."""
         arr = self.check_actions(actions)
-        if np.any(arr != np.round(arr)):
-            raise ValueError("actions must be integers (MultiDiscrete)")
         nvec = np.asarray(self.action_space().nvec)
+        flat = arr.reshape(*arr.shape[:2], -1)
+
+        def refuse(bad: np.ndarray, rule: str):
+            copy, agent, i = (int(v) for v in np.argwhere(bad.reshape(flat.shape))[0])
+            label = labels[i] if i < len(labels) else f"action[{i}]"
+            where = self.agent_names[agent] + (f", copy {copy}" if self.batch > 1 else "")
+            raise ValueError(f"{label} must be {rule.format(nvec.reshape(-1)[i] - 1)}, "
+                             f"got {flat[copy, agent, i]:g} ({where})")
+
+        if np.any(arr != np.round(arr)):
+            refuse(arr != np.round(arr), "integers in [0, {}]")
         outside = (arr < 0) | (arr >= nvec)
         if np.any(outside):
-            i = int(np.argwhere(outside)[0][-1])
-            label = labels[i] if i < len(labels) else f"action[{i}]"
-            value = arr[..., i][outside[..., i]][0]
-            raise ValueError(f"{label} must be integers in [0, {nvec[i] - 1}], got {value:g}")
+            refuse(outside, "integers in [0, {}]")
         return arr.astype(np.int64)

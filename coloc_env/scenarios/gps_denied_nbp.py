@@ -20,19 +20,21 @@ neighbours once it has heard from theta distinct neighbours, theta = 3 -> 2 -> 1
 then every belief is propagated to tau + 1. The agents decide what the paper
 fixes: whether to use each broadcast opportunity the schedule gives them.
 
-Action (per UAV, ``MultiBinary(num_iterations)``, int8)
--------------------------------------------------------
+Action (per UAV, ``MultiDiscrete([2] * num_iterations)``, int64; ``MultiBinary`` before issue 14,
+which RLlib's PPO refuses)
+------------------------------------------------------------------------------------------------
 | index | meaning                                                                              |
 |-------|--------------------------------------------------------------------------------------|
 | ``n`` | 1 = broadcast my message in NBP iteration n of this step if the schedule allows it;  |
 |       | a bit for an iteration in which the schedule does not allow me to send is ignored.   |
 
-Values are thresholded at 0.5; a NaN or inf is a ``ValueError``. ``paper``
+A value other than 0 or 1, a NaN or inf is a ``ValueError`` naming the iteration. ``paper``
 (all ones) is the paper's schedule; all zeros reduces every fault UAV to dead
 reckoning.
 
-Observation (per UAV, ``Box(-inf, inf, shape=(7,), float32)``), about the coming step tau
---------------------------------------------------------------------------------------
+Observation (per UAV, ``Box(shape=(7,), float32)``: entries 0-3 and 6 in [0, 1], 4 and 5 in
+[0, inf)), about the coming step tau
+----------------------------------------------------------------------------------------------
 | index | meaning                                                                         |
 |-------|---------------------------------------------------------------------------------|
 | 0     | own GPS normal (1) or fault (0) at tau                                          |
@@ -61,15 +63,27 @@ The spec's optional particle-count action (and its lambda_M term) is not impleme
 Termination: none; truncation after ``horizon`` steps (T = 30 [chosen]).
 
 ``infos[agent]``: ``true_position``, ``estimated_position`` (belief mean),
-``error`` (metres), ``fault`` (GPS faulty at tau), ``broadcasts`` (this
-step), ``communication`` (= broadcasts: what ``coloc evaluate`` counts),
-``messages_sent``, ``messages_received`` (directed messages),
-``neighbours``, ``step``. At reset the estimate is the tau = 0 prior mean.
+``position_error`` and ``error`` (the same distance, metres), ``trace`` (m^2, of the
+belief particles' sample covariance), ``fault`` (GPS faulty at tau), ``broadcasts`` (this
+step, as the schedule counts them), ``communication`` (= broadcasts: what ``coloc
+evaluate`` counts), ``messages_sent`` (the network's count at the sender: one per
+broadcast that reached a listener; before issue 14 this key counted directed
+deliveries), ``floats_sent`` (3 M + 1 floats per message), ``messages_received``
+(directed: the messages this UAV took), ``neighbours``, ``step``. At reset the estimate
+is the tau = 0 prior mean.
+
+Composition: a binding (:mod:`coloc_env.scenarios.binding`) of world ``gps_denied``
+(the same flight, GPS chain and ranging), network ``broadcast`` (radius ``comm_range``,
+no loss) and backend ``dnbp`` (``init`` included); ``coloc_env.PRESETS["gps_denied_nbp"]``
+is that composition. The world draws from the episode's generator itself and the
+estimator from its first child, as before the core, so the same seed and actions give
+the same numbers bit for bit.
 
 Batching and seeding: reset draws each copy's whole episode (truth,
 accelerometer, GPS chain and fixes, ranges, the warm-start knowledge) from the
 copy's generator in blocks, then spawns the copy's estimator generator from
-it; steps are one batched call of :func:`estimators.dnbp.step` over copies,
+it; steps are one batched call of :func:`estimators.dnbp.step` (through the backend,
+each iteration's delivery asked of the network) over copies,
 particles and messages. What remains a loop over copies is the drawing of the
 particle filter's random numbers (resampling, proposals, message directions):
 each copy draws its block from its own estimator generator, so copy b of a
@@ -114,13 +128,16 @@ import gymnasium
 import numpy as np
 
 import estimators.dnbp as dn
+from coloc_env.backends.particles import Dnbp
+from coloc_env.composition import Composition
 from coloc_env.config import as_array, check_choice, check_range
+from coloc_env.networks.broadcast import Broadcast
 from coloc_env.rendering import Link, Scene
-from coloc_env.scenarios.base import Scenario
-from coloc_env.world.broadcast_medium import BroadcastMedium
+from coloc_env.scenarios.binding import PresetScenario
 from coloc_env.world.cv_uav import ConstantVelocityUAVs
 from coloc_env.world.gps_markov import MarkovGPS
 from coloc_env.world.range_network import RangeNetwork
+from coloc_env.worlds.gps_denied import GpsDenied
 
 OBS_DIM = 7
 
@@ -193,6 +210,21 @@ class GpsDeniedNbpConfig:
         check_choice("schedule", self.schedule, ("modified", "parallel"))
         check_choice("reward", self.reward, ("team", "own"))
         check_range("broadcast_cost", self.broadcast_cost, 0.0, 1e12)
+
+    def parts(self) -> tuple:
+        """The (world, network, backend) configs this flat config stands for: ``gps_denied`` with the same
+        flight, GPS chain and ranging, ``broadcast`` over the ranging radius without loss, ``dnbp``."""
+        world = GpsDenied(num_agents=self.num_uavs, horizon=self.horizon, dt=self.dt, area=self.area,
+                          nominal_velocity=self.nominal_velocity, velocity_spread=self.velocity_spread,
+                          accel_std=self.accel_std, accel_noise_std=self.accel_noise_std, gps_std=self.gps_std,
+                          range_std=self.range_std, comm_range=self.comm_range,
+                          p_normal_to_fault=self.p_normal_to_fault, p_fault_to_normal=self.p_fault_to_normal,
+                          num_normal=self.num_normal)
+        backend = Dnbp(num_particles=self.num_particles, num_iterations=self.num_iterations,
+                       oversampling=self.oversampling, defensive_weight=self.defensive_weight,
+                       box_margin=self.box_margin, min_bandwidth=self.min_bandwidth,
+                       initial_threshold=self.initial_threshold, schedule=self.schedule, init=self.init)
+        return world, Broadcast(comm_range=self.comm_range, loss=0.0), backend
 
     def estimator_model(self) -> dn.DnbpModel:
         """The dNBP parameters; the defensive box covers the whole flight (spec §4.3)."""
@@ -272,8 +304,9 @@ def bimodality(points: np.ndarray) -> np.ndarray:
     return np.where(m2 > 1e-18, (skew**2 + 1.0) / np.maximum(kurt, 1e-12), 1.0 / 3.0)
 
 
-class GpsDeniedNbpScenario(Scenario):
-    """Batched core of ``gps_denied_nbp``; see the module docstring for the tables."""
+class GpsDeniedNbpScenario(PresetScenario):
+    """``gps_denied_nbp`` as a binding: ``gps_denied`` / ``broadcast`` / ``dnbp`` with the paper's per-iteration
+    broadcast codec, observation, reward and infos (module docstring)."""
 
     name = "gps_denied_nbp"
     paper = "wan2014"
@@ -282,102 +315,111 @@ class GpsDeniedNbpScenario(Scenario):
 
     def __init__(self, config: GpsDeniedNbpConfig, batch: int = 1):
         super().__init__(config, batch)
-        self.model = config.estimator_model()
-        self.medium = BroadcastMedium()
-        B, N, T, M, n = self.batch, config.num_uavs, config.horizon, config.num_particles, config.num_iterations
-        self.k = np.zeros(B, dtype=int)
-        self.truth = np.zeros((B, T, N, 4))
-        self.accel = np.zeros((B, T, N, 2))
-        self.gps_normal = np.zeros((B, T, N), bool)
-        self.gps_fix = np.zeros((B, T, N, 2))
-        self.adjacency = np.zeros((B, T, N, N), bool)
-        self.ranges = np.zeros((B, T, N, N))
-        self.estimator_rngs: list[np.random.Generator | None] = [None] * B
-        particles = np.zeros((B, N, M, 4))
-        self.belief_state = dn.DnbpState(prior=particles, prior_bandwidth=np.ones((B, N)),
-                                         prior_uniform=np.zeros((B, N), bool), belief=particles.copy(),
-                                         estimate=np.zeros((B, N, 2)))
-        self.estimate = np.zeros((B, N, 2))
-        self.errors = np.zeros((B, N))
+        B, N, n = self.batch, config.num_uavs, config.num_iterations
         self.delivered = np.zeros((B, n, N, N), bool)
         self.broadcasts = np.zeros((B, N), int)
         self.heard = np.zeros((B, N), int)
-        self._reward = np.zeros((B, N))
+        self.fault = np.zeros((B, N), bool)
+
+    @classmethod
+    def compose(cls, config: GpsDeniedNbpConfig) -> Composition:
+        spec = Composition(*config.parts(), horizon=config.horizon, preset=cls.name)
+        spec.validate()
+        return spec
+
+    # --- the paper scenario's names for the parts' state (tests, policies, the reproduction, the renderer) -----
+    @property
+    def model(self) -> dn.DnbpModel:
+        return self.backend.model
+
+    @property
+    def belief_state(self) -> dn.DnbpState:
+        return self.backend.state
+
+    @property
+    def estimator_rngs(self) -> list:
+        return self.backend.rngs
+
+    @property
+    def truth(self) -> np.ndarray:
+        """(B, T, N, 4) true [position, velocity] of every slice."""
+        return self.world.truth
+
+    @property
+    def gps_normal(self) -> np.ndarray:
+        return self.world.gps_normal
+
+    @property
+    def adjacency(self) -> np.ndarray:
+        return self.world.adjacency
+
+    @property
+    def estimate(self) -> np.ndarray:
+        """Belief means (B, N, 2) of the last step's slice tau (the tau = 0 prior mean at reset)."""
+        return self.backend.posterior_position
+
+    @property
+    def errors(self) -> np.ndarray:
+        return self.position_error()
 
     # --- description ------------------------------------------------------------
+    @property
+    def num_agents(self) -> int:
+        return self.config.num_uavs
+
     def observation_space(self):
-        return gymnasium.spaces.Box(-np.inf, np.inf, shape=(OBS_DIM,), dtype=np.float32)
+        low = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], np.float32)
+        high = np.array([1.0, 1.0, 1.0, 1.0, np.inf, np.inf, 1.0], np.float32)
+        return gymnasium.spaces.Box(low, high, dtype=np.float32)
 
     def action_space(self):
-        return gymnasium.spaces.MultiBinary(int(self.config.num_iterations))
+        return gymnasium.spaces.MultiDiscrete([2] * int(self.config.num_iterations), dtype=np.int64)
 
     def state_space(self):
         return gymnasium.spaces.Box(-np.inf, np.inf, shape=(self.num_agents * (OBS_DIM + 1),), dtype=np.float32)
 
     # --- dynamics ----------------------------------------------------------------
-    def reset(self, rngs, env_index=None) -> None:
-        idx = self._indices(env_index)
-        if len(rngs) != len(idx):
-            raise ValueError(f"reset needs one generator per copy: {len(idx)} copies, {len(rngs)} generators")
-        episodes = [sample_episode(self.config, rng) for rng in rngs]
-        self.start(idx, episodes, [rng.spawn(1)[0] for rng in rngs])
+    def part_generators(self, rng):
+        # The world draws the episode from the episode's generator itself, in sample_episode's order, and the
+        # estimator takes its first child, as this scenario always did; the network (no loss by default) the second.
+        backend, network = rng.spawn(2)
+        return rng, network, backend
 
-    def start(self, idx, episodes: list[Episode], estimator_rngs: list[np.random.Generator]) -> None:
-        """Begin the given episodes in copies ``idx`` with their own estimator generators."""
-        idx = self._indices(idx)
-        for b, ep, rng in zip(idx, episodes, estimator_rngs, strict=True):
-            self.truth[b], self.accel[b] = ep.truth, ep.accel
-            self.gps_normal[b], self.gps_fix[b] = ep.gps_normal, ep.gps_fix
-            self.adjacency[b], self.ranges[b] = ep.adjacency, ep.ranges
-            self.estimator_rngs[b] = rng
-        fresh = initial_beliefs(self.config, self.model, episodes, [self.estimator_rngs[b] for b in idx])
-        for name in ("prior", "prior_bandwidth", "prior_uniform", "belief", "estimate"):
-            getattr(self.belief_state, name)[idx] = getattr(fresh, name)
-        self.k[idx] = 0
-        self.estimate[idx] = fresh.estimate
-        self.errors[idx] = np.linalg.norm(fresh.estimate - self.truth[idx, 0, :, :2], axis=-1)
+    def reset(self, rngs, env_index=None) -> None:
+        super().reset(rngs, env_index)
+        idx = self._indices(env_index)
         self.delivered[idx] = False
         self.broadcasts[idx] = 0
         self.heard[idx] = 0
-        self._reward[idx] = 0.0
+        self.fault[idx] = ~self.world.gps_normal[idx, 0]
+        self.network.messages_sent[idx] = 0.0
+        self.network.floats_sent[idx] = 0.0
 
+    def decode_actions(self, actions) -> np.ndarray:
+        """Actions (B, N, n_iter) of 0/1 -> the broadcast network's ``transmit`` block (one entry per round)."""
+        n = int(self.config.num_iterations)
+        return self.check_discrete_actions(actions, [f"action[{i}] (broadcast in NBP iteration {i})"
+                                                     for i in range(n)])
+
+    def advance(self, decoded) -> None:
+        super().advance(decoded)
+        result = self.backend.last_result
+        self.fault = ~np.asarray(self.readings.fix_valid, bool)
+        self.delivered, self.broadcasts, self.heard = result.delivered, result.broadcasts, result.received
+
+    def compute_reward(self) -> np.ndarray:
+        """The reward table: the fault UAVs' mean error (team) or each UAV's own, minus the broadcast cost."""
+        errors, fault, cost = self.position_error(), self.fault, self.config.broadcast_cost
+        if self.config.reward == "team":
+            mean_fault = np.sum(errors * fault, axis=1) / np.maximum(fault.sum(axis=1), 1)
+            team = -mean_fault - cost * self.broadcasts.sum(axis=1)
+            return np.repeat(team[:, None], self.num_agents, axis=1)
+        return -errors - cost * self.broadcasts
+
+    # --- views -------------------------------------------------------------------
     def _slice(self, array: np.ndarray, k: np.ndarray) -> np.ndarray:
         return array[np.arange(self.batch), np.minimum(k, self.horizon - 1)]
 
-    def step(self, actions) -> None:
-        actions = self.check_actions(actions)
-        outside = (actions != 0) & (actions != 1)
-        if np.any(outside):  # MultiBinary: exactly 0 or 1, as MultiDiscrete refuses a value out of range
-            copy, agent, i = np.argwhere(outside)[0]
-            raise ValueError(f"action[{i}] (broadcast in NBP iteration {i}) of {self.agent_names[agent]} must be "
-                             f"0 or 1 (MultiBinary), got {actions[copy, agent, i]:g}")
-        if np.any(self.k >= self.horizon):
-            raise RuntimeError("step() on a copy whose episode is over; reset it first")
-        self.advance(actions > 0.5)
-
-    def advance(self, broadcast: np.ndarray) -> None:
-        """Step with decoded decisions: broadcast (B, N, n_iter) bool."""
-        k = self.k
-        normal = self._slice(self.gps_normal, k)
-        self.belief_state, result = dn.step(
-            self.model, self.belief_state, normal, self._slice(self.gps_fix, k),
-            self.medium.over(self._slice(self.adjacency, k)), self._slice(self.ranges, k), self._slice(self.accel, k),
-            self.estimator_rngs, broadcast)
-        truth = self._slice(self.truth, k)[..., :2]
-        self.estimate = result.estimate
-        self.errors = np.linalg.norm(result.estimate - truth, axis=-1)
-        self.delivered, self.broadcasts, self.heard = result.delivered, result.broadcasts, result.received
-        fault = ~normal
-        cost = self.config.broadcast_cost
-        if self.config.reward == "team":
-            mean_fault = np.sum(self.errors * fault, axis=1) / np.maximum(fault.sum(axis=1), 1)
-            team = -mean_fault - cost * self.broadcasts.sum(axis=1)
-            self._reward = np.repeat(team[:, None], self.num_agents, axis=1)
-        else:
-            self._reward = -self.errors - cost * self.broadcasts
-        self.k = k + 1
-
-    # --- views -------------------------------------------------------------------
     def observation(self) -> np.ndarray:
         N = self.num_agents
         normal = self._slice(self.gps_normal, self.k)
@@ -405,12 +447,6 @@ class GpsDeniedNbpScenario(Scenario):
         count = fault.sum(axis=(-2, -1))
         return np.where(count > 0, (errors * fault).sum(axis=(-2, -1)) / np.maximum(count, 1), 0.0)
 
-    def reward(self) -> np.ndarray:
-        return self._reward.copy()
-
-    def done(self) -> np.ndarray:
-        return self.k >= self.horizon
-
     def state(self) -> np.ndarray:
         obs = self.observation().reshape(self.batch, -1)
         return np.concatenate([obs, np.log1p(self.errors)], axis=-1).astype(np.float32)
@@ -422,14 +458,18 @@ class GpsDeniedNbpScenario(Scenario):
     def info(self) -> dict[str, np.ndarray]:
         B, N = self.batch, self.num_agents
         k_est = self._estimated_slice()
+        error = self.position_error()
         return {
-            "true_position": self._slice(self.truth, k_est)[..., :2].copy(),
-            "estimated_position": self.estimate.copy(),
-            "error": self.errors.copy(),
-            "fault": ~self._slice(self.gps_normal, k_est),
+            "true_position": self._truth.copy(),
+            "estimated_position": self.backend.posterior_position.copy(),
+            "position_error": error,
+            "error": error.copy(),
+            "trace": np.trace(self.backend.position_cov(), axis1=-2, axis2=-1),
+            "fault": self.fault.copy(),
             "broadcasts": self.broadcasts.copy(),
             "communication": self.broadcasts.astype(float),
-            "messages_sent": self.delivered.sum(axis=(1, 3)),
+            "messages_sent": self.network.messages_sent.copy(),
+            "floats_sent": self.network.floats_sent.copy(),
             "messages_received": self.delivered.sum(axis=(1, 2)),
             "neighbours": self._slice(self.adjacency, k_est).sum(axis=-1),
             "step": np.broadcast_to(self.k[:, None], (B, N)).copy(),
@@ -450,7 +490,6 @@ class GpsDeniedNbpScenario(Scenario):
         edges = self.adjacency[b, k_est] & ((counts > 0) | (np.arange(N)[:, None] < np.arange(N)))
         links = [Link(source=int(t), target=int(s), value=float(counts[t, s]))
                  for t, s in zip(*np.nonzero(edges | (counts > 0)), strict=True)]
-        labels = [f"{name}{' (fault)' if fault[i] else ''}" for i, name in enumerate(self.agent_names)]
         mean_fault = float(self.errors[b][fault].mean()) if fault.any() else 0.0
         return Scene(
             title=f"gps_denied_nbp (wan2014)  tau = {k_est}/{self.horizon}",
@@ -460,7 +499,8 @@ class GpsDeniedNbpScenario(Scenario):
             trails=np.swapaxes(self.truth[b, max(0, k_est - 10): k_est + 1, :, :2], 0, 1),
             particles=particles,
             node_positions=(truth - centre) / max(half, 1e-9),
-            node_labels=labels,
+            node_labels=list(self.agent_names),
+            node_status=["GPS fault" if fault[i] else "" for i in range(N)],
             links=links,
             link_value_max=float(self.config.num_iterations),
             link_value_name="iterations with a message",

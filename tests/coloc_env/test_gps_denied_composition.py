@@ -5,7 +5,9 @@ import pytest
 
 import agents
 import coloc_env
-from coloc_env.scenarios.gps_denied_nbp import GpsDeniedNbpConfig, GpsDeniedNbpScenario, sample_episode
+import estimators.dnbp as dn
+from coloc_env.scenarios.gps_denied_nbp import GpsDeniedNbpConfig, initial_beliefs, sample_episode
+from coloc_env.world.broadcast_medium import BroadcastMedium
 
 DNBP_SMALL = {"name": "dnbp", "num_particles": 50}
 
@@ -26,8 +28,9 @@ def _run(spec, seed, steps):
     return np.array(truth), np.array(estimates), np.array(errors), np.array(fault), env
 
 
-def test_dnbp_over_broadcast_equals_the_gps_denied_nbp_scenario():
-    """Same episode, same estimator generator, the network's range = the world's: the scenario's estimates."""
+def test_dnbp_over_broadcast_equals_the_estimator_on_the_scenarios_episode():
+    """Same episode and estimator generator as the composition's children of the seed, the network's range =
+    the world's: :func:`estimators.dnbp.step` over the paper scenario's broadcast medium gives the same estimates."""
     seed, steps = 3, 30
     spec = coloc_env.compose(world="gps_denied", network={"name": "broadcast", "comm_range": 300.0},
                              backend=DNBP_SMALL)
@@ -36,12 +39,15 @@ def test_dnbp_over_broadcast_equals_the_gps_denied_nbp_scenario():
     world_rng, _, backend_rng = np.random.default_rng(seed).spawn(3)  # the composition's children of the seed
     episode = sample_episode(config, world_rng)
     np.testing.assert_array_equal(env.unwrapped.scenario.world.truth[0], episode.truth)
-    scenario = GpsDeniedNbpScenario(config)
-    scenario.start([0], [episode], [backend_rng])
+    model = config.estimator_model()
+    state = initial_beliefs(config, model, [episode], [backend_rng])
+    ones = np.ones((1, config.num_uavs, config.num_iterations), bool)
     for k in range(steps):
-        scenario.advance(np.ones((1, config.num_uavs, config.num_iterations), bool))
+        state, result = dn.step(model, state, episode.gps_normal[k][None], episode.gps_fix[k][None],
+                                BroadcastMedium().over(episode.adjacency[k][None]), episode.ranges[k][None],
+                                episode.accel[k][None], [backend_rng], ones)
         np.testing.assert_array_equal(truth[k], episode.truth[k, :, :2])
-        np.testing.assert_allclose(estimates[k], scenario.estimate[0], rtol=0, atol=1e-9)
+        np.testing.assert_allclose(estimates[k], result.estimate[0], rtol=0, atol=1e-9)
 
 
 def test_cooperative_backends_beat_dead_reckoning_on_fault_uavs():
