@@ -1,4 +1,11 @@
-"""PettingZoo views of a batched scenario: the parallel env (B = 1) and the AEC view."""
+"""PettingZoo views of a batched scenario: the parallel env (B = 1) and the AEC view.
+
+``max_cycles`` is PettingZoo's name for the episode length (its
+``max_cycles_test`` and the SISL/butterfly environments use it): every env
+here accepts it and writes it into the field that sets the episode length,
+the preset's ``horizon`` (``window_steps`` for mrclam_relay, the replayed
+window) or a composition's ``horizon`` (:func:`with_max_cycles`).
+"""
 
 from __future__ import annotations
 
@@ -8,9 +15,56 @@ from collections.abc import Mapping
 import numpy as np
 from pettingzoo import ParallelEnv
 
-from coloc_env.config import build_config
+from coloc_env.config import build_config, check_range
 from coloc_env.rendering import Renderer
 from coloc_env.scenarios.base import Scenario
+
+# The config field that sets the episode length, where it is not ``horizon``.
+EPISODE_LENGTH_FIELDS = {"mrclam_relay": "window_steps"}
+MAX_CYCLES_LIMIT = 1_000_000_000
+
+
+def episode_length_field(scenario_cls: type[Scenario]) -> str:
+    """The name of the config field of ``scenario_cls`` that ``max_cycles`` sets."""
+    return EPISODE_LENGTH_FIELDS.get(getattr(scenario_cls, "name", ""), "horizon")
+
+
+def with_max_cycles(scenario_cls: type[Scenario], composition, config: dict, max_cycles: int | None):
+    """``(composition, config)`` with the episode length set to ``max_cycles`` (None: unchanged).
+
+    A preset's flat config gets its episode-length field (:func:`episode_length_field`); a
+    composition gets ``Composition.replace(horizon=max_cycles)``. Giving both ``max_cycles`` and that
+    field with different values is a ValueError, so neither silently wins.
+    """
+    if max_cycles is None:
+        return composition, config
+    check_range("max_cycles", max_cycles, 1, MAX_CYCLES_LIMIT, integer=True)
+    if composition is not None:
+        try:
+            return composition.replace(horizon=int(max_cycles)), config
+        except ValueError as exc:
+            raise ValueError(f"max_cycles sets the composition's horizon: {exc}") from exc
+    field = episode_length_field(scenario_cls)
+    if field in config and config[field] != max_cycles:
+        raise ValueError(f"max_cycles={max_cycles!r} and {field}={config[field]!r} both set the episode length "
+                         f"of {scenario_cls.name}; give one of them")
+    return composition, {**config, field: int(max_cycles)}
+
+
+def build_scenario(scenario_cls: type[Scenario], batch: int, composition=None, max_cycles: int | None = None,
+                   **config) -> Scenario:
+    """``scenario_cls`` over ``batch`` copies from its flat config or a composition (and ``max_cycles``)."""
+    composition, config = with_max_cycles(scenario_cls, composition, config, max_cycles)
+    if composition is not None:  # a composition's scenario validates its own config
+        return scenario_cls(composition, batch=batch)
+    field = episode_length_field(scenario_cls)
+    try:
+        built = build_config(scenario_cls.Config, config)
+    except ValueError as exc:
+        if max_cycles is not None and str(exc).startswith(field):
+            raise ValueError(f"max_cycles sets {field} of {scenario_cls.name}: {exc}") from exc
+        raise
+    return scenario_cls(built, batch=batch)
 
 
 class CoLocParallelEnv(ParallelEnv):
@@ -18,16 +72,15 @@ class CoLocParallelEnv(ParallelEnv):
 
     ``reset(seed=s)`` gives the env ``np.random.default_rng(s)``; ``reset()``
     without a seed continues the same generator (DESIGN.md, Seeding).
-    Episodes end by truncation at the scenario's horizon.
+    Episodes end by truncation at the scenario's horizon; ``max_cycles``
+    (PettingZoo's keyword) sets it (:func:`with_max_cycles`).
     """
 
     metadata = {"render_modes": [None, "rgb_array", "human"], "is_parallelizable": True, "render_fps": 5}
 
-    def __init__(self, scenario_cls: type[Scenario], render_mode: str | None = None, *, composition=None, **config):
-        if composition is not None:  # a composition's scenario validates its own config
-            self.scenario = scenario_cls(composition, batch=1)
-        else:
-            self.scenario = scenario_cls(build_config(scenario_cls.Config, config), batch=1)
+    def __init__(self, scenario_cls: type[Scenario], render_mode: str | None = None, *, composition=None,
+                 max_cycles: int | None = None, **config):
+        self.scenario = build_scenario(scenario_cls, 1, composition, max_cycles, **config)
         self.metadata = dict(self.metadata, name=self.scenario.name)
         self._renderer = Renderer(render_mode)
         self.render_mode = render_mode
@@ -117,10 +170,19 @@ class CoLocParallelEnv(ParallelEnv):
     def state(self):
         return self.scenario.state()[0]
 
-    def render(self):
+    def render(self, mode: str | None = None):
+        """The frame of the current step (``rgb_array``: an (H, W, 3) uint8 array; ``human``: a window).
+
+        ``mode`` exists for clients that still pass it positionally (RLlib's ``PettingZooEnv.render``
+        calls ``env.render(mode)``): it must be None or equal to ``render_mode``, which is fixed when
+        the env is made, as PettingZoo's API requires.
+        """
+        if mode is not None and mode != self.render_mode:
+            raise ValueError(f"render mode {mode!r} differs from this env's render_mode {self.render_mode!r}; "
+                             "the mode is chosen when the env is made: parallel_env(..., render_mode=...)")
         if self.render_mode is None:
             return None
-        return self._renderer.render(self.scenario.scene(0))
+        return self._renderer.render(self.scenario.scene(0), agent_names=self.possible_agents)
 
     def close(self):
         self._renderer.close()

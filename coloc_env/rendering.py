@@ -1,21 +1,62 @@
-"""One renderer for every scenario.
+"""One renderer for every scenario and composition.
 
 A scenario describes what to draw for one copy as a :class:`Scene`; the
 renderer turns it into an RGB array (``render_mode="rgb_array"``) or shows it
-in a matplotlib window (``render_mode="human"``). Two panels: the estimation
-view (truth, estimates, covariance ellipses, optional particles and trails)
-and the network view (nodes and the links of the current step, coloured by
-what they carried).
+in a matplotlib window (``render_mode="human"``). Every frame has the same
+layout, so that presets and compositions look alike:
+
+* the title (the scenario and the time) across the top, wrapped, never cut;
+* the map (left): true positions (hollow black circles), each agent's
+  estimate (a filled dot in the agent's colour, drawn above the truth), a
+  thin segment from truth to estimate, the covariance ellipses (2 sigma,
+  magnified by a 1-2-5 factor named in the legend when the largest would be
+  under 2 % of the map), particle clouds, recent true paths and landmarks;
+  equal metres on both axes, the limits widened (never narrowed) to the
+  panel's shape, so a long thin scene is not squashed into a strip. Where
+  the scene has particles and one cloud is too small to see, an inset in
+  the map's emptiest corner shows that agent's particles and ellipse at
+  true scale;
+* the network (middle): one node per participant, labelled beside it with
+  its full name, coloured as on the map (white: a node that is not an
+  agent; a red ring: a node with a status such as a GPS fault), and the
+  links of the current step coloured by what they carried;
+* the legend (right): each agent's colour, every mark, what an arrow and a
+  dashed link mean, and what the link colours count (with samples);
+* the notes (bottom), below the panels.
+
+The figure has exactly two axes (map and network; the inset is a child of
+the map); title, legend and notes are figure-level artists placed by
+matplotlib's constrained layout, so none overlaps a panel.
+
+Frames are 960 x 600 pixels by default (:class:`Renderer`), legible when
+scaled to 720 pixels wide.
 """
 
 from __future__ import annotations
 
+import textwrap
 from dataclasses import dataclass, field
 
 import numpy as np
 
+# tab10, then tab20's light shades: 20 distinct agent colours (bandwidth_fusion allows 16 UAVs)
 AGENT_COLOURS = ["tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown",
-                 "tab:pink", "tab:olive", "tab:cyan", "tab:gray"]
+                 "tab:pink", "tab:olive", "tab:cyan", "tab:gray",
+                 "#aec7e8", "#ffbb78", "#98df8a", "#ff9896", "#c5b0d5", "#c49c94", "#f7b6d2", "#dbdb8d",
+                 "#9edae5", "#c7c7c7"]
+MAX_LINK_LABELS = 24  # more labelled links than this would cover the network panel
+NON_AGENT_COLOUR = "white"  # drawn with a grey edge: no agent colour (tab:gray is one) looks like it
+FAULT_COLOUR = "crimson"
+ELLIPSE_SIGMA = 2.0
+# An ellipse whose largest 2-sigma semi-axis is below this fraction of the map's span is magnified
+# (by a 1-2-5 factor) so that its largest one spans about ELLIPSE_TARGET_FRACTION.
+ELLIPSE_MIN_FRACTION = 0.02
+ELLIPSE_TARGET_FRACTION = 0.05
+MAX_NOTE_LINES = 5
+LEGEND_ROWS = 30  # legend entries that fit one column of a 600-pixel frame
+PANELS_FRACTION = 0.74  # of the figure's width, left of the legend
+INSET_SIZE = 0.36  # the particle inset's side, as a fraction of the map's
+FONT_SIZE = 10
 
 
 @dataclass
@@ -36,12 +77,17 @@ class Link:
 class Scene:
     """What the renderer draws for one environment copy (2-D projections, metres).
 
-    ``truth`` (K, 2): true positions of the tracked objects; ``estimates``
-    (N, 2) and ``covariances`` (N, 2, 2): each agent's estimate and its
-    covariance (drawn as a 2-sigma ellipse); ``trails`` (K, T, 2): recent true
-    path; ``particles`` (N, P, 2): particle clouds where the estimator has
-    them; ``node_positions`` (N, 2): where the network panel draws each agent;
-    ``links``: what moved over the network this step.
+    ``truth`` (K, 2): true positions of the tracked objects (the agents
+    themselves, or one target); ``estimates`` (N, 2) and ``covariances``
+    (N, 2, 2): each agent's estimate and its covariance (drawn as a 2-sigma
+    ellipse); ``estimate_labels``: the legend's name of each estimate (default:
+    the env's ``possible_agents``, else ``node_labels``); ``trails`` (K, T, 2):
+    recent true path; ``particles`` (N, P, 2): particle clouds where the
+    estimator has them; ``landmarks`` (L, 2): fixed known beacons;
+    ``node_positions`` (M, 2): where the network panel draws each node (any
+    scale: the panel fits them), ``node_labels`` their names and
+    ``node_status`` a short word per node (e.g. "GPS fault", "" for none),
+    drawn as a red ring round the node and named in the legend; ``links``: what moved over the network this step.
     """
 
     title: str
@@ -58,9 +104,13 @@ class Scene:
     directed: bool = True
     extent: tuple[float, float, float, float] | None = None
     notes: list[str] = field(default_factory=list)
+    landmarks: np.ndarray | None = None
+    estimate_labels: list[str] | None = None
+    node_status: list[str] = field(default_factory=list)
 
 
-def _ellipse_points(mean: np.ndarray, cov: np.ndarray, scale: float = 2.0, count: int = 48) -> np.ndarray:
+def _ellipse_points(mean: np.ndarray, cov: np.ndarray, scale: float = ELLIPSE_SIGMA, count: int = 48) -> np.ndarray:
+    """Points of the ellipse {x : (x - mean)^T cov^-1 (x - mean) = scale^2}."""
     vals, vecs = np.linalg.eigh(0.5 * (cov + cov.T))
     radii = scale * np.sqrt(np.clip(vals, 0.0, None))
     angle = np.linspace(0.0, 2.0 * np.pi, count)
@@ -68,74 +118,393 @@ def _ellipse_points(mean: np.ndarray, cov: np.ndarray, scale: float = 2.0, count
     return mean + (circle * radii) @ vecs.T
 
 
-def draw_scene(scene: Scene, figure) -> None:
-    """Draw ``scene`` on a matplotlib ``figure`` (cleared first)."""
-    import matplotlib as mpl
+def nice_factor(ratio: float) -> float:
+    """The smallest of 1, 2, 5, 10, 20, 50, ... that is at least ``ratio`` (a magnification a reader can read)."""
+    if not np.isfinite(ratio) or ratio <= 1.0:
+        return 1.0
+    exponent = np.floor(np.log10(ratio))
+    for mantissa in (1.0, 2.0, 5.0, 10.0):
+        if mantissa * 10.0**exponent >= ratio:
+            return float(mantissa * 10.0**exponent)
+    return float(10.0 ** (exponent + 1))
 
-    figure.clear()
-    has_network = scene.node_positions is not None
-    axes = figure.subplots(1, 2, gridspec_kw={"width_ratios": [3, 2]}) if has_network else [figure.subplots()]
-    ax = axes[0]
-    if scene.trails is not None:
-        for trail in scene.trails:
-            ax.plot(trail[:, 0], trail[:, 1], color="0.6", lw=1)
-    if scene.particles is not None:
-        for i, cloud in enumerate(scene.particles):
-            ax.scatter(cloud[:, 0], cloud[:, 1], s=2, alpha=0.3, color=AGENT_COLOURS[i % len(AGENT_COLOURS)])
-    truth = np.atleast_2d(scene.truth)
-    ax.scatter(truth[:, 0], truth[:, 1], marker="*", s=160, color="black", label="truth", zorder=5)
-    if scene.estimates is not None:
-        for i, est in enumerate(np.atleast_2d(scene.estimates)):
-            colour = AGENT_COLOURS[i % len(AGENT_COLOURS)]
-            label = scene.node_labels[i] if i < len(scene.node_labels) else f"agent {i}"
-            ax.scatter([est[0]], [est[1]], s=40, color=colour, label=label, zorder=4)
-            if scene.covariances is not None:
-                pts = _ellipse_points(est, scene.covariances[i])
-                ax.plot(pts[:, 0], pts[:, 1], color=colour, lw=1)
+
+def ellipse_magnification(covariances: np.ndarray | None, span: float) -> float:
+    """The factor applied to the 2-sigma ellipses so that the largest is visible on a map ``span`` metres wide.
+
+    1 when the largest 2-sigma semi-axis is already at least ``ELLIPSE_MIN_FRACTION`` of the span;
+    otherwise a 1-2-5 number that brings it to about ``ELLIPSE_TARGET_FRACTION`` (stated in the legend).
+    """
+    if covariances is None or len(covariances) == 0 or not span > 0:
+        return 1.0
+    cov = np.asarray(covariances, float)
+    largest = ELLIPSE_SIGMA * float(np.sqrt(np.clip(np.linalg.eigvalsh(0.5 * (cov + np.swapaxes(cov, -1, -2))),
+                                                    0.0, None).max()))
+    if not np.isfinite(largest) or largest >= ELLIPSE_MIN_FRACTION * span:
+        return 1.0
+    if largest <= 0.0:
+        return 1.0
+    return nice_factor(ELLIPSE_TARGET_FRACTION * span / largest)
+
+
+def separate_nodes(positions: np.ndarray, min_distance: float, iterations: int = 50) -> np.ndarray:
+    """``positions`` moved apart until no two are closer than ``min_distance`` (deterministic).
+
+    Nodes of the network panel sit where the agents are, and agents flying in formation would
+    overlap; each pass pushes every too-close pair apart along the line joining them (coincident
+    nodes along a fixed direction per pair), so the picture keeps who is near whom.
+    """
+    pos = np.array(positions, float)
+    count = len(pos)
+    for _ in range(iterations):
+        moved = False
+        for i in range(count):
+            for j in range(i + 1, count):
+                d = pos[j] - pos[i]
+                dist = float(np.hypot(*d))
+                if dist >= min_distance:
+                    continue
+                angle = 2.0 * np.pi * (i * count + j) / max(count * count, 1)
+                direction = d / dist if dist > 1e-12 else np.array([np.cos(angle), np.sin(angle)])
+                push = 0.5 * (min_distance - dist) * direction
+                pos[i] -= push
+                pos[j] += push
+                moved = True
+        if not moved:
+            break
+    return pos
+
+
+def _map_limits(scene: Scene, points: list[np.ndarray]) -> tuple[float, float, float, float]:
+    """The scene's extent, or the box around everything drawn (10 % margin, at least 1 m)."""
     if scene.extent is not None:
-        ax.set_xlim(scene.extent[0], scene.extent[1])
-        ax.set_ylim(scene.extent[2], scene.extent[3])
-    ax.set_aspect("equal", adjustable="box")
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
-    ax.set_title(scene.title, fontsize=10)
-    ax.legend(loc="upper left", fontsize=7)
-    for n, note in enumerate(scene.notes):
-        ax.text(0.01, 0.02 + 0.05 * n, note, transform=ax.transAxes, fontsize=8)
+        return tuple(float(v) for v in scene.extent)
+    stacked = np.concatenate([np.asarray(p, float).reshape(-1, 2) for p in points if p is not None and np.size(p)])
+    stacked = stacked[np.all(np.isfinite(stacked), axis=1)]
+    if not len(stacked):
+        return (-1.0, 1.0, -1.0, 1.0)
+    low, high = stacked.min(axis=0), stacked.max(axis=0)
+    pad = np.maximum(0.1 * (high - low).max(), 1.0)
+    return (low[0] - pad, high[0] + pad, low[1] - pad, high[1] + pad)
 
+
+def fit_aspect(limits: tuple[float, float, float, float], height_over_width: float) -> tuple[float, ...]:
+    """``limits`` (x0, x1, y0, y1) widened symmetrically on the shorter side so that, drawn with equal
+    metres on both axes, the box has the panel's shape ``height_over_width`` (never narrowed: nothing
+    drawn is cut, and a long thin scene is not squashed into a strip)."""
+    x0, x1, y0, y1 = limits
+    width, height = max(x1 - x0, 1e-9), max(y1 - y0, 1e-9)
+    if height / width < height_over_width:
+        grow = 0.5 * (width * height_over_width - height)
+        return (x0, x1, y0 - grow, y1 + grow)
+    grow = 0.5 * (height / height_over_width - width)
+    return (x0 - grow, x1 + grow, y0, y1)
+
+
+def _panel_shape(ax) -> float:
+    """Height over width of the panel ``ax`` on its figure, in inches."""
+    box = ax.get_position()
+    return float((box.height * ax.figure.get_figheight()) / max(box.width * ax.figure.get_figwidth(), 1e-9))
+
+
+def _agent_colour(index: int) -> str:
+    return AGENT_COLOURS[index % len(AGENT_COLOURS)]
+
+
+def _estimate_labels(scene: Scene, agent_names, count: int) -> list[str]:
+    for names in (scene.estimate_labels, agent_names, scene.node_labels):
+        if names is not None and len(names) >= count:
+            return [str(n) for n in names[:count]]
+    return [f"agent {i}" for i in range(count)]
+
+
+def _draw_map(ax, scene: Scene, agent_names, handles: list, agent_handles: list) -> None:
+    from matplotlib.lines import Line2D
+    from matplotlib.ticker import MaxNLocator, ScalarFormatter
+
+    truth = np.atleast_2d(np.asarray(scene.truth, float))
+    estimates = None if scene.estimates is None else np.atleast_2d(np.asarray(scene.estimates, float))
+    x0, x1, y0, y1 = _map_limits(scene, [truth, estimates, scene.trails, scene.landmarks])
+    span = max(x1 - x0, y1 - y0)
+
+    if scene.trails is not None and np.size(scene.trails):
+        for trail in np.asarray(scene.trails, float):
+            ax.plot(trail[:, 0], trail[:, 1], color="0.65", lw=1.2, zorder=1)
+        handles.append(Line2D([], [], color="0.65", lw=1.2, label="true path (recent)"))
+    if scene.landmarks is not None and np.size(scene.landmarks):
+        marks = np.atleast_2d(np.asarray(scene.landmarks, float))
+        ax.scatter(marks[:, 0], marks[:, 1], marker="s", s=28, facecolor="0.85", edgecolor="0.3", lw=0.8, zorder=2)
+        handles.append(Line2D([], [], ls="", marker="s", ms=6, mfc="0.85", mec="0.3", label="landmark"))
+    if scene.particles is not None and np.size(scene.particles):
+        for i, cloud in enumerate(np.asarray(scene.particles, float)):
+            ax.scatter(cloud[:, 0], cloud[:, 1], s=4, alpha=0.35, color=_agent_colour(i), lw=0, zorder=2)
+        handles.append(Line2D([], [], ls="", marker=".", ms=6, color="0.4", alpha=0.6, label="particles (belief)"))
+
+    self_localisation = estimates is not None and len(estimates) == len(truth)
+    truth_label = "true position" if self_localisation or len(truth) > 1 else "target (truth)"
+    ax.scatter(truth[:, 0], truth[:, 1], marker="o", s=110, facecolor="none", edgecolor="black", lw=1.4, zorder=5)
+    handles.append(Line2D([], [], ls="", marker="o", ms=9, mfc="none", mec="black", mew=1.4, label=truth_label))
+
+    if estimates is not None:
+        labels = _estimate_labels(scene, agent_names, len(estimates))
+        magnification = ellipse_magnification(scene.covariances, span)
+        for i, est in enumerate(estimates):
+            colour = _agent_colour(i)
+            if self_localisation:
+                ax.plot([truth[i, 0], est[0]], [truth[i, 1], est[1]], color=colour, lw=0.9, zorder=4)
+            ax.scatter([est[0]], [est[1]], s=34, color=colour, edgecolor="white", lw=0.6, zorder=6)
+            if scene.covariances is not None:
+                pts = _ellipse_points(est, np.asarray(scene.covariances[i], float),
+                                      scale=ELLIPSE_SIGMA * magnification)
+                ax.plot(pts[:, 0], pts[:, 1], color=colour, lw=1.3, zorder=4)
+            agent_handles.append(Line2D([], [], ls="", marker="o", ms=6, color=colour, label=labels[i]))
+        if self_localisation:
+            handles.append(Line2D([], [], color="0.3", lw=0.9, label="error (truth to estimate)"))
+        if scene.covariances is not None:
+            what = "2\u03c3 ellipse" + (f" \u00d7{magnification:g} (enlarged)" if magnification > 1 else "")
+            handles.append(Line2D([], [], color="0.3", lw=1.3, label=what))
+
+    shape = _panel_shape(ax)
+    x0, x1, y0, y1 = fit_aspect((x0, x1, y0, y1), shape)  # widen the shorter side: never a strip
+    inset_corner = None
+    if estimates is not None and wants_belief_inset(scene, (x0, x1, y0, y1)):
+        drawn = [truth, estimates] + ([np.asarray(scene.trails, float).reshape(-1, 2)]
+                                      if scene.trails is not None else [])
+        inset_corner, crowd = emptiest_corner(np.concatenate(drawn), (x0, x1, y0, y1), INSET_SIZE)
+        if crowd:  # widen the map to the right so that the inset hides nothing
+            x1 = x1 + INSET_SIZE / (1.0 - INSET_SIZE) * (x1 - x0)
+            x0, x1, y0, y1 = fit_aspect((x0, x1, y0, y1), shape)
+            inset_corner = (1.0 - INSET_SIZE, 1.0 - INSET_SIZE)
+    ax.set_xlim(x0, x1)
+    ax.set_ylim(y0, y1)
+    ax.set_aspect("equal", adjustable="box")
+    if inset_corner is not None:
+        _draw_belief_inset(ax, scene, _estimate_labels(scene, agent_names, len(estimates)), inset_corner)
+        handles.append(_inset_handle())
+    for axis in (ax.xaxis, ax.yaxis):
+        axis.set_major_locator(MaxNLocator(nbins=5))
+        formatter = ScalarFormatter(useOffset=False)
+        formatter.set_scientific(False)
+        axis.set_major_formatter(formatter)
+    ax.tick_params(labelsize=FONT_SIZE - 1)
+    ax.set_xlabel("x [m]", fontsize=FONT_SIZE)
+    ax.set_ylabel("y [m]", fontsize=FONT_SIZE)
+    ax.set_title("estimates", fontsize=FONT_SIZE + 1)
+    ax.grid(True, color="0.92", lw=0.6, zorder=0)
+
+
+def belief_zoom(truth: np.ndarray, estimates: np.ndarray, particles: np.ndarray,
+                covariances: np.ndarray | None) -> tuple[int, float]:
+    """(agent, half-width in m) of the inset that shows one particle cloud at its true scale.
+
+    The agent is the one whose estimate is furthest from its truth (the cloud worth looking at; agent
+    0 when the truth is one shared target); the half-width holds its truth, its 2-sigma ellipse and
+    98 % of its particles.
+    """
+    self_localisation = len(truth) == len(estimates)
+    errors = np.linalg.norm(estimates - truth, axis=1) if self_localisation else np.zeros(len(estimates))
+    agent = int(np.argmax(errors))
+    cloud = np.asarray(particles[agent], float)
+    reach = [1.2 * errors[agent], 1.1 * float(np.quantile(np.linalg.norm(cloud - estimates[agent], axis=1), 0.98))]
+    if covariances is not None:
+        largest = float(np.sqrt(np.clip(np.linalg.eigvalsh(np.asarray(covariances[agent], float)), 0.0, None).max()))
+        reach.append(1.2 * ELLIPSE_SIGMA * largest)
+    return agent, max(*reach, 0.5)
+
+
+def wants_belief_inset(scene: Scene, limits: tuple[float, float, float, float]) -> bool:
+    """Whether the frame shows one particle cloud at true scale: the scene has particles and the cloud
+    of :func:`belief_zoom` is under a tenth of the map wide (invisible at the map's scale)."""
+    if scene.estimates is None or scene.particles is None or not np.size(scene.particles):
+        return False
+    truth, estimates = np.atleast_2d(np.asarray(scene.truth, float)), np.atleast_2d(np.asarray(scene.estimates, float))
+    _, half = belief_zoom(truth, estimates, np.asarray(scene.particles, float), scene.covariances)
+    x0, x1, y0, y1 = limits
+    return 2.0 * half < 0.1 * max(x1 - x0, y1 - y0)
+
+
+def emptiest_corner(points: np.ndarray, limits: tuple[float, float, float, float],
+                    size: float) -> tuple[tuple[float, float], int]:
+    """The corner (lower-left in axes fractions) of a ``size`` x ``size`` inset holding the fewest of
+    ``points`` on a map with ``limits``, and how many it holds (upper right first on ties)."""
+    x0, x1, y0, y1 = limits
+    u, v = (points[:, 0] - x0) / (x1 - x0), (points[:, 1] - y0) / (y1 - y0)
+    gap = 0.04
+    corners = [(1 - size, 1 - size), (0.0, 1 - size), (1 - size, 0.0), (0.0, 0.0)]
+    crowd = [int(np.sum((u >= cx - gap) & (u <= cx + size + gap) & (v >= cy - gap) & (v <= cy + size + gap)))
+             for cx, cy in corners]
+    best = int(np.argmin(crowd))
+    return corners[best], crowd[best]
+
+
+def _draw_belief_inset(ax, scene: Scene, labels: list[str], corner: tuple[float, float]) -> None:
+    """One agent's particles, truth, estimate and 2-sigma ellipse at their true scale, in an inset at
+    ``corner`` of the map ``ax`` (particle clouds are metres wide on maps of hundreds of metres)."""
+    truth, estimates = np.atleast_2d(np.asarray(scene.truth, float)), np.atleast_2d(np.asarray(scene.estimates, float))
+    agent, half = belief_zoom(truth, estimates, np.asarray(scene.particles, float), scene.covariances)
+    cx, cy = corner
+    size = INSET_SIZE
+    inset = ax.inset_axes([cx + 0.015, cy + 0.015, size - 0.03, size - 0.03], zorder=10)
+    colour, centre = _agent_colour(agent), estimates[agent]
+    cloud = np.asarray(scene.particles[agent], float)
+    inset.scatter(cloud[:, 0], cloud[:, 1], s=6, alpha=0.5, color=colour, lw=0)
+    own_truth = truth[agent:agent + 1] if len(truth) == len(estimates) else truth
+    inset.scatter(own_truth[:, 0], own_truth[:, 1], marker="o", s=70, facecolor="none", edgecolor="black", lw=1.3,
+                  zorder=5)
+    inset.scatter([centre[0]], [centre[1]], s=28, color=colour, edgecolor="white", lw=0.6, zorder=6)
+    if scene.covariances is not None:
+        pts = _ellipse_points(centre, np.asarray(scene.covariances[agent], float))
+        inset.plot(pts[:, 0], pts[:, 1], color=colour, lw=1.2)
+    inset.set_xlim(centre[0] - half, centre[0] + half)
+    inset.set_ylim(centre[1] - half, centre[1] + 1.6 * half)  # headroom for the caption
+    inset.set_aspect("equal", adjustable="box")
+    inset.set_xticks([])
+    inset.set_yticks([])
+    inset.text(0.5, 0.98, f"zoom: {labels[agent]}\n{2 * half:.3g} m wide", transform=inset.transAxes,
+               ha="center", va="top", fontsize=FONT_SIZE - 2,
+               bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.85})
+
+
+def link_colour_samples(scene: Scene) -> list[float]:
+    """The link values the legend shows a colour for: those drawn this step (at most 5, spread over
+    their range) and the scale's maximum."""
+    values = sorted({float(link.value) for link in scene.links if link.value > 0} | {float(scene.link_value_max)})
+    if len(values) > 5:
+        values = [values[int(round(i))] for i in np.linspace(0, len(values) - 1, 5)]
+    return values
+
+
+def _draw_network(net, scene: Scene, agent_names, handles: list, colour_handles: list) -> None:
+    import matplotlib as mpl
+    from matplotlib.lines import Line2D
+
+    pos = np.atleast_2d(np.asarray(scene.node_positions, float))
+    span = float(np.ptp(pos, axis=0).max()) if len(pos) > 1 else 1.0
+    span = span if span > 1e-9 else 1.0
+    pos = (pos - 0.5 * (pos.min(axis=0) + pos.max(axis=0))) / span  # unit-size, centred, whatever the scale
+    pos = separate_nodes(pos, min_distance=0.32)
+    cmap = mpl.colormaps["viridis"]
+    value_max = max(float(scene.link_value_max), 1e-12)
+    names = [str(n) for n in scene.node_labels] + [str(i) for i in range(len(scene.node_labels), len(pos))]
+    agent_index = {name: i for i, name in enumerate(agent_names or [])}
+
+    for link in scene.links:
+        a, b = pos[link.source], pos[link.target]
+        frac = float(np.clip(link.value / value_max, 0.0, 1.0))
+        colour = cmap(frac) if link.value > 0 else (0.75, 0.75, 0.75, 0.8)
+        d = b - a
+        # Offset directed links sideways so that i->j and j->i do not overlap.
+        normal = np.array([-d[1], d[0]]) / (np.linalg.norm(d) + 1e-12) * (0.03 if scene.directed else 0.0)
+        style = "-|>" if scene.directed else "-"
+        net.annotate("", xy=b + normal, xytext=a + normal,
+                     arrowprops={"arrowstyle": style, "color": colour, "lw": 1.0 + 2.0 * frac,
+                                 "shrinkA": 9, "shrinkB": 9, "mutation_scale": 12,
+                                 "linestyle": "-" if link.value > 0 else "--"}, zorder=2)
+        if link.label and len(scene.links) <= MAX_LINK_LABELS:
+            mid = 0.5 * (a + b) + 2.0 * normal
+            net.text(mid[0], mid[1], link.label, fontsize=FONT_SIZE - 2, ha="center", va="center", zorder=4,
+                     bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.8})
+    status = list(scene.node_status) + [""] * (len(pos) - len(scene.node_status))
+    for i, p in enumerate(pos):
+        index = agent_index.get(names[i], i if not agent_index and i < len(AGENT_COLOURS) else None)
+        colour = _agent_colour(index) if index is not None else NON_AGENT_COLOUR
+        ring = FAULT_COLOUR if status[i] else ("white" if index is not None else "0.35")
+        net.scatter([p[0]], [p[1]], s=150, color=colour, edgecolor=ring, lw=2.2 if status[i] else 1.2, zorder=6)
+        text = names[i]
+        # the label sits beside the node, on the side away from the layout's centre (fewer collisions)
+        right, up = p[0] >= 0.0, p[1] >= 0.0
+        net.annotate(text, xy=(p[0], p[1]), xytext=(8 if right else -8, 6 if up else -6), textcoords="offset points",
+                     fontsize=FONT_SIZE - 1, ha="left" if right else "right", va="bottom" if up else "top",
+                     zorder=7, color="black",
+                     bbox={"boxstyle": "round,pad=0.1", "fc": "white", "ec": "none", "alpha": 0.7})
+    margin = 0.45  # room for the labels beside the outer nodes
+    limits = (pos[:, 0].min() - margin, pos[:, 0].max() + margin, pos[:, 1].min() - 0.6 * margin,
+              pos[:, 1].max() + 0.6 * margin)
+    x0, x1, y0, y1 = fit_aspect(limits, _panel_shape(net))
+    net.set_xlim(x0, x1)
+    net.set_ylim(y0, y1)
+    net.set_aspect("equal", adjustable="box")
+    net.axis("off")
+    net.set_title("network (this step)", fontsize=FONT_SIZE + 1)
+
+    arrow = "arrow: message sender \u2192 receiver" if scene.directed else "line: link between two nodes"
+    handles.append(Line2D([], [], color=cmap(0.7), lw=2, marker=">" if scene.directed else None, ms=5,
+                          label=arrow))
+    handles.append(Line2D([], [], color=(0.75, 0.75, 0.75), lw=1, ls="--", label="link that carried nothing"))
+    if len(scene.links) > MAX_LINK_LABELS and any(link.label for link in scene.links):
+        handles.append(Line2D([], [], ls="", label=f"(link labels hidden: {len(scene.links)} links)"))
+    if any(s for s in status):
+        words = ", ".join(sorted({s for s in status if s}))
+        handles.append(Line2D([], [], ls="", marker="o", ms=8, mfc="0.8", mec=FAULT_COLOUR, mew=2,
+                              label=f"red ring: {words}"))
+    if any(i not in agent_index for i in names) and agent_index:
+        handles.append(Line2D([], [], ls="", marker="o", ms=8, mfc=NON_AGENT_COLOUR, mec="0.35",
+                              label="node (not an agent)"))
+
+    label = scene.link_value_name or "link value"
+    colour_handles.append(Line2D([], [], ls="", label="\n".join(textwrap.wrap(f"link colour: {label}", 34))))
+    for value in link_colour_samples(scene):
+        frac = float(np.clip(value / value_max, 0.0, 1.0))
+        colour_handles.append(Line2D([], [], color=cmap(frac), lw=1.0 + 2.0 * frac, label=f"{value:g}"))
+
+
+def _header(text: str):
+    from matplotlib.lines import Line2D
+
+    return Line2D([], [], ls="", label=text)
+
+
+def draw_scene(scene: Scene, figure, agent_names: list[str] | None = None) -> None:
+    """Draw ``scene`` on a matplotlib ``figure`` (cleared first); ``agent_names`` are the env's
+    ``possible_agents`` (the legend's names of the estimates and the colours of the network's nodes).
+
+    The figure holds two axes, the map and the network; the title, the legend (right) and the notes
+    (bottom) are figure-level texts that the constrained layout makes room for, so none overlaps a panel.
+    """
+    figure.clear()
+    figure.set_layout_engine("constrained")
+    has_network = scene.node_positions is not None
+    width_px = figure.get_figwidth() * figure.dpi
+    # the title spans the panels only (the legend takes the right quarter from the top)
+    wrap = max(40, int(PANELS_FRACTION * width_px / (0.62 * (FONT_SIZE + 2) * figure.dpi / 72.0)))
+    figure.suptitle("\n".join(textwrap.wrap(scene.title, wrap)), x=0.5 * PANELS_FRACTION, fontsize=FONT_SIZE + 2)
+
+    handles: list = []
+    agent_handles: list = []
+    network_handles: list = []
+    colour_handles: list = []
     if has_network:
-        net = axes[1]
-        pos = np.asarray(scene.node_positions, float)
-        cmap = mpl.colormaps["viridis"]
-        for link in scene.links:
-            a, b = pos[link.source], pos[link.target]
-            frac = float(np.clip(link.value / max(scene.link_value_max, 1e-12), 0.0, 1.0))
-            colour = cmap(frac) if link.value > 0 else (0.8, 0.8, 0.8, 0.6)
-            d = b - a
-            # Offset directed links sideways so that i->j and j->i do not overlap.
-            normal = np.array([-d[1], d[0]]) / (np.linalg.norm(d) + 1e-12) * (0.04 if scene.directed else 0.0)
-            if scene.directed:
-                net.annotate("", xy=b + normal - 0.12 * d, xytext=a + normal + 0.12 * d,
-                             arrowprops={"arrowstyle": "->", "color": colour, "lw": 1 + 2 * frac})
-            else:
-                net.plot([a[0], b[0]], [a[1], b[1]], color=colour, lw=1 + 2 * frac)
-            if link.label:
-                mid = 0.5 * (a + b) + 2.5 * normal
-                net.text(mid[0], mid[1], link.label, fontsize=6, ha="center", va="center")
-        for i, p in enumerate(pos):
-            net.scatter([p[0]], [p[1]], s=300, color=AGENT_COLOURS[i % len(AGENT_COLOURS)], zorder=3)
-            label = scene.node_labels[i] if i < len(scene.node_labels) else str(i)
-            net.text(p[0], p[1], label.split("_")[-1], ha="center", va="center", color="white", zorder=4)
-        net.set_aspect("equal")
-        net.axis("off")
-        title = "network"
-        if scene.link_value_name:
-            title += f" (colour: {scene.link_value_name}, max {scene.link_value_max:g})"
-        net.set_title(title, fontsize=9)
-        margin = 0.3
-        net.set_xlim(pos[:, 0].min() - margin, pos[:, 0].max() + margin)
-        net.set_ylim(pos[:, 1].min() - margin, pos[:, 1].max() + margin)
-    figure.tight_layout()
+        ax, net = figure.subplots(1, 2, gridspec_kw={"width_ratios": [1.25, 1.0]})
+    else:
+        ax = figure.subplots()
+    _draw_map(ax, scene, agent_names, handles, agent_handles)
+    if has_network:
+        _draw_network(net, scene, agent_names, network_handles, colour_handles)
+
+    entries = [_header("estimate of (dot colour):"), *agent_handles, _header("marks:"), *handles]
+    if has_network:
+        entries += [_header("network:"), *network_handles, *colour_handles]
+    columns = 1 if len(entries) <= LEGEND_ROWS else 2  # many agents (bandwidth_fusion allows 16)
+    legend = figure.legend(handles=entries, loc="outside right upper", fontsize=FONT_SIZE - 1, frameon=False,
+                           handlelength=1.6, labelspacing=0.3, borderaxespad=0.2, ncols=columns)
+    for text, entry in zip(legend.get_texts(), entries, strict=True):
+        if entry.get_linestyle() in ("None", "", " ") and entry.get_marker() in ("None", None, "", " "):
+            text.set_fontweight("bold")  # section headers and the colour scale's name
+
+    notes = [str(n) for n in scene.notes]
+    if len(notes) > MAX_NOTE_LINES:
+        notes = notes[: MAX_NOTE_LINES - 1] + [f"(+{len(notes) - MAX_NOTE_LINES + 1} more notes)"]
+    footer_wrap = max(60, int(width_px / (0.62 * (FONT_SIZE - 1) * figure.dpi / 72.0)))
+    lines = [line for note in notes for line in textwrap.wrap(note, footer_wrap)][:MAX_NOTE_LINES]
+    if lines:
+        figure.supxlabel("\n".join(lines), x=0.01, ha="left", fontsize=FONT_SIZE - 1, family="monospace",
+                         linespacing=1.3)
+
+
+def _inset_handle():  # noqa: N802 - a legend handle
+    from matplotlib.lines import Line2D
+
+    return Line2D([], [], ls="", marker="s", ms=8, mfc="white", mec="black", label="inset: one belief at true scale")
 
 
 def ring_layout(count: int) -> np.ndarray:
@@ -145,16 +514,20 @@ def ring_layout(count: int) -> np.ndarray:
 
 
 class Renderer:
-    """Keeps one figure per env; ``rgb_array`` draws off-screen, ``human`` shows a window."""
+    """Keeps one figure per env; ``rgb_array`` draws off-screen, ``human`` shows a window.
 
-    def __init__(self, render_mode: str | None, size: tuple[float, float] = (9.0, 4.5), dpi: int = 80):
+    The default 9.6 x 6.0 in at 100 dpi gives 960 x 600 pixel frames (every frame of an env the
+    same size, as video recorders need).
+    """
+
+    def __init__(self, render_mode: str | None, size: tuple[float, float] = (9.6, 6.0), dpi: int = 100):
         if render_mode not in (None, "rgb_array", "human"):
             raise ValueError(f"render_mode must be None, 'rgb_array' or 'human', got {render_mode!r}")
         self.render_mode = render_mode
         self.size, self.dpi = size, dpi
         self._figure = None
 
-    def render(self, scene: Scene) -> np.ndarray | None:
+    def render(self, scene: Scene, agent_names: list[str] | None = None) -> np.ndarray | None:
         if self.render_mode is None:
             return None
         if self.render_mode == "rgb_array":
@@ -164,7 +537,7 @@ class Renderer:
             if self._figure is None:
                 self._figure = Figure(figsize=self.size, dpi=self.dpi)
                 FigureCanvasAgg(self._figure)
-            draw_scene(scene, self._figure)
+            draw_scene(scene, self._figure, agent_names)
             self._figure.canvas.draw()
             return np.asarray(self._figure.canvas.buffer_rgba())[..., :3].copy()
         import matplotlib.pyplot as plt
@@ -172,7 +545,7 @@ class Renderer:
         if self._figure is None:
             plt.ion()
             self._figure = plt.figure(figsize=self.size, dpi=self.dpi)
-        draw_scene(scene, self._figure)
+        draw_scene(scene, self._figure, agent_names)
         self._figure.canvas.draw_idle()
         plt.pause(0.001)
         return None

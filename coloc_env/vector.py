@@ -12,7 +12,8 @@ later episodes continue its generator as ``reset()`` would. ``seed(s)``
 (called by SB3's ``PPO(seed=s)``) reseeds copy b with ``s + b`` at the next
 reset.
 
-Episodes end by truncation at the scenario's horizon: finished copies are
+Episodes end by truncation at the scenario's horizon (``max_cycles`` sets it, as
+in :class:`~coloc_env.env.CoLocParallelEnv`): finished copies are
 reset automatically, and their sub-envs' infos carry ``terminal_observation``
 and ``TimeLimit.truncated = True`` so that SB3 bootstraps the value of the
 last observation.
@@ -26,7 +27,7 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
 
-from coloc_env.config import build_config
+from coloc_env.env import build_scenario
 from coloc_env.rendering import Renderer
 from coloc_env.scenarios.base import Scenario
 
@@ -35,13 +36,10 @@ class CoLocVecEnv(VecEnv):
     """B copies x N agents of ``scenario_cls`` as ``B * N`` SB3 sub-envs."""
 
     def __init__(self, scenario_cls: type[Scenario], num_envs: int, seed: int | None = None,
-                 render_mode: str | None = None, *, composition=None, **config):
+                 render_mode: str | None = None, *, composition=None, max_cycles: int | None = None, **config):
         if not isinstance(num_envs, (int, np.integer)) or isinstance(num_envs, bool) or num_envs < 1:
             raise ValueError(f"num_envs must be a positive integer (copies of the scenario), got {num_envs!r}")
-        if composition is not None:
-            self.scenario = scenario_cls(composition, batch=int(num_envs))
-        else:
-            self.scenario = scenario_cls(build_config(scenario_cls.Config, config), batch=int(num_envs))
+        self.scenario = build_scenario(scenario_cls, int(num_envs), composition, max_cycles, **config)
         self.num_copies = int(num_envs)
         self.num_agents = self.scenario.num_agents
         self.render_mode = render_mode
@@ -111,13 +109,14 @@ class CoLocVecEnv(VecEnv):
 
     def get_images(self) -> Sequence[np.ndarray | None]:
         renderer = Renderer("rgb_array")
-        return [renderer.render(self.scenario.scene(b)) for b in range(self.num_copies)]
+        names = self.scenario.agent_names
+        return [renderer.render(self.scenario.scene(b), agent_names=names) for b in range(self.num_copies)]
 
     def render(self, mode: str | None = None) -> np.ndarray | None:
         """Copy 0 through the shared renderer."""
         if (mode or self.render_mode) is None:
             return None
-        return Renderer(mode or self.render_mode).render(self.scenario.scene(0))
+        return Renderer(mode or self.render_mode).render(self.scenario.scene(0), agent_names=self.scenario.agent_names)
 
     def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
         value = getattr(self, attr_name) if hasattr(self, attr_name) else getattr(self.scenario, attr_name)

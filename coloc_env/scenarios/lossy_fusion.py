@@ -389,6 +389,7 @@ class LossyFusionScenario(Scenario):
             trails=self.truth[b, start:max(k, 1), :][:, xy][None],
             node_positions=ring_layout(L),
             node_labels=self.agent_names,
+            estimate_labels=[f"{self.agent_names[0]} (fused)"] + [f"{a} (own filter)" for a in self.agent_names[1:]],
             links=links,
             link_value_max=1.0,
             link_value_name="packet (1 on time, 0.5 late)",

@@ -558,11 +558,16 @@ class MrclamRelayScenario(Scenario):
                       for h, (p, q) in enumerate(zip(hops[:-1], hops[1:], strict=True))]
             if hops:
                 notes.append(f"chain {' -> '.join(map(str, hops))} ({STOP_REASONS[self.event.relay.stop[row]]})")
-        notes.append(f"mean error {self.position_error()[b].mean():.2f} m, "
+        notes.append(f"mean error {self.position_error()[b].mean():.3f} m, "
                      f"{int(self.event.landmarks[b].sum())} landmark sightings")
         centre = np.array([0.5 * (x0 + x1), 0.5 * (y0 + y1)])
+        # the map holds the run's tracks and every landmark, with a margin for the ellipses
+        landmarks = np.asarray(self.data.landmarks, float)
+        low = np.minimum([x0, y0], landmarks.min(axis=0)) - 0.3
+        high = np.maximum([x1, y1], landmarks.max(axis=0)) + 0.3
         return Scene(
-            title=f"mrclam_relay  t = {(start + k) * self.data.dt:.1f} s (window step {k})",
+            title=(f"mrclam_relay (MRCLAM dataset)  t = {(start + k) * self.data.dt:.1f} s, "
+                   f"window step {k}/{self.horizon}"),
             truth=truth,
             estimates=self.estimate[b, :, :2],
             covariances=self.P_ii[b, :, :2, :2],
@@ -572,6 +577,7 @@ class MrclamRelayScenario(Scenario):
             links=links,
             link_value_max=1.0,
             link_value_name="relay hop of the last step (source:hop)",
-            extent=self.tables.extent,
+            extent=(float(low[0]), float(high[0]), float(low[1]), float(high[1])),
+            landmarks=landmarks,
             notes=notes[-4:],
         )

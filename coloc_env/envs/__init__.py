@@ -1,0 +1,56 @@
+"""Each preset as a module, the way PettingZoo ships its own environments.
+
+>>> from coloc_env.envs import relay_ukf
+>>> env = relay_ukf.parallel_env(max_cycles=100, speed_noise_std=0.02)
+
+Every module ``coloc_env.envs.<preset>`` has
+
+* ``parallel_env(max_cycles=None, render_mode=None, **config)``: the
+  :class:`~coloc_env.env.CoLocParallelEnv` (``config`` = the preset's flat
+  dataclass fields, as ``coloc_env.parallel_env(name, **config)``);
+* ``raw_env(...)``: its AEC view without wrappers;
+* ``env(...)``: the AEC view wrapped in PettingZoo's ``OrderEnforcingWrapper``;
+
+``max_cycles`` is the episode length (PettingZoo's keyword, checked by
+``pettingzoo.test.max_cycles_test``): the preset's ``horizon``, or
+``window_steps`` for ``mrclam_relay`` (:func:`coloc_env.env.with_max_cycles`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from pettingzoo.utils.conversions import parallel_to_aec_wrapper
+from pettingzoo.utils.wrappers import OrderEnforcingWrapper
+
+from coloc_env.env import CoLocParallelEnv
+from coloc_env.scenarios import REGISTRY
+
+PRESET_MODULES = ("bandwidth_fusion", "lossy_fusion", "relay_ukf", "gps_denied_nbp", "nlos_horizon", "mrclam_relay")
+
+
+def constructors(name: str) -> tuple[Callable[..., CoLocParallelEnv], Callable, Callable]:
+    """``(parallel_env, raw_env, env)`` of the preset ``name`` (one module per preset calls this)."""
+    if name not in REGISTRY:
+        raise ValueError(f"unknown preset {name!r}; available: {sorted(REGISTRY)}")
+    scenario_cls = REGISTRY[name]
+
+    def parallel_env(max_cycles: int | None = None, render_mode: str | None = None, **config) -> CoLocParallelEnv:
+        return CoLocParallelEnv(scenario_cls, render_mode=render_mode, max_cycles=max_cycles, **config)
+
+    def raw_env(max_cycles: int | None = None, render_mode: str | None = None, **config):
+        return parallel_to_aec_wrapper(parallel_env(max_cycles=max_cycles, render_mode=render_mode, **config))
+
+    def env(max_cycles: int | None = None, render_mode: str | None = None, **config):
+        return OrderEnforcingWrapper(raw_env(max_cycles=max_cycles, render_mode=render_mode, **config))
+
+    for function, what in ((parallel_env, "the PettingZoo ParallelEnv"), (raw_env, "the unwrapped AEC env"),
+                           (env, "the AEC env with PettingZoo's OrderEnforcingWrapper")):
+        function.__doc__ = (f"{what} of ``{name}``; ``max_cycles`` = episode length, ``config`` = "
+                            f"{scenario_cls.Config.__name__} fields.")
+        function.__qualname__ = function.__name__
+        function.__module__ = f"coloc_env.envs.{name}"
+    return parallel_env, raw_env, env
+
+
+__all__ = ["PRESET_MODULES", "constructors"]

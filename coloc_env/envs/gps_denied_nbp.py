@@ -1,0 +1,10 @@
+"""``gps_denied_nbp`` as a PettingZoo environment module: ``parallel_env``, ``raw_env`` and ``env``.
+
+``max_cycles`` sets ``horizon``. See :mod:`coloc_env.envs`.
+"""
+
+from coloc_env.envs import constructors
+
+parallel_env, raw_env, env = constructors("gps_denied_nbp")
+
+__all__ = ["env", "parallel_env", "raw_env"]

@@ -1,0 +1,10 @@
+"""``nlos_horizon`` as a PettingZoo environment module: ``parallel_env``, ``raw_env`` and ``env``.
+
+``max_cycles`` sets ``horizon``. See :mod:`coloc_env.envs`.
+"""
+
+from coloc_env.envs import constructors
+
+parallel_env, raw_env, env = constructors("nlos_horizon")
+
+__all__ = ["env", "parallel_env", "raw_env"]
