@@ -3,20 +3,84 @@
 A saved model ``model.zip`` has a sidecar ``model.json`` recording the
 scenario and its config; loading it for another scenario, or for spaces that
 differ from the ones it was trained on, is a ``ValueError``.
+
+Damaged files are ``ValueError`` s naming the file and what is wrong with it
+(:func:`check_model_zip`, :func:`read_metadata`): a truncated or non-zip
+``model.zip``, one without SB3's ``data`` or ``policy.pth`` members, a
+``model.json`` that is truncated, not JSON, or not an object. Without these
+checks SB3 fails with an ``AssertionError`` or a ``KeyError`` that names no file.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import zipfile
+import zlib
 
 import numpy as np
 
 from agents.base import Policy
 
+# the members stable-baselines3's save_to_zip_file writes and load_from_zip_file needs
+REQUIRED_MEMBERS = ("data", "policy.pth")
+
 
 def metadata_path(model_path: str) -> str:
     return os.path.splitext(model_path)[0] + ".json"
+
+
+def check_model_zip(path: str) -> None:
+    """ValueError naming ``path`` unless it is a complete zip holding SB3's ``data`` and ``policy.pth``."""
+    try:
+        with zipfile.ZipFile(path) as archive:
+            names = archive.namelist()
+            missing = [m for m in REQUIRED_MEMBERS if m not in names]
+            if missing:
+                shown = ", ".join(names[:5]) + (f", ... ({len(names)} members)" if len(names) > 5 else "")
+                raise ValueError(f"model {path!r} is not a complete stable-baselines3 model (truncated, or not "
+                                 f"saved by coloc train): the zip has no {' or '.join(missing)} (it holds {shown})")
+            damaged = None
+            for name in names:  # read every member: a CRC mismatch or a broken deflate stream is damage
+                try:
+                    with archive.open(name) as member:
+                        while member.read(1 << 20):
+                            pass
+                except (zipfile.BadZipFile, zlib.error, EOFError) as exc:
+                    damaged = f"{name!r} ({exc})"
+                    break
+    except zipfile.BadZipFile as exc:
+        raise ValueError(f"model {path!r} is not a readable zip (truncated or not a model.zip): {exc}") from exc
+    except (OSError, EOFError) as exc:
+        raise ValueError(f"model {path!r} cannot be read: {exc}") from exc
+    if damaged is not None:
+        raise ValueError(f"model {path!r} is damaged: member {damaged} cannot be read back")
+
+
+def read_metadata(meta_file: str) -> dict:
+    """The ``model.json`` beside a model, as a dict; ValueError naming the file when it is not a JSON object."""
+    try:
+        with open(meta_file, encoding="utf-8") as fh:
+            meta = json.load(fh)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"model metadata {meta_file!r} is not valid JSON (truncated?): {exc.msg} at line "
+                         f"{exc.lineno} column {exc.colno}") from exc
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ValueError(f"model metadata {meta_file!r} cannot be read: {exc}") from exc
+    if not isinstance(meta, dict):
+        raise ValueError(f"model metadata {meta_file!r} must hold a JSON object, got {type(meta).__name__}")
+    return meta
+
+
+def check_spaces(path: str, env, model) -> None:
+    """The model's observation and action spaces must equal the env's in full: type, shape, dtype and every
+    bound (Box low/high, MultiDiscrete nvec/start, Discrete n/start), not only type and shape: a policy
+    trained for ``nvec = [27, 2, ...]`` plays nonsense on ``[17, 2, ...]`` of the same shape."""
+    agent = env.possible_agents[0]
+    for kind, ours, theirs in (("observation", env.observation_space(agent), model.observation_space),
+                               ("action", env.action_space(agent), model.action_space)):
+        if ours != theirs or ours.dtype != theirs.dtype:
+            raise ValueError(f"model {path!r} has {kind} space {theirs!r}, the env has {ours!r}")
 
 
 class SB3Policy(Policy):
@@ -31,16 +95,16 @@ class SB3Policy(Policy):
         meta_file = metadata_path(path)
         scenario_name = env.unwrapped.scenario.name
         if os.path.isfile(meta_file):
-            with open(meta_file) as fh:
-                meta = json.load(fh)
+            meta = read_metadata(meta_file)
             if meta.get("scenario") != scenario_name:
                 raise ValueError(f"model {path!r} was trained on {meta.get('scenario')!r}, not {scenario_name!r}")
-        self.model = PPO.load(path, device="cpu")
-        agent = env.possible_agents[0]
-        for kind, ours, theirs in (("observation", env.observation_space(agent), self.model.observation_space),
-                                   ("action", env.action_space(agent), self.model.action_space)):
-            if ours.shape != theirs.shape or type(ours) is not type(theirs):
-                raise ValueError(f"model {path!r} has {kind} space {theirs}, the env has {ours}")
+        check_model_zip(path)
+        try:
+            self.model = PPO.load(path, device="cpu")
+        except Exception as exc:  # SB3 reports a damaged model with assorted exceptions that name no file
+            raise ValueError(f"model {path!r} cannot be loaded by stable-baselines3: "
+                             f"{type(exc).__name__}: {exc}") from exc
+        check_spaces(path, env, self.model)
         self.deterministic = deterministic
 
     def act(self, observations):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import sys
 
@@ -11,75 +12,132 @@ PAPERS = {"fu2017": "lossy_fusion", "zhao2020": "bandwidth_fusion", "wang2019": 
 SCENARIO_TO_PAPER = {v: k for k, v in PAPERS.items()}
 
 
+# The unit of each preset's episode metric (Scenario.episode_error) and what its "communication" info counts;
+# compositions report the mean position error in metres and the messages sent.
+METRIC_UNITS = {"bandwidth_fusion": "m^2", "lossy_fusion": "m^2", "nlos_horizon": "m^2", "relay_ukf": "m",
+                "gps_denied_nbp": "m", "mrclam_relay": "m"}
+COMMUNICATION_UNITS = {"bandwidth_fusion": "components received", "lossy_fusion": "messages transmitted",
+                       "nlos_horizon": "packets", "relay_ukf": "relays", "gps_denied_nbp": "broadcasts",
+                       "mrclam_relay": "messages delivered"}
+INTERRUPTED = 130  # the shell's exit status of a process ended by SIGINT (128 + 2)
+
+
 def _seed_range(text: str) -> list[int]:
-    if ".." in text:
-        a, b = text.split("..")
-        if int(b) < int(a):
-            raise argparse.ArgumentTypeError(f"--seeds A..B needs A <= B, got {text}")
-        return list(range(int(a), int(b) + 1))
-    return [int(text)]
+    """``A..B`` (both included) or one seed ``S``; any other form is refused naming the ``A..B`` form."""
+    start, dots, stop = text.partition("..")
+    try:
+        seeds = list(range(int(start), int(stop) + 1)) if dots else [int(text)]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected A..B (e.g. 0..2, both included) or one integer S, "
+                                         f"got {text!r}") from None
+    if not seeds:
+        raise argparse.ArgumentTypeError(f"A..B needs A <= B, got {text!r}")
+    return seeds
 
 
 def _positive(text: str) -> int:
-    value = int(text)
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
     if value < 1:
-        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text}")
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text!r}")
     return value
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="coloc", description=__doc__)
-    sub = parser.add_subparsers(dest="command", required=True)
+class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter):
+    """Every option's default in its help, except where there is none to show (None, a flag's False);
+    descriptions and epilogs keep their line breaks (the tables of ``coloc study --help``)."""
 
-    rep = sub.add_parser("reproduce", help="reproduce a paper's figures and claims")
+    def _get_help_string(self, action):
+        if action.default is None or action.default is False:
+            return action.help
+        return super()._get_help_string(action)
+
+
+def _scenarios_help() -> str:
+    import coloc_env
+
+    return "one of: " + ", ".join(coloc_env.SCENARIOS)
+
+
+def _policies_epilog() -> str:
+    """The policy names ``--policy`` accepts, per preset, from the registry (agents.available_policies)."""
+    import agents
+    import coloc_env
+    from agents import generic
+
+    lines = ["policies (--policy NAME, or NAME:VARIANT where a policy takes one: paper:T2P3 for bandwidth_fusion,",
+             "constant:12 and paper:smoothed for nlos_horizon):"]
+    width = max(len(name) for name in coloc_env.SCENARIOS)
+    for name in coloc_env.SCENARIOS:
+        lines.append(f"  {name:<{width}}  {', '.join(agents.available_policies(name))}")
+    lines.append(f"  {'compositions':<{width}}  {', '.join(['random', *generic.POLICIES])}")
+    lines.append("  any scenario: PATH.zip (a model saved by coloc train), or all (every name above and")
+    lines.append("                the models under --models)")
+    return "\n".join(lines)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="coloc", description=__doc__, formatter_class=_HelpFormatter)
+    sub = parser.add_subparsers(dest="command", required=True)
+    scenarios = _scenarios_help()
+    papers = ", ".join(f"{paper} ({scenario})" for paper, scenario in PAPERS.items())
+
+    rep = sub.add_parser("reproduce", help="reproduce a paper's figures and claims", formatter_class=_HelpFormatter,
+                         description=f"Reproduce a paper's figures and claims into OUT/PAPER/. Papers: {papers}.")
     rep.add_argument("paper", choices=[*PAPERS, "all", "mrclam"],
                      help="a paper, all of them, or mrclam (real UTIAS MRCLAM data; needs --data, not part of all)")
     rep.add_argument("--runs", type=_positive, default=None,
                      help="Monte Carlo runs (default: the paper module's RUNS, or QUICK_RUNS with --quick)")
-    rep.add_argument("--seed", type=int, default=0)
-    rep.add_argument("--out", default="results")
+    rep.add_argument("--seed", type=int, default=0, help="seed of the first Monte Carlo run")
+    rep.add_argument("--out", default="results", help="writes OUT/PAPER/")
     rep.add_argument("--quick", action="store_true", help="fewer Monte Carlo runs")
-    rep.add_argument("--executor", choices=["local", "ray"], default="local")
+    rep.add_argument("--executor", choices=["local", "ray"], default="local", help="where the runs execute")
     rep.add_argument("--address", default=None, help="Ray cluster address (default: a local Ray)")
     rep.add_argument("--data", default=None,
                      help="mrclam: an MRCLAM dataset folder (default: $COLOC_MRCLAM_DATA)")
 
-    tr = sub.add_parser("train", help="train a shared PPO policy with stable-baselines3")
-    tr.add_argument("scenario")
-    tr.add_argument("--timesteps", type=_positive, default=200_000)
+    tr = sub.add_parser("train", help="train a shared PPO policy with stable-baselines3",
+                        formatter_class=_HelpFormatter)
+    tr.add_argument("scenario", help=scenarios)
+    tr.add_argument("--timesteps", type=_positive, default=200_000, help="PPO timesteps (agent transitions)")
     group = tr.add_mutually_exclusive_group()
-    group.add_argument("--seed", type=int, default=None)
-    group.add_argument("--seeds", type=_seed_range, default=None, help="A..B")
+    group.add_argument("--seed", type=int, default=None, help="one training seed S (default: 0)")
+    group.add_argument("--seeds", type=_seed_range, default=None, metavar="A..B",
+                       help="training seeds A to B, both included (e.g. 0..2: seeds 0, 1 and 2)")
     tr.add_argument("--vec", choices=["native", "supersuit"], default="native",
                     help="native: coloc_env.vector_env (one batched numpy call); supersuit: SuperSuit's concat")
-    tr.add_argument("--out", default="results/train")
-    tr.add_argument("--executor", choices=["local", "ray"], default="local")
+    tr.add_argument("--out", default="results/train", help="writes OUT/SCENARIO/seedS/")
+    tr.add_argument("--executor", choices=["local", "ray"], default="local", help="where the seeds train")
     tr.add_argument("--address", default=None, help="Ray cluster address (default: a local Ray)")
-    tr.add_argument("--tensorboard", action="store_true")
+    tr.add_argument("--tensorboard", action="store_true", help="also write TensorBoard logs (OUT/.../tb)")
     tr.add_argument("--curve-points", type=int, default=10, help="validation points of the learning curve (0: none)")
 
-    ev = sub.add_parser("evaluate", help="evaluate a policy over seeded episodes")
-    ev.add_argument("scenario")
+    ev = sub.add_parser("evaluate", help="evaluate a policy over seeded episodes", formatter_class=_HelpFormatter,
+                        epilog=_policies_epilog())
+    ev.add_argument("scenario", help=f"{scenarios}, or all")
     ev.add_argument("--policy", default="paper",
-                    help="paper | random | greedy | oracle_* | PATH.zip | all (every named policy and the "
-                         "trained models under --models)")
+                    help="a policy name of the scenario (listed below), PATH.zip, or all (every named policy and "
+                         "the trained models under --models)")
     ev.add_argument("--models", default="results/train", help="where --policy all looks for SCENARIO/seed*/model.zip")
-    ev.add_argument("--episodes", type=_positive, default=100)
+    ev.add_argument("--episodes", type=_positive, default=100, help="seeded evaluation episodes per policy")
     ev.add_argument("--stochastic", action="store_true",
                     help="trained models sample their actions (seeded) instead of taking the most likely")
-    ev.add_argument("--out", default="results")
+    ev.add_argument("--out", default="results", help="records into OUT/PAPER/leaderboard.json and OUT/leaderboard.md")
 
-    be = sub.add_parser("bench", help="throughput of estimators and envs")
-    be.add_argument("--quick", action="store_true")
-    be.add_argument("--out", default="results")
-    be.add_argument("--scenarios", nargs="+", default=None, help="only these scenarios (default: all)")
+    be = sub.add_parser("bench", help="throughput of estimators and envs", formatter_class=_HelpFormatter)
+    be.add_argument("--quick", action="store_true", help="shorter timing windows (noisier rates)")
+    be.add_argument("--out", default="results", help="writes OUT/bench/")
+    be.add_argument("--scenarios", nargs="+", default=None, help=f"only these scenarios (default: all); {scenarios}")
     be.add_argument("--against", metavar="REF", default=None,
                     help="also measure git commit REF (e.g. HEAD~3, a tag) side by side in the same run and print "
                          "both rates and the ratio current / REF (OUT/bench/against.json)")
 
     _add_study_parser(sub)
 
-    sub.add_parser("list", help="worlds, networks, backends, presets and the compatibility table")
+    sub.add_parser("list", help="worlds, networks, backends, presets and the compatibility table",
+                   formatter_class=_HelpFormatter)
     return parser
 
 
@@ -104,7 +162,7 @@ def _add_study_parser(sub) -> None:
     st = sub.add_parser("study", help="compare backends on the same seeded episodes, optionally over a sweep",
                         description="Run every backend of one world and network on the same seeded episodes "
                                     "(see train/study.py).",
-                        epilog=STUDY_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+                        epilog=STUDY_EPILOG, formatter_class=_HelpFormatter)
     st.add_argument("--world", required=True, help="a world (coloc list), at its defaults")
     st.add_argument("--network", required=True, help="a network (coloc list), at its defaults")
     st.add_argument("--backends", required=True,
@@ -116,10 +174,9 @@ def _add_study_parser(sub) -> None:
                          "key 'default'")
     st.add_argument("--policy", choices=["always", "silent", "random", "paper"], default="always",
                     help="always: every transport decision at its maximum; silent: nothing sent; random: "
-                         "uniform, seeded S + e; paper: where the composition has one (default: always)")
-    st.add_argument("--episodes", type=_positive, default=30, help="episodes per (backend, value), >= 2 "
-                    "(default: 30)")
-    st.add_argument("--seed", type=int, default=0, help="S: episode e is seeded S + e (default: 0)")
+                         "uniform, seeded S + e; paper: where the composition has one")
+    st.add_argument("--episodes", type=_positive, default=30, help="episodes per (backend, value), >= 2")
+    st.add_argument("--seed", type=int, default=0, help="S: episode e is seeded S + e")
     st.add_argument("--horizon", type=_positive, default=None,
                     help="steps per episode (compose(horizon=...); default: the world's)")
     st.add_argument("--batched", action="store_true",
@@ -128,22 +185,43 @@ def _add_study_parser(sub) -> None:
     st.add_argument("--executor", choices=["local", "ray"], default="local",
                     help="ray: each (backend, value) cell is one Ray task, with the same numbers as local")
     st.add_argument("--address", default=None, help="Ray cluster address (default: a local Ray)")
-    st.add_argument("--out", default="results", help="writes OUT/study/NAME/ (default: results)")
+    st.add_argument("--out", default="results", help="writes OUT/study/NAME/")
     st.add_argument("--name", default=None,
                     help="NAME (default: WORLD_NETWORK, plus _PART.FIELD with a sweep, e.g. "
                          "circles_relay_network.loss_at_zero)")
 
 
-def cmd_reproduce(args) -> int:
+def _console():
+    """A rich Console; on a terminal it fits the terminal, elsewhere (a pipe, a file) lines are never wrapped."""
     from rich.console import Console
 
     console = Console()
+    if not console.is_terminal:
+        console = Console(soft_wrap=True)
+    return console
+
+
+def _open(args, folder: str):
+    """``train.io.result_folder`` for ``folder``, remembered on ``args`` so that an interrupt can name it."""
+    from train.io import result_folder
+
+    args.open_folders.append(folder)
+    return result_folder(folder, "coloc " + " ".join(args.argv))
+
+
+def cmd_reproduce(args) -> int:
+    from train.io import check_output_folder
+
+    console = _console()
     papers = list(PAPERS) if args.paper == "all" else [args.paper]
+    for paper in papers:
+        check_output_folder(os.path.join(args.out, paper))
     for paper in papers:
         module = __import__(f"train.reproduce.{paper}", fromlist=["run"])
         runs = args.runs or (module.QUICK_RUNS if args.quick else module.RUNS)
         extra = {"data": args.data} if paper == "mrclam" else {}
-        with console.status(f"reproducing {paper} ({runs} Monte Carlo runs)") as status:
+        with _open(args, os.path.join(args.out, paper)), \
+                console.status(f"reproducing {paper} ({runs} Monte Carlo runs)") as status:
             metrics = module.run(args.out, runs=runs, seed=args.seed, quick=args.quick,
                                  executor=args.executor, address=args.address, **extra,
                                  progress=lambda msg, status=status, paper=paper: status.update(f"{paper}: {msg}"))
@@ -159,13 +237,21 @@ def cmd_reproduce(args) -> int:
 def cmd_train(args) -> int:
     import coloc_env
     from train.executor import map_tasks
+    from train.io import check_output_folder
     from train.training import train
 
     coloc_env.scenario_class(args.scenario)
     seeds = args.seeds or [0 if args.seed is None else args.seed]
+    folders = [os.path.join(args.out, args.scenario, f"seed{s}") for s in seeds]
+    for folder in folders:
+        check_output_folder(folder)
     jobs = [(args.scenario, args.timesteps, s, args.out, args.vec, args.executor == "local", args.tensorboard,
              args.curve_points) for s in seeds]
-    for path in map_tasks(train, jobs, args.executor, args.address):
+    with contextlib.ExitStack() as stack:
+        for folder in folders:
+            stack.enter_context(_open(args, folder))
+        paths = map_tasks(train, jobs, args.executor, args.address)
+    for path in paths:
         print(f"saved {path} (learning curve beside it)")
     return 0
 
@@ -197,18 +283,31 @@ def _policies_for(scenario: str, policy: str, models: str) -> list[str]:
     return agents.available_policies(scenario) + found
 
 
+def _evaluation_line(scenario: str, policy: str, result: dict, episodes: int, path: str) -> str:
+    """One printed result, every number with its unit; the initial term only where the scenario's cost has one."""
+    unit = METRIC_UNITS.get(scenario, "m")
+    line = (f"{scenario} {policy}: mean realized cost {result['mean_cost']:.3f} +- {result['ci95']:.3f} {unit} "
+            f"(95 %, {episodes} episodes)")
+    if result["initial_cost"] != 0:
+        line += f"; with the initial term {result['initial_cost']:.2f} {unit}: {result['paper_cost']:.3f} {unit}"
+    communication = COMMUNICATION_UNITS.get(scenario, "messages sent")
+    return line + f"; communication {result['communication_per_step']:.2f} {communication} per step -> {path}"
+
+
 def cmd_evaluate(args) -> int:
-    from rich.console import Console
     from rich.progress import Progress
 
     import coloc_env
     from train.evaluate import evaluate_policy
+    from train.io import check_output_folder
     from train.leaderboard import record
 
-    console = Console()
+    console = _console()
+    check_output_folder(args.out)
     scenarios = _runnable_scenarios(console) if args.scenario == "all" else [args.scenario]
     for scenario in scenarios:
         coloc_env.scenario_class(scenario)
+        check_output_folder(os.path.join(args.out, SCENARIO_TO_PAPER.get(scenario, scenario)))
         for policy in _policies_for(scenario, args.policy, args.models):
             with Progress(console=console, transient=True) as bar:
                 task = bar.add_task(f"{scenario} / {policy}", total=args.episodes)
@@ -216,37 +315,35 @@ def cmd_evaluate(args) -> int:
                                          progress=lambda task=task: bar.advance(task),
                                          stochastic=args.stochastic and policy.endswith(".zip"))
             path = record(result, args.out, SCENARIO_TO_PAPER.get(scenario, scenario))
-            console.print(
-                f"{scenario} {policy}: mean realized cost {result['mean_cost']:.3f} "
-                f"+- {result['ci95']:.3f} (95 %, {args.episodes} episodes); with the initial term "
-                f"{result['initial_cost']:.2f}: {result['paper_cost']:.3f}; "
-                f"communication {result['communication_per_step']:.2f} per step -> {path}")
+            console.print(_evaluation_line(scenario, policy, result, args.episodes, path), highlight=False)
     return 0
 
 
 def cmd_bench(args) -> int:
-    from rich.console import Console
-
     import coloc_env
     from train.bench import run, run_against
+    from train.io import check_output_folder
 
+    check_output_folder(os.path.join(args.out, "bench"))
     for name in args.scenarios or []:
         coloc_env.scenario_class(name)
-    scenarios = args.scenarios or _runnable_scenarios(Console())
-    if args.against:
-        run_against(args.out, args.against, quick=args.quick, scenarios=scenarios)
-    else:
-        run(args.out, quick=args.quick, scenarios=scenarios)
+    scenarios = args.scenarios or _runnable_scenarios(_console())
+    with _open(args, os.path.join(args.out, "bench")):
+        if args.against:
+            run_against(args.out, args.against, quick=args.quick, scenarios=scenarios)
+        else:
+            run(args.out, quick=args.quick, scenarios=scenarios)
     return 0
 
 
 def cmd_study(args) -> int:
-    from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
+    from train.io import check_output_folder
     from train.study import run_study
 
-    console = Console()
+    check_output_folder(args.out)  # creates nothing: refused input leaves OUT as it was
+    console = _console()
     with Progress(TextColumn("study {task.description}"), BarColumn(), MofNCompleteColumn(),
                   TimeRemainingColumn(), console=console, transient=True) as bar:
         task = bar.add_task(f"{args.world}/{args.network}", total=None)
@@ -290,15 +387,42 @@ def cmd_list(args) -> int:
     return 0
 
 
+@contextlib.contextmanager
+def _wide_output_when_not_a_terminal():
+    """Rich sizes every Console it creates (train.bench's tables too) from ``COLUMNS``: when stdout is not a
+    terminal and the user set none, make it wide enough that no line wraps at 80 columns and no table cell is
+    truncated ("UnscentedKalmanFilt..."). Restored afterwards (main is also called in-process)."""
+    previous = os.environ.get("COLUMNS")
+    if previous is None and not sys.stdout.isatty():
+        os.environ["COLUMNS"] = "400"
+    try:
+        yield
+    finally:
+        if previous is None:
+            os.environ.pop("COLUMNS", None)
+
+
 def main(argv: list[str] | None = None) -> int:
+    """Run one command. Bad input (a ValueError, e.g. an unusable ``--out``): one line on stderr, exit 2, checked
+    before any computing. Ctrl-C: one line naming the folders left marked ``INCOMPLETE``, exit 130."""
+    argv = sys.argv[1:] if argv is None else list(argv)
     args = build_parser().parse_args(argv)
+    args.argv, args.open_folders = argv, []
     handlers = {"reproduce": cmd_reproduce, "train": cmd_train, "evaluate": cmd_evaluate, "bench": cmd_bench,
                 "study": cmd_study, "list": cmd_list}
     try:
-        return handlers[args.command](args)
+        with _wide_output_when_not_a_terminal():
+            return handlers[args.command](args)
     except ValueError as exc:
         print(f"coloc {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        from train.io import INCOMPLETE
+
+        marked = [f for f in args.open_folders if os.path.exists(os.path.join(f, INCOMPLETE))]
+        where = f"; {', '.join(marked)} marked {INCOMPLETE}" if marked else "; nothing was left half written"
+        print(f"coloc {args.command}: interrupted{where}", file=sys.stderr)
+        return INTERRUPTED
 
 
 if __name__ == "__main__":

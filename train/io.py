@@ -1,10 +1,19 @@
-"""Atomic writes: a result file is either the old one or the complete new one, never half."""
+"""Atomic writes: a result file is either the old one or the complete new one, never half.
+
+A result *folder* holds several files written one after the other, so it cannot be
+replaced atomically as a whole; :func:`result_folder` marks it instead: an
+``INCOMPLETE`` file is written before the first result and removed after the last,
+so a folder interrupted half way (Ctrl-C, a crash) says so.
+"""
 
 from __future__ import annotations
 
+import contextlib
+import datetime
 import json
 import os
 import tempfile
+from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
@@ -59,6 +68,75 @@ def save_figure(path: str, figure) -> None:
     import matplotlib.pyplot as plt
 
     plt.close(figure)
+
+
+INCOMPLETE = "INCOMPLETE"
+
+
+def _nearest_existing(path: str) -> str:
+    """``path`` or its closest ancestor that exists (``/`` at worst)."""
+    current = os.path.abspath(path)
+    while not os.path.lexists(current):
+        parent = os.path.dirname(current)
+        if parent == current:
+            break
+        current = parent
+    return current
+
+
+def check_output_folder(folder: str | os.PathLike) -> str:
+    """Prove that ``folder`` is, or can become, a folder where files can be written; create nothing.
+
+    Called before any computing, so a bad ``--out`` fails at once rather than after the
+    run. Writability is probed by creating (and removing) a temporary file in the folder
+    or in its nearest existing ancestor: permission bits alone do not tell (root, ACLs,
+    read-only mounts, ``/proc``). Returns the path as text; ValueError naming it otherwise.
+    """
+    if not isinstance(folder, (str, os.PathLike)) or not os.fspath(folder):
+        raise ValueError(f"output folder must be a non-empty path, got {folder!r}")
+    folder = os.fspath(folder)
+    existing = _nearest_existing(folder)
+    if not os.path.isdir(existing):
+        if existing == os.path.abspath(folder):
+            raise ValueError(f"output folder {folder!r} is an existing file, not a folder")
+        raise ValueError(f"output folder {folder!r} cannot be created: {existing!r} is a file, not a folder")
+    try:
+        fd, probe = tempfile.mkstemp(dir=existing, prefix=".probe-")
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        where = "" if existing == os.path.abspath(folder) else f" (nothing can be created in {existing!r})"
+        raise ValueError(f"output folder {folder!r} is not writable{where}: {exc.strerror or exc}") from exc
+    return folder
+
+
+@contextlib.contextmanager
+def result_folder(folder: str, command: str) -> Iterator[str]:
+    """Write into ``folder`` under an ``INCOMPLETE`` marker, removed only when the block finishes.
+
+    The marker (written atomically first) names the command and when it started; an
+    interrupt or an error leaves it in place, beside whatever was written so far. When
+    the block fails before writing anything, the folder is left as it was found (a
+    folder this call created is removed again), so refused input leaves no trace.
+    """
+    check_output_folder(folder)
+    existing = _nearest_existing(folder)
+    marker = os.path.join(folder, INCOMPLETE)
+    had_marker = os.path.exists(marker)
+    started = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
+    write_text(marker, f"{command}\nstarted {started} and has not finished: the files beside this one may be "
+                       "partial or from an earlier run. Run the command again to complete this folder.\n")
+    try:
+        yield folder
+    except BaseException:
+        if not had_marker and os.listdir(folder) == [INCOMPLETE]:
+            os.unlink(marker)
+            current = os.path.abspath(folder)
+            while current != existing and not os.listdir(current):  # the folders this call created
+                os.rmdir(current)
+                current = os.path.dirname(current)
+        raise
+    os.unlink(marker)
 
 
 def read_json(path: str, default: Any = None) -> Any:

@@ -42,8 +42,20 @@ measured range.
 
 Errors: a missing path, a folder that is not a dataset (missing file), a
 malformed line (wrong number of fields, a non-number, a non-finite value,
-time going backwards), an unknown subject in ``Barcodes.dat`` or
-``Landmark_Groundtruth.dat`` raise ``ValueError`` naming the file and line.
+bytes that are not text, time going backwards), an unknown or repeated
+subject or barcode in ``Barcodes.dat`` or ``Landmark_Groundtruth.dat``, and a
+physically impossible value raise ``ValueError`` naming the file and line.
+The physical bounds (:data:`PHYSICAL_BOUNDS`) come from the dataset paper
+(Leung et al. 2011: five iRobot Create robots in a 15 m x 8 m indoor
+workspace, Vicon ground truth): |v| <= ``MAX_SPEED`` = 0.5 m/s (the Create's
+top drive speed, 500 mm/s in its Open Interface), |w| <= ``MAX_TURN_RATE`` =
+2 x 0.5 / 0.26 = 3.85 rad/s (both wheels at top speed in opposite directions,
+wheel base 0.26 m), 0 < range <= ``MAX_RANGE`` = 20 m (beyond the workspace's
+17 m diagonal), |bearing| <= pi, Vicon and landmark positions within
+``MAX_POSITION`` = 20 m of the origin, headings within pi (+ the logs' rounding
+to 4 decimals), landmark std >= 0, and a file spans at most ``MAX_SPAN`` = one
+day (the datasets run for minutes to about an hour; a time of 1e308 would otherwise make a
+step grid of 1e309 steps). Dataset 6's values lie well inside every bound.
 The loader only reads.
 """
 
@@ -67,6 +79,50 @@ ENV_VAR = "COLOC_MRCLAM_DATA"
 NUM_ROBOTS = 5
 NUM_LANDMARKS = 15  # subjects 6..20
 NUM_SUBJECTS = NUM_ROBOTS + NUM_LANDMARKS
+
+# Physical bounds of the recorded values (module docstring: the iRobot Create and the workspace of Leung et al.)
+MAX_SPEED = 0.5  # m/s, the Create's top drive speed (500 mm/s)
+MAX_TURN_RATE = 2 * MAX_SPEED / 0.26  # rad/s, wheels at +-0.5 m/s, wheel base 0.26 m: 3.85 rad/s
+MAX_RANGE = 20.0  # m, beyond the 15 m x 8 m workspace's 17 m diagonal
+MAX_POSITION = 20.0  # m from the Vicon origin, the workspace's centre
+ANGLE_ROUNDING = 1e-3  # rad: headings are logged wrapped to [-pi, pi] and rounded (3.1416 > pi)
+MAX_SPAN = 86_400.0  # s: one file covers at most a day (a dataset runs for minutes to about an hour)
+
+
+@dataclass(frozen=True)
+class Bound:
+    """Column ``column`` of a file's rows lies in [low, high] (``(low, high]`` with ``low_open``)."""
+
+    column: int
+    low: float
+    high: float
+    what: str
+    why: str
+    low_open: bool = False
+
+    def violated(self, table: np.ndarray) -> np.ndarray:
+        values = table[:, self.column]
+        above_low = values > self.low if self.low_open else values >= self.low
+        return ~(above_low & (values <= self.high))
+
+
+_POSITION_WHY = f"the workspace is 15 m x 8 m, at most {MAX_POSITION:g} m from the origin"
+_HEADING = (-np.pi - ANGLE_ROUNDING, np.pi + ANGLE_ROUNDING)
+PHYSICAL_BOUNDS = {
+    "Odometry": (Bound(1, -MAX_SPEED, MAX_SPEED, "forward velocity [m/s]", "the iRobot Create drives at most 0.5 m/s"),
+                 Bound(2, -MAX_TURN_RATE, MAX_TURN_RATE, "angular velocity [rad/s]",
+                       f"the iRobot Create turns at most {MAX_TURN_RATE:.2f} rad/s")),
+    "Measurement": (Bound(2, 0.0, MAX_RANGE, "range [m]", f"a sighting is at a positive range within {MAX_RANGE:g} m "
+                          "(the workspace)", low_open=True),
+                    Bound(3, -np.pi, np.pi, "bearing [rad]", "a bearing lies in [-pi, pi]")),
+    "Groundtruth": (Bound(1, -MAX_POSITION, MAX_POSITION, "x [m]", _POSITION_WHY),
+                    Bound(2, -MAX_POSITION, MAX_POSITION, "y [m]", _POSITION_WHY),
+                    Bound(3, *_HEADING, "orientation [rad]", "headings are logged wrapped to [-pi, pi]")),
+    "Landmark_Groundtruth": (Bound(1, -MAX_POSITION, MAX_POSITION, "x [m]", _POSITION_WHY),
+                             Bound(2, -MAX_POSITION, MAX_POSITION, "y [m]", _POSITION_WHY),
+                             Bound(3, 0.0, MAX_POSITION, "x std-dev [m]", "a standard deviation is >= 0"),
+                             Bound(4, 0.0, MAX_POSITION, "y std-dev [m]", "a standard deviation is >= 0")),
+}
 
 
 @dataclass(frozen=True)
@@ -135,12 +191,26 @@ def resolve_data_path(data: str | os.PathLike | None) -> str:
     return path
 
 
-def _read_table(path: str, columns: int, integer_columns: tuple[int, ...] = (),
-                time_column: int | None = 0) -> np.ndarray:
-    """Rows of ``columns`` finite numbers; ValueError naming the file and the line otherwise.
+def _data_lines(path: str) -> list[tuple[int, bytes]]:
+    """(line number, raw line) of every data line: what is left before a ``#`` is not blank (np.loadtxt's rule)."""
+    with open(path, "rb") as fh:
+        raw = fh.read().splitlines()
+    return [(number, line) for number, line in enumerate(raw, start=1) if line.split(b"#", 1)[0].strip()]
 
-    Fast path: ``np.loadtxt`` and vectorized checks; on any failure the line-by-line
-    parser re-reads the file to name the offending line.
+
+def _refuse_row(path: str, row: int, message: str):
+    """ValueError naming ``path`` and the file line of data row ``row`` (0-based, comments and blanks skipped)."""
+    number, line = _data_lines(path)[row]
+    return ValueError(f"{path}, line {number}: {message}: {line.decode('utf-8', 'replace').strip()!r}")
+
+
+def _read_table(path: str, columns: int, integer_columns: tuple[int, ...] = (),
+                time_column: int | None = 0, bounds: tuple[Bound, ...] = ()) -> np.ndarray:
+    """Rows of ``columns`` finite numbers within ``bounds``; ValueError naming the file and the line otherwise.
+
+    Fast path: ``np.loadtxt`` and vectorized checks; on any format failure the line-by-line
+    parser re-reads the file to name the offending line, and a value out of its bounds is
+    located by re-reading the line numbers (only then: the real files pass).
     """
     name = os.path.basename(path)
     if not os.path.isfile(path):
@@ -154,9 +224,22 @@ def _read_table(path: str, columns: int, integer_columns: tuple[int, ...] = (),
               and (time_column is None or np.all(np.diff(table[:, time_column]) >= 0)))
     except (ValueError, UserWarning, UnicodeDecodeError):
         ok = False
-    if ok:
-        return table
-    return _read_table_lines(path, columns, integer_columns, time_column)
+    if not ok:
+        table = _read_table_lines(path, columns, integer_columns, time_column)
+    for bound in bounds:
+        bad = np.flatnonzero(bound.violated(table))
+        if len(bad):
+            value = table[bad[0], bound.column]
+            interval = f"{'(' if bound.low_open else '['}{bound.low:.4g}, {bound.high:.4g}]"
+            raise _refuse_row(path, int(bad[0]), f"{bound.what} {value:g} outside {interval}, physically "
+                                                 f"impossible ({bound.why})")
+    if time_column is not None:
+        late = np.flatnonzero(table[:, time_column] - table[0, time_column] > MAX_SPAN)
+        if len(late):
+            raise _refuse_row(path, int(late[0]), f"time {table[late[0], time_column]:.17g} is more than "
+                                                  f"{MAX_SPAN:g} s after the file's first line (a dataset runs "
+                                                  "for minutes)")
+    return table
 
 
 def _read_table_lines(path: str, columns: int, integer_columns: tuple[int, ...],
@@ -164,12 +247,22 @@ def _read_table_lines(path: str, columns: int, integer_columns: tuple[int, ...],
     name = os.path.basename(path)
     rows = []
     try:
-        with open(path, encoding="utf-8") as fh:
-            lines = fh.readlines()
-    except (OSError, UnicodeDecodeError) as exc:
+        with open(path, "rb") as fh:
+            lines = fh.read().splitlines()
+    except OSError as exc:
         raise ValueError(f"{path}: cannot read {name}: {exc}") from exc
     previous = -np.inf
-    for number, line in enumerate(lines, start=1):
+    for number, raw in enumerate(lines, start=1):
+        try:
+            line = raw.decode("utf-8")
+        except UnicodeDecodeError as exc:
+            raise ValueError(f"{path}, line {number}: not text (byte 0x{raw[exc.start]:02x} at column "
+                             f"{exc.start + 1}): a binary or damaged file") from exc
+        data = line.split("#", 1)[0]
+        control = [c for c in data if ord(c) < 32 and c not in "\t\f\v"]
+        if control:
+            raise ValueError(f"{path}, line {number}: not text (control byte 0x{ord(control[0]):02x} at column "
+                             f"{data.index(control[0]) + 1}): a binary or damaged file")
         text = line.strip()
         if not text or text.startswith("#"):
             continue
@@ -214,23 +307,40 @@ def load(data: str | os.PathLike | None = None, dt: float = 0.1) -> MrclamData:
     path = resolve_data_path(data)
     file = functools.partial(os.path.join, path)
 
-    barcode_rows = _read_table(file("Barcodes.dat"), 2, (0, 1), time_column=None)
+    barcode_file = file("Barcodes.dat")
+    barcode_rows = _read_table(barcode_file, 2, (0, 1), time_column=None)
     barcodes: dict[int, int] = {}
-    for subject, code in barcode_rows.astype(int):
+    barcode_row: dict[int, int] = {}
+    subject_row: dict[int, int] = {}
+    for row, (subject, code) in enumerate(barcode_rows.astype(int)):
+        subject, code = int(subject), int(code)
         if not 1 <= subject <= NUM_SUBJECTS:
-            raise ValueError(f"{file('Barcodes.dat')}: subject {subject} outside 1..{NUM_SUBJECTS}")
-        barcodes[int(code)] = int(subject)
+            raise _refuse_row(barcode_file, row, f"subject {subject} outside 1..{NUM_SUBJECTS}")
+        if code in barcode_row:
+            first = _data_lines(barcode_file)[barcode_row[code]][0]
+            raise _refuse_row(barcode_file, row, f"barcode {code} is already subject {barcodes[code]}'s "
+                                                 f"(line {first}); each barcode names one subject")
+        if subject in subject_row:
+            first = _data_lines(barcode_file)[subject_row[subject]][0]
+            raise _refuse_row(barcode_file, row, f"subject {subject} already has a barcode (line {first})")
+        barcodes[code], barcode_row[code], subject_row[subject] = subject, row, row
     if sorted(barcodes.values()) != list(range(1, NUM_SUBJECTS + 1)):
-        raise ValueError(f"{file('Barcodes.dat')}: must map each subject 1..{NUM_SUBJECTS} to one distinct barcode")
+        missing = sorted(set(range(1, NUM_SUBJECTS + 1)) - set(barcodes.values()))
+        raise ValueError(f"{barcode_file}: must map each subject 1..{NUM_SUBJECTS} to one distinct barcode; "
+                         f"no barcode for subjects {missing}")
 
-    landmark_rows = _read_table(file("Landmark_Groundtruth.dat"), 5, (0,), time_column=None)
+    landmark_file = file("Landmark_Groundtruth.dat")
+    landmark_rows = _read_table(landmark_file, 5, (0,), time_column=None,
+                                bounds=PHYSICAL_BOUNDS["Landmark_Groundtruth"])
     landmarks = np.full((NUM_LANDMARKS, 2), np.nan)
     landmark_std = np.full((NUM_LANDMARKS, 2), np.nan)
-    for row in landmark_rows:
+    for index, row in enumerate(landmark_rows):
         subject = int(row[0])
         if not NUM_ROBOTS < subject <= NUM_SUBJECTS:
-            raise ValueError(f"{file('Landmark_Groundtruth.dat')}: subject {subject} is not a landmark "
-                             f"({NUM_ROBOTS + 1}..{NUM_SUBJECTS})")
+            raise _refuse_row(landmark_file, index, f"subject {subject} is not a landmark "
+                                                    f"({NUM_ROBOTS + 1}..{NUM_SUBJECTS})")
+        if not np.isnan(landmarks[subject - NUM_ROBOTS - 1, 0]):
+            raise _refuse_row(landmark_file, index, f"landmark {subject} is given twice")
         landmarks[subject - NUM_ROBOTS - 1] = row[1:3]
         landmark_std[subject - NUM_ROBOTS - 1] = row[3:5]
     if np.isnan(landmarks).any():
@@ -239,9 +349,9 @@ def load(data: str | os.PathLike | None = None, dt: float = 0.1) -> MrclamData:
 
     odometry, truth, measured = [], [], []
     for r in range(1, NUM_ROBOTS + 1):
-        odometry.append(_read_table(file(f"Robot{r}_Odometry.dat"), 3))
-        truth.append(_read_table(file(f"Robot{r}_Groundtruth.dat"), 4))
-        measured.append(_read_table(file(f"Robot{r}_Measurement.dat"), 4, (1,)))
+        odometry.append(_read_table(file(f"Robot{r}_Odometry.dat"), 3, bounds=PHYSICAL_BOUNDS["Odometry"]))
+        truth.append(_read_table(file(f"Robot{r}_Groundtruth.dat"), 4, bounds=PHYSICAL_BOUNDS["Groundtruth"]))
+        measured.append(_read_table(file(f"Robot{r}_Measurement.dat"), 4, (1,), bounds=PHYSICAL_BOUNDS["Measurement"]))
 
     t0 = max(max(o[0, 0], g[0, 0]) for o, g in zip(odometry, truth, strict=True))
     t_end = min(min(o[-1, 0], g[-1, 0]) for o, g in zip(odometry, truth, strict=True))

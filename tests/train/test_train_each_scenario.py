@@ -1,7 +1,12 @@
-"""A short training run per scenario: it saves, reloads through agents.make_policy and plays an episode."""
+"""A short training run per scenario: it saves, reloads through agents.make_policy and plays an episode;
+a model is refused by another scenario (its model.json) and by the same scenario with other spaces (the space
+check, compared in full: an ``nvec`` change of the same shape is refused too)."""
+
+import os
 
 import numpy as np
 import pytest
+from stable_baselines3 import PPO
 
 import agents
 import coloc_env
@@ -15,6 +20,20 @@ SHORT = {
     "nlos_horizon": {"horizon": 60},
     "gps_denied_nbp": {"horizon": 3, "num_particles": 20},
 }
+# A field per scenario whose change changes the agents' spaces; nlos_horizon's keeps the shape and type and
+# changes only the action space's nvec (27 horizon choices -> 17), the case a shape-and-type check lets through.
+OTHER_SPACES = {
+    "bandwidth_fusion": {"num_uavs": 3},
+    "lossy_fusion": {"num_uavs": 3},
+    "relay_ukf": {"num_platforms": 3},
+    "nlos_horizon": {"window_max": 20},
+    "gps_denied_nbp": {"num_iterations": 3},
+}
+
+
+def _spaces(env):
+    agent = env.possible_agents[0]
+    return env.observation_space(agent), env.action_space(agent)
 
 
 @pytest.mark.parametrize("scenario", sorted(SHORT))
@@ -33,7 +52,23 @@ def test_short_training_saves_reloads_and_plays(scenario, tmp_path):
         assert all(np.isfinite(r) for r in rewards.values())
         steps += 1
     assert steps == env.scenario.horizon
-    # a model saved for one scenario is refused by another whose spaces differ
+
+    # another scenario: refused by the scenario recorded in model.json
     other = "lossy_fusion" if scenario != "lossy_fusion" else "relay_ukf"
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=f"was trained on '{scenario}', not '{other}'"):
+        agents.make_policy(path, coloc_env.parallel_env(other, **SHORT[other]))
+
+    # the same scenario with other spaces passes the scenario check and is refused by the space check
+    changed = coloc_env.parallel_env(scenario, **SHORT[scenario], **OTHER_SPACES[scenario])
+    model = PPO.load(path, device="cpu")
+    assert _spaces(changed) != (model.observation_space, model.action_space)  # the change does change a space
+    if scenario == "nlos_horizon":
+        ours, theirs = changed.action_space(changed.possible_agents[0]), model.action_space
+        assert (type(ours), ours.shape) == (type(theirs), theirs.shape) and ours.nvec[0] != theirs.nvec[0]
+    with pytest.raises(ValueError, match=r"has (observation|action) space .*, the env has"):
+        agents.make_policy(path, changed)
+
+    # without its model.json a model for another scenario is still refused, by its spaces
+    os.remove(os.path.splitext(path)[0] + ".json")
+    with pytest.raises(ValueError, match=r"has (observation|action) space .*, the env has"):
         agents.make_policy(path, coloc_env.parallel_env(other, **SHORT[other]))

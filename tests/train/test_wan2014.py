@@ -3,6 +3,7 @@
 import json
 
 import numpy as np
+import pytest
 
 from coloc_env.config import build_config
 from coloc_env.scenarios.gps_denied_nbp import GpsDeniedNbpConfig
@@ -63,11 +64,19 @@ def test_train_smoke_then_the_model_plays_the_env(tmp_path):
     env = coloc_env.parallel_env("gps_denied_nbp", num_uavs=10, num_particles=20, horizon=3)
     policy = agents.make_policy(path, env)
     observations, _ = env.reset(seed=0)
+    steps = 0
     while env.agents:
         actions = policy.act(observations)
         assert actions["uav_0"].shape == (5,)
+        assert all(env.action_space(a).contains(np.asarray(actions[a], env.action_space(a).dtype)) for a in actions)
         observations, rewards, _, _, infos = env.step(actions)
-    assert np.isfinite(rewards["uav_0"]) and infos["uav_0"]["error"] >= 0
+        steps += 1
+        for agent, info in infos.items():
+            assert np.isfinite(rewards[agent])
+            # the reported error is the distance of the played belief's estimate from the truth
+            distance = np.linalg.norm(np.asarray(info["estimated_position"]) - np.asarray(info["true_position"]))
+            assert info["error"] == pytest.approx(distance, abs=1e-9), agent
+    assert steps == 3
 
 
 def test_bench_reports_time_per_fault_uav_step():
