@@ -35,12 +35,16 @@ def _square(name: str, value, n: int | None = None) -> np.ndarray:
 
 def _covariance(name: str, value, n: int, strict: bool) -> np.ndarray:
     a = _square(name, value, n)
-    if not np.allclose(a, a.T, atol=1e-12, rtol=0.0):
+    # tolerances relative to the matrix's scale: an absolute 1e-12 refuses the rounding of a covariance with
+    # entries near 1e12 and lets a covariance of 1e-12 entries be indefinite by its own size
+    scale = float(np.abs(a).max()) if a.size else 0.0
+    if not np.allclose(a, a.T, atol=1e-12 * max(scale, 1e-300), rtol=0.0):
         raise ValueError(f"{name} must be symmetric")
     low = np.linalg.eigvalsh(a).min()
-    if low < (1e-300 if strict else -1e-12):
+    # strict: numerically positive definite, so that a Cholesky factor exists (cond < 1e14)
+    if low < (1e-14 * scale if strict else -1e-12 * scale) or (strict and low <= 0.0):
         raise ValueError(f"{name} must be positive {'definite' if strict else 'semi-definite'}, "
-                         f"smallest eigenvalue {low:g}")
+                         f"smallest eigenvalue {low:g} (largest entry {scale:g})")
     return a
 
 

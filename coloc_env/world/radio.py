@@ -78,11 +78,12 @@ class RssAoaSensor:
         check_range(f"{prefix}d0", s.d0, 0.0, 1e6, low_open=True)
         check_range(f"{prefix}path_loss_exponent", s.exponent, 0.0, 10.0, low_open=True)
         check_range(f"{prefix}sigma_db", s.sigma_db, 0.0, 100.0, low_open=True)
-        check_range(f"{prefix}sigma_theta_deg", s.sigma_theta, 0.0, np.pi, low_open=True)
+        # the angles are held in radians but named (and given) in degrees: checked and reported in degrees
+        check_range(f"{prefix}sigma_theta_deg", float(np.degrees(s.sigma_theta)), 0.0, 180.0, low_open=True)
         check_range(f"{prefix}nlos_bias_db", s.nlos_bias_db, -100.0, 100.0)
         check_range(f"{prefix}nlos_sigma_db", s.nlos_sigma_db, 0.0, 100.0)
-        check_range(f"{prefix}nlos_bias_deg", s.nlos_bias_theta, -np.pi, np.pi)
-        check_range(f"{prefix}nlos_sigma_deg", s.nlos_sigma_theta, 0.0, np.pi)
+        check_range(f"{prefix}nlos_bias_deg", float(np.degrees(s.nlos_bias_theta)), -180.0, 180.0)
+        check_range(f"{prefix}nlos_sigma_deg", float(np.degrees(s.nlos_sigma_theta)), 0.0, 180.0)
 
     def mean_rss(self, distance: np.ndarray) -> np.ndarray:
         """P_T - PL(d0) - 10 n log10(d / d0): the LOS mean in dBm."""

@@ -112,3 +112,18 @@ def test_bounded_delay_frequencies_and_losses():
                           ({"probabilities": (-0.1, 0.5, 0.1, 0.1)}, "delay_probs")]:
         with pytest.raises(ValueError, match=field):
             BoundedRandomDelay(**kwargs).validate()
+
+
+def test_the_radio_checks_its_angles_in_the_degrees_it_names():
+    """The sensor holds its angles in radians but its fields are named (and given) in degrees."""
+    import dataclasses
+
+    from coloc_env.world.radio import RssAoaSensor
+    from estimators.afge import SignalModel
+
+    base = SignalModel()
+    RssAoaSensor(dataclasses.replace(base, sigma_theta=np.radians(180.0))).validate()  # the bound itself is allowed
+    with pytest.raises(ValueError, match=r"sigma_theta_deg must be in \(0(\.0)?, 180(\.0)?\], got 200"):
+        RssAoaSensor(dataclasses.replace(base, sigma_theta=np.radians(200.0))).validate()
+    with pytest.raises(ValueError, match=r"nlos_bias_deg must be in \[-180(\.0)?, 180(\.0)?\], got -190"):
+        RssAoaSensor(dataclasses.replace(base, nlos_bias_theta=np.radians(-190.0))).validate()
