@@ -5,7 +5,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-$(shell cat pyproject.toml | cksum | cut -d' ' -f1)
 
-.PHONY: demo test install clean
+.PHONY: demo test install clean test-clients rllib-example
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -55,5 +55,23 @@ test: $(STAMP)
 	$(VENV)/bin/ruff check .
 	MPLBACKEND=Agg $(PY) -m pytest -q -n 2
 
+# TorchRL's check_env_specs on every preset and some compositions, and the client examples of docs/clients
+# (TorchRL installs beside torch 2.13.0; its import alone takes seconds, so it stays out of `make test`).
+test-clients: $(STAMP)
+	$(PY) -m pip install --quiet -e '.[test,torchrl]'
+	MPLBACKEND=Agg $(PY) -m pytest -q -p no:xdist tests/test_clients.py
+
+# RLlib pins an older gymnasium than SB3's: its example runs in its own venv.
+RLLIB_VENV := .venv-rllib
+RLLIB_PY := $(RLLIB_VENV)/bin/python
+$(RLLIB_PY):
+	$(PYTHON) -m venv $(RLLIB_VENV)
+	$(RLLIB_PY) -m pip install --quiet --upgrade pip
+	$(RLLIB_PY) -m pip install --quiet --retries 1 torch==$(TORCH_VERSION) $(TORCH_INDEX_OPTION)
+	$(RLLIB_PY) -m pip install --quiet -e '.[rllib]'
+
+rllib-example: $(RLLIB_PY)
+	MPLBACKEND=Agg $(RLLIB_PY) docs/clients/rllib_ppo.py
+
 clean:
-	rm -rf $(VENV) results .pytest_cache
+	rm -rf $(VENV) $(RLLIB_VENV) results .pytest_cache

@@ -52,23 +52,26 @@ def _spec(name_or_spec, config: dict):
     return scenario_class(name_or_spec), None, config
 
 
-def parallel_env(name, render_mode: str | None = None, **config) -> CoLocParallelEnv:
-    """The PettingZoo ``ParallelEnv`` of a preset name (``config`` = its dataclass fields) or a Composition."""
+def parallel_env(name, render_mode: str | None = None, max_cycles: int | None = None, **config) -> CoLocParallelEnv:
+    """The PettingZoo ``ParallelEnv`` of a preset name (``config`` = its dataclass fields) or a Composition.
+
+    ``max_cycles`` is PettingZoo's name for the episode length: a preset's ``horizon`` (``window_steps`` for
+    mrclam_relay), a composition's ``horizon``."""
     cls, spec, config = _spec(name, config)
-    return CoLocParallelEnv(cls, render_mode=render_mode, composition=spec, **config)
+    return CoLocParallelEnv(cls, render_mode=render_mode, composition=spec, max_cycles=max_cycles, **config)
 
 
-def vector_env(name, num_envs: int = 1, seed: int | None = None, **config):
+def vector_env(name, num_envs: int = 1, seed: int | None = None, max_cycles: int | None = None, **config):
     """An SB3 ``VecEnv`` of ``num_envs`` copies x N agents in one batched core (see :mod:`coloc_env.vector`)."""
     from coloc_env.vector import CoLocVecEnv
 
     cls, spec, config = _spec(name, config)
-    return CoLocVecEnv(cls, num_envs=num_envs, seed=seed, composition=spec, **config)
+    return CoLocVecEnv(cls, num_envs=num_envs, seed=seed, composition=spec, max_cycles=max_cycles, **config)
 
 
-def env(name, render_mode: str | None = None, **config):
+def env(name, render_mode: str | None = None, max_cycles: int | None = None, **config):
     """The AEC view of :func:`parallel_env` (``pettingzoo.utils.parallel_to_aec``)."""
-    return parallel_to_aec(parallel_env(name, render_mode=render_mode, **config))
+    return parallel_to_aec(parallel_env(name, render_mode=render_mode, max_cycles=max_cycles, **config))
 
 
 __all__ = ["BACKENDS", "NETWORKS", "PRESETS", "SCENARIOS", "WORLDS", "CoLocParallelEnv", "Composition",
