@@ -22,8 +22,8 @@ import coloc_env
 from coloc_env.scenarios.composed import ComposedScenario
 
 REPO_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-DATASET6 = os.environ.get("COLOC_MRCLAM_DATA") or os.path.join(REPO_ROOT, "..", "shared", "data", "mrclam",
-                                                                 "MRCLAM_Dataset6")
+from tests.conftest import MRCLAM_DATASET6 as DATASET6  # noqa: E402
+from tests.conftest import MRCLAM_SKIP_REASON  # noqa: E402
 
 # backend -> (world, network): cheap parts on which it runs
 CASES = {
@@ -67,7 +67,7 @@ def _check_health(name: str, cov: np.ndarray, step: int) -> None:
 def test_covariances_stay_symmetric_psd_and_finite_over_a_long_run(backend, steps):
     world, network = CASES[backend]
     if backend == "ukf_se2" and not os.path.isdir(DATASET6):
-        pytest.skip(f"MRCLAM dataset 6 not found at {DATASET6} (set COLOC_MRCLAM_DATA)")
+        pytest.skip(MRCLAM_SKIP_REASON)
     if backend == "ukf_se2":  # a window of the recorded run: its length is what the data allow
         steps = min(steps, 5_000)
     part = {"name": backend, **BACKEND_OPTIONS.get(backend, {})}

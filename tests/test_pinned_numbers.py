@@ -51,7 +51,9 @@ import coloc_env
 from coloc_env.config import build_config
 
 REPO_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-DATASET6 = os.path.join(REPO_ROOT, "..", "shared", "data", "mrclam", "MRCLAM_Dataset6")
+from tests.conftest import MRCLAM_DATASET6 as DATASET6  # noqa: E402
+from tests.conftest import MRCLAM_SKIP_REASON  # noqa: E402
+
 REL, ABS = 1e-9, 1e-12
 
 RESET_SEED = 3
@@ -72,7 +74,7 @@ OVERRIDES = {
 
 def _needs_data(name: str) -> None:
     if name == "mrclam_relay" and not os.path.isdir(DATASET6):
-        pytest.skip(f"MRCLAM dataset 6 not found at {DATASET6}")
+        pytest.skip(MRCLAM_SKIP_REASON)
 
 
 def _config(name: str, **overrides):

@@ -11,7 +11,9 @@ from agents.mrclam_relay import complete_chain_routing, paper_actions, paper_par
 
 NAME = "mrclam_relay"
 REPO_ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-DATASET6 = os.path.join(REPO_ROOT, "..", "shared", "data", "mrclam", "MRCLAM_Dataset6")
+from tests.conftest import MRCLAM_DATASET6 as DATASET6  # noqa: E402
+from tests.conftest import MRCLAM_SKIP_REASON  # noqa: E402
+
 N = 5
 
 
@@ -41,7 +43,7 @@ def test_partners_are_the_lowest_recorded_robot_and_chains_are_complete():
     assert np.all(paper_actions(recorded, relay=False)[0, :, 1:] == N)
 
 
-@pytest.mark.skipif(not os.path.isdir(DATASET6), reason=f"MRCLAM dataset 6 not found at {DATASET6}")
+@pytest.mark.skipif(not os.path.isdir(DATASET6), reason=MRCLAM_SKIP_REASON)
 def test_paper_reaches_everyone_no_relay_stops_at_n_and_random_runs():
     assert set(agents.available_policies(NAME)) == {"random", "paper", "no_relay"}
     for name in ("paper", "no_relay", "random"):

@@ -10,9 +10,8 @@ from pettingzoo.test import parallel_api_test
 import agents
 import coloc_env
 from coloc_env.data import mrclam
-
-DATASET6 = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))), "..", "shared",
-                        "data", "mrclam", "MRCLAM_Dataset6")
+from tests.conftest import MRCLAM_DATASET6 as DATASET6  # noqa: E402
+from tests.conftest import MRCLAM_SKIP_REASON  # noqa: E402
 
 OK_ROWS = [r for r in coloc_env.compatibility() if r["ok"]]
 
@@ -36,7 +35,7 @@ def _rollout(spec, policy_name, seed, steps):
 def test_every_compatible_composition_passes_the_api_and_runs(row, monkeypatch):
     if row["world"] == "mrclam":  # recorded data: its default data=None reads $COLOC_MRCLAM_DATA at build time
         if not os.path.isdir(DATASET6):
-            pytest.skip(f"MRCLAM dataset 6 not found at {DATASET6}")
+            pytest.skip(MRCLAM_SKIP_REASON)
         monkeypatch.setenv(mrclam.ENV_VAR, DATASET6)
     spec = coloc_env.compose(world=row["world"], network=row["network"], backend=row["backend"])
     parallel_api_test(coloc_env.parallel_env(spec), num_cycles=10)

@@ -14,9 +14,11 @@ from coloc_env.scenarios.composed import ComposedScenario
 from coloc_env.scenarios.mrclam_relay import MrclamRelayConfig, MrclamRelayScenario
 
 REPO_ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-DATASET6 = os.path.join(REPO_ROOT, "..", "shared", "data", "mrclam", "MRCLAM_Dataset6")
+from tests.conftest import MRCLAM_DATASET6 as DATASET6  # noqa: E402
+from tests.conftest import MRCLAM_SKIP_REASON  # noqa: E402
+
 N = mrclam.NUM_ROBOTS
-needs_data = pytest.mark.skipif(not os.path.isdir(DATASET6), reason=f"MRCLAM dataset 6 not found at {DATASET6}")
+needs_data = pytest.mark.skipif(not os.path.isdir(DATASET6), reason=MRCLAM_SKIP_REASON)
 
 
 def world(**fields):

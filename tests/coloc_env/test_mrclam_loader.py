@@ -10,13 +10,14 @@ import pytest
 from coloc_env.data import mrclam
 
 REPO_ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-DATASET6 = os.path.join(REPO_ROOT, "..", "shared", "data", "mrclam", "MRCLAM_Dataset6")
+from tests.conftest import MRCLAM_DATASET6 as DATASET6  # noqa: E402
+from tests.conftest import MRCLAM_SKIP_REASON  # noqa: E402
 
 
 @pytest.fixture(scope="module")
 def dataset6():
     if not os.path.isdir(DATASET6):
-        pytest.skip(f"MRCLAM dataset 6 not found at {DATASET6}")
+        pytest.skip(MRCLAM_SKIP_REASON)
     return mrclam.load_cached(DATASET6, 0.1)
 
 

@@ -10,7 +10,9 @@ import pytest
 import estimators.ukf_relay_se2 as se2
 
 REPO_ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-DATASET6 = os.path.join(REPO_ROOT, "..", "shared", "data", "mrclam", "MRCLAM_Dataset6")
+from tests.conftest import MRCLAM_DATASET6 as DATASET6  # noqa: E402
+from tests.conftest import MRCLAM_SKIP_REASON  # noqa: E402
+
 R = np.diag([0.1**2, 0.05**2])
 Q = (0.05**2, 0.2**2)
 
@@ -79,7 +81,7 @@ def test_bad_arguments():
 
 def test_dcl_equals_ccl_on_mrclam_slice():
     if not os.path.isdir(DATASET6):
-        pytest.skip(f"MRCLAM dataset 6 not found at {DATASET6}")
+        pytest.skip(MRCLAM_SKIP_REASON)
     from coloc_env.data import mrclam
 
     d = mrclam.load_cached(DATASET6, 0.1).window(0, 400)

@@ -11,7 +11,8 @@ import pytest
 from train.cli import PAPERS, build_parser
 
 REPO_ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-DATASET6 = os.path.join(REPO_ROOT, "..", "shared", "data", "mrclam", "MRCLAM_Dataset6")
+from tests.conftest import MRCLAM_DATASET6 as DATASET6  # noqa: E402
+from tests.conftest import MRCLAM_SKIP_REASON  # noqa: E402
 
 
 def test_cli_accepts_mrclam_not_in_all():
@@ -30,7 +31,7 @@ def test_missing_data_is_a_clear_error(tmp_path, monkeypatch):
 
 def test_quick_reproduce_on_dataset6(tmp_path, monkeypatch):
     if not os.path.isdir(DATASET6):
-        pytest.skip(f"MRCLAM dataset 6 not found at {DATASET6}")
+        pytest.skip(MRCLAM_SKIP_REASON)
     from train.reproduce import mrclam
 
     monkeypatch.setattr(mrclam, "QUICK_STEPS", 600)
@@ -168,7 +169,7 @@ def test_lossy_link_study_lossless_is_the_paper_policy_and_losses_cut_hops():
     """On a short seeded window: the lossless setting is the scenario under ``agents``' paper policy (1e-9),
     coupled losses never deliver more hops, and a hop budget of 1 delivers exactly the first hop of each chain."""
     if not os.path.isdir(DATASET6):
-        pytest.skip(f"MRCLAM dataset 6 not found at {DATASET6}")
+        pytest.skip(MRCLAM_SKIP_REASON)
     import agents
     import coloc_env
     from train.reproduce import mrclam

@@ -11,7 +11,9 @@ import estimators.ukf_relay_se2 as se2
 from train.reproduce import mrclam_nbp as nbp
 
 REPO_ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-DATASET6 = os.path.join(REPO_ROOT, "..", "shared", "data", "mrclam", "MRCLAM_Dataset6")
+from tests.conftest import MRCLAM_DATASET6 as DATASET6  # noqa: E402
+from tests.conftest import MRCLAM_SKIP_REASON  # noqa: E402
+
 SLICES, PARTICLES = 100, 50  # the first 100 s
 
 
@@ -33,7 +35,7 @@ def test_pseudo_fix_from_true_pose_is_the_position():
 @pytest.fixture(scope="module")
 def stretch():
     if not os.path.isdir(DATASET6):
-        pytest.skip(f"MRCLAM dataset 6 not found at {DATASET6}")
+        pytest.skip(MRCLAM_SKIP_REASON)
     from coloc_env.data import mrclam
 
     d = mrclam.load_cached(DATASET6)
