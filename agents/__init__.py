@@ -3,6 +3,17 @@
 >>> import agents, coloc_env
 >>> env = coloc_env.parallel_env("bandwidth_fusion")
 >>> policy = agents.make_policy("paper", env)
+
+Three lists per scenario:
+
+* :func:`available_policies`: the realizable policies, those that use only what the agents
+  can have (``random``, ``always`` and ``silent`` included);
+* :func:`bound_policies`: the ``bound_*`` policies, which use what the agents cannot have
+  (hindsight on the episode, the truth, packet ages without time stamps); leaderboards show
+  them apart, as bounds, and never judge a target against them;
+* :func:`strongest_baselines`: the realizable policies a learned policy with the same
+  information must beat (a leaderboard picks the best of them on the paired episodes;
+  ``train.evaluate.baselines`` adds the reference filters that are not env policies).
 """
 
 from __future__ import annotations
@@ -12,21 +23,68 @@ import inspect
 from agents import bandwidth_fusion, generic, gps_denied_nbp, lossy_fusion, mrclam_relay, nlos_horizon, relay_ukf
 from agents.base import FixedActionPolicy, Policy, RandomPolicy
 
-SCENARIO_POLICIES = {"bandwidth_fusion": bandwidth_fusion.POLICIES, "lossy_fusion": lossy_fusion.POLICIES,
-                     "relay_ukf": relay_ukf.POLICIES, "nlos_horizon": nlos_horizon.POLICIES,
-                     "gps_denied_nbp": gps_denied_nbp.POLICIES, "mrclam_relay": mrclam_relay.POLICIES}
+SCENARIO_POLICIES = {"bandwidth_fusion": {**bandwidth_fusion.POLICIES, **generic.PRESET_FIXED["bandwidth_fusion"]},
+                     "lossy_fusion": lossy_fusion.POLICIES, "relay_ukf": relay_ukf.POLICIES,
+                     "nlos_horizon": nlos_horizon.POLICIES, "gps_denied_nbp": gps_denied_nbp.POLICIES,
+                     "mrclam_relay": mrclam_relay.POLICIES}
+BOUND_POLICIES = {"nlos_horizon": nlos_horizon.BOUNDS}
+ALIASES = {"nlos_horizon": nlos_horizon.ALIASES}  # old name -> current name, accepted by make_policy only
+
+# The strongest realizable baselines with the agents' information (issue 15 §1). lossy_fusion's are the
+# leader-alone Kalman filter and the centralized filter (A), estimators rather than env policies:
+# ``train.evaluate.REFERENCE_FILTERS`` runs them on the same episodes; its informed filter is a bound.
+STRONGEST_BASELINES = {
+    "bandwidth_fusion": ("oracle_static",),
+    "lossy_fusion": (),
+    "relay_ukf": ("paper", "no_relay"),
+    "nlos_horizon": ("best_constant",),
+    "gps_denied_nbp": ("paper", "threshold"),
+    "mrclam_relay": ("paper",),
+}
+COMPOSITION_BASELINES = ("always", "silent")
 
 
 def available_policies(scenario: str) -> list[str]:
-    """Policy names for a preset, or for a composition's name ``world/network/backend``."""
+    """Realizable policy names for a preset, or for a composition's name ``world/network/backend``
+    (``random`` first; ``always`` and ``silent`` included; no bound)."""
     if scenario in SCENARIO_POLICIES:
         return ["random", *SCENARIO_POLICIES[scenario]]
     return ["random", *generic.POLICIES]
 
 
+def duplicates(scenario: str) -> dict[str, str]:
+    """Names that build the same policy as an earlier name of :func:`available_policies` (``always`` is
+    ``paper`` where the paper already sends everything): name -> the earlier name. Evaluating them again
+    would repeat the same episodes."""
+    table = SCENARIO_POLICIES.get(scenario, generic.POLICIES)
+    baselines = strongest_baselines(scenario)
+    names = sorted(available_policies(scenario)[1:], key=lambda n: n not in baselines)  # a baseline keeps its name
+    first, same = {}, {}
+    for name in names:
+        factory = table[name]
+        if factory in first:
+            same[name] = first[factory]
+        else:
+            first[factory] = name
+    return same
+
+
+def bound_policies(scenario: str) -> list[str]:
+    """The ``bound_*`` policies of ``scenario`` (what the agents cannot have); empty where it has none."""
+    return list(BOUND_POLICIES.get(scenario, {}))
+
+
+def strongest_baselines(scenario: str) -> tuple[str, ...]:
+    """The realizable policies a learned one must beat on ``scenario`` (a composition: ``always``, ``silent``)."""
+    if scenario in SCENARIO_POLICIES:
+        return STRONGEST_BASELINES[scenario]
+    return COMPOSITION_BASELINES
+
+
 def make_policy(name: str, env, seed: int | None = None, **kwargs) -> Policy:
     """A policy for ``env`` by name: ``paper`` (``paper:T2P3`` for other tables where the
-    scenario has them), ``random``, ``greedy``, ``oracle_*``, or a path to a trained ``.zip``."""
+    scenario has them), ``random``, ``always``, ``silent``, ``greedy``, ``oracle_*``, a scenario's
+    ``bound_*``, or a path to a trained ``.zip``."""
     scenario = env.unwrapped.scenario.name
     if name.endswith(".zip"):
         from agents.sb3 import SB3Policy
@@ -35,9 +93,11 @@ def make_policy(name: str, env, seed: int | None = None, **kwargs) -> Policy:
     if name == "random":
         return RandomPolicy(env, seed=seed)
     base, _, variant = name.partition(":")
-    table = SCENARIO_POLICIES.get(scenario, generic.POLICIES)
+    base = ALIASES.get(scenario, {}).get(base, base)
+    table = {**SCENARIO_POLICIES.get(scenario, generic.POLICIES), **BOUND_POLICIES.get(scenario, {})}
     if base not in table:
-        raise ValueError(f"unknown policy {name!r} for {scenario}; available: {available_policies(scenario)} or a .zip")
+        raise ValueError(f"unknown policy {name!r} for {scenario}; available: {available_policies(scenario)}, "
+                         f"bounds: {bound_policies(scenario)} or a .zip")
     if variant:
         kwargs["tables"] = variant
     if "seed" in inspect.signature(table[base]).parameters:  # stochastic scenario policies take their own seed
@@ -45,4 +105,5 @@ def make_policy(name: str, env, seed: int | None = None, **kwargs) -> Policy:
     return table[base](env, **kwargs)
 
 
-__all__ = ["FixedActionPolicy", "Policy", "RandomPolicy", "available_policies", "make_policy"]
+__all__ = ["FixedActionPolicy", "Policy", "RandomPolicy", "available_policies", "bound_policies", "duplicates",
+           "make_policy", "strongest_baselines"]

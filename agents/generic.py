@@ -18,11 +18,17 @@ import itertools
 import numpy as np
 
 from agents.base import FixedActionPolicy, Policy
+from coloc_env.scenarios.binding import PresetScenario
+
+
+def _is_composition(scenario) -> bool:
+    """A plain composition's actions are its blocks; a preset binding has its own action codec (and policies)."""
+    return hasattr(scenario, "action_vector") and not isinstance(scenario, PresetScenario)
 
 
 def _fixed(env, which: str) -> FixedActionPolicy:
     scenario = env.unwrapped.scenario
-    if not hasattr(scenario, "action_vector"):
+    if not _is_composition(scenario):
         raise ValueError(f"policy {'always' if which == 'maximum' else 'silent'!r} needs a composition "
                          f"(coloc_env.compose); {scenario.name} is a preset with its own policies")
     vector = scenario.action_vector(which)
@@ -61,7 +67,7 @@ class GreedyPolicy(Policy):
     def __init__(self, env, max_candidates: int = 64):
         super().__init__(env)
         core = env.unwrapped.scenario
-        if not hasattr(core, "action_vector"):
+        if not _is_composition(core):
             raise ValueError(f"policy 'greedy' needs a composition (coloc_env.compose); {core.name} is a preset "
                              "with its own policies")
         self.max_candidates = int(max_candidates)
@@ -128,3 +134,43 @@ def greedy(env) -> GreedyPolicy:
 
 
 POLICIES = {"always": always, "silent": silent, "greedy": greedy}
+
+
+# --- always / silent of bandwidth_fusion ---------------------------------------------------------------
+# Kept here because agents/bandwidth_fusion.py has another owner; they belong in that module's POLICIES.
+def _bandwidth_fusion_fixed(env, fewest: bool) -> FixedActionPolicy:
+    """Every (neighbour, component) score at -1 (``fewest``) or +1: the env decodes it to the feasible selection
+    with the fewest / most components (ties: the first in the budget's order), without listing the selections.
+    Fusion weights: the paper's P1 where it applies (4 UAVs), else equal weights (zero logits)."""
+    from coloc_env.scenarios.bandwidth_fusion import paper_weights
+
+    scenario = env.unwrapped.scenario
+    if scenario.name != "bandwidth_fusion":
+        raise ValueError(f"this policy is for bandwidth_fusion, not {scenario.name}")
+    N, n = scenario.num_agents, scenario.n
+    scores = (N - 1) * n
+    actions = np.zeros((N, scenario.action_space().shape[0]))
+    if N == 4:
+        first = scenario.links.selection_at(np.zeros(N, dtype=np.int64))  # any feasible selection
+        actions[:, scores:] = scenario.encode_actions(first, paper_weights("P1"))[:, scores:]
+    actions[:, :scores] = -1.0 if fewest else 1.0
+    return FixedActionPolicy(env, actions)
+
+
+def bandwidth_fusion_always(env) -> FixedActionPolicy:
+    """bandwidth_fusion: every receiver takes the feasible selection with the most components (the first
+    such in the budget's order), the paper's weights P1."""
+    return _bandwidth_fusion_fixed(env, fewest=False)
+
+
+def bandwidth_fusion_silent(env) -> FixedActionPolicy:
+    """bandwidth_fusion: every receiver takes the feasible selection with the fewest components, weights P1.
+
+    The budget sets how little a receiver may take (``min_per_link`` per link; with the default
+    ``exact_budget`` every feasible selection takes exactly ``budget`` components), so "silent" is the
+    least the budget allows, not nothing; at the paper's setting it sends as much as ``always``.
+    """
+    return _bandwidth_fusion_fixed(env, fewest=True)
+
+
+PRESET_FIXED = {"bandwidth_fusion": {"always": bandwidth_fusion_always, "silent": bandwidth_fusion_silent}}

@@ -78,4 +78,6 @@ class NoRelayPolicy(PaperPolicy):
     relay = False
 
 
-POLICIES = {"paper": PaperPolicy, "no_relay": NoRelayPolicy}
+# ``always`` (every transport decision at its maximum: the complete chain) is ``paper``; ``silent``
+# (nothing relayed: the measurement still updates m and n) is ``no_relay``.
+POLICIES = {"paper": PaperPolicy, "always": PaperPolicy, "silent": NoRelayPolicy, "no_relay": NoRelayPolicy}

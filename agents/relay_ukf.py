@@ -118,4 +118,7 @@ class NearestLocalPolicy(Policy):
         return actions
 
 
-POLICIES = {"paper": PaperPolicy, "no_relay": NoRelayPolicy, "nearest_local": NearestLocalPolicy}
+# ``always`` (every transport decision at its maximum: the complete chain) is ``paper``; ``silent``
+# (nothing relayed: the measurement still updates m and n) is ``no_relay``.
+POLICIES = {"paper": PaperPolicy, "always": PaperPolicy, "silent": NoRelayPolicy, "no_relay": NoRelayPolicy,
+            "nearest_local": NearestLocalPolicy}

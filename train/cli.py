@@ -118,8 +118,8 @@ def build_parser() -> argparse.ArgumentParser:
                         epilog=_policies_epilog())
     ev.add_argument("scenario", help=f"{scenarios}, or all")
     ev.add_argument("--policy", default="paper",
-                    help="a policy name of the scenario (listed below), PATH.zip, or all (every named policy and "
-                         "the trained models under --models)")
+                    help="a policy name of the scenario (listed below), PATH.zip, or all (every realizable policy, "
+                         "the bounds, the reference filters and the trained models under --models)")
     ev.add_argument("--models", default="results/train", help="where --policy all looks for SCENARIO/seed*/model.zip")
     ev.add_argument("--episodes", type=_positive, default=100, help="seeded evaluation episodes per policy")
     ev.add_argument("--stochastic", action="store_true",
@@ -273,14 +273,15 @@ def _runnable_scenarios(console) -> list[str]:
 
 
 def _policies_for(scenario: str, policy: str, models: str) -> list[str]:
+    """``all``: every realizable policy, the bounds, the reference filters and the trained models under ``models``."""
     import glob
 
-    import agents
+    from train.evaluate import all_rows
 
     if policy != "all":
         return [policy]
     found = sorted(glob.glob(os.path.join(models, scenario, "seed*", "model.zip")))
-    return agents.available_policies(scenario) + found
+    return all_rows(scenario) + found
 
 
 def _evaluation_line(scenario: str, policy: str, result: dict, episodes: int, path: str) -> str:

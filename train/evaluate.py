@@ -4,11 +4,18 @@ Seeds (documented once, used everywhere):
 
 * training: seed S seeds the network and copy c of the training env with S + c
   (small integers);
-* learning curves during training: VALIDATION_SEED_BASE + e;
+* validation (learning curves during training, and every choice made before
+  evaluation: the ``best_constant`` horizon, the ``threshold`` rule's spread):
+  VALIDATION_SEED_BASE + e;
 * ``coloc evaluate``: EVAL_SEED_BASE + e.
 
-The three ranges are disjoint, so no policy is evaluated on a training seed
-and nothing is tuned on the evaluation seeds.
+The three ranges are disjoint (each holds SEED_RANGE episodes), so no policy is
+evaluated on a training seed and nothing is tuned on the evaluation seeds
+(:func:`check_not_evaluation_seeds` refuses a tuning run that asks for them).
+Every policy of a scenario plays the same episodes: episode e is
+``env.reset(seed=seed_base + e)`` for every policy, so two rows of a
+leaderboard pair episode by episode (``train.leaderboard.paired_difference``);
+each result keeps its per-episode costs for that.
 
 The metric is the scenario's own, ``Scenario.episode_error`` of every step's
 ``infos[agent][Scenario.metric_error_key]`` (``"error"`` except where the paper samples
@@ -18,41 +25,131 @@ over steps and agents); communication is the per-step sum over agents of
 scenario counts it). ``paper_cost`` adds ``Scenario.initial_cost()``, the
 part of a paper's cost an episode does not contain (bandwidth_fusion's k = 0
 term).
+
+Reference filters (:data:`REFERENCE_FILTERS`) are rows that are not policies of
+the env: another estimator run on the very episodes the env draws for the same
+seeds (lossy_fusion's leader-alone Kalman filter and the paper's centralized
+filter (A), which the env's actions cannot express). A name starting with
+``bound_`` uses what the agents cannot have and is shown apart as a bound.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
 EVAL_SEED_BASE = 10**6
 VALIDATION_SEED_BASE = 2 * 10**6
+SEED_RANGE = 10**6  # episodes each seed range can hold before it would run into the next
+BOUND_PREFIX = "bound_"
+
+# lossy_fusion (fu2017): row name -> (the filter of estimators.lossy_fusion.FILTERS, packets each follower
+# sends per slot, what it is). Every row runs on config.sample_episodes(default_rng(seed_base + e)), the
+# episode env.reset(seed=seed_base + e) draws (a test checks that "distributed" equals the env's paper row).
+REFERENCE_FILTERS = {
+    "lossy_fusion": {
+        "leader_only_kf": ("leader_only_kf", 0.0, "the leader's Kalman filter on its own measurements"),
+        "centralized_A": ("centralized", 1.0, "the paper's centralized augmented-state filter (A), every "
+                                              "follower sending its measurement each slot"),
+        "bound_informed_kf": ("informed_kf", 1.0, "a Kalman filter told every packet's age (the agents have no "
+                                                  "time stamps): a bound below (A)"),
+    },
+}
+
+
+def is_bound(name: str) -> bool:
+    """Bounds (``bound_*``) use hindsight, the truth or information the agents lack; never a baseline."""
+    return name.startswith(BOUND_PREFIX)
+
+
+def reference_rows(scenario: str) -> list[str]:
+    """The reference filters ``coloc evaluate`` can add for ``scenario`` (bounds included)."""
+    return list(REFERENCE_FILTERS.get(scenario, {}))
+
+
+def baselines(scenario: str) -> tuple[str, ...]:
+    """The strongest realizable baselines of ``scenario``: its policies (``agents.strongest_baselines``)
+    and its realizable reference filters; a target is judged against the best of them on paired episodes."""
+    import agents
+
+    return (*agents.strongest_baselines(scenario), *(n for n in reference_rows(scenario) if not is_bound(n)))
+
+
+# Variants worth a row of their own under ``--policy all``: gps_denied_nbp's threshold rule at 5 m used 40 %
+# fewer broadcasts than the paper's schedule at an error not distinguishable from it on the validation seeds
+# (agents/gps_denied_nbp.py), the comparison for any policy that claims the paper's error with fewer broadcasts.
+EXTRA_ROWS = {"gps_denied_nbp": ("threshold:5",)}
+
+
+def all_rows(scenario: str) -> list[str]:
+    """What ``coloc evaluate S --policy all`` runs besides trained models: the realizable policies (and
+    :data:`EXTRA_ROWS`), the bounds and the reference filters. A name that builds the same policy as an
+    earlier one (``agents.duplicates``: ``always`` = ``paper`` on relay_ukf) is left out; the leaderboard
+    names it beside the row it equals."""
+    import agents
+
+    same = agents.duplicates(scenario)
+    realizable = [n for n in agents.available_policies(scenario) if n not in same]
+    return [*realizable, *EXTRA_ROWS.get(scenario, ()), *agents.bound_policies(scenario), *reference_rows(scenario)]
+
+
+def check_not_evaluation_seeds(seed_base: int, episodes: int, what: str) -> None:
+    """Refuse a tuning run whose seeds seed_base .. seed_base + episodes - 1 meet the evaluation seeds."""
+    if seed_base < EVAL_SEED_BASE + SEED_RANGE and seed_base + episodes > EVAL_SEED_BASE:
+        raise ValueError(f"{what}: seed_base {seed_base} with {episodes} episodes overlaps the evaluation seeds "
+                         f"[{EVAL_SEED_BASE}, {EVAL_SEED_BASE + SEED_RANGE}); choose on validation seeds "
+                         f"(seed_base >= {VALIDATION_SEED_BASE})")
+
+
+def mean_ci95(values) -> tuple[float, float]:
+    """Mean and the half-width of its 95 % Student-t interval (t_{0.975, n-1} s / sqrt(n)); nan for n < 2."""
+    from scipy import stats
+
+    values = np.asarray(values, float)
+    if len(values) < 2:
+        return float(values.mean()) if len(values) else float("nan"), float("nan")
+    half = stats.t.ppf(0.975, len(values) - 1) * values.std(ddof=1) / math.sqrt(len(values))
+    return float(values.mean()), float(half)
 
 
 def summarize(scenario, policy_name: str, costs, comms, seed_base: int, initial_cost: float) -> dict:
+    """One leaderboard row; ``per_episode_cost`` / ``per_episode_communication`` (episode e: seed seed_base + e)
+    are what the paired comparisons use."""
     costs = np.asarray(costs, float)
-    half = 1.96 * costs.std(ddof=1) / np.sqrt(len(costs)) if len(costs) > 1 else float("nan")
+    comms = np.broadcast_to(np.asarray(comms, float), costs.shape)
+    mean, half = mean_ci95(costs)
     return {
         "scenario": scenario,
         "policy": policy_name,
         "episodes": len(costs),
         "seed_base": seed_base,
-        "mean_cost": float(costs.mean()),
-        "ci95": float(half),
-        "paper_cost": float(costs.mean() + initial_cost),
+        "mean_cost": mean,
+        "ci95": half,
+        "paper_cost": float(mean + initial_cost),
         "initial_cost": float(initial_cost),
         "communication_per_step": float(np.mean(comms)),
+        "per_episode_cost": [float(c) for c in costs],
+        "per_episode_communication": [float(c) for c in comms],
     }
 
 
 def evaluate_policy(scenario: str, policy_name: str, episodes: int, seed_base: int = EVAL_SEED_BASE,
                     progress=None, stochastic: bool = False) -> dict:
-    """A trained model (``.zip``) on the batched core, any other policy through the PettingZoo env.
+    """A trained model (``.zip``) on the batched core, a reference filter on the same episodes, any other
+    policy through the PettingZoo env.
 
-    The two paths give the same episodes (``vector_env`` equals ``parallel_env``
+    The two env paths give the same episodes (``vector_env`` equals ``parallel_env``
     copy for copy; a test checks the costs agree); the batched one runs every
     episode in one call per step. ``stochastic``: a model samples its actions
     (torch seeded with ``seed_base``) and is recorded as ``PATH.zip (stochastic)``.
     """
+    if policy_name in REFERENCE_FILTERS.get(scenario, {}):
+        result = run_reference_filter(scenario, policy_name, episodes, seed_base)
+        if progress:
+            for _ in range(episodes):
+                progress()
+        return result
     if not policy_name.endswith(".zip"):
         return run_episodes(scenario, policy_name, episodes, seed_base, progress)
     import agents
@@ -66,6 +163,38 @@ def evaluate_policy(scenario: str, policy_name: str, episodes: int, seed_base: i
         for _ in range(episodes):
             progress()
     return dict(result, policy=policy_name + (" (stochastic)" if stochastic else ""))
+
+
+def run_reference_filter(scenario: str, name: str, episodes: int, seed_base: int = EVAL_SEED_BASE,
+                         **env_config) -> dict:
+    """A reference filter of :data:`REFERENCE_FILTERS` on the episodes the env draws for seeds seed_base + e.
+
+    lossy_fusion's metric is the fused position MSE averaged over the slots (its ``episode_error``);
+    communication is the packets the followers send per slot as the env counts them.
+    """
+    filters = REFERENCE_FILTERS.get(scenario, {})
+    if name not in filters:
+        raise ValueError(f"unknown reference filter {name!r} for {scenario}; available: {list(filters)}")
+    if episodes < 2:
+        raise ValueError(f"episodes must be >= 2 for a confidence interval, got {episodes}")
+    costs, comms = reference_filter_costs(scenario, filters[name][0], episodes, seed_base, **env_config)
+    return summarize(scenario, name, costs, comms * filters[name][1], seed_base, 0.0)
+
+
+def reference_filter_costs(scenario: str, filter_name: str, episodes: int, seed_base: int,
+                           **env_config) -> tuple[np.ndarray, float]:
+    """Per-episode costs (episodes,) of one of fu2017's filters and the followers' count L - 1."""
+    from coloc_env.config import build_config
+    from coloc_env.scenarios.lossy_fusion import LossyFusionConfig
+    from train.reproduce.fu2017 import run_block_filters
+
+    if scenario != "lossy_fusion":
+        raise ValueError(f"reference filters exist for {list(REFERENCE_FILTERS)}, not {scenario!r}")
+    config = build_config(LossyFusionConfig, env_config)
+    drawn = [config.sample_episodes(np.random.default_rng(seed_base + e)) for e in range(episodes)]
+    sim = {key: np.stack([d[key] for d in drawn]) for key in ("truth", "z", "outcome")}
+    errors = run_block_filters(config, sim)["errors"][filter_name]  # (episodes, K) squared position errors
+    return errors.mean(axis=1), float(config.num_uavs - 1)
 
 
 def run_episodes(scenario: str, policy_name: str, episodes: int, seed_base: int = EVAL_SEED_BASE,
@@ -96,6 +225,28 @@ def run_episodes(scenario: str, policy_name: str, episodes: int, seed_base: int 
     return summarize(scenario, policy_name, costs, comms, seed_base, env.scenario.initial_cost())
 
 
+def _run_core(scenario: str, episodes: int, seed_base: int, choose, env_config: dict) -> tuple:
+    """Steps ``episodes`` copies of the batched core (copy e seeded ``seed_base + e``) with
+    ``choose(core) -> actions (episodes, N, *action_shape)``; returns (costs, comms per step, initial cost)."""
+    import coloc_env
+    from coloc_env.config import build_config
+
+    cls = coloc_env.scenario_class(scenario)
+    core = cls(build_config(cls.Config, env_config), batch=episodes)
+    core.reset([np.random.default_rng(seed_base + e) for e in range(episodes)])
+    errors, weights, comm = [], [], np.zeros(episodes)
+    while not core.done().all():
+        core.step(choose(core))
+        info = core.info()
+        errors.append(info[core.metric_error_key])
+        if core.metric_weight_key:
+            weights.append(info[core.metric_weight_key])
+        comm += info["communication"].sum(axis=-1) if "communication" in info else 0.0
+    # (episodes, T, N) -> (episodes,)
+    cost = core.episode_error(np.stack(errors, axis=1), np.stack(weights, axis=1) if weights else None)
+    return cost, comm / len(errors), core.initial_cost()
+
+
 def run_model_batched(model, scenario: str, episodes: int, seed_base: int, deterministic: bool = True,
                       **env_config) -> dict:
     """An SB3 model on ``episodes`` copies of the batched core at once (copy e seeded ``seed_base + e``).
@@ -109,24 +260,54 @@ def run_model_batched(model, scenario: str, episodes: int, seed_base: int, deter
         import torch
 
         torch.manual_seed(seed_base)
-    import coloc_env
-    from coloc_env.config import build_config
 
-    cls = coloc_env.scenario_class(scenario)
-    core = cls(build_config(cls.Config, env_config), batch=episodes)
-    core.reset([np.random.default_rng(seed_base + e) for e in range(episodes)])
-    shape = core.action_space().shape
-    errors, weights, comm = [], [], np.zeros(episodes)
-    while not core.done().all():
+    def choose(core):
         observation = core.observation()
         actions, _ = model.predict(observation.reshape(episodes * core.num_agents, *observation.shape[2:]),
                                    deterministic=deterministic)
-        core.step(np.asarray(actions, dtype=float).reshape(episodes, core.num_agents, *shape))
-        info = core.info()
-        errors.append(info[core.metric_error_key])
-        if core.metric_weight_key:
-            weights.append(info[core.metric_weight_key])
-        comm += info["communication"].sum(axis=-1) if "communication" in info else 0.0
-    # (episodes, T, N) -> (episodes,)
-    cost = core.episode_error(np.stack(errors, axis=1), np.stack(weights, axis=1) if weights else None)
-    return summarize(scenario, "model", cost, comm / len(errors), seed_base, core.initial_cost())
+        return np.asarray(actions, dtype=float).reshape(episodes, core.num_agents, *core.action_space().shape)
+
+    cost, comm, initial = _run_core(scenario, episodes, seed_base, choose, env_config)
+    return summarize(scenario, "model", cost, comm, seed_base, initial)
+
+
+def run_rule_batched(scenario: str, name: str, rule, episodes: int, seed_base: int, **env_config) -> dict:
+    """A policy given as a batched rule ``rule(core) -> actions (B, N, *shape)`` on the batched core.
+
+    For the validation sweeps: the rules of ``agents`` that read only the observation
+    (``ConstantPolicy``, ``ThresholdPolicy``) have a batched form, so a sweep runs every
+    episode of a candidate in one call per step (a test checks it equals the env loop).
+    """
+    cost, comm, initial = _run_core(scenario, episodes, seed_base, rule, env_config)
+    return summarize(scenario, name, cost, comm, seed_base, initial)
+
+
+def constant_horizon_sweep(windows, episodes: int, seed_base: int = VALIDATION_SEED_BASE, **env_config) -> dict:
+    """nlos_horizon: each constant horizon N of ``windows`` (all packets kept) on the same validation
+    episodes; returns N -> its result row. ``agents.nlos_horizon.BEST_CONSTANT_WINDOW`` is the argmin
+    of the mean cost over N of such a sweep (never on evaluation seeds)."""
+    check_not_evaluation_seeds(seed_base, episodes, "constant_horizon_sweep")
+    out = {}
+    for window in windows:
+        def rule(core, window=int(window)):
+            return core.encode_actions(np.full((core.batch, core.num_agents), window))
+
+        out[int(window)] = run_rule_batched("nlos_horizon", f"constant:{int(window)}", rule, episodes, seed_base,
+                                            **env_config)
+    return out
+
+
+def threshold_sweep(spreads, episodes: int, seed_base: int = VALIDATION_SEED_BASE, **env_config) -> dict:
+    """gps_denied_nbp: the ``threshold:S`` rule (``agents.gps_denied_nbp.threshold_actions``) for each spread S
+    in metres, and the paper's schedule (key ``inf``), on the same validation episodes."""
+    from agents.gps_denied_nbp import threshold_actions
+
+    check_not_evaluation_seeds(seed_base, episodes, "threshold_sweep")
+    out = {}
+    for spread in [*spreads, math.inf]:
+        def rule(core, spread=float(spread)):
+            return threshold_actions(core.observation(), spread, core.config.num_iterations)
+
+        name = "paper" if math.isinf(spread) else f"threshold:{spread:g}"
+        out[float(spread)] = run_rule_batched("gps_denied_nbp", name, rule, episodes, seed_base, **env_config)
+    return out

@@ -1,42 +1,48 @@
-"""Leaderboard target verdicts on hand-made tables."""
+"""Leaderboard rows and target verdicts on hand-made tables (the paired arithmetic: test_paired_leaderboard)."""
 
-from train.leaderboard import target_verdict
+import numpy as np
 
-
-def _row(policy, mean, ci=0.1, comm=1.0, scenario="relay_ukf"):
-    return {"scenario": scenario, "policy": policy, "mean_cost": mean, "ci95": ci, "paper_cost": mean,
-            "communication_per_step": comm, "episodes": 10}
+from train.evaluate import EVAL_SEED_BASE
+from train.leaderboard import rows, target_verdict
 
 
-def test_verdict_needs_fewer_messages_where_the_target_says_so():
-    table = {"paper": _row("paper", 1.50, comm=1.5), "/m/seed0/model.zip": _row("/m/seed0/model.zip", 1.45, comm=1.0)}
-    assert "**met**" in target_verdict("relay_ukf", table)
-    table["/m/seed0/model.zip"] = _row("/m/seed0/model.zip", 1.45, comm=1.6)  # better error, more hops
-    assert "**not met**" in target_verdict("relay_ukf", table)
+def _row(policy, costs, comm=1.0, scenario="relay_ukf"):
+    costs = np.asarray(costs, float)
+    return {"scenario": scenario, "policy": policy, "mean_cost": float(costs.mean()), "ci95": 0.1,
+            "paper_cost": float(costs.mean()), "initial_cost": 0.0, "communication_per_step": comm,
+            "episodes": len(costs), "seed_base": EVAL_SEED_BASE, "per_episode_cost": list(costs)}
 
 
-def test_verdict_margin_and_noise():
-    paper = _row("paper", 100.0, ci=5.0, scenario="lossy_fusion")
-    for mean, verdict in ((89.0, "**met**"), (93.0, "**not met, within noise**"), (99.0, "**not met**")):
-        table = {"paper": paper, "a.zip": _row("a.zip", mean, ci=1.0, scenario="lossy_fusion")}
-        assert verdict in target_verdict("lossy_fusion", table), mean
-
-
-def test_verdict_uses_the_best_constant_horizon_and_skips_untrained_tables():
-    table = {"paper": _row("paper", 3.0), "constant:6": _row("constant:6", 2.7),
-             "constant:12": _row("constant:12", 2.9), "oracle_constant": _row("oracle_constant", 2.0),
-             "x.zip": _row("x.zip", 2.8)}
+def test_nlos_target_uses_the_validated_best_constant_not_the_hindsight_bound_or_paper():
+    rng = np.random.default_rng(1)
+    best = 7.0 + rng.standard_normal(20)
+    table = {"paper": _row("paper", best + 3.0, scenario="nlos_horizon"),
+             "best_constant": _row("best_constant", best, scenario="nlos_horizon"),
+             "constant:6": _row("constant:6", best - 0.3, scenario="nlos_horizon"),  # not a baseline: one of many
+             "bound_hindsight_constant": _row("bound_hindsight_constant", best - 2.0, scenario="nlos_horizon"),
+             "x/seed2/model.zip": _row("x/seed2/model.zip", best + 0.5 + 0.01 * rng.standard_normal(20),
+                                       scenario="nlos_horizon")}
     line = target_verdict("nlos_horizon", table)
-    assert "constant:6 2.7" in line and "**not met, within noise**" in line
-    assert target_verdict("nlos_horizon", {"paper": _row("paper", 3.0)}) is None
+    assert "Strongest realizable baseline: best_constant" in line and "seed2: worse" in line and "**not met**" in line
+    assert target_verdict("nlos_horizon", {"paper": table["paper"]}) is None
 
 
 def test_stochastic_models_get_their_own_summary_and_do_not_count_for_the_target():
-    from train.leaderboard import rows
-
-    table = {"paper": _row("paper", 1.5, comm=1.5), "a.zip": _row("a.zip", 1.6, comm=0.8),
-             "a.zip (stochastic)": _row("a.zip (stochastic)", 1.4, comm=0.8)}
+    paper = np.linspace(1.4, 1.6, 10)
+    table = {"paper": _row("paper", paper, comm=1.5), "a.zip": _row("a.zip", paper + 0.1, comm=0.8),
+             "a.zip (stochastic)": _row("a.zip (stochastic)", paper - 0.1, comm=0.8)}
     names = [r["policy"] for r in rows(table)]
     assert names == ["paper", "a.zip (stochastic)", "a.zip", "trained (mean of 1 seed)",
                      "trained, stochastic (mean of 1 seed)"]
-    assert "Trained 1.6 " in target_verdict("relay_ukf", table)
+    line = target_verdict("relay_ukf", table)
+    assert "a.zip: worse" in line and "stochastic" not in line
+
+
+def test_trained_summary_pairs_the_per_episode_mean_over_seeds():
+    paper = np.linspace(1.0, 2.0, 12)
+    table = {"paper": _row("paper", paper), "s0/model.zip": _row("s0/model.zip", paper - 0.2),
+             "s1/model.zip": _row("s1/model.zip", paper + 0.1)}
+    summary = rows(table)[-1]
+    assert summary["policy"] == "trained (mean of 2 seeds)"
+    np.testing.assert_allclose(summary["per_episode_cost"], paper - 0.05, atol=1e-12)
+    assert summary["spread"] == (float(np.mean(paper - 0.2)), float(np.mean(paper + 0.1)))
