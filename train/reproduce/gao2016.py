@@ -1,16 +1,16 @@
 """Reproduce Gao et al. 2016 (``nlos_horizon``): AFGE vs constant-horizon DFIR and Kalman baselines.
 
 The paper's formulas and most numbers were lost; the contract is the reconstruction
-``../shared/specs/gao2016_afge.md``, and the claims checked are its §11 (qualitative: the
+``docs/gao2016.md``, and the claims checked are its §11 (qualitative: the
 absolute numbers of the paper are not comparable). One target per run, as in the paper.
 
 Monte Carlo: ``runs`` runs of every setting; run r of sweep setting i draws its world from
-``np.random.default_rng([SEED_BASE + seed + i, r])`` (spec §9: seed 2016, +i for the i-th
+``np.random.default_rng([SEED_BASE + seed + i, r])`` (docs/gao2016.md §9: seed 2016, +i for the i-th
 setting; ``--seed S`` shifts the base), and every estimator of a setting runs on the same
 draws, so comparisons are paired per run. Runs go in blocks of :data:`BLOCK` through
 :func:`train.executor.map_tasks` (the blocks are fixed, so any executor gives the same bits).
 
-Writes ``OUT/gao2016/metrics.json`` with exactly the keys of spec §12, ``report.md`` (each
+Writes ``OUT/gao2016/metrics.json`` with exactly the keys of docs/gao2016.md §12, ``report.md`` (each
 claim, our numbers, holds or not, decided on the paired per-run interval) and the figures
 ``fig4_rmse_vs_horizon.png`` (the U-curve with AFGE as a line), ``fig6_rmse_over_time.png``,
 ``horizon_over_time.png`` (chosen horizon against the turn schedule) and
@@ -43,7 +43,7 @@ SEED_BASE = 2016
 BLOCK = 10
 WARMUP = 50
 HORIZONS = tuple(range(2, 31))
-MATCHED_ACCEL_SIGMA = 1.0  # m/s^2, the KF matched to the turns (spec §8)
+MATCHED_ACCEL_SIGMA = 1.0  # m/s^2, the KF matched to the turns (docs/gao2016.md §8)
 SETTINGS = (  # (name, config changes): spec's sweep, the default first
     ("default", {}),
     ("pi=0.1", {"p_nlos": 0.1}),
@@ -423,15 +423,15 @@ def _report(m: dict, extra: dict, claims: list[dict], quick: bool) -> str:
     lines = [
         "# gao2016: adaptive finite-horizon group estimator (reproduction)",
         "",
-        "Gao et al. 2016 (seed `004_4a0edde314525ef9.txt`); formulas reconstructed in "
-        "`shared/specs/gao2016_afge.md`. Scenario `nlos_horizon`, estimator `estimators/afge.py`. "
+        "Gao et al. 2016; formulas reconstructed in "
+        "`docs/gao2016.md`. Scenario `nlos_horizon`, estimator `estimators/afge.py`. "
         f"{m['runs']} Monte Carlo runs per setting, base seed {m['seed']}, {m['steps']} steps of T = {m['T']} s, "
         f"averages over k >= {m['warmup']}" + (" (quick mode)." if quick else "."),
         "The paper's absolute numbers (DFIR 0.216 at N = 12, AFGE 0.196, DRHE 0.320; units lost) are not "
         "comparable: its world and most parameters are lost. DRHE is not implemented (its equations are "
-        "not in the seed).",
+        "not in the paper's text).",
         "",
-        "## Claims (spec §11)",
+        "## Claims (docs/gao2016.md §11)",
         "",
     ]
     lines += claims_table(claims)

@@ -22,7 +22,7 @@ quantile are rejected (the same in CCL and DCL). The evaluation runs over
 the whole run, the calibration window included; no ground truth after the
 calibration window enters the filters.
 
-Noise model (issue 9), every parameter from the calibration window
+Noise model (the calibrated one), every parameter from the calibration window
 (:func:`coloc_env.data.mrclam.calibration_seconds`: the first 10 % of the
 run, at least 60 s: 75.6 s of dataset 6, 60 s of a ``--quick`` run) against
 Vicon by the rules of :func:`coloc_env.data.mrclam.calibrate_noise`, applied
@@ -44,7 +44,7 @@ per step by :class:`coloc_env.data.mrclam.NoiseModel` (the same code as the
   robot share their error (correlation 0.95 in range, 0.7 in bearing), so
   the same burst-sum rule over bursts of sightings.
 
-The model before issue 9 (``*_baseline`` in metrics.json: constant
+The model before calibration (``*_baseline`` in metrics.json: constant
 1.4826 x MAD noise over the first 60 s, raw commands; ``NoiseModel`` of kind
 ``"baseline"``) runs too, and so does
 the calibrated model without the measurement inflation
@@ -62,7 +62,7 @@ and covariance, worst over the models), ``duration_s``, ``steps``,
 ``report.md`` and figures ``trajectories.png``, ``error_over_time.png``,
 ``nees.png`` (calibrated model).
 
-Lossy / hop-limited links (issue 9, :func:`lossy_link_study`): the
+Lossy / hop-limited links (:func:`lossy_link_study`): the
 ``mrclam_relay`` scenario core, driven with the ``paper`` policy's actions
 (complete chains m -> n -> the others ascending) over the whole run (window
 start 0), runs UKF-DCL for each link setting of :func:`link_settings`: a
@@ -108,7 +108,7 @@ def run_filters(d: mrclam.MrclamData, noise: dict, progress=None, baseline: bool
 
     ``noise``: a :func:`coloc_env.data.mrclam.calibrate_noise` dict, applied by
     :class:`coloc_env.data.mrclam.NoiseModel`: ``baseline`` the constant 1.4826 x MAD noise on the
-    raw commands (the model before issue 9), else the calibrated model
+    raw commands (the model before calibration), else the calibrated model
     (``inflate_measurements=False``: without its measurement inflation, for the ablation).
     """
     model = mrclam.NoiseModel.from_calibration(noise, "baseline" if baseline else "calibrated",

@@ -1,7 +1,7 @@
 """dNBP (wan2014) on real robot data: UTIAS MRCLAM, landmark-sighting robots as the "GPS-normal" UAVs.
 
 Issue 9: "dNBP with the robots that see landmarks playing the GPS-normal role".
-:mod:`estimators.dnbp` (Wan et al. 2014, spec ``shared/specs/wan2014_dnbp.md``)
+:mod:`estimators.dnbp` (Wan et al. 2014, reconstructed in ``docs/wan2014.md``)
 and the least-squares baseline :mod:`estimators.range_ls` are driven on one
 MRCLAM dataset (:func:`coloc_env.data.mrclam.load_cached`; cite Leung et al.,
 IJRR 2011). No Vicon data after the calibration window enters any estimator;

@@ -1,10 +1,10 @@
 """Reproduce Wan et al. 2014 (``gps_denied_nbp``): Figs. 4-6, Table 1 and the paper's claims.
 
 The paper's equations and most numbers were lost in extraction; the model is
-the reconstruction ``shared/specs/wan2014_dnbp.md`` and the claims are its §8.
-Writes ``OUT/wan2014/metrics.json`` (spec §7):
+the reconstruction ``docs/wan2014.md`` and the claims are its §8.
+Writes ``OUT/wan2014/metrics.json`` (docs/wan2014.md §7):
 
-* ``default``: the default point (spec §1), with per-method (``dnbp``, ``ls``,
+* ``default``: the default point (docs/wan2014.md §1), with per-method (``dnbp``, ``ls``,
   ``dr``) ``err_fault``, ``err_all``, ``err_normal`` (pooled means over
   runs, steps and UAVs), ``fail_rate`` (fault errors > 20 m),
   ``err_fault_run_std`` (std over runs of each run's pooled fault error) and
@@ -15,13 +15,13 @@ Writes ``OUT/wan2014/metrics.json`` (spec §7):
   ``sweep_particles`` (Table 1): the same object per point;
 * ``case_study`` (Fig. 4) and ``claims``.
 
-Seeding (common random numbers, spec §7): run r draws its world from
+Seeding (common random numbers, docs/wan2014.md §7): run r draws its world from
 ``default_rng([seed, r])`` and its dNBP randomness from
 ``default_rng([seed, 100000 + r])`` at every point, so curves are comparable
 point by point. A point's runs are one batch (vectorized over runs); points
 are the independent tasks of :func:`train.executor.map_tasks`.
 
-The Monte Carlo runs drive the composable parts (issue 14, :class:`Rig`): the
+The Monte Carlo runs drive the composable parts (:class:`Rig`): the
 ``gps_denied`` world, the ``broadcast`` medium and the backends ``dnbp``
 (dNBP), ``range_ls`` (LS of ref. [7]) and ``range_ls`` with nobody
 transmitting (DR: each UAV's own GPS/accelerometer Kalman filter). Only the
@@ -62,7 +62,7 @@ KEY = "wan2014"
 RUNS = 12
 QUICK_RUNS = 2
 QUICK_HORIZON = 10
-FAIL_THRESHOLD = 20.0  # metres: an unresolved flip / ring ambiguity (spec §7)
+FAIL_THRESHOLD = 20.0  # metres: an unresolved flip / ring ambiguity (docs/wan2014.md §7)
 ESTIMATOR_SEED_OFFSET = 100_000
 # A case-study belief counts as unimodal and located when its spread and its error are below this: on the
 # case-study graph a two-mode belief has a spread of ~70 m and a ring ~190 m, while a located belief is
@@ -99,7 +99,7 @@ def _sweep_override(field: str, value, config: GpsDeniedNbpConfig) -> dict:
 
 
 def summarize(errors: np.ndarray, fault: np.ndarray) -> dict:
-    """Pooled metrics (spec §7) of errors (R, T, N) with fault masks (R, T, N)."""
+    """Pooled metrics (docs/wan2014.md §7) of errors (R, T, N) with fault masks (R, T, N)."""
     def pooled(mask):
         return float(errors[mask].mean()) if mask.any() else None
 
@@ -396,7 +396,8 @@ def _claims(m: dict) -> list[dict]:
     add("dnbp_below_ls_over_time", "Fig. 5: dNBP below LS over the run",
         f"dNBP below LS at {100 * below:.0f} % of the {int(valid.sum())} steps", below >= 0.8,
         "mean error curve of dNBP below LS at >= 80 % of the steps", key=False)
-    add("dr_about_twice", "spec §11: DR about twice the cooperative methods; normal UAVs at the GPS-filter level",
+    add("dr_about_twice",
+        "docs/wan2014.md §11: DR about twice the cooperative methods; normal UAVs at the GPS-filter level",
         f"DR / dNBP = {e['dr'] / e['dnbp']:.2f}, DR / LS = {e['dr'] / e['ls']:.2f}; err_normal dNBP "
         f"{d['dnbp']['err_normal']:.2f}, LS {d['ls']['err_normal']:.2f}, DR {d['dr']['err_normal']:.2f} m",
         e["dr"] > 1.5 * max(e["dnbp"], e["ls"]), "err_fault(DR) > 1.5 x the larger of dNBP and LS", key=False)
@@ -432,7 +433,7 @@ def _claims(m: dict) -> list[dict]:
                   zip(ms, errs_m, times, strict=True)) + f"; time ~ M^{slope:.2f}",
         errs_m[-1] < errs_m[0], "err_fault(M = 300) < err_fault(M = 50)")
     add("time_grows_with_M", "Table 1: the time per fault-UAV step grows with the number of samples",
-        f"log-log slope {slope:.2f} (spec §11 expects 1.5-2)", all(np.diff(times) > 0),
+        f"log-log slope {slope:.2f} (docs/wan2014.md §11 expects 1.5-2)", all(np.diff(times) > 0),
         "time per fault-UAV step strictly increasing in M", key=False)
     return claims
 
@@ -509,8 +510,8 @@ def _report(m: dict, claims: list[dict], config: GpsDeniedNbpConfig) -> str:
         "# wan2014: dynamic NBP for UAVs under GPS loss (reproduction)",
         "",
         "Wan, Zhong, Zhang, IJDSN 2014. The paper's equations and most numbers were lost in extraction; the "
-        "model is the reconstruction `shared/specs/wan2014_dnbp.md`, so every number here comes from that "
-        "model and only the paper's qualitative claims (spec §8) can be checked. Scenario `gps_denied_nbp`, "
+        "model is the reconstruction `docs/wan2014.md`, so every number here comes from that "
+        "model and only the paper's qualitative claims (docs/wan2014.md §8) can be checked. Scenario `gps_denied_nbp`, "
         "estimators `estimators/dnbp.py` (dNBP) and `estimators/range_ls.py` (LS of ref. [7], dead reckoning).",
         "",
         f"Monte Carlo: {m['runs']} runs per point (the paper: 100), T = {config.horizon} steps, seed base "
@@ -552,8 +553,8 @@ def _report(m: dict, claims: list[dict], config: GpsDeniedNbpConfig) -> str:
         "* `sweep_normal_ratio` uses the fixed-proportion mode (exactly round(ratio N) normal UAVs, no "
         "switching), as the paper's Fig. 6(a).",
         "* Times are for this numpy implementation on a shared CPU; the paper's Table 1 reports seconds in "
-        "unoptimised Matlab. Only the trend is comparable (spec §8).",
-        "* Known weakness (spec §11): a fault UAV with one or two neighbours can lock onto the wrong mode "
+        "unoptimised Matlab. Only the trend is comparable (docs/wan2014.md §8).",
+        "* Known weakness (docs/wan2014.md §11): a fault UAV with one or two neighbours can lock onto the wrong mode "
         "(flip or ring ambiguity); the fail rate counts those steps.",
     ]
     return "\n".join(lines) + "\n"

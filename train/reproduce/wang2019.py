@@ -14,7 +14,7 @@ Writes ``OUT/wang2019/metrics.json`` with
 * ``truncated_chain``        hop budget 1: the paper's rule for unreached cross-covariances vs ours
 * ``claims``                 each claim -> holds (bool)
 
-plus ``report.md`` and PNG figures. The estimators are the composable backends (issue 14) on
+plus ``report.md`` and PNG figures. The estimators are the composable backends on
 the ``circles`` world (:class:`Rig`): IL = ``dead_reckoning``, CCL = ``ukf_ccl`` over ``ideal``,
 DCL = ``ukf_dcl`` over ``relay``; the filterpy comparison runs filterpy's update beside the
 ``ukf_ccl`` backend. Every Monte Carlo block draws its runs
@@ -399,7 +399,7 @@ def _claims(metrics: dict, summary: dict) -> list[dict]:
     literal = [metrics["paper_literal"]["error_vs_p"][str(p)]["CCL"] for p in PROBABILITIES]
     claims.append({
         "id": "literal_q_error_rises_again",
-        "claim": "(issue 5) with the paper's Q the error rises again when range measurements are frequent",
+        "claim": "with the paper's Q the error rises again when range measurements are frequent",
         "ours": f"paper's Q, CCL: p=1.0 {literal[-1]:.3f} m vs the smallest over p {min(literal):.3f} m",
         "criterion": "the error at p = 1.0 exceeds the smallest error over p",
         "holds": bool(literal[-1] > min(literal)),
@@ -407,7 +407,7 @@ def _claims(metrics: dict, summary: dict) -> list[dict]:
     nees = metrics["nees_ccl"]
     claims.append({
         "id": "heading_term_makes_filter_consistent",
-        "claim": "(issue 5) the paper's Q makes the filter overconfident; the heading term in Q fixes it",
+        "claim": "the paper's Q makes the filter overconfident; the heading term in Q fixes it",
         "ours": f"mean NEES of each platform's own block at p = {nees['p']} (2 if consistent): default Q "
                 f"{nees['default']:.2f}, paper's Q {nees['paper_literal']:.2f}, control without turn-rate "
                 f"noise {nees['no_turn_rate_noise']:.2f}",
@@ -417,7 +417,7 @@ def _claims(metrics: dict, summary: dict) -> list[dict]:
     trunc = metrics["truncated_chain"]
     claims.append({
         "id": "truncated_chain_consistent_update",
-        "claim": "(issue 5) on truncated chains the paper's rule (P_RU unchanged) makes P indefinite; the "
+        "claim": "on truncated chains the paper's rule (P_RU unchanged) makes P indefinite; the "
                  "consistent update P_RU - K_R P_zU keeps it positive definite",
         "ours": f"hop budget {trunc['max_hops']}, {trunc['copies']} runs: paper's rule first indefinite at step "
                 f"{trunc['paper']['first_indefinite_step']}, Cholesky failed at step "
