@@ -6,7 +6,9 @@ the validation seeds and ``coloc evaluate`` on the evaluation seeds of
 :mod:`train.evaluate`; neither range overlaps the training seeds.
 
 Writes ``OUT/SCENARIO/seedS/``: ``model.zip`` (+ ``model.json``: scenario,
-config, spaces), ``checkpoint.zip`` (replaced atomically as training goes),
+config, spaces, which checkpoint it is), the best checkpoint on the validation seeds (its
+point of the learning curve has the lowest validation cost; the last weights where there is no
+curve), ``best.zip`` and ``last.zip`` (the final weights), ``checkpoint.zip`` (replaced atomically as training goes),
 ``curve.json`` and ``learning_curve.png`` (validation error vs timesteps, the
 paper policy's level as a line).
 """
@@ -16,6 +18,7 @@ from __future__ import annotations
 import importlib
 import json
 import os
+import shutil
 
 import numpy as np
 
@@ -100,6 +103,7 @@ def _callbacks(scenario: str, folder: str, timesteps: int, curve: list, points: 
             super().__init__()
             self.next_at = 0
             self.every = 1
+            self.best: tuple[float, int] | None = None  # (validation mean cost, timesteps) of best.zip
 
         def _on_training_start(self) -> None:
             rollout = self.model.n_steps * self.model.get_env().num_envs
@@ -122,6 +126,12 @@ def _callbacks(scenario: str, folder: str, timesteps: int, curve: list, points: 
             if points:
                 result = run_model_batched(self.model, scenario, CURVE_EPISODES, VALIDATION_SEED_BASE)
                 curve.append((int(self.num_timesteps), result["mean_cost"], result["ci95"]))
+                # the best point on the validation seeds is the model that is kept (never the evaluation seeds)
+                if self.best is None or result["mean_cost"] < self.best[0]:
+                    tmp = os.path.join(folder, ".tmp-best.zip")
+                    self.model.save(tmp)
+                    os.replace(tmp, os.path.join(folder, "best.zip"))
+                    self.best = (float(result["mean_cost"]), int(self.num_timesteps))
 
     return CheckpointAndCurve()
 
@@ -192,15 +202,25 @@ def train(scenario: str, timesteps: int, seed: int, out: str, vec: str = "native
                     tensorboard_log=os.path.join(folder, "tb") if tensorboard else None, **hyper)
         model.action_space.seed(seed)
         curve: list = []
-        model.learn(total_timesteps=timesteps, progress_bar=progress_bar,
-                    callback=_callbacks(scenario, folder, timesteps, curve, curve_points))
+        callback = _callbacks(scenario, folder, timesteps, curve, curve_points)
+        model.learn(total_timesteps=timesteps, progress_bar=progress_bar, callback=callback)
     finally:
         torch.set_num_threads(threads)
     path = os.path.join(folder, "model.zip")
-    tmp = os.path.join(folder, ".tmp-model.zip")
+    tmp = os.path.join(folder, ".tmp-last.zip")
     model.save(tmp)
-    os.replace(tmp, path)
+    os.replace(tmp, os.path.join(folder, "last.zip"))
+    if callback.best is not None:  # model.zip is the best validation checkpoint; last.zip the final weights
+        selected = {"selected": "best on the validation seeds", "timesteps": callback.best[1],
+                    "validation_mean_cost": callback.best[0], "validation_episodes": CURVE_EPISODES}
+        source = os.path.join(folder, "best.zip")
+    else:
+        selected = {"selected": "last (no validation curve)", "timesteps": int(model.num_timesteps)}
+        source = os.path.join(folder, "last.zip")
+    shutil.copyfile(source, os.path.join(folder, ".tmp-model.zip"))
+    os.replace(os.path.join(folder, ".tmp-model.zip"), path)
     write_json(os.path.join(folder, "model.json"), {
+        "checkpoint": selected,
         "scenario": scenario, "seed": seed, "timesteps": timesteps, "env_config": env_config,
         "hyperparams": json.loads(json.dumps(hyper)), "vec": vec, "copies": copies,
         "observation_space": repr(venv.observation_space), "action_space": repr(venv.action_space),
