@@ -52,9 +52,23 @@ class PaperPolicy(FixedActionPolicy):
         super().__init__(env, scenario.encode_actions(paper_selection(t_name), paper_weights(p_name)))
 
 
+GREEDY_MAX_OPTIONS = 4096
+
+
 def greedy_selection(scenario, weights: np.ndarray) -> np.ndarray:
-    """Receiver-relative selections (B, N, N-1, n) minimizing each tr Sigma_i(k+1) given ``weights`` (B, N, N)."""
+    """Receiver-relative selections (B, N, N-1, n) minimizing each tr Sigma_i(k+1) given ``weights`` (B, N, N).
+
+    Exact: every feasible selection is scored. tr Sigma_i(k+1) is quadratic in
+    receiver i's 0/1 selection (the fused errors of two links correlate), so
+    no per-link programme finds its minimum; the search is refused beyond
+    ``GREEDY_MAX_OPTIONS`` (4,096) selections per receiver instead of
+    scoring ~1e12 of them (N = 16) or returning something else under its name.
+    """
     links, model = scenario.links, scenario.model
+    if links.size > GREEDY_MAX_OPTIONS:
+        raise ValueError(f"greedy scores every feasible selection: {links.size} with num_uavs={links.num_nodes}, "
+                         f"budget={links.budget}, more than {GREEDY_MAX_OPTIONS}; use fewer UAVs or a tighter "
+                         "min_per_link / max_per_link")
     feasible = links.feasible  # (F, N-1, n)
     N = scenario.num_agents
     every = links.full_selection(np.broadcast_to(feasible[:, None], (len(feasible), N, *feasible.shape[1:])))

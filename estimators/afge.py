@@ -66,6 +66,15 @@ Departures
   for Y^-1): numpy's stacked matmul/solve on 4x4 matrices is dominated by per-matrix
   overhead. The reference batch form :func:`dfir_batch` uses
   ``scipy.linalg.solve``; a test holds the two equal to 1e-9.
+* Speed (issue 18): where numba is installed, a time step's buffer re-run and estimates
+  (:func:`buffer_estimates`) and the packet selection and fusion (:func:`fuse_packets`) run
+  as compiled kernels, one (copy, target) element at a time with every horizon slot held in
+  registers, the stack kept as a ring so the shift moves nothing. They evaluate the same
+  formulas in the same order as the numpy form (including numpy's pairwise order for the
+  fusion weights' normaliser), so results agree to the last bit on the tests' machine and
+  to 1e-9 by test; ``compiled=False`` is the numpy reference, also used without numba. The
+  numpy block form allocated an (elements, S)-sized temporary for every block product:
+  cProfile of ``vector_env("nlos_horizon", num_envs=1024)`` put ~80 % of a step there.
 """
 
 from __future__ import annotations
@@ -96,6 +105,7 @@ __all__ = [
     "fuse_packets",
     "dfir_batch",
     "information_predict",
+    "buffer_estimates",
     "empty_stack",
     "prior_stack",
     "stack_advance",
@@ -349,7 +359,8 @@ def fused_fix(Y: np.ndarray, y: np.ndarray, gamma: np.ndarray):
 
 
 def fuse_packets(signal: SignalModel, rss, aoa, nav, modes, delays, lags, keep, n_strongest: int,
-                 mode_info: str = "known", weighting: str = "distance", min_packets: int = 1):
+                 mode_info: str = "known", weighting: str = "distance", min_packets: int = 1,
+                 fixes: tuple | None = None, compiled: bool | None = None):
     """Steps 1-2 for buffered stamps: the fused observation of each stamp from its packets
     known now (spec §4-5) [paper/reconstructed]; :func:`known_at_lag`, :func:`select_strongest`,
     :func:`mode_weight`, :func:`packet_fixes` and :func:`fuse_fixes` in that order.
@@ -357,15 +368,114 @@ def fuse_packets(signal: SignalModel, rss, aoa, nav, modes, delays, lags, keep, 
     Packets on the last axis J: ``rss``/``aoa``/``modes``/``delays`` (..., J), ``nav`` (..., J, 2)
     the senders' position estimates; ``lags`` (...) how long ago each stamp was (negative: not
     yet sent); ``keep`` (..., J) a selection mask applied before the ``n_strongest`` rule.
-    Returns ``(Y, y, gamma, used)``.
+    ``fixes``: :func:`packet_fixes` of these packets (z, R, r_hat) when the caller has them
+    (a packet's fix depends neither on the lag nor on the mask). ``compiled`` (default: where
+    numba is installed) selects and sums in one pass per stamp (:func:`_fuse_kernel_source`;
+    equal to the numpy path, ``compiled=False``, to rounding). Returns ``(Y, y, gamma, used)``.
     """
+    if fixes is None:
+        fixes = packet_fixes(signal, nav, rss, aoa, mode_weight(mode_info, modes, signal.p_nlos))
+    z, R, r_hat = fixes
+    if weighting not in WEIGHTINGS:
+        raise ValueError(f"weighting must be one of {WEIGHTINGS}, got {weighting!r}")
     lags = np.asarray(lags)
-    known = known_at_lag(delays, np.where(lags >= 0, lags, -1)[..., None]) & (lags >= 0)[..., None]
-    used = select_strongest(rss, known & keep, n_strongest)
-    m = mode_weight(mode_info, modes, signal.p_nlos)
-    z, R, r_hat = packet_fixes(signal, nav, rss, aoa, m)
-    Y, y, gamma, _ = fuse_fixes(z, R, r_hat, used, weighting, min_packets)
-    return Y, y, gamma, used
+    kernels = _compiled("fuse") if compiled in (None, True) else None
+    if compiled and kernels is None:
+        raise ValueError("compiled=True needs numba, which is not installed")
+    if kernels is None:
+        known = known_at_lag(delays, np.where(lags >= 0, lags, -1)[..., None]) & (lags >= 0)[..., None]
+        used = select_strongest(rss, known & keep, n_strongest)
+        Y, y, gamma, _ = fuse_fixes(z, R, r_hat, used, weighting, min_packets)
+        return Y, y, gamma, used
+    batch = np.broadcast_shapes(np.shape(rss)[:-1], lags.shape, np.shape(keep)[:-1])
+    J = np.shape(rss)[-1]
+    M = int(np.prod(batch, dtype=np.int64))
+
+    def flat(a, tail, dtype):
+        return np.ascontiguousarray(np.broadcast_to(a, (*batch, *tail)), dtype).reshape(M, *tail)
+
+    out_Y, out_y = np.empty((M, 2, 2)), np.empty((M, 2))
+    out_gamma, out_used = np.empty(M, bool), np.empty((M, J), bool)
+    kernel = kernels[1] if M >= _PARALLEL_ELEMENTS else kernels[0]
+    kernel(flat(z, (J, 2), float), flat(R, (J, 2, 2), float), flat(r_hat, (J,), float), flat(rss, (J,), float),
+           flat(delays, (J,), np.int64), flat(lags, (), np.int64), flat(keep, (J,), bool), int(n_strongest),
+           weighting == "distance", int(min_packets), out_Y, out_y, out_gamma, out_used)
+    return (out_Y.reshape(*batch, 2, 2), out_y.reshape(*batch, 2), out_gamma.reshape(batch),
+            out_used.reshape(*batch, J))
+
+
+def _numpy_sum(values):  # pragma: no cover - compiled by numba
+    """Sum of a short contiguous vector in the order numpy's pairwise summation takes (eight
+    running sums, then ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7)); sequential below 8;
+    up to its 128-element block), so that the compiled fusion weights equal the numpy ones."""
+    n = values.shape[0]
+    if n < 8:
+        total = 0.0
+        for i in range(n):
+            total += values[i]
+        return total
+    r = values[:8].copy()
+    i = 8
+    while i + 8 <= n:
+        for lane in range(8):
+            r[lane] += values[i + lane]
+        i += 8
+    total = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+    while i < n:
+        total += values[i]
+        i += 1
+    return total
+
+
+def _fuse_kernel_source(z, R, r_hat, rss, delays, lags, keep, n_strongest, distance, min_packets,
+                        out_Y, out_y, out_gamma, out_used):  # pragma: no cover - compiled by numba
+    """Per stamp m: :func:`known_at_lag`, :func:`select_strongest` (rank by RSS, ties to the
+    lower index) and :func:`fuse_fixes` on the packets' fixes, without the (M, J, 2, 2)
+    temporaries of the numpy form."""
+    M, J = rss.shape[0], rss.shape[1]
+    for m in _prange(M):
+        lag = lags[m]
+        usable = np.zeros(J, np.bool_)
+        for j in range(J):
+            usable[j] = lag >= 0 and delays[m, j] <= lag and keep[m, j]
+        selected = np.zeros(J, np.bool_)
+        for j in range(J):
+            if usable[j]:
+                rank = 0
+                for i in range(J):
+                    if usable[i] and (rss[m, i] > rss[m, j] or (rss[m, i] == rss[m, j] and i < j)):
+                        rank += 1
+                selected[j] = rank < n_strongest
+        count = 0
+        dist = np.zeros(J)
+        for j in range(J):
+            out_used[m, j] = selected[j]
+            if selected[j]:
+                count += 1
+                dist[j] = r_hat[m, j]
+        total = _numpy_sum(dist)
+        gamma = count >= min_packets
+        out_gamma[m] = gamma
+        Y00 = Y01 = Y10 = Y11 = 0.0
+        y0 = y1 = 0.0
+        if gamma:
+            for j in range(J):
+                if selected[j]:
+                    if distance:
+                        w = r_hat[m, j] / (total if total > 0 else 1.0)
+                    else:
+                        w = 1.0
+                    det = R[m, j, 0, 0] * R[m, j, 1, 1] - R[m, j, 0, 1] * R[m, j, 1, 0]
+                    i00, i11 = R[m, j, 1, 1] / det, R[m, j, 0, 0] / det
+                    i01, i10 = -R[m, j, 0, 1] / det, -R[m, j, 1, 0] / det
+                    Y00 += w * i00
+                    Y01 += w * i01
+                    Y10 += w * i10
+                    Y11 += w * i11
+                    y0 += w * i00 * z[m, j, 0] + w * i01 * z[m, j, 1]
+                    y1 += w * i10 * z[m, j, 0] + w * i11 * z[m, j, 1]
+        out_Y[m, 0, 0], out_Y[m, 0, 1], out_Y[m, 1, 0], out_Y[m, 1, 1] = Y00, Y01, Y10, Y11
+        out_y[m, 0], out_y[m, 1] = y0, y1
 
 
 # --------------------------------------------------------------------------------------
@@ -604,6 +714,214 @@ def buffer_step(motion: MotionModel, final: HorizonStack, k, buffer_info, buffer
 
 
 # --------------------------------------------------------------------------------------
+# the buffer re-run and the estimates in one compiled pass (the default where numba is installed)
+# --------------------------------------------------------------------------------------
+_KERNELS: dict | None = None  # name -> [serial, parallel] once compiled; {} where numba is missing
+_prange = range  # numba.prange once numba is imported (the kernel's loop over elements)
+_PARALLEL_ELEMENTS = 4096  # (copy, agent) elements from which threads pay for themselves
+
+
+def _buffer_kernel_source(final_info, final_vector, final_stamps, buffer_info, buffer_vector, buffer_success,
+                          k, shift, inv_q, T, min_stamps, out_info, out_vector, out_stamps, out_x, out_P,
+                          out_valid):  # pragma: no cover - compiled by numba; the numpy path is the reference
+    """Per element m: the D+1 :func:`stack_advance` calls of :func:`buffer_step`, then
+    :func:`stack_estimates`, with the same formulas in the same order on the 2x2 blocks.
+
+    Every slot of the stack lives in 16 + 4 + 1 numbers that never leave the element's
+    row, so the stack of all horizons is advanced without the (M, S, 4, 4) temporaries the
+    numpy form allocates for every block product (most of its time at B = 1024).
+    """
+    M, S = final_stamps.shape[0], final_stamps.shape[1]
+    D1 = buffer_success.shape[1]
+    D = D1 - 1
+    b1, b2 = 0.5 * T * T, T
+    for m in _prange(M):
+        # a ring: logical slot j lives at (head + j) % S, so the shift moves no data
+        info = final_info[m].copy()
+        vec = final_vector[m].copy()
+        st = final_stamps[m].copy()
+        head = 0
+        for i in range(D1):
+            stamp = k[m] - D + i
+            if stamp >= 0:
+                if shift:
+                    head = head - 1 if head > 0 else S - 1
+                    info[head] = 0.0
+                    vec[head] = 0.0
+                    st[head] = 0
+                if stamp > 0:
+                    for j in range(S):
+                        Y = info[j]
+                        y11a, y11b, y11c, y11d = Y[0, 0], Y[0, 1], Y[1, 0], Y[1, 1]
+                        y12a, y12b, y12c, y12d = Y[0, 2], Y[0, 3], Y[1, 2], Y[1, 3]
+                        y22a, y22b, y22c, y22d = Y[2, 2], Y[2, 3], Y[3, 2], Y[3, 3]
+                        m11a, m11b, m11c, m11d = y11a, y11b, y11c, y11d
+                        m12a, m12b = y12a - T * y11a, y12b - T * y11b
+                        m12c, m12d = y12c - T * y11c, y12d - T * y11d
+                        # M22 = Y22 - T Y12 - T Y12^T + T^2 Y11 (the sum in _lin's order)
+                        m22a = y22a - T * y12a - T * y12a + (T * T) * y11a
+                        m22b = y22b - T * y12b - T * y12c + (T * T) * y11b
+                        m22c = y22c - T * y12c - T * y12b + (T * T) * y11c
+                        m22d = y22d - T * y12d - T * y12d + (T * T) * y11d
+                        u1a, u1b = b1 * m11a + b2 * m12a, b1 * m11b + b2 * m12b
+                        u1c, u1d = b1 * m11c + b2 * m12c, b1 * m11d + b2 * m12d
+                        u2a, u2b = b1 * m12a + b2 * m22a, b1 * m12c + b2 * m22b
+                        u2c, u2d = b1 * m12b + b2 * m22c, b1 * m12d + b2 * m22d
+                        wa = b1 * u1a + b2 * u2a + inv_q[m]
+                        wb = b1 * u1b + b2 * u2b
+                        wc = b1 * u1c + b2 * u2c
+                        wd = b1 * u1d + b2 * u2d + inv_q[m]
+                        det = wa * wd - wb * wc
+                        ia, ib, ic, id_ = wd / det, -wb / det, -wc / det, wa / det
+                        g1a, g1b = u1a * ia + u1b * ic, u1a * ib + u1b * id_
+                        g1c, g1d = u1c * ia + u1d * ic, u1c * ib + u1d * id_
+                        g2a, g2b = u2a * ia + u2b * ic, u2a * ib + u2b * id_
+                        g2c, g2d = u2c * ia + u2d * ic, u2c * ib + u2d * id_
+                        p11a = m11a - (g1a * u1a + g1b * u1b)
+                        p11b = m11b - (g1a * u1c + g1b * u1d)
+                        p11c = m11c - (g1c * u1a + g1d * u1b)
+                        p11d = m11d - (g1c * u1c + g1d * u1d)
+                        p12a = m12a - (g1a * u2a + g1b * u2b)
+                        p12b = m12b - (g1a * u2c + g1b * u2d)
+                        p12c = m12c - (g1c * u2a + g1d * u2b)
+                        p12d = m12d - (g1c * u2c + g1d * u2d)
+                        p22a = m22a - (g2a * u2a + g2b * u2b)
+                        p22b = m22b - (g2a * u2c + g2b * u2d)
+                        p22c = m22c - (g2c * u2a + g2d * u2b)
+                        p22d = m22d - (g2c * u2c + g2d * u2d)
+                        v = vec[j]
+                        v10, v11 = v[0], v[1]
+                        v20, v21 = v[2] - T * v10, v[3] - T * v11
+                        c0, c1 = b1 * v10 + b2 * v20, b1 * v11 + b2 * v21
+                        v[0] = v10 - (g1a * c0 + g1b * c1)
+                        v[1] = v11 - (g1c * c0 + g1d * c1)
+                        v[2] = v20 - (g2a * c0 + g2b * c1)
+                        v[3] = v21 - (g2c * c0 + g2d * c1)
+                        Y[0, 0], Y[1, 1] = p11a, p11d
+                        Y[0, 1] = Y[1, 0] = 0.5 * (p11b + p11c)
+                        Y[2, 2], Y[3, 3] = p22a, p22d
+                        Y[2, 3] = Y[3, 2] = 0.5 * (p22b + p22c)
+                        Y[0, 2] = Y[2, 0] = p12a
+                        Y[0, 3] = Y[3, 0] = p12b
+                        Y[1, 2] = Y[2, 1] = p12c
+                        Y[1, 3] = Y[3, 1] = p12d
+                for j in range(S):
+                    for r in range(2):
+                        for c in range(2):
+                            info[j, r, c] += buffer_info[m, i, r, c]
+                        vec[j, r] += buffer_vector[m, i, r]
+                    st[j] += buffer_success[m, i]
+            if i == 0:
+                for j in range(S):
+                    slot = (head + j) % S
+                    out_info[m, j] = info[slot]
+                    out_vector[m, j] = vec[slot]
+                    out_stamps[m, j] = st[slot]
+        for j in range(S):
+            slot = (head + j) % S
+            valid = st[slot] >= min_stamps
+            out_valid[m, j] = valid
+            Y = info[slot]
+            if valid:
+                y11a, y11b, y11c, y11d = Y[0, 0], Y[0, 1], Y[1, 0], Y[1, 1]
+                y12a, y12b, y12c, y12d = Y[0, 2], Y[0, 3], Y[1, 2], Y[1, 3]
+                y22a, y22b, y22c, y22d = Y[2, 2], Y[2, 3], Y[3, 2], Y[3, 3]
+                ya, yb, yc, yd = vec[slot, 0], vec[slot, 1], vec[slot, 2], vec[slot, 3]
+            else:
+                y11a, y11b, y11c, y11d = 1.0, 0.0, 0.0, 1.0
+                y12a, y12b, y12c, y12d = 0.0, 0.0, 0.0, 0.0
+                y22a, y22b, y22c, y22d = 1.0, 0.0, 0.0, 1.0
+                ya, yb, yc, yd = 0.0, 0.0, 0.0, 0.0
+            det = y22a * y22d - y22b * y22c
+            i22a, i22b, i22c, i22d = y22d / det, -y22b / det, -y22c / det, y22a / det
+            t1a, t1b = y12a * i22a + y12b * i22c, y12a * i22b + y12b * i22d
+            t1c, t1d = y12c * i22a + y12d * i22c, y12c * i22b + y12d * i22d
+            sa = y11a - (t1a * y12a + t1b * y12b)
+            sb = y11b - (t1a * y12c + t1b * y12d)
+            sc = y11c - (t1c * y12a + t1d * y12b)
+            sd = y11d - (t1c * y12c + t1d * y12d)
+            det = sa * sd - sb * sc
+            s1a, s1b, s1c, s1d = sd / det, -sb / det, -sc / det, sa / det
+            q12a, q12b = -(s1a * t1a + s1b * t1c), -(s1a * t1b + s1b * t1d)
+            q12c, q12d = -(s1c * t1a + s1d * t1c), -(s1c * t1b + s1d * t1d)
+            # P22 = Y22^-1 - T1^T P12
+            q22a = i22a - (t1a * q12a + t1c * q12c)
+            q22b = i22b - (t1a * q12b + t1c * q12d)
+            q22c = i22c - (t1b * q12a + t1d * q12c)
+            q22d = i22d - (t1b * q12b + t1d * q12d)
+            P = out_P[m, j]
+            P[0, 0], P[1, 1] = s1a, s1d
+            P[0, 1] = P[1, 0] = 0.5 * (s1b + s1c)
+            P[2, 2], P[3, 3] = q22a, q22d
+            P[2, 3] = P[3, 2] = 0.5 * (q22b + q22c)
+            P[0, 2] = P[2, 0] = q12a
+            P[0, 3] = P[3, 0] = q12b
+            P[1, 2] = P[2, 1] = q12c
+            P[1, 3] = P[3, 1] = q12d
+            for r in range(4):
+                out_x[m, j, r] = P[r, 0] * ya + P[r, 1] * yb + P[r, 2] * yc + P[r, 3] * yd
+
+
+def _compiled(name: str):
+    """[serial, parallel] numba forms of the kernel ``name`` (``"buffer"``:
+    :func:`_buffer_kernel_source`, ``"fuse"``: :func:`_fuse_kernel_source`), compiled on first
+    use and cached on disk, or ``None`` where numba is not installed."""
+    global _KERNELS, _prange
+    if _KERNELS is None:
+        try:
+            import numba
+        except ImportError:  # pragma: no cover - numba is a dependency; the numpy path stays for other installs
+            _KERNELS = {}
+        else:
+            _prange = numba.prange
+            options = {"cache": True, "nogil": True, "boundscheck": False}
+            global _numpy_sum
+            _numpy_sum = numba.njit(**options)(_numpy_sum)
+            _KERNELS = {key: [numba.njit(**options)(fn), numba.njit(parallel=True, **options)(fn)]
+                        for key, fn in (("buffer", _buffer_kernel_source), ("fuse", _fuse_kernel_source))}
+    return _KERNELS.get(name)
+
+
+def buffer_estimates(motion: MotionModel, final: HorizonStack, k, buffer_info, buffer_vector, buffer_success,
+                     shift: bool = True, accel_var=None, min_stamps: int = 2, compiled: bool | None = None):
+    """:func:`buffer_step` then :func:`stack_estimates` of the current stack: (final, x, P, valid).
+
+    The scenario's and the backend's step at time k: the stack of every horizon is advanced
+    once per buffered stamp and read once. ``compiled`` (default: where numba is installed)
+    runs :func:`_buffer_kernel_source`, the same arithmetic element by element (equal to the
+    numpy path to rounding: tests hold it to 1e-9), instead of the numpy block form
+    (``compiled=False``), which is the reference and the path without numba.
+    """
+    kernels = _compiled("buffer") if compiled in (None, True) else None
+    if compiled and kernels is None:
+        raise ValueError("compiled=True needs numba, which is not installed")
+    if kernels is None:
+        final, current = buffer_step(motion, final, k, buffer_info, buffer_vector, buffer_success, shift, accel_var)
+        return (final, *stack_estimates(current, min_stamps))
+    batch, S = final.stamps.shape[:-1], final.stamps.shape[-1]
+    D1 = np.shape(buffer_success)[-1]
+    M = int(np.prod(batch, dtype=np.int64))
+    q = motion.accel_sigma**2 if accel_var is None else np.asarray(accel_var, float)
+    inv_q = np.ascontiguousarray(np.broadcast_to(1.0 / q, batch), float).reshape(M)
+    info = np.ascontiguousarray(final.info, float).reshape(M, S, 4, 4)
+    vector = np.ascontiguousarray(final.vector, float).reshape(M, S, 4)
+    stamps = np.ascontiguousarray(final.stamps, np.int64).reshape(M, S)
+    Yb = np.ascontiguousarray(np.broadcast_to(buffer_info, (*batch, D1, 2, 2)), float).reshape(M, D1, 2, 2)
+    yb = np.ascontiguousarray(np.broadcast_to(buffer_vector, (*batch, D1, 2)), float).reshape(M, D1, 2)
+    gb = np.ascontiguousarray(np.broadcast_to(buffer_success, (*batch, D1)), np.int64).reshape(M, D1)
+    kk = np.ascontiguousarray(np.broadcast_to(np.asarray(k, np.int64), batch)).reshape(M)
+    out_info, out_vector = np.empty_like(info), np.empty_like(vector)
+    out_stamps = np.empty_like(stamps)
+    x, P, valid = np.empty((M, S, 4)), np.empty((M, S, 4, 4)), np.empty((M, S), bool)
+    kernel = kernels[1] if M >= _PARALLEL_ELEMENTS else kernels[0]
+    kernel(info, vector, stamps, Yb, yb, gb, kk, bool(shift), inv_q, float(motion.period), int(min_stamps),
+           out_info, out_vector, out_stamps, x, P, valid)
+    new_final = HorizonStack(out_info.reshape(*batch, S, 4, 4), out_vector.reshape(*batch, S, 4),
+                             out_stamps.reshape(*batch, S))
+    return new_final, x.reshape(*batch, S, 4), P.reshape(*batch, S, 4, 4), valid.reshape(*batch, S)
+
+
+# --------------------------------------------------------------------------------------
 # AHG and AFGE (Algorithm 10)
 # --------------------------------------------------------------------------------------
 def _quadratic2(e0, e1, S):
@@ -727,8 +1045,7 @@ def run_fixed_mask(motion: MotionModel, fused_info, fused_vector, fused_success,
         out[f"afge_{name}_position"] = np.empty((*batch, K, 2))
     for k in range(K):
         Yb, yb, gb, _ = buffer_observations(fused_info, fused_vector, fused_success, k)
-        final, current = buffer_step(motion, final, k, Yb, yb, gb)
-        x, P, valid = stack_estimates(current)
+        final, x, P, valid = buffer_estimates(motion, final, k, Yb, yb, gb)
         truth = truth_position[..., k, None, :]
         const_out = np.where(valid[..., None], x, const_pred)
         out["dfir"][..., k, :] = np.sum((const_out[..., :2] - truth) ** 2, axis=-1)
@@ -765,7 +1082,7 @@ def run_kalman(motion: MotionModel, fused_info, fused_vector, fused_success, tru
     errors = np.empty((*batch, K))
     for k in range(K):
         Yb, yb, gb, _ = buffer_observations(fused_info, fused_vector, fused_success, k)
-        final, current = buffer_step(motion, final, k, Yb, yb, gb, shift=False, accel_var=accel_var)
-        x, _, _ = stack_estimates(current, min_stamps=0)
+        final, x, _, _ = buffer_estimates(motion, final, k, Yb, yb, gb, shift=False, accel_var=accel_var,
+                                          min_stamps=0)
         errors[..., k] = np.sum((x[..., 0, :2] - truth_position[..., k, :]) ** 2, axis=-1)
     return errors

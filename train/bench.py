@@ -97,8 +97,7 @@ def _nlos_horizon_estimator_step(batch: int, agents: int = 4, stack_size: int = 
                     np.zeros((*shape, stack_size), bool))}
 
     def step() -> None:
-        box["final"], current = af.buffer_step(motion, box["final"], box["k"], info, vector, success)
-        x, P, valid = af.stack_estimates(current)
+        box["final"], x, P, valid = af.buffer_estimates(motion, box["final"], box["k"], info, vector, success)
         z, R = af.fused_fix(info[..., -1, :, :], vector[..., -1, :], success[..., -1])
         costs = af.predictive_costs(motion, *box["prev"], z, R)
         _, box["centre"] = af.ahg_select(params, box["centre"], costs, valid, success[..., -1])
@@ -326,26 +325,50 @@ def bench_vmas(min_seconds: float, batches=BATCHES) -> list[dict]:
     return rows
 
 
+REFERENCE_SCENARIOS = ("vmas simple_spread",)  # drawn in every panel as a grey reference, not a panel of its own
+
+
 def _figure(rows: list[dict], path: str) -> None:
+    """One panel per preset (its env rows, estimator step and peers, each line labelled in the
+    panel's own short legend), VMAS as a dashed grey reference in every panel: a single axes
+    with every series in one legend (26 entries) hid the lines it described."""
+    import math
+
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(8, 5))
-    series: dict[tuple[str, str], list[tuple[int, float]]] = {}
+    series: dict[str, dict[str, list[tuple[int, float]]]] = {}
     for row in rows:
-        series.setdefault((row["scenario"], row["what"]), []).append((row["batch"], row["env_steps_per_s"]))
-    for (scenario, what), points in series.items():
-        points.sort()
-        batches, rates = zip(*points, strict=True)
-        style = "o-" if len(points) > 1 else "s"
-        ax.loglog(batches, rates, style, label=f"{scenario}: {what}")
-    ax.set_xlabel("batch B (copies)")
-    ax.set_ylabel("env-steps / s")
-    ax.set_title("coloc bench: throughput vs batch size (2-core CPU)")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7)
+        series.setdefault(row["scenario"], {}).setdefault(row["what"], []).append(
+            (row["batch"], row["env_steps_per_s"]))
+    panels = [name for name in series if name not in REFERENCE_SCENARIOS]
+    references = {name: series[name] for name in REFERENCE_SCENARIOS if name in series}
+    columns = min(3, max(1, len(panels)))
+    lines = max(1, math.ceil(len(panels) / columns))
+    fig, axes = plt.subplots(lines, columns, figsize=(5.2 * columns, 3.9 * lines), squeeze=False)
+    for ax, name in zip(axes.flat, panels, strict=False):
+        for what, points in series[name].items():
+            points.sort()
+            batches, rates = zip(*points, strict=True)
+            ax.loglog(batches, rates, "o-" if len(points) > 1 else "s", label=what, markersize=4)
+        for ref_name, whats in references.items():
+            for what, points in whats.items():
+                points.sort()
+                batches, rates = zip(*points, strict=True)
+                ax.loglog(batches, rates, "--", color="0.6", linewidth=1, label=f"{ref_name} ({what})")
+        ax.set_title(name, fontsize=10)
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=6.5, loc="best", framealpha=0.85)
+    for ax in axes[-1]:
+        ax.set_xlabel("batch B (copies)")
+    for ax in axes[:, 0]:
+        ax.set_ylabel("env-steps / s")
+    for ax in list(axes.flat)[len(panels):]:
+        ax.set_visible(False)
+    fig.suptitle(f"coloc bench: throughput vs batch size ({os.cpu_count()}-core CPU)")
+    fig.tight_layout()
     save_figure(path, fig)
 
 

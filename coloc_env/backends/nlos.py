@@ -269,8 +269,7 @@ class PacketFirBackend(Backend):
                                             mask[:, :, None, :], c.n_strongest, c.mode_info, c.weighting,
                                             c.min_packets)
         k = np.asarray(self.world.k)[:, None]
-        final, current = af.buffer_step(self.motion, self.final, k, Y, y, gamma)
-        x, P, valid = af.stack_estimates(current)
+        final, x, P, valid = af.buffer_estimates(self.motion, self.final, k, Y, y, gamma)
         fresh = gamma[..., -1]
         z, R = af.fused_fix(Y[..., -1, :, :], y[..., -1, :], fresh)
         window = self._choose(decisions, x, P, valid, fresh, z, R)

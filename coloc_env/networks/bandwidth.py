@@ -13,6 +13,9 @@ A receiver's transport decision is one index into the feasible selections
 (:attr:`BandwidthBudget.feasible`, a fixed order; 108 of them in the paper's
 setting N = 4, n = 3, budget 5, 1..3 per link); neighbours are indexed
 relative to the receiver (neighbour k of agent i is agent (i + 1 + k) mod N).
+The index is decoded by :meth:`BandwidthBudget.selection_at` (unranking by
+the completion table), so nothing is listed; the Discrete's size is capped
+at 100,000 (``MAX_SELECTIONS``).
 
 | quantity   | value                                                                                    |
 |------------|------------------------------------------------------------------------------------------|
@@ -38,7 +41,6 @@ Arguments (``coloc_env.networks.Bandwidth``; defaults = the paper's)
 from __future__ import annotations
 
 from dataclasses import dataclass
-from math import comb
 
 import numpy as np
 
@@ -79,16 +81,11 @@ class Bandwidth(PartConfig):
         if self.min_per_link > links.max_per_link:
             raise ValueError(f"{prefix}min_per_link must be in [0, {links.max_per_link}], got {self.min_per_link!r}")
         links.validate(prefix)
-
-
-        subsets = sum(comb(dim, c) for c in range(self.min_per_link, links.max_per_link + 1))
-        if subsets ** (num_agents - 1) > 100 * MAX_SELECTIONS:
-            raise ValueError(f"{prefix}budget: {num_agents} agents x {dim} components give "
-                             f"{subsets ** (num_agents - 1)} selections to enumerate (a Discrete action); "
-                             "use fewer agents or components")
-        if len(links.feasible) > MAX_SELECTIONS:
-            raise ValueError(f"{prefix}budget: {len(links.feasible)} feasible selections, more than "
-                             f"{MAX_SELECTIONS} (a Discrete action)")
+        # counted by the completion table (BandwidthBudget.size), never listed: the limit is the Discrete's size
+        if links.size > MAX_SELECTIONS:
+            raise ValueError(f"{prefix}budget: {num_agents} agents x {dim} components give {links.size} feasible "
+                             f"selections, more than {MAX_SELECTIONS} (a Discrete action); use fewer agents or "
+                             "components, or the bandwidth_fusion scenario's score action")
         return links
 
     def build(self, num_agents: int, batch: int, message_kind: str, rounds: int = 1) -> Network:
@@ -105,14 +102,15 @@ class BandwidthNetwork(Network):
     def set_component_dim(self, dim: int) -> None:
         """Called by a ``components`` backend at build: n, the components of its message."""
         self.links = self.config.budget_for(self.num_agents, int(dim))
-        totals = self.links.feasible.sum(axis=(-1, -2))
-        self._most = int(np.argmax(totals))
-        self._fewest = int(np.argmin(totals))
+        # the first selection with the most (fewest) components: the best for scores +1 (-1) per component
+        ones = np.ones((self.links.num_nodes - 1, self.links.dim))
+        self._most = int(self.links.index_of(self.links.best_selection(ones)))
+        self._fewest = int(self.links.index_of(self.links.best_selection(-ones)))
 
     def transport_blocks(self) -> list[Block]:
         if self.message_kind != "components" or self.links is None:
             return []
-        F = len(self.links.feasible)
+        F = self.links.size
         return [Block("selection", 1, F, f"which of the {F} feasible component selections this agent receives "
                       "(BandwidthBudget.feasible order)", default=self._most, maximum=self._most,
                       minimum=self._fewest)]
@@ -122,4 +120,4 @@ class BandwidthNetwork(Network):
         if self.links is None:
             raise RuntimeError("bandwidth network: set_component_dim was not called by the backend")
         index = np.asarray(self._decisions[:, :, 0], int)
-        return self.links.full_selection(self.links.feasible[index])
+        return self.links.full_selection(self.links.selection_at(index))

@@ -27,6 +27,10 @@ to the receiver (neighbour k of ``uav_i`` is ``uav_{(i+1+k) mod N}``).
 |                         | feasible selections of the paper's setting; ties go to the first in     |
 |                         | :attr:`BandwidthBudget.feasible` order). Every feasible selection is    |
 |                         | reachable: scores +1 selected / -1 not decode back to it exactly.       |
+|                         | Beyond 2,048 selections found by :meth:`BandwidthBudget.best_selection`,|
+|                         | a dynamic programme over links (the same argmax, ties included, without |
+|                         | listing the ~7e11 selections of N = 16), so every N in 2..16 decodes    |
+|                         | the same way.                                                           |
 | ``[(N-1)*n, (N-1)*n+N)``| fusion-weight logits for [self, neighbour 0, ..., neighbour N-2];       |
 |                         | p_i = softmax(``weight_logit_scale`` * a). A weight is never exactly 0. |
 
@@ -108,6 +112,7 @@ from coloc_env.world import BandwidthBudget, LinearMotion, LinearSensor
 from coloc_env.world.noise import covariance_factor, sample_gaussian
 
 _COMPONENT_NAMES = "xyzabcdefghijklmnop"
+ENUMERATED_DECODE_LIMIT = 2048  # feasible selections up to which decoding lists them (108 in the paper's setting)
 
 # The paper's component selections (Sec. 2). T_ji = T_ij (eq. 5), so each
 # unordered pair {i, j} (1-based as printed) maps to the diagonal of T_ji.
@@ -281,7 +286,11 @@ class BandwidthFusionScenario(Scenario):
         self.links = config.links
         self.n = self.model.state_dim
         self.m = self.model.measurement_dim
-        self._feasible_flat = self.links.feasible.reshape(len(self.links.feasible), -1).astype(float)
+        # Up to a few thousand selections one matmul + argmax over the list is the faster decoder; beyond,
+        # the dynamic programme (BandwidthBudget.best_selection). Both give the same selection (a test holds it).
+        self._feasible = self.links.feasible if self.links.size <= ENUMERATED_DECODE_LIMIT else None
+        self._feasible_flat = (None if self._feasible is None
+                               else self._feasible.reshape(self.links.size, -1).astype(float))
         # weight_order[i] = absolute node index of [self, neighbour 0, ...] of receiver i
         self._weight_order = np.concatenate([np.arange(config.num_uavs)[:, None], self.links.neighbours], axis=1)
         self._initial_estimate = np.asarray(config.initial_state, float)
@@ -324,8 +333,11 @@ class BandwidthFusionScenario(Scenario):
         """Actions (B, N, A) -> receiver-relative selections (B, N, N-1, n) and absolute weights (B, N, N)."""
         N, n = self.num_agents, self.n
         actions = np.clip(actions, -1.0, 1.0)
-        scores = actions[..., : (N - 1) * n] @ self._feasible_flat.T  # (B, N, F)
-        selection = self.links.feasible[np.argmax(scores, axis=-1)]
+        scores = actions[..., : (N - 1) * n]
+        if self._feasible is not None:  # argmax over the listed feasible selections (ties: the first)
+            selection = self._feasible[np.argmax(scores @ self._feasible_flat.T, axis=-1)]
+        else:  # the same argmax by dynamic programming over links, nothing listed
+            selection = self.links.best_selection(scores.reshape(*actions.shape[:-1], N - 1, n))
         logits = self.config.weight_logit_scale * actions[..., (N - 1) * n :]
         logits = logits - logits.max(axis=-1, keepdims=True)
         relative = np.exp(logits)

@@ -368,15 +368,22 @@ def draw_episode(config: NlosHorizonConfig, rng: np.random.Generator, targets: i
     return Episode(truth, rss, aoa, nav, modes, delays, prior, orbits)
 
 
-def fuse_buffer(config: NlosHorizonConfig, rss, aoa, nav, modes, delays, lags, keep):
+def fuse_buffer(config: NlosHorizonConfig, rss, aoa, nav, modes, delays, lags, keep, fixes=None):
     """Fused observations of buffered stamps from their packets (spec §4-5).
 
     Packets on the last axis J: ``rss``/``aoa``/``modes``/``delays`` (..., J), ``nav``
     (..., J, 2); ``lags`` (...) how long ago each stamp was (negative: not yet sent);
-    ``keep`` (..., J) the agent's mask. Returns (Y, y, gamma, used).
+    ``keep`` (..., J) the agent's mask; ``fixes`` the packets' :func:`packet_fixes` if known.
+    Returns (Y, y, gamma, used).
     """
     return af.fuse_packets(config.signal, rss, aoa, nav, modes, delays, lags, keep, config.n_strongest,
-                           config.mode_info, config.weighting, config.min_packets)
+                           config.mode_info, config.weighting, config.min_packets, fixes=fixes)
+
+
+def buffer_fixes(config: NlosHorizonConfig, rss, aoa, nav, modes):
+    """:func:`estimators.afge.packet_fixes` of buffered packets (z, R, r_hat): they depend on the
+    packet only, so one time step's two filters (last mask, then the agent's) share them."""
+    return af.packet_fixes(config.signal, nav, rss, aoa, af.mode_weight(config.mode_info, modes, config.signal.p_nlos))
 
 
 def fused_by_stamp_and_lag(config: NlosHorizonConfig, episode: Episode):
@@ -494,18 +501,26 @@ class NlosHorizonScenario(Scenario):
         return (pick(self.rss), pick(self.aoa), pick(self.nav), pick(self.modes), pick(self.delays),
                 np.broadcast_to(lags[:, None, :], (self.batch, self.num_agents, D + 1)))
 
-    def _filter(self, mask: np.ndarray) -> dict:
-        """The buffer re-run at time k with ``mask`` (B, N, J): fused buffer, stacks, estimates, costs."""
-        rss, aoa, nav, modes, delays, lags = self._gather_buffer()
-        Y, y, gamma, used = fuse_buffer(self.config, rss, aoa, nav, modes, delays, lags, mask[:, :, None, :])
-        final, current = af.buffer_step(self.motion, self.final, self.k[:, None], Y, y, gamma)
-        x, P, valid = af.stack_estimates(current)
+    def _filter(self, mask: np.ndarray, buffer: dict | None = None) -> dict:
+        """The buffer re-run at time k with ``mask`` (B, N, J): fused buffer, stacks, estimates, costs.
+
+        ``buffer``: the packets of this time step and their fixes (``_filter``'s ``"buffer"``
+        entry) when another mask was filtered at the same k; they do not depend on the mask.
+        """
+        if buffer is None:
+            rss, aoa, nav, modes, delays, lags = self._gather_buffer()
+            buffer = {"packets": (rss, aoa, nav, modes, delays, lags),
+                      "fixes": buffer_fixes(self.config, rss, aoa, nav, modes)}
+        rss, aoa, nav, modes, delays, lags = buffer["packets"]
+        Y, y, gamma, used = fuse_buffer(self.config, rss, aoa, nav, modes, delays, lags, mask[:, :, None, :],
+                                        fixes=buffer["fixes"])
+        final, x, P, valid = af.buffer_estimates(self.motion, self.final, self.k[:, None], Y, y, gamma)
         fresh = gamma[..., -1]
         z, R = af.fused_fix(Y[..., -1, :, :], y[..., -1, :], fresh)
         arrived = (delays == lags[..., None]) & (lags[..., None] >= 0)
         return {"mask": mask.copy(), "final": final, "x": x, "P": P, "valid": valid, "fresh": fresh, "z": z,
                 "R": R, "used": used, "arrived": arrived, "delays": delays, "lags": lags, "rss": rss,
-                "modes": modes}
+                "modes": modes, "buffer": buffer}
 
     def _prepare(self) -> None:
         """Everything the agents see before acting at time k, filtered with the last mask."""
@@ -563,7 +578,8 @@ class NlosHorizonScenario(Scenario):
     def advance(self, window: np.ndarray, mask: np.ndarray) -> None:
         """Output the horizon-``window`` estimate (B, N) at time k with the packets of ``mask``
         (B, N, J), then move the world to k + 1."""
-        t = self.pending if np.array_equal(mask, self.pending["mask"]) else self._filter(mask)
+        same = np.array_equal(mask, self.pending["mask"])
+        t = self.pending if same else self._filter(mask, self.pending["buffer"])
         A = self.motion.transition
         idx = (window - 1)[..., None]
         valid = np.take_along_axis(t["valid"], idx, axis=-1)[..., 0]

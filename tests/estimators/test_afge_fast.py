@@ -1,0 +1,135 @@
+"""The compiled AFGE kernels (issue 18) compute what the numpy block form does.
+
+:func:`estimators.afge.buffer_estimates` (the buffer re-run of every horizon and the
+estimates) and :func:`estimators.afge.fuse_packets` (selection and complementary fusion) run
+numba kernels where numba is installed; ``compiled=False`` is the numpy reference. Both are
+held equal to 1e-9 here on delayed, partly empty buffers, on the Kalman form (no shift, a
+per-element sigma_a^2, min_stamps = 0), and through a whole ``nlos_horizon`` rollout with
+random actions (every step filters twice: the last mask, then the agent's).
+"""
+
+import numpy as np
+import pytest
+
+import coloc_env
+import estimators.afge as af
+
+pytest.importorskip("numba")
+
+TOL = {"rtol": 1e-9, "atol": 1e-9}
+
+
+def _buffers(rng, shape, D, steps):
+    """Fused observations (Y, y, gamma) per step for the D + 1 buffer stamps, some stamps empty."""
+    out = []
+    for _ in range(steps):
+        A = rng.normal(size=(*shape, D + 1, 2, 2))
+        Y = A @ np.swapaxes(A, -1, -2) * 0.05 + 0.01 * np.eye(2)
+        y = (Y @ rng.normal(scale=50.0, size=(*shape, D + 1, 2, 1)))[..., 0]
+        gamma = rng.random((*shape, D + 1)) < 0.7
+        out.append((np.where(gamma[..., None, None], Y, 0.0), np.where(gamma[..., None], y, 0.0), gamma))
+    return out
+
+
+def _assert_stacks_equal(fast, slow):
+    final_fast, *est_fast = fast
+    final_slow, *est_slow = slow
+    np.testing.assert_allclose(final_fast.info, final_slow.info, **TOL)
+    np.testing.assert_allclose(final_fast.vector, final_slow.vector, **TOL)
+    np.testing.assert_array_equal(final_fast.stamps, final_slow.stamps)
+    for a, b in zip(est_fast[:2], est_slow[:2], strict=True):
+        np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9 * max(1.0, np.abs(b).max()))
+    np.testing.assert_array_equal(est_fast[2], est_slow[2])
+
+
+@pytest.mark.parametrize("stack_size, D", [(30, 3), (7, 0), (5, 4)])
+def test_compiled_buffer_re_run_equals_the_numpy_stack(stack_size, D):
+    """Copies at different times (k from -1 to 14: early stamps inactive), horizons shifted in,
+    delayed packets re-filtered: the final stack, x, P and validity agree at every step."""
+    rng = np.random.default_rng(stack_size + D)
+    shape = (3, 2)
+    motion = af.MotionModel()
+    fast = slow = af.empty_stack(shape, stack_size)
+    k0 = np.array([[0, -1], [3, 0], [1, 2]])
+    for step, (Y, y, gamma) in enumerate(_buffers(rng, shape, D, 13)):
+        k = k0 + step
+        a = af.buffer_estimates(motion, fast, k, Y, y, gamma, compiled=True)
+        b = af.buffer_estimates(motion, slow, k, Y, y, gamma, compiled=False)
+        _assert_stacks_equal(a, b)
+        fast, slow = a[0], b[0]
+    assert slow.stamps.max() >= 2  # estimates existed, not only the placeholders
+
+
+def test_compiled_kalman_form_equals_the_numpy_stack():
+    """shift=False from a prior (S = 1), sigma_a^2 per element, min_stamps = 0 (run_kalman's call)."""
+    rng = np.random.default_rng(7)
+    shape, D = (4,), 2
+    motion = af.MotionModel()
+    prior = af.prior_stack(rng.normal(size=(*shape, 4)), np.diag([100.0, 100.0, 4.0, 4.0]))
+    accel_var = rng.uniform(0.1, 4.0, size=shape)
+    fast = slow = prior
+    for step, (Y, y, gamma) in enumerate(_buffers(rng, shape, D, 10)):
+        a = af.buffer_estimates(motion, fast, step, Y, y, gamma, shift=False, accel_var=accel_var, min_stamps=0,
+                                compiled=True)
+        b = af.buffer_estimates(motion, slow, step, Y, y, gamma, shift=False, accel_var=accel_var, min_stamps=0,
+                                compiled=False)
+        _assert_stacks_equal(a, b)
+        fast, slow = a[0], b[0]
+
+
+@pytest.mark.parametrize("weighting, n_strongest, min_packets", [("distance", 4, 1), ("information", 3, 2),
+                                                                  ("distance", 8, 2)])
+def test_compiled_fusion_equals_numpy_with_rss_ties_masks_and_delays(weighting, n_strongest, min_packets):
+    rng = np.random.default_rng(n_strongest)
+    signal = af.SignalModel()
+    shape, J = (5, 4), 8
+    rss = np.round(rng.uniform(-90, -60, size=(*shape, J)))  # whole dB: many exact ties
+    rss[..., 3] = rss[..., 5]  # and certain ones (ties go to the lower index)
+    aoa = rng.uniform(-np.pi, np.pi, size=(*shape, J))
+    nav = rng.normal(scale=30.0, size=(*shape, J, 2))
+    modes = rng.random((*shape, J)) < 0.3
+    delays = rng.integers(0, 6, size=(*shape, J))
+    lags = rng.integers(-1, 4, size=shape)
+    keep = rng.random((*shape, J)) < 0.8
+    args = (signal, rss, aoa, nav, modes, delays, lags, keep, n_strongest, "known", weighting, min_packets)
+    fast = af.fuse_packets(*args, compiled=True)
+    slow = af.fuse_packets(*args, compiled=False)
+    np.testing.assert_array_equal(fast[3], slow[3])  # the packets used
+    np.testing.assert_array_equal(fast[2], slow[2])  # gamma
+    assert slow[2].any() and not slow[2].all()
+    np.testing.assert_allclose(fast[0], slow[0], **TOL)
+    np.testing.assert_allclose(fast[1], slow[1], rtol=1e-9, atol=1e-9 * np.abs(slow[1]).max())
+
+
+def _rollout(steps=40, batch=4):
+    env = coloc_env.vector_env("nlos_horizon", num_envs=batch, seed=3, horizon=60)
+    out = [env.reset()]
+    env.action_space.seed(5)
+    for _ in range(steps):
+        actions = np.stack([env.action_space.sample() for _ in range(env.num_envs)])
+        observation, reward, _, _ = env.step(actions)
+        out += [observation, reward]
+    pending = env.scenario.pending
+    return out + [pending["x"], pending["P"], pending["predictive"]]
+
+
+def test_nlos_horizon_rollout_with_random_actions_equals_the_numpy_path(monkeypatch):
+    fast = _rollout()
+    monkeypatch.setattr(af, "_KERNELS", {})  # as where numba is not installed: the numpy reference
+    slow = _rollout()
+    for a, b in zip(fast, slow, strict=True):
+        a, b = np.asarray(a, float), np.asarray(b, float)
+        finite = np.isfinite(b)
+        np.testing.assert_array_equal(np.isfinite(a), finite)
+        np.testing.assert_allclose(a[finite], b[finite], rtol=1e-9, atol=1e-9 * max(1.0, np.abs(b[finite]).max()))
+
+
+def test_compiled_without_numba_and_an_unknown_weighting_are_refused(monkeypatch):
+    motion = af.MotionModel()
+    Y, y, gamma = _buffers(np.random.default_rng(0), (2,), 1, 1)[0]
+    with pytest.raises(ValueError, match="weighting must be one of"):
+        af.fuse_packets(af.SignalModel(), np.zeros(3), np.zeros(3), np.zeros((3, 2)), np.zeros(3, bool),
+                        np.zeros(3, int), 0, np.ones(3, bool), 2, weighting="nearest")
+    monkeypatch.setattr(af, "_KERNELS", {})
+    with pytest.raises(ValueError, match="compiled=True needs numba"):
+        af.buffer_estimates(motion, af.empty_stack((2,), 4), 0, Y, y, gamma, compiled=True)
