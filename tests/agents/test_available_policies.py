@@ -8,6 +8,7 @@ import pytest
 
 import agents
 import coloc_env
+from tests.conftest import MRCLAM_DATASET6, MRCLAM_SKIP_REASON
 
 PRESETS = ["bandwidth_fusion", "lossy_fusion", "relay_ukf", "nlos_horizon", "gps_denied_nbp", "mrclam_relay"]
 SMALL = {"nlos_horizon": {"horizon": 60}, "gps_denied_nbp": {"horizon": 3, "num_particles": 30},
@@ -15,8 +16,10 @@ SMALL = {"nlos_horizon": {"horizon": 60}, "gps_denied_nbp": {"horizon": 3, "num_
 
 
 def _env(scenario):
-    if scenario == "mrclam_relay" and not os.environ.get("COLOC_MRCLAM_DATA"):
-        pytest.skip("mrclam_relay needs COLOC_MRCLAM_DATA")
+    if scenario == "mrclam_relay":
+        if not os.path.isdir(MRCLAM_DATASET6):
+            pytest.skip(MRCLAM_SKIP_REASON)
+        return coloc_env.parallel_env(scenario, data=MRCLAM_DATASET6, window_steps=30)
     return coloc_env.parallel_env(scenario, **SMALL.get(scenario, {}))
 
 
