@@ -167,7 +167,10 @@ class Network:
         src = np.maximum(source, 0)
         distance = self.distances()
         choice = self.next_hop_choice()
-        u = uniforms(self.keys, (self._k, 1, slot), (N,))
+        usable = self.usable(distance)
+        loss = self.loss_probability(distance)
+        # a lossless network needs no draws (u < 0 never holds): the same chains, without the hashing
+        u = uniforms(self.keys, (self._k, 1, slot), (N,)) if np.any(loss > 0) else np.ones((B, N))
         chain = np.full((B, N), -1)
         chain[active, 0] = src[active]
         reached = np.zeros((B, N), dtype=bool)
@@ -186,8 +189,8 @@ class Network:
             valid = (target >= 0) & (target < N) & (target != holder)
             safe = np.where(valid, target, 0)
             d = distance[rows, holder, safe]
-            reasons = [np.full(B, hop >= limit), ~valid, valid & reached[rows, safe], ~self.usable(d),
-                       u[:, hop] < self.loss_probability(d)]
+            reasons = [np.full(B, hop >= limit), ~valid, valid & reached[rows, safe], ~usable[rows, holder, safe],
+                       u[:, hop] < loss[rows, holder, safe]]
             failed = np.zeros(B, dtype=bool)
             for code, condition in enumerate(reasons, start=1):
                 new = going & ~failed & condition

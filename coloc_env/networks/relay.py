@@ -140,6 +140,8 @@ class RelayNetwork(Network):
         """:meth:`Network.relay` with the routing entry of each copy's source, and the hop costs accounted."""
         self._source = np.maximum(np.asarray(source, int), 0)
         chain = super().relay(source, first, floats_per_hop, slot)
+        if self.config.hop_cost == 0 and self.config.hop_cost_per_m2 == 0:
+            return chain  # free hops: cost_sent stays 0
         cost = self.links.cost(chain.hop_distance)  # (B, N - 1); 0 where no hop was delivered
         rows = np.arange(self.batch)
         for hop in range(cost.shape[1]):

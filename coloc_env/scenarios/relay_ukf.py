@@ -394,8 +394,8 @@ class RelayUKFScenario(PresetScenario):
         return np.linalg.norm(self.backend.mean - self.world.positions(), axis=-1)
 
     def own_traces(self) -> np.ndarray:
-        """tr P_ii (B, N) of the current estimate."""
-        return np.trace(self.backend.position_cov(), axis1=-2, axis2=-1)
+        """tr P_ii (B, N) of the current estimate (the joint covariance's diagonal, in pairs)."""
+        return np.diagonal(self.backend.cov, axis1=-2, axis2=-1).reshape(self.batch, self.num_agents, 2).sum(axis=-1)
 
     def distances(self) -> np.ndarray:
         """True distances between platforms at the current step (B, N, N)."""
