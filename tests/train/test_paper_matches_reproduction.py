@@ -48,3 +48,60 @@ def test_evaluate_paper_policy_equals_the_reproduction_on_the_same_seeds(scenari
     # here from the reproduction's exact covariance, against the env's initial_cost.
     initial = reproduction.initial_term(config) if scenario == "bandwidth_fusion" else 0.0
     assert env["paper_cost"] == pytest.approx(costs.mean() + initial, rel=1e-9, abs=0)
+
+
+def _wang2019_by_the_estimator_functions(seeds, config) -> np.ndarray:
+    """Per-episode paper metric of UKF-DCL from ``estimators.ukf_relay`` on chains resolved by
+    :class:`coloc_env.world.relay.RelayChainLinks` (the paper scenario's own delivery code): no backend,
+    no network, no env. The paper policy's partners come from one generator seeded with the first seed
+    and continued over the episodes, as ``coloc evaluate`` seeds it."""
+    from tests.train.test_reproductions_drive_backends import _reference_wang2019
+
+    policy_rng = np.random.default_rng(seeds[0])
+    dcl = 2  # rows IL, CCL, DCL
+    return np.array([_reference_wang2019(config, [np.random.default_rng(s)], policy_rng)[dcl].mean()
+                     for s in seeds])
+
+
+def _wan2014_by_the_estimator_function(seeds, config) -> np.ndarray:
+    """Per-episode fault-UAV error of :func:`estimators.dnbp.step` over the paper scenario's broadcast medium
+    on ``sample_episode``'s draws (all broadcasts the schedule allows): no backend, no network, no env."""
+    import estimators.dnbp as dn
+    from coloc_env.scenarios.gps_denied_nbp import initial_beliefs, sample_episode
+    from coloc_env.world.broadcast_medium import BroadcastMedium
+
+    model = config.estimator_model()
+    costs = []
+    for s in seeds:
+        rng = np.random.default_rng(s)
+        episode = sample_episode(config, rng)
+        estimator_rng = rng.spawn(1)[0]
+        state = initial_beliefs(config, model, [episode], [estimator_rng])
+        errors, fault = [], []
+        ones = np.ones((1, config.num_uavs, config.num_iterations), bool)
+        for k in range(config.horizon):
+            state, result = dn.step(model, state, episode.gps_normal[k][None], episode.gps_fix[k][None],
+                                    BroadcastMedium().over(episode.adjacency[k][None]), episode.ranges[k][None],
+                                    episode.accel[k][None], [estimator_rng], ones)
+            errors.append(np.linalg.norm(result.estimate[0] - episode.truth[k, :, :2], axis=-1))
+            fault.append(~episode.gps_normal[k])
+        errors, fault = np.array(errors), np.array(fault)
+        costs.append(float(errors[fault].mean()) if fault.any() else 0.0)
+    return np.array(costs)
+
+
+INDEPENDENT = {"relay_ukf": _wang2019_by_the_estimator_functions, "gps_denied_nbp": _wan2014_by_the_estimator_function}
+
+
+@pytest.mark.parametrize("scenario", list(INDEPENDENT))
+def test_evaluate_paper_policy_equals_an_independent_estimator_path(scenario):
+    """relay_ukf and gps_denied_nbp are bindings on the core and their reproductions drive the same backends,
+    so the test above is nearly circular for them: here the reference is the estimator functions on the
+    scenario's draws, without the composable core."""
+    _, episodes, overrides = CASES[scenario]
+    config = build_config(coloc_env.scenario_class(scenario).Config, overrides)
+    seeds = [EVAL_SEED_BASE + e for e in range(episodes)]
+    env = run_episodes(scenario, "paper", episodes, seed_base=EVAL_SEED_BASE, **overrides)
+    reference = INDEPENDENT[scenario](seeds, config)
+    assert np.all(reference > 0) and len(set(reference.tolist())) == episodes
+    assert env["mean_cost"] == pytest.approx(reference.mean(), rel=1e-9, abs=0)
