@@ -39,17 +39,26 @@ install: $(STAMP)
 DEMO_RUNS := bandwidth_fusion:20000:100 lossy_fusion:40000:100 relay_ukf:20000:20 nlos_horizon:20000:6 \
              gps_denied_nbp:4800:6
 
+# Each stage appends "START END STAGE" (date +%s stamps) to results/.demo_times; the summary reads them.
+DEMO_TIMES := results/.demo_times
+
 demo: $(STAMP)
-	MPLBACKEND=Agg $(VENV)/bin/coloc reproduce all --quick --out results
+	mkdir -p results && rm -f $(DEMO_TIMES)
+	t=$$(date +%s) && MPLBACKEND=Agg $(VENV)/bin/coloc reproduce all --quick --out results && \
+	  echo "$$t $$(date +%s) reproduce all --quick" >> $(DEMO_TIMES)
 	for run in $(DEMO_RUNS); do \
 	  set -e; scenario=$${run%%:*}; rest=$${run#*:}; steps=$${rest%%:*}; episodes=$${rest#*:}; \
+	  t=$$(date +%s); \
 	  MPLBACKEND=Agg $(VENV)/bin/coloc train $$scenario --timesteps $$steps --seed 0 --out results/train \
 	    --curve-points 2; \
+	  echo "$$t $$(date +%s) train $$scenario ($$steps timesteps)" >> $(DEMO_TIMES); t=$$(date +%s); \
 	  MPLBACKEND=Agg $(VENV)/bin/coloc evaluate $$scenario --policy all --models results/train \
 	    --episodes $$episodes --out results; \
+	  echo "$$t $$(date +%s) evaluate $$scenario ($$episodes episodes)" >> $(DEMO_TIMES); \
 	done
-	MPLBACKEND=Agg $(VENV)/bin/coloc evaluate nlos_horizon --policy constant:6 --episodes 6 --out results
-	@echo "results: results/leaderboard.md, results/<paper>/report.md, results/train/<scenario>/seed0/learning_curve.png"
+	t=$$(date +%s) && MPLBACKEND=Agg $(VENV)/bin/coloc evaluate nlos_horizon --policy constant:6 --episodes 6 \
+	  --out results && echo "$$t $$(date +%s) evaluate nlos_horizon constant:6" >> $(DEMO_TIMES)
+	@$(PY) -m train.demo_summary results
 
 test: $(STAMP)
 	$(VENV)/bin/ruff check .

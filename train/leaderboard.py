@@ -305,6 +305,9 @@ def target_verdict(scenario: str, table: dict) -> str | None:
 
 # --- output -------------------------------------------------------------------------------------------
 def bar_chart(table: dict, path: str, key: str) -> None:
+    """The leaderboard's bars with their 95 % intervals. Means spanning more than 10x (``random`` beside the
+    filters) go on a log axis when all are positive; otherwise the bars above 10x the median are left out and
+    named, with their values, in a note under the axes."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -315,18 +318,37 @@ def bar_chart(table: dict, path: str, key: str) -> None:
     entries = [r for r in rows(table) if not _is_model(r["policy"])]
     bounds = bound_rows(table)
     shown = entries + bounds
-    fig, ax = plt.subplots(figsize=(max(5, 1.3 * len(shown)), 4))
+    means = np.array([r["mean_cost"] for r in shown], dtype=float)
+    finite = means[np.isfinite(means)]
+    positive = finite.size > 0 and bool(np.all(finite > 0))
+    wide = finite.size > 1 and (np.max(np.abs(finite)) > 10 * max(np.min(np.abs(finite)), 1e-300))
+    log = positive and wide
+    left_out = []
+    if wide and not log:
+        scale = 10 * max(float(np.median(np.abs(finite))), 1e-300)
+        left_out = [r for r in shown if abs(r["mean_cost"]) > scale]
+        shown = [r for r in shown if abs(r["mean_cost"]) <= scale]
+    fig, ax = plt.subplots(figsize=(max(5, 1.3 * len(shown)), 4.2), layout="constrained")
     names = [r["policy"] for r in shown]
     colours = ["tab:green" if n.startswith("trained") else "tab:gray" if _is_bound(n) else "tab:blue" for n in names]
-    ax.bar(range(len(shown)), [r["mean_cost"] for r in shown], yerr=[r["ci95"] for r in shown], capsize=4,
-           color=colours)
+    heights = np.array([r["mean_cost"] for r in shown], dtype=float)
+    half = np.array([r["ci95"] for r in shown], dtype=float)
+    # on a log axis an interval reaching zero or below is drawn down to the axis' floor
+    lower = np.minimum(half, heights * 0.999) if log else half
+    ax.bar(range(len(shown)), heights, yerr=[lower, half], capsize=4, color=colours)
+    if log:
+        ax.set_yscale("log")
     baseline = strongest_baseline(scenario, table)
     if baseline is not None:
         ax.axhline(baseline["mean_cost"], color="k", ls="--", lw=1, label=f"strongest baseline ({baseline['policy']})")
         ax.legend(fontsize=8)
     ax.set_xticks(range(len(shown)), names, rotation=20, ha="right", fontsize=8)
-    ax.set_ylabel(f"mean episode error [{unit}] (95 % CI)")
+    ax.set_ylabel(f"mean episode error [{unit}] (95 % CI){', log scale' if log else ''}")
     ax.set_title(f"{key}: {name} on the evaluation seeds (grey: bounds)", fontsize=9)
+    if left_out:
+        note = "not shown (off scale, > 10x the median): " + ", ".join(
+            f"{r['policy']} {r['mean_cost']:.4g} {unit}" for r in left_out)
+        fig.text(0.01, 0.0, note, fontsize=7, ha="left", va="top", wrap=True)
     save_figure(path, fig)
 
 

@@ -152,15 +152,21 @@ def write_learning_curve(folder: str, scenario: str, curve: list, title: str) ->
         "points": [{"timesteps": t, "mean_cost": c, "ci95": h} for t, c, h in curve],
         "paper": {"mean_cost": paper["mean_cost"], "ci95": paper["ci95"]},
     })
-    fig, ax = plt.subplots(figsize=(7, 4))
-    steps, costs, half = (np.array(v) for v in zip(*curve, strict=True))
-    ax.plot(steps, costs, "o-", label="trained policy (deterministic)")
-    ax.fill_between(steps, costs - half, costs + half, alpha=0.2)
-    ax.axhline(paper["mean_cost"], color="k", ls="--", label=f"paper policy ({paper['mean_cost']:.2f})")
+    fig, ax = plt.subplots(figsize=(7.5, 4.5), layout="constrained")
+    steps, costs, half = (np.array(v, dtype=float) for v in zip(*curve, strict=True))
+    n = CURVE_EPISODES
+    ax.plot(steps, costs, "o-", color="tab:blue", label=f"trained policy (deterministic): mean over {n} "
+                                                        "validation episodes")
+    ax.fill_between(steps, costs - half, costs + half, color="tab:blue", alpha=0.2,
+                    label=f"trained policy: 95 % interval over {n} validation episodes")
+    p_mean, p_half = float(paper["mean_cost"]), float(paper["ci95"])
+    ax.axhline(p_mean, color="k", ls="--", label=f"paper policy on the same {n} episodes: {p_mean:.4g}")
+    ax.axhspan(p_mean - p_half, p_mean + p_half, color="0.5", alpha=0.15,
+               label=f"paper policy: 95 % interval over {n} validation episodes (±{p_half:.2g})")
     ax.set_xlabel("timesteps (agent transitions)")
     ax.set_ylabel("episode estimation error (scenario metric)")
     ax.set_title(title, fontsize=10)
-    ax.legend()
+    ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2)
     save_figure(os.path.join(folder, "learning_curve.png"), fig)
 
 

@@ -475,21 +475,7 @@ def _figures(folder: str, m: dict, history: list[np.ndarray], config: GpsDeniedN
     ax.legend()
     save_figure(os.path.join(folder, "fig5_error_vs_time.png"), fig)
 
-    fig, axes = plt.subplots(2, 2, figsize=(10, 7))
-    panels = [("sweep_normal_ratio", "proportion of normal UAVs (fixed)", "(a)"),
-              ("sweep_comm_range", "communication range R [m]", "(b)"),
-              ("sweep_gps_std", "GPS noise std [m]", "(c)"),
-              ("sweep_range_std", "range noise std [m]", "(d)")]
-    for ax, (key, xlabel, tag) in zip(axes.ravel(), panels, strict=True):
-        xs = [float(k) for k in m[key]]
-        for method, label in (("dnbp", "dNBP"), ("ls", "LS [7]"), ("dr", "DR")):
-            ax.plot(xs, [_err(p, method) for p in m[key].values()], "o-", label=label)
-        ax.set_xlabel(xlabel)
-        ax.set_ylabel("mean fault-UAV error [m]")
-        ax.set_yscale("log")
-        ax.set_title(f"Fig. 6{tag}", fontsize=10)
-        ax.legend(fontsize=8)
-    save_figure(os.path.join(folder, "fig6_sweeps.png"), fig)
+    save_figure(os.path.join(folder, "fig6_sweeps.png"), fig6_sweeps(m))
 
     fig, ax = plt.subplots(figsize=(6, 4))
     mp = m["sweep_particles"]
@@ -502,6 +488,47 @@ def _figures(folder: str, m: dict, history: list[np.ndarray], config: GpsDeniedN
     ax.set_ylabel("mean fault-UAV error [m]")
     ax.set_title("Table 1: accuracy vs cost (dNBP)", fontsize=10)
     save_figure(os.path.join(folder, "tradeoff.png"), fig)
+
+
+FIG6_PANELS = (("sweep_normal_ratio", "proportion of normal UAVs (fixed)", "(a)"),
+               ("sweep_comm_range", "communication range R [m]", "(b)"),
+               ("sweep_gps_std", "GPS noise std [m]", "(c)"),
+               ("sweep_range_std", "range noise std [m]", "(d)"))
+
+
+def plain_log_ticks(ax) -> None:
+    """Label a log y axis with plain numbers (2, 5, 10, 20, ...) on its major ticks only, never "6x10^0"."""
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+
+    low, high = ax.get_ylim()
+    subs = (1.0, 2.0, 5.0)
+    if np.isfinite(low) and np.isfinite(high) and low > 0:
+        inside = [t for t in LogLocator(base=10, subs=subs).tick_values(low, high) if low <= t <= high]
+        if len(inside) < 2:  # less than a third of a decade: label every integer multiple
+            subs = tuple(float(k) for k in range(1, 10))
+    ax.yaxis.set_major_locator(LogLocator(base=10, subs=subs))
+    ax.yaxis.set_major_formatter(FuncFormatter(lambda value, _pos: f"{value:g}"))
+    ax.yaxis.set_minor_formatter(NullFormatter())
+
+
+def fig6_sweeps(m: dict):
+    """Fig. 6: mean fault-UAV error of dNBP, LS and DR over the four sweeps (log error axis); returns the figure."""
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(2, 2, figsize=(10, 7.5), layout="constrained")
+    fig.get_layout_engine().set(h_pad=0.1, w_pad=0.1, hspace=0.06, wspace=0.06)
+    for ax, (key, xlabel, tag) in zip(axes.ravel(), FIG6_PANELS, strict=True):
+        xs = [float(k) for k in m[key]]
+        for method, label in (("dnbp", "dNBP"), ("ls", "LS [7]"), ("dr", "DR")):
+            ax.plot(xs, [_err(p, method) for p in m[key].values()], "o-", label=label)
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel("mean fault-UAV error [m]")
+        ax.set_yscale("log")
+        plain_log_ticks(ax)
+        ax.set_title(f"Fig. 6{tag}", fontsize=10)
+        ax.legend(fontsize=8)
+    fig.suptitle(f"Fig. 6: error vs the sweep parameters ({m['runs']} runs per point)", fontsize=11)
+    return fig
 
 
 def _report(m: dict, claims: list[dict], config: GpsDeniedNbpConfig) -> str:

@@ -1,0 +1,185 @@
+"""The figures of issue 16 ("Figures"), built from small synthetic inputs, checked for layout properties."""
+
+from __future__ import annotations
+
+import itertools
+import os
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+from coloc_env.config import build_config  # noqa: E402
+from coloc_env.scenarios.nlos_horizon import NlosHorizonConfig  # noqa: E402
+from train import demo_summary  # noqa: E402
+from train.reproduce import gao2016, wan2014  # noqa: E402
+
+
+def _overlap(a, b) -> bool:
+    return a.x0 < b.x1 and b.x0 < a.x1 and a.y0 < b.y1 and b.y0 < a.y1
+
+
+@pytest.fixture
+def fig6_metrics():
+    rng = np.random.default_rng(0)
+    m = {"runs": 2}
+    for key, (_field, values) in wan2014.SWEEPS.items():
+        # errors between 4 and 9 m: less than a decade, where matplotlib's default labels read "6x10^0"
+        m[key] = {f"{v:g}": {method: {"err_fault": float(rng.uniform(4, 9))} for method in ("dnbp", "ls", "dr")}
+                  for v in values}
+    return m
+
+
+def test_wan2014_fig6_panels_do_not_overlap_and_log_ticks_are_plain(fig6_metrics):
+    fig = wan2014.fig6_sweeps(fig6_metrics)
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    boxes = [ax.get_tightbbox(renderer) for ax in fig.axes]
+    assert len(boxes) == 4
+    for a, b in itertools.combinations(boxes, 2):
+        assert not _overlap(a, b), (a, b)
+    for ax in fig.axes:
+        assert ax.get_yscale() == "log"
+        major = [t.get_text() for t in ax.get_yticklabels() if t.get_text()]
+        minor = [t.get_text() for t in ax.get_yticklabels(minor=True) if t.get_text()]
+        assert len(major) >= 2, major  # the axis is still labelled
+        assert not minor, minor
+        assert all("times" not in s and "^" not in s for s in major), major
+        assert all(float(s) > 0 for s in major)
+    plt.close(fig)
+
+
+def test_gao2016_fig6_legend_is_outside_the_data_area():
+    config = build_config(NlosHorizonConfig, {"num_uavs": 1})
+    rng = np.random.default_rng(1)
+    R, K, S = 3, config.horizon, 30
+    res = {"afge": {"known": rng.uniform(0.1, 1, (R, K))}, "dfir": {"known": rng.uniform(0.1, 1, (R, K, S))},
+           "kf": {"known": rng.uniform(0.1, 1, (R, K)), "blind": rng.uniform(1, 10, (R, K))},
+           "kf_matched": {"known": rng.uniform(0.1, 1, (R, K))}}
+    fig = gao2016.fig6_rmse_over_time(res, 5, config)
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    (ax,) = fig.axes
+    legend = ax.get_legend()
+    assert legend is not None
+    assert len(legend.get_texts()) == 6  # five series and the turns' shading
+    assert not _overlap(legend.get_window_extent(renderer), ax.get_window_extent(renderer))
+    plt.close(fig)
+
+
+def _capture(monkeypatch, module, name="save_figure"):
+    saved = {}
+    monkeypatch.setattr(module, name, lambda path, fig: saved.update(path=path, fig=fig))
+    return saved
+
+
+def test_learning_curve_bands_are_labelled(monkeypatch, tmp_path):
+    import train.evaluate
+    import train.io
+    from train import training
+
+    monkeypatch.setattr(train.evaluate, "run_episodes",
+                        lambda *args, **kwargs: {"mean_cost": 3.0, "ci95": 0.4})
+    saved = _capture(monkeypatch, train.io)
+    training.write_learning_curve(str(tmp_path), "bandwidth_fusion", [(100, 5.0, 1.0), (200, 4.0, 0.5)], "t")
+    labels = [t.get_text() for t in saved["fig"].axes[0].get_legend().get_texts()]
+    n = training.CURVE_EPISODES
+    interval = [s for s in labels if f"95 % interval over {n} validation episodes" in s]
+    assert len(interval) == 2, labels  # the trained policy's band and the paper policy's
+    assert any(s.startswith("paper policy") and "3" in s for s in labels), labels
+    assert os.path.isfile(tmp_path / "curve.json")
+    plt.close(saved["fig"])
+
+
+def _row(policy, mean, ci=0.1):
+    return {"policy": policy, "scenario": "bandwidth_fusion", "mean_cost": mean, "ci95": ci, "episodes": 4,
+            "seed_base": 0, "per_episode_cost": [mean] * 4, "paper_cost": mean, "communication_per_step": 1.0}
+
+
+def test_bar_chart_uses_a_log_axis_when_means_span_more_than_10x(monkeypatch):
+    from train import leaderboard
+
+    saved = _capture(monkeypatch, leaderboard)
+    table = {p: _row(p, v) for p, v in (("random", 500.0), ("paper", 2.0), ("oracle_static", 1.5))}
+    leaderboard.bar_chart(table, "x.png", "bandwidth_fusion")
+    ax = saved["fig"].axes[0]
+    assert ax.get_yscale() == "log"
+    assert "[m^2]" in ax.get_ylabel()
+    plt.close(saved["fig"])
+
+    table = {p: _row(p, v) for p, v in (("random", 3.0), ("paper", 2.0), ("oracle_static", 1.5))}
+    leaderboard.bar_chart(table, "x.png", "bandwidth_fusion")
+    assert saved["fig"].axes[0].get_yscale() == "linear"
+    plt.close(saved["fig"])
+
+
+def test_bar_chart_leaves_out_outliers_with_a_note_when_a_mean_is_not_positive(monkeypatch):
+    from train import leaderboard
+
+    saved = _capture(monkeypatch, leaderboard)
+    table = {p: _row(p, v) for p, v in (("random", 500.0), ("paper", 2.0), ("oracle_static", 0.0),
+                                         ("always", 1.0))}
+    leaderboard.bar_chart(table, "x.png", "bandwidth_fusion")
+    ax = saved["fig"].axes[0]
+    assert ax.get_yscale() == "linear"
+    names = [t.get_text() for t in ax.get_xticklabels()]
+    assert "random" not in names and "paper" in names
+    notes = [t.get_text() for t in saved["fig"].texts]
+    assert any("random" in t and "500" in t for t in notes), notes
+    plt.close(saved["fig"])
+
+
+def test_demo_summary_on_an_empty_folder_says_what_is_missing(tmp_path):
+    text = demo_summary.summary(str(tmp_path))
+    for paper in demo_summary.PAPERS:
+        assert f"missing: {tmp_path / paper}/" in text
+    assert f"missing: {tmp_path / 'leaderboard.md'}" in text
+    assert f"missing: {tmp_path / '.demo_times'}" in text
+
+
+def test_demo_summary_reads_claims_verdicts_and_stage_times(tmp_path, capsys):
+    import json
+
+    (tmp_path / "zhao2020").mkdir()
+    (tmp_path / "zhao2020" / "metrics.json").write_text(json.dumps({"claims": {"a": True, "b": False}}))
+    (tmp_path / "fu2017").mkdir()
+    (tmp_path / "fu2017" / "metrics.json").write_text(json.dumps({"claims": {"n3": {"x": True, "y": True}}}))
+    (tmp_path / "gao2016").mkdir()
+    (tmp_path / "gao2016" / "report.md").write_text(
+        "# r\n\n| claim | our numbers | criterion | holds |\n|---|---|---|---|\n| c1 | 1 | < 2 | yes |\n"
+        "| c2 | 3 | < 2 | **no** |\n\nafter\n")
+    (tmp_path / "leaderboard.md").write_text(
+        "# Leaderboard\n\n## bandwidth_fusion (`bandwidth_fusion`)\n\nTarget: beat it. seed0: beats: **met**.\n\n"
+        "## relay_ukf (`relay_ukf`)\n\nTarget: beat it. seed0: worse: **not met**.\n\n## x (`x`)\n\nno target\n")
+    (tmp_path / ".demo_times").write_text("100 130 reproduce all --quick\n130 205 train relay_ukf\nbad line\n")
+    demo_summary.main([str(tmp_path)])
+    text = capsys.readouterr().out
+    assert "zhao2020  1 held, 1 failed; failed: b" in text
+    assert "fu2017    2 held, 0 failed" in text
+    assert "gao2016   1 held, 1 failed; failed: c2" in text
+    assert "missing: " + str(tmp_path / "wan2014") in text
+    lines = text.splitlines()
+    assert any("bandwidth_fusion (`bandwidth_fusion`)" in s and "target met" in s for s in lines)
+    assert any("relay_ukf (`relay_ukf`)" in s and "target not met" in s for s in lines)
+    assert any(s.strip().startswith("reproduce all --quick") and s.strip().endswith("30 s") for s in lines)
+    assert any(s.strip().startswith("train relay_ukf") and s.strip().endswith("1 min 15 s") for s in lines)
+    assert any(s.strip().startswith("total") and s.strip().endswith("1 min 45 s") for s in lines)
+
+
+def test_gao2016_fig6_log_ticks_are_plain():
+    config = build_config(NlosHorizonConfig, {"num_uavs": 1})
+    rng = np.random.default_rng(2)
+    R, K = 2, config.horizon
+    res = {"afge": {"known": rng.uniform(1, 4, (R, K))}, "dfir": {"known": rng.uniform(1, 4, (R, K, 10))},
+           "kf": {"known": rng.uniform(1, 4, (R, K)), "blind": rng.uniform(4, 9, (R, K))},
+           "kf_matched": {"known": rng.uniform(1, 4, (R, K))}}
+    fig = gao2016.fig6_rmse_over_time(res, 5, config)
+    fig.canvas.draw()
+    (ax,) = fig.axes
+    major = [t.get_text() for t in ax.get_yticklabels() if t.get_text()]
+    assert len(major) >= 2 and all("times" not in s for s in major), major
+    assert not [t.get_text() for t in ax.get_yticklabels(minor=True) if t.get_text()]
+    plt.close(fig)
