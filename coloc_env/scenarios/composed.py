@@ -189,6 +189,23 @@ class ComposedScenario(Scenario):
             self._truth[idx] = self.world.positions()[idx]
         self._received[idx] = 0.0
         self._reward[idx] = 0.0
+        self._clear_step_record(idx)
+
+    def _clear_step_record(self, idx: np.ndarray) -> None:
+        """What the network recorded of the last step, cleared for the copies that start anew (their infos at
+        reset report no messages and no chain, not those of the episode before)."""
+        net = self.network
+        net.messages_sent[idx] = 0.0
+        net.floats_sent[idx] = 0.0
+        net.delivered[idx] = False
+        if hasattr(net, "cost_sent"):
+            net.cost_sent[idx] = 0.0
+        chain = net.last_chain
+        if chain is not None:
+            chain.chain[idx] = -1
+            chain.length[idx] = 0
+            chain.hop_distance[idx] = np.nan
+            chain.stop[idx] = -1
 
     def part_generators(self, rng: np.random.Generator) -> tuple:
         """The generators of the world, the network and the backend for one copy's episode.

@@ -392,8 +392,6 @@ class GpsDeniedNbpScenario(PresetScenario):
         self.broadcasts[idx] = 0
         self.heard[idx] = 0
         self.fault[idx] = ~self.world.gps_normal[idx, 0]
-        self.network.messages_sent[idx] = 0.0
-        self.network.floats_sent[idx] = 0.0
 
     def decode_actions(self, actions) -> np.ndarray:
         """Actions (B, N, n_iter) of 0/1 -> the broadcast network's ``transmit`` block (one entry per round)."""
