@@ -291,3 +291,18 @@ def test_the_papers_truncation_rule_warns_when_chosen_and_fails_with_a_clear_err
     while env.agents:
         observations, rewards, *_ = env.step(policy.act(observations))
     assert all(np.isfinite(list(rewards.values())))
+
+
+def test_reset_infos_report_no_chain_or_messages_of_the_episode_before():
+    env = coloc_env.parallel_env(NAME, horizon=4, measurement_probability=1.0)
+    policy = agents.make_policy("paper", env, seed=0)
+    observations, _ = env.reset(seed=1)
+    sent = 0.0
+    while env.agents:
+        observations, _, _, _, infos = env.step(policy.act(observations))
+        sent += sum(infos[a]["messages_sent"] for a in env.possible_agents)
+    assert sent > 0 and max(infos[a]["chain_position"] for a in env.possible_agents) > 0
+    _, infos = env.reset(seed=2)
+    for a in env.possible_agents:
+        assert infos[a]["messages_sent"] == 0 and infos[a]["floats_sent"] == 0
+        assert infos[a]["chain_position"] == -1 and infos[a]["partner"] == -1 and infos[a]["hops"] == 0
