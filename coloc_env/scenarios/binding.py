@@ -10,7 +10,8 @@ something the generic composition leaves open:
 
 | hook                          | what a binding gives                                               |
 |-------------------------------|--------------------------------------------------------------------|
-| ``compose(config)``           | the world, network and backend configs of its flat config          |
+| ``Config.parts()``            | the world, network and backend configs of its flat config          |
+| ``composition_options``       | composition-level fields its flat config sets (``reward``, ...)    |
 | ``action_space`` /            | its action codec: the paper's action, decoded into the parts'      |
 | ``decode_actions``            | blocks                                                             |
 | ``observation`` (+ ``_space``)| its observation features                                           |
@@ -22,13 +23,13 @@ something the generic composition leaves open:
 
 from __future__ import annotations
 
-import abc
 from typing import ClassVar
 
+from coloc_env.composition import Composition
 from coloc_env.scenarios.composed import ComposedScenario
 
 
-class PresetScenario(ComposedScenario, abc.ABC):
+class PresetScenario(ComposedScenario):
     """Batched core of a preset: its flat config (``self.config``) bound to the composition of its parts
     (``self.composition``)."""
 
@@ -37,6 +38,15 @@ class PresetScenario(ComposedScenario, abc.ABC):
     Config: ClassVar[type]
 
     @classmethod
-    @abc.abstractmethod
     def compose(cls, config):
-        """The validated :class:`~coloc_env.composition.Composition` of the flat ``config``'s parts."""
+        """The validated :class:`~coloc_env.composition.Composition` of the flat ``config``'s parts
+        (``config.parts()``), with the episode length and :meth:`composition_options`."""
+        spec = Composition(*config.parts(), horizon=config.horizon, preset=cls.name,
+                           **cls.composition_options(config))
+        spec.validate()
+        return spec
+
+    @classmethod
+    def composition_options(cls, config) -> dict:
+        """Composition-level fields (``reward``, ``communication_cost``) the flat config sets; none by default."""
+        return {}

@@ -129,7 +129,6 @@ import numpy as np
 
 import estimators.dnbp as dn
 from coloc_env.backends.particles import Dnbp
-from coloc_env.composition import Composition
 from coloc_env.config import as_array, check_choice, check_range
 from coloc_env.networks.broadcast import Broadcast
 from coloc_env.rendering import Link, Scene
@@ -320,12 +319,6 @@ class GpsDeniedNbpScenario(PresetScenario):
         self.broadcasts = np.zeros((B, N), int)
         self.heard = np.zeros((B, N), int)
         self.fault = np.zeros((B, N), bool)
-
-    @classmethod
-    def compose(cls, config: GpsDeniedNbpConfig) -> Composition:
-        spec = Composition(*config.parts(), horizon=config.horizon, preset=cls.name)
-        spec.validate()
-        return spec
 
     # --- the paper scenario's names for the parts' state (tests, policies, the reproduction, the renderer) -----
     @property

@@ -151,7 +151,6 @@ import numpy as np
 
 import estimators.ukf_relay as ukf
 from coloc_env.backends.ukf import UkfDcl
-from coloc_env.composition import Composition
 from coloc_env.config import as_array, check_choice, check_range
 from coloc_env.networks.relay import Relay
 from coloc_env.rendering import Link, Scene
@@ -159,7 +158,7 @@ from coloc_env.scenarios.binding import PresetScenario
 from coloc_env.world.odometry import OdometrySensor, RangeSensor
 from coloc_env.world.relay import STOP_REASONS, RelayChain, RelayChainLinks, check_distance
 from coloc_env.world.unicycle import CircularTracks
-from coloc_env.worlds.circles import Circles, default_layout
+from coloc_env.worlds.circles import Circles
 
 DISTANCE_SCALE = 100.0  # metres per unit in the observation
 
@@ -195,12 +194,8 @@ class RelayUKFConfig:
 
     @property
     def tracks(self) -> CircularTracks:
-        centres, angles, directions = default_layout(self.num_platforms)
-        return CircularTracks(
-            centres=centres if self.centres is None else np.asarray(self.centres, float),
-            start_angles=angles if self.start_angles is None else np.asarray(self.start_angles, float),
-            directions=directions if self.directions is None else np.asarray(self.directions, float),
-            speed=self.speed, turn_rate=self.turn_rate, dt=self.dt)
+        """The circles flown: the ``circles`` world's (its layout where a field is None)."""
+        return self.parts()[0].tracks
 
     @property
     def odometry(self) -> OdometrySensor:
@@ -273,10 +268,8 @@ class RelayUKFScenario(PresetScenario):
         self.posterior_error = np.zeros((B, N))
 
     @classmethod
-    def compose(cls, config: RelayUKFConfig) -> Composition:
-        spec = Composition(*config.parts(), reward=config.reward, horizon=config.horizon, preset=cls.name)
-        spec.validate()
-        return spec
+    def composition_options(cls, config: RelayUKFConfig) -> dict:
+        return {"reward": config.reward}
 
     # --- the paper scenario's names for the parts' state (tests, policies, the reproduction) ---------------
     @property
@@ -343,13 +336,6 @@ class RelayUKFScenario(PresetScenario):
     def state_space(self):
         dim = self.num_agents * self.obs_dim + 2 * self.num_agents
         return gymnasium.spaces.Box(-np.inf, np.inf, shape=(dim,), dtype=np.float32)
-
-    def odometry(self, k: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Measured speed (B, N), integrated heading (B, N) and heading variance (B, 1) at step ``k`` (default: now)."""
-        k = self.k if k is None else np.asarray(k)
-        rows = np.arange(self.batch)
-        return (self.world.measured_speed[rows, k], self.world.measured_heading[rows, k],
-                self.world.heading_variance(k)[:, None])
 
     # --- dynamics ------------------------------------------------------------------
     def part_generators(self, rng):
