@@ -103,6 +103,18 @@ class BernoulliDelayNetwork(Network):
         late = (u_next >= a1) & (u_next < a1 + a2)
         return np.where(u < a1, 0, np.where(late, 1, -1))
 
+    def slot_outcomes(self, steps, slot: int = 0) -> np.ndarray:
+        """(B, len(steps), N, N) [t, s] eq. (3)'s outcome code of link t -> s at each of ``steps``: 0 on time
+        (u_k < alpha1), 1 late (alpha1 <= u_k < alpha1 + alpha2), 2 lost (the codes of
+        :mod:`estimators.lossy_fusion`), from the same counter-based uniforms :meth:`packets` draws; known
+        from reset, whatever the agents decide. A "late" code after an on-time packet delivers nothing new
+        (see the module table)."""
+        a1 = float(self.config.on_time_probability)
+        a2 = float(self.config.late_probability)
+        N = self.num_agents
+        u = np.stack([uniforms(self.keys, (np.full(self.batch, k), 2, slot), (N, N)) for k in steps], axis=1)
+        return np.where(u < a1, 0, np.where(u < a1 + a2, 1, 2)).astype(np.int8)
+
     def slot_probabilities(self, distance: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(alpha1, alpha2) per link at ``distance``: the per-slot outcome probabilities of eq. (3)."""
         shape = np.shape(distance)

@@ -18,6 +18,18 @@ fuses its own estimate with the compensated ones by inverse-trace weights
 (eq. 30) and feeds the fused estimate back into its own filter (eq. 31).
 This is the paper's distributed algorithm (B). One env step is one slot.
 
+The preset is the composition ``target_cv`` / ``bernoulli_delay`` /
+``prediction_compensation`` (:meth:`LossyFusionConfig.parts`) with this
+action codec, observation and info. The world draws the episode (x(0), the
+accelerations, the measurement noise) from the episode's generator in the
+order of :meth:`LossyFusionConfig.sample_episodes`; the link outcomes are
+the network's (its counter-based draws from its own generator, fixed at
+reset: :meth:`LossyFusionScenario.link_outcomes`), not the sampler's. One
+reading differs from eq. (3) as printed and changes no estimate: a "late"
+outcome after an on-time packet delivers nothing (the packet it would
+re-deliver is the one already held; ``delivered`` then says lost, and the
+held value and its age are the same either way).
+
 The agents decide what the paper fixes: followers whether to transmit each
 slot, the leader how to tilt the compensation and fusion weights away from
 (29)/(30) (the fusion weights need this slot's covariances, which arrive only
@@ -68,14 +80,19 @@ tr P0 = sum a_i^2 tr P_i, so ``"trace"`` rewards exactly the paper's weights.
 
 Termination: none; truncation after ``horizon`` slots (the paper's 100).
 
-``infos[agent]``: ``true_position``, ``estimated_position`` (the fused
-estimate, the same for all), ``error`` (its squared position error, the same
-for all: ``coloc evaluate`` sums it over agents, i.e. L times the fused
-error), ``claimed_trace`` (tr H P0 H^T), ``local_estimate`` and
+``infos[agent]``: ``true_position`` (3-D, m), ``estimated_position`` (the fused
+estimate, the same for all), ``position_error`` (||H (x0hat - x)||, m),
+``error`` (its square, m^2, the same for all; the episode metric averages it
+over slots and agents), ``trace`` and ``claimed_trace`` (tr H P0 H^T, m^2),
+``messages_sent`` (packets this agent sent this slot, as the network counts
+them; also ``communication``), ``floats_sent`` (their floats: three
+estimates and three covariances of the 6-state, 3 n + 3 n (n + 1) / 2 = 81 a
+packet), ``local_estimate`` and
 ``local_error`` (the agent's own filter: the leader's is the fused one),
-``communication`` (packets this agent sent this slot), ``packet_age`` (age of
+``packet_age`` (age of
 the packet the leader holds from this follower; 0 for the leader),
-``link_outcome`` (this slot's draw: 0 on time, 1 late, 2 lost), ``delivered``
+``link_outcome`` (this slot's draw of the link to the leader: 0 on time, 1 late,
+2 lost), ``delivered``
 (what arrived: 0 on time, 1 late packet, 2 nothing), ``fusion_weight``
 (a_i), ``step``.
 
@@ -106,12 +123,15 @@ import gymnasium
 import numpy as np
 
 import estimators.lossy_fusion as lf
+from coloc_env.backends.fusion import PredictionCompensation
 from coloc_env.config import as_array, check_choice, check_psd, check_range
+from coloc_env.networks.bernoulli_delay import BernoulliDelay
 from coloc_env.rendering import Link, Scene, ring_layout
-from coloc_env.scenarios.base import Scenario
+from coloc_env.scenarios.binding import PresetScenario
 from coloc_env.world.delay_links import BernoulliDelayLink
 from coloc_env.world.sensors import LinearSensor
 from coloc_env.world.target import ConstantVelocityTarget
+from coloc_env.worlds.target_cv import TargetCv
 
 AGE_SCALE = 10.0
 _OUTCOME_NAMES = {lf.ON_TIME: "on time", lf.LATE: "late", lf.LOST: "lost"}
@@ -162,6 +182,16 @@ class LossyFusionConfig:
         check_range("message_cost", self.message_cost, 0.0, 1e12)
         check_range("weight_logit_scale", self.weight_logit_scale, 0.0, 50.0, low_open=True)
 
+    def parts(self) -> tuple:
+        """The (world, network, backend) configs this flat config stands for: ``target_cv`` with the same
+        target, sensors and prior, ``bernoulli_delay`` with (alpha1, alpha2), ``prediction_compensation``."""
+        world = TargetCv(num_agents=self.num_uavs, period=self.period, accel_noise=self.accel_noise,
+                         measurement_noise=self.measurement_noise, initial_state=self.initial_state,
+                         initial_cov=self.initial_cov, horizon=self.horizon)
+        network = BernoulliDelay(on_time_probability=self.on_time_probability,
+                                 late_probability=self.late_probability)
+        return world, network, PredictionCompensation(weight_logit_scale=self.weight_logit_scale)
+
     def lossy_model(self) -> lf.LossyModel:
         L, target = self.num_uavs, self.target
         return lf.LossyModel(
@@ -175,8 +205,9 @@ class LossyFusionConfig:
 
     def sample_episodes(self, rng: np.random.Generator, size: tuple[int, ...] = ()) -> dict[str, np.ndarray]:
         """Whole episodes drawn from ``rng`` in blocks, in this order: x(0), accelerations, measurement
-        noise, link outcomes. Returns ``truth`` (*size, K, 6), ``z`` (*size, K, L, 3) and ``outcome``
-        (*size, K, L) (the leader's column always on time)."""
+        noise, link outcomes (the reproduction's sampler; the env draws the same truth and measurements
+        but its network draws the link outcomes: :func:`drawn_episodes`). Returns ``truth`` (*size, K, 6),
+        ``z`` (*size, K, L, 3) and ``outcome`` (*size, K, L) (the leader's column always on time)."""
         K, L = self.horizon, self.num_uavs
         target, sensor = self.target, self.sensor
         x0 = rng.multivariate_normal(np.asarray(self.initial_state, float), np.asarray(self.initial_cov, float),
@@ -190,30 +221,64 @@ class LossyFusionConfig:
         return {"truth": truth, "z": z, "outcome": outcome}
 
 
-class LossyFusionScenario(Scenario):
-    """Batched core of ``lossy_fusion``; see the module docstring for the table."""
+class LossyFusionScenario(PresetScenario):
+    """Batched core of ``lossy_fusion``: the binding of :class:`LossyFusionConfig` on the composable core
+    (``target_cv`` / ``bernoulli_delay`` / ``prediction_compensation``); the module docstring has the table."""
 
     name = "lossy_fusion"
     paper = "fu2017"
     Config = LossyFusionConfig
 
+    @classmethod
+    def composition_options(cls, config) -> dict:
+        return {"reward": config.reward, "communication_cost": config.message_cost}
+
     def __init__(self, config: LossyFusionConfig, batch: int = 1):
         super().__init__(config, batch)
-        self.model = config.lossy_model()
-        self.H = config.target.position_matrix
-        self._x0 = np.asarray(config.initial_state, float)
-        self._P0 = np.asarray(config.initial_cov, float)
-        self._compensation = lf.compensation_weights(self.model.on_time[1:], self.model.late[1:])
-        B, L, K = self.batch, self.num_agents, self.horizon
-        self.k = np.zeros(B, dtype=int)
-        self.truth = np.zeros((B, K, 6))
-        self.z = np.zeros((B, K, L, 3))
-        self.outcome = np.zeros((B, K, L), dtype=np.int8)
-        self.fusion = lf.distributed_initial(self.model, self._x0, self._P0, (B,))
-        self.local = np.broadcast_to(self._x0, (B, L - 1, 6)).copy()
-        self.local_cov = np.broadcast_to(self._P0, (B, L - 1, 6, 6)).copy()
-        self.transmitted = np.zeros((B, L - 1), bool)
-        self._reward = np.zeros((B, L))
+        self.H = self.world.metric
+        self._action_space = gymnasium.spaces.Box(-1.0, 1.0, shape=(self.action_dim,), dtype=np.float64)
+        self._outcomes = np.zeros((self.batch, self.horizon, self.num_agents), np.int8)
+
+    # --- the parts' state, by the paper's names ------------------------------------------
+    @property
+    def model(self) -> lf.LossyModel:
+        return self.backend.model
+
+    @property
+    def fusion(self) -> lf.DistributedState:
+        """The leader's and the followers' filter state (:class:`estimators.lossy_fusion.DistributedState`)."""
+        return self.backend.fusion
+
+    @property
+    def truth(self) -> np.ndarray:
+        """The episode's target states x(0..K) (B, K + 1, 6)."""
+        return self.world.truth
+
+    @property
+    def z(self) -> np.ndarray:
+        """Every UAV's measurement of every slot (B, K, L, 3)."""
+        return self.world.observations
+
+    @property
+    def local(self) -> np.ndarray:
+        """The followers' own x(k|k) (B, L - 1, 6): the first entry of the packet each would send."""
+        return self.fusion.packet[..., 0, :]
+
+    @property
+    def local_cov(self) -> np.ndarray:
+        return self.fusion.packet_cov[..., 0, :, :]
+
+    @property
+    def transmitted(self) -> np.ndarray:
+        """(B, L - 1) the followers that sent their packet this slot."""
+        return self.network.messages_sent[:, 1:] > 0
+
+    def link_outcomes(self) -> np.ndarray:
+        """(B, K, L) each follower's link outcome to the leader at each slot (0 on time, 1 late, 2 lost; the
+        leader's own column on time): the network's draws, fixed at reset. With every follower transmitting
+        these are the ``outcome`` of :meth:`LossyFusionConfig.sample_episodes` that the reproduction's
+        filters take."""
+        return self._outcomes.copy()
 
     # --- description ------------------------------------------------------------
     @property
@@ -228,28 +293,16 @@ class LossyFusionScenario(Scenario):
     def observation_space(self):
         return gymnasium.spaces.Box(-np.inf, np.inf, shape=(self.obs_dim,), dtype=np.float32)
 
-    def action_space(self):
-        # cached: check_actions asks for it every step
-        if not hasattr(self, "_action_space"):
-            self._action_space = gymnasium.spaces.Box(-1.0, 1.0, shape=(self.action_dim,), dtype=np.float64)
-        return self._action_space
-
     def state_space(self):
         dim = self.num_agents * self.obs_dim + 3 * (self.num_agents - 1)
         return gymnasium.spaces.Box(-np.inf, np.inf, shape=(dim,), dtype=np.float32)
 
     # --- action encoding --------------------------------------------------------
-    def decode_actions(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Actions (B, N, A) -> transmit (B, L-1) bool, compensation weights (B, L-1, 3), fusion factors (B, L)."""
-        L, scale = self.num_agents, self.config.weight_logit_scale
-        actions = np.clip(actions, -1.0, 1.0)
-        transmit = actions[:, 1:, 0] >= 0.0
-        leader = actions[:, 0]
-        fusion_factors = np.exp(scale * leader[:, 1:1 + L])
-        tilt = leader[:, 1 + L:].reshape(-1, L - 1, 3)
-        compensation = self._compensation * np.exp(scale * tilt)
-        compensation = compensation / compensation.sum(axis=-1, keepdims=True)
-        return transmit, compensation, fusion_factors
+    def decode_actions(self, actions) -> np.ndarray:
+        """Actions (B, N, A) -> the parts' blocks: the network's ``transmit`` (1 where entry 0 >= 0) and the
+        backend's fusion and compensation tilts (entries 1.., clipped to [-1, 1]), in the same order."""
+        arr = np.clip(self.check_actions(actions), -1.0, 1.0)
+        return np.concatenate([(arr[..., :1] >= 0.0).astype(float), arr[..., 1:]], axis=-1)
 
     def paper_actions(self) -> np.ndarray:
         """The action (N, A) of the paper's algorithm: every follower transmits, weights (29)/(30)."""
@@ -258,81 +311,47 @@ class LossyFusionScenario(Scenario):
         return actions
 
     # --- dynamics ----------------------------------------------------------------
+    def part_generators(self, rng):
+        # The world draws from the episode's generator itself, in the order of sample_episodes (x(0), the
+        # accelerations, the measurement noise), so the truth and the readings are the sampler's; the
+        # network and the backend draw from children.
+        network, backend = rng.spawn(2)
+        return rng, network, backend
+
     def reset(self, rngs, env_index=None) -> None:
+        super().reset(rngs, env_index)
         idx = self._indices(env_index)
-        if len(rngs) != len(idx):
-            raise ValueError(f"reset needs one generator per copy: {len(idx)} copies, {len(rngs)} generators")
-        for b, rng in zip(idx, rngs, strict=True):
-            # One block per episode so that stepping never loops over copies.
-            episode = self.config.sample_episodes(rng)
-            self.truth[b], self.z[b], self.outcome[b] = episode["truth"], episode["z"], episode["outcome"]
-        fresh = lf.distributed_initial(self.model, self._x0, self._P0, (len(idx),))
-        for field, value in vars(fresh).items():
-            getattr(self.fusion, field)[idx] = value
-        self.local[idx] = self._x0
-        self.local_cov[idx] = self._P0
-        self.transmitted[idx] = False
-        self.k[idx] = 0
-        self._reward[idx] = 0.0
-
-    def step(self, actions) -> None:
-        actions = self.check_actions(actions)
-        if np.any(self.k >= self.horizon):
-            raise RuntimeError("step() on a copy whose episode is over; reset it first")
-        self.advance(*self.decode_actions(actions))
-
-    def advance(self, transmit: np.ndarray, compensation: np.ndarray, fusion_factors: np.ndarray) -> None:
-        """Step with decoded decisions: transmit (B, L-1), compensation (B, L-1, 3), fusion factors (B, L)."""
-        rows = np.arange(self.batch)
-        self.fusion = lf.distributed_step(self.model, self.fusion, self.z[rows, self.k], self.outcome[rows, self.k],
-                                          transmit, compensation, fusion_factors)
-        self.local = self.fusion.packet[..., 0, :].copy()
-        self.local_cov = self.fusion.packet_cov[..., 0, :, :].copy()
-        self.transmitted = np.asarray(transmit, bool).copy()
-        self.k = self.k + 1
-        if self.config.reward == "error":
-            loss = self._fused_error()
-        else:
-            loss = self._claimed_trace()
-        sent = np.concatenate([np.zeros((self.batch, 1)), self.transmitted], axis=1)
-        self._reward = -loss[:, None] - self.config.message_cost * sent
+        codes = self.network.slot_outcomes(range(self.horizon))[:, :, :, 0]  # every link to the leader
+        codes[..., 0] = lf.ON_TIME
+        self._outcomes[idx] = codes[idx]
 
     # --- views -------------------------------------------------------------------
-    def _current_truth(self) -> np.ndarray:
-        """x(k) of the last slot stepped (x(0) before the first step), (B, 6)."""
-        return self.truth[np.arange(self.batch), np.maximum(self.k - 1, 0)]
-
     def _fused_error(self) -> np.ndarray:
-        return np.sum(((self.fusion.fused - self._current_truth()) @ self.H.T) ** 2, axis=-1)
+        return self.target_error()[:, 0]
 
     def _claimed_trace(self) -> np.ndarray:
         return np.trace(self.H @ self.fusion.fused_cov @ self.H.T, axis1=-2, axis2=-1)
 
     def observation(self) -> np.ndarray:
         B, L = self.batch, self.num_agents
+        fusion = self.fusion
         obs = np.zeros((B, L, self.obs_dim))
         obs[:, 0, 0] = 1.0
         obs[:, :, 1] = (self.k / self.horizon)[:, None]
-        obs[:, 0, 2] = np.log(np.trace(self.fusion.fused_cov, axis1=-2, axis2=-1))
+        obs[:, 0, 2] = np.log(np.trace(fusion.fused_cov, axis1=-2, axis2=-1))
         obs[:, 1:, 2] = np.log(np.trace(self.local_cov, axis1=-2, axis2=-1))
-        obs[:, 0, 3:3 + (L - 1)] = self.fusion.held_age / AGE_SCALE
-        obs[:, 0, 3 + (L - 1):] = np.log(np.trace(self.fusion.held_cov, axis1=-2, axis2=-1)).reshape(B, -1)
+        obs[:, 0, 3:3 + (L - 1)] = fusion.held_age / AGE_SCALE
+        obs[:, 0, 3 + (L - 1):] = np.log(np.trace(fusion.held_cov, axis1=-2, axis2=-1)).reshape(B, -1)
         return obs.astype(np.float32)
-
-    def reward(self) -> np.ndarray:
-        return self._reward.copy()
 
     def episode_error(self, errors: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
         """The paper's metric: the fused position MSE averaged over the slots (every agent holds the
         same fused error, so averaging over agents changes nothing)."""
         return np.asarray(errors, float).mean(axis=(-2, -1))
 
-    def done(self) -> np.ndarray:
-        return self.k >= self.horizon
-
     def _last_outcome(self) -> np.ndarray:
         """This slot's link draws (B, L); on time for every link before the first step."""
-        last = self.outcome[np.arange(self.batch), np.maximum(self.k - 1, 0)]
+        last = self._outcomes[np.arange(self.batch), np.maximum(self.k - 1, 0)]
         return np.where((self.k > 0)[:, None], last, lf.ON_TIME)
 
     def state(self) -> np.ndarray:
@@ -342,24 +361,31 @@ class LossyFusionScenario(Scenario):
 
     def info(self) -> dict[str, np.ndarray]:
         B, L = self.batch, self.num_agents
-        truth = self._current_truth() @ self.H.T
-        fused = self.fusion.fused @ self.H.T
-        local = np.concatenate([self.fusion.fused[:, None], self.local], axis=1) @ self.H.T
+        fusion = self.fusion
+        truth = self._truth_state @ self.H.T
+        fused = self.backend.posterior_state[:, 0] @ self.H.T
+        local = np.concatenate([fusion.fused[:, None], self.local], axis=1) @ self.H.T
         error = self._fused_error()
+        claimed = self._claimed_trace()
         zeros = np.zeros((B, 1))
+        team = lambda values: np.broadcast_to(np.asarray(values)[:, None], (B, L)).copy()  # noqa: E731
         return {
             "true_position": np.broadcast_to(truth[:, None], (B, L, 3)).copy(),
             "estimated_position": np.broadcast_to(fused[:, None], (B, L, 3)).copy(),
-            "error": np.broadcast_to(error[:, None], (B, L)).copy(),
-            "claimed_trace": np.broadcast_to(self._claimed_trace()[:, None], (B, L)).copy(),
+            "position_error": team(np.sqrt(error)),
+            "error": team(error),
+            "trace": team(claimed),
+            "claimed_trace": team(claimed),
             "local_estimate": local,
             "local_error": np.sum((local - truth[:, None]) ** 2, axis=-1),
-            "communication": np.concatenate([zeros, self.transmitted.astype(float)], axis=1),
-            "packet_age": np.concatenate([zeros, self.fusion.held_age.astype(float)], axis=1),
+            "messages_sent": self.network.messages_sent.copy(),
+            "floats_sent": self.network.floats_sent.copy(),
+            "communication": self.network.messages_sent.copy(),
+            "packet_age": np.concatenate([zeros, fusion.held_age.astype(float)], axis=1),
             "link_outcome": self._last_outcome().astype(int),
-            "delivered": np.concatenate([np.full((B, 1), lf.ON_TIME), self.fusion.delivered], axis=1).astype(int),
-            "fusion_weight": self.fusion.weights.copy(),
-            "step": np.broadcast_to(self.k[:, None], (B, L)).copy(),
+            "delivered": np.concatenate([np.full((B, 1), lf.ON_TIME), fusion.delivered], axis=1).astype(int),
+            "fusion_weight": fusion.weights.copy(),
+            "step": team(self.k),
         }
 
     def scene(self, b: int) -> Scene:
@@ -367,17 +393,18 @@ class LossyFusionScenario(Scenario):
         xy = [0, 2]  # x and y positions in the state
         estimates = np.concatenate([self.fusion.fused[b][None], self.local[b]])[:, xy]
         covs = np.concatenate([self.fusion.fused_cov[b][None], self.local_cov[b]])[:, xy][:, :, xy]
-        truth_xy = self._current_truth()[b, xy]
+        truth_xy = self._truth_state[b, xy]
         spread = max(20.0, 3.0 * float(np.sqrt(covs[:, [0, 1], [0, 1]].max())),
                      1.2 * float(np.abs(estimates - truth_xy).max()))
         start = max(0, k - 10)
+        last = self._last_outcome()
         links = []
         for f in range(1, L):
             code = int(self.fusion.delivered[b, f - 1]) if k else lf.LOST
             sent = bool(self.transmitted[b, f - 1])
             value = {lf.ON_TIME: 1.0, lf.LATE: 0.5}.get(code, 0.0)
             label = _OUTCOME_NAMES[code] if code != lf.LOST else ("lost" if sent else "silent")
-            if k and code == lf.LOST and sent and self._last_outcome()[b, f] == lf.LATE:
+            if k and code == lf.LOST and sent and last[b, f] == lf.LATE:
                 label = "late, nothing sent before"
             links.append(Link(source=f, target=0, value=value, label=label))
         fused_err = float(self._fused_error()[b])
@@ -397,3 +424,15 @@ class LossyFusionScenario(Scenario):
             notes=["uav_0: the fused estimate; followers: their own filters",
                    f"fused squared error {fused_err:.1f} m^2, claimed tr P0 {self._claimed_trace()[b]:.1f} m^2"],
         )
+
+
+def drawn_episodes(config: LossyFusionConfig, seeds) -> dict[str, np.ndarray]:
+    """The episodes ``env.reset(seed=s)`` draws for each of ``seeds``, in
+    :meth:`LossyFusionConfig.sample_episodes`' layout: ``truth`` (E, K, 6), ``z`` (E, K, L, 3) and
+    ``outcome`` (E, K, L), the link outcomes of the env's network. Filters run on these are paired with the
+    env's policies episode by episode."""
+    seeds = list(seeds)
+    core = LossyFusionScenario(config, batch=len(seeds))
+    core.reset([np.random.default_rng(s) for s in seeds])
+    K = config.horizon
+    return {"truth": core.truth[:, :K].copy(), "z": core.z.copy(), "outcome": core.link_outcomes()}

@@ -16,8 +16,9 @@ def test_paper_policy_transmits_and_keeps_the_paper_weights():
     for agent, action in actions.items():
         assert action.dtype == env.action_space(agent).dtype
         assert action[0] == 1.0 and np.all(action[1:] == 0.0)
-    transmit, compensation, factors = env.scenario.decode_actions(np.stack(list(actions.values()))[None])
-    assert transmit.all() and np.all(factors == 1.0)
+    decoded = env.scenario.decode_actions(np.stack(list(actions.values()))[None])  # [transmit, tilts...]
+    compensation, factors = env.scenario.backend.decode(decoded[..., 1:])
+    assert np.all(decoded[0, :, 0] == 1.0) and np.all(factors == 1.0)
     np.testing.assert_allclose(compensation[0], np.tile([0.4, 0.42, 0.18], (2, 1)), atol=1e-15)
     _, _, _, _, infos = env.step(actions)
     assert sum(infos[a]["communication"] for a in env.possible_agents) == 2.0

@@ -102,7 +102,8 @@ def test_env_with_paper_policy_equals_the_estimator(num_uavs, seed):
     policy = agents.make_policy("paper", env)
     observations, infos = env.reset(seed=seed)
     scenario = env.scenario
-    truth, z, outcome = scenario.truth[0].copy(), scenario.z[0].copy(), scenario.outcome[0].copy()
+    # the network's link draws, fixed at reset: the filter sees what the env's network delivers
+    truth, z, outcome = scenario.truth[0].copy(), scenario.z[0].copy(), scenario.link_outcomes()[0]
     estimates, covariances = lf.distributed_filter(scenario.model, X0, P0, z, outcome)
     H = scenario.H
     k = 0
@@ -115,6 +116,7 @@ def test_env_with_paper_policy_equals_the_estimator(num_uavs, seed):
             loss = np.sum((expected - H @ truth[k]) ** 2)
             assert rewards[agent] == pytest.approx(-loss, rel=1e-12, abs=1e-12)
         assert infos["uav_0"]["claimed_trace"] == pytest.approx(np.trace(H @ covariances[k] @ H.T), rel=1e-12)
+        assert [infos[a]["link_outcome"] for a in env.possible_agents] == outcome[k].tolist()
         k += 1
     assert k == 100
     # the world the env drew is the paper's: the leader's link is always on time, followers' sometimes not
@@ -167,8 +169,9 @@ def test_weight_tilts_reach_the_estimator():
     actions = scenario.paper_actions()
     actions[0, 1] = 1.0  # the leader's own fusion tilt
     actions[0, 4] = -1.0  # follower 1: less weight on x(s|s-1)
-    transmit, compensation, factors = scenario.decode_actions(actions[None])
-    assert transmit.tolist() == [[True]]
+    decoded = scenario.decode_actions(actions[None])  # the network's transmit, then the backend's tilts
+    compensation, factors = scenario.backend.decode(decoded[..., 1:])
+    assert decoded[0, 1:, 0].tolist() == [1.0]
     np.testing.assert_allclose(factors, [[np.exp(3.0), 1.0]])
     paper_c = lf.compensation_weights(0.4, 0.3)
     expected = paper_c * np.exp([0.0, -3.0, 0.0])

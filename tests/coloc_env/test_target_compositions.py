@@ -113,31 +113,35 @@ def _uniform_outcomes(env, steps):
     return codes
 
 
-def test_prediction_compensation_over_bernoulli_delay_is_the_lossy_fusion_scenario():
-    """target_cv + bernoulli_delay + prediction_compensation with the paper's decisions gives the lossy_fusion
-    scenario's fused estimates and errors (1e-9) when the scenario is fed the same episode and the link
-    outcomes the network drew (the network draws them from its own generator, the scenario from the episode's)."""
+def test_the_lossy_fusion_preset_is_target_cv_bernoulli_delay_prediction_compensation():
+    """The preset is the composition target_cv + bernoulli_delay + prediction_compensation plus its action codec:
+    fed the same episode and the same network key, the composition under the paper's decisions gives the preset's
+    fused estimates, errors and rewards (1e-12); the link draws include every outcome."""
     seed = 3
     spec = coloc_env.compose(world="target_cv", network="bernoulli_delay", backend="prediction_compensation")
-    infos, rewards, env = _episode(spec, _always, seed)
-    K = len(infos)
-    config = LossyFusionConfig()
-    scenario = LossyFusionScenario(config)
-    scenario.reset([_world_rng(seed)])
-    np.testing.assert_array_equal(scenario.truth[0], env.unwrapped.scenario.world.truth[0, :K])
-    scenario.outcome[0] = _uniform_outcomes(env, K)
-    assert {lf.ON_TIME, lf.LATE, lf.LOST} <= set(np.unique(scenario.outcome[0, :, 1]))
-    paper = scenario.paper_actions()[None]
-    for k, info in enumerate(infos):
-        scenario.step(paper)
-        ref = scenario.info()
+    env = coloc_env.parallel_env(spec)
+    env.reset(seed=seed)
+    composed = env.unwrapped.scenario
+    preset = LossyFusionScenario(LossyFusionConfig())
+    preset.reset([np.random.default_rng(seed + 1)])  # another episode, then made the same
+    preset.world.truth[:] = composed.world.truth
+    preset.world.observations[:] = composed.world.observations
+    preset.network.keys[:] = composed.network.keys
+    assert {lf.ON_TIME, lf.LATE, lf.LOST} <= set(np.unique(_uniform_outcomes(env, 100)[:, 1]))
+    paper = preset.paper_actions()[None]
+    k = 0
+    while env.agents:
+        _, rewards, _, _, info = env.step(_always(env, k))
+        preset.step(paper)
+        ref = preset.info()
         np.testing.assert_allclose(_stack([info], "true_position", env)[0], ref["true_position"][0][:, :2],
-                                   rtol=0, atol=1e-9)
+                                   rtol=0, atol=1e-12)
         np.testing.assert_allclose(_stack([info], "estimated_position", env)[0], ref["estimated_position"][0][:, :2],
-                                   rtol=0, atol=1e-9)
-        np.testing.assert_allclose(_stack([info], "error", env)[0], ref["error"][0], rtol=0, atol=1e-9)
-        np.testing.assert_allclose([rewards[k][a] for a in env.possible_agents], scenario.reward()[0],
-                                   rtol=0, atol=1e-9)
+                                   rtol=0, atol=1e-12)
+        np.testing.assert_allclose(_stack([info], "error", env)[0], ref["error"][0], rtol=0, atol=1e-12)
+        np.testing.assert_allclose([rewards[a] for a in env.possible_agents], preset.reward()[0], rtol=0, atol=1e-12)
+        k += 1
+    assert k == 100
 
 
 @pytest.mark.parametrize("backend,reference", [

@@ -87,14 +87,15 @@ def paper_policy_costs(seeds, config: LossyFusionConfig | None = None) -> np.nda
     """Per-episode MSE (mean over the slots of the squared position error) of :data:`PAPER_FILTER`,
     the filter the env's ``paper`` policy runs, on the episodes the env draws for ``seeds``.
 
-    Episode e is ``config.sample_episodes(default_rng(seeds[e]))``, what
-    ``env.reset(seed=seeds[e])`` draws; the filters run by this reproduction's own path
-    (:func:`run_block_filters`), with ``config.num_uavs`` UAVs (the env's default 2: setting L2).
+    Episode e is what ``env.reset(seed=seeds[e])`` draws (the truth and measurements of
+    ``config.sample_episodes(default_rng(seeds[e]))``, the link outcomes of the env's network:
+    :func:`coloc_env.scenarios.lossy_fusion.drawn_episodes`); the filters run by this reproduction's own
+    path (:func:`run_block_filters`), with ``config.num_uavs`` UAVs (the env's default 2: setting L2).
     """
+    from coloc_env.scenarios.lossy_fusion import drawn_episodes
+
     config = config or build_config(LossyFusionConfig, {})
-    episodes = [config.sample_episodes(np.random.default_rng(s)) for s in seeds]
-    sim = {key: np.stack([e[key] for e in episodes]) for key in ("truth", "z", "outcome")}
-    return run_block_filters(config, sim)["errors"][PAPER_FILTER].mean(axis=1)
+    return run_block_filters(config, drawn_episodes(config, seeds))["errors"][PAPER_FILTER].mean(axis=1)
 
 
 def run_block_filters(config: LossyFusionConfig, sim: dict) -> dict:
