@@ -352,7 +352,8 @@ def cmd_study(args) -> int:
             args.world, args.network, args.backends, sweep=args.sweep, policy=args.policy, episodes=args.episodes,
             seed=args.seed, horizon=args.horizon, batched=args.batched, executor=args.executor,
             address=args.address, out=args.out, name=args.name,
-            progress=lambda done, total: bar.update(task, completed=done, total=total))
+            progress=lambda done, total: bar.update(task, completed=done, total=total),
+            mark=lambda folder: _open(args, folder))  # INCOMPLETE until the last file; named on Ctrl-C
     console.print(f"wrote {folder}/ (metrics.json, report.md, position_error.png)", soft_wrap=True)
     reference = metrics["reference"]
     for backend, cells in metrics["backends"].items():

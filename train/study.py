@@ -41,6 +41,12 @@ Every input is checked (compositions composed, policies built, the output
 folder probed for writing) before any episode runs; a bad one is a
 ``ValueError`` naming it, and nothing is written.
 
+From the first episode to the last file, the folder holds an ``INCOMPLETE``
+file (:func:`train.io.result_folder`): a study interrupted (Ctrl-C: ``coloc
+study`` prints one line and exits 130) or failed half way leaves it there,
+beside the files written so far and those already in the folder (a folder
+that held nothing else is removed again); a study that completes removes it.
+
 Metrics of each (backend, value) cell, over the E episodes
 ------------------------------------------------------------
 | key                 | meaning                                                                          |
@@ -83,8 +89,8 @@ import math
 import os
 import re
 import shlex
-import tempfile
 from collections.abc import Callable, Sequence
+from contextlib import AbstractContextManager
 from typing import Any
 
 import numpy as np
@@ -208,16 +214,6 @@ def build_cells(world: str, network: str, backends: list[str], sweep: tuple | No
             except ValueError as exc:
                 raise ValueError(f"--sweep {part}.{field}={text} with backend {backend}: {exc}") from exc
     return cells
-
-
-def _check_writable(folder: str) -> None:
-    try:
-        os.makedirs(folder, exist_ok=True)
-        fd, probe = tempfile.mkstemp(dir=folder, prefix=".probe-")
-        os.close(fd)
-        os.unlink(probe)
-    except OSError as exc:
-        raise ValueError(f"output folder {folder!r} is not writable: {exc}") from exc
 
 
 # --- running one cell: E paired episodes of one composition --------------------------------------------------
@@ -461,10 +457,15 @@ def figure(metrics: dict):
 def run_study(world: str, network: str, backends: str | Sequence[str], sweep: str | None = None,
               policy: str = "always", episodes: int = 30, seed: int = 0, horizon: int | None = None,
               batched: bool = False, executor: str = "local", address: str | None = None, out: str = "results",
-              name: str | None = None, progress: Callable[[int, int], None] | None = None) -> tuple[dict, str]:
+              name: str | None = None, progress: Callable[[int, int], None] | None = None,
+              mark: Callable[[str], AbstractContextManager] | None = None) -> tuple[dict, str]:
     """Run the study (see the module docstring) and write its three files; returns (metrics, folder).
 
-    ``progress(done, total)`` is called as episodes finish (per cell with ``batched`` or Ray)."""
+    ``progress(done, total)`` is called as episodes finish (per cell with ``batched`` or Ray).
+    After every check and before the first episode, the folder is marked: ``mark(folder)`` is entered
+    around the computing and the writing, by default ``train.io.result_folder(folder, command line)``,
+    whose ``INCOMPLETE`` file stays behind if the study is interrupted (Ctrl-C) or fails; the command
+    line passes its own, which also remembers the folder to name it on Ctrl-C."""
     import agents
     import coloc_env
 
@@ -495,55 +496,60 @@ def run_study(world: str, network: str, backends: str | Sequence[str], sweep: st
         view = coloc_env.parallel_env(cells[backend, keys[0]])
         agents.make_policy(policy, view, seed=seed)
         view.close()
+    from train.io import check_output_folder, result_folder, save_figure, write_json, write_text
+
     folder = os.path.join(os.fspath(out), "study", name)
-    _check_writable(folder)
-
-    # 2. the cells: (backend, value) -> per-episode arrays, the same seeds everywhere
-    order = [(b, k) for b in backends for k in keys]
-    total = len(order) * (1 if batched else episodes)
-    done = 0
-
-    def tick():
-        nonlocal done
-        done += 1
-        if progress:
-            progress(done, total)
-
-    if executor == "local":
-        results = {cell: run_cell(cells[cell], policy, episodes, seed, batched, tick) for cell in order}
-    else:
-        from train.executor import map_tasks
-
-        outputs = map_tasks(run_cell, [(cells[cell], policy, episodes, seed, batched) for cell in order], "ray",
-                            address)
-        results = dict(zip(order, outputs, strict=True))
-        if progress:
-            progress(total, total)
-
-    # 3. metrics, report, figure
-    spec0 = cells[order[0]]
-    sweep_config = None if parsed is None else {"part": parsed[0], "field": parsed[1], "values": parsed[3],
-                                                "keys": parsed[2]}
-    metrics = {
-        "world": world,
-        "network": network,
-        "reference": backends[0],
-        "backends": {b: {k: cell_metrics(results[b, k]) for k in keys} for b in backends},
-        "paired": paired_metrics(results, backends, keys),
-        "config": {"seed": seed, "episodes": episodes, "episode_seeds": f"{seed} + e, e = 0..{episodes - 1}",
-                   "policy": policy, "sweep": sweep_config, "horizon": horizon,
-                   "episode_steps": spec0.episode_steps, "batched": bool(batched),
-                   "compositions": {b: {k: {part: getattr(cells[b, k], part).as_dict() for part in PARTS}
-                                        for k in keys} for b in backends}},
-    }
-    metrics = _finite(metrics)
+    try:
+        check_output_folder(folder)  # creates nothing: refused input leaves OUT as it was
+    except ValueError as exc:
+        raise ValueError(f"study folder not writable: {exc}") from exc
     command = command_line(world, network, backends, sweep, policy, episodes, seed, horizon, batched, executor,
                            address, os.fspath(out), name)
-    from train.io import save_figure, write_json, write_text
 
-    write_json(os.path.join(folder, "metrics.json"), metrics)
-    write_text(os.path.join(folder, "report.md"), report(metrics, command))
-    save_figure(os.path.join(folder, FIGURE), figure(metrics))
+    # from here to the last file the folder is marked INCOMPLETE; an interrupt or a failure leaves the mark
+    with result_folder(folder, command) if mark is None else mark(folder):
+        # 2. the cells: (backend, value) -> per-episode arrays, the same seeds everywhere
+        order = [(b, k) for b in backends for k in keys]
+        total = len(order) * (1 if batched else episodes)
+        done = 0
+
+        def tick():
+            nonlocal done
+            done += 1
+            if progress:
+                progress(done, total)
+
+        if executor == "local":
+            results = {cell: run_cell(cells[cell], policy, episodes, seed, batched, tick) for cell in order}
+        else:
+            from train.executor import map_tasks
+
+            outputs = map_tasks(run_cell, [(cells[cell], policy, episodes, seed, batched) for cell in order], "ray",
+                                address)
+            results = dict(zip(order, outputs, strict=True))
+            if progress:
+                progress(total, total)
+
+        # 3. metrics, report, figure
+        spec0 = cells[order[0]]
+        sweep_config = None if parsed is None else {"part": parsed[0], "field": parsed[1], "values": parsed[3],
+                                                    "keys": parsed[2]}
+        metrics = {
+            "world": world,
+            "network": network,
+            "reference": backends[0],
+            "backends": {b: {k: cell_metrics(results[b, k]) for k in keys} for b in backends},
+            "paired": paired_metrics(results, backends, keys),
+            "config": {"seed": seed, "episodes": episodes, "episode_seeds": f"{seed} + e, e = 0..{episodes - 1}",
+                       "policy": policy, "sweep": sweep_config, "horizon": horizon,
+                       "episode_steps": spec0.episode_steps, "batched": bool(batched),
+                       "compositions": {b: {k: {part: getattr(cells[b, k], part).as_dict() for part in PARTS}
+                                            for k in keys} for b in backends}},
+        }
+        metrics = _finite(metrics)
+        write_json(os.path.join(folder, "metrics.json"), metrics)
+        write_text(os.path.join(folder, "report.md"), report(metrics, command))
+        save_figure(os.path.join(folder, FIGURE), figure(metrics))
     return metrics, folder
 
 
