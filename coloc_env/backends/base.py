@@ -18,6 +18,8 @@ report), then predicts to k + 1 with the readings' inputs.
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import numpy as np
 
 from coloc_env.parts import Block
@@ -25,6 +27,9 @@ from coloc_env.parts import Block
 
 class Backend:
     """Runtime of one backend for B copies; its config class carries the declarations above."""
+
+    # Whether it reads ``Readings.fix`` / ``fix_valid`` (the world may skip computing fixes nobody reads).
+    reads_fixes: ClassVar[bool] = True
 
     def __init__(self, config, world, network, batch: int):
         self.config = config

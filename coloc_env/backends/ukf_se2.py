@@ -48,6 +48,11 @@ loss uniforms (tests/coloc_env/test_mrclam_preset_parts.py, 1e-9): the parts of
 | under-determined | nothing to solve: a step without observations is a time update only                 |
 | outliers         | normalized innovation nu^T Pz^-1 nu > ``gate``: the observation is not applied       |
 | decisions        | none (the relay next hop is the network's)                                           |
+| records          | per observer m of the last step: ``partner`` (the robot its robot observation        |
+|                  | measured, -1), ``used`` (that observation reached it and passed the gate),           |
+|                  | ``landmarks_applied``, ``applied``, ``rejected``, and ``chains`` (rows b N + m: its   |
+|                  | chain); with several robot observations per observer (sensing "every robot"), the    |
+|                  | last one's                                                                           |
 
 Arguments (``coloc_env.backends.UkfSe2``)
 
@@ -67,6 +72,7 @@ import estimators.ukf_relay_se2 as se2
 from coloc_env.backends.base import Backend
 from coloc_env.data.mrclam import GATE_999
 from coloc_env.parts import BACKENDS, PartConfig, check_range
+from coloc_env.world.relay import RelayChain
 
 
 def hop_floats(hop: int, num_agents: int) -> float:
@@ -98,6 +104,8 @@ class UkfSe2(PartConfig):
 
 
 class UkfSe2Backend(Backend):
+    reads_fixes = False  # the landmark sightings themselves, not the world's pseudo-fixes made from them
+
     def __init__(self, config: UkfSe2, world, network, batch: int):
         super().__init__(config, world, network, batch)
         B, N = self.batch, self.num_agents
@@ -109,6 +117,10 @@ class UkfSe2Backend(Backend):
         self.sigma = np.zeros((B, N, N, 3, 3))
         self.applied = np.zeros((B, N))  # observations applied to each observer at the last step
         self.rejected = np.zeros((B, N))  # refused by the gate
+        self.landmarks_applied = np.zeros((B, N))  # the landmark sightings among them
+        self.partner = np.full((B, N), -1)  # the robot each observer's (last) robot observation measured, -1 none
+        self.used = np.zeros((B, N), dtype=bool)  # that observation reached the measured robot and passed the gate
+        self.chains = self._no_chains()  # rows b * N + m: the chain of observer m's (last) robot observation
 
     def reset(self, rngs, idx) -> None:
         mean, cov = self.world.initial_belief()
@@ -120,8 +132,24 @@ class UkfSe2Backend(Backend):
             f = se2.factor(joint)
             self.estimate[b], self.P_ii[b], self.phi[b], self.sigma[b] = mean[b], f.P_ii, f.phi, f.sigma
         self.posterior_position[idx] = mean[idx, :, :2]
+        self._clear_records(idx)
+
+    def _no_chains(self) -> RelayChain:
+        B, N = self.batch, self.num_agents
+        return RelayChain(chain=np.full((B * N, N), -1), length=np.zeros(B * N, dtype=int),
+                          hop_distance=np.full((B * N, max(N - 1, 1)), np.nan), stop=np.full(B * N, -1))
+
+    def _clear_records(self, idx) -> None:
+        N = self.num_agents
         self.applied[idx] = 0.0
         self.rejected[idx] = 0.0
+        self.landmarks_applied[idx] = 0.0
+        self.partner[idx] = -1
+        self.used[idx] = False
+        rows = (np.asarray(idx)[:, None] * N + np.arange(N)).ravel()
+        fresh = self._no_chains()
+        for name in ("chain", "length", "hop_distance", "stop"):
+            getattr(self.chains, name)[rows] = getattr(fresh, name)[rows]
 
     def _factors(self, b: int) -> se2.FactoredCov:
         return se2.FactoredCov(self.P_ii[b], self.phi[b], self.sigma[b])
@@ -134,8 +162,7 @@ class UkfSe2Backend(Backend):
         extra = readings.extra
         observer, subject = extra["obs_observer"], extra["obs_subject"]
         lam, gate = self.config.ukf_lambda, self.config.gate
-        self.applied[:] = 0.0
-        self.rejected[:] = 0.0
+        self._clear_records(np.arange(self.batch))
         floats = lambda hop: hop_floats(hop, N)  # noqa: E731
         for j in range(observer.shape[1]):
             robot = (observer[:, j] >= 0) & (subject[:, j] >= 0)
@@ -143,6 +170,11 @@ class UkfSe2Backend(Backend):
             if robot.any():
                 chain = self.network.relay(np.where(robot, observer[:, j], -1), np.where(robot, subject[:, j], -1),
                                            floats, slot=j)
+                copies = np.flatnonzero(robot)
+                rows = copies * N + observer[copies, j]
+                for name in ("chain", "length", "hop_distance", "stop"):
+                    getattr(self.chains, name)[rows] = getattr(chain, name)[copies]
+                self.partner[copies, observer[copies, j]] = subject[copies, j]
             for b in np.flatnonzero(observer[:, j] >= 0):
                 m = int(observer[b, j])
                 z, R = extra["obs_z"][b, j], extra["obs_cov"][b, j]
@@ -151,10 +183,12 @@ class UkfSe2Backend(Backend):
                         continue
                     path = chain.chain[b, :chain.length[b]]
                     x, f, ok = se2.dcl_update(self.estimate[b], self._factors(b), path, z, R, lam=lam, gate=gate)
+                    self.used[b, m] = ok
                 else:
                     x, f, ok = se2.dcl_update(self.estimate[b], self._factors(b), [m], z, R,
                                               measured_in_chain=False, landmark=extra["obs_target"][b, j],
                                               lam=lam, gate=gate)
+                    self.landmarks_applied[b, m] += ok
                 self._store(b, x, f)
                 self.applied[b, m] += ok
                 self.rejected[b, m] += not ok

@@ -95,6 +95,7 @@ class ComposedScenario(Scenario):
         self.network = spec.network.build(self.world.num_agents, self.batch, spec.backend.message_kind,
                                           getattr(spec.backend, "rounds", 1))
         self.backend = spec.backend.build(self.world, self.network, self.batch)
+        self.world.fixes_needed = self.backend.reads_fixes
         self.blocks = [*self.world.sensing_blocks(), *self.network.transport_blocks(),
                        *self.backend.decision_blocks()]
         self.block_parts = (["world"] * len(self.world.sensing_blocks())

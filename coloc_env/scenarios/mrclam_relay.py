@@ -148,14 +148,20 @@ Arguments (fields of :class:`MrclamRelayConfig`)
 | ukf_lambda           | 0.0            | > -3N                                                        |
 | reward               | "error"        | "error", "trace"                                             |
 
-Randomness: per episode, the offset s, then the loss uniforms of every step,
-source and hop (drawn at reset, so the same seed gives the same window and
-the same losses whatever the policy and the loss probability).
+The preset is the composition ``mrclam`` / ``relay`` (``routing="per_source"``) /
+``ukf_se2`` (:meth:`MrclamRelayConfig.parts`) with this action codec (the
+action vector passed verbatim), observation, team reward and info.
+
+Randomness: per episode, the offset s from the episode's generator (its
+first draw, as before the composable core); the loss of every step, source
+and hop is the relay network's counter-based draw from its own key (a child
+of the episode's generator), so the same seed gives the same window and the
+same losses whatever the policy and the loss probability.
 
 Batching: the estimator (:mod:`estimators.ukf_relay_se2`) has no batch axis,
 so the estimator updates loop over the copies; the relay chains of every copy
-and source are resolved in one vectorized call, and the state is held in
-arrays indexed by copy.
+are resolved in one vectorized network call per observation slot, and the
+state is held in arrays indexed by copy.
 """
 
 from __future__ import annotations
@@ -168,11 +174,14 @@ import gymnasium
 import numpy as np
 
 import estimators.ukf_relay_se2 as se2
+from coloc_env.backends.ukf_se2 import UkfSe2
 from coloc_env.config import check_choice, check_range
 from coloc_env.data import mrclam
+from coloc_env.networks.relay import Relay
 from coloc_env.rendering import Link, Scene
-from coloc_env.scenarios.base import Scenario
+from coloc_env.scenarios.binding import PresetScenario
 from coloc_env.world.relay import STOP_REASONS, RelayChain, RelayChainLinks
+from coloc_env.worlds.mrclam import Mrclam
 
 NUM_ROBOTS = mrclam.NUM_ROBOTS
 DISTANCE_SCALE = 10.0  # metres per unit in the observation
@@ -244,6 +253,23 @@ class MrclamRelayConfig:
     reward: str = "error"
 
     @property
+    def horizon(self) -> int:
+        """Steps per episode: ``window_steps``."""
+        return self.window_steps
+
+    def parts(self) -> tuple:
+        """The (world, network, backend) configs this flat config stands for: ``mrclam`` with the same run,
+        grid and noise model (the window offset drawn per episode), ``relay`` with the same links and one next
+        hop per measuring robot (``routing="per_source"``), ``ukf_se2``. Reads no data."""
+        world = Mrclam(data=self.data, dt=self.dt, horizon=self.window_steps, noise_model=self.noise_model,
+                       calibration_s=self.calibration_s, initial_position_std=self.initial_position_std,
+                       initial_heading_std=self.initial_heading_std)
+        network = Relay(comm_range=self.comm_range, max_hops=self.max_hops, loss_at_zero=self.loss_at_zero,
+                        loss_length=self.loss_length, routing="per_source", hop_cost=self.hop_cost,
+                        hop_cost_per_m2=self.hop_cost_per_m2)
+        return world, network, UkfSe2(ukf_lambda=self.ukf_lambda, gate=self.gate)
+
+    @property
     def links(self) -> RelayChainLinks:
         return RelayChainLinks(self.comm_range, self.max_hops, self.loss_at_zero, self.loss_length,
                                self.hop_cost, self.hop_cost_per_m2)
@@ -296,34 +322,75 @@ class StepEvent:
     cost: np.ndarray  # (B,) hop cost
 
 
-class MrclamRelayScenario(Scenario):
-    """Batched core of ``mrclam_relay``; see the module docstring for the tables."""
+class MrclamRelayScenario(PresetScenario):
+    """Batched core of ``mrclam_relay``: the binding of :class:`MrclamRelayConfig` on the composable core
+    (``mrclam`` / ``relay`` with ``routing="per_source"`` / ``ukf_se2``); the module docstring has the tables."""
 
     name = "mrclam_relay"
     paper = "mrclam"
     Config = MrclamRelayConfig
     agent_prefix = "robot"
 
+    @classmethod
+    def composition_options(cls, config) -> dict:
+        return {"reward": config.reward}
+
     def __init__(self, config: MrclamRelayConfig, batch: int = 1):
         super().__init__(config, batch)
-        N, B, W = self.num_agents, self.batch, self.horizon
-        self.tables = config.tables()
-        self.data = self.tables.data
-        self.noise = dict(self.tables.noise)
-        self.noise_model = self.tables.noise_model
-        self.links = config.links
-        std = np.array([config.initial_position_std, config.initial_position_std, config.initial_heading_std])
-        self._initial = se2.factor(np.diag(np.tile(std**2, N)))
-        self.start = np.zeros(B, dtype=int)
-        self.k = np.zeros(B, dtype=int)
-        self.estimate = np.zeros((B, N, 3))
-        self.P_ii = np.zeros((B, N, 3, 3))
-        self.phi = np.zeros((B, N, 3, 3))
-        self.sigma = np.zeros((B, N, N, 3, 3))
+        N, B = self.num_agents, self.batch
         self.dead_reckoning = np.zeros((B, N, 3))
-        self._loss_uniforms = np.zeros((B, W, N, N - 1))
-        self.event = self._empty_event(B)
-        self._reward = np.zeros((B, N))
+        self.measured = np.zeros((B, N))
+
+    # --- the parts' state, by the scenario's names ----------------------------------------
+    @property
+    def tables(self) -> ReplayTables:
+        return self.world.tables
+
+    @property
+    def data(self) -> mrclam.MrclamData:
+        return self.world.data
+
+    @property
+    def noise_model(self) -> mrclam.NoiseModel:
+        return self.world.noise_model
+
+    @property
+    def noise(self) -> dict:
+        return dict(self.tables.noise)
+
+    @property
+    def start(self) -> np.ndarray:
+        """The window offset s of each copy (B,)."""
+        return self.world.start
+
+    @property
+    def estimate(self) -> np.ndarray:
+        """Each robot's pose estimate (B, N, 3): after a step, the prediction to k + 1."""
+        return self.backend.estimate
+
+    @property
+    def P_ii(self) -> np.ndarray:
+        return self.backend.P_ii
+
+    @property
+    def phi(self) -> np.ndarray:
+        return self.backend.phi
+
+    @property
+    def sigma(self) -> np.ndarray:
+        return self.backend.sigma
+
+    @property
+    def event(self) -> StepEvent:
+        """The last step's partners, chains (by source), applied and refused observations and hop cost."""
+        backend = self.backend
+        return StepEvent(partner=backend.partner.copy(), relay=backend.chains, used=backend.used.copy(),
+                         landmarks=backend.landmarks_applied.copy(), rejected=backend.rejected.copy(),
+                         measured=self.measured.copy(), cost=self.network.cost_sent.sum(axis=-1))
+
+    def joint_cov(self, b: int) -> np.ndarray:
+        """The joint covariance (3N, 3N) of copy b that the factors stand for."""
+        return self.backend.joint_cov(b)
 
     # --- description ------------------------------------------------------------
     @property
@@ -350,144 +417,59 @@ class MrclamRelayScenario(Scenario):
         return gymnasium.spaces.Box(-np.inf, np.inf, shape=(dim,), dtype=np.float32)
 
     # --- dynamics ------------------------------------------------------------------
-    def reset(self, rngs, env_index=None) -> None:
-        idx = self._indices(env_index)
-        if len(rngs) != len(idx):
-            raise ValueError(f"reset needs one generator per copy: {len(idx)} copies, {len(rngs)} generators")
-        N, W = self.num_agents, self.horizon
-        span = self.data.steps - W  # offsets 0 .. T - 1 - W
-        for c, rng in enumerate(rngs):
-            b = idx[c]
-            self.start[b] = rng.integers(0, span)
-            self._loss_uniforms[b] = rng.random((W, N, N - 1))
-            self.k[b] = 0
-            self.estimate[b] = self.data.groundtruth[self.start[b]]
-            self.dead_reckoning[b] = self.data.groundtruth[self.start[b]]
-            self.P_ii[b], self.phi[b], self.sigma[b] = self._initial.P_ii, self._initial.phi, self._initial.sigma
-        fresh = self._empty_event(len(idx))
-        for name in ("partner", "used", "landmarks", "rejected", "measured", "cost"):
-            getattr(self.event, name)[idx] = getattr(fresh, name)
-        rows = (idx[:, None] * N + np.arange(N)).ravel()
-        for name in ("chain", "length", "hop_distance", "stop"):
-            getattr(self.event.relay, name)[rows] = getattr(fresh.relay, name)
-        self._reward[idx] = 0.0
+    def part_generators(self, rng):
+        # The world draws the window offset from the episode's generator itself, as this scenario always did
+        # (its first draw); the network (the loss uniforms, now counter-based from its key) and the backend
+        # draw from children.
+        network, backend = rng.spawn(2)
+        return rng, network, backend
 
-    def _empty_event(self, count: int) -> StepEvent:
-        N = self.num_agents
-        relay = RelayChain(chain=np.full((count * N, N), -1), length=np.zeros(count * N, dtype=int),
-                           hop_distance=np.full((count * N, N - 1), np.nan), stop=np.full(count * N, -1))
-        zeros = np.zeros((count, N))
-        return StepEvent(partner=np.full((count, N), -1), relay=relay, used=np.zeros((count, N), dtype=bool),
-                         landmarks=zeros.copy(), rejected=zeros.copy(), measured=zeros.copy(), cost=np.zeros(count))
+    def reset(self, rngs, env_index=None) -> None:
+        super().reset(rngs, env_index)
+        idx = self._indices(env_index)
+        self.dead_reckoning[idx] = self.data.groundtruth[self.start[idx]]
+        self.measured[idx] = 0.0
 
     def decode_actions(self, actions) -> np.ndarray:
-        """Actions (B, N, 1 + N) -> int array, after checking finiteness, integrality and range."""
+        """Actions (B, N, 1 + N) -> the parts' blocks, verbatim: the world's ``partner`` (never its "every
+        robot" entry N) and the network's per-source ``next_hop`` table (N = stop; itself = stop, as there)."""
         N = self.num_agents
         relay = f"action[1:] (whom to relay each source's chain to, {N} = stop)"
         return self.check_discrete_actions(actions, ("action[0] (whose measurement to use)", *[relay] * N))
 
     def absolute_step(self) -> np.ndarray:
         """The data step a = s + k of each copy (B,)."""
-        return self.start + self.k
+        return self.world.absolute_step()
 
-    def step(self, actions) -> None:
-        if np.any(self.k >= self.horizon):
-            raise RuntimeError("step() on a copy whose episode is over; reset it first")
-        decoded = self.decode_actions(actions)
-        event = self.resolve_chains(decoded)
-        self.measurement_update(event)
-        self.time_update()
-
-    def resolve_chains(self, actions: np.ndarray) -> StepEvent:
-        """Partners and relay chains of every copy and source from decoded actions (B, N, 1 + N)."""
-        B, N = self.batch, self.num_agents
-        a = self.absolute_step()
-        ids = np.arange(N)
-        choice = actions[..., 0]  # (B, N)
-        first = self.tables.first_index[a]  # (B, N, N)
-        recorded = first[np.arange(B)[:, None], ids[None, :], choice] >= 0
-        attempt = (choice != ids[None, :]) & recorded
-        partner = np.where(attempt, choice, -1)
-        positions = self.data.groundtruth[a, :, :2]  # (B, N, 2)
-        # row (b, m): the chain of source m; holder h passes to actions[b, h, 1 + m]
-        routing = np.swapaxes(actions[..., 1:], 1, 2).reshape(B * N, N)
-        relay = self.links.resolve(np.repeat(positions, N, axis=0), np.tile(ids, B),
-                                   np.where(attempt, choice, ids[None, :]).ravel(), routing,
-                                   self._loss_uniforms[np.arange(B), self.k].reshape(B * N, N - 1))
-        off = ~attempt.ravel()
-        relay.chain[off] = -1
-        relay.length[off] = 0
-        relay.hop_distance[off] = np.nan
-        relay.stop[off] = -1
-        cost = self.links.cost(relay.hop_distance).sum(axis=-1).reshape(B, N).sum(axis=-1)
-        measured = (first >= 0).sum(axis=-1).astype(float)
-        zeros = np.zeros((B, N))
-        return StepEvent(partner=partner, relay=relay, used=np.zeros((B, N), dtype=bool), landmarks=zeros.copy(),
-                         rejected=zeros.copy(), measured=measured, cost=cost)
-
-    def measurement_update(self, event: StepEvent) -> None:
-        """UKF-DCL of every copy: landmark sightings and delivered robot measurements, in file order."""
-        d, N, gate, lam = self.data, self.num_agents, self.config.gate, self.config.ukf_lambda
-        self.event = event
-        a = self.absolute_step()
+    def advance(self, decoded) -> None:
+        self.measured = (self.tables.first_index[self.absolute_step()] >= 0).sum(axis=-1).astype(float)
+        super().advance(decoded)
+        u = self.readings.inputs[..., :2]  # u'[a], the noise model's odometry the backend predicted with
         for b in range(self.batch):
-            chosen = self.tables.first_index[a[b], np.arange(N), np.maximum(event.partner[b], 0)]
-            chosen = np.where(event.partner[b] >= 0, chosen, -1)
-            x = self.estimate[b]
-            f = se2.FactoredCov(self.P_ii[b], self.phi[b], self.sigma[b])
-            s = d.measurements_at(int(a[b]))
-            for j in range(s.start, s.stop):
-                m, subject = int(d.meas_robot[j]), int(d.meas_subject[j])
-                z = np.array([d.meas_range[j], d.meas_bearing[j]])
-                R = self.tables.measurement_cov[j]  # from the measured range
-                if subject > N:
-                    x, f, ok = se2.dcl_update(x, f, [m], z, R, measured_in_chain=False,
-                                              landmark=d.landmarks[subject - N - 1], lam=lam, gate=gate)
-                    event.landmarks[b, m] += ok
-                    event.rejected[b, m] += not ok
-                    continue
-                row = b * N + m
-                if chosen[m] != j or event.relay.length[row] < 2:
-                    continue
-                chain = event.relay.chain[row, :event.relay.length[row]]
-                x, f, ok = se2.dcl_update(x, f, chain, z, R, lam=lam, gate=gate)
-                event.used[b, m] = ok
-                event.rejected[b, m] += not ok
-            self.estimate[b], self.P_ii[b], self.phi[b], self.sigma[b] = x, f.P_ii, f.phi, f.sigma
-
-    def time_update(self) -> None:
-        """Every robot predicts a -> a+1 from the model's odometry of step a; rewards against Vicon at a+1."""
-        a = self.absolute_step()
-        u = self.noise_model.odometry(self.data, a)  # (B, N, 2) corrected u'[a] (earlier raw steps, >= 0)
-        q = self.noise_model.odometry_var(u)  # (B, N, 2) per-step, per-robot variances
-        for b in range(self.batch):
-            f = se2.FactoredCov(self.P_ii[b], self.phi[b], self.sigma[b])
-            x, f = se2.time_update_factored(self.estimate[b], f, u[b], self.data.dt, q[b])
-            self.estimate[b], self.P_ii[b], self.phi[b], self.sigma[b] = x, f.P_ii, f.phi, f.sigma
             self.dead_reckoning[b] = se2.motion(self.dead_reckoning[b], u[b], self.data.dt)[0]
-        self.k = self.k + 1
+
+    def compute_reward(self) -> np.ndarray:
+        """The team's: minus the mean over robots of the error (or RMS) after the time update to k + 1, minus the
+        hop cost of the step's chains."""
         if self.config.reward == "error":
             loss = self.position_error().mean(axis=-1)
         else:
             loss = np.sqrt(self.own_traces()).mean(axis=-1)
-        self._reward = np.repeat((-loss - self.event.cost)[:, None], self.num_agents, axis=1)
+        cost = self.network.cost_sent.sum(axis=-1)
+        return np.repeat((-loss - cost)[:, None], self.num_agents, axis=1)
 
     # --- views -------------------------------------------------------------------------
     def truth(self) -> np.ndarray:
         """Vicon poses (B, N, 3) at the current step."""
-        return self.data.groundtruth[self.absolute_step()]
+        return self.world.poses()
 
     def position_error(self) -> np.ndarray:
-        """||p_hat_i - p_i|| (B, N), metres, against Vicon."""
+        """||p_hat_i - p_i|| (B, N), metres, against Vicon, of the current estimate (after a step: k + 1)."""
         return np.linalg.norm(self.estimate[..., :2] - self.truth()[..., :2], axis=-1)
 
     def own_traces(self) -> np.ndarray:
         """tr of each robot's position covariance (B, N), m^2."""
         return self.P_ii[..., 0, 0] + self.P_ii[..., 1, 1]
-
-    def joint_cov(self, b: int) -> np.ndarray:
-        """The joint covariance (3N, 3N) of copy b that the factors stand for."""
-        return se2.FactoredCov(self.P_ii[b], self.phi[b], self.sigma[b]).joint()
 
     def distances(self) -> np.ndarray:
         """Vicon distances between robots at the current step (B, N, N)."""
@@ -510,39 +492,36 @@ class MrclamRelayScenario(Scenario):
         """Mean distance error ||p_hat_i - p_i|| over the steps and robots (as ``relay_ukf``)."""
         return np.asarray(errors, float).mean(axis=(-2, -1))
 
-    def reward(self) -> np.ndarray:
-        return self._reward.copy()
-
-    def done(self) -> np.ndarray:
-        return self.k >= self.horizon
-
     def state(self) -> np.ndarray:
         log_var = np.log(np.diagonal(self.P_ii, axis1=-2, axis2=-1)).reshape(self.batch, -1)
         return np.concatenate([self.observation().reshape(self.batch, -1), log_var], axis=-1).astype(np.float32)
 
     def info(self) -> dict[str, np.ndarray]:
         B, N = self.batch, self.num_agents
-        event = self.event
+        backend, chains = self.backend, self.backend.chains
         truth = self.truth()
-        delivered = event.relay.next_hop(N).reshape(B, N, N) >= 0  # (copy, source, holder)
         team = lambda values: np.repeat(np.asarray(values)[:, None], N, axis=1)  # noqa: E731
+        error = self.position_error()
         return {
             "true_position": truth[..., :2].copy(),
             "estimated_position": self.estimate[..., :2].copy(),
-            "error": self.position_error(),
+            "position_error": error,
+            "error": error.copy(),
             "heading_error": np.abs(se2.wrap(self.estimate[..., 2] - truth[..., 2])),
             "trace": self.own_traces(),
             "dead_reckoning_error": np.linalg.norm(self.dead_reckoning[..., :2] - truth[..., :2], axis=-1),
-            "measured": event.measured.copy(),
-            "partner": event.partner.copy(),
-            "used": event.used.copy(),
-            "landmarks": event.landmarks.copy(),
-            "rejected": event.rejected.copy(),
-            "chain_length": event.relay.length.reshape(B, N).copy(),
-            "chain_stop": event.relay.stop.reshape(B, N).copy(),
-            "communication": delivered.sum(axis=1).astype(float),
-            "hops": team(event.relay.hops.reshape(B, N).sum(axis=-1)),
-            "hop_cost": team(event.cost),
+            "measured": self.measured.copy(),
+            "partner": backend.partner.copy(),
+            "used": backend.used.copy(),
+            "landmarks": backend.landmarks_applied.copy(),
+            "rejected": backend.rejected.copy(),
+            "chain_length": chains.length.reshape(B, N).copy(),
+            "chain_stop": chains.stop.reshape(B, N).copy(),
+            "messages_sent": self.network.messages_sent.copy(),
+            "floats_sent": self.network.floats_sent.copy(),
+            "communication": self.network.messages_sent.copy(),
+            "hops": team(self.network.messages_sent.sum(axis=-1)),
+            "hop_cost": team(self.network.cost_sent.sum(axis=-1)),
             "step": team(self.k),
         }
 
@@ -550,16 +529,17 @@ class MrclamRelayScenario(Scenario):
         N, k, start = self.num_agents, int(self.k[b]), int(self.start[b])
         truth = self.data.groundtruth[start + k, :, :2]
         x0, x1, y0, y1 = self.tables.extent
+        chains = self.backend.chains
         links, notes = [], []
         for m in range(N):
             row = b * N + m
-            hops = [int(p) for p in self.event.relay.chain[row] if p >= 0]
+            hops = [int(p) for p in chains.chain[row] if p >= 0]
             links += [Link(source=p, target=q, value=1.0, label=(f"{m}:range" if h == 0 else f"{m}:{h + 1}"))
                       for h, (p, q) in enumerate(zip(hops[:-1], hops[1:], strict=True))]
             if hops:
-                notes.append(f"chain {' -> '.join(map(str, hops))} ({STOP_REASONS[self.event.relay.stop[row]]})")
+                notes.append(f"chain {' -> '.join(map(str, hops))} ({STOP_REASONS[chains.stop[row]]})")
         notes.append(f"mean error {self.position_error()[b].mean():.3f} m, "
-                     f"{int(self.event.landmarks[b].sum())} landmark sightings")
+                     f"{int(self.backend.landmarks_applied[b].sum())} landmark sightings")
         centre = np.array([0.5 * (x0 + x1), 0.5 * (y0 + y1)])
         # the map holds the run's tracks and every landmark, with a margin for the ellipses
         landmarks = np.asarray(self.data.landmarks, float)

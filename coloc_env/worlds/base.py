@@ -67,6 +67,9 @@ class World:
         self.batch = int(batch)
         self.horizon = int(horizon)
         self.k = np.zeros(self.batch, dtype=int)
+        # Whether the backend reads Readings.fix (set by the composition from Backend.reads_fixes): a world whose
+        # fixes cost a computation of their own (mrclam's pseudo-fixes from its own-navigation filters) skips it.
+        self.fixes_needed = True
 
     # --- description ------------------------------------------------------------------
     @property

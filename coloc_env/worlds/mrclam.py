@@ -51,7 +51,9 @@ sigma_fix^2 = max(sigma_r^2, r^2 (sigma_b^2 + sigma_theta^2)) + |sigma_landmark|
 reduction: the sightings share the heading error) in ``extra["fix_var"]``;
 ``fix_noise_var()`` is one variance for backends that take a constant (the median over
 the run's sightings at the initial heading variance). ``ukf_se2`` uses the sightings
-themselves and ignores the fixes (using both would count them twice). ``extra`` keys:
+themselves and ignores the fixes (using both would count them twice); with a backend that reads no
+fixes (``Backend.reads_fixes`` False) the own-navigation filters are not run and ``fix_valid`` stays
+False. ``extra`` keys:
 
 | key                    | shape         | meaning                                                           |
 |------------------------|---------------|-------------------------------------------------------------------|
@@ -219,6 +221,9 @@ class MrclamWorld(World):
             self.start[idx[c]] = rng.integers(0, span) if self.config.start is None else self.config.start
         mean, cov = self.initial_belief()
         self.nav_pose[idx], self.nav_cov[idx] = mean[idx], cov[idx]
+        self.fix_valid[idx] = False
+        if not self.fixes_needed:  # nobody reads the pseudo-fixes: no own-navigation filters to run
+            return
         for b in idx:
             self._navigate(int(b))
 
@@ -249,6 +254,9 @@ class MrclamWorld(World):
 
     def advance(self) -> None:
         """k -> k + 1: the own-navigation filters predict with u'[a], then take the sightings of a + 1."""
+        if not self.fixes_needed:
+            super().advance()
+            return
         a = self.absolute_step()
         N = self.num_agents
         u = self.noise_model.odometry(self.data, a)[:, :N]

@@ -1,9 +1,10 @@
-"""``PRESETS["mrclam_relay"]`` names (mrclam, relay per source, ukf_se2): its parts reproduce the scenario.
+"""``PRESETS["mrclam_relay"]`` names (mrclam, relay per source, ukf_se2): the preset is those parts plus its codec.
 
-The scenario draws the window offset and the loss uniforms of every step, source and hop from its single
-episode generator; the composition's world draws the offset from its own child generator (in the same way,
-so the scenario reset with that child replays the same window) and the relay network its losses from its
-own key. Handed the network's loss uniforms, the scenario gives the composition's estimates to 1e-9.
+The preset (a binding on the core) draws the window offset from its episode generator itself and its losses
+from its network's key (a child of that generator); the plain composition's world draws the offset from its
+own child generator (in the same way, so the preset reset with that child replays the same window) and the
+relay network its losses from another child's key. Handed the composition's network key, the preset gives the
+composition's estimates to 1e-9 under any routing, hop budget, range limit and loss.
 """
 
 import dataclasses
@@ -17,7 +18,6 @@ from pettingzoo.test import parallel_api_test
 import agents
 import coloc_env
 from coloc_env.data import mrclam
-from coloc_env.draws import uniforms
 from coloc_env.networks.relay import Relay
 from coloc_env.scenarios.mrclam_relay import MrclamRelayConfig, MrclamRelayScenario
 from coloc_env.world.relay import STOP_REASONS
@@ -88,16 +88,12 @@ def _lockstep(seed, steps, scenario_fields, network_fields, inject, action_seed=
     scenario = MrclamRelayScenario(MrclamRelayConfig(data=DATASET6, window_steps=steps, **scenario_fields))
     scenario.reset([np.random.default_rng(seed).spawn(3)[0]])  # the composition's world child of the seed
     assert scenario.start[0] == core.world.start[0]
+    if inject:  # the binding's network draws its losses from its own key: hand it the composition's
+        scenario.network.keys[:] = core.network.keys
     rng = np.random.default_rng(action_seed)
     stats = {"used": 0, "stops": np.zeros(len(STOP_REASONS), int), "split_routes": 0, "cost": 0.0}
     for _ in range(steps):
         action = _scenario_action(scenario, rng)
-        if inject:
-            readings = core.world.readings(action[None, :, :1])
-            observer, subject = readings.extra["obs_observer"][0], readings.extra["obs_subject"][0]
-            for j in np.flatnonzero((observer >= 0) & (subject >= 0)):  # the network's uniforms of slot j
-                u = uniforms(core.network.keys, (core.world.k, 1, int(j)), (N,))[0, :N - 1]
-                scenario._loss_uniforms[0, scenario.k[0], observer[j]] = u
         scenario.step(action[None])
         env.step({agent: action[i] for i, agent in enumerate(env.possible_agents)})
         backend = core.backend

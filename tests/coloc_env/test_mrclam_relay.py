@@ -137,12 +137,13 @@ def test_same_seed_gives_identical_episodes_and_reset_continues_the_generator():
     assert len(first_a) == 16 and data_equivalence(first_a, first_b)
     other = play(make(window_steps=15), agents.make_policy("random", env_a, seed=5), 12)
     assert not data_equivalence(first_a, other)
-    start, uniforms = env_a.scenario.start.copy(), env_a.scenario._loss_uniforms.copy()
+    # the loss draws are counter-based from the network's key, drawn at reset
+    start, keys = env_a.scenario.start.copy(), env_a.scenario.network.keys.copy()
     env_a.reset()
     env_b.reset()
     assert env_a.scenario.start[0] == env_b.scenario.start[0]
-    np.testing.assert_array_equal(env_a.scenario._loss_uniforms, env_b.scenario._loss_uniforms)
-    assert env_a.scenario.start[0] != start[0] and not np.array_equal(env_a.scenario._loss_uniforms, uniforms)
+    np.testing.assert_array_equal(env_a.scenario.network.keys, env_b.scenario.network.keys)
+    assert env_a.scenario.start[0] != start[0] and not np.array_equal(env_a.scenario.network.keys, keys)
 
 
 @pytest.mark.parametrize("noise_model", ["calibrated", "baseline"])
