@@ -10,18 +10,27 @@ layout, so that presets and compositions look alike:
   estimate (a filled dot in the agent's colour, drawn above the truth), a
   thin segment from truth to estimate, the covariance ellipses (2 sigma,
   magnified by a 1-2-5 factor named in the legend when the largest would be
-  under 2 % of the map), particle clouds, recent true paths and landmarks;
-  equal metres on both axes, the limits widened (never narrowed) to the
-  panel's shape, so a long thin scene is not squashed into a strip. Where
-  the scene has particles and one cloud is too small to see, an inset in
-  the map's emptiest corner shows that agent's particles and ellipse at
-  true scale;
+  under 2 % of the map), particle clouds, recent true paths, landmarks and,
+  where the truth is a tracked target, the agents themselves (triangles);
+  the view holds the truth, the estimates, their ellipses, the agents and
+  the landmarks with 8 % of the map to spare (the scene's extent is the
+  least it shows); equal metres on both axes, the limits widened (never
+  narrowed) to the panel's shape, so a long thin scene is not squashed into
+  a strip. Where the scene has particles and one cloud is too small to see,
+  an inset in the map's emptiest corner shows that agent's particles and
+  ellipse at true scale;
 * the network (middle): one node per participant, labelled beside it with
   its full name, coloured as on the map (white: a node that is not an
   agent; a red ring: a node with a status such as a GPS fault), and the
-  links of the current step coloured by what they carried;
+  links of the current step, their colour and width showing what they
+  carried. The names and the link labels are placed when the frame is drawn,
+  where none overlaps another or covers a node (a link label beside its
+  arrow, crossing no other link where it can); a label that finds no room
+  is left out and counted under the panel, and with more than
+  ``MAX_LINK_LABELS`` links none is written (the legend says so);
 * the legend (right): each agent's colour, every mark, what an arrow and a
-  dashed link mean, and what the link colours count (with samples);
+  dashed link mean, and what the link colours and widths count (with
+  samples);
 * the notes (bottom), below the panels.
 
 The figure has exactly two axes (map and network; the inset is a child of
@@ -52,6 +61,7 @@ ELLIPSE_SIGMA = 2.0
 # (by a 1-2-5 factor) so that its largest one spans about ELLIPSE_TARGET_FRACTION.
 ELLIPSE_MIN_FRACTION = 0.02
 ELLIPSE_TARGET_FRACTION = 0.05
+MAP_MARGIN = 0.08  # of the map's largest side, kept free round everything drawn
 MAX_NOTE_LINES = 5
 LEGEND_ROWS = 30  # legend entries that fit one column of a 600-pixel frame
 PANELS_FRACTION = 0.74  # of the figure's width, left of the legend
@@ -88,6 +98,10 @@ class Scene:
     scale: the panel fits them), ``node_labels`` their names and
     ``node_status`` a short word per node (e.g. "GPS fault", "" for none),
     drawn as a red ring round the node and named in the legend; ``links``: what moved over the network this step.
+    ``sensors`` (N, 2): where the agents are when ``truth`` is a target they track (drawn as triangles in
+    the agents' colours). ``extent`` (x0, x1, y0, y1) is the least the map shows: the map grows beyond
+    it where something drawn (truth, estimates, their ellipses, sensors, landmarks) would lie outside it or
+    closer than ``MAP_MARGIN`` to its edge; without it the map frames all of them and the trails.
     """
 
     title: str
@@ -107,6 +121,7 @@ class Scene:
     landmarks: np.ndarray | None = None
     estimate_labels: list[str] | None = None
     node_status: list[str] = field(default_factory=list)
+    sensors: np.ndarray | None = None
 
 
 def _ellipse_points(mean: np.ndarray, cov: np.ndarray, scale: float = ELLIPSE_SIGMA, count: int = 48) -> np.ndarray:
@@ -175,17 +190,29 @@ def separate_nodes(positions: np.ndarray, min_distance: float, iterations: int =
     return pos
 
 
-def _map_limits(scene: Scene, points: list[np.ndarray]) -> tuple[float, float, float, float]:
-    """The scene's extent, or the box around everything drawn (10 % margin, at least 1 m)."""
-    if scene.extent is not None:
-        return tuple(float(v) for v in scene.extent)
-    stacked = np.concatenate([np.asarray(p, float).reshape(-1, 2) for p in points if p is not None and np.size(p)])
-    stacked = stacked[np.all(np.isfinite(stacked), axis=1)]
+def _finite_points(points: list) -> np.ndarray:
+    arrays = [np.asarray(p, float).reshape(-1, 2) for p in points if p is not None and np.size(p)]
+    stacked = np.concatenate(arrays) if arrays else np.zeros((0, 2))
+    return stacked[np.all(np.isfinite(stacked), axis=1)]
+
+
+def _map_limits(scene: Scene, points: list) -> tuple[float, float, float, float]:
+    """The map's box: around everything in ``points`` (what is drawn) with a margin of ``MAP_MARGIN``
+    of its largest side (at least 1 m), and never less than the scene's ``extent``."""
+    stacked = _finite_points(points)
     if not len(stacked):
-        return (-1.0, 1.0, -1.0, 1.0)
+        return tuple(float(v) for v in scene.extent) if scene.extent is not None else (-1.0, 1.0, -1.0, 1.0)
     low, high = stacked.min(axis=0), stacked.max(axis=0)
-    pad = np.maximum(0.1 * (high - low).max(), 1.0)
-    return (low[0] - pad, high[0] + pad, low[1] - pad, high[1] + pad)
+    if scene.extent is not None:
+        x0, x1, y0, y1 = (float(v) for v in scene.extent)
+        span = max(x1 - x0, y1 - y0, float((high - low).max()))
+    else:
+        span = float((high - low).max())
+    pad = max(MAP_MARGIN * span, 1.0)
+    box = (low[0] - pad, high[0] + pad, low[1] - pad, high[1] + pad)
+    if scene.extent is None:
+        return box
+    return (min(x0, box[0]), max(x1, box[1]), min(y0, box[2]), max(y1, box[3]))
 
 
 def fit_aspect(limits: tuple[float, float, float, float], height_over_width: float) -> tuple[float, ...]:
@@ -224,8 +251,22 @@ def _draw_map(ax, scene: Scene, agent_names, handles: list, agent_handles: list)
 
     truth = np.atleast_2d(np.asarray(scene.truth, float))
     estimates = None if scene.estimates is None else np.atleast_2d(np.asarray(scene.estimates, float))
-    x0, x1, y0, y1 = _map_limits(scene, [truth, estimates, scene.trails, scene.landmarks])
+    sensors = None if scene.sensors is None or not np.size(scene.sensors) else \
+        np.atleast_2d(np.asarray(scene.sensors, float))
+    # what the map must show; a recent path only where the scene sets no extent (it may run off the map)
+    drawn = [truth, estimates, scene.landmarks, sensors] + ([scene.trails] if scene.extent is None else [])
+    x0, x1, y0, y1 = _map_limits(scene, drawn)
     span = max(x1 - x0, y1 - y0)
+    magnification = ellipse_magnification(scene.covariances, span)
+    ellipses = []
+    if estimates is not None and scene.covariances is not None:
+        ellipses = [_ellipse_points(est, np.asarray(scene.covariances[i], float), scale=ELLIPSE_SIGMA * magnification)
+                    for i, est in enumerate(estimates)]
+        # the ellipses inside too, with the margin; a diverged one (far larger than the scene) widens the
+        # view by at most the scene's size each side, so that the rest is not shrunk to a dot
+        span_now = max(x1 - x0, y1 - y0)
+        low, high = np.array([x0 - span_now, y0 - span_now]), np.array([x1 + span_now, y1 + span_now])
+        x0, x1, y0, y1 = _map_limits(scene, drawn + [np.clip(e, low, high) for e in ellipses])
 
     if scene.trails is not None and np.size(scene.trails):
         for trail in np.asarray(scene.trails, float):
@@ -240,23 +281,25 @@ def _draw_map(ax, scene: Scene, agent_names, handles: list, agent_handles: list)
             ax.scatter(cloud[:, 0], cloud[:, 1], s=4, alpha=0.35, color=_agent_colour(i), lw=0, zorder=2)
         handles.append(Line2D([], [], ls="", marker=".", ms=6, color="0.4", alpha=0.6, label="particles (belief)"))
 
-    self_localisation = estimates is not None and len(estimates) == len(truth)
+    self_localisation = estimates is not None and len(estimates) == len(truth) and sensors is None
     truth_label = "true position" if self_localisation or len(truth) > 1 else "target (truth)"
+    if sensors is not None:
+        for i, p in enumerate(sensors):
+            ax.scatter([p[0]], [p[1]], marker="^", s=70, color=_agent_colour(i), edgecolor="black", lw=0.7, zorder=5)
+        handles.append(Line2D([], [], ls="", marker="^", ms=8, mfc="0.8", mec="black", mew=0.7,
+                              label="agent position"))
     ax.scatter(truth[:, 0], truth[:, 1], marker="o", s=110, facecolor="none", edgecolor="black", lw=1.4, zorder=5)
     handles.append(Line2D([], [], ls="", marker="o", ms=9, mfc="none", mec="black", mew=1.4, label=truth_label))
 
     if estimates is not None:
         labels = _estimate_labels(scene, agent_names, len(estimates))
-        magnification = ellipse_magnification(scene.covariances, span)
         for i, est in enumerate(estimates):
             colour = _agent_colour(i)
             if self_localisation:
                 ax.plot([truth[i, 0], est[0]], [truth[i, 1], est[1]], color=colour, lw=0.9, zorder=4)
             ax.scatter([est[0]], [est[1]], s=34, color=colour, edgecolor="white", lw=0.6, zorder=6)
-            if scene.covariances is not None:
-                pts = _ellipse_points(est, np.asarray(scene.covariances[i], float),
-                                      scale=ELLIPSE_SIGMA * magnification)
-                ax.plot(pts[:, 0], pts[:, 1], color=colour, lw=1.3, zorder=4)
+            if ellipses:
+                ax.plot(ellipses[i][:, 0], ellipses[i][:, 1], color=colour, lw=1.3, zorder=4)
             agent_handles.append(Line2D([], [], ls="", marker="o", ms=6, color=colour, label=labels[i]))
         if self_localisation:
             handles.append(Line2D([], [], color="0.3", lw=0.9, label="error (truth to estimate)"))
@@ -268,9 +311,8 @@ def _draw_map(ax, scene: Scene, agent_names, handles: list, agent_handles: list)
     x0, x1, y0, y1 = fit_aspect((x0, x1, y0, y1), shape)  # widen the shorter side: never a strip
     inset_corner = None
     if estimates is not None and wants_belief_inset(scene, (x0, x1, y0, y1)):
-        drawn = [truth, estimates] + ([np.asarray(scene.trails, float).reshape(-1, 2)]
-                                      if scene.trails is not None else [])
-        inset_corner, crowd = emptiest_corner(np.concatenate(drawn), (x0, x1, y0, y1), INSET_SIZE)
+        inset_corner, crowd = emptiest_corner(_finite_points([truth, estimates, scene.trails, sensors]),
+                                              (x0, x1, y0, y1), INSET_SIZE)
         if crowd:  # widen the map to the right so that the inset hides nothing
             x1 = x1 + INSET_SIZE / (1.0 - INSET_SIZE) * (x1 - x0)
             x0, x1, y0, y1 = fit_aspect((x0, x1, y0, y1), shape)
@@ -374,7 +416,161 @@ def link_colour_samples(scene: Scene) -> list[float]:
     return values
 
 
-def _draw_network(net, scene: Scene, agent_names, handles: list, colour_handles: list) -> None:
+def _link_width(frac: float, crowded: bool) -> float:
+    """Line width (points) of a link carrying ``frac`` of the scale's maximum (thinner when crowded)."""
+    return (0.6 + 1.4 * frac) if crowded else (1.0 + 2.0 * frac)
+
+
+class _NetworkLabels:
+    """The texts of the network panel, placed when the figure is drawn (after the layout: where they hit
+    nothing). An artist of the panel drawn before its texts (:meth:`draw`, lowest zorder) moves them."""
+
+    def __init__(self, net, centres: np.ndarray, names: list[str], node_radius_pt: float, node_font: float,
+                 directed: bool):
+        from matplotlib.artist import Artist
+
+        self.net, self.centres, self.node_radius_pt, self.directed = net, centres, node_radius_pt, directed
+        self.node_texts = [self._text(name, node_font, 7, "node-label",
+                                      {"boxstyle": "round,pad=0.1", "fc": "white", "ec": "none", "alpha": 0.7})
+                           for name in names]
+        # (text, from, to, source node, target node), from and to where the link is drawn
+        self.links: list[tuple] = []
+        self.note = net.text(0.5, 0.0, "", transform=net.transAxes, fontsize=FONT_SIZE - 2, ha="center", va="top",
+                             color="0.3", gid="link-label-note", visible=False)
+        self.note.set_in_layout(False)
+        self.written = self.left_out = 0
+
+        placer = Artist()
+        placer.draw = lambda renderer: self.place(renderer)
+        placer.set_zorder(-100)  # before every text of the panel
+        placer.set_in_layout(False)
+        net.add_artist(placer)
+
+    def _text(self, label: str, font: float, zorder: int, gid: str, bbox: dict):
+        text = self.net.text(0.0, 0.0, label, fontsize=font, ha="center", va="center", zorder=zorder,
+                             color="black", bbox=bbox, gid=gid)
+        text.set_in_layout(False)  # inside the panel: the layout need not make room for it
+        return text
+
+    def add_link(self, label: str, start: np.ndarray, end: np.ndarray, source: int, target: int) -> None:
+        if len(label) > 16:  # a long label on two or more short lines fits between the links
+            label = "\n".join(textwrap.wrap(label, 14)) or label
+        text = self._text(label, FONT_SIZE - 2, 4, "link-label",
+                          {"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.85})
+        self.links.append((text, start, end, source, target))
+
+    def place(self, renderer) -> None:
+        """Each node's name beside it on the first free side (away from the layout's middle first); each
+        link label at the first free place along its link (beside its arrow when directed, crossing no
+        other link if it can), or nowhere, counted in a note under the panel."""
+        net = self.net
+        to_px = net.transData.transform
+        to_data = net.transData.inverted().transform
+        px_per_pt = net.figure.dpi / 72.0
+        frame = tuple(net.get_window_extent(renderer).extents)
+        centres = to_px(self.centres) if len(self.centres) else np.zeros((0, 2))
+        radius = self.node_radius_pt * px_per_pt
+        occupied = [(x - radius, y - radius, x + radius, y + radius) for x, y in centres]
+
+        middle = centres.mean(axis=0) if len(centres) else np.zeros(2)
+        for i, text in enumerate(self.node_texts):
+            w, h = _text_size(text, renderer, 0.1)
+            away = centres[i] - middle
+            base = float(np.arctan2(away[1], away[0])) if np.hypot(*away) > 1.0 else np.pi / 4
+            best, best_cost = None, np.inf
+            for turn in (0, 30, -30, 60, -60, 90, -90, 120, -120, 150, -150, 180):
+                angle = base + np.radians(turn)
+                u = np.array([np.cos(angle), np.sin(angle)])
+                for gap in (3.0, 10.0):
+                    c = centres[i] + u * (radius + gap) + 0.5 * u * np.array([w, h])
+                    box = (c[0] - w / 2, c[1] - h / 2, c[0] + w / 2, c[1] + h / 2)
+                    cost = _collision(box, occupied, frame)
+                    if cost < best_cost - 1e-9:
+                        best, best_cost = (c, box), cost
+                    if cost == 0.0:
+                        break
+                if best_cost == 0.0:
+                    break
+            text.set_position(to_data(best[0]))
+            occupied.append(best[1])
+
+        self.written = self.left_out = 0
+        # nearer the sender first (many links end at one receiver), then further along
+        steps = ((0.4, 0.5, 0.3, 0.6, 0.25, 0.7, 0.2, 0.75, 0.15, 0.85) if self.directed
+                 else (0.5, 0.62, 0.38, 0.72, 0.28, 0.8, 0.2))
+        drawn = {(source, target) for *_, source, target in self.links}
+        # points along every labelled link, so that a label goes where it crosses no other link if it can
+        along = np.linspace(0.0, 1.0, 25)[:, None]
+        lines = [to_px(start) + along * (to_px(end) - to_px(start)) for _, start, end, *_ in self.links]
+        sizes = [_text_size(text, renderer, 0.15) for text, *_ in self.links]
+        for number in sorted(range(len(self.links)), key=lambda k: -sizes[k][0] * sizes[k][1]):  # largest first
+            text, start, end, source, target = self.links[number]
+            a, b = to_px(start), to_px(end)
+            d = b - a
+            normal = np.array([-d[1], d[0]]) / max(float(np.hypot(*d)), 1e-9)
+            w, h = sizes[number]
+            half = 0.5 * (abs(normal[0]) * w + abs(normal[1]) * h) + 1.0  # centre to edge across the link
+            if self.directed:  # beside its own arrow; the other side only where no arrow comes back
+                sides = [half, half + 6.0, half + 14.0] + ([] if (target, source) in drawn
+                                                           else [-half, -half - 6.0, -half - 14.0])
+            else:  # on the line, else beside it
+                sides = [0.0, half, -half, half + 8.0, -half - 8.0]
+            others = np.concatenate([p for k, p in enumerate(lines) if k != number] or [np.zeros((0, 2))])
+            placed = None
+            for avoid_lines, side, t in ((v, s, t) for v in (True, False) for s in sides for t in steps):
+                c = a + t * d + side * normal
+                box = (c[0] - w / 2, c[1] - h / 2, c[0] + w / 2, c[1] + h / 2)
+                if _collision(box, occupied, frame) > 0.0:
+                    continue
+                if avoid_lines and np.any((others[:, 0] > box[0]) & (others[:, 0] < box[2])
+                                          & (others[:, 1] > box[1]) & (others[:, 1] < box[3])):
+                    continue
+                if not avoid_lines and len(others) and np.min(np.hypot(*(others - c).T)) < _segment_distance(c, a, b):
+                    continue  # on other links and nearer one of them than its own: it would be read as theirs
+                placed = (c, box)
+                break
+            text.set_visible(placed is not None)
+            if placed is None:
+                self.left_out += 1
+                continue
+            text.set_position(to_data(placed[0]))
+            occupied.append(placed[1])
+            self.written += 1
+        self.note.set_text(f"labels of {self.left_out} of {len(self.links)} links left out (no room)")
+        self.note.set_visible(self.left_out > 0)
+
+
+def _segment_distance(point: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
+    """Distance from ``point`` to the segment from ``a`` to ``b``."""
+    d = b - a
+    t = float(np.clip(np.dot(point - a, d) / max(float(np.dot(d, d)), 1e-12), 0.0, 1.0))
+    return float(np.hypot(*(point - a - t * d)))
+
+
+def _boxes_overlap(a, b) -> float:
+    """Area (pixels^2) that two display boxes (x0, y0, x1, y1) share."""
+    w = min(a[2], b[2]) - max(a[0], b[0])
+    h = min(a[3], b[3]) - max(a[1], b[1])
+    return max(w, 0.0) * max(h, 0.0)
+
+
+def _collision(box, occupied: list, frame) -> float:
+    """How much ``box`` hits the ``occupied`` boxes or leaves ``frame`` (0: free)."""
+    inside = _boxes_overlap(box, frame)
+    outside = (box[2] - box[0]) * (box[3] - box[1]) - inside
+    return outside + sum(_boxes_overlap(box, other) for other in occupied)
+
+
+def _text_size(text, renderer, pad: float) -> tuple[float, float]:
+    """Width and height (pixels) of ``text`` with its white box (``pad`` in font sizes) and a pixel to spare."""
+    extent = text.get_window_extent(renderer)
+    pad_px = 2.0 * pad * text.get_fontsize() * text.figure.dpi / 72.0 + 2.0
+    return extent.width + pad_px, extent.height + pad_px
+
+
+def _draw_network(net, scene: Scene, agent_names, handles: list, colour_handles: list) -> _NetworkLabels:
+    """The nodes and links of ``scene`` on the panel ``net``; returns the texts to place once the figure
+    is drawn (:class:`_NetworkLabels`)."""
     import matplotlib as mpl
     from matplotlib.lines import Line2D
 
@@ -382,12 +578,17 @@ def _draw_network(net, scene: Scene, agent_names, handles: list, colour_handles:
     span = float(np.ptp(pos, axis=0).max()) if len(pos) > 1 else 1.0
     span = span if span > 1e-9 else 1.0
     pos = (pos - 0.5 * (pos.min(axis=0) + pos.max(axis=0))) / span  # unit-size, centred, whatever the scale
-    pos = separate_nodes(pos, min_distance=0.32)
+    pos = separate_nodes(pos, min_distance=min(0.32, 2.2 / max(len(pos), 1)))  # a ring of 16 keeps its shape
     cmap = mpl.colormaps["viridis"]
     value_max = max(float(scene.link_value_max), 1e-12)
     names = [str(n) for n in scene.node_labels] + [str(i) for i in range(len(scene.node_labels), len(pos))]
     agent_index = {name: i for i, name in enumerate(agent_names or [])}
+    crowded = len(scene.links) > MAX_LINK_LABELS
+    many_nodes = len(pos) > 12
+    node_size = 100.0 if many_nodes else 150.0
 
+    pending = _NetworkLabels(net, pos, names, node_radius_pt=0.5 * np.sqrt(node_size) + 1.2,
+                             node_font=FONT_SIZE - 2 if many_nodes else FONT_SIZE - 1, directed=scene.directed)
     for link in scene.links:
         a, b = pos[link.source], pos[link.target]
         frac = float(np.clip(link.value / value_max, 0.0, 1.0))
@@ -397,26 +598,18 @@ def _draw_network(net, scene: Scene, agent_names, handles: list, colour_handles:
         normal = np.array([-d[1], d[0]]) / (np.linalg.norm(d) + 1e-12) * (0.03 if scene.directed else 0.0)
         style = "-|>" if scene.directed else "-"
         net.annotate("", xy=b + normal, xytext=a + normal,
-                     arrowprops={"arrowstyle": style, "color": colour, "lw": 1.0 + 2.0 * frac,
-                                 "shrinkA": 9, "shrinkB": 9, "mutation_scale": 12,
+                     arrowprops={"arrowstyle": style, "color": colour, "lw": _link_width(frac, crowded),
+                                 "shrinkA": 9, "shrinkB": 9, "mutation_scale": 8 if crowded else 12,
                                  "linestyle": "-" if link.value > 0 else "--"}, zorder=2)
-        if link.label and len(scene.links) <= MAX_LINK_LABELS:
-            mid = 0.5 * (a + b) + 2.0 * normal
-            net.text(mid[0], mid[1], link.label, fontsize=FONT_SIZE - 2, ha="center", va="center", zorder=4,
-                     bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.8})
+        if link.label and not crowded:
+            pending.add_link(link.label, a + normal, b + normal, int(link.source), int(link.target))
     status = list(scene.node_status) + [""] * (len(pos) - len(scene.node_status))
     for i, p in enumerate(pos):
         index = agent_index.get(names[i], i if not agent_index and i < len(AGENT_COLOURS) else None)
         colour = _agent_colour(index) if index is not None else NON_AGENT_COLOUR
         ring = FAULT_COLOUR if status[i] else ("white" if index is not None else "0.35")
-        net.scatter([p[0]], [p[1]], s=150, color=colour, edgecolor=ring, lw=2.2 if status[i] else 1.2, zorder=6)
-        text = names[i]
-        # the label sits beside the node, on the side away from the layout's centre (fewer collisions)
-        right, up = p[0] >= 0.0, p[1] >= 0.0
-        net.annotate(text, xy=(p[0], p[1]), xytext=(8 if right else -8, 6 if up else -6), textcoords="offset points",
-                     fontsize=FONT_SIZE - 1, ha="left" if right else "right", va="bottom" if up else "top",
-                     zorder=7, color="black",
-                     bbox={"boxstyle": "round,pad=0.1", "fc": "white", "ec": "none", "alpha": 0.7})
+        net.scatter([p[0]], [p[1]], s=node_size, color=colour, edgecolor=ring, lw=2.2 if status[i] else 1.2,
+                    zorder=6)
     margin = 0.45  # room for the labels beside the outer nodes
     limits = (pos[:, 0].min() - margin, pos[:, 0].max() + margin, pos[:, 1].min() - 0.6 * margin,
               pos[:, 1].max() + 0.6 * margin)
@@ -431,7 +624,7 @@ def _draw_network(net, scene: Scene, agent_names, handles: list, colour_handles:
     handles.append(Line2D([], [], color=cmap(0.7), lw=2, marker=">" if scene.directed else None, ms=5,
                           label=arrow))
     handles.append(Line2D([], [], color=(0.75, 0.75, 0.75), lw=1, ls="--", label="link that carried nothing"))
-    if len(scene.links) > MAX_LINK_LABELS and any(link.label for link in scene.links):
+    if crowded and any(link.label for link in scene.links):
         handles.append(Line2D([], [], ls="", label=f"(link labels hidden: {len(scene.links)} links)"))
     if any(s for s in status):
         words = ", ".join(sorted({s for s in status if s}))
@@ -442,10 +635,11 @@ def _draw_network(net, scene: Scene, agent_names, handles: list, colour_handles:
                               label="node (not an agent)"))
 
     label = scene.link_value_name or "link value"
-    colour_handles.append(Line2D([], [], ls="", label="\n".join(textwrap.wrap(f"link colour: {label}", 34))))
+    colour_handles.append(Line2D([], [], ls="", label="\n".join(textwrap.wrap(f"link colour and width: {label}", 34))))
     for value in link_colour_samples(scene):
         frac = float(np.clip(value / value_max, 0.0, 1.0))
-        colour_handles.append(Line2D([], [], color=cmap(frac), lw=1.0 + 2.0 * frac, label=f"{value:g}"))
+        colour_handles.append(Line2D([], [], color=cmap(frac), lw=_link_width(frac, crowded), label=f"{value:g}"))
+    return pending
 
 
 def _header(text: str):
