@@ -15,56 +15,42 @@ actions.
 | nlos_horizon       | gao2016   | nlos_orbit   | random_delay     | afge                      |
 | mrclam_relay       | MRCLAM    | mrclam       | relay            | ukf_se2                   |
 
-How exactly the parts reproduce each binding (tests/coloc_env):
+How exactly the parts reproduce each preset (tests/coloc_env):
 
-* relay_ukf: a binding on the core (:mod:`coloc_env.scenarios.binding`): its scenario *is* the
-  composition of circles (no anchors) / relay / ukf_dcl with the paper's action codec, observation and
-  team reward; ``PRESETS["relay_ukf"]`` is :meth:`RelayUKFScenario.compose` of the default config;
-* gps_denied_nbp: a binding too: gps_denied / broadcast (the ranging radius, no loss) / dnbp;
-* bandwidth_fusion: drift / bandwidth / bandwidth_fusion with the paper's component tables gives
-  the scenario's estimates to 1e-9, reported one step earlier (the composition scores the one-step
-  prediction xhat(k) against x(k), eq. 12's pairing; test_target_compositions);
-* lossy_fusion, nlos_horizon: equal to 1e-9 when the scenario is handed the link outcomes (delays,
-  losses) the network drew; on its own seed the scenario draws them from its single episode
-  generator, while a network draws from its own child generator, so that every backend sees the
-  same world (test_target_compositions, test_nlos_composition).
-* mrclam_relay: mrclam / relay (``routing="per_source"``: the scenario's routing table, one next hop per
-  measuring robot) / ukf_se2, with the scenario's action vector passed verbatim, gives the scenario's
-  estimates and covariance factors to 1e-9 when the scenario replays the window the world drew and gets
-  the loss uniforms the network drew (the scenario draws the offset and the losses from its episode
-  generator; the world and the network from their own children), and the same messages per holder and
-  hop cost per step (test_mrclam_preset_parts). Its reward stays the binding's: the team's mean error
-  after the time update minus the team's hop cost (a composition: each agent's own error after the
-  measurement update, minus ``communication_cost`` per message; the relay network accounts the hop cost
-  in ``cost_sent`` but the composed reward does not subtract it); so does its observation.
+* relay_ukf, gps_denied_nbp, lossy_fusion, bandwidth_fusion, mrclam_relay: bindings on the core
+  (:mod:`coloc_env.scenarios.binding`): the scenario *is* the composition of its parts with the
+  paper's action codec, observation, reward and info; ``PRESETS[name]`` is
+  :meth:`~coloc_env.scenarios.binding.PresetScenario.compose` of the default config. relay_ukf:
+  circles (no anchors) / relay (one next hop per holder) / ukf_dcl, team reward. gps_denied_nbp:
+  gps_denied / broadcast (the ranging radius, no loss) / dnbp. lossy_fusion: target_cv /
+  bernoulli_delay / prediction_compensation; its link outcomes are the network's draws
+  (``LossyFusionScenario.link_outcomes``). bandwidth_fusion: drift / bandwidth (the preset's scored
+  selection) / bandwidth_fusion, reporting xhat(k+1) after step k (the plain composition scores the
+  one-step prediction xhat(k) against x(k), eq. 12's pairing). mrclam_relay: mrclam / relay
+  (``routing="per_source"``: one next hop per measuring robot) / ukf_se2, the action vector passed
+  verbatim, the team's mean error after the time update minus the team's hop cost. Each binding's test
+  shows that the plain composition, handed the same world draws and network key, gives the preset's
+  estimates (test_target_compositions, test_mrclam_preset_parts, test_relay_ukf_env,
+  test_gps_denied_composition).
+* nlos_horizon: nlos_orbit / random_delay / afge is equal to 1e-9 under AHG when the scenario is
+  handed the delays the network drew (test_nlos_composition). It is not a binding yet: the scenario
+  lets the agent see the packets that arrived at k before it picks the horizon for k, while the core
+  decides before the readings of k (a composed afge agent sees step k - 1's packets and costs; AHG
+  itself runs inside the backend on k's, so the paper policy is the same).
 """
 
 from __future__ import annotations
 
-from coloc_env.backends.fusion import BandwidthFusion, PredictionCompensation
 from coloc_env.backends.nlos import Afge
-from coloc_env.backends.ukf_se2 import UkfSe2
 from coloc_env.composition import Composition
-from coloc_env.networks import Relay
-from coloc_env.networks.bandwidth import Bandwidth
-from coloc_env.networks.bernoulli_delay import BernoulliDelay
 from coloc_env.networks.random_delay import RandomDelay
 from coloc_env.scenarios import REGISTRY
 from coloc_env.scenarios.binding import PresetScenario
-from coloc_env.worlds.drift import Drift
-from coloc_env.worlds.mrclam import Mrclam
 from coloc_env.worlds.nlos_orbit import NlosOrbit
-from coloc_env.worlds.target_cv import TargetCv
 
 _PARTS = {
-    "bandwidth_fusion": (Drift(), Bandwidth(), BandwidthFusion()),
-    "lossy_fusion": (TargetCv(), BernoulliDelay(), PredictionCompensation()),
     "nlos_horizon": (NlosOrbit(), RandomDelay(), Afge()),
-    # data=None: $COLOC_MRCLAM_DATA is read only when an env is built; a loss-free relay with the scenario's
-    # per-source routing table (test_mrclam_preset_parts)
-    "mrclam_relay": (Mrclam(), Relay(loss_at_zero=0.0, routing="per_source"), UkfSe2()),
 }
-
 
 
 def _preset(name: str) -> Composition:

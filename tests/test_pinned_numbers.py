@@ -187,11 +187,17 @@ REPRODUCTION = {
 
 # --- the pins (commit 6f148d7) -----------------------------------------------------------------
 PINNED_ROLLOUTS = {
+    # bandwidth_fusion became a binding on the composable core (issue 14): drift / bandwidth / bandwidth_fusion with
+    # its action codec; the world draws the episode from the episode's generator in draw_episode's order and the
+    # bandwidth network draws nothing, so rewards, observations and the vector pin are 6f148d7's bit for bit. The
+    # infos now report position_error (m; the "error" pin sums it, it summed the squared error before) and trace
+    # (tr Sigma_i, m^2; None before). Paper policy T1P1, 500 episodes, seeds 1e6 + e: J_50 - 1.44 = 29.2431 +- 0.1955
+    # before and after, the per-episode costs identical.
     "bandwidth_fusion": {
-        "paper": {"steps": 25, "reward": -17.268696353831736, "error": 17.268696353831736, "trace": None,
-                  "obs_sum": 0.094229552894830704},
-        "random": {"steps": 25, "reward": -21.09272043628452, "error": 21.09272043628452, "trace": None,
-                   "obs_sum": -6.0589263513684273},
+        "paper": {"steps": 25, "reward": -17.268696353831736, "error": 39.658217579576494,
+                  "trace": 14.7804029124928, "obs_sum": 0.094229552894830704},
+        "random": {"steps": 25, "reward": -21.09272043628452, "error": 42.829322103017724,
+                   "trace": 17.675288143042007, "obs_sum": -6.0589263513684273},
     },
     # lossy_fusion became a binding on the composable core (issue 14): the link outcomes are the
     # bernoulli_delay network's counter-based draws (from its own child generator), no longer the last block

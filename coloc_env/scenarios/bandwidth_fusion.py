@@ -15,6 +15,17 @@ neighbours' intermediate estimates (at least ``min_per_link`` and at most
 with weights p_ij. The agents choose what the paper fixes by hand: the
 component selection T and the fusion weights p.
 
+The preset is the composition ``drift`` / ``bandwidth`` / ``bandwidth_fusion``
+(:meth:`BandwidthFusionConfig.parts`) with this action codec, observation,
+reward and info. The world draws the episode (x(0), w, v_j) from the
+episode's generator itself, in the order of :func:`draw_episode`; the
+bandwidth network delivers every selected component on time and draws
+nothing. Timing: the backend reports xhat_i(k) at step k (the composition's
+pairing of J_K); the preset reports, after step k, the estimate xhat_i(k+1)
+it has just formed with y(k), against x(k+1), so that the reward credits a
+step's selection and weights at once (the same sequence of estimates, one
+step earlier than the composition's).
+
 Action (one per receiver, the same Box for all agents)
 ------------------------------------------------------
 ``Box(-1, 1, shape=((N-1)*n + N,), float64)``; neighbours are indexed relative
@@ -62,15 +73,30 @@ term sum_i tr M(0) = 1.44 is the paper's J_50 (eq. 12) for one realization.
 
 Termination: none; truncation after ``horizon`` steps (the paper's 50).
 
-``infos[agent]``: ``true_position``, ``estimated_position``, ``error``
-(squared), ``trace_error`` (tr Sigma_i), ``bound_trace`` (tr M_i),
-``components_received`` (and ``communication``, the same count: the key every
-scenario uses for what ``coloc evaluate`` reports as communication),
-``weights`` (the node's row p_i., absolute order), ``step``.
+``infos[agent]`` (after step k: time k+1; at reset: time 0)
+-------------------------------------------------------------
+| key                    | meaning                                                                 |
+|------------------------|-------------------------------------------------------------------------|
+| ``true_position``      | x(k+1) (n,), m (the paper's state is the 3-D position); the same for all|
+| ``estimated_position`` | the node's xhat_i(k+1) (n,), m                                          |
+| ``position_error``     | ||xhat_i(k+1) - x(k+1)|| (m), the distance of the estimate              |
+| ``error``              | its square (m^2), the summand of J_K (eq. 12); the episode metric sums  |
+|                        | it over the steps and nodes                                             |
+| ``trace``              | tr Sigma_i(k+1) (m^2): the node's exact error covariance (the paper's   |
+|                        | (10); the state is the position), the same as ``trace_error``           |
+| ``trace_error``        | tr Sigma_i(k+1) (m^2)                                                   |
+| ``bound_trace``        | tr M_i(k+1) (m^2), the node's own bound (eq. 19)                        |
+| ``components_received``| components the node took from its neighbours this step (0 at reset)    |
+| ``communication``      | the same count as a float (what ``coloc evaluate`` reports)             |
+| ``messages_sent``      | messages the node sent this step, as the network counts them: one per   |
+|                        | receiver that takes a component of it                                   |
+| ``floats_sent``        | their floats: the components its receivers took from it                 |
+| ``weights``            | the node's row p_i. of fusion weights (N,), absolute order              |
+| ``step``               | k + 1 (0 at reset)                                                      |
 
 Batching: every step of B copies is one set of numpy calls (stacked matmul
-and solve); the only per-copy loop is at reset, where each copy draws its
-whole episode's noise from its own generator.
+and solve; one network call per receiver); the only per-copy loop is at
+reset, where each copy draws its whole episode's noise from its own generator.
 
 Arguments (fields of :class:`BandwidthFusionConfig`, defaults = the paper)
 ------------------------------------------------------------------------
@@ -105,11 +131,15 @@ import gymnasium
 import numpy as np
 
 import estimators.bandwidth_fusion as bf
+from coloc_env.backends.fusion import BandwidthFusion
 from coloc_env.config import as_array, check_choice, check_psd, check_range
+from coloc_env.networks.bandwidth import Bandwidth
 from coloc_env.rendering import Link, Scene, ring_layout
 from coloc_env.scenarios.base import Scenario
+from coloc_env.scenarios.binding import PresetScenario
 from coloc_env.world import BandwidthBudget, LinearMotion, LinearSensor
 from coloc_env.world.noise import covariance_factor, sample_gaussian
+from coloc_env.worlds.drift import Drift
 
 _COMPONENT_NAMES = "xyzabcdefghijklmnop"
 ENUMERATED_DECODE_LIMIT = 2048  # feasible selections up to which decoding lists them (108 in the paper's setting)
@@ -235,6 +265,32 @@ class BandwidthFusionConfig:
             measurement_noise=self.sensor_noise,
         )
 
+    def parts(self) -> tuple:
+        """The (world, network, backend) configs this flat config stands for: ``drift`` with the same system
+        and prior, ``bandwidth`` with the same budget (:class:`ScoredBandwidth`), ``bandwidth_fusion``."""
+        world = Drift(num_agents=self.num_uavs, transition=self.transition, drift=self.drift,
+                      measurement=self.measurement, process_noise=self.process_noise,
+                      measurement_noise=self.measurement_noise, initial_state=self.initial_state,
+                      initial_cov=self.initial_cov, horizon=self.horizon)
+        network = ScoredBandwidth(budget=self.budget, min_per_link=self.min_per_link,
+                                  max_per_link=self.max_per_link, exact_budget=self.exact_budget)
+        return world, network, BandwidthFusion(weight_logit_scale=self.weight_logit_scale)
+
+
+@dataclass(frozen=True)
+class ScoredBandwidth(Bandwidth):
+    """The ``bandwidth`` network as the preset drives it: the same rules and delivery, but a budget is not
+    refused beyond ``MAX_SELECTIONS`` feasible selections (the limit of a Discrete selection action). The
+    preset's action is a score per (neighbour, component), decoded by the argmax over the feasible
+    selections (:meth:`BandwidthBudget.best_selection`); the network's selection index only carries the
+    result (int64, exact for the ~7e11 selections of N = 16)."""
+
+    def budget_for(self, num_agents: int, dim: int, prefix: str = "network.") -> BandwidthBudget:
+        links = BandwidthBudget(num_agents, dim, self.budget, self.min_per_link,
+                                dim if self.max_per_link is None else self.max_per_link, self.exact_budget)
+        links.validate(prefix)
+        return links
+
 
 @dataclass(frozen=True)
 class NoiseFactors:
@@ -254,7 +310,8 @@ def noise_factors(config: BandwidthFusionConfig) -> NoiseFactors:
 
 def draw_episode(config: BandwidthFusionConfig, rng: np.random.Generator,
                  factors: NoiseFactors | None = None) -> dict[str, np.ndarray]:
-    """One episode's randomness, drawn from ``rng`` in the order ``reset`` draws it for a copy.
+    """One episode's randomness, drawn from ``rng`` in the order ``reset`` draws it for a copy (the ``drift``
+    world draws it from the episode's generator itself: :meth:`BandwidthFusionScenario.part_generators`).
 
     Returns ``initial_state`` x(0) ~ N(xhat(0), M(0)) (n,), ``process_noise`` w(0..K-1) (K, n)
     and ``measurement_noise`` v_j(0..K-1) of every node (K, N, m). The reproduction
@@ -271,42 +328,64 @@ def draw_episode(config: BandwidthFusionConfig, rng: np.random.Generator,
     return {"initial_state": x0, "process_noise": process, "measurement_noise": measurement}
 
 
-class BandwidthFusionScenario(Scenario):
-    """Batched core of ``bandwidth_fusion``; see the module docstring for the table."""
+class BandwidthFusionScenario(PresetScenario):
+    """Batched core of ``bandwidth_fusion``: the binding of :class:`BandwidthFusionConfig` on the composable core
+    (``drift`` / ``bandwidth`` / ``bandwidth_fusion``); the module docstring has the table."""
 
     name = "bandwidth_fusion"
     paper = "zhao2020"
     Config = BandwidthFusionConfig
 
+    @classmethod
+    def composition_options(cls, config) -> dict:
+        return {"reward": config.reward}
+
     def __init__(self, config: BandwidthFusionConfig, batch: int = 1):
         super().__init__(config, batch)
-        self.model = config.fusion_model()
-        self.motion = config.motion
-        self.sensor = LinearSensor(np.asarray(config.measurement, float), self.model.measurement_noise[0])
-        self.links = config.links
-        self.n = self.model.state_dim
-        self.m = self.model.measurement_dim
+        self.n = self.world.state_dim
+        self.m = self.world.measurement_dim
+        links = self.links
         # Up to a few thousand selections one matmul + argmax over the list is the faster decoder; beyond,
         # the dynamic programme (BandwidthBudget.best_selection). Both give the same selection (a test holds it).
-        self._feasible = self.links.feasible if self.links.size <= ENUMERATED_DECODE_LIMIT else None
+        self._feasible = links.feasible if links.size <= ENUMERATED_DECODE_LIMIT else None
         self._feasible_flat = (None if self._feasible is None
-                               else self._feasible.reshape(self.links.size, -1).astype(float))
+                               else self._feasible.reshape(links.size, -1).astype(float))
         # weight_order[i] = absolute node index of [self, neighbour 0, ...] of receiver i
-        self._weight_order = np.concatenate([np.arange(config.num_uavs)[:, None], self.links.neighbours], axis=1)
-        self._initial_estimate = np.asarray(config.initial_state, float)
+        self._weight_order = self.backend.weight_order
         self._initial_cov = np.asarray(config.initial_cov, float)
-        self._factors = noise_factors(config)
-        B, N, n, m, K = self.batch, self.num_agents, self.n, self.m, self.horizon
-        self.k = np.zeros(B, dtype=int)
-        self.truth = np.zeros((B, n))
-        self.trail = np.zeros((B, K + 1, n))
-        self.fusion = bf.initial_state(self.model, self._initial_estimate, self._initial_cov, (B,))
-        self._process = np.zeros((B, K, n))
-        self._meas_noise = np.zeros((B, K, N, m))
+        B, N, n = self.batch, self.num_agents, self.n
         self.ages = np.zeros((B, N, N - 1, n))
         self.selection = np.zeros((B, N, N - 1, n), dtype=bool)
-        self.weights = np.full((B, N, N), 1.0 / N)
-        self._reward = np.zeros((B, N))
+
+    # --- the parts' state, by the paper's names ------------------------------------------
+    @property
+    def model(self) -> bf.FusionModel:
+        return self.backend.model
+
+    @property
+    def fusion(self) -> bf.FusionState:
+        """Every node's xhat_i, M_i and the exact joint error covariance (:class:`estimators.bandwidth_fusion`)."""
+        return self.backend.fusion
+
+    @property
+    def links(self) -> BandwidthBudget:
+        """The receivers' budget (the network's)."""
+        return self.network.links
+
+    @property
+    def truth(self) -> np.ndarray:
+        """The true state now (B, n): x(k+1) after step k, x(0) at reset."""
+        return self.world.target_state()
+
+    @property
+    def trail(self) -> np.ndarray:
+        """The episode's true states x(0..K) (B, K + 1, n)."""
+        return self.world.truth
+
+    @property
+    def weights(self) -> np.ndarray:
+        """(B, N, N) the fusion weights p_ij of the last step (1/N at reset)."""
+        return self.backend.weights
 
     # --- description ------------------------------------------------------------
     @property
@@ -329,22 +408,29 @@ class BandwidthFusionScenario(Scenario):
         return gymnasium.spaces.Box(-np.inf, np.inf, shape=(dim,), dtype=np.float32)
 
     # --- action encoding --------------------------------------------------------
-    def decode_actions(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Actions (B, N, A) -> receiver-relative selections (B, N, N-1, n) and absolute weights (B, N, N)."""
+    def _decode(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Actions (B, N, A) -> relative selections (B, N, N-1, n), their indices in the feasible order (B, N)
+        and the weight logits (B, N, N), clipped."""
         N, n = self.num_agents, self.n
         actions = np.clip(actions, -1.0, 1.0)
         scores = actions[..., : (N - 1) * n]
         if self._feasible is not None:  # argmax over the listed feasible selections (ties: the first)
-            selection = self._feasible[np.argmax(scores @ self._feasible_flat.T, axis=-1)]
+            index = np.argmax(scores @ self._feasible_flat.T, axis=-1)
+            selection = self._feasible[index]
         else:  # the same argmax by dynamic programming over links, nothing listed
             selection = self.links.best_selection(scores.reshape(*actions.shape[:-1], N - 1, n))
-        logits = self.config.weight_logit_scale * actions[..., (N - 1) * n :]
-        logits = logits - logits.max(axis=-1, keepdims=True)
-        relative = np.exp(logits)
-        relative /= relative.sum(axis=-1, keepdims=True)
-        weights = np.zeros(actions.shape[:-2] + (N, N))
-        np.put_along_axis(weights, np.broadcast_to(self._weight_order, weights.shape), relative, axis=-1)
-        return selection, weights
+            index = self.links.index_of(selection)
+        return selection, index, actions[..., (N - 1) * n :]
+
+    def decode_actions(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Actions (B, N, A) -> receiver-relative selections (B, N, N-1, n) and absolute weights (B, N, N)."""
+        selection, _, logits = self._decode(actions)
+        return selection, self.backend.decode_weights(logits)
+
+    def part_decisions(self, index: np.ndarray, logits: np.ndarray) -> np.ndarray:
+        """The parts' blocks (B, N, 1 + N): the network's ``selection`` (an index in the feasible order) and
+        the backend's ``fusion_weights`` logits (relative order)."""
+        return np.concatenate([np.asarray(index, float)[..., None], logits], axis=-1)
 
     def encode_actions(self, selection: np.ndarray, weights: np.ndarray) -> np.ndarray:
         """The action that decodes exactly to ``selection`` and ``weights``.
@@ -374,70 +460,71 @@ class BandwidthFusionScenario(Scenario):
         return np.concatenate([scores, logit_action], axis=-1)
 
     # --- dynamics ----------------------------------------------------------------
+    def part_generators(self, rng):
+        # The world draws from the episode's generator itself, in draw_episode's order (x(0), w, v), so a
+        # seed gives the episodes of the scenario this binding replaced; the network (which draws nothing
+        # on its lossless links) and the backend get children.
+        network, backend = rng.spawn(2)
+        return rng, network, backend
+
     def reset(self, rngs, env_index=None) -> None:
+        super().reset(rngs, env_index)
         idx = self._indices(env_index)
-        if len(rngs) != len(idx):
-            raise ValueError(f"reset needs one generator per copy: {len(idx)} copies, {len(rngs)} generators")
-        N = self.num_agents
-        for b, rng in zip(idx, rngs, strict=True):
-            # One block per episode so that stepping never loops over copies.
-            episode = draw_episode(self.config, rng, self._factors)
-            self.truth[b] = episode["initial_state"]
-            self._process[b] = episode["process_noise"]
-            self._meas_noise[b] = episode["measurement_noise"]
-        fresh = bf.initial_state(self.model, self._initial_estimate, self._initial_cov, (len(idx),))
-        self.fusion.estimate[idx] = fresh.estimate
-        self.fusion.bound[idx] = fresh.bound
-        self.fusion.error_cov[idx] = fresh.error_cov
-        self.k[idx] = 0
-        self.trail[idx] = 0.0
-        self.trail[idx, 0] = self.truth[idx]
         self.ages[idx] = 0.0
         self.selection[idx] = False  # nothing received before the first step
-        self.weights[idx] = 1.0 / N
-        self._reward[idx] = 0.0
 
     def step(self, actions) -> None:
         actions = self.check_actions(actions)
         if np.any(self.k >= self.horizon):
             raise RuntimeError("step() on a copy whose episode is over; reset it first")
-        selection, weights = self.decode_actions(actions)
-        self.advance(selection, weights)
+        _, index, logits = self._decode(actions)
+        self.advance(self.part_decisions(index, logits))
 
-    def advance(self, selection: np.ndarray, weights: np.ndarray) -> None:
-        """Step with decoded decisions: relative selections (B, N, N-1, n), absolute weights (B, N, N)."""
-        rows = np.arange(self.batch)
-        full = self.links.full_selection(selection)
-        y = self.sensor.measure(self.truth[:, None, :], self._meas_noise[rows, self.k])
-        self.fusion = bf.step(self.model, self.fusion, y, full, weights)
-        self.truth = self.motion.step(self.truth, self._process[rows, self.k])
-        self.k = self.k + 1
-        self.trail[rows, self.k] = self.truth
-        self.ages = np.where(selection, 0.0, self.ages + 1.0)
-        self.selection, self.weights = selection, weights
+    def advance(self, decoded: np.ndarray, weights: np.ndarray | None = None) -> None:
+        """One step of every copy under decoded decisions: the parts' blocks (B, N, 1 + N)
+        (:meth:`part_decisions`), or receiver-relative selections (B, N, N-1, n) with absolute weights
+        (B, N, N) (the fusion weights are then the softmax of their logarithms: the same to rounding, exact
+        for equal weights)."""
+        if weights is not None:
+            index = self.links.index_of(decoded)
+            if np.any(index < 0):
+                raise ValueError("selection does not meet the bandwidth budget for every receiver")
+            with np.errstate(divide="ignore"):  # a zero weight: logit -inf, weight exactly 0
+                logits = np.log(np.take_along_axis(np.asarray(weights, float),
+                                                   np.broadcast_to(self._weight_order, np.shape(weights)), axis=-1))
+            decoded = self.part_decisions(index, logits / self.config.weight_logit_scale)
+        super().advance(decoded)
+        self.selection = self.links.relative_selection(self.backend.delivered_selection)
+        self.ages = np.where(self.selection, 0.0, self.ages + 1.0)
+        self._reward = self.compute_reward()
+
+    def compute_reward(self) -> np.ndarray:
+        """The reward table of the module docstring, after :meth:`advance`: xhat_i(k+1) against x(k+1)."""
         if self.config.reward == "error":
-            loss = np.sum((self.fusion.estimate - self.truth[:, None, :]) ** 2, axis=-1)
+            loss = self._squared_error()
         else:
             loss = bf.node_traces(self.fusion.error_cov, self.num_agents)
-        self._reward = -loss - self.config.component_cost * self.links.components_received(selection)
+        return -loss - self.config.component_cost * self.links.components_received(self.selection)
 
     def initial_cost(self) -> float:
         """The k = 0 term of J_K: sum_i tr M_i(0) = N tr M(0) (1.44 m^2 with the paper's values)."""
         return float(self.num_agents * np.trace(self._initial_cov))
 
+    def episode_error(self, errors: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
+        """The paper's J_K without its k = 0 term: the squared errors summed over the steps and nodes."""
+        return Scenario.episode_error(self, errors, weights)
+
     # --- views -------------------------------------------------------------------
+    def _squared_error(self) -> np.ndarray:
+        """||xhat_i(k+1) - x(k+1)||^2 (B, N) (x(0) and xhat(0) at reset)."""
+        return np.sum((self.fusion.estimate - self.truth[:, None, :]) ** 2, axis=-1)
+
     def observation(self) -> np.ndarray:
         B, N = self.batch, self.num_agents
         log_bound = np.log(np.diagonal(self.fusion.bound, axis1=-2, axis2=-1))
         ages = self.ages.reshape(B, N, -1) / self.horizon
         frac = np.broadcast_to((self.k / self.horizon)[:, None, None], (B, N, 1))
         return np.concatenate([log_bound, ages, frac], axis=-1).astype(np.float32)
-
-    def reward(self) -> np.ndarray:
-        return self._reward.copy()
-
-    def done(self) -> np.ndarray:
-        return self.k >= self.horizon
 
     def state(self) -> np.ndarray:
         node_cov = bf.node_covariances(self.fusion.error_cov, self.num_agents)
@@ -446,14 +533,21 @@ class BandwidthFusionScenario(Scenario):
 
     def info(self) -> dict[str, np.ndarray]:
         B, N = self.batch, self.num_agents
+        error = self._squared_error()
+        exact = bf.node_traces(self.fusion.error_cov, N)
+        received = self.links.components_received(self.selection)
         return {
             "true_position": np.broadcast_to(self.truth[:, None, :], (B, N, self.n)).copy(),
             "estimated_position": self.fusion.estimate.copy(),
-            "error": np.sum((self.fusion.estimate - self.truth[:, None, :]) ** 2, axis=-1),
-            "trace_error": bf.node_traces(self.fusion.error_cov, N),
+            "position_error": np.sqrt(error),
+            "error": error,
+            "trace": exact.copy(),
+            "trace_error": exact,
             "bound_trace": np.trace(self.fusion.bound, axis1=-2, axis2=-1),
-            "components_received": self.links.components_received(self.selection),
-            "communication": self.links.components_received(self.selection).astype(float),
+            "components_received": received,
+            "communication": received.astype(float),
+            "messages_sent": self.network.messages_sent.copy(),
+            "floats_sent": self.network.floats_sent.copy(),
             "weights": self.weights.copy(),
             "step": np.broadcast_to(self.k[:, None], (B, N)).copy(),
         }
@@ -462,7 +556,8 @@ class BandwidthFusionScenario(Scenario):
         N, k = self.num_agents, int(self.k[b])
         node_cov = bf.node_covariances(self.fusion.error_cov[b], N)
         spread = max(1.0, 3.0 * float(np.sqrt(node_cov[:, :2, :2].diagonal(axis1=-2, axis2=-1).max())))
-        centre = self.truth[b, :2]
+        truth = self.truth[b]
+        centre = truth[:2]
         links = []
         for i in range(N):
             for kk, j in enumerate(self.links.neighbours[i]):
@@ -471,7 +566,7 @@ class BandwidthFusionScenario(Scenario):
                 links.append(Link(source=int(j), target=i, value=float(comps.sum()), label=label))
         return Scene(
             title=f"bandwidth_fusion (zhao2020)  k = {k}/{self.horizon}",
-            truth=self.truth[b, :2][None],
+            truth=truth[:2][None],
             estimates=self.fusion.estimate[b, :, :2],
             covariances=node_cov[:, :2, :2],
             trails=self.trail[b, max(0, k - 10) : k + 1, :2][None],

@@ -10,7 +10,7 @@ from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test
 import agents
 import coloc_env
 import estimators.bandwidth_fusion as bf
-from coloc_env.scenarios.bandwidth_fusion import paper_selection, paper_weights
+from coloc_env.scenarios.bandwidth_fusion import draw_episode, paper_selection, paper_weights
 from tests.helpers import play
 
 NAME = "bandwidth_fusion"
@@ -96,9 +96,12 @@ def test_env_with_paper_policy_equals_the_estimator(tables):
     policy = agents.make_policy(f"paper:{tables}", env)
     observations, infos = env.reset(seed=7)
     scenario = env.scenario
-    truth = scenario.truth[0].copy()
-    noise_v, noise_w = scenario._meas_noise[0].copy(), scenario._process[0].copy()
-    model = scenario.model
+    # the episode reset(seed=7) draws: draw_episode on the episode's generator, in its order
+    episode = draw_episode(scenario.config, np.random.default_rng(7))
+    truth = episode["initial_state"]
+    np.testing.assert_array_equal(scenario.truth[0], truth)
+    noise_v, noise_w = episode["measurement_noise"], episode["process_noise"]
+    model = scenario.config.fusion_model()
     state = bf.initial_state(model, np.full(3, 10.0), np.diag([0.19, 0.09, 0.08]))
     selection, weights = paper_selection(tables[:2]), paper_weights(tables[2:])
     k = 0
@@ -112,6 +115,45 @@ def test_env_with_paper_policy_equals_the_estimator(tables):
             np.testing.assert_allclose(infos[agent]["true_position"], truth, atol=1e-12, rtol=0)
             assert rewards[agent] == pytest.approx(-np.sum((state.estimate[i] - truth) ** 2), abs=1e-12)
     assert k == 50
+
+
+def test_infos_carry_the_contract_keys_in_the_presets_units():
+    """position_error is the distance of the estimate, trace the exact tr Sigma_i, and messages_sent /
+    floats_sent what the network counted at each sender: under T1 one message to each receiver that takes a
+    component of it (min_per_link = 1: all N - 1 of them) carrying the components that receiver took."""
+    env = coloc_env.parallel_env(NAME)
+    policy = agents.make_policy("paper", env)
+    observations, infos = env.reset(seed=2)
+    assert all(infos[a]["messages_sent"] == 0 and infos[a]["floats_sent"] == 0 for a in env.possible_agents)
+    T1 = paper_selection("T1")  # [i, j]: receiver i takes these components of j
+    taken_from = T1.sum(axis=-1).sum(axis=0) - 3  # over the receivers, without the node itself
+    for _ in range(4):
+        observations, _, _, _, infos = env.step(policy.act(observations))
+        for j, agent in enumerate(env.possible_agents):
+            info = infos[agent]
+            assert info["position_error"] == np.sqrt(info["error"])
+            assert info["position_error"] == np.linalg.norm(info["estimated_position"] - info["true_position"])
+            assert info["trace"] == info["trace_error"] > 0
+            assert info["messages_sent"] == 3
+            assert info["floats_sent"] == taken_from[j]
+    assert sum(infos[a]["floats_sent"] for a in env.possible_agents) == 4 * 5
+
+
+def test_advance_takes_decoded_selections_and_weights():
+    """advance(selection, weights): the old scenario's entry point (the reproduction's greedy curve) steps the
+    parts with that selection and those weights (to rounding: the backend's softmax of their logarithms)."""
+    env = coloc_env.parallel_env(NAME)
+    env.reset(seed=0)
+    scenario = env.scenario
+    relative = scenario.links.relative_selection(paper_selection("T2"))[None]
+    for name in ("P1", "P3"):
+        weights = paper_weights(name)[None]
+        scenario.advance(relative, weights)
+        np.testing.assert_array_equal(scenario.selection, relative)
+        np.testing.assert_allclose(scenario.weights, weights, rtol=0, atol=1e-15)
+    assert scenario.k[0] == 2
+    with pytest.raises(ValueError, match="budget"):
+        scenario.advance(np.ones_like(relative), weights)
 
 
 def test_every_feasible_selection_and_weights_round_trip_through_the_action():

@@ -36,10 +36,6 @@ def _always(env, k):
     return agents.make_policy("always", env).act({a: None for a in env.possible_agents})
 
 
-def _world_rng(seed):
-    return np.random.default_rng(seed).spawn(3)[0]  # the composition's world child of the episode seed
-
-
 def test_the_matrix_has_the_target_rows_the_issue_names():
     assert ("drift", "bernoulli_delay", "bandwidth_fusion") in OK
     assert ("drift", "ideal", "prediction_compensation") in OK
@@ -53,48 +49,56 @@ def test_the_matrix_has_the_target_rows_the_issue_names():
     assert "cannot carry" in reasons[("drift", "bandwidth", "kalman")]
 
 
-def test_bandwidth_fusion_over_the_bandwidth_network_is_the_scenario():
-    """drift (paper defaults) + bandwidth (budget 5) + bandwidth_fusion with the tables T1, P1 gives the
-    bandwidth_fusion scenario's estimates, errors and rewards on the same episode (1e-9)."""
+def test_the_bandwidth_fusion_preset_is_drift_bandwidth_bandwidth_fusion():
+    """The preset is the composition drift + bandwidth + bandwidth_fusion plus its action codec: on the same
+    seed the composition under the tables T1, P1 (its selection index and zero logits) gives the preset's
+    truth, estimates, errors and traces exactly (the same draws and the same arithmetic), one step
+    later (the backend reports xhat_i(k) at step k, the preset xhat_i(k+1) after step k), and the same
+    messages and floats; the preset's reward is its own (xhat(k+1) against x(k+1))."""
     seed = 5
     spec = coloc_env.compose(world="drift", network="bandwidth", backend="bandwidth_fusion")
-    probe = coloc_env.parallel_env(spec)
-    probe.reset(seed=seed)
-    links = probe.unwrapped.scenario.network.links
+    env = coloc_env.parallel_env(spec)
+    env.reset(seed=seed)
+    composed = env.unwrapped.scenario
+    links = composed.network.links
     relative = links.relative_selection(paper_selection("T1"))
     index = links.index_of(relative)
     assert np.all(index >= 0)
-    N = len(probe.possible_agents)
-
-    def actions(env, k):
-        return {a: np.concatenate([[index[i]], np.zeros(N)]).astype(np.float32)
-                for i, a in enumerate(env.possible_agents)}
-
-    infos, rewards, env = _episode(spec, actions, seed)
-    scenario = BandwidthFusionScenario(env.unwrapped.scenario.world.config.scenario_config())
-    scenario.reset([_world_rng(seed)])
-    weights = paper_weights("P1")[None]
-    # step k reports xhat_i(k) (data up to k-1, the pairing of J_K) where the scenario reports xhat_i(k+1)
-    # after its step k: the composition's step k is the scenario after k steps
-    first = infos[0]
-    np.testing.assert_allclose(_stack([first], "true_position", env)[0], scenario.info()["true_position"][0][:, :2],
-                               rtol=0, atol=1e-9)
-    np.testing.assert_allclose(_stack([first], "estimated_position", env)[0], np.full((N, 2), 10.0), rtol=0, atol=0)
-    for k, info in enumerate(infos[1:], start=1):
-        scenario.advance(relative[None], weights)
-        ref = scenario.info()
-        np.testing.assert_allclose(_stack([info], "true_position", env)[0], ref["true_position"][0][:, :2],
-                                   rtol=0, atol=1e-9)
-        np.testing.assert_allclose(_stack([info], "estimated_position", env)[0], ref["estimated_position"][0][:, :2],
-                                   rtol=0, atol=1e-9)
-        np.testing.assert_allclose(_stack([info], "error", env)[0], ref["error"][0], rtol=0, atol=1e-9)
-        np.testing.assert_allclose([rewards[k][a] for a in env.possible_agents], scenario.reward()[0],
-                                   rtol=0, atol=1e-9)
-        np.testing.assert_allclose(_stack([info], "trace", env)[0], _position_trace(scenario), rtol=0, atol=1e-9)
+    N = len(env.possible_agents)
+    preset_env = coloc_env.parallel_env("bandwidth_fusion")
+    _, preset_info = preset_env.reset(seed=seed + 1)  # another episode, then made the same
+    preset = preset_env.unwrapped.scenario
+    assert isinstance(preset, BandwidthFusionScenario)
+    preset.world.truth[:] = composed.world.truth
+    preset.world.observations[:] = composed.world.observations
+    preset.network.keys[:] = composed.network.keys
+    paper = preset.encode_actions(paper_selection("T1"), paper_weights("P1"))
+    np.testing.assert_array_equal(preset.decode_actions(paper[None])[0][0], relative)
+    composition_action = {a: np.concatenate([[index[i]], np.zeros(N)]).astype(np.float32)
+                          for i, a in enumerate(env.possible_agents)}
+    assert (preset.composition.world, preset.composition.backend) == (spec.world, spec.backend)
+    assert isinstance(preset.network, type(composed.network)) and preset.links == links
+    keys = ("true_position", "estimated_position", "error")
+    k = 0
+    while env.agents:
+        _, _, _, _, info = env.step(composition_action)
+        # the composition's step k reports time k: the preset after k steps (before its step k)
+        ref = {key: preset.info()[key][0] for key in keys}
+        np.testing.assert_array_equal(_stack([info], "true_position", env)[0], ref["true_position"][:, :2])
+        np.testing.assert_array_equal(_stack([info], "estimated_position", env)[0], ref["estimated_position"][:, :2])
+        np.testing.assert_array_equal(_stack([info], "error", env)[0], ref["error"])
+        np.testing.assert_array_equal(_stack([info], "trace", env)[0], _position_trace(preset))
+        _, rewards, _, _, preset_info = preset_env.step({a: paper[i] for i, a in enumerate(env.possible_agents)})
+        # the preset's step k: the components it received, its floats and messages are the network's of step k
+        for key in ("messages_sent", "floats_sent"):
+            np.testing.assert_array_equal(_stack([preset_info], key, env)[0], _stack([info], key, env)[0])
+        np.testing.assert_array_equal([rewards[a] for a in env.possible_agents],
+                                      -np.sum((preset.fusion.estimate[0] - preset.truth[0]) ** 2, axis=-1))
+        k += 1
     # every receiver took exactly its budget: 5 components a step, counted at the senders
-    floats = _stack(infos, "floats_sent", env)
-    assert np.all(floats.sum(axis=1) == N * 5)
-    assert len(infos) == 50
+    assert np.all(_stack([preset_info], "components_received", env) == 5)
+    assert np.sum(_stack([preset_info], "floats_sent", env)) == N * 5
+    assert k == 50
 
 
 def _position_trace(scenario):
