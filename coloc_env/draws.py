@@ -14,6 +14,8 @@ the same copy alone, bit for bit.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
@@ -32,18 +34,27 @@ def draw_keys(rngs, dtype=np.uint64) -> np.ndarray:
     return np.array([rng.integers(0, 2**63, dtype=np.int64) for rng in rngs], dtype=np.int64).astype(dtype)
 
 
+@functools.lru_cache(maxsize=64)
+def _cell_offsets(shape: tuple[int, ...]) -> np.ndarray:
+    """GOLDEN * (idx + 1) of every cell of ``shape`` (read-only; the same for every call of that shape)."""
+    cells = np.arange(int(np.prod(shape, dtype=np.int64)), dtype=np.uint64)
+    offsets = (_GOLDEN * (cells + np.uint64(1))).reshape(shape)
+    offsets.flags.writeable = False
+    return offsets
+
+
 def uniforms(keys: np.ndarray, counters: tuple, shape: tuple[int, ...]) -> np.ndarray:
     """Uniforms in [0, 1) of shape (B, *shape): entry [b, idx] hashes keys[b], ``counters`` and idx.
 
     ``counters`` are integers or (B,) integer arrays (e.g. the step k of each copy, a round number).
     """
+    # Every operand is an array of at least one dimension, so uint64 products wrap (modulo 2^64, the hash's
+    # arithmetic) without numpy's scalar overflow warning, and no errstate context is needed.
     keys = np.asarray(keys, dtype=np.uint64)
     B = keys.shape[0]
-    with np.errstate(over="ignore"):
-        z = keys.copy()
-        for counter in counters:
-            c = np.broadcast_to(np.asarray(counter, dtype=np.int64), (B,)).astype(np.uint64)
-            z = _mix(z + _GOLDEN * (c + np.uint64(1)))
-        cells = np.arange(int(np.prod(shape, dtype=np.int64)), dtype=np.uint64).reshape(shape)
-        z = _mix(z.reshape((B,) + (1,) * len(shape)) + _GOLDEN * (cells + np.uint64(1)))
+    z = keys.copy()
+    for counter in counters:
+        c = np.asarray(counter, dtype=np.int64).reshape(-1).astype(np.uint64)  # (1,) or (B,): broadcasts
+        z = _mix(z + _GOLDEN * (c + np.uint64(1)))
+    z = _mix(z.reshape((B,) + (1,) * len(shape)) + _cell_offsets(tuple(int(n) for n in shape)))
     return (z >> np.uint64(11)).astype(np.float64) * (1.0 / 9007199254740992.0)

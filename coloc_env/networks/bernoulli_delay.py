@@ -111,8 +111,11 @@ class BernoulliDelayNetwork(Network):
         (see the module table)."""
         a1 = float(self.config.on_time_probability)
         a2 = float(self.config.late_probability)
-        N = self.num_agents
-        u = np.stack([uniforms(self.keys, (np.full(self.batch, k), 2, slot), (N, N)) for k in steps], axis=1)
+        N, B = self.num_agents, self.batch
+        steps = np.asarray(list(steps), dtype=np.int64)
+        # one call for every (copy, step): the keys repeated per step, the step as that row's counter
+        u = uniforms(np.repeat(self.keys, len(steps)), (np.tile(steps, B), 2, slot), (N, N))
+        u = u.reshape(B, len(steps), N, N)
         return np.where(u < a1, 0, np.where(u < a1 + a2, 1, 2)).astype(np.int8)
 
     def slot_probabilities(self, distance: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
