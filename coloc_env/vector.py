@@ -17,11 +17,15 @@ in :class:`~coloc_env.env.CoLocParallelEnv`): finished copies are
 reset automatically, and their sub-envs' infos carry ``terminal_observation``
 and ``TimeLimit.truncated = True`` so that SB3 bootstraps the value of the
 last observation.
+
+Action masks (discrete actions): :meth:`CoLocVecEnv.action_masks` gives one row per sub-env,
+what ``sb3_contrib.MaskablePPO`` reads before every step (``get_action_masks``).
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from itertools import repeat
 from typing import Any
 
 import numpy as np
@@ -89,7 +93,8 @@ class CoLocVecEnv(VecEnv):
         rewards = self.scenario.reward().reshape(self.num_envs).astype(np.float32)
         done_copies = self.scenario.done()
         dones = np.repeat(done_copies, self.num_agents)
-        infos: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
+        # a fresh dict per sub-env (SB3 may write into them); repeat() makes no int per item, a quarter faster
+        infos: list[dict[str, Any]] = [{} for _ in repeat(None, self.num_envs)]
         finished = np.flatnonzero(done_copies)
         if len(finished):
             for b in finished:
@@ -102,6 +107,17 @@ class CoLocVecEnv(VecEnv):
             observation[finished] = fresh
             observation = observation.reshape(self.num_envs, *observation.shape[2:])
         return observation, rewards, dones, infos
+
+    def action_masks(self) -> np.ndarray:
+        """(num_envs, sum(nvec)) bool: the valid choices of each sub-env's next action (sb3_contrib's
+        ``get_action_masks``, through :meth:`env_method`), ``Discrete(n)``: (num_envs, n). It reads the
+        scenario's current state, so after an auto-reset in ``step_wait`` it is the new episode's. A
+        ``Box`` action has nothing to mask: a ValueError."""
+        mask = self.scenario.action_mask()
+        if mask is None:
+            raise ValueError(f"{self.scenario.name} has a {type(self.action_space).__name__} action: no action "
+                             "masks (they exist for Discrete and MultiDiscrete actions)")
+        return np.asarray(mask, dtype=bool).reshape(self.num_envs, -1)
 
     # --- the rest of the VecEnv interface --------------------------------------
     def close(self) -> None:
@@ -126,6 +142,9 @@ class CoLocVecEnv(VecEnv):
         raise AttributeError(f"sub-envs of a batched scenario share their attributes; cannot set {attr_name!r}")
 
     def env_method(self, method_name: str, *method_args, indices: VecEnvIndices = None, **method_kwargs) -> list[Any]:
+        if method_name == "action_masks":  # one row per sub-env (sb3_contrib's get_action_masks stacks them)
+            masks = self.action_masks(*method_args, **method_kwargs)
+            return [masks[i] for i in self._get_indices(indices)]
         result = getattr(self.scenario, method_name)(*method_args, **method_kwargs)
         return [result for _ in self._get_indices(indices)]
 

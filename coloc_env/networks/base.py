@@ -57,6 +57,7 @@ class Network:
         self._positions = np.zeros((B, N, 2))
         self._decisions = np.zeros((B, N, 0), dtype=np.int64)
         self._k = np.zeros(B, dtype=int)
+        self._distance: np.ndarray | None = None  # the cache of distances()
 
     # --- description ---------------------------------------------------------------------
     def transport_blocks(self) -> list[Block]:
@@ -100,14 +101,31 @@ class Network:
         self._k = np.asarray(k)
         self._positions = np.asarray(positions, float)
         self._decisions = decisions
+        self._distance = None  # this step's link distances, computed on first use
         self.messages_sent = np.zeros_like(self.messages_sent)
         self.floats_sent = np.zeros_like(self.floats_sent)
         self.delivered = np.zeros_like(self.delivered)
         self.last_chain = None
 
     def distances(self) -> np.ndarray:
-        p = self._positions
-        return np.sqrt(np.sum((p[:, :, None, :] - p[:, None, :, :]) ** 2, axis=-1))
+        """(B, N, N) distances between the agents at this step (read only: computed once per step and shared
+        by every delivery call; copies at the same positions, like the circles world's, share one matrix)."""
+        if self._distance is None:
+            p = self._positions
+            shared = len(p) > 1 and bool((p == p[:1]).all())
+            q = p[:1] if shared else p
+            if q.shape[-1] == 2:  # sqrt(dx^2 + dy^2): the same float operations as the sum over the last axis
+                x, y = q[..., 0], q[..., 1]
+                dx, dy = x[:, :, None] - x[:, None, :], y[:, :, None] - y[:, None, :]
+                dx *= dx
+                dy *= dy
+                dx += dy
+                distance = np.sqrt(dx, out=dx)
+            else:
+                distance = np.sqrt(np.sum((q[:, :, None, :] - q[:, None, :, :]) ** 2, axis=-1))
+            self._distance = np.broadcast_to(distance, (len(p),) + distance.shape[1:]) if shared else distance
+            self._distance.flags.writeable = False
+        return self._distance
 
     def broadcast(self, senders: np.ndarray, listening: np.ndarray, floats: float, slot: int = 0) -> np.ndarray:
         """One round: senders (B, N) that want to transmit, listening (B, N, N) [t, s] = s takes t's message.
@@ -161,52 +179,78 @@ class Network:
         chain within the step (see :meth:`broadcast`).
         """
         B, N = self.batch, self.num_agents
-        rows = np.arange(B)
-        source, first = np.asarray(source, int), np.asarray(first, int)
-        active = source >= 0
-        src = np.maximum(source, 0)
-        distance = self.distances()
-        choice = self.next_hop_choice()
-        usable = self.usable(distance)
-        loss = self.loss_probability(distance)
-        # a lossless network needs no draws (u < 0 never holds): the same chains, without the hashing
-        u = uniforms(self.keys, (self._k, 1, slot), (N,)) if np.any(loss > 0) else np.ones((B, N))
+        source, first = (np.broadcast_to(np.asarray(x, int), (B,)) for x in (source, first))
         chain = np.full((B, N), -1)
-        chain[active, 0] = src[active]
-        reached = np.zeros((B, N), dtype=bool)
-        reached[rows[active], src[active]] = True
-        length = active.astype(int)
+        length = np.zeros(B, dtype=int)
         hop_distance = np.full((B, max(N - 1, 1)), np.nan)
-        stop = np.where(active, 0, -1)
-        holder, going = src.copy(), active.copy()
-        limit = self.max_hops()
-        for hop in range(N - 1):
-            wish = np.full(B, N + 1) if choice is None else choice[rows, holder]
-            nearest = np.argmin(np.where(reached, np.inf, distance[rows, holder]), axis=-1)
-            target = np.where(wish == N + 1, nearest, wish)
-            if hop == 0:  # a range's chain goes to the measured platform first; a fix's follows the choice
-                target = np.where(first >= 0, first, target)
-            valid = (target >= 0) & (target < N) & (target != holder)
-            safe = np.where(valid, target, 0)
-            d = distance[rows, holder, safe]
-            reasons = [np.full(B, hop >= limit), ~valid, valid & reached[rows, safe], ~usable[rows, holder, safe],
-                       u[:, hop] < loss[rows, holder, safe]]
-            failed = np.zeros(B, dtype=bool)
-            for code, condition in enumerate(reasons, start=1):
-                new = going & ~failed & condition
-                stop[new] = code
-                failed |= new
-            ok = going & ~failed
-            chain[ok, hop + 1] = target[ok]
-            reached[rows[ok], target[ok]] = True
-            hop_distance[ok, hop] = d[ok]
-            self.messages_sent[rows[ok], holder[ok]] += 1
-            self.floats_sent[rows[ok], holder[ok]] += floats_per_hop(hop)
-            self.delivered[rows[ok], holder[ok], target[ok]] = True
-            length += ok
-            holder = np.where(ok, target, holder)
-            going = ok
-        stop[(length == N) & active] = 0
+        stop = np.full(B, -1)
+        rows = np.flatnonzero(source >= 0)  # the copies with a chain; the others keep the empty one
+        n = len(rows)
+        if n:
+            distance = self.distances()
+            choice = self.next_hop_choice()
+            # the link rules are elementwise: copies that share one distance matrix share their results
+            shared = distance.strides[0] == 0
+            usable = self.usable(distance[:1] if shared else distance)
+            loss = self.loss_probability(distance[:1] if shared else distance)
+            lossy = bool(np.any(loss > 0))
+            if shared:
+                usable, loss = np.broadcast_to(usable, distance.shape), np.broadcast_to(loss, distance.shape)
+            # a lossless network needs no draws (u < 0 never holds): the same chains, without the hashing
+            u = None
+            if lossy:
+                k = self._k if np.ndim(self._k) == 0 else self._k[rows]
+                u = uniforms(self.keys[rows], (k, 1, slot), (N,))
+            local = np.arange(n)
+            holder = source[rows]
+            links = np.full((n, N), -1)  # this chain's platforms, in order (the rows of ``chain``)
+            links[:, 0] = holder
+            reached = np.zeros((n, N), dtype=bool)
+            reached[local, holder] = True
+            size = np.ones(n, dtype=int)
+            hops = np.full((n, max(N - 1, 1)), np.nan)
+            code = np.zeros(n, dtype=int)
+            going = np.ones(n, dtype=bool)
+            first = first[rows]
+            limit = self.max_hops()
+            for hop in range(N - 1):
+                if hop >= limit:  # stop reason 1: the hop budget is spent
+                    code[going] = 1
+                    break
+                row_distance = distance[rows, holder]
+                nearest = np.argmin(np.where(reached, np.inf, row_distance), axis=-1)
+                target = nearest if choice is None else choice[rows, holder]
+                if choice is not None:
+                    target = np.where(target == N + 1, nearest, target)
+                if hop == 0:  # a range's chain goes to the measured platform first; a fix's follows the choice
+                    target = np.where(first >= 0, first, target)
+                valid = (target >= 0) & (target < N) & (target != holder)
+                safe = np.where(valid, target, 0)
+                # the first of the stop reasons 2..5 that holds: no platform named, already reached, out of
+                # range, lost
+                failed = np.where(u[:, hop] < loss[rows, holder, safe], 5, 0) if u is not None else np.zeros(n, int)
+                failed = np.where(~usable[rows, holder, safe], 4, failed)
+                failed = np.where(reached[local, safe], 3, failed)
+                failed = np.where(valid, failed, 2)
+                ok = going & (failed == 0)
+                code = np.where(going, failed, code)
+                links[:, hop + 1] = np.where(ok, target, -1)
+                reached[local, safe] |= ok
+                hops[:, hop] = np.where(ok, row_distance[local, safe], np.nan)
+                size += ok
+                holder = np.where(ok, target, holder)
+                going = ok
+                if not going.any():
+                    break
+            code[size == N] = 0
+            chain[rows], length[rows], hop_distance[rows], stop[rows] = links, size, hops, code
+            # the accounting, at each delivered hop's holder (a chain holds a platform once: one addition each)
+            sent = links[:, 1:] >= 0
+            c, h = np.nonzero(sent)
+            holders = links[c, h]
+            self.messages_sent[rows[c], holders] += 1
+            self.floats_sent[rows[c], holders] += np.array([floats_per_hop(j) for j in range(N - 1)], float)[h]
+            self.delivered[rows[c], holders, links[c, h + 1]] = True
         self.last_chain = RelayChain(chain=chain, length=length, hop_distance=hop_distance, stop=stop)
         return self.last_chain
 

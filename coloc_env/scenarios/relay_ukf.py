@@ -45,6 +45,18 @@ out-of-range actions and NaN/inf are a ``ValueError``. Whether a measurement
 happens and who measures is drawn by the env: a policy cannot measure more
 often than ``measurement_probability``.
 
+Action mask (``infos[agent]["action_mask"]``, ``vector_env(...).action_masks()``; (2N + 1,): index 0's
+N choices, then index 1's N + 1; :meth:`RelayUKFScenario.action_mask`): nothing is refused, so a mask
+only drops a choice that does by definition what an explicit one does, from the distances at this
+step (observation ``[N+1, 2N+1)``):
+
+| index | masked                                          | valid                                                  |
+|-------|-------------------------------------------------|--------------------------------------------------------|
+| 0     | a platform beyond ``sensing_range`` (no         | itself (no measurement: saves the forced first hop's   |
+|       | measurement, as itself)                         | cost) and every platform within ``sensing_range``      |
+| 1     | itself (stop, as N); a platform beyond          | N = stop and every other platform within               |
+|       | ``comm_range`` (the chain ends, as at N)        | ``comm_range`` (reached ones are not known in advance) |
+
 Observation (per agent, ``Box(shape=(2N + 3,), float32)``)
 ---------------------------------------------------------
 | index            | meaning                                                               | bounds     |
@@ -333,6 +345,13 @@ class RelayUKFScenario(PresetScenario):
         N = self.num_agents
         return gymnasium.spaces.MultiDiscrete([N, N + 1], dtype=np.int64)
 
+    def action_mask(self) -> np.ndarray:
+        """(B, N, 2N + 1) bool, the "Action masks" table: index 0's N choices, then index 1's N + 1 (the
+        core's ``partner`` and ``next_hop`` rules without their ``nearest`` entries, which this codec lacks)."""
+        N = self.num_agents
+        partner, next_hop = self.block_choice_masks()
+        return np.concatenate([partner[:, :, 0, :N], next_hop[:, :, 0, :N + 1]], axis=-1)
+
     def state_space(self):
         dim = self.num_agents * self.obs_dim + 2 * self.num_agents
         return gymnasium.spaces.Box(-np.inf, np.inf, shape=(dim,), dtype=np.float32)
@@ -385,17 +404,21 @@ class RelayUKFScenario(PresetScenario):
 
     def distances(self) -> np.ndarray:
         """True distances between platforms at the current step (B, N, N)."""
-        positions = self.world.positions()
-        return np.linalg.norm(positions[:, :, None, :] - positions[:, None, :, :], axis=-1)
+        return self.world.distances()
 
     def observation(self) -> np.ndarray:
         B, N = self.batch, self.num_agents
-        identity = np.broadcast_to(np.eye(N), (B, N, N))
-        flag = (np.arange(N)[None, :] == self.world.measuring()[:, None]).astype(float)
-        frac = np.broadcast_to((self.k / self.horizon)[:, None], (B, N))
-        obs = np.concatenate([identity, flag[..., None], self.distances() / DISTANCE_SCALE,
-                              np.log(self.own_traces())[..., None], frac[..., None]], axis=-1)
-        return obs.astype(np.float32)
+        table = self.world.distance_table
+        cached = getattr(self, "_scaled_distances", None)
+        if cached is None or cached[0] is not table:  # the world's table of distances, in the observation's unit
+            cached = self._scaled_distances = (table, (table / DISTANCE_SCALE).astype(np.float32))
+        obs = np.empty((B, N, 2 * N + 3), dtype=np.float32)  # each entry cast from float64, as astype would
+        obs[:, :, :N] = np.eye(N)
+        obs[:, :, N] = np.arange(N)[None, :] == self.world.measuring()[:, None]
+        obs[:, :, N + 1:2 * N + 1] = np.take(cached[1], self.world.k, axis=0)
+        obs[:, :, 2 * N + 1] = np.log(self.own_traces())
+        obs[:, :, 2 * N + 2] = (self.k / self.horizon)[:, None]
+        return obs
 
     def episode_error(self, errors: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
         """The paper's metric: the distance error ||xhat_i - x_i|| averaged over the steps and platforms.

@@ -136,6 +136,9 @@ class CirclesWorld(World):
         N, K, B = config.num_agents, self.horizon, self.batch
         self.tracks = config.tracks
         self.truth, self.true_heading, self._speed, self._turn_rate = self.tracks.trajectory(K)
+        # every copy flies the same tracks: the distances between the platforms at each step, once
+        # (sqrt of the summed squared differences, the same floats as ||p_i - p_j|| at each step)
+        self.distance_table = np.sqrt(np.sum((self.truth[:, :, None, :] - self.truth[:, None, :, :]) ** 2, axis=-1))
         self.odometry = OdometrySensor(config.speed_noise_std, config.turn_rate_noise_std)
         self.range_sensor = RangeSensor(config.range_noise_var, config.sensing_range)
         self.motion_model = OdometryDisplacement(config.dt, config.speed_noise_std**2)
@@ -173,7 +176,11 @@ class CirclesWorld(World):
         self.measured_heading[idx] = np.swapaxes(heading, 1, 2)
 
     def positions(self) -> np.ndarray:
-        return self.truth[self.k]
+        return np.take(self.truth, self.k, axis=0)
+
+    def distances(self) -> np.ndarray:
+        """True distances between the platforms at k (B, N, N), from :attr:`distance_table`."""
+        return np.take(self.distance_table, self.k, axis=0)
 
     def initial_belief(self):
         B, N = self.batch, self.num_agents
@@ -195,24 +202,23 @@ class CirclesWorld(World):
     def readings(self, sensing: np.ndarray) -> Readings:
         B, N = self.batch, self.num_agents
         rows, k = np.arange(B), self.k
-        positions = self.positions()
         measuring = self.schedule[rows, k]
         source = np.maximum(measuring, 0)
         partner = sensing[rows, source, 0].astype(int)
-        distance = np.linalg.norm(positions[rows, source][:, None, :] - positions, axis=-1)
+        # the source's distances from the table: the floats RangeSensor.true_range gives for (p_source, p_j)
+        distance = self.distance_table[k, source]
         distance[rows, source] = np.inf
         partner = np.where(partner == N, np.argmin(distance, axis=-1), partner)
-        in_view = self.range_sensor.in_range(positions[rows, source], positions[rows, partner])
-        attempt = (measuring >= 0) & (partner != source) & in_view
+        true_range = self.distance_table[k, source, partner]
+        attempt = (measuring >= 0) & (partner != source) & (true_range <= self.range_sensor.max_range)
         valid = np.zeros((B, N, N), dtype=bool)
         valid[rows[attempt], source[attempt], partner[attempt]] = True
-        ranges = np.full((B, N, N), np.nan)
-        ranges[rows, source, partner] = np.where(
-            attempt, self.range_sensor.measure(positions[rows, source], positions[rows, partner],
-                                               self.range_noise[rows, k]), np.nan)
+        ranges = np.full((B, N, N), np.nan)  # RangeSensor.measure: the true range plus the drawn noise
+        ranges[rows, source, partner] = np.where(attempt, true_range + self.range_noise[rows, k], np.nan)
         fix = np.zeros((B, N, 2))
         A = self.config.num_anchors
-        fix[:, :A] = positions[:, :A] + self.fix_noise[rows, k]
+        if A:
+            fix[:, :A] = self.positions()[:, :A] + self.fix_noise[rows, k]
         fix_valid = np.zeros((B, N), dtype=bool)
         fix_valid[:, :A] = True
         inputs = np.stack([self.measured_speed[rows, k], self.measured_heading[rows, k],
