@@ -12,6 +12,7 @@ from __future__ import annotations
 import functools
 from collections.abc import Mapping
 
+import gymnasium
 import numpy as np
 from pettingzoo import ParallelEnv
 
@@ -67,6 +68,27 @@ def build_scenario(scenario_cls: type[Scenario], batch: int, composition=None, m
     return scenario_cls(built, batch=batch)
 
 
+class MaskableMultiDiscrete(gymnasium.spaces.MultiDiscrete):
+    """A ``MultiDiscrete`` whose ``sample(mask)`` also takes ``infos[agent]["action_mask"]``: an array of
+    sum(nvec) 0/1 entries, one vector per dimension in order (any shape; gymnasium's tuple still works).
+    PettingZoo's idiom ``env.action_space(agent).sample(info["action_mask"])`` then samples a valid action."""
+
+    def sample(self, mask=None, probability=None):
+        if isinstance(mask, np.ndarray) and self.nvec.ndim == 1 and mask.size == int(np.sum(self.nvec)):
+            mask = tuple(np.split(mask.reshape(-1).astype(np.int8), np.cumsum(self.nvec)[:-1]))
+        return super().sample(mask=mask, probability=probability)
+
+
+def info_action_mask(space, mask: np.ndarray) -> np.ndarray:
+    """One agent's flat mask (sum(nvec),) as ``infos[agent]["action_mask"]``: int8, flat, except (k, n) for a
+    ``MultiDiscrete`` of k equal sizes n (the shape of TorchRL's one-hot spec of such a space, which its
+    PettingZoo wrapper fills from this key). ``reshape(-1)`` always gives the flat layout."""
+    mask = np.asarray(mask, dtype=np.int8)
+    if isinstance(space, gymnasium.spaces.MultiDiscrete) and space.nvec.ndim == 1 and len(np.unique(space.nvec)) == 1:
+        return mask.reshape(len(space.nvec), int(space.nvec[0]))
+    return mask
+
+
 class CoLocParallelEnv(ParallelEnv):
     """PettingZoo ``ParallelEnv`` over one copy of a :class:`Scenario`.
 
@@ -74,6 +96,14 @@ class CoLocParallelEnv(ParallelEnv):
     without a seed continues the same generator (DESIGN.md, Seeding).
     Episodes end by truncation at the scenario's horizon; ``max_cycles``
     (PettingZoo's keyword) sets it (:func:`with_max_cycles`).
+
+    Where the action space is discrete (``Discrete`` / ``MultiDiscrete``), ``infos[agent]["action_mask"]``
+    (at reset and every step) is the scenario's :meth:`~coloc_env.scenarios.base.Scenario.action_mask`
+    for that agent as ``np.int8``: 1 = valid now. ``Discrete(n)``: shape (n,). ``MultiDiscrete(nvec)``: the
+    concatenation of one vector per dimension (sb3_contrib's layout), flat (sum(nvec),), or (k, n) where
+    all k sizes are n (:func:`info_action_mask`, TorchRL's shape); the env's ``MaskableMultiDiscrete``
+    takes it in ``action_space(agent).sample(mask)``, PettingZoo's idiom. Masked choices are never
+    refused: by definition they do what a valid choice does (the scenario's table).
     """
 
     metadata = {"render_modes": [None, "rgb_array", "human"], "is_parallelizable": True, "render_fps": 5}
@@ -89,6 +119,9 @@ class CoLocParallelEnv(ParallelEnv):
         self._rng: np.random.Generator | None = None
         self._observation_space = self.scenario.observation_space()
         self._action_space = self.scenario.action_space()
+        if type(self._action_space) is gymnasium.spaces.MultiDiscrete:  # sample(mask) takes the infos' mask
+            space = self._action_space
+            self._action_space = MaskableMultiDiscrete(space.nvec, dtype=space.dtype, start=space.start)
         self.state_space = self.scenario.state_space()
 
     @functools.cache  # noqa: B019 - one space per agent name, shared by design
@@ -165,7 +198,12 @@ class CoLocParallelEnv(ParallelEnv):
 
     def _infos(self):
         info = self.scenario.info()
-        return {a: {k: v[0, i] for k, v in info.items()} for i, a in enumerate(self.possible_agents)}
+        infos = {a: {k: v[0, i] for k, v in info.items()} for i, a in enumerate(self.possible_agents)}
+        mask = self.scenario.action_mask()
+        if mask is not None:  # a discrete action: its valid choices now (info_action_mask)
+            for i, a in enumerate(self.possible_agents):
+                infos[a]["action_mask"] = info_action_mask(self._action_space, mask[0, i])
+        return infos
 
     def state(self):
         return self.scenario.state()[0]

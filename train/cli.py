@@ -152,7 +152,8 @@ each sweep value, so the backends compare on paired episodes. Writes OUT/study/N
                       e^T P^-1 e with the backend's 2x2 position covariance, null without one)
   report.md           a table per metric, the paired table, the command line
   position_error.png  error vs the swept value, one line per backend with 95 % bands (no sweep: bars)
-Everything is checked before any episode runs (bad input: exit 2 and nothing written).
+Everything is checked before any episode runs (bad input: exit 2 and nothing written). While it runs the
+folder holds an INCOMPLETE marker, removed after the last file; Ctrl-C prints one line and exits 130.
 Example: coloc study --world circles --network relay --backends ukf_dcl,dead_reckoning \\
            --sweep network.loss_at_zero=0,0.2,0.4 --episodes 30
 """

@@ -100,6 +100,26 @@ class Scenario(abc.ABC):
     @abc.abstractmethod
     def scene(self, b: int) -> Scene: ...
 
+    def action_mask(self) -> np.ndarray | None:
+        """The choices valid now, for the next step's action, from what the agents may know: bool.
+
+        ``Discrete(n)``: (B, N, n); ``MultiDiscrete(nvec)``: (B, N, sum(nvec)), one boolean vector per
+        dimension, concatenated in order (the layout of sb3_contrib's ``MaskableMultiCategorical``);
+        None for a ``Box`` or ``MultiBinary`` space (nothing to mask). Default: every choice valid. A
+        scenario masks a choice only where the env would refuse it or where it does nothing by
+        definition (an alias of an explicit "stop" / "none" choice), never on what the agents cannot
+        observe; at least one choice of every dimension stays valid. The env views pass it on:
+        ``infos[agent]["action_mask"]`` and ``CoLocVecEnv.action_masks()``.
+        """
+        space = self.action_space()
+        if isinstance(space, gymnasium.spaces.Discrete):
+            size = int(space.n)
+        elif isinstance(space, gymnasium.spaces.MultiDiscrete):
+            size = int(np.sum(space.nvec))
+        else:
+            return None
+        return np.ones((self.batch, self.num_agents, size), dtype=bool)
+
     def initial_cost(self) -> float:
         """Expected cost of the state before the first step, which an episode's return does not
         contain but a paper's cost may (bandwidth_fusion's k = 0 term). 0 by default."""

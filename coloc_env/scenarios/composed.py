@@ -32,6 +32,30 @@ Action (per agent, the blocks in order world, network, backend)
 range, a non-integer in a MultiDiscrete, NaN or inf is a ``ValueError`` naming
 the block.
 
+Action masks (MultiDiscrete actions; ``infos[agent]["action_mask"]``, ``vector_env(...).action_masks()``)
+---------------------------------------------------------------------------------------------------------
+:meth:`ComposedScenario.action_mask`: (B, N, sum(nvec)) bool, each entry's choices in order, True =
+valid for the next step. A masked choice is never refused; it is one that by the part's own rule does
+the same as the block's explicit "stop" / "none" choice, decided from the distances at the coming step
+(the observation's link-layer knowledge). Nothing the agent cannot observe masks a choice (who is
+reached before it, a spent hop budget, a loss, whom an mrclam robot recorded). A ``Box`` action has no mask.
+
+| block (part)              | masked choices                            | why (the part's own rule)                  |
+|---------------------------|-------------------------------------------|--------------------------------------------|
+| ``next_hop`` (``relay``)  | itself; a platform beyond ``comm_range``; | the chain ends there, as at N = stop (stop |
+|                           | per source, entry m's source m; N + 1     | reasons "stopped", "out_of_range",         |
+|                           | (nearest not yet reached) where no other  | "revisit": the source is reached by every  |
+|                           | platform is within ``comm_range``         | chain of its own)                          |
+| ``partner`` (``circles``) | a platform beyond ``sensing_range``; N    | no measurement, as itself ("none": kept,   |
+|                           | (the nearest) where all are beyond it     | the way to decline a measurement)          |
+| ``partner`` (``mrclam``)  | none                                      | whom it recorded is not observed (a count) |
+| ``transmit``, ``keep``,   | none                                      | every value is a decision                  |
+| ``selection``, ``horizon``|                                           |                                            |
+
+N = stop is never masked, nor itself in a ``partner`` block, so every entry keeps a valid choice. A
+binding with its own action codec masks nothing unless it overrides ``action_mask`` (``relay_ukf``
+does).
+
 Observation (per agent, ``Box(float32)``; both estimands)
 ---------------------------------------------------------
 | index             | meaning                                                        | bounds      |
@@ -56,7 +80,9 @@ Reward (per agent, its own estimate; a shared estimate gives every agent the tea
 |          | (m^2, the paper's metric; see the world)        | covariance over the same components (exact where  |
 |          |                                                 | the backend computes it: bandwidth_fusion's Sigma_i) |
 
-both minus ``communication_cost`` per message it sent this step.
+both minus ``communication_cost`` per message it sent this step, and minus the cost the network itself
+charges for what the agent sent (``relay``'s ``hop_cost`` + ``hop_cost_per_m2`` d^2 per delivered hop, at
+the holder that sent it; 0 for the other networks).
 
 Termination: none; truncation after ``horizon`` steps.
 
@@ -173,6 +199,55 @@ class ComposedScenario(Scenario):
             values = [0]
         return np.asarray(values, dtype=self._action_space.dtype)
 
+    def action_mask(self) -> np.ndarray | None:
+        """The valid choices of the next step's action (B, N, sum(nvec)) bool, by the rules of the module's
+        "Action masks" table; None for a ``Box`` action. A binding with its own action codec (its
+        ``action_space`` / ``decode_actions``) gets every choice valid unless it overrides this."""
+        codec = type(self).action_space is ComposedScenario.action_space \
+            and type(self).decode_actions is ComposedScenario.decode_actions
+        if not codec:
+            return Scenario.action_mask(self)
+        if not isinstance(self._action_space, gymnasium.spaces.MultiDiscrete):
+            return None
+        B, N = self.batch, self.num_agents
+        if not self.blocks:  # the placeholder MultiDiscrete([1]): its only action, 0
+            return np.ones((B, N, 1), dtype=bool)
+        return np.concatenate([m.reshape(B, N, -1) for m in self.block_choice_masks()], axis=-1)
+
+    def block_choice_masks(self) -> list[np.ndarray | None]:
+        """One (B, N, size, choices) bool per block (None for a continuous block): the valid choices of each
+        entry now (the module's "Action masks" table), from the distances at the coming step, which every
+        agent observes (link-layer knowledge)."""
+        B, N = self.batch, self.num_agents
+        p = self.world.positions()
+        distance = np.sqrt(np.sum((p[:, :, None, :] - p[:, None, :, :]) ** 2, axis=-1))  # [i, j] (B, N, N)
+        others = ~np.eye(N, dtype=bool)
+        masks: list[np.ndarray | None] = []
+        for blk, part in zip(self.blocks, self.block_parts, strict=True):
+            if not blk.discrete:
+                masks.append(None)
+                continue
+            mask = np.ones((B, N, blk.size, blk.choices), dtype=bool)
+            rule = (part, getattr(self.composition, part).name, blk.name)
+            if rule == ("world", "circles", "partner"):
+                # a platform beyond sensing_range gives no measurement, as itself does (kept: "none");
+                # the nearest is beyond it only when every platform is
+                reach = (distance <= self.world.range_sensor.max_range) & others
+                mask[:, :, 0, :N] = reach | ~others
+                mask[:, :, 0, N] = reach.any(axis=-1)
+            elif rule == ("network", "relay", "next_hop"):
+                # itself, a platform beyond comm_range (and, per source, the source, which every chain has
+                # reached) end the chain, as N = stop does; the nearest not yet reached only where one is in range
+                reach = np.asarray(self.network.usable(distance), bool) & others  # [holder, j]
+                if blk.size == 1:  # per_holder: one next hop for whatever chain the holder holds
+                    allowed = reach[:, :, None, :]
+                else:  # per_source: entry m for the chain whose source is m
+                    allowed = reach[:, :, None, :] & others[None, None, :, :]  # [holder, m, j]
+                mask[..., :N] = allowed
+                mask[..., N + 1] = allowed.any(axis=-1)
+            masks.append(mask)
+        return masks
+
     # --- dynamics ------------------------------------------------------------------
     def reset(self, rngs, env_index=None) -> None:
         idx = self._indices(env_index)
@@ -280,7 +355,9 @@ class ComposedScenario(Scenario):
         else:
             trace = self.posterior_traces()
             loss = self.position_error() if trace is None else np.sqrt(trace)
-        return -loss - self.composition.communication_cost * self.network.messages_sent
+        cost = self.composition.communication_cost * self.network.messages_sent
+        network_cost = getattr(self.network, "cost_sent", None)  # relay hop costs, where the network sets them
+        return -loss - (cost if network_cost is None else cost + network_cost)
 
     # --- views -------------------------------------------------------------------------
     def _target_truth(self, offset: int = 0) -> np.ndarray:
@@ -370,7 +447,8 @@ class ComposedScenario(Scenario):
             links=links,
             link_value_max=1.0,
             link_value_name="delivered this step",
-            extent=(-reach, reach, -reach, reach),
+            sensors=self.world.positions()[b] if target else None,  # the agents, beside the target they track
+            extent=None if target else (-reach, reach, -reach, reach),
             notes=[f"mean error {self.position_error()[b].mean():.2f} m",
                    f"messages this step {int(self.network.messages_sent[b].sum())}"],
         )

@@ -78,6 +78,10 @@ Action (per agent, ``MultiDiscrete([N] + [N + 1] * N)``, int64, N = 5, absolute 
 |            | The measuring robot always sends to the measured one first, so index 1 + i     |
 |            | of agent i is not used                                                         |
 
+``infos[agent]["action_mask"]`` (:meth:`MrclamRelayScenario.action_mask`): index 0 allows the robots
+it recorded and itself; index 1 + m masks itself, the source m and robots beyond ``comm_range`` (each
+does what N = stop does); nothing is masked on what a robot cannot observe.
+
 If a robot recorded the same robot twice in one step, the first line in file
 order is the one used (dataset 6 has no such case). Non-integer or
 out-of-range actions and NaN/inf are a ``ValueError``.
@@ -411,6 +415,18 @@ class MrclamRelayScenario(PresetScenario):
     def action_space(self):
         N = self.num_agents
         return gymnasium.spaces.MultiDiscrete([N] + [N + 1] * N, dtype=np.int64)
+
+    def action_mask(self) -> np.ndarray:
+        """(B, N, N + N (N + 1)) bool: the choices valid now. Index 0: the robots it recorded at this step (its
+        observation's entries [N, 2N)) and itself ("none"); any other robot gives no measurement, as itself
+        does. Index 1 + m: the core's per-source ``next_hop`` rule without its "nearest" entry (itself, the
+        source m and a robot beyond ``comm_range`` end the chain, as N = stop does; stop stays valid)."""
+        B, N = self.batch, self.num_agents
+        a = np.minimum(self.absolute_step(), self.data.steps - 1)
+        live = (self.k < self.horizon)[:, None, None]
+        partner = ((self.tables.first_index[a] >= 0) & live) | np.eye(N, dtype=bool)
+        _, next_hop = self.block_choice_masks()  # (B, N holders, N sources, N + 2)
+        return np.concatenate([partner, next_hop[..., :N + 1].reshape(B, N, -1)], axis=-1)
 
     def state_space(self):
         dim = self.num_agents * self.obs_dim + 3 * self.num_agents

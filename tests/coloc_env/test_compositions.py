@@ -168,3 +168,30 @@ def test_presets_are_compositions_and_build_the_same_env():
             total += sum(rewards.values())
         outs.append(total)
     assert outs[0] == outs[1]
+
+
+def test_a_relays_hop_cost_is_charged_in_the_composed_reward_at_the_holder():
+    """relay's hop_cost / hop_cost_per_m2 are the network's price of a hop: a composition's reward is minus the
+    agent's error minus the cost of the hops it sent (and the same episode without a price differs by exactly that)."""
+    def run(**fields):
+        spec = coloc_env.compose(world="circles", network={"name": "relay", **fields}, backend="ukf_dcl", horizon=12)
+        env = coloc_env.parallel_env(spec)
+        policy = agents.make_policy("always", env, seed=0)
+        observations, _ = env.reset(seed=2)
+        rows = []
+        while env.agents:
+            observations, rewards, _, _, infos = env.step(policy.act(observations))
+            cost = env.unwrapped.scenario.network.cost_sent[0].copy()
+            rows.append(([rewards[a] for a in env.possible_agents], [infos[a]["error"] for a in env.possible_agents],
+                         cost))
+        return rows
+
+    priced, free = run(hop_cost=0.5, hop_cost_per_m2=0.001), run()
+    charged = 0.0
+    for (reward, error, cost), (free_reward, free_error, free_cost) in zip(priced, free, strict=True):
+        np.testing.assert_allclose(reward, -np.asarray(error) - cost, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(error, free_error, rtol=0, atol=0)  # the price changes no estimate
+        np.testing.assert_allclose(free_reward, -np.asarray(free_error), rtol=0, atol=1e-12)
+        assert not np.any(free_cost)
+        charged += cost.sum()
+    assert charged > 0.5 * len(priced)  # hops were sent (and priced) at most steps
