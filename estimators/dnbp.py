@@ -58,16 +58,29 @@ one block per copy and purpose from that copy's own generator, so that copy b
 of a batch is bit-identical to the same copy run alone. Large kernel
 evaluations (proposals x mixture components) are chunked to bound memory.
 
-Speed. The three hot loops (the fast mixture kernel, the velocity
-completion's categorical draw, the importance-weight combination) run as
-compiled numba kernels, one row (a proposal of one mixture, a new particle)
-per iteration, on threads over rows above ``_PARALLEL_ELEMENTS`` kernel
-entries; a row reads only its own inputs, so the results depend neither on
-the batch nor on the thread count. The numpy formulations stay
-(``compiled=False``; also used where numba is not installed) and are what the
-compiled kernels are tested against (``tests/estimators/test_dnbp_fast.py``):
-the same exponents and the same draws, equal up to float rounding (~1e-10 in
-a log density at kilometre coordinates); seeded episodes agree to 1e-9.
+Speed. :func:`belief_update` (Algorithm 2, where nearly all the time goes)
+runs as two fused numba kernels, one receiver per iteration: proposals and
+importance log-weights (``_belief_weights_source``: the prior's KDE and every
+present message evaluated at each proposal, no (R, S, C, M) temporaries, no
+numpy call per step of the algorithm), then normalization, systematic
+resampling, jitter and velocity completion (``_belief_resample_source``).
+They reproduce the numpy path's arithmetic in its order: the same exponents,
+numpy's pairwise sum for the weight normalization, the flat-offset
+comparisons of :func:`_categorical` (by bisection or a merge instead of a
+scan: the same counts), so they make the same draws; the particles equal the
+numpy path's to ~1e-13 m (the einsum of h_rot sums in another order). A GPS
+fix (M identical components) is evaluated once per point and added M times
+(the same sum). The other hot loops (the mixture kernel of the correction
+weights, and of a numpy-path update: the fast kernel, the velocity draw, the
+importance-weight combination) are compiled per row. Those run on threads
+above ``_PARALLEL_ELEMENTS`` kernel entries; the fused kernels run on one
+thread (their threaded form, over receivers, is ``_FUSED_THREADS``, off: it
+measured slower on the 2-core machine); a row (receiver) reads only its own
+inputs, so the results depend neither on the batch nor on the thread count. The numpy formulations
+stay (``compiled=False``; also used where numba is not installed) and are
+what the compiled kernels are tested against
+(``tests/estimators/test_dnbp_fast.py``): equal up to float rounding (~1e-10
+in a log density at kilometre coordinates); seeded episodes agree to 1e-9.
 
 Departures from the spec
 ------------------------
@@ -111,6 +124,7 @@ at M = 400); unimodal tracking beliefs are not affected (h_rot ~ 1 m).
 from __future__ import annotations
 
 import math
+import types
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
@@ -385,7 +399,7 @@ def _compiled_kernels() -> dict | None:
             out[r, c] = target - log_q if ok else -np.inf
 
     options = {"cache": True, "nogil": True, "boundscheck": False}
-    _KERNELS = {name: (numba.njit(**options)(fn), numba.njit(parallel=True, **options)(fn))
+    _KERNELS = {name: (numba.njit(**options)(fn), numba.njit(parallel=True, **options)(_renamed(fn, "_threaded")))
                 for name, fn in (("mixture_rows", mixture_rows), ("velocity_rows", velocity_rows),
                                  ("importance_rows", importance_rows))}
     return _KERNELS
@@ -516,6 +530,424 @@ def _normalized_cdf(log_weights: np.ndarray) -> np.ndarray:
     return cdf
 
 
+# --- the fused belief update (compiled): Algorithm 2 one receiver per iteration ----------------------------------
+# Module-level sources compiled by numba in _fused_kernels(); each reproduces the numpy path's arithmetic in its
+# order (the same exponents, the same flat-offset comparisons of _categorical, numpy's pairwise sum of the
+# weights), so its draws are the numpy path's and its floats equal them up to rounding.
+_prange = range  # numba.prange once numba is imported
+
+
+def _block_sum(values, lo, n):  # pragma: no cover - compiled by numba
+    """values[lo:lo + n], n <= 128, summed as numpy's pairwise summation sums a block (sequential below 8,
+    else eight running sums combined as ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7)), then the rest)."""
+    if n < 8:
+        total = 0.0
+        for i in range(lo, lo + n):
+            total += values[i]
+        return total
+    r0, r1, r2, r3 = values[lo], values[lo + 1], values[lo + 2], values[lo + 3]
+    r4, r5, r6, r7 = values[lo + 4], values[lo + 5], values[lo + 6], values[lo + 7]
+    i = lo + 8
+    end = lo + n - n % 8
+    while i < end:
+        r0 += values[i]
+        r1 += values[i + 1]
+        r2 += values[i + 2]
+        r3 += values[i + 3]
+        r4 += values[i + 4]
+        r5 += values[i + 5]
+        r6 += values[i + 6]
+        r7 += values[i + 7]
+        i += 8
+    total = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < lo + n:
+        total += values[i]
+        i += 1
+    return total
+
+
+def _numpy_sum(values, n):  # pragma: no cover - compiled by numba
+    """values[:n] summed in the order of numpy's pairwise summation: blocks of at most 128 (_block_sum), a
+    longer range split in halves at a multiple of 8, left + right; by an explicit stack (numba's disk cache
+    does not hold recursive functions)."""
+    if n <= 128:
+        return _block_sum(values, 0, n)
+    depth = 64
+    los, lens, stage = np.empty(depth, np.int64), np.empty(depth, np.int64), np.empty(depth, np.int64)
+    sums = np.empty(depth)
+    top, done = 0, 0
+    los[0], lens[0], stage[0] = 0, n, 0
+    while top >= 0:
+        lo, m = los[top], lens[top]
+        if m <= 128:
+            sums[done] = _block_sum(values, lo, m)
+            done += 1
+            top -= 1
+        elif stage[top] == 0:
+            stage[top] = 1
+            half = m // 2
+            half -= half % 8
+            # the right half below the left one on the stack: the left is summed first
+            los[top + 1], lens[top + 1], stage[top + 1] = lo + half, m - half, 0
+            los[top + 2], lens[top + 2], stage[top + 2] = lo, half, 0
+            top += 2
+        else:
+            done -= 1
+            sums[done - 1] = sums[done - 1] + sums[done]
+            top -= 1
+    return sums[0]
+
+
+def _mixture_point(x, y, inv, cx, cy, centre_term, log_norm, buffer, identical):  # pragma: no cover - compiled
+    """The fast kernel of :func:`mixture_logpdf` at one point (x, y) of one mixture, ``mixture_rows``' arithmetic
+    (the exponent s . c_k + point term + centre term, centre_term[k] = log w_k - 0.5 ||c_k||^2 inv) on the
+    centres' coordinates cx, cy (K,): the exponents are formed once into ``buffer``, those above the cut packed
+    to its front without branches, and only they reach exp (in the same order). ``identical``: every component
+    is the same (a GPS fix): its one exponent and exp, added K times (the same sum, bit for bit)."""
+    floor, negligible = _EXP_FLOOR, _NEGLIGIBLE
+    K = cx.shape[0]
+    s0, s1 = x * inv, y * inv
+    pt = -0.5 * (x * x + y * y) * inv
+    if identical:
+        a = (s0 * cx[0] + s1 * cy[0] + pt) + centre_term[0]
+        if min(max(floor, a), 0.0) <= floor:
+            return -np.inf
+        term = math.exp(min(max(a, floor), 0.0))
+        total = 0.0
+        for _ in range(K):
+            total += term
+        return (math.log(total) if total > 2.0 * K * math.exp(floor) else -np.inf) - log_norm
+    top = floor
+    for k in range(K):
+        a = (s0 * cx[k] + s1 * cy[k] + pt) + centre_term[k]
+        buffer[k] = a
+        top = max(top, a)
+    top = min(top, 0.0)
+    if top <= floor:
+        return -np.inf
+    cut = top - negligible if top > floor + negligible else -np.inf
+    n = 0
+    for k in range(K):
+        a = buffer[k]
+        buffer[n] = a
+        n += a > cut
+    total = 0.0
+    for k in range(n):
+        total += math.exp(min(max(buffer[k], floor), 0.0))
+    return (math.log(total) if total > 2.0 * K * math.exp(floor) else -np.inf) - log_norm
+
+
+def _count_at_most(values, offset, target, lo, n):  # pragma: no cover - compiled by numba
+    """How many of values[lo:lo + n] (non-decreasing) have values + offset <= target: the count numpy's
+    searchsorted(side="right") takes on the offset rows of _categorical, by bisection (the sums are
+    non-decreasing too)."""
+    first, last = lo, lo + n
+    while first < last:
+        middle = (first + last) // 2
+        if values[middle] + offset <= target:
+            first = middle + 1
+        else:
+            last = middle
+    return first - lo
+
+
+def _logaddexp(x, y):  # pragma: no cover - compiled by numba
+    """numpy's logaddexp, in its order."""
+    if x == y:
+        return x + math.log(2.0)
+    d = x - y
+    if d > 0:
+        return x + math.log1p(math.exp(-d))
+    if d <= 0:
+        return y + math.log1p(math.exp(d))
+    return d
+
+
+def _belief_weights_source(prior, prior_bandwidth, prior_uniform, centres, log_weights, bandwidth, present, pick,
+                           box, noise, oversampling, eps, box_lo, box_hi, cold_lo, cold_hi, proposals, log_w
+                           ):  # pragma: no cover - compiled by numba
+    """Algorithm 2's proposals and fast importance log-weights, one receiver r per iteration.
+
+    proposals (R, C, 2) and log_w (R, C) are filled as :func:`belief_update`'s numpy path fills them: every
+    column's proposal (the invalid ones too, they are drawable by the clipped resampling index), the weights
+    log pi - log q of the valid ones (-inf elsewhere, as in _importance_log_weights).
+    """
+    floor = _EXP_FLOOR
+    R, M = prior.shape[0], prior.shape[1]
+    S, K = centres.shape[1], centres.shape[2]
+    C = proposals.shape[1]
+    log_m_weight = -math.log(M)
+    log_cold = -2.0 * math.log(cold_hi - cold_lo)
+    log_eps = math.log(eps) if eps > 0.0 else -np.inf
+    log_box = log_eps - 2.0 * math.log(box_hi - box_lo)
+    log_keep = math.log1p(-eps)
+    for r in _prange(R):
+        count = 0
+        for s in range(S):
+            if present[r, s]:
+                count += 1
+        per = (oversampling * M + count) // (count + 1)  # ceil(k_is M / (K+1))
+        total = per * (count + 1)
+        slots = np.empty(count + 1, np.int64)
+        n = 1
+        for s in range(S):
+            if present[r, s]:
+                slots[n] = s
+                n += 1
+        # the present messages' component CDFs (_normalized_cdf) and kernel terms; the prior's KDE terms
+        cdf = np.empty((S, K))
+        terms, xs, ys = np.empty((S, K)), np.empty((S, K)), np.empty((S, K))
+        inv_m, norm_m = np.empty(S), np.empty(S)
+        identical = np.zeros(S, np.bool_)
+        for s in range(S):
+            if not present[r, s]:
+                continue
+            top = -np.inf
+            for k in range(K):
+                if log_weights[r, s, k] > top:
+                    top = log_weights[r, s, k]
+            ok = np.isfinite(top)
+            shift = top if ok else 0.0
+            run = 0.0
+            for k in range(K):
+                lw = log_weights[r, s, k]
+                if ok:
+                    w = math.exp(max(lw - shift, floor)) if lw != -np.inf else 0.0
+                else:
+                    w = 1.0
+                run += w
+                cdf[s, k] = run
+            last = cdf[s, K - 1]
+            for k in range(K - 1):
+                cdf[s, k] /= last
+            cdf[s, K - 1] = 1.0
+            b = bandwidth[r, s]
+            inv = 1.0 / (b * b)
+            inv_m[s], norm_m[s] = inv, math.log(2.0 * np.pi * (b * b))
+            for k in range(K):
+                cx, cy = centres[r, s, k, 0], centres[r, s, k, 1]
+                xs[s, k], ys[s, k] = cx, cy
+                terms[s, k] = log_weights[r, s, k] - 0.5 * (cx * cx + cy * cy) * inv
+            same = True
+            for k in range(1, K):
+                same = same and xs[s, k] == xs[s, 0] and ys[s, k] == ys[s, 0] and terms[s, k] == terms[s, 0]
+            identical[s] = same
+        h = prior_bandwidth[r]
+        inv_rho = 1.0 / (h * h)
+        norm_rho = math.log(2.0 * np.pi * (h * h))
+        rho_terms, px, py = np.empty(M), np.empty(M), np.empty(M)
+        for k in range(M):
+            cx, cy = prior[r, k, 0], prior[r, k, 1]
+            px[k], py[k] = cx, cy
+            rho_terms[k] = log_m_weight - 0.5 * (cx * cx + cy * cy) * inv_rho
+        buffer = np.empty(max(M, K))
+        log_count = math.log(count + 1.0)
+        log_m = np.empty(S)
+        for j in range(C):
+            rank = min(j // per, count)
+            if rank == 0:
+                if prior_uniform[r]:
+                    x = cold_lo + (cold_hi - cold_lo) * box[r, j, 1]
+                    y = cold_lo + (cold_hi - cold_lo) * box[r, j, 2]
+                elif box[r, j, 0] < eps:
+                    x = box_lo + (box_hi - box_lo) * box[r, j, 1]
+                    y = box_lo + (box_hi - box_lo) * box[r, j, 2]
+                else:
+                    i = min(int(pick[r, j] * M), M - 1)
+                    x = prior[r, i, 0] + h * noise[r, j, 0]
+                    y = prior[r, i, 1] + h * noise[r, j, 1]
+            else:
+                s = slots[rank]
+                offset = float(r * S + s)  # the flat-offset comparison of the numpy path's searchsorted
+                target = offset + pick[r, j]
+                comp = min(_count_at_most(cdf[s], offset, target, 0, K), K - 1)
+                x = centres[r, s, comp, 0] + bandwidth[r, s] * noise[r, j, 0]
+                y = centres[r, s, comp, 1] + bandwidth[r, s] * noise[r, j, 1]
+            proposals[r, j, 0] = x
+            proposals[r, j, 1] = y
+            if j >= total:
+                log_w[r, j] = -np.inf
+                continue
+            # log rho (prior_logpdf)
+            if prior_uniform[r]:
+                inside = cold_lo <= x <= cold_hi and cold_lo <= y <= cold_hi
+                log_rho = log_cold if inside else -np.inf
+            else:
+                kde = _mixture_point(x, y, inv_rho, px, py, rho_terms, norm_rho, buffer, False)
+                inside = box_lo <= x <= box_hi and box_lo <= y <= box_hi
+                log_rho = _logaddexp(log_keep + kde, log_box if inside else -np.inf)
+            # log m_s at the proposal, then the combination of importance_rows
+            target = 0.0
+            top = log_rho
+            for s in range(S):
+                if present[r, s]:
+                    value = _mixture_point(x, y, inv_m[s], xs[s], ys[s], terms[s], norm_m[s], buffer, identical[s])
+                    target += value
+                else:
+                    value = -np.inf
+                log_m[s] = value
+                if value > top:
+                    top = value
+            target += log_rho
+            if not np.isfinite(top):
+                top = 0.0
+            q = math.exp(max(log_rho - top, floor)) if log_rho != -np.inf else 0.0
+            for s in range(S):
+                if log_m[s] != -np.inf:
+                    q += math.exp(max(log_m[s] - top, floor))
+            log_q = (math.log(q) if q > 0.0 else -np.inf) + top - log_count
+            fine = np.isfinite(log_q) and np.isfinite(target)
+            log_w[r, j] = target - log_q if fine else -np.inf
+
+
+def _velocity_row(positions, prior, denominator, uniform, u, r, out):  # pragma: no cover - compiled by numba
+    """``velocity_rows`` for the new particles of one receiver r (flat row offsets r * M + i)."""
+    M, Mp = positions.shape[0], prior.shape[0]
+    negligible = _NEGLIGIBLE
+    w = np.empty(Mp)
+    for i in range(M):
+        top = -np.inf
+        for j in range(Mp):
+            if uniform:
+                w[j] = 0.0
+            else:
+                dx = positions[i, 0] - prior[j, 0]
+                dy = positions[i, 1] - prior[j, 1]
+                w[j] = -(dx * dx + dy * dy) / denominator
+            if w[j] > top:
+                top = w[j]
+        ok = np.isfinite(top)
+        total = 0.0
+        for j in range(Mp):
+            if ok:
+                value = math.exp(w[j] - top) if w[j] - top > -negligible else 0.0
+            else:
+                value = 1.0
+            total += value
+            w[j] = total
+        offset = float(r * M + i)
+        target = u[i] + offset
+        first, last = 0, Mp  # bisection of the CDF w[j] / total (1 at the end), non-decreasing
+        while first < last:
+            middle = (first + last) // 2
+            c = 1.0 if middle == Mp - 1 else w[middle] / total
+            if c + offset <= target:
+                first = middle + 1
+            else:
+                last = middle
+        out[i] = min(first, Mp - 1)
+
+
+def _belief_resample_source(prior, prior_bandwidth, prior_uniform, proposals, log_w, ok, resample, jitter, velocity,
+                            out):  # pragma: no cover - compiled by numba
+    """Algorithm 2's normalization, systematic resampling, jitter and velocity completion, one receiver per
+    iteration (the numpy path's order: pairwise weight sum, sequential CDF, flat row offsets r of _categorical)."""
+    R, d = prior.shape[0], prior.shape[2]
+    C = proposals.shape[1]
+    M = jitter.shape[1]
+    for r in _prange(R):
+        if not ok[r]:  # every weight vanished: the belief stays the prior
+            for i in range(M):
+                for e in range(d):
+                    out[r, i, e] = prior[r, i, e]
+            continue
+        weights = np.empty(C)
+        top = -np.inf
+        for j in range(C):
+            if log_w[r, j] > top:
+                top = log_w[r, j]
+        for j in range(C):
+            weights[j] = math.exp(log_w[r, j] - top)
+        norm = _numpy_sum(weights, C)
+        for j in range(C):
+            weights[j] /= norm
+        cdf = np.empty(C)
+        run = 0.0
+        for j in range(C):
+            run += weights[j]
+            cdf[j] = run
+        last = cdf[C - 1]
+        for j in range(C - 1):
+            cdf[j] /= last
+        cdf[C - 1] = 1.0
+        # h_rot of the weighted proposals (rule_of_thumb_bandwidth)
+        mx, my, ss = 0.0, 0.0, 0.0
+        for j in range(C):
+            mx += weights[j] * proposals[r, j, 0]
+            my += weights[j] * proposals[r, j, 1]
+            ss += weights[j] * weights[j]
+        var = 0.0
+        for j in range(C):
+            dx = proposals[r, j, 0] - mx
+            dy = proposals[r, j, 1] - my
+            var += weights[j] * (dx * dx) + weights[j] * (dy * dy)
+        var /= 2.0
+        h_rot = math.sqrt(max(var, 0.0)) * (1.0 / ss) ** (-1.0 / 6.0)
+        positions = np.empty((M, 2))
+        offset = float(r)
+        idx = 0  # the targets do not decrease with i: the count only grows (a merge of the two sorted lists)
+        for i in range(M):
+            target = (resample[r] + i) / M + offset
+            while idx < C and cdf[idx] + offset <= target:
+                idx += 1
+            pick = min(idx, C - 1)
+            positions[i, 0] = proposals[r, pick, 0] + h_rot * jitter[r, i, 0]
+            positions[i, 1] = proposals[r, pick, 1] + h_rot * jitter[r, i, 1]
+        index = np.empty(M, np.int64)
+        _velocity_row(positions, prior[r], 2.0 * (prior_bandwidth[r] * prior_bandwidth[r]), prior_uniform[r],
+                      velocity[r], r, index)
+        for i in range(M):
+            out[r, i, 0] = positions[i, 0]
+            out[r, i, 1] = positions[i, 1]
+            for e in range(2, d):
+                out[r, i, e] = prior[r, index[i], e]
+
+
+_FUSED: dict | None = None
+# The fused kernels' threaded form (over receivers) is off: on the 2-core machine it measured 2x slower than one
+# thread (B = 4 receivers of gps_denied_nbp, load ~2.6, numba's omp layer), where the per-row kernels' threads
+# are not; it gives the same results (tests/estimators/test_dnbp_fast.py) for a machine where it pays.
+_FUSED_THREADS = False
+
+
+def _fused_kernels() -> dict | None:
+    """{name: (serial, parallel)} of the fused belief update (numba, cached on disk), None without numba."""
+    global _FUSED, _prange, _block_sum, _numpy_sum, _mixture_point, _count_at_most, _logaddexp, _velocity_row
+    if _FUSED is not None:
+        return _FUSED or None
+    try:
+        import numba
+    except ImportError:  # pragma: no cover - numba is a dependency; the numpy path stays for other installs
+        _FUSED = {}
+        return None
+    options = {"cache": True, "nogil": True, "boundscheck": False}
+    _prange = numba.prange
+    _block_sum = numba.njit(**options)(_block_sum)
+    _numpy_sum = numba.njit(**options)(_numpy_sum)
+    _mixture_point = numba.njit(**options)(_mixture_point)
+    _count_at_most = numba.njit(**options)(_count_at_most)
+    _logaddexp = numba.njit(**options)(_logaddexp)
+    _velocity_row = numba.njit(**options)(_velocity_row)
+    # the threaded form is a renamed copy, with its own on-disk cache entry (see _renamed)
+    _FUSED = {name: (numba.njit(**options)(fn), numba.njit(parallel=True, **options)(_renamed(fn, "_threaded")))
+              for name, fn in (("weights", _belief_weights_source), ("resample", _belief_resample_source))}
+    _FUSED["chunks"] = numba.parallel_chunksize
+    return _FUSED
+
+
+def _renamed(fn, suffix: str):
+    """A copy of the function ``fn`` under the name ``fn.__name__ + suffix`` (same code, globals and closure).
+
+    numba's disk cache files a function's compiled forms by its name and signature, not by ``parallel``: a
+    serial and a threaded form of one function share an entry, and the next process's serial dispatcher may
+    load the threaded code (found so: the serial mixture kernel ran threaded, 7x slower, on a loaded machine).
+    """
+    copy = types.FunctionType(fn.__code__, fn.__globals__, fn.__name__ + suffix, fn.__defaults__, fn.__closure__)
+    copy.__qualname__ = fn.__qualname__ + suffix
+    copy.__module__ = fn.__module__
+    return copy
+
+
 # --- Algorithm 1 -------------------------------------------------------------------------------------------------
 def sample_messages(model: DnbpModel, sender_points: np.ndarray, distance: np.ndarray,
                     correction_log_weights: np.ndarray | None, permutation: np.ndarray, offset: np.ndarray,
@@ -551,7 +983,7 @@ def correction_weights(sender_points: np.ndarray, reverse_centres: np.ndarray, r
 # --- Algorithm 2 -------------------------------------------------------------------------------------------------
 def belief_update(model: DnbpModel, prior: np.ndarray, prior_bandwidth: np.ndarray, prior_uniform: np.ndarray,
                   centres: np.ndarray, log_weights: np.ndarray, bandwidth: np.ndarray, present: np.ndarray,
-                  draws: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+                  draws: dict[str, np.ndarray], compiled: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Algorithm 2 (mixture importance sampling) for R receivers.
 
     prior (R, M, 4), prior_bandwidth (R,), prior_uniform (R,); incoming
@@ -561,7 +993,9 @@ def belief_update(model: DnbpModel, prior: np.ndarray, prior_bandwidth: np.ndarr
     normals with C = :attr:`DnbpModel.proposal_capacity`, ``resample`` (R,),
     ``jitter`` (R, M, 2), ``velocity`` (R, M). Returns the new particles
     (R, M, 4) and a bool (R,) that is False where every weight underflowed
-    (the prior is kept there).
+    (the prior is kept there). ``compiled`` (default): the fused numba kernels
+    where numba is installed (see the module's Speed note); False: the numpy
+    path they are tested against.
     """
     R, M = prior.shape[:2]
     S = present.shape[1]
@@ -571,6 +1005,10 @@ def belief_update(model: DnbpModel, prior: np.ndarray, prior_bandwidth: np.ndarr
     if np.any(total > model.proposal_capacity):
         raise ValueError(f"too many incoming messages for the proposal capacity {model.proposal_capacity}")
     C = int(total.max())  # the draws have the fixed capacity; only the first C columns are used
+    kernels = _fused_kernels() if compiled else None
+    if kernels is not None and R:
+        return _belief_update_fused(kernels, model, prior, prior_bandwidth, prior_uniform, centres, log_weights,
+                                    bandwidth, present, draws, K_r, total, C)
     j = np.arange(C)[None, :]
     valid = j < total[:, None]
     rank = np.minimum(j // per_comp[:, None], K_r[:, None])  # 0 = prior, k = k-th present message
@@ -630,6 +1068,48 @@ def belief_update(model: DnbpModel, prior: np.ndarray, prior_bandwidth: np.ndarr
     velocities = prior[rows, j_vel, 2:]
     particles = np.concatenate([positions, velocities], axis=-1)
     return np.where(ok[:, None, None], particles, prior), ok
+
+
+def _belief_update_fused(kernels, model, prior, prior_bandwidth, prior_uniform, centres, log_weights, bandwidth,
+                         present, draws, K_r, total, C):
+    """:func:`belief_update` by the two fused kernels (proposals and weights; resampling and completion), with
+    the exact log-domain recomputation of a receiver whose every fast weight vanished in between."""
+    R, M = prior.shape[:2]
+    # threads (off by default, see _FUSED_THREADS) over receivers, taken one at a time (dynamic chunks of 1)
+    which = 1 if _FUSED_THREADS and R >= 4 and int(np.dot(total, K_r + 1)) * M >= 8 * _PARALLEL_ELEMENTS else 0
+    prior = np.ascontiguousarray(prior, float)
+    prior_bandwidth = np.ascontiguousarray(prior_bandwidth, float)
+    prior_uniform = np.ascontiguousarray(prior_uniform, bool)
+    centres = np.ascontiguousarray(centres, float)
+    log_weights = np.ascontiguousarray(log_weights, float)
+    bandwidth = np.ascontiguousarray(bandwidth, float)
+    present = np.ascontiguousarray(present, bool)
+    proposals = np.empty((R, C, 2))
+    log_w = np.empty((R, C))
+    lo, hi = model.defensive_box
+    lo_c, hi_c = model.cold_box
+    with kernels["chunks"](1 if which else 0):
+        kernels["weights"][which](prior, prior_bandwidth, prior_uniform, centres, log_weights, bandwidth, present,
+                                  np.ascontiguousarray(draws["pick"], float),
+                                  np.ascontiguousarray(draws["box"], float),
+                                  np.ascontiguousarray(draws["noise"], float), int(model.oversampling),
+                                  float(model.defensive_weight), float(lo), float(hi), float(lo_c), float(hi_c),
+                                  proposals, log_w)
+    ok = np.isfinite(log_w).any(axis=1)
+    if not ok.all():
+        redo = np.flatnonzero(~ok)
+        valid = np.arange(C)[None, :] < total[redo, None]
+        log_w[redo] = _importance_log_weights(
+            model, proposals[redo], prior[redo], prior_bandwidth[redo], prior_uniform[redo], centres[redo],
+            log_weights[redo], bandwidth[redo], present[redo], valid, K_r[redo], exact=True)
+        ok = np.isfinite(log_w).any(axis=1)
+    out = np.empty_like(prior)
+    with kernels["chunks"](1 if which else 0):
+        kernels["resample"][which](prior, prior_bandwidth, prior_uniform, proposals, log_w, ok,
+                                   np.ascontiguousarray(draws["resample"], float),
+                                   np.ascontiguousarray(draws["jitter"], float),
+                                   np.ascontiguousarray(draws["velocity"], float), out)
+    return out, ok
 
 
 def _velocity_index(positions: np.ndarray, prior: np.ndarray, prior_bandwidth: np.ndarray, prior_uniform: np.ndarray,

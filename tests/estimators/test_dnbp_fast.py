@@ -1,5 +1,6 @@
 """dNBP's compiled kernels (numba) compute what the numpy kernels compute: the same mixture log-densities up to
-float rounding, the same velocity draws exactly, on any batch and thread count, and the same seeded episodes."""
+float rounding, the same velocity draws exactly, the same belief updates (the fused kernels) up to rounding, on
+any batch and thread count, and the same seeded episodes."""
 
 import numpy as np
 import pytest
@@ -96,6 +97,7 @@ def test_a_seeded_env_episode_is_the_same_with_the_numpy_kernels(monkeypatch):
     """The kernels' rounding differences (~1e-10 in a log density) do not move a seeded episode."""
     compiled = _episode()
     monkeypatch.setattr(dn, "_KERNELS", {})
+    monkeypatch.setattr(dn, "_FUSED", {})
     numpy = _episode()
     np.testing.assert_allclose(compiled, numpy, rtol=1e-9)
 
@@ -122,3 +124,82 @@ def test_compiled_importance_weights_equal_the_numpy_combination():
     assert finite.any() and not finite.all()
     np.testing.assert_array_equal(np.isfinite(compiled), finite)
     np.testing.assert_allclose(compiled[finite], numpy[finite], rtol=0, atol=1e-9)
+
+
+# --- the fused belief update (Algorithm 2 in two compiled kernels) --------------------------------------------
+def _receivers(rng, R=9, S=5, M=40, far=False):
+    """Belief-update inputs of R receivers: KDE and cold-box priors, 0..S present messages (rings, clusters, a GPS
+    fix of identical components), non-uniform message weights; ``far``: messages that do not overlap at all."""
+    model = dn.DnbpModel(num_particles=M)
+    centre = 600.0 + rng.normal(size=(R, 1, 2)) * 30
+    prior = np.concatenate([centre + rng.normal(size=(R, M, 2)) * 4, rng.normal(size=(R, M, 2))], axis=-1)
+    prior_bandwidth = dn.rule_of_thumb_bandwidth(prior[..., :2])
+    prior_uniform = np.arange(R) % 4 == 1
+    angle = rng.random((R, S, M)) * 2 * np.pi
+    radius = np.where(np.arange(S)[None, :, None] % 2 == 0, 120.0 + rng.normal(size=(R, S, M)), 3.0)
+    centres = centre[:, None] + radius[..., None] * np.stack([np.cos(angle), np.sin(angle)], axis=-1)
+    centres[:, -1] = centre + rng.normal(size=(R, 1, 2)) * 2  # a GPS fix: M identical components
+    if far:
+        centres += 400.0 * np.arange(S)[None, :, None, None]
+    log_weights = np.log(rng.dirichlet(np.ones(M), size=(R, S)))
+    log_weights[:, -1] = -np.log(M)
+    bandwidth = rng.choice([0.5, 2.0, 6.0], size=(R, S))
+    present = rng.random((R, S)) < 0.6
+    present[0] = False  # the prior alone
+    present[2] = True  # every slot
+    draws = dn.draw_belief(rng, R, model)
+    return model, (prior, prior_bandwidth, prior_uniform, centres, log_weights, bandwidth, present, draws)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_fused_belief_update_equals_the_numpy_path(seed):
+    """The same proposals, weights and draws: the particles agree to rounding (~1e-13 m at 600 m)."""
+    model, args = _receivers(np.random.default_rng(seed))
+    fused, ok = dn.belief_update(model, *args)
+    numpy, ok_numpy = dn.belief_update(model, *args, compiled=False)
+    np.testing.assert_array_equal(ok, ok_numpy)
+    assert ok.all()
+    np.testing.assert_allclose(fused, numpy, rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(fused[..., 2:], numpy[..., 2:])  # velocities are copied: the same draws
+
+
+def test_fused_belief_update_recomputes_vanished_weights_in_the_log_domain(monkeypatch):
+    """Messages 400 m apart: every fast weight underflows, the exact log domain takes over as in the numpy path."""
+    model, args = _receivers(np.random.default_rng(3), far=True)
+    exact_rows = []
+    log_weights = dn._importance_log_weights
+
+    def spy(*a, exact, **k):
+        if exact:
+            exact_rows.append(len(a[1]))
+        return log_weights(*a, exact=exact, **k)
+
+    monkeypatch.setattr(dn, "_importance_log_weights", spy)
+    fused, ok = dn.belief_update(model, *args)
+    assert exact_rows and exact_rows[0] >= 2
+    numpy, ok_numpy = dn.belief_update(model, *args, compiled=False)
+    assert exact_rows[1] == exact_rows[0]  # the same receivers recomputed
+    np.testing.assert_array_equal(ok, ok_numpy)
+    np.testing.assert_allclose(fused, numpy, rtol=0, atol=1e-9)
+
+
+def test_fused_belief_update_depends_neither_on_threads_nor_on_the_batch(monkeypatch):
+    model, args = _receivers(np.random.default_rng(4), R=12)
+    monkeypatch.setattr(dn, "_FUSED_THREADS", True)
+    monkeypatch.setattr(dn, "_PARALLEL_ELEMENTS", 1)
+    threaded, _ = dn.belief_update(model, *args)
+    monkeypatch.setattr(dn, "_FUSED_THREADS", False)
+    serial, _ = dn.belief_update(model, *args)
+    np.testing.assert_array_equal(threaded, serial)
+    # a receiver alone: the draws' flat offsets differ (row 0 instead of r), which moves nothing here
+    *arrays, draws = args
+    for r in (2, 5, 11):
+        alone, _ = dn.belief_update(model, *[a[r:r + 1] for a in arrays], {k: v[r:r + 1] for k, v in draws.items()})
+        np.testing.assert_allclose(alone[0], serial[r], rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("n", [1, 7, 8, 9, 127, 128, 129, 264, 1000, 5000])
+def test_compiled_sum_is_numpys_pairwise_sum(n):
+    dn._fused_kernels()
+    values = np.exp(np.random.default_rng(n).normal(size=n) * 4)
+    assert dn._numpy_sum(values, n) == values.sum()
