@@ -70,17 +70,30 @@ test-clients: $(STAMP)
 	$(PY) -m pip install --quiet -e '.[test,torchrl]'
 	MPLBACKEND=Agg $(PY) -m pytest -q -p no:xdist tests/test_clients.py
 
-# RLlib pins an older gymnasium than SB3's: its example runs in its own venv.
+# RLlib pins an older gymnasium (ray[rllib] 2.60: gymnasium==1.2.2) than the main venv's: its example
+# runs in its own venv, with the same torch CPU build first (TORCH_INDEX as above). The stamp (as the main
+# venv's, from pyproject.toml) is written only once the install has passed `pip check` with no CUDA
+# package (nvidia-*) pulled in, so a failed install is retried by the next `make rllib-example`.
+# RLLIB_ARGS: e.g. make rllib-example RLLIB_ARGS='--preset bandwidth_fusion --iterations 5'.
+# PYTHONHASHSEED=0: RLlib's MultiAgentEpisode orders agents through sets of their names, so without a
+# fixed hash seed the sampled actions (and returns) change from run to run whatever PPO's seed.
 RLLIB_VENV := .venv-rllib
 RLLIB_PY := $(RLLIB_VENV)/bin/python
+RLLIB_STAMP := $(RLLIB_VENV)/$(notdir $(STAMP))
+RLLIB_ARGS ?=
 $(RLLIB_PY):
 	$(PYTHON) -m venv $(RLLIB_VENV)
 	$(RLLIB_PY) -m pip install --quiet --upgrade pip
+
+$(RLLIB_STAMP): $(RLLIB_PY) pyproject.toml
 	$(RLLIB_PY) -m pip install --quiet --retries 1 torch==$(TORCH_VERSION) $(TORCH_INDEX_OPTION)
 	$(RLLIB_PY) -m pip install --quiet -e '.[rllib]'
+	$(RLLIB_PY) -m pip check
+	! $(RLLIB_PY) -m pip list 2>/dev/null | grep -i '^nvidia-'
+	touch $(RLLIB_STAMP)
 
-rllib-example: $(RLLIB_PY)
-	MPLBACKEND=Agg $(RLLIB_PY) docs/clients/rllib_ppo.py
+rllib-example: $(RLLIB_STAMP)
+	PYTHONHASHSEED=0 MPLBACKEND=Agg $(RLLIB_PY) docs/clients/rllib_ppo.py $(RLLIB_ARGS)
 
 clean:
 	rm -rf $(VENV) $(RLLIB_VENV) results .pytest_cache
