@@ -162,8 +162,11 @@ class Network:
         distance = self.distances()
         want = (np.asarray(senders, bool) & self.transmits(slot))[:, :, None] & np.asarray(listening, bool)
         want &= ~np.eye(N, dtype=bool) & self.usable(distance)
-        u = uniforms(self.keys, (self._k, 2, slot), (N, N))
-        delay = np.where(want, self.packet_delays(distance, u), -1).astype(np.int64)
+        if type(self).packet_delays is Network.packet_delays and not np.any(self.loss_probability(distance) > 0):
+            delay = np.where(want, 0, -1).astype(np.int64)  # lossless and on time: no draw decides anything
+        else:
+            u = uniforms(self.keys, (self._k, 2, slot), (N, N))
+            delay = np.where(want, self.packet_delays(distance, u), -1).astype(np.int64)
         sent = want.any(axis=-1)
         self.messages_sent += sent
         self.floats_sent += floats * sent
