@@ -147,9 +147,10 @@ class UkfSe2Backend(Backend):
         self.partner[idx] = -1
         self.used[idx] = False
         rows = (np.asarray(idx)[:, None] * N + np.arange(N)).ravel()
-        fresh = self._no_chains()
-        for name in ("chain", "length", "hop_distance", "stop"):
-            getattr(self.chains, name)[rows] = getattr(fresh, name)[rows]
+        self.chains.chain[rows] = -1
+        self.chains.length[rows] = 0
+        self.chains.hop_distance[rows] = np.nan
+        self.chains.stop[rows] = -1
 
     def _factors(self, b: int) -> se2.FactoredCov:
         return se2.FactoredCov(self.P_ii[b], self.phi[b], self.sigma[b])

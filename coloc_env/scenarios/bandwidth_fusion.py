@@ -460,13 +460,6 @@ class BandwidthFusionScenario(PresetScenario):
         return np.concatenate([scores, logit_action], axis=-1)
 
     # --- dynamics ----------------------------------------------------------------
-    def part_generators(self, rng):
-        # The world draws from the episode's generator itself, in draw_episode's order (x(0), w, v), so a
-        # seed gives the episodes of the scenario this binding replaced; the network (which draws nothing
-        # on its lossless links) and the backend get children.
-        network, backend = rng.spawn(2)
-        return rng, network, backend
-
     def reset(self, rngs, env_index=None) -> None:
         super().reset(rngs, env_index)
         idx = self._indices(env_index)

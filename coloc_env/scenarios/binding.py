@@ -17,8 +17,8 @@ something the generic composition leaves open:
 | ``observation`` (+ ``_space``)| its observation features                                           |
 | ``compute_reward``            | its reward (team or own, the paper's error, its costs)             |
 | ``info``                      | the core's keys plus its own                                       |
-| ``part_generators``           | which generator each part draws from (a binding may keep the draws |
-|                               | of its paper scenario's world on the episode generator itself)     |
+| ``part_generators``           | which generator each part draws from (by default the world keeps   |
+|                               | the episode generator itself, the network and backend its children)|
 """
 
 from __future__ import annotations
@@ -45,6 +45,14 @@ class PresetScenario(ComposedScenario):
                            **cls.composition_options(config))
         spec.validate()
         return spec
+
+    def part_generators(self, rng):
+        """The presets' rule: the world draws from the episode's generator itself, in the order the hand-wired
+        scenario it replaced drew (so seeded episodes keep their truth and readings); the network and the
+        backend draw from its first and second child. (gps_denied_nbp gives its backend the first child, as
+        its scenario always did.)"""
+        network, backend = rng.spawn(2)
+        return rng, network, backend
 
     @classmethod
     def composition_options(cls, config) -> dict:

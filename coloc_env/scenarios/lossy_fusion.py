@@ -311,13 +311,6 @@ class LossyFusionScenario(PresetScenario):
         return actions
 
     # --- dynamics ----------------------------------------------------------------
-    def part_generators(self, rng):
-        # The world draws from the episode's generator itself, in the order of sample_episodes (x(0), the
-        # accelerations, the measurement noise), so the truth and the readings are the sampler's; the
-        # network and the backend draw from children.
-        network, backend = rng.spawn(2)
-        return rng, network, backend
-
     def reset(self, rngs, env_index=None) -> None:
         super().reset(rngs, env_index)
         idx = self._indices(env_index)

@@ -433,13 +433,6 @@ class MrclamRelayScenario(PresetScenario):
         return gymnasium.spaces.Box(-np.inf, np.inf, shape=(dim,), dtype=np.float32)
 
     # --- dynamics ------------------------------------------------------------------
-    def part_generators(self, rng):
-        # The world draws the window offset from the episode's generator itself, as this scenario always did
-        # (its first draw); the network (the loss uniforms, now counter-based from its key) and the backend
-        # draw from children.
-        network, backend = rng.spawn(2)
-        return rng, network, backend
-
     def reset(self, rngs, env_index=None) -> None:
         super().reset(rngs, env_index)
         idx = self._indices(env_index)

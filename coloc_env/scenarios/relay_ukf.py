@@ -357,13 +357,6 @@ class RelayUKFScenario(PresetScenario):
         return gymnasium.spaces.Box(-np.inf, np.inf, shape=(dim,), dtype=np.float32)
 
     # --- dynamics ------------------------------------------------------------------
-    def part_generators(self, rng):
-        # The world draws from the episode's generator itself, in the order the paper scenario always drew
-        # (odometry noise, the schedule, the range noise), so that seeded episodes keep their readings; the
-        # network and the backend draw from children.
-        network, backend = rng.spawn(2)
-        return rng, network, backend
-
     def reset(self, rngs, env_index=None) -> None:
         super().reset(rngs, env_index)
         idx = self._indices(env_index)
