@@ -30,6 +30,10 @@ class Backend:
 
     # Whether it reads ``Readings.fix`` / ``fix_valid`` (the world may skip computing fixes nobody reads).
     reads_fixes: ClassVar[bool] = True
+    # Whether its decisions choose among what has arrived, so that the agents should see the readings of
+    # time k (and their delivery) before they decide: the core then calls :meth:`receive` ahead of the step
+    # where the composition allows it (:mod:`coloc_env.scenarios.composed`, "Receive, then decide").
+    receives_before_deciding: ClassVar[bool] = False
 
     def __init__(self, config, world, network, batch: int):
         self.config = config
@@ -55,6 +59,11 @@ class Backend:
         self.predict(readings.inputs)
 
     def update(self, readings, decisions: np.ndarray) -> None:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def receive(self, readings, idx: np.ndarray) -> None:  # pragma: no cover - interface
+        """The readings of time k of the copies ``idx``, delivered through the network before the agents
+        decide (only for a backend with ``receives_before_deciding``); :meth:`update` then uses them."""
         raise NotImplementedError
 
     def predict(self, inputs: np.ndarray) -> None:  # pragma: no cover - interface

@@ -2,7 +2,11 @@
 
 Both adapt :mod:`estimators.afge` (no second copy of its math): each agent is a target that
 fuses the packets of its J world neighbours (:mod:`coloc_env.worlds.nlos_orbit`'s readings).
-Per step k, for each agent:
+Both receive before they decide (``receives_before_deciding``): where the composition allows it
+(no sensing or transport decisions), steps 1-3 run with the last step's mask before the agent
+acts (:meth:`PacketFirBackend.receive`, the core's "receive, then decide"), so its observation
+and the AHG costs describe the packets of stamp k, and step k re-filters only if the agent
+changes the mask. Per step k, for each agent:
 
 1. the packets stamped k (one per neighbour that measured the target) go to the network
    (:func:`coloc_env.networks.random_delay.node_packets`, slot 0), which returns each one's
@@ -44,9 +48,9 @@ same episode and the same delays (``tests/coloc_env/test_nlos_composition.py``).
 |                 | of the last horizon (14 where invalid)                              | estimate of its own      |
 
 RSS slots (``keep``): the neighbours ordered by the RSS of their packet of the newest stamp
-known at the end of the previous step (what the agent's observation showed; strongest
-first, then the neighbours without one, by index); the bit applies to that neighbour's
-packets of every buffered stamp. As in the scenario, ``n_strongest`` is applied after the
+as the agent's observation showed it (strongest first, then the neighbours without one, by
+index): stamp k where it received before deciding, else stamp k - 1; the bit applies to that
+neighbour's packets of every buffered stamp. As in the scenario, ``n_strongest`` is applied after the
 mask. AHG's centre runs every step, also while the agent overrides the horizon.
 
 Arguments (``coloc_env.backends.Afge``; defaults = ``nlos_horizon``'s, spec §9)
@@ -178,6 +182,8 @@ class Dfir(_PacketFirConfig):
 class PacketFirBackend(Backend):
     """Buffer, fusion and DFIR stack of :mod:`estimators.afge` for B copies x N targets; ``_choose`` picks N."""
 
+    receives_before_deciding = True
+
     def __init__(self, config, world, network, batch: int, stack_size: int):
         super().__init__(config, world, network, batch)
         J = getattr(world, "num_neighbours", None)
@@ -207,6 +213,10 @@ class PacketFirBackend(Backend):
         self.pred_P = np.broadcast_to(np.eye(4), (B, N, 4, 4)).copy()
         self.out_P = self.pred_P.copy()
         self.slots = np.broadcast_to(np.arange(J), (B, N, J)).copy()
+        self.mask = np.ones((B, N, J), bool)  # the keep mask of the last update (the pending filter's)
+        self._taken = np.zeros(B, bool)  # stamp k's packets are in the buffer
+        self.pending: dict | None = None
+        self.used = np.zeros((B, N, D1, J), bool)
         self.horizon_used = np.zeros((B, N), np.int64)
         self.valid_used = np.zeros((B, N), bool)
         self.packets_used = np.zeros((B, N))
@@ -226,9 +236,12 @@ class PacketFirBackend(Backend):
         self.out_x[idx], self.out_P[idx] = mean[idx], cov[idx]
         self.delays[idx] = NEVER
         self.last_delays[idx] = -1
+        self.mask[idx] = True
+        self._taken[idx] = False
         self.slots[idx] = np.arange(self.J)
         self.horizon_used[idx], self.valid_used[idx] = 0, False
         self.packets_used[idx], self.packets_arrived[idx] = 0.0, 0.0
+        self.used[idx] = False
         self._features[idx] = self.feature_defaults()
         self.posterior_position[idx] = mean[idx, :, :2]
         if self.posterior_position_cov is None:
@@ -240,18 +253,27 @@ class PacketFirBackend(Backend):
         return None
 
     # --- step -----------------------------------------------------------------------------
-    def _receive(self, readings) -> None:
-        """Stamp k's packets to the network, into the buffer (oldest first)."""
+    def receive(self, readings, idx) -> None:
+        """Receive, then decide: stamp k's packets of the copies ``idx`` into the buffer, the buffer filtered
+        with the last mask (:attr:`pending`: what the agent knows before it acts; the costs of the horizons
+        come from it) and the observation of what arrived, RSS slots included."""
+        self._take(readings, np.asarray(idx))
+        self._prepare()
+        self._refresh_view(self.pending)
+
+    def _take(self, readings, rows: np.ndarray) -> None:
+        """Stamp k's packets of the copies ``rows`` to the network, into the buffer (oldest first)."""
         extra = readings.extra
         sending = np.asarray(extra["measured"], bool)
         delay = node_packets(self.network, sending, self.world.neighbour_distances(), self.config.payload, slot=0)
-        self.last_delays = delay
+        self.last_delays[rows] = delay[rows]
         for name, new in (("rss", extra["rss"]), ("aoa", extra["aoa"]), ("nav", extra["nav"]),
                           ("modes", extra.get("mode", np.zeros(sending.shape, np.int8))),
                           ("delays", np.where(delay >= 0, delay, NEVER))):
             buf = getattr(self, name)
-            buf[:, :, :-1] = buf[:, :, 1:].copy()
-            buf[:, :, -1] = new
+            buf[rows, :, :-1] = buf[rows, :, 1:]  # a copy: rows is an index array
+            buf[rows, :, -1] = new[rows]
+        self._taken[rows] = True
 
     def _lags(self) -> np.ndarray:
         """(B, N, D+1): k - s for the buffer stamps s = k-D..k, -1 for stamps before 0."""
@@ -260,42 +282,81 @@ class PacketFirBackend(Backend):
         lags = np.where(stamps >= 0, k - stamps, -1)
         return np.broadcast_to(lags[:, None, :], (self.batch, self.num_agents, self.D + 1))
 
-    def update(self, readings, decisions) -> None:
-        self._receive(readings)
-        lags = self._lags()
-        mask = self._mask(decisions)
+    def _prepare(self) -> None:
+        """:attr:`pending`: the buffer at k filtered with the last mask (recomputed whole: the copies that did
+        not receive anew get the same values again)."""
+        c = self.config
+        fixes = af.packet_fixes(self.signal, self.nav, self.rss, self.aoa,
+                                af.mode_weight(c.mode_info, self.modes, self.signal.p_nlos))
+        self.pending = self._filter(self.mask, self._lags(), fixes)
+
+    def _filter(self, mask: np.ndarray, lags: np.ndarray, fixes: tuple) -> dict:
+        """Steps 2-3 at k with ``mask`` (B, N, J): the fused buffer, the re-run stacks, every horizon's
+        estimate; ``fixes`` are the buffer's packet fixes (they depend on neither the mask nor the lag)."""
         c = self.config
         Y, y, gamma, used = af.fuse_packets(self.signal, self.rss, self.aoa, self.nav, self.modes, self.delays, lags,
                                             mask[:, :, None, :], c.n_strongest, c.mode_info, c.weighting,
-                                            c.min_packets)
+                                            c.min_packets, fixes=fixes)
         k = np.asarray(self.world.k)[:, None]
         final, x, P, valid = af.buffer_estimates(self.motion, self.final, k, Y, y, gamma)
         fresh = gamma[..., -1]
         z, R = af.fused_fix(Y[..., -1, :, :], y[..., -1, :], fresh)
-        window = self._choose(decisions, x, P, valid, fresh, z, R)
+        return {"mask": mask.copy(), "lags": lags, "fixes": fixes, "final": final, "x": x, "P": P, "valid": valid,
+                "fresh": fresh, "z": z, "R": R, "used": used}
+
+    def costs(self, t: dict, likelihood: str) -> np.ndarray:
+        """AHG costs J_N(k) (B, N, S) of a filter ``t`` (``predictive``: each horizon's last estimate
+        predicted to k against the fused fix of k; ``paper``: in-sample), computed once per filter."""
+        if likelihood not in t:
+            if likelihood == "paper":
+                t[likelihood] = af.in_sample_costs(t["x"], t["valid"], t["z"], t["R"])
+            else:
+                t[likelihood] = af.predictive_costs(self.motion, self.prev_x, self.prev_P, self.prev_valid, t["z"],
+                                                    t["R"])
+        return t[likelihood]
+
+    def update(self, readings, decisions) -> None:
+        if not self._taken.all():  # not received ahead: the agent decided on the view of the last step
+            self._take(readings, np.flatnonzero(~self._taken))
+            self._prepare()
+        mask = self._mask(decisions)
+        pending = self.pending
+        t = pending if np.array_equal(mask, pending["mask"]) else self._filter(mask, pending["lags"],
+                                                                               pending["fixes"])
+        window = self._choose(decisions, t)
         idx = (window - 1)[..., None]
-        valid_w = np.take_along_axis(valid, idx, axis=-1)[..., 0]
-        x_w = np.take_along_axis(x, idx[..., None], axis=-2)[..., 0, :]
-        P_w = np.take_along_axis(P, idx[..., None, None], axis=-3)[..., 0, :, :]
-        e = z - self.pred_x[..., :2]
-        nis = np.einsum("...a,...ab,...b->...", e, np.linalg.inv(self.pred_P[..., :2, :2] + R), e)
+        valid_w = np.take_along_axis(t["valid"], idx, axis=-1)[..., 0]
+        x_w = np.take_along_axis(t["x"], idx[..., None], axis=-2)[..., 0, :]
+        P_w = np.take_along_axis(t["P"], idx[..., None, None], axis=-3)[..., 0, :, :]
         self.out_x = np.where(valid_w[..., None], x_w, self.pred_x)
         self.out_P = np.where(valid_w[..., None, None], P_w, self.pred_P)
         self.horizon_used, self.valid_used = np.asarray(window, np.int64), valid_w
+        lags = t["lags"]
         arrived = (self.delays == lags[..., None]) & (lags[..., None] >= 0)
-        self.packets_used = (used & arrived).sum(axis=(-1, -2)).astype(float)
+        self.packets_used = (t["used"] & arrived).sum(axis=(-1, -2)).astype(float)
         self.packets_arrived = arrived.sum(axis=(-1, -2)).astype(float)
-        self.final = final
-        self.prev_x, self.prev_P, self.prev_valid = x, P, valid
+        self.used = t["used"]
+        self.final = t["final"]
+        self.prev_x, self.prev_P, self.prev_valid = t["x"], t["P"], t["valid"]
+        self.mask = mask.copy()
+        self._taken[:] = False
+        self._refresh_view(t)
+
+    def _refresh_view(self, t: dict) -> None:
+        """The RSS slots (neighbours by the RSS of their packet of the newest stamp, strongest first) and the
+        observation features of filter ``t``, the innovation measured against the current prediction."""
         newest = self.delays[..., -1, :] == 0
         key = np.where(newest, self.rss[..., -1, :], -np.inf)
         self.slots = np.argsort(-key, axis=-1, kind="stable")
-        self._features = self._make_features(lags, np.where(fresh, nis, 0.0), P, valid)
+        e = t["z"] - self.pred_x[..., :2]
+        nis = np.einsum("...a,...ab,...b->...", e, np.linalg.inv(self.pred_P[..., :2, :2] + t["R"]), e)
+        self._features = self._make_features(t["lags"], np.where(t["fresh"], nis, 0.0), t["P"], t["valid"])
 
     def _mask(self, decisions) -> np.ndarray:
         return np.ones((self.batch, self.num_agents, self.J), bool)
 
-    def _choose(self, decisions, x, P, valid, fresh, z, R) -> np.ndarray:  # pragma: no cover - interface
+    def _choose(self, decisions, t: dict) -> np.ndarray:  # pragma: no cover - interface
+        """The horizon N (B, N) to output, given filter ``t``."""
         raise NotImplementedError
 
     def predict(self, inputs) -> None:
@@ -352,15 +413,12 @@ class AfgeBackend(PacketFirBackend):
         np.put_along_axis(mask, self.slots, bits, axis=-1)
         return mask
 
-    def _choose(self, decisions, x, P, valid, fresh, z, R) -> np.ndarray:
+    def _choose(self, decisions, t: dict) -> np.ndarray:
         c = self.config
-        if c.likelihood == "paper":
-            costs = af.in_sample_costs(x, valid, z, R)
-        else:
-            costs = af.predictive_costs(self.motion, self.prev_x, self.prev_P, self.prev_valid, z, R)
-            if c.likelihood == "smoothed":
-                self.raw, self.count, costs = af.smooth_costs(self.raw, self.count, costs, c.smoothing)
-        chosen, centre = af.ahg_select(self.ahg, self.centre, costs, valid, fresh)
+        costs = self.costs(t, "paper" if c.likelihood == "paper" else "predictive")
+        if c.likelihood == "smoothed":
+            self.raw, self.count, costs = af.smooth_costs(self.raw, self.count, costs, c.smoothing)
+        chosen, centre = af.ahg_select(self.ahg, self.centre, costs, t["valid"], t["fresh"])
         # chosen = 0: no group member has an estimate; the centre (also without one) outputs the prediction
         adaptive = np.where(chosen > 0, chosen, self.centre)
         self.centre = centre
@@ -391,7 +449,8 @@ class AfgeBackend(PacketFirBackend):
                           np.where(present, np.clip((rss + 80.0) / 10.0, -RSS_BOUND, RSS_BOUND), 0.0),
                           np.where(present, flag, 0.0)], axis=-1).reshape(B, N, 3 * J)
         h = self.ahg.half * c.window_step
-        centre = np.clip(self.horizon_used, c.window_min + h, c.window_max - h)
+        centre = np.clip(np.where(self.horizon_used > 0, self.horizon_used, c.window_centre), c.window_min + h,
+                         c.window_max - h)  # before the first output: the AHG's N_c(0)
         group = af.ahg_group(self.ahg, centre)
         trace = np.trace(P[..., :2, :2], axis1=-2, axis2=-1)
         log_trace = np.where(valid, np.clip(np.log(np.maximum(trace, 1e-300)), -LOG_BOUND, LOG_BOUND),
@@ -405,7 +464,7 @@ class DfirBackend(PacketFirBackend):
     def __init__(self, config: Dfir, world, network, batch):
         super().__init__(config, world, network, batch, config.horizon)
 
-    def _choose(self, decisions, x, P, valid, fresh, z, R) -> np.ndarray:
+    def _choose(self, decisions, t: dict) -> np.ndarray:
         return np.full((self.batch, self.num_agents), self.config.horizon, np.int64)
 
     def feature_bounds(self):

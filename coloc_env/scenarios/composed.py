@@ -11,6 +11,19 @@ and the transport decisions; the backend updates its estimates of time k,
 asking the network for every delivery, then predicts to k + 1; the world
 moves to k + 1. The infos report time k's truth and the posterior of k.
 
+Receive, then decide. A backend that declares ``receives_before_deciding``
+(``afge``, ``dfir``: their decisions pick among the packets that have arrived)
+gets the readings of time k, and the network's delivery of them, before the
+agents choose the action of step k, wherever no action shapes what is read
+or carried (the world has no sensing blocks and the network no transport
+blocks): at reset and at the end of step k - 1 the core reads the world at
+k, calls the network for step k and hands both to ``backend.receive``; the
+observation then shows what arrived, and step k only updates. The network's
+record of that call (``messages_sent``, ``floats_sent``, ...) is kept aside
+and reported in step k's infos, so every step still reports what was sent in
+it. Elsewhere the backend receives inside its update, as every other backend
+does. ``receives_ahead`` says which way a composition runs.
+
 Two estimands (the world's ``estimand``, which the backend must share):
 
 * ``self``: each agent estimates its own position; the truth is
@@ -95,6 +108,8 @@ Termination: none; truncation after ``horizon`` steps.
 
 from __future__ import annotations
 
+import copy
+
 import gymnasium
 import numpy as np
 
@@ -103,6 +118,20 @@ from coloc_env.scenarios.base import Scenario
 
 LOG_TRACE_BOUND = 50.0
 DISTANCE_SCALE = 100.0
+# what a network records of one step's sending (the infos report it); RelayChain last_chain apart
+_RECORD_ARRAYS = ("messages_sent", "floats_sent", "delivered", "cost_sent", "node_messages", "node_floats")
+
+
+def _network_record(network) -> dict:
+    record = {name: np.array(getattr(network, name)) for name in _RECORD_ARRAYS
+              if getattr(network, name, None) is not None}
+    record["last_chain"] = copy.deepcopy(network.last_chain)
+    return record
+
+
+def _restore_network_record(network, record: dict) -> None:
+    for name, value in record.items():
+        setattr(network, name, copy.deepcopy(value) if name == "last_chain" else value.copy())
 
 
 class ComposedScenario(Scenario):
@@ -122,6 +151,10 @@ class ComposedScenario(Scenario):
                                           getattr(spec.backend, "rounds", 1))
         self.backend = spec.backend.build(self.world, self.network, self.batch)
         self.world.fixes_needed = self.backend.reads_fixes
+        # receive, then decide (the module docstring): only where no action shapes what is read or carried
+        self.receives_ahead = bool(self.backend.receives_before_deciding) \
+            and not self.world.sensing_blocks() and not self.network.transport_blocks()
+        self._ahead_record: dict | None = None  # the network's record of the coming step's call
         self.blocks = [*self.world.sensing_blocks(), *self.network.transport_blocks(),
                        *self.backend.decision_blocks()]
         self.block_parts = (["world"] * len(self.world.sensing_blocks())
@@ -265,7 +298,31 @@ class ComposedScenario(Scenario):
             self._truth[idx] = self.world.positions()[idx]
         self._received[idx] = 0.0
         self._reward[idx] = 0.0
+        if self.receives_ahead:
+            self._receive_ahead(idx)
         self._clear_step_record(idx)
+
+    def _receive_ahead(self, idx: np.ndarray) -> None:
+        """Readings of the copies ``idx`` at their time k, and the network's step-k delivery of them, to the
+        backend before the agents decide (receive, then decide). The network's record of this call is kept
+        for step k's infos; what it recorded for the step just done stays visible until then. The other
+        copies are read and drawn again at their own k (the draws are counter-based: the same values), and
+        the backend takes only ``idx``'s."""
+        B, N = self.batch, self.num_agents
+        net = self.network
+        done_step = _network_record(net)
+        none = np.zeros((B, N, 0), np.int64)
+        self.readings = self.world.readings(none)
+        net.begin(self.world.k, self.world.positions().copy(), none)
+        self.backend.receive(self.readings, idx)
+        coming = _network_record(net)
+        if self._ahead_record is None:
+            self._ahead_record = coming
+        else:
+            for name, value in coming.items():
+                if name != "last_chain":
+                    self._ahead_record[name][idx] = value[idx]
+        _restore_network_record(net, done_step)
 
     def _clear_step_record(self, idx: np.ndarray) -> None:
         """What the network recorded of the last step, cleared for the copies that start anew (their infos at
@@ -330,9 +387,13 @@ class ComposedScenario(Scenario):
         sensing = decoded[..., :nw].astype(np.int64)
         transport = decoded[..., nw:nw + nn].astype(np.int64)
         decisions = decoded[..., nw + nn:]
-        readings = self.readings = self.world.readings(sensing)
         truth = self.world.positions().copy()
-        self.network.begin(self.world.k, truth, transport)
+        if self.receives_ahead:  # read, carried and received before the agents decided
+            readings = self.readings
+            _restore_network_record(self.network, self._ahead_record)
+        else:
+            readings = self.readings = self.world.readings(sensing)
+            self.network.begin(self.world.k, truth, transport)
         self.backend.step(readings, decisions)
         if self.estimand == "target":
             self._truth_state = self.world.target_state().copy()
@@ -342,6 +403,10 @@ class ComposedScenario(Scenario):
         self._received = self.network.delivered.transpose(0, 2, 1)  # [s, t]: s heard t
         self.world.advance()
         self.k = self.k + 1
+        if self.receives_ahead:
+            live = np.flatnonzero(self.k < self.horizon)
+            if live.size:
+                self._receive_ahead(live)
 
     def compute_reward(self) -> np.ndarray:
         """The reward table of the module docstring, after :meth:`advance`: (B, N)."""

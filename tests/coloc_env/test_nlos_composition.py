@@ -21,11 +21,15 @@ def _composition_run(spec, seed, steps):
     observations, _ = env.reset(seed=seed)
     backend = env.unwrapped.scenario.backend
     truth, estimates, delays = [], [], []
+    ahead = env.unwrapped.scenario.receives_ahead  # stamp k's packets arrive before the agents decide
     for _ in range(steps):
+        if ahead:
+            delays.append(backend.last_delays[0].copy())
         observations, _, _, _, infos = env.step(policy.act(observations))
+        if not ahead:
+            delays.append(backend.last_delays[0].copy())
         truth.append([infos[a]["true_position"] for a in env.possible_agents])
         estimates.append([infos[a]["estimated_position"] for a in env.possible_agents])
-        delays.append(backend.last_delays[0].copy())
     return np.array(truth), np.array(estimates), np.array(delays), env
 
 
