@@ -16,10 +16,20 @@ each step, which horizon's estimate to output and which neighbours' packets to f
 equals AFGE. Agents do not exchange estimates, so they are independent copies of the
 paper's single objective UAV with different paths (see the Arguments).
 
-Time line of one step (copy b, time k). Before the action the agent has received every
-packet that arrived up to k, and its observation describes them; the action then picks the
-horizon whose estimate is output as x_hat(k) (reward for time k), the world moves to k + 1
-and the packets arriving then are buffered.
+The preset is the composition ``nlos_orbit`` / ``random_delay`` / ``afge``
+(:meth:`NlosHorizonConfig.parts`) with this action codec, observation, reward and info. The
+world draws each episode from the episode's generator by :func:`draw_episode` (truth,
+readings and prior as the hand-wired scenario drew them); the packet delays are the
+network's (its counter-based draws from its own child generator, Assumption 3's law:
+:meth:`NlosHorizonScenario.packet_delays`), not the delay block of that draw, which the
+world draws only to keep the stream. :func:`drawn_episodes` gives the reproduction the env's
+episodes with the network's delays.
+
+Time line of one step (copy b, time k): receive, then decide (:mod:`coloc_env.scenarios.composed`).
+Before the action the agent has received every packet that arrived up to k (the backend has
+filtered the buffer with the last mask), and its observation describes them; the action then
+picks the horizon whose estimate is output as x_hat(k) (reward for time k), the world moves to
+k + 1 and the packets arriving then are buffered.
 
 Action (one per agent, the same ``MultiDiscrete`` for all)
 ----------------------------------------------------------
@@ -38,20 +48,25 @@ of a stamp, the strongest ``n_strongest`` are fused), so keeping all reproduces 
 rule exactly; set ``n_strongest = num_neighbours`` to hand the whole selection to the agent.
 A NaN/inf or a value outside the space is a ``ValueError``.
 
-Observation (per agent, ``Box(-inf, inf, shape=(D + 1 + 3 J + M + 3,), float32)``; 36 by default)
+Observation (per agent, ``Box(low, high, shape=(D + 1 + 3 J + M + 3,), float32)``; 36 by default)
 ----------------------------------------------------------------------------------------------
-| index                   | meaning                                                                  |
-|-------------------------|--------------------------------------------------------------------------|
-| ``[0, D+1)``            | packets of stamp k - l known at time k, l = 0..D, divided by J           |
-| ``D+1+3s + 0``          | slot s has a packet of the newest stamp (0/1)                            |
-| ``D+1+3s + 1``          | its RSS, (RSS + 80 dBm) / 10 (0 when absent)                             |
-| ``D+1+3s + 2``          | its mode: +1 NLOS, -1 LOS with ``mode_info="known"``, else 0             |
-| ``D+1+3J``              | log(1 + e^T S^-1 e) of the newest fused observation against the          |
-|                         | prediction of the last output (0 without a fresh observation)            |
-| ``D+2+3J``              | the last horizon used, / N_max                                           |
-| ``[D+3+3J, D+3+3J+M)``  | log tr P_N (position block) for the M horizons of an AHG group centred on |
-|                         | the last horizon (clipped as AHG clips its centre); 14 where invalid     |
-| ``[-1]``                | step fraction k / horizon                                                |
+The ``afge`` backend's features (:mod:`coloc_env.backends.nlos`), then the step fraction.
+Since the binding every entry has a finite bound (the column; the RSS, innovation and trace
+entries are clipped to it: before, the space was unbounded and nothing was clipped).
+
+| index                   | meaning                                                                  | bounds    |
+|-------------------------|--------------------------------------------------------------------------|-----------|
+| ``[0, D+1)``            | packets of stamp k - l known at time k, l = 0..D, divided by J           | [0, 1]    |
+| ``D+1+3s + 0``          | slot s has a packet of the newest stamp (0/1)                            | [0, 1]    |
+| ``D+1+3s + 1``          | its RSS, (RSS + 80 dBm) / 10 (0 when absent)                             | [-20, 20] |
+| ``D+1+3s + 2``          | its mode: +1 NLOS, -1 LOS with ``mode_info="known"``, else 0             | [-1, 1]   |
+| ``D+1+3J``              | log(1 + e^T S^-1 e) of the newest fused observation against the          | [0, 50]   |
+|                         | prediction of the last output (0 without a fresh observation)            |           |
+| ``D+2+3J``              | the last horizon used, / N_max (0 before the first output)               | [0, 1]    |
+| ``[D+3+3J, D+3+3J+M)``  | log tr P_N (position block) for the M horizons of an AHG group centred on | [-50, 50] |
+|                         | the last horizon (N_c(0) before the first; clipped as AHG clips its      |           |
+|                         | centre); 14 where invalid                                                |           |
+| ``[-1]``                | step fraction k / horizon                                                | [0, 1]    |
 
 ``state()``: every agent's observation, then each agent's true estimation error (x, y) / 10 m.
 
@@ -64,11 +79,13 @@ Reward (per agent: each target has its own estimate)
 
 Termination: none; truncation after ``horizon`` steps (the paper's 1000 s flight).
 
-``infos[agent]``: ``true_position``, ``estimated_position``, ``error`` (squared m),
-``trace`` (tr of the output's position covariance), ``horizon`` (N used; 0 at reset),
-``valid`` (DFIR_N had an estimate), ``packets_received`` (packets arriving at k),
+``infos[agent]``: ``true_position``, ``estimated_position``, ``position_error`` (m), ``error``
+(squared m), ``trace`` (tr of the output's position covariance), ``horizon`` (N used; 0 at
+reset), ``valid`` (DFIR_N had an estimate), ``packets_received`` (packets arriving at k),
 ``communication`` (packets used: of those arriving at k, how many were fused),
-``nlos_fraction`` (NLOS links among the neighbours in range at k), ``step``.
+``nlos_fraction`` (NLOS links among the neighbours in the RSA at k, the time of the output;
+before the binding it was read at k + 1), ``messages_sent`` / ``floats_sent`` (0: the
+packets come from world nodes, not from agents), ``step``.
 
 Batching: B copies x N agents step in one set of numpy calls; the fused observations of
 the D + 1 buffer stamps, the D + 1 stack advances over all horizons and the AHG costs are
@@ -140,8 +157,9 @@ import numpy as np
 
 import estimators.afge as af
 from coloc_env.config import as_array, check_choice, check_range, check_step_windows
+from coloc_env.networks.random_delay import node_packets
 from coloc_env.rendering import Link, Scene
-from coloc_env.scenarios.base import Scenario
+from coloc_env.scenarios.binding import PresetScenario
 from coloc_env.world.flight import OrbitingNeighbours, OrbitParameters, TurnSchedulePath
 from coloc_env.world.los_nlos import LosNlosChain
 from coloc_env.world.radio import ReceiveSearchArea, RssAoaSensor
@@ -199,6 +217,23 @@ class NlosHorizonConfig:
     prior_std: tuple = (50.0, 50.0, 5.0, 5.0)
     reward: str = "error"
     packet_cost: float = 0.0
+
+    def parts(self) -> tuple:
+        """The (world, network, backend) configs this flat config stands for: ``nlos_orbit`` with the same
+        flight, orbits, radio and prior, ``random_delay`` with (``delay_probs``, ``buffer_length``) and
+        ``afge`` with the estimator's fields."""
+        from coloc_env.backends.nlos import Afge  # the parts import this module (the world's episode draw)
+        from coloc_env.networks.random_delay import RandomDelay
+        from coloc_env.worlds.nlos_orbit import SCENARIO_FIELDS, NlosOrbit
+
+        world = NlosOrbit(num_agents=self.num_uavs, horizon=self.horizon,
+                          **{name: getattr(self, name) for name in SCENARIO_FIELDS})
+        network = RandomDelay(delay_probs=tuple(self.delay_probs), buffer_length=self.buffer_length)
+        backend = Afge(n_strongest=self.n_strongest, min_packets=self.min_packets, weighting=self.weighting,
+                       mode_info=self.mode_info, window_min=self.window_min, window_max=self.window_max,
+                       window_step=self.window_step, group_size=self.group_size, window_centre=self.window_centre,
+                       likelihood=self.likelihood, smoothing=self.smoothing)
+        return world, network, backend
 
     # --- the world and estimator parts this config describes ---------------------------
     @property
@@ -395,8 +430,10 @@ def fused_by_stamp_and_lag(config: NlosHorizonConfig, episode: Episode):
     return np.moveaxis(Y, 0, 1), np.moveaxis(y, 0, 1), np.moveaxis(gamma, 0, 1)
 
 
-class NlosHorizonScenario(Scenario):
-    """Batched core of ``nlos_horizon``; see the module docstring for the tables."""
+class NlosHorizonScenario(PresetScenario):
+    """Batched core of ``nlos_horizon``: the binding of :class:`NlosHorizonConfig` on the composable core
+    (``nlos_orbit`` / ``random_delay`` / ``afge``, receiving before deciding); the module docstring has the
+    tables."""
 
     name = "nlos_horizon"
     paper = "gao2016"
@@ -404,37 +441,40 @@ class NlosHorizonScenario(Scenario):
 
     def __init__(self, config: NlosHorizonConfig, batch: int = 1):
         super().__init__(config, batch)
-        c = config
-        self.motion = c.motion
-        self.ahg = c.ahg
-        self.D = c.buffer_length
-        self.J = c.num_neighbours
-        self.S = c.window_max
-        B, N, K1, J, S = self.batch, c.num_uavs, c.horizon + 1, self.J, self.S
-        self.k = np.zeros(B, dtype=np.int64)
-        self.episode_id = np.zeros(B, dtype=np.int64)
-        self.truth = np.zeros((B, K1, N, 4))
-        self.rss = np.zeros((B, K1, N, J))
-        self.aoa = np.zeros((B, K1, N, J))
-        self.nav = np.zeros((B, K1, N, J, 2))
-        self.modes = np.zeros((B, K1, N, J), np.int8)
-        self.delays = np.full((B, K1, N, J), NEVER, np.int16)
-        self.prior = np.zeros((B, N, 4))
-        self.orbits = OrbitParameters(*(np.zeros((B, N, J)) for _ in range(5)))
-        self.final = af.empty_stack((B, N), S)
-        self.prev_x, self.prev_P = np.zeros((B, N, S, 4)), np.broadcast_to(np.eye(4), (B, N, S, 4, 4)).copy()
-        self.prev_valid = np.zeros((B, N, S), bool)
-        self.mask = np.ones((B, N, J), bool)
-        self.pred_x = np.zeros((B, N, 4))
-        self.pred_P = np.broadcast_to(c.prior_cov, (B, N, 4, 4)).copy()
-        self.out_x = np.zeros((B, N, 4))
-        self.out_P = np.broadcast_to(c.prior_cov, (B, N, 4, 4)).copy()
-        self.horizon_used = np.zeros((B, N), np.int64)
-        self.valid_used = np.zeros((B, N), bool)
-        self.packets_used = np.zeros((B, N))
-        self._reward = np.zeros((B, N))
-        self._last_arrived = np.zeros((B, N))
-        self._prepare()
+        be = self.backend
+        self.motion = be.motion
+        self.ahg = be.ahg
+        self.D, self.J, self.S = be.D, be.J, be.S
+        self.episode_id = np.zeros(self.batch, dtype=np.int64)
+        self._preset_action_space = gymnasium.spaces.MultiDiscrete(
+            [config.window_max - config.window_min + 1] + [2] * self.J, dtype=np.int64)
+        low, high = be.feature_bounds()
+        self._observation_space = gymnasium.spaces.Box(np.r_[low, 0.0].astype(np.float32),
+                                                       np.r_[high, 1.0].astype(np.float32), dtype=np.float32)
+
+    # --- the parts' state, by the scenario's names ----------------------------------------
+    @property
+    def truth(self) -> np.ndarray:
+        """True states (B, K + 1, N, 4) of the episode's targets, stamps 0..K."""
+        return self.world.truth
+
+    @property
+    def pending(self) -> dict:
+        """The backend's buffer at the current time filtered with the last mask, before the agent acts
+        (:meth:`coloc_env.backends.nlos.PacketFirBackend.receive`): ``x``, ``P``, ``valid`` per horizon."""
+        return self.backend.pending
+
+    def packet_delays(self) -> np.ndarray:
+        """(B, K + 1, N, J) int64: the delay the network gives the packet of stamp s from neighbour j to
+        uav_i, -1 where none was sent (outside the RSA) or it was lost; the network's counter-based draws,
+        fixed at reset (replayed here on a copy of the network, its own rule)."""
+        net, w = copy.deepcopy(self.network), self.world
+        B, K1 = self.batch, self.horizon + 1
+        out = np.empty((B, K1, self.num_agents, self.J), np.int64)
+        for s in range(K1):
+            net.begin(np.full(B, s), w.truth[:, s, :, :2], np.zeros((B, self.num_agents, 0), np.int64))
+            out[:, s] = node_packets(net, w.in_rsa[:, s], w.distance[:, s], self.backend.config.payload, slot=0)
+        return out
 
     # --- description ------------------------------------------------------------
     @property
@@ -442,11 +482,10 @@ class NlosHorizonScenario(Scenario):
         return self.D + 1 + 3 * self.J + self.config.group_size + 3
 
     def observation_space(self):
-        return gymnasium.spaces.Box(-np.inf, np.inf, shape=(self.obs_dim,), dtype=np.float32)
+        return self._observation_space
 
     def action_space(self):
-        c = self.config
-        return gymnasium.spaces.MultiDiscrete([c.window_max - c.window_min + 1] + [2] * self.J, dtype=np.int64)
+        return self._preset_action_space
 
     def state_space(self):
         dim = self.num_agents * (self.obs_dim + 2)
@@ -458,87 +497,13 @@ class NlosHorizonScenario(Scenario):
         keep = np.ones((*window.shape, self.J), np.int64) if keep_slots is None else np.asarray(keep_slots, np.int64)
         return np.concatenate([(window - self.config.window_min)[..., None], keep], axis=-1)
 
-    # --- episode ----------------------------------------------------------------
-    def reset(self, rngs, env_index=None) -> None:
-        idx = self._indices(env_index)
-        if len(rngs) != len(idx):
-            raise ValueError(f"reset needs one generator per copy: {len(idx)} copies, {len(rngs)} generators")
-        for b, rng in zip(idx, rngs, strict=True):
-            ep = draw_episode(self.config, rng)
-            self.truth[b], self.rss[b], self.aoa[b], self.nav[b] = ep.truth, ep.rss, ep.aoa, ep.nav
-            self.modes[b], self.delays[b], self.prior[b] = ep.modes, ep.delays, ep.prior
-            for name in ("radius", "wobble", "wobble_rate", "phase", "bearing_rate"):
-                getattr(self.orbits, name)[b] = getattr(ep.orbits, name)
-        N, S = self.num_agents, self.S
-        self.k[idx] = 0
-        self.episode_id[idx] += 1
-        empty = af.empty_stack((len(idx), N), S)
-        self.final.info[idx], self.final.vector[idx], self.final.stamps[idx] = empty.info, empty.vector, empty.stamps
-        self.prev_x[idx], self.prev_P[idx], self.prev_valid[idx] = 0.0, np.eye(4), False
-        self.mask[idx] = True
-        self.pred_x[idx] = self.prior[idx]
-        self.pred_P[idx] = self.config.prior_cov
-        self.out_x[idx] = self.prior[idx]
-        self.out_P[idx] = self.config.prior_cov
-        self.horizon_used[idx] = 0
-        self.valid_used[idx] = False
-        self.packets_used[idx] = 0.0
-        self._last_arrived[idx] = 0.0
-        self._reward[idx] = 0.0
-        self._prepare()
-
-    def _gather_buffer(self):
-        """Packets of the buffer stamps k-D..k, arrays (B, N, D+1, J, ...), and the lags (B, D+1)."""
-        D, K1 = self.D, self.config.horizon + 1
-        stamps = self.k[:, None] + np.arange(-D, 1)
-        s = np.clip(stamps, 0, K1 - 1)
-        rows = np.arange(self.batch)[:, None]
-
-        def pick(arr):
-            return np.moveaxis(arr[rows, s], 1, 2)  # (B, D+1, N, J, ...) -> (B, N, D+1, J, ...)
-
-        lags = np.where(stamps >= 0, self.k[:, None] - s, -1)
-        return (pick(self.rss), pick(self.aoa), pick(self.nav), pick(self.modes), pick(self.delays),
-                np.broadcast_to(lags[:, None, :], (self.batch, self.num_agents, D + 1)))
-
-    def _filter(self, mask: np.ndarray, buffer: dict | None = None) -> dict:
-        """The buffer re-run at time k with ``mask`` (B, N, J): fused buffer, stacks, estimates, costs.
-
-        ``buffer``: the packets of this time step and their fixes (``_filter``'s ``"buffer"``
-        entry) when another mask was filtered at the same k; they do not depend on the mask.
-        """
-        if buffer is None:
-            rss, aoa, nav, modes, delays, lags = self._gather_buffer()
-            buffer = {"packets": (rss, aoa, nav, modes, delays, lags),
-                      "fixes": buffer_fixes(self.config, rss, aoa, nav, modes)}
-        rss, aoa, nav, modes, delays, lags = buffer["packets"]
-        Y, y, gamma, used = fuse_buffer(self.config, rss, aoa, nav, modes, delays, lags, mask[:, :, None, :],
-                                        fixes=buffer["fixes"])
-        final, x, P, valid = af.buffer_estimates(self.motion, self.final, self.k[:, None], Y, y, gamma)
-        fresh = gamma[..., -1]
-        z, R = af.fused_fix(Y[..., -1, :, :], y[..., -1, :], fresh)
-        arrived = (delays == lags[..., None]) & (lags[..., None] >= 0)
-        return {"mask": mask.copy(), "final": final, "x": x, "P": P, "valid": valid, "fresh": fresh, "z": z,
-                "R": R, "used": used, "arrived": arrived, "delays": delays, "lags": lags, "rss": rss,
-                "modes": modes, "buffer": buffer}
-
-    def _prepare(self) -> None:
-        """Everything the agents see before acting at time k, filtered with the last mask."""
-        t = self._filter(self.mask)
-        t["predictive"] = af.predictive_costs(self.motion, self.prev_x, self.prev_P, self.prev_valid, t["z"], t["R"])
-        t["paper"] = af.in_sample_costs(t["x"], t["valid"], t["z"], t["R"])
-        e = t["z"] - self.pred_x[..., :2]
-        S = self.pred_P[..., :2, :2] + t["R"]
-        nis = np.einsum("...a,...ab,...b->...", e, np.linalg.inv(S), e)
-        t["nis"] = np.where(t["fresh"], nis, 0.0)
-        # RSS slots at the newest stamp: strongest first, then neighbours without a newest packet
-        newest = t["delays"][..., -1, :] == 0  # packets of stamp k known at k
-        key = np.where(newest, t["rss"][..., -1, :], -np.inf)
-        t["slots"] = np.argsort(-key, axis=-1, kind="stable")
-        t["slot_present"] = np.take_along_axis(newest, t["slots"], axis=-1)
-        t["slot_rss"] = np.take_along_axis(t["rss"][..., -1, :], t["slots"], axis=-1)
-        t["slot_mode"] = np.take_along_axis(t["modes"][..., -1, :], t["slots"], axis=-1)
-        self.pending = t
+    def decode_actions(self, actions) -> np.ndarray:
+        """Actions (B, N, 1 + J) -> the backend's blocks: ``horizon`` v = a[0] + 1 (N = N_min + a[0]; the
+        preset offers no v = 0, AHG inside the backend: its ``paper`` policy runs AHG as an agent) and
+        ``keep`` a[1:], the slot bits."""
+        a = self.check_discrete_actions(
+            actions, ("action[0] (horizon N - N_min)", *[f"action[1:{1 + self.J}] (keep 1 / drop 0)"] * self.J))
+        return np.concatenate([a[..., :1] + 1, a[..., 1:]], axis=-1)
 
     # --- costs for policies -------------------------------------------------------
     def horizon_costs(self, likelihood: str) -> np.ndarray:
@@ -547,7 +512,7 @@ class NlosHorizonScenario(Scenario):
         the predictive costs)."""
         if likelihood not in ("predictive", "paper"):
             raise ValueError(f"likelihood must be 'predictive' or 'paper' here, got {likelihood!r}")
-        return self.pending[likelihood]
+        return self.backend.costs(self.pending, likelihood)
 
     @property
     def horizon_valid(self) -> np.ndarray:
@@ -560,87 +525,40 @@ class NlosHorizonScenario(Scenario):
         return self.pending["fresh"]
 
     # --- dynamics ----------------------------------------------------------------
-    def decode_actions(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Actions (B, N, 1 + J) -> horizons (B, N) and the neighbour mask (B, N, J) (absolute order)."""
-        a = self.check_discrete_actions(
-            actions, ("action[0] (horizon N - N_min)", *[f"action[1:{1 + self.J}] (keep 1 / drop 0)"] * self.J))
-        window = self.config.window_min + a[..., 0]
-        mask = np.zeros((self.batch, self.num_agents, self.J), bool)
-        np.put_along_axis(mask, self.pending["slots"], a[..., 1:] == 1, axis=-1)
-        return window, mask
+    def reset(self, rngs, env_index=None) -> None:
+        super().reset(rngs, env_index)
+        self.episode_id[self._indices(env_index)] += 1
 
-    def step(self, actions) -> None:
-        window, mask = self.decode_actions(actions)  # a bad action is a ValueError before anything else
-        if np.any(self.k >= self.horizon):
-            raise RuntimeError("step() on a copy whose episode is over; reset it first")
-        self.advance(window, mask)
-
-    def advance(self, window: np.ndarray, mask: np.ndarray) -> None:
-        """Output the horizon-``window`` estimate (B, N) at time k with the packets of ``mask``
-        (B, N, J), then move the world to k + 1."""
-        same = np.array_equal(mask, self.pending["mask"])
-        t = self.pending if same else self._filter(mask, self.pending["buffer"])
-        A = self.motion.transition
-        idx = (window - 1)[..., None]
-        valid = np.take_along_axis(t["valid"], idx, axis=-1)[..., 0]
-        x = np.take_along_axis(t["x"], idx[..., None], axis=-2)[..., 0, :]
-        P = np.take_along_axis(t["P"], idx[..., None, None], axis=-3)[..., 0, :, :]
-        self.out_x = np.where(valid[..., None], x, self.pred_x)
-        self.out_P = np.where(valid[..., None, None], P, self.pred_P)
-        self.horizon_used, self.valid_used = np.asarray(window, np.int64), valid
-        self.packets_used = (t["used"] & t["arrived"]).sum(axis=(-1, -2)).astype(float)
-        truth = self.truth[np.arange(self.batch), self.k]
+    def compute_reward(self) -> np.ndarray:
+        be = self.backend
         if self.config.reward == "error":
-            loss = np.sum((self.out_x[..., :2] - truth[..., :2]) ** 2, axis=-1)
+            loss = np.sum((be.posterior_position - self._truth) ** 2, axis=-1)
         else:
-            loss = np.trace(self.out_P[..., :2, :2], axis1=-2, axis2=-1)
-        self._reward = -loss - self.config.packet_cost * self.packets_used
-        self._last_arrived = t["arrived"].sum(axis=(-1, -2)).astype(float)
-        self.final = t["final"]
-        self.prev_x, self.prev_P, self.prev_valid = t["x"], t["P"], t["valid"]
-        self.mask = np.asarray(mask, bool).copy()
-        self.pred_x = self.out_x @ A.T
-        self.pred_P = A @ self.out_P @ A.T + self.motion.process_cov
-        self.k = self.k + 1
-        self._prepare()
+            loss = np.trace(be.posterior_position_cov, axis1=-2, axis2=-1)
+        return -loss - self.config.packet_cost * be.packets_used
 
     def constant_horizon_errors(self) -> np.ndarray:
         """Summed squared error (B, N, S) of every constant horizon N = 1..S from now to the end of
         the episode, all packets kept (privileged: a look-ahead on a copy of the world)."""
         sim = copy.deepcopy(self)
+        be = sim.backend
         A = self.motion.transition
-        pred = np.broadcast_to(sim.pred_x[:, :, None, :], (*sim.prev_valid.shape, 4)).copy()
-        total = np.zeros(sim.prev_valid.shape)
-        keep = np.ones_like(sim.mask)
+        pred = np.broadcast_to(be.pred_x[:, :, None, :], (*be.prev_valid.shape, 4)).copy()
+        total = np.zeros(be.prev_valid.shape)
+        action = sim.encode_actions(np.full((sim.batch, sim.num_agents), self.config.window_min))
         while not np.all(sim.k >= sim.horizon):
-            t = sim.pending
+            t = be.pending
             out = np.where(t["valid"][..., None], t["x"], pred)
-            truth = sim.truth[np.arange(sim.batch), sim.k]
-            total += np.sum((out[..., :2] - truth[:, :, None, :2]) ** 2, axis=-1)
+            total += np.sum((out[..., :2] - sim.world.positions()[:, :, None, :]) ** 2, axis=-1)
             pred = out @ A.T
-            sim.advance(np.full(sim.k.shape + (sim.num_agents,), self.config.window_min), keep)
+            sim.step(action)
         return total
 
     # --- views -------------------------------------------------------------------
     def observation(self) -> np.ndarray:
-        c, t = self.config, self.pending
-        B, N, J = self.batch, self.num_agents, self.J
-        known = (t["delays"] <= t["lags"][..., None]) & (t["lags"][..., None] >= 0)
-        per_lag = known.sum(axis=-1)[..., ::-1] / J  # lag 0 first
-        mode_flag = np.where(t["slot_mode"] == 1, 1.0, -1.0) if c.mode_info == "known" else np.zeros((B, N, J))
-        slots = np.stack([t["slot_present"].astype(float),
-                          np.where(t["slot_present"], (t["slot_rss"] + 80.0) / 10.0, 0.0),
-                          np.where(t["slot_present"], mode_flag, 0.0)], axis=-1).reshape(B, N, 3 * J)
-        h = self.ahg.half * c.window_step
-        centre = np.clip(np.where(self.horizon_used > 0, self.horizon_used, c.window_centre),
-                         c.window_min + h, c.window_max - h)
-        group = af.ahg_group(self.ahg, centre)
-        trace = np.trace(t["P"][..., :2, :2], axis1=-2, axis2=-1)
-        log_trace = np.where(t["valid"], np.log(np.maximum(trace, 1e-300)), INVALID_LOG_TRACE)
-        group_trace = np.take_along_axis(log_trace, group - 1, axis=-1)
-        last = np.stack([np.log1p(t["nis"]), self.horizon_used / c.window_max], axis=-1)
+        B, N = self.batch, self.num_agents
         frac = np.broadcast_to((self.k / self.horizon)[:, None, None], (B, N, 1))
-        return np.concatenate([per_lag, slots, last, group_trace, frac], axis=-1).astype(np.float32)
+        return np.concatenate([self.backend.observation_features(), frac], axis=-1).astype(np.float32)
 
     def episode_error(self, errors: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
         """Time-averaged squared position error over k >= min(50, horizon - 1), mean over the agents.
@@ -651,37 +569,35 @@ class NlosHorizonScenario(Scenario):
         warm = min(50, self.horizon - 1)
         return np.asarray(errors, float)[..., warm:, :].mean(axis=(-2, -1))
 
-    def reward(self) -> np.ndarray:
-        return self._reward.copy()
-
-    def done(self) -> np.ndarray:
-        return self.k >= self.horizon
-
-    def _truth_now(self) -> np.ndarray:
-        """True states (B, N, 4) at the time of the last output (k - 1; 0 at reset)."""
-        return self.truth[np.arange(self.batch), np.maximum(self.k - 1, 0)]
+    def _output_time(self) -> np.ndarray:
+        """(B,) the time of the last output (k - 1; 0 at reset)."""
+        return np.maximum(self.k - 1, 0)
 
     def state(self) -> np.ndarray:
-        error = (self.out_x[..., :2] - self._truth_now()[..., :2]) / 10.0
+        error = (self.backend.posterior_position - self._truth) / 10.0
         return np.concatenate([self.observation().reshape(self.batch, -1), error.reshape(self.batch, -1)],
                               axis=-1).astype(np.float32)
 
     def info(self) -> dict[str, np.ndarray]:
         B, N = self.batch, self.num_agents
-        truth = self._truth_now()
+        be, w = self.backend, self.world
+        rows, now = np.arange(B), self._output_time()
         started = (self.k > 0)[:, None]
-        t = self.pending
-        in_range = t["delays"][..., -1, :] != NEVER
-        nlos = (t["modes"][..., -1, :] == 1) & in_range
+        in_range = w.in_rsa[rows, now]
+        nlos = (w.modes[rows, now] == 1) & in_range
+        error = np.sum((be.posterior_position - self._truth) ** 2, axis=-1)
         return {
-            "true_position": truth[..., :2].copy(),
-            "estimated_position": self.out_x[..., :2].copy(),
-            "error": np.sum((self.out_x[..., :2] - truth[..., :2]) ** 2, axis=-1),
-            "trace": np.trace(self.out_P[..., :2, :2], axis1=-2, axis2=-1),
-            "horizon": self.horizon_used.copy(),
-            "valid": self.valid_used.copy(),
-            "packets_received": np.where(started, self._last_arrived, 0.0),
-            "communication": np.where(started, self.packets_used, 0.0),
+            "true_position": self._truth.copy(),
+            "estimated_position": be.posterior_position.copy(),
+            "position_error": np.sqrt(error),
+            "error": error,
+            "trace": np.trace(be.posterior_position_cov, axis1=-2, axis2=-1),
+            "messages_sent": self.network.messages_sent.copy(),
+            "floats_sent": self.network.floats_sent.copy(),
+            "horizon": be.horizon_used.copy(),
+            "valid": be.valid_used.copy(),
+            "packets_received": np.where(started, be.packets_arrived, 0.0),
+            "communication": np.where(started, be.packets_used, 0.0),
             "nlos_fraction": nlos.sum(-1) / np.maximum(in_range.sum(-1), 1),
             "step": np.broadcast_to(self.k[:, None], (B, N)).copy(),
         }
@@ -689,27 +605,43 @@ class NlosHorizonScenario(Scenario):
     def scene(self, b: int) -> Scene:
         k = int(self.k[b])
         now = max(k - 1, 0)
-        truth = self.truth[b, now]
+        w, be = self.world, self.backend
+        truth = w.truth[b, now]
         offsets = self.config.neighbours.offsets(
-            OrbitParameters(*(getattr(self.orbits, n)[b, 0] for n in
+            OrbitParameters(*(getattr(w.orbits, n)[b, 0] for n in
                               ("radius", "wobble", "wobble_rate", "phase", "bearing_rate"))), now + 1)[now]
-        t = self.pending
-        used = t["used"][b, 0].sum(axis=0)  # packets fused per neighbour of uav_0 over the buffer
-        modes = self.modes[b, now, 0]
+        used = be.used[b, 0].sum(axis=0)  # packets fused per neighbour of uav_0 over the buffer
+        modes = w.modes[b, now, 0]
         J = self.J
         nodes = np.vstack([[0.0, 0.0], offsets / max(float(self.config.r_sup), 1.0)])
         links = [Link(source=j + 1, target=0, value=float(used[j]), label="N" if modes[j] else "L") for j in range(J)]
         return Scene(
             title=f"nlos_horizon (gao2016)  k = {k}/{self.horizon}",
             truth=truth[:, :2],
-            estimates=self.out_x[b, :, :2],
-            covariances=self.out_P[b, :, :2, :2],
-            trails=np.swapaxes(self.truth[b, max(0, now - 30):now + 1, :, :2], 0, 1),
+            estimates=be.posterior_position[b],
+            covariances=be.posterior_position_cov[b],
+            trails=np.swapaxes(w.truth[b, max(0, now - 30):now + 1, :, :2], 0, 1),
             node_positions=nodes,
             node_labels=["uav_0"] + [f"nb_{j}" for j in range(J)],
             links=links,
             link_value_max=float(self.D + 1),
             link_value_name="packets of uav_0's buffer fused (L/N = LOS/NLOS)",
-            notes=[f"uav_0: horizon {int(self.horizon_used[b, 0])}, error "
-                   f"{np.linalg.norm(self.out_x[b, 0, :2] - truth[0, :2]):.1f} m"],
+            notes=[f"uav_0: horizon {int(be.horizon_used[b, 0])}, error "
+                   f"{np.linalg.norm(be.posterior_position[b, 0] - truth[0, :2]):.1f} m"],
         )
+
+
+def drawn_episodes(config: NlosHorizonConfig, seeds) -> list[Episode]:
+    """The episodes ``env.reset(seed=s)`` draws for each of ``seeds``, as :class:`Episode` (the layout of
+    :func:`draw_episode`), with the delays of the env's network (:meth:`NlosHorizonScenario.packet_delays`;
+    ``NEVER`` where no packet was sent or it was lost). Filters run on these are paired with the env's
+    policies episode by episode."""
+    seeds = list(seeds)
+    core = NlosHorizonScenario(config, batch=len(seeds))
+    core.reset([np.random.default_rng(s) for s in seeds])
+    w, delays = core.world, core.packet_delays()
+    names = ("radius", "wobble", "wobble_rate", "phase", "bearing_rate")
+    return [Episode(truth=w.truth[b].copy(), rss=w.rss[b].copy(), aoa=w.aoa[b].copy(), nav=w.nav[b].copy(),
+                    modes=w.modes[b].copy(), delays=np.where(delays[b] >= 0, delays[b], NEVER).astype(np.int16),
+                    prior=w.prior[b].copy(), orbits=OrbitParameters(*(getattr(w.orbits, n)[b].copy() for n in names)))
+            for b in range(len(seeds))]

@@ -100,7 +100,7 @@ from estimators.afge import SignalModel
 from estimators.nlos_models import ConstantVelocityWhiteAccel, RssAoaModel
 
 SENSORS = ("rss", "aoa")
-_SCENARIO_FIELDS = ("num_neighbours", "period", "accel_sigma", "speed", "turn_rates_deg", "turn_windows",
+SCENARIO_FIELDS = ("num_neighbours", "period", "accel_sigma", "speed", "turn_rates_deg", "turn_windows",
                     "target_spacing", "schedule_shift", "orbit_radius", "orbit_wobble", "orbit_wobble_rate",
                     "orbit_bearing_rate", "r_inf", "r_sup", "sigma_nav", "tx_power_dbm", "frequency_hz", "d0",
                     "path_loss_exponent", "sigma_db", "sigma_theta_deg", "nlos_bias_db", "nlos_sigma_db",
@@ -155,7 +155,7 @@ class NlosOrbit(PartConfig):
 
     def scenario_config(self, horizon: int | None = None) -> NlosHorizonConfig:
         """The ``nlos_horizon`` config whose episode draw this world uses (its estimator fields at their defaults)."""
-        fields = {f: getattr(self, f) for f in _SCENARIO_FIELDS}
+        fields = {f: getattr(self, f) for f in SCENARIO_FIELDS}
         return NlosHorizonConfig(num_uavs=self.num_agents, horizon=self.horizon if horizon is None else horizon,
                                  **fields)
 

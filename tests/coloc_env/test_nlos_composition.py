@@ -1,7 +1,5 @@
 """World ``nlos_orbit``, network ``random_delay``, backends ``afge`` and ``dfir`` (gao2016 in the composable core)."""
 
-import dataclasses
-
 import numpy as np
 import pytest
 
@@ -10,7 +8,7 @@ import coloc_env
 from coloc_env.backends.dead_reckoning import DeadReckoning
 from coloc_env.networks.random_delay import delays_from_uniforms, node_packets
 from coloc_env.scenarios.composed import ComposedScenario
-from coloc_env.world.random_delay import NEVER, BoundedRandomDelay
+from coloc_env.world.random_delay import BoundedRandomDelay
 from coloc_env.worlds.nlos_orbit import NlosOrbit
 
 
@@ -33,52 +31,56 @@ def _composition_run(spec, seed, steps):
     return np.array(truth), np.array(estimates), np.array(delays), env
 
 
-def _scenario_run(world: NlosOrbit, seed, steps, delays=None, **fields):
-    """The nlos_horizon scenario under its ``paper`` policy on the composition's world generator; with
-    ``delays`` (steps, N, J) (-1 = none) its packets get the network's delays instead of its own."""
-    config = dataclasses.replace(world.scenario_config(steps), **fields)
-    flat = {f.name: getattr(config, f.name) for f in dataclasses.fields(config)}
-    env = coloc_env.parallel_env("nlos_horizon", **flat)
-    policy = agents.make_policy("paper", env, seed=0)
-    observations, _ = env.reset(seed=0)
+def _preset_run(seed, steps, **fields):
+    """The nlos_horizon preset under its ``paper`` policy (AHG as the agent), its parts handed the generators a
+    plain composition gives them (world, network, backend: children 0, 1, 2 of the seed). Per step: truth,
+    estimates, the first observation entry before acting, the network's node-packet count reported with the
+    step; and the env."""
+    env = coloc_env.parallel_env("nlos_horizon", horizon=steps, **fields)
     scenario = env.unwrapped.scenario
-    world_rng = np.random.default_rng(seed).spawn(3)[0]  # the composition's world child of the seed
-    scenario.reset([world_rng])
-    if delays is not None:
-        scenario.delays[0, :steps] = np.where(delays >= 0, delays, NEVER)
-        scenario._prepare()
-    truth, estimates = [], []
+    scenario.part_generators = lambda rng: ComposedScenario.part_generators(scenario, rng)
+    policy = agents.make_policy("paper", env, seed=0)
+    observations, _ = env.reset(seed=seed)
+    truth, estimates, on_time_seen, node_messages = [], [], [], []
     for _ in range(steps):
+        on_time_seen.append([observations[a][0] for a in env.possible_agents])
         observations, _, _, _, infos = env.step(policy.act(observations))
         truth.append([infos[a]["true_position"] for a in env.possible_agents])
         estimates.append([infos[a]["estimated_position"] for a in env.possible_agents])
-    return np.array(truth), np.array(estimates)
+        node_messages.append(scenario.network.node_messages[0].copy())
+    return np.array(truth), np.array(estimates), np.array(on_time_seen), np.array(node_messages), env
 
 
-def test_afge_over_random_delay_equals_the_nlos_horizon_scenario_given_the_same_delays():
-    """Same episode (the world draws it as the scenario does), the scenario's packets delayed as the network
-    delayed the composition's: AFGE (always = AHG + keep all) equals the scenario under ``paper`` to 1e-9."""
+def test_the_preset_is_the_composition_and_receives_before_deciding():
+    """nlos_horizon is nlos_orbit / random_delay / afge: on the same generators the preset under ``paper``
+    (AHG run by the agent on the costs it is shown) equals the composition under ``always`` (AHG inside the
+    backend) to 1e-9, late and lost packets included. Before acting at k the agent's observation already
+    counts the packets of stamp k that arrived on time, and the network's record reported with step k is
+    step k's (one packet per neighbour in the receive-search area)."""
     seed, steps = 3, 70
     spec = coloc_env.compose(world="nlos_orbit", network="random_delay", backend="afge", horizon=steps)
     truth, estimates, delays, env = _composition_run(spec, seed, steps)
-    assert np.any(delays > 0) and np.any(delays == 0) and np.any((delays < 0) & env.unwrapped.scenario.world.in_rsa[
-        0, :steps])  # late and lost packets did occur
-    truth_s, estimates_s = _scenario_run(spec.world, seed, steps, delays)
-    np.testing.assert_array_equal(truth, truth_s)
-    np.testing.assert_allclose(estimates, estimates_s, rtol=0, atol=1e-9)
-    assert np.abs(estimates - truth)[20:].max() < 20.0  # past the prior (std 50 m), the packets localize
+    in_rsa = env.unwrapped.scenario.world.in_rsa[0, :steps]
+    assert np.any(delays > 0) and np.any(delays == 0) and np.any((delays < 0) & in_rsa)  # late and lost occurred
+    truth_p, estimates_p, on_time_seen, node_messages, preset = _preset_run(seed, steps)
+    np.testing.assert_array_equal(truth, truth_p)
+    np.testing.assert_allclose(estimates, estimates_p, rtol=0, atol=1e-9)
+    J = delays.shape[-1]
+    np.testing.assert_allclose(on_time_seen, (delays == 0).sum(axis=-1) / J, rtol=0, atol=1e-7)
+    np.testing.assert_array_equal(node_messages, in_rsa.sum(axis=-1))
+    np.testing.assert_array_equal(preset.unwrapped.scenario.packet_delays()[0, :steps], delays)
 
 
-def test_afge_without_delays_equals_the_scenario_on_its_own_draws():
-    """All packets on time (q = (1, 0, 0, 0)): no delay to inject, the two agree on their own draws."""
+def test_afge_without_delays_equals_the_preset():
+    """All packets on time (q = (1, 0, 0, 0)): the same equality without any buffering."""
     seed, steps = 5, 50
     probs = (1.0, 0.0, 0.0, 0.0)
     spec = coloc_env.compose(world="nlos_orbit", network={"name": "random_delay", "delay_probs": probs},
                              backend="afge", horizon=steps)
     truth, estimates, _, _ = _composition_run(spec, seed, steps)
-    truth_s, estimates_s = _scenario_run(spec.world, seed, steps, delay_probs=probs)
-    np.testing.assert_array_equal(truth, truth_s)
-    np.testing.assert_allclose(estimates, estimates_s, rtol=0, atol=1e-9)
+    truth_p, estimates_p, *_ = _preset_run(seed, steps, delay_probs=probs)
+    np.testing.assert_array_equal(truth, truth_p)
+    np.testing.assert_allclose(estimates, estimates_p, rtol=0, atol=1e-9)
 
 
 def _batched_errors(spec, seeds, warm=50):

@@ -10,7 +10,7 @@ from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test
 import agents
 import coloc_env
 import estimators.afge as af
-from coloc_env.scenarios.nlos_horizon import draw_episode, fused_by_stamp_and_lag
+from coloc_env.scenarios.nlos_horizon import drawn_episodes, fused_by_stamp_and_lag
 from tests.helpers import play
 
 NAME = "nlos_horizon"
@@ -57,7 +57,7 @@ def test_env_with_the_paper_policy_equals_afge_run_directly(likelihood):
         estimates.append([infos[a]["estimated_position"] for a in env.possible_agents])
         rewards.append([reward[a] for a in env.possible_agents])
     config = env.config
-    episode = draw_episode(config, np.random.default_rng(21))
+    episode = drawn_episodes(config, [21])[0]  # the world's draw, the network's delays
     Y, y, g = fused_by_stamp_and_lag(config, episode)
     truth = np.moveaxis(episode.truth[:horizon, :, :2], 0, 1)
     out = af.run_fixed_mask(config.motion, Y[:, :horizon], y[:, :horizon], g[:, :horizon], truth, episode.prior,

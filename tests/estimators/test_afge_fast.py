@@ -110,7 +110,7 @@ def _rollout(steps=40, batch=4):
         observation, reward, _, _ = env.step(actions)
         out += [observation, reward]
     pending = env.scenario.pending
-    return out + [pending["x"], pending["P"], pending["predictive"]]
+    return out + [pending["x"], pending["P"], env.scenario.horizon_costs("predictive")]
 
 
 def test_nlos_horizon_rollout_with_random_actions_equals_the_numpy_path(monkeypatch):

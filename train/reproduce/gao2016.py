@@ -31,7 +31,13 @@ import numpy as np
 
 import estimators.afge as af
 from coloc_env.config import build_config
-from coloc_env.scenarios.nlos_horizon import NlosHorizonConfig, draw_episode, fused_by_stamp_and_lag, in_turn
+from coloc_env.scenarios.nlos_horizon import (
+    NlosHorizonConfig,
+    draw_episode,
+    drawn_episodes,
+    fused_by_stamp_and_lag,
+    in_turn,
+)
 from coloc_env.world.random_delay import NEVER
 from train.executor import map_tasks
 from train.io import claims_table, save_figure, write_json, write_text
@@ -91,13 +97,14 @@ def paper_policy_costs(seeds, config: NlosHorizonConfig | None = None) -> np.nda
     ``config.likelihood``, every neighbour kept) over k >= min(50, K - 1), mean over the targets,
     on the episodes the env draws for ``seeds``.
 
-    Episode e is :func:`draw_episode` of ``default_rng(seeds[e])`` with ``config.num_uavs``
-    targets, what ``env.reset(seed=seeds[e])`` draws; AFGE runs by this reproduction's own path
+    Episode e is what ``env.reset(seed=seeds[e])`` draws (:func:`coloc_env.scenarios.nlos_horizon.drawn_episodes`:
+    the world's :func:`draw_episode` of ``default_rng(seeds[e])`` with ``config.num_uavs`` targets, the
+    packet delays of the env's network); AFGE runs by this reproduction's own path
     (:func:`episode_inputs`, :func:`estimators.afge.run_fixed_mask`) with the env's stack of
     ``window_max`` horizons.
     """
     config = config or build_config(NlosHorizonConfig, {})
-    episodes = [draw_episode(config, np.random.default_rng(s)) for s in seeds]
+    episodes = drawn_episodes(config, seeds)
     K, T = config.horizon, config.num_uavs
     Y, y, g, truth, prior = stack_inputs(episode_inputs(config, episodes), K)
     out = af.run_fixed_mask(config.motion, Y, y, g, truth, prior, config.ahg, config.window_max,
