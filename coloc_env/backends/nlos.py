@@ -51,7 +51,8 @@ RSS slots (``keep``): the neighbours ordered by the RSS of their packet of the n
 as the agent's observation showed it (strongest first, then the neighbours without one, by
 index): stamp k where it received before deciding, else stamp k - 1; the bit applies to that
 neighbour's packets of every buffered stamp. As in the scenario, ``n_strongest`` is applied after the
-mask. AHG's centre runs every step, also while the agent overrides the horizon.
+mask. AHG's centre runs every step, also while the agent overrides the horizon (a binding whose codec
+never offers v = 0 turns it off: ``AfgeBackend.adaptive``).
 
 Arguments (``coloc_env.backends.Afge``; defaults = ``nlos_horizon``'s, spec §9)
 
@@ -223,6 +224,7 @@ class PacketFirBackend(Backend):
         self.packets_arrived = np.zeros((B, N))
         self._features = np.zeros((B, N, self.feature_bounds()[0].size))
         self._features[:] = self.feature_defaults()
+        self._view: tuple | None = None  # (filter, prediction) the features describe, until built
 
     # --- episode -------------------------------------------------------------------------
     def reset(self, rngs, idx) -> None:
@@ -242,6 +244,7 @@ class PacketFirBackend(Backend):
         self.horizon_used[idx], self.valid_used[idx] = 0, False
         self.packets_used[idx], self.packets_arrived[idx] = 0.0, 0.0
         self.used[idx] = False
+        self._build_view()  # the other copies' view, before this one's defaults
         self._features[idx] = self.feature_defaults()
         self.posterior_position[idx] = mean[idx, :, :2]
         if self.posterior_position_cov is None:
@@ -348,8 +351,16 @@ class PacketFirBackend(Backend):
         newest = self.delays[..., -1, :] == 0
         key = np.where(newest, self.rss[..., -1, :], -np.inf)
         self.slots = np.argsort(-key, axis=-1, kind="stable")
-        e = t["z"] - self.pred_x[..., :2]
-        nis = np.einsum("...a,...ab,...b->...", e, np.linalg.inv(self.pred_P[..., :2, :2] + t["R"]), e)
+        # built when observed: after an update the core usually receives (and refreshes) again first
+        self._view = (t, self.pred_x, self.pred_P)
+
+    def _build_view(self) -> None:
+        if self._view is None:
+            return
+        t, pred_x, pred_P = self._view
+        self._view = None
+        e = t["z"] - pred_x[..., :2]
+        nis = np.einsum("...a,...ab,...b->...", e, np.linalg.inv(pred_P[..., :2, :2] + t["R"]), e)
         self._features = self._make_features(t["lags"], np.where(t["fresh"], nis, 0.0), t["P"], t["valid"])
 
     def _mask(self, decisions) -> np.ndarray:
@@ -379,6 +390,7 @@ class PacketFirBackend(Backend):
         return np.zeros(self.feature_bounds()[0].size)
 
     def observation_features(self) -> np.ndarray:
+        self._build_view()
         return self._features.copy()
 
 
@@ -394,6 +406,8 @@ class AfgeBackend(PacketFirBackend):
         self.centre = np.full((B, N), config.window_centre, np.int64)
         self.raw = np.zeros((B, N, self.S))
         self.count = np.zeros((B, N, self.S), np.int64)
+        # whether AHG runs here: a binding whose action codec never offers v = 0 turns it off
+        self.adaptive = True
 
     def decision_blocks(self) -> list[Block]:
         c = self.config
@@ -415,6 +429,9 @@ class AfgeBackend(PacketFirBackend):
 
     def _choose(self, decisions, t: dict) -> np.ndarray:
         c = self.config
+        pick = np.asarray(decisions)[..., 0].astype(np.int64)
+        if not self.adaptive:  # a codec without v = 0 (the nlos_horizon preset: its agent runs AHG itself)
+            return c.window_min + pick - 1
         costs = self.costs(t, "paper" if c.likelihood == "paper" else "predictive")
         if c.likelihood == "smoothed":
             self.raw, self.count, costs = af.smooth_costs(self.raw, self.count, costs, c.smoothing)
@@ -422,7 +439,6 @@ class AfgeBackend(PacketFirBackend):
         # chosen = 0: no group member has an estimate; the centre (also without one) outputs the prediction
         adaptive = np.where(chosen > 0, chosen, self.centre)
         self.centre = centre
-        pick = np.asarray(decisions)[..., 0].astype(np.int64)
         return np.where(pick == 0, adaptive, c.window_min + pick - 1)
 
     def feature_bounds(self):

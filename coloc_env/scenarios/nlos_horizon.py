@@ -442,6 +442,7 @@ class NlosHorizonScenario(PresetScenario):
     def __init__(self, config: NlosHorizonConfig, batch: int = 1):
         super().__init__(config, batch)
         be = self.backend
+        be.adaptive = False  # the codec never asks the backend for AHG (v = 0); the paper policy runs it
         self.motion = be.motion
         self.ahg = be.ahg
         self.D, self.J, self.S = be.D, be.J, be.S
