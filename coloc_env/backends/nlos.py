@@ -45,7 +45,8 @@ same episode and the same delays (``tests/coloc_env/test_nlos_composition.py``).
 | observation     | packets of stamp k - l known / J (l = 0..D); per RSS slot: present, | packets of stamp k - l   |
 |                 | (RSS + 80) / 10, mode (+1 NLOS / -1 LOS with ``known``, else 0);    | known / J (l = 0..D);    |
 |                 | log(1 + NIS); last horizon / N_max; log tr P_N over the AHG group   | 1 if the output had an   |
-|                 | of the last horizon (14 where invalid)                              | estimate of its own      |
+|                 | of the last horizon (14 where invalid); each member's AHG cost J_N  | estimate of its own      |
+|                 | minus the group's lowest (0 = AHG's pick; 50 where invalid, capped) |                          |
 
 RSS slots (``keep``): the neighbours ordered by the RSS of their packet of the newest stamp
 as the agent's observation showed it (strongest first, then the neighbours without one, by
@@ -93,6 +94,7 @@ from coloc_env.world.random_delay import NEVER
 INVALID_LOG_TRACE = 14.0  # log tr P shown for a horizon without an estimate (the scenario's value)
 LOG_BOUND = 50.0
 RSS_BOUND = 20.0
+COST_BOUND = 50.0  # an AHG cost's excess over the group's best, shown up to this (and where invalid)
 
 
 class _PacketFirConfig(PartConfig):
@@ -339,11 +341,11 @@ class PacketFirBackend(Backend):
         self.packets_used = (t["used"] & arrived).sum(axis=(-1, -2)).astype(float)
         self.packets_arrived = arrived.sum(axis=(-1, -2)).astype(float)
         self.used = t["used"]
+        self._refresh_view(t)  # before prev_* move on: t's costs compare with the estimates of k - 1
         self.final = t["final"]
         self.prev_x, self.prev_P, self.prev_valid = t["x"], t["P"], t["valid"]
         self.mask = mask.copy()
         self._taken[:] = False
-        self._refresh_view(t)
 
     def _refresh_view(self, t: dict) -> None:
         """The RSS slots (neighbours by the RSS of their packet of the newest stamp, strongest first) and the
@@ -361,7 +363,7 @@ class PacketFirBackend(Backend):
         self._view = None
         e = t["z"] - pred_x[..., :2]
         nis = np.einsum("...a,...ab,...b->...", e, np.linalg.inv(pred_P[..., :2, :2] + t["R"]), e)
-        self._features = self._make_features(t["lags"], np.where(t["fresh"], nis, 0.0), t["P"], t["valid"])
+        self._features = self._make_features(t, np.where(t["fresh"], nis, 0.0))
 
     def _mask(self, decisions) -> np.ndarray:
         return np.ones((self.batch, self.num_agents, self.J), bool)
@@ -427,6 +429,15 @@ class AfgeBackend(PacketFirBackend):
         np.put_along_axis(mask, self.slots, bits, axis=-1)
         return mask
 
+    @property
+    def feature_likelihood(self) -> str:
+        """The AHG cost the observation shows (``smoothed`` shows its unsmoothed predictive cost)."""
+        return "paper" if self.config.likelihood == "paper" else "predictive"
+
+    def _refresh_view(self, t: dict) -> None:
+        self.costs(t, self.feature_likelihood)  # now, while prev_* are the estimates t's costs compare with
+        super()._refresh_view(t)
+
     def _choose(self, decisions, t: dict) -> np.ndarray:
         c = self.config
         pick = np.asarray(decisions)[..., 0].astype(np.int64)
@@ -444,18 +455,21 @@ class AfgeBackend(PacketFirBackend):
     def feature_bounds(self):
         D1, J, M = self.D + 1, self.J, self.M
         low = np.concatenate([np.zeros(D1), np.tile([0.0, -RSS_BOUND, -1.0], J), [0.0, 0.0],
-                              np.full(M, -LOG_BOUND)])
+                              np.full(M, -LOG_BOUND), np.zeros(M)])
         high = np.concatenate([np.ones(D1), np.tile([1.0, RSS_BOUND, 1.0], J), [LOG_BOUND, 1.0],
-                               np.full(M, LOG_BOUND)])
+                               np.full(M, LOG_BOUND), np.full(M, COST_BOUND)])
         return low, high
 
     def feature_defaults(self) -> np.ndarray:
         out = np.zeros(self.feature_bounds()[0].size)
-        out[-self.M:] = INVALID_LOG_TRACE
+        M = self.M
+        out[-2 * M:-M] = INVALID_LOG_TRACE
+        out[-M:] = COST_BOUND
         return out
 
-    def _make_features(self, lags, nis, P, valid) -> np.ndarray:
+    def _make_features(self, t, nis) -> np.ndarray:
         c = self.config
+        P, valid = t["P"], t["valid"]
         B, N, J = self.batch, self.num_agents, self.J
         present = np.take_along_axis(self.delays[..., -1, :] == 0, self.slots, axis=-1)
         rss = np.take_along_axis(self.rss[..., -1, :], self.slots, axis=-1)
@@ -472,8 +486,12 @@ class AfgeBackend(PacketFirBackend):
         log_trace = np.where(valid, np.clip(np.log(np.maximum(trace, 1e-300)), -LOG_BOUND, LOG_BOUND),
                              INVALID_LOG_TRACE)
         last = np.stack([np.minimum(np.log1p(nis), LOG_BOUND), self.horizon_used / c.window_max], axis=-1)
-        return np.concatenate([self._per_lag(lags), slots, last, np.take_along_axis(log_trace, group - 1, axis=-1)],
-                              axis=-1)
+        cost = np.take_along_axis(np.where(valid, t[self.feature_likelihood], np.inf), group - 1, axis=-1)
+        best = np.min(cost, axis=-1, keepdims=True)
+        excess = np.where(np.isfinite(cost), np.minimum(cost - np.where(np.isfinite(best), best, 0.0), COST_BOUND),
+                          COST_BOUND)  # 0 marks the member AHG would pick
+        return np.concatenate([self._per_lag(t["lags"]), slots, last,
+                               np.take_along_axis(log_trace, group - 1, axis=-1), excess], axis=-1)
 
 
 class DfirBackend(PacketFirBackend):
@@ -487,5 +505,5 @@ class DfirBackend(PacketFirBackend):
         D1 = self.D + 1
         return np.zeros(D1 + 1), np.ones(D1 + 1)
 
-    def _make_features(self, lags, nis, P, valid) -> np.ndarray:
-        return np.concatenate([self._per_lag(lags), self.valid_used[..., None].astype(float)], axis=-1)
+    def _make_features(self, t, nis) -> np.ndarray:
+        return np.concatenate([self._per_lag(t["lags"]), self.valid_used[..., None].astype(float)], axis=-1)

@@ -48,7 +48,7 @@ of a stamp, the strongest ``n_strongest`` are fused), so keeping all reproduces 
 rule exactly; set ``n_strongest = num_neighbours`` to hand the whole selection to the agent.
 A NaN/inf or a value outside the space is a ``ValueError``.
 
-Observation (per agent, ``Box(low, high, shape=(D + 1 + 3 J + M + 3,), float32)``; 36 by default)
+Observation (per agent, ``Box(low, high, shape=(D + 1 + 3 J + 2 M + 3,), float32)``; 41 by default)
 ----------------------------------------------------------------------------------------------
 The ``afge`` backend's features (:mod:`coloc_env.backends.nlos`), then the step fraction.
 Since the binding every entry has a finite bound (the column; the RSS, innovation and trace
@@ -66,7 +66,13 @@ entries are clipped to it: before, the space was unbounded and nothing was clipp
 | ``[D+3+3J, D+3+3J+M)``  | log tr P_N (position block) for the M horizons of an AHG group centred on | [-50, 50] |
 |                         | the last horizon (N_c(0) before the first; clipped as AHG clips its      |           |
 |                         | centre); 14 where invalid                                                |           |
+| ``[D+3+3J+M, D+3+3J+2M)``| the AHG cost J_N(k) of the same M horizons (``likelihood``'s: the one-  | [0, 50]   |
+|                         | step predictive cost, or the in-sample residual for ``"paper"``) minus   |           |
+|                         | the group's lowest: 0 marks AHG's pick; 50 where invalid (capped)        |           |
 | ``[-1]``                | step fraction k / horizon                                                | [0, 1]    |
+
+The AHG costs were added for learning (issue 15: the horizon agent should see the innovation
+statistics AHG decides on; the observation had only the log-traces and the newest NIS).
 
 ``state()``: every agent's observation, then each agent's true estimation error (x, y) / 10 m.
 
@@ -480,7 +486,7 @@ class NlosHorizonScenario(PresetScenario):
     # --- description ------------------------------------------------------------
     @property
     def obs_dim(self) -> int:
-        return self.D + 1 + 3 * self.J + self.config.group_size + 3
+        return self.D + 1 + 3 * self.J + 2 * self.config.group_size + 3
 
     def observation_space(self):
         return self._observation_space
