@@ -44,7 +44,7 @@ def _scenario(env):
 
 
 def threshold_actions(observations: np.ndarray, spread: float, num_iterations: int) -> np.ndarray:
-    """Actions (..., N, num_iterations) int8 of ``threshold:spread`` from observations (..., N, 7).
+    """Actions (..., N, num_iterations) int8 of ``threshold:spread`` from observations (..., N, 8).
 
     Broadcast bit n = 1 for every iteration when GPS is normal or log(1 + spread of the prior) <=
     log(1 + ``spread``); ``spread = inf`` is the paper's schedule.

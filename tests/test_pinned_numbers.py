@@ -223,12 +223,13 @@ PINNED_ROLLOUTS = {
     # MultiBinary(n_iter), so the random policy and action_space.sample() draw other actions ("random" and
     # the vector pin are new). The paper rollout's reward, error and observations are 6f148d7's to 1e-14;
     # on the same actions the binding is bit-identical to the scenario it replaced (checked then, with the
-    # actions of 2 seeded episodes, in a worktree of c5d50d6).
+    # actions of 2 seeded episodes, in a worktree of c5d50d6). Then the observation gained entry 7, what the
+    # neighbours heard (issue 15): obs_sum moved, the rewards did not.
     "gps_denied_nbp": {
         "paper": {"steps": 10, "reward": -604.3678943276825, "error": 518.1200318608358, "trace": 4785.748565134399,
-                  "obs_sum": 5.578319042921066},
+                  "obs_sum": 5.9857264459133148},
         "random": {"steps": 10, "reward": -551.7500809058329, "error": 481.1705238086633, "trace": 11974.192581420139,
-                   "obs_sum": 5.73525170981884},
+                   "obs_sum": 5.8648813366889954},
     },
     # nlos_horizon became a binding on the composable core (issue 14): nlos_orbit / random_delay / afge, receiving
     # before deciding. The packet delays are the random_delay network's counter-based draws (from its own child

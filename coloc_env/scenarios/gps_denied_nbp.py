@@ -32,7 +32,7 @@ A value other than 0 or 1, a NaN or inf is a ``ValueError`` naming the iteration
 (all ones) is the paper's schedule; all zeros reduces every fault UAV to dead
 reckoning.
 
-Observation (per UAV, ``Box(shape=(7,), float32)``: entries 0-3 and 6 in [0, 1], 4 and 5 in
+Observation (per UAV, ``Box(shape=(8,), float32)``: entries 0-3, 6 and 7 in [0, 1], 4 and 5 in
 [0, inf)), about the coming step tau
 ----------------------------------------------------------------------------------------------
 | index | meaning                                                                         |
@@ -45,6 +45,12 @@ Observation (per UAV, ``Box(shape=(7,), float32)``: entries 0-3 and 6 in [0, 1],
 | 5     | bimodality coefficient (g^2 + 1) / kappa of the prior along its principal axis  |
 |       | (1/3 Gaussian, > 5/9 suggests a ring or two modes)                              |
 | 6     | step fraction tau / horizon                                                     |
+| 7     | what its neighbours already heard: the mean over its neighbours within R at tau |
+|       | of the distinct UAVs each heard from in the previous step, / (N - 1) (0 without |
+|       | neighbours and at reset) [chosen: each UAV's count rides on its beacon]          |
+
+Entry 7 was added for learning (issue 15): a broadcast helps most where the neighbours heard
+little; without it a UAV knew only its own count (entry 3).
 
 Truth is used only in the reward, never in observations. ``state()``
 (centralized critic): every agent's observation, then log(1 + e_s) of the
@@ -138,7 +144,7 @@ from coloc_env.world.gps_markov import MarkovGPS
 from coloc_env.world.range_network import RangeNetwork
 from coloc_env.worlds.gps_denied import GpsDenied
 
-OBS_DIM = 7
+OBS_DIM = 8
 
 
 @dataclass(frozen=True)
@@ -361,8 +367,8 @@ class GpsDeniedNbpScenario(PresetScenario):
         return self.config.num_uavs
 
     def observation_space(self):
-        low = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], np.float32)
-        high = np.array([1.0, 1.0, 1.0, 1.0, np.inf, np.inf, 1.0], np.float32)
+        low = np.zeros(OBS_DIM, np.float32)
+        high = np.array([1.0, 1.0, 1.0, 1.0, np.inf, np.inf, 1.0, 1.0], np.float32)
         return gymnasium.spaces.Box(low, high, dtype=np.float32)
 
     def action_space(self):
@@ -419,6 +425,8 @@ class GpsDeniedNbpScenario(PresetScenario):
         centred = prior - prior.mean(axis=2, keepdims=True)
         spread = np.sqrt(np.mean(np.sum(centred**2, axis=-1), axis=-1))
         frac = np.broadcast_to((self.k / self.horizon)[:, None], normal.shape)
+        neighbours = adjacency.sum(axis=-1)
+        neighbours_heard = (adjacency * self.heard[:, None, :]).sum(axis=-1) / np.maximum(neighbours, 1)
         obs = np.stack([
             normal.astype(float),
             adjacency.sum(axis=-1) / (N - 1),
@@ -427,6 +435,7 @@ class GpsDeniedNbpScenario(PresetScenario):
             np.log1p(spread),
             bimodality(prior),
             frac,
+            neighbours_heard / (N - 1),
         ], axis=-1)
         return obs.astype(np.float32)
 

@@ -43,7 +43,7 @@ def test_spaces_state_render_and_infos():
     assert env.action_space("uav_0") == env.action_space("uav_4")
     # MultiDiscrete([2] * n_iter), not MultiBinary: RLlib's PPO refuses MultiBinary
     assert isinstance(env.action_space("uav_0"), gymnasium.spaces.MultiDiscrete)
-    assert env.action_space("uav_0").nvec.tolist() == [2] * 5 and env.observation_space("uav_1").shape == (7,)
+    assert env.action_space("uav_0").nvec.tolist() == [2] * 5 and env.observation_space("uav_1").shape == (8,)
     _, infos = env.reset(seed=0)
     assert env.state().shape == env.state_space.shape
     frame = env.render()
@@ -153,3 +153,23 @@ def test_silent_policy_sends_nothing_and_paper_beats_it_on_fault_uavs():
     assert totals["paper"][0] < totals["silent"][0]
     paper = agents.make_policy("paper", env).act({"uav_0": None})["uav_0"]
     assert env.action_space("uav_0").contains(paper.astype(env.action_space("uav_0").dtype))
+
+
+def test_the_observation_says_what_the_neighbours_heard():
+    """Entry 7 is the mean, over a UAV's neighbours within R now, of how many distinct UAVs each heard from in
+    the step just done (the network's delivery record), / (N - 1); 0 at reset and when nobody broadcasts."""
+    for bits in (1, 0):
+        env = coloc_env.parallel_env(NAME, **SMALL)
+        observations, _ = env.reset(seed=2)
+        scenario = env.unwrapped.scenario
+        np.testing.assert_array_equal([observations[a][7] for a in env.agents], 0.0)  # nothing heard at reset
+        action = np.full(scenario.config.num_iterations, bits)
+        N = scenario.num_agents
+        for k in range(4):
+            observations, *_ = env.step({a: action for a in env.agents})
+            heard = scenario.network.delivered[0].sum(axis=0)  # [t, s]: t's message reached s, any round
+            now = scenario.adjacency[0, k + 1].astype(float)
+            expected = (now @ heard) / np.maximum(now.sum(axis=1), 1) / (N - 1)
+            np.testing.assert_allclose([observations[a][7] for a in env.possible_agents], expected, atol=1e-6)
+            assert bits == 1 or not np.any(expected)
+        assert bits == 0 or any(observations[a][7] > 0 for a in env.possible_agents)
