@@ -21,12 +21,46 @@ import numpy as np
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 _M1 = np.uint64(0xBF58476D1CE4E5B9)
 _M2 = np.uint64(0x94D049BB133111EB)
+_S30, _S27, _S31, _S11 = np.uint64(30), np.uint64(27), np.uint64(31), np.uint64(11)
+_MASK = (1 << 64) - 1
+_GOLDEN_INT, _M1_INT, _M2_INT = int(_GOLDEN), int(_M1), int(_M2)
+_SMALL_BATCH = 8  # copies up to which the counters are mixed on Python ints
 
 
-def _mix(z: np.ndarray) -> np.ndarray:
-    z = (z ^ (z >> np.uint64(30))) * _M1
-    z = (z ^ (z >> np.uint64(27))) * _M2
-    return z ^ (z >> np.uint64(31))
+def _mix_in_place(z: np.ndarray) -> np.ndarray:
+    """SplitMix64's finalizer on uint64 ``z``, overwriting it (an array the caller owns)."""
+    z ^= z >> _S30
+    z *= _M1
+    z ^= z >> _S27
+    z *= _M2
+    z ^= z >> _S31
+    return z
+
+
+def _mix_int(z: int) -> int:
+    """The finalizer of :func:`_mix_in_place` on one Python int, modulo 2^64 as uint64 arithmetic wraps."""
+    z = ((z ^ (z >> 30)) * _M1_INT) & _MASK
+    z = ((z ^ (z >> 27)) * _M2_INT) & _MASK
+    return z ^ (z >> 31)
+
+
+def _counter_chain(keys: np.ndarray, counters: tuple) -> np.ndarray:
+    """keys (B,) mixed with every counter in turn: the per-copy part of :func:`uniforms`."""
+    B = keys.shape[0]
+    values = [np.asarray(counter, dtype=np.int64).reshape(-1) for counter in counters]
+    if B <= _SMALL_BATCH and all(len(c) in (1, B) for c in values):
+        # a few copies: a numpy call costs more than the whole chain on Python ints (the same values)
+        columns = [c.tolist() * (B if len(c) == 1 else 1) for c in values]
+        out = []
+        for b, z in enumerate(keys.tolist()):
+            for column in columns:
+                z = _mix_int((z + _GOLDEN_INT * ((column[b] + 1) & _MASK)) & _MASK)
+            out.append(z)
+        return np.array(out, dtype=np.uint64)
+    z = keys.copy()
+    for c in values:
+        z = _mix_in_place(z + _GOLDEN * (c.astype(np.uint64) + np.uint64(1)))  # (1,) or (B,): broadcasts
+    return z
 
 
 def draw_keys(rngs, dtype=np.uint64) -> np.ndarray:
@@ -52,9 +86,7 @@ def uniforms(keys: np.ndarray, counters: tuple, shape: tuple[int, ...]) -> np.nd
     # arithmetic) without numpy's scalar overflow warning, and no errstate context is needed.
     keys = np.asarray(keys, dtype=np.uint64)
     B = keys.shape[0]
-    z = keys.copy()
-    for counter in counters:
-        c = np.asarray(counter, dtype=np.int64).reshape(-1).astype(np.uint64)  # (1,) or (B,): broadcasts
-        z = _mix(z + _GOLDEN * (c + np.uint64(1)))
-    z = _mix(z.reshape((B,) + (1,) * len(shape)) + _cell_offsets(tuple(int(n) for n in shape)))
-    return (z >> np.uint64(11)).astype(np.float64) * (1.0 / 9007199254740992.0)
+    z = _counter_chain(keys, counters)
+    z = _mix_in_place(z.reshape((B,) + (1,) * len(shape)) + _cell_offsets(tuple(int(n) for n in shape)))
+    z >>= _S11
+    return z.astype(np.float64) * (1.0 / 9007199254740992.0)

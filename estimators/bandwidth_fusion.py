@@ -66,6 +66,7 @@ and sum_j p_ij^2 <= sum_j p_ij for the noise term. A test checks M_i >= Sigma_ii
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -165,8 +166,27 @@ def check_weights(weights: np.ndarray, atol: float = 1e-9) -> np.ndarray:
     return weights
 
 
+@functools.lru_cache(maxsize=32)
+def _identity(n: int) -> np.ndarray:
+    """I_n, built once per size (read-only: shared by every call)."""
+    eye = np.eye(n)
+    eye.flags.writeable = False
+    return eye
+
+
+@functools.lru_cache(maxsize=32)
+def _identity_bytes(n: int) -> bytes:
+    return np.eye(n).tobytes()
+
+
 def _is_identity(matrix: np.ndarray) -> bool:
-    return matrix.ndim == 2 and matrix.shape[0] == matrix.shape[1] and np.array_equal(matrix, np.eye(len(matrix)))
+    if matrix.ndim != 2 or matrix.shape[0] != matrix.shape[1]:
+        return False
+    # called several times a step on the model's A and C: comparing raw bytes settles the usual float64 I
+    # without the cost of array_equal; anything else (another dtype, a -0.0) gets the value comparison
+    if matrix.dtype == np.float64 and matrix.tobytes() == _identity_bytes(len(matrix)):
+        return True
+    return np.array_equal(matrix, _identity(len(matrix)))
 
 
 def _sandwich(left: np.ndarray, middle: np.ndarray, right: np.ndarray) -> np.ndarray:
@@ -269,7 +289,7 @@ def error_transition(
     batch = blocks.shape[:-4]
     F = np.swapaxes(blocks, -3, -2).reshape(*batch, N * n, N * n)
 
-    process = np.einsum("...ij->...i", weights)[..., :, None, None] * np.eye(n)  # (..., N, n, n)
+    process = np.einsum("...ij->...i", weights)[..., :, None, None] * _identity(n)  # (..., N, n, n)
     process = np.broadcast_to(process, (*batch, N, n, n))
     meas = -(weights[..., :, :, None, None] * sel[..., :, :, :, None] * gain[..., None, :, :, :])  # (..., i, j, n, m)
     meas = np.swapaxes(meas, -3, -2).reshape(*batch, N * n, N * m)

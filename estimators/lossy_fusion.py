@@ -127,6 +127,7 @@ Departures from the printed equations
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -213,14 +214,22 @@ class LossyModel:
 
 
 def _sym(a: np.ndarray) -> np.ndarray:
-    return 0.5 * (a + np.swapaxes(a, -1, -2))
+    return 0.5 * (a + a.swapaxes(-1, -2))  # the method: np.swapaxes' dispatch costs more at small sizes
+
+
+@functools.lru_cache(maxsize=32)
+def _identity(n: int) -> np.ndarray:
+    """I_n, built once per size (read-only: shared by every call)."""
+    eye = np.eye(n)
+    eye.flags.writeable = False
+    return eye
 
 
 def _right_solve(S: np.ndarray, B: np.ndarray) -> np.ndarray:
     """B S^-1 for a symmetric positive definite S (Cholesky when unbatched)."""
     if S.ndim == 2 and B.ndim == 2:
         return scipy.linalg.cho_solve(scipy.linalg.cho_factor(S), B.T).T
-    return np.swapaxes(np.linalg.solve(S, np.swapaxes(B, -1, -2)), -1, -2)
+    return np.linalg.solve(S, B.swapaxes(-1, -2)).swapaxes(-1, -2)
 
 
 def deliver(fresh: np.ndarray, previous: np.ndarray, held: np.ndarray, outcome: np.ndarray) -> np.ndarray:
@@ -259,8 +268,8 @@ def kalman_update(mean, cov, z, H, R, mask=None):
     K = _right_solve(S, PHt)
     innovation = z - mean @ H.T
     new_mean = mean + np.einsum("...ij,...j->...i", K, innovation)
-    IKH = np.eye(H.shape[1]) - K @ H
-    new_cov = _sym(IKH @ cov @ np.swapaxes(IKH, -1, -2) + K @ R @ np.swapaxes(K, -1, -2))
+    IKH = _identity(H.shape[1]) - K @ H
+    new_cov = _sym(IKH @ cov @ IKH.swapaxes(-1, -2) + K @ R @ K.swapaxes(-1, -2))
     if mask is None:
         return new_mean, new_cov
     mask = np.asarray(mask, bool)
@@ -620,7 +629,8 @@ def distributed_step(model: LossyModel, state: DistributedState, z: np.ndarray, 
     followers = outcome[..., 1:]
     if transmit is None:
         transmit = np.ones(followers.shape, bool)
-    transmit = np.broadcast_to(np.asarray(transmit, bool), followers.shape)
+    else:
+        transmit = np.broadcast_to(np.asarray(transmit, bool), followers.shape)
     if compensation is None:
         compensation = compensation_weights(model.on_time[1:], model.late[1:])
 

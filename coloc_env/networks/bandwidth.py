@@ -13,9 +13,10 @@ A receiver's transport decision is one index into the feasible selections
 (:attr:`BandwidthBudget.feasible`, a fixed order; 108 of them in the paper's
 setting N = 4, n = 3, budget 5, 1..3 per link); neighbours are indexed
 relative to the receiver (neighbour k of agent i is agent (i + 1 + k) mod N).
-The index is decoded by :meth:`BandwidthBudget.selection_at` (unranking by
-the completion table), so nothing is listed; the Discrete's size is capped
-at 100,000 (``MAX_SELECTIONS``).
+Up to 4,096 selections (``TABLE_LIMIT``) the index is decoded by a lookup in
+a table built once from :attr:`BandwidthBudget.feasible`; beyond, by
+:meth:`BandwidthBudget.selection_at` (unranking by the completion table), so
+nothing is listed; the Discrete's size is capped at 100,000 (``MAX_SELECTIONS``).
 
 | quantity   | value                                                                                    |
 |------------|------------------------------------------------------------------------------------------|
@@ -49,6 +50,7 @@ from coloc_env.parts import NETWORKS, Block, PartConfig, check_flag, check_range
 from coloc_env.world.links import BandwidthBudget
 
 MAX_SELECTIONS = 100_000
+TABLE_LIMIT = 4096  # feasible selections up to which component_selection decodes by a lookup table
 
 
 @NETWORKS.register
@@ -98,6 +100,8 @@ class BandwidthNetwork(Network):
     def __init__(self, config: Bandwidth, num_agents, batch, message_kind, rounds=1):
         super().__init__(config, num_agents, batch, message_kind, rounds)
         self.links: BandwidthBudget | None = None
+        self._table: np.ndarray | None = None  # [i, f]: receiver i's row of full_selection(feasible[f])
+        self._offered: tuple[np.ndarray, np.ndarray] | None = None  # (index, selection) from offer_selection
 
     def set_component_dim(self, dim: int) -> None:
         """Called by a ``components`` backend at build: n, the components of its message."""
@@ -106,6 +110,11 @@ class BandwidthNetwork(Network):
         ones = np.ones((self.links.num_nodes - 1, self.links.dim))
         self._most = int(self.links.index_of(self.links.best_selection(ones)))
         self._fewest = int(self.links.index_of(self.links.best_selection(-ones)))
+        # a lookup decodes a step's indices far faster than unranking them one link at a time
+        if 0 < self.links.size <= TABLE_LIMIT:
+            feasible, N = self.links.feasible, self.links.num_nodes  # (F, N-1, n)
+            every = np.broadcast_to(feasible[:, None], (len(feasible), N, *feasible.shape[1:]))  # all receivers
+            self._table = np.ascontiguousarray(self.links.full_selection(every).swapaxes(0, 1))
 
     def transport_blocks(self) -> list[Block]:
         if self.message_kind != "components" or self.links is None:
@@ -119,5 +128,21 @@ class BandwidthNetwork(Network):
         """(B, N, N, n) bool [i, j, c]: receiver i takes component c of agent j (the diagonal all True)."""
         if self.links is None:
             raise RuntimeError("bandwidth network: set_component_dim was not called by the backend")
-        index = np.asarray(self._decisions[:, :, 0], int)
-        return self.links.full_selection(self.links.selection_at(index))
+        index = np.asarray(self._decisions[:, :, 0], np.int64)
+        table = self._table
+        if table is not None and index.size and 0 <= index.min() and index.max() < table.shape[1]:
+            return table[np.arange(self.num_agents), index]
+        offered = self._offered
+        if offered is not None and offered[0].shape == index.shape and np.array_equal(offered[0], index):
+            relative = offered[1]
+        else:
+            relative = self.links.selection_at(index)  # also the ValueError for an index out of range
+        return self.links.full_selection(relative)
+
+    def offer_selection(self, index: np.ndarray, selection: np.ndarray) -> None:
+        """Hand over the selections (B, N, N-1, n) that the indices (B, N) stand for, from a caller that
+        decoded both (the ``bandwidth_fusion`` preset decodes scores): beyond ``TABLE_LIMIT`` selections
+        :meth:`component_selection` takes them while the ``selection`` decisions are those indices, instead
+        of unranking the indices again. ``selection`` must be ``links.selection_at(index)``; it is kept,
+        not copied."""
+        self._offered = (np.array(index, np.int64), selection)

@@ -148,30 +148,52 @@ class Network:
         self.delivered |= delivered
         return delivered
 
-    def packets(self, senders: np.ndarray, listening: np.ndarray, floats: float, slot: int = 0) -> np.ndarray:
+    def packets(self, senders: np.ndarray, listening: np.ndarray, floats: float | np.ndarray,
+                slot: int = 0) -> np.ndarray:
         """One stamped packet per sender at this step: senders (B, N), listening (B, N, N) [t, s] = t sends to s.
 
         Returns delay (B, N, N) int [t, s]: the packet of t reaches s after that many steps (0 = this
         step), or -1 (not sent, out of range, or lost); the receiver buffers what arrives late. The
         loss and delay draws depend on (step, slot) only, as in :meth:`broadcast`; the transmit
         decision is read at ``slot``. Unlike a broadcast, a packet counts as sent (one message per
-        sender, ``floats`` floats) when it is transmitted, whether it arrives or not: the radio
-        spent the air time.
+        sender, ``floats`` floats: a number, or (B, N) per sender) when it is transmitted, whether it
+        arrives or not: the radio spent the air time. ``floats`` (B, N, N) [t, s] makes every link its
+        own message instead (t sends s a packet of that many floats, e.g. the components s selected):
+        one message per link that carries a packet.
         """
         N = self.num_agents
-        distance = self.distances()
+        cls = type(self)
+        plain = cls.packet_delays is Network.packet_delays
+        # the base's rules (every link usable, none lost, on time) read no distance, nor does a delay rule of
+        # the uniforms alone (``_delays_read_distance`` False): then none is computed
+        base_rules = plain and cls.usable is Network.usable and cls.loss_probability is Network.loss_probability
+        reads_distance = cls.usable is not Network.usable or (
+            cls.loss_probability is not Network.loss_probability if plain
+            else getattr(self, "_delays_read_distance", True))
+        distance = self.distances() if reads_distance else None
         want = (np.asarray(senders, bool) & self.transmits(slot))[:, :, None] & np.asarray(listening, bool)
-        want &= ~np.eye(N, dtype=bool) & self.usable(distance)
-        if type(self).packet_delays is Network.packet_delays and not np.any(self.loss_probability(distance) > 0):
+        want &= ~np.eye(N, dtype=bool)
+        if cls.usable is not Network.usable:
+            want &= self.usable(distance)
+        if plain and (base_rules or not np.any(self.loss_probability(distance) > 0)):
             delay = np.where(want, 0, -1).astype(np.int64)  # lossless and on time: no draw decides anything
         else:
-            u = uniforms(self.keys, (self._k, 2, slot), (N, N))
+            u = self._packet_uniforms(slot)
             delay = np.where(want, self.packet_delays(distance, u), -1).astype(np.int64)
-        sent = want.any(axis=-1)
-        self.messages_sent += sent
-        self.floats_sent += floats * sent
+        if np.ndim(floats) == 3:
+            self.messages_sent += want.sum(axis=-1)
+            self.floats_sent += np.where(want, floats, 0.0).sum(axis=-1)
+        else:
+            sent = want.any(axis=-1)
+            self.messages_sent += sent
+            self.floats_sent += floats * sent
         self.delivered |= delay == 0
         return delay
+
+    def _packet_uniforms(self, slot: int) -> np.ndarray:
+        """(B, N, N) the uniforms of this step's packets in ``slot``, counters (k, 2, slot); a network that
+        draws a later step's ahead may hand those back (the values depend on the counters only)."""
+        return uniforms(self.keys, (self._k, 2, slot), (self.num_agents, self.num_agents))
 
     def relay(self, source: np.ndarray, first: np.ndarray, floats_per_hop, slot: int = 0) -> RelayChain:
         """Relay chains source -> first -> ... (B,), following the holders' choices (or nearest first).

@@ -11,13 +11,14 @@ Reading built (the paper's per-slot outcome, exactly): the outcome of slot k
 on link t -> s is one uniform u_k (the base's counter-based draw of step k);
 packet k is on time (delay 0) if u_k < alpha1; otherwise it arrives one step
 late (delay 1) if the *next* slot's outcome is "late", alpha1 <= u_{k+1} <
-alpha1 + alpha2 (u_{k+1} is the same counter-based draw the next step makes),
-else it is lost (-1). So at most one packet per link arrives in a slot and
-the held sequence is eq. (3)'s. The one difference from (3) as printed: a
-late outcome after an on-time packet would re-deliver the packet already
-held (a duplicate); a packet has one delay, so it is not delivered again. The
-held value and its age are the same either way. Per packet, P(delay 0) =
-alpha1, P(delay 1) = (1 - alpha1) alpha2.
+alpha1 + alpha2 (u_{k+1} is the same counter-based draw the next step makes;
+it is drawn once and kept for that step), else it is lost (-1). So at most
+one packet per link arrives in a slot and the held sequence is eq. (3)'s.
+The one difference from (3) as printed: a late outcome after an on-time
+packet would re-deliver the packet already held (a duplicate); a packet has
+one delay, so it is not delivered again. The held value and its age are the
+same either way. Per packet, P(delay 0) = alpha1, P(delay 1) =
+(1 - alpha1) alpha2.
 
 | quantity   | value                                                                                     |
 |------------|-------------------------------------------------------------------------------------------|
@@ -74,9 +75,15 @@ class BernoulliDelay(PartConfig):
 class BernoulliDelayNetwork(Network):
     """The base's ``packets`` with fu2017's per-slot outcomes as packet delays."""
 
+    @property
+    def _delays_read_distance(self) -> bool:
+        # this packet_delays reads the uniforms only, so packets computes no distances; a subclass's may read them
+        return type(self).packet_delays is not BernoulliDelayNetwork.packet_delays
+
     def __init__(self, config: BernoulliDelay, num_agents, batch, message_kind, rounds=1):
         super().__init__(config, num_agents, batch, message_kind, rounds)
         self._slot = 0
+        self._ahead: dict[int, tuple] = {}  # slot -> (keys, steps, uniforms): the next step's draw, made this step
 
     def transport_blocks(self) -> list[Block]:
         if self.message_kind in ("packets", "components"):
@@ -100,8 +107,24 @@ class BernoulliDelayNetwork(Network):
         a1 = float(self.config.on_time_probability)
         a2 = float(self.config.late_probability)
         u_next = uniforms(self.keys, (self._k + 1, 2, self._slot), np.shape(u)[-2:])
+        if u_next.shape == (self.batch, self.num_agents, self.num_agents):
+            # the next step's packets draw exactly these (same keys and counters): _packet_uniforms hands them back
+            self._ahead[self._slot] = (self.keys.copy(), np.asarray(self._k) + 1, u_next)
         late = (u_next >= a1) & (u_next < a1 + a2)
         return np.where(u < a1, 0, np.where(late, 1, -1))
+
+    def _packet_uniforms(self, slot: int) -> np.ndarray:
+        ahead = self._ahead.get(slot)
+        if ahead is not None:
+            keys, steps, u = ahead
+            # drawn for these keys at this step (a copy reset since, or another step, draws afresh)
+            if (keys == self.keys).all() and (steps == self._k).all():
+                return u
+        return super()._packet_uniforms(slot)
+
+    def reset(self, rngs, idx) -> None:
+        super().reset(rngs, idx)
+        self._ahead.clear()
 
     def slot_outcomes(self, steps, slot: int = 0) -> np.ndarray:
         """(B, len(steps), N, N) [t, s] eq. (3)'s outcome code of link t -> s at each of ``steps``: 0 on time

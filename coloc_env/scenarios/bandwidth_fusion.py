@@ -95,7 +95,7 @@ Termination: none; truncation after ``horizon`` steps (the paper's 50).
 | ``step``               | k + 1 (0 at reset)                                                      |
 
 Batching: every step of B copies is one set of numpy calls (stacked matmul
-and solve; one network call per receiver); the only per-copy loop is at
+and solve; a single network call for all links); the only per-copy loop is at
 reset, where each copy draws its whole episode's noise from its own generator.
 
 Arguments (fields of :class:`BandwidthFusionConfig`, defaults = the paper)
@@ -353,6 +353,9 @@ class BandwidthFusionScenario(PresetScenario):
         # weight_order[i] = absolute node index of [self, neighbour 0, ...] of receiver i
         self._weight_order = self.backend.weight_order
         self._initial_cov = np.asarray(config.initial_cov, float)
+        # built once (check_actions reads it every step); float64: the paper's weight tables must survive
+        # the softmax encoding exactly (float32 loses 1e-9)
+        self._preset_action_space = gymnasium.spaces.Box(-1.0, 1.0, shape=(self.action_dim,), dtype=np.float64)
         B, N, n = self.batch, self.num_agents, self.n
         self.ages = np.zeros((B, N, N - 1, n))
         self.selection = np.zeros((B, N, N - 1, n), dtype=bool)
@@ -400,8 +403,7 @@ class BandwidthFusionScenario(PresetScenario):
         return gymnasium.spaces.Box(-np.inf, np.inf, shape=(self.obs_dim,), dtype=np.float32)
 
     def action_space(self):
-        # float64: the paper's weight tables must survive the softmax encoding exactly (float32 loses 1e-9)
-        return gymnasium.spaces.Box(-1.0, 1.0, shape=(self.action_dim,), dtype=np.float64)
+        return self._preset_action_space
 
     def state_space(self):
         dim = self.num_agents * (self.obs_dim + self.n)
@@ -470,7 +472,8 @@ class BandwidthFusionScenario(PresetScenario):
         actions = self.check_actions(actions)
         if np.any(self.k >= self.horizon):
             raise RuntimeError("step() on a copy whose episode is over; reset it first")
-        _, index, logits = self._decode(actions)
+        selection, index, logits = self._decode(actions)
+        self.network.offer_selection(index, selection)  # the network need not decode the index again
         self.advance(self.part_decisions(index, logits))
 
     def advance(self, decoded: np.ndarray, weights: np.ndarray | None = None) -> None:
@@ -482,6 +485,7 @@ class BandwidthFusionScenario(PresetScenario):
             index = self.links.index_of(decoded)
             if np.any(index < 0):
                 raise ValueError("selection does not meet the bandwidth budget for every receiver")
+            self.network.offer_selection(index, np.asarray(decoded, bool))
             with np.errstate(divide="ignore"):  # a zero weight: logit -inf, weight exactly 0
                 logits = np.log(np.take_along_axis(np.asarray(weights, float),
                                                    np.broadcast_to(self._weight_order, np.shape(weights)), axis=-1))
@@ -497,6 +501,8 @@ class BandwidthFusionScenario(PresetScenario):
             loss = self._squared_error()
         else:
             loss = bf.node_traces(self.fusion.error_cov, self.num_agents)
+        if self.config.component_cost == 0:  # -loss - 0 * count is -loss exactly: no count needed
+            return -loss
         return -loss - self.config.component_cost * self.links.components_received(self.selection)
 
     def initial_cost(self) -> float:
