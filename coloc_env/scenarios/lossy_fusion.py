@@ -59,10 +59,18 @@ Observation (per agent, ``Box(-inf, inf, shape=(3 + 4 (L-1),), float32)``)
 | ``[0]``                    | 1 (role)                                      | 0                       |
 | ``[1]``                    | slots done / horizon                          | same                    |
 | ``[2]``                    | log tr P0 (its fused covariance, eq. 30)      | log tr of its own P(k|k)|
-| ``[3, 3+(L-1))``           | age in slots of the packet held from each     | 0                       |
-|                            | follower, / 10                                |                         |
+| ``[3, 3+(L-1))``           | per follower, slots since its held packet     | 0                       |
+|                            | arrived, / 10 (with ``time_stamps``: the      |                         |
+|                            | packet's age, slots since it was formed)      |                         |
 | ``[3+(L-1), 3+4(L-1))``    | log tr of the three covariances in that       | 0                       |
 |                            | packet, follower-major                        |                         |
+
+Packets carry no time stamp in the paper, so without ``time_stamps`` the leader cannot
+tell a late packet from an on-time one: it knows only when each packet arrived (a late
+packet held since it arrived is one slot older than the entry says). Before issue 15 the
+entry was the age itself, which the paper's leader cannot know; ``time_stamps=True`` gives
+it back (packets stamped with their slot, one more number on the air, not counted in
+``floats_sent``, which counts the estimates).
 
 ``state()`` (centralized critic): every agent's observation, then the one-hot
 link outcome of each follower's last slot (on time, late, lost).
@@ -113,6 +121,8 @@ Arguments (fields of :class:`LossyFusionConfig`, defaults = the paper)
 | reward               | "error"                          | "error", "trace"                         |
 | message_cost         | 0.0                              | [0, 1e12], per packet sent               |
 | weight_logit_scale   | 3.0                              | (0, 50]                                  |
+| time_stamps          | False                            | bool: packets carry their slot (the      |
+|                      |                                  | observation shows ages, not arrivals)    |
 """
 
 from __future__ import annotations
@@ -126,6 +136,7 @@ import estimators.lossy_fusion as lf
 from coloc_env.backends.fusion import PredictionCompensation
 from coloc_env.config import as_array, check_choice, check_psd, check_range
 from coloc_env.networks.bernoulli_delay import BernoulliDelay
+from coloc_env.parts import check_flag
 from coloc_env.rendering import Link, Scene, ring_layout
 from coloc_env.scenarios.binding import PresetScenario
 from coloc_env.world.delay_links import BernoulliDelayLink
@@ -157,6 +168,7 @@ class LossyFusionConfig:
     reward: str = "error"
     message_cost: float = 0.0
     weight_logit_scale: float = 3.0
+    time_stamps: bool = False
 
     @property
     def target(self) -> ConstantVelocityTarget:
@@ -181,6 +193,7 @@ class LossyFusionConfig:
         check_choice("reward", self.reward, ("error", "trace"))
         check_range("message_cost", self.message_cost, 0.0, 1e12)
         check_range("weight_logit_scale", self.weight_logit_scale, 0.0, 50.0, low_open=True)
+        check_flag("time_stamps", self.time_stamps)
 
     def parts(self) -> tuple:
         """The (world, network, backend) configs this flat config stands for: ``target_cv`` with the same
@@ -238,6 +251,7 @@ class LossyFusionScenario(PresetScenario):
         self.H = self.world.metric
         self._action_space = gymnasium.spaces.Box(-1.0, 1.0, shape=(self.action_dim,), dtype=np.float64)
         self._outcomes = np.zeros((self.batch, self.horizon, self.num_agents), np.int8)
+        self._since_arrival = np.zeros((self.batch, self.num_agents - 1))  # slots since each held packet arrived
 
     # --- the parts' state, by the paper's names ------------------------------------------
     @property
@@ -317,6 +331,12 @@ class LossyFusionScenario(PresetScenario):
         codes = self.network.slot_outcomes(range(self.horizon))[:, :, :, 0]  # every link to the leader
         codes[..., 0] = lf.ON_TIME
         self._outcomes[idx] = codes[idx]
+        self._since_arrival[idx] = self.fusion.held_age[idx]  # the prior held as packet: no arrival yet
+
+    def advance(self, decoded) -> None:
+        super().advance(decoded)
+        arrived = self.fusion.delivered != lf.LOST
+        self._since_arrival = np.where(arrived, 0.0, self._since_arrival + 1.0)
 
     # --- views -------------------------------------------------------------------
     def _fused_error(self) -> np.ndarray:
@@ -333,7 +353,8 @@ class LossyFusionScenario(PresetScenario):
         obs[:, :, 1] = (self.k / self.horizon)[:, None]
         obs[:, 0, 2] = np.log(np.trace(fusion.fused_cov, axis1=-2, axis2=-1))
         obs[:, 1:, 2] = np.log(np.trace(self.local_cov, axis1=-2, axis2=-1))
-        obs[:, 0, 3:3 + (L - 1)] = fusion.held_age / AGE_SCALE
+        age = fusion.held_age if self.config.time_stamps else self._since_arrival
+        obs[:, 0, 3:3 + (L - 1)] = age / AGE_SCALE
         obs[:, 0, 3 + (L - 1):] = np.log(np.trace(fusion.held_cov, axis1=-2, axis2=-1)).reshape(B, -1)
         return obs.astype(np.float32)
 

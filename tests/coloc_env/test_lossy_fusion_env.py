@@ -205,3 +205,30 @@ def test_rgb_render_draws_a_frame():
     frame = env.render()
     assert frame.ndim == 3 and frame.dtype == np.uint8 and frame.std() > 10
     assert coloc_env.parallel_env(NAME).render() is None
+
+
+def test_without_time_stamps_the_leader_sees_arrivals_not_ages():
+    """Packets carry no stamp in the paper: the leader's entry 3 counts the slots since the held packet
+    arrived, which is its age except while a late packet is held (one slot less); with ``time_stamps`` the
+    entry is the age. Same episode either way (the option changes only the observation)."""
+    seen = {}
+    for stamps in (False, True):
+        env = coloc_env.parallel_env("lossy_fusion", horizon=60, time_stamps=stamps)
+        scenario = env.unwrapped.scenario
+        policy = agents.make_policy("paper", env)
+        observations, _ = env.reset(seed=4)
+        entry, ages, late_held = [], [], []
+        held_late = False
+        for _ in range(60):
+            observations, *_ = env.step(policy.act(observations))
+            code = scenario.fusion.delivered[0, 0]
+            held_late = code == lf.LATE or (held_late and code == lf.LOST)
+            entry.append(observations["uav_0"][3] * 10.0)
+            ages.append(scenario.fusion.held_age[0, 0])
+            late_held.append(held_late)
+        seen[stamps] = (np.array(entry), np.array(ages), np.array(late_held))
+    entry, ages, late_held = seen[False]
+    assert late_held.any() and not late_held.all()
+    np.testing.assert_allclose(entry, ages - late_held, atol=1e-5)
+    np.testing.assert_allclose(seen[True][0], ages, atol=1e-5)
+    np.testing.assert_array_equal(seen[True][1], ages)
