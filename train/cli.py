@@ -101,7 +101,9 @@ def build_parser() -> argparse.ArgumentParser:
     tr = sub.add_parser("train", help="train a shared PPO policy with stable-baselines3",
                         formatter_class=_HelpFormatter)
     tr.add_argument("scenario", help=scenarios)
-    tr.add_argument("--timesteps", type=_positive, default=200_000, help="PPO timesteps (agent transitions)")
+    tr.add_argument("--timesteps", type=_positive, default=None,
+                    help="PPO timesteps (agent transitions) (default: the scenario's TIMESTEPS in "
+                         "train/hyperparams/<scenario>.py, 200000 where it sets none)")
     group = tr.add_mutually_exclusive_group()
     group.add_argument("--seed", type=int, default=None, help="one training seed S (default: 0)")
     group.add_argument("--seeds", type=_seed_range, default=None, metavar="A..B",

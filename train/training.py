@@ -26,6 +26,7 @@ from train.io import write_json
 
 MAX_TRAINING_SEED = 10**5  # keeps S + c far below the validation and evaluation seed ranges
 CURVE_POINTS = 10
+DEFAULT_TIMESTEPS = 200_000  # a scenario's budget where its hyperparameter module sets no TIMESTEPS
 CURVE_EPISODES = 16
 
 
@@ -170,11 +171,13 @@ def write_learning_curve(folder: str, scenario: str, curve: list, title: str) ->
     save_figure(os.path.join(folder, "learning_curve.png"), fig)
 
 
-def train(scenario: str, timesteps: int, seed: int, out: str, vec: str = "native",
+def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = "native",
           progress_bar: bool = True, tensorboard: bool = False, curve_points: int = CURVE_POINTS) -> str:
     """Train and save ``out/<scenario>/seed<S>/model.zip`` (+ ``model.json``); returns the model path.
 
-    ``curve_points`` validation points make the learning curve (0: no curve, only checkpoints).
+    ``timesteps`` None: the scenario's budget (``TIMESTEPS`` of ``train/hyperparams/<scenario>.py``,
+    :data:`DEFAULT_TIMESTEPS` where it sets none). ``curve_points`` validation points make the learning
+    curve (0: no curve, only checkpoints).
     """
     import torch
     from stable_baselines3 import PPO
@@ -182,8 +185,12 @@ def train(scenario: str, timesteps: int, seed: int, out: str, vec: str = "native
 
     from train.hyperparams import load
 
-    if timesteps < 1:
-        raise ValueError(f"timesteps must be >= 1, got {timesteps}")
+    if timesteps is None:
+        from train.hyperparams import budget
+
+        timesteps = budget(scenario, DEFAULT_TIMESTEPS)
+    if isinstance(timesteps, bool) or not isinstance(timesteps, (int, np.integer)) or timesteps < 1:
+        raise ValueError(f"timesteps must be an integer >= 1, got {timesteps!r}")
     if not 0 <= seed < MAX_TRAINING_SEED:
         raise ValueError(f"seed must be in [0, {MAX_TRAINING_SEED}) (disjoint from evaluation seeds), got {seed}")
     if tensorboard:

@@ -131,7 +131,8 @@ def _help(command: str) -> str:
 
 def test_help_shows_defaults_scenarios_and_every_policy_name():
     train_help = " ".join(_help("train").split())
-    assert "(default: 200000)" in train_help and "(default: results/train)" in train_help
+    assert "TIMESTEPS in train/hyperparams/<scenario>.py, 200000 where it sets none" in train_help
+    assert "(default: results/train)" in train_help
     assert "(default: native)" in train_help and "(default: 10)" in train_help
     for scenario in coloc_env.SCENARIOS:
         assert scenario in train_help

@@ -23,3 +23,4 @@ HYPERPARAMS = {
 }
 
 NUM_COPIES = 8
+TIMESTEPS = 500_000  # the README's budget: `coloc train bandwidth_fusion` at its defaults reproduces the table
