@@ -9,7 +9,7 @@ and the AHG costs describe the packets of stamp k, and step k re-filters only if
 changes the mask. Per step k, for each agent:
 
 1. the packets stamped k (one per neighbour that measured the target) go to the network
-   (:func:`coloc_env.networks.random_delay.node_packets`, slot 0), which returns each one's
+   (:meth:`coloc_env.networks.base.Network.node_packets`, slot 0), which returns each one's
    delay tau (or lost); the backend buffers stamps k-D..k (D = the network's
    :meth:`~coloc_env.networks.base.Network.max_delay`), a packet becoming known at k when
    tau <= k - s (Step 1, :func:`estimators.afge.known_at_lag`);
@@ -87,7 +87,6 @@ import numpy as np
 
 import estimators.afge as af
 from coloc_env.backends.base import Backend
-from coloc_env.networks.random_delay import node_packets
 from coloc_env.parts import BACKENDS, Block, PartConfig, check_choice, check_range
 from coloc_env.world.random_delay import NEVER
 
@@ -270,7 +269,7 @@ class PacketFirBackend(Backend):
         """Stamp k's packets of the copies ``rows`` to the network, into the buffer (oldest first)."""
         extra = readings.extra
         sending = np.asarray(extra["measured"], bool)
-        delay = node_packets(self.network, sending, self.world.neighbour_distances(), self.config.payload, slot=0)
+        delay = self.network.node_packets(sending, self.world.neighbour_distances(), self.config.payload, slot=0)
         self.last_delays[rows] = delay[rows]
         for name, new in (("rss", extra["rss"]), ("aoa", extra["aoa"]), ("nav", extra["nav"]),
                           ("modes", extra.get("mode", np.zeros(sending.shape, np.int8))),

@@ -11,12 +11,15 @@ A backend never decides delivery: it asks its network. Three message patterns
 | ``central`` | each measurement sent to the fusion centre, agent 0 (UKF-CCL)     | ``broadcast`` to agent 0 |
 | ``packets`` | one stamped packet per sender and step, to the receivers it names; | :meth:`Network.packets`  |
 |             | each arrives after a delay of 0..D steps or is lost (fu2017, gao2016) |                      |
+|             | from a world node (gao2016's orbiting neighbours, no agents) to an | :meth:`Network.node_packets` |
+|             | agent: the same rule, J nodes per agent                           |                        |
 
 Every network accounts at the sender, in one unit for every backend: a
 *message* is one transmission (a broadcast heard by several neighbours is one
 message; each relay hop is one message) and *floats* are the numbers it
 carried (the backend states its payload). ``messages_sent`` and
-``floats_sent`` are per agent and step.
+``floats_sent`` are per agent and step; world nodes are no agents, so their
+packets are counted per receiving agent in ``node_messages`` / ``node_floats``.
 
 Packet loss is drawn by :mod:`coloc_env.draws` from a key the network draws
 from its own generator at reset: the value for (step, round, sender,
@@ -35,6 +38,7 @@ from coloc_env.world.relay import RelayChain
 
 MESSAGE_KINDS = ("none", "broadcast", "chain", "central", "packets")
 CENTRE = 0  # the fusion centre of ``central`` backends
+NODE_STREAM = 3  # counter of world-node packets; broadcast uses 0, relay 1, packets 2
 
 
 class Network:
@@ -53,6 +57,8 @@ class Network:
         self.messages_sent = np.zeros((B, N))
         self.floats_sent = np.zeros((B, N))
         self.delivered = np.zeros((B, N, N), dtype=bool)  # union over this step's rounds, for the renderer
+        self.node_messages = np.zeros((B, N))  # world-node packets sent to each agent this step
+        self.node_floats = np.zeros((B, N))
         self.last_chain: RelayChain | None = None
         self._positions = np.zeros((B, N, 2))
         self._decisions = np.zeros((B, N, 0), dtype=np.int64)
@@ -105,6 +111,8 @@ class Network:
         self.messages_sent = np.zeros_like(self.messages_sent)
         self.floats_sent = np.zeros_like(self.floats_sent)
         self.delivered = np.zeros_like(self.delivered)
+        self.node_messages = np.zeros_like(self.node_messages)
+        self.node_floats = np.zeros_like(self.node_floats)
         self.last_chain = None
 
     def distances(self) -> np.ndarray:
@@ -188,6 +196,32 @@ class Network:
             self.messages_sent += sent
             self.floats_sent += floats * sent
         self.delivered |= delay == 0
+        return delay
+
+    def node_packets(self, sending: np.ndarray, distance: np.ndarray, floats: float, slot: int = 0) -> np.ndarray:
+        """World node -> agent packets of this step: ``sending`` (B, N, J) bool [i, j] node j of agent i sends a
+        packet to agent i, over a link of true length ``distance`` (B, N, J) m.
+
+        Returns delay (B, N, J) int64: the packet of node j reaches agent i after that many steps (0 = this
+        step), -1 if not sent, out of range (``usable``) or lost (``packet_delays`` of one counter-based
+        uniform per packet, hashing (step, :data:`NODE_STREAM`, slot, agent, node) with the network's key: a
+        stream of its own, so a copy equals itself run alone). Counts ``node_messages`` (packets sent to
+        agent i) and ``node_floats`` when transmitted; a call with ``slot`` 0 (the step's first node round)
+        restarts the step's count, as :meth:`begin` does. ``ideal`` delivers every packet at once,
+        ``relay`` loses it with p_loss(d), ``broadcast`` drops it beyond its range, ``random_delay`` delays it.
+        """
+        sending = np.asarray(sending, bool)
+        distance = np.asarray(distance, float)
+        N, J = sending.shape[1:]
+        want = sending & self.usable(distance)
+        u = uniforms(self.keys, (self._k, NODE_STREAM, slot), (N, J))
+        delay = np.where(want, self.packet_delays(distance, u), -1).astype(np.int64)
+        if slot == 0:
+            self.node_messages = np.zeros_like(self.node_messages)
+            self.node_floats = np.zeros_like(self.node_floats)
+        sent = want.sum(axis=-1)
+        self.node_messages = self.node_messages + sent
+        self.node_floats = self.node_floats + floats * sent
         return delay
 
     def _packet_uniforms(self, slot: int) -> np.ndarray:

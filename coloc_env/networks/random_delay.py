@@ -12,8 +12,8 @@ buffers what arrives late; the network only says when.
 |------------|----------------------------------------------------------------------------------------|
 | carries    | ``packets`` only (a broadcast, chain or central message has no buffer; a "late = lost" |
 |            | reading of them would be a different network, so they are not offered)                 |
-| packets    | agent -> agent by :meth:`~coloc_env.networks.base.Network.packets` (delays overridden   |
-|            | here); world node -> agent by :func:`node_packets` (see below)                          |
+| packets    | agent -> agent by :meth:`~coloc_env.networks.base.Network.packets`, world node -> agent by |
+|            | :meth:`~coloc_env.networks.base.Network.node_packets` (the delays of both overridden here) |
 | delay      | 0..D steps with q_0..q_D; lost with 1 - sum q_l; a link beyond ``comm_range`` carries   |
 |            | nothing                                                                                |
 | decisions  | none by default (gao2016's senders always transmit); with ``transmit_decision`` a      |
@@ -24,19 +24,9 @@ buffers what arrives late; the network only says when.
 |            | sender and step, counted when transmitted); world nodes: ``node_messages`` /           |
 |            | ``node_floats`` (B, N) per receiving agent (world nodes are no agents)                 |
 
-World-node packets. In gao2016 the senders are the target's orbiting neighbours, which
-are part of the world, not agents, while :meth:`Network.packets` takes agent senders (B, N).
-:func:`node_packets` is the same rule for J world nodes per agent: ``sending`` (B, N, J) [i, j]
-node j of agent i sends a packet to agent i this step, over a link of true length
-``distance`` (B, N, J); it returns the delay (B, N, J), -1 = not sent, out of range or lost.
-It uses only the base's interface (``keys``, the step of :meth:`Network.begin`, ``usable``,
-``packet_delays``), so it runs over any network: ``ideal`` delivers every packet at once,
-``relay`` loses it with p_loss(d), ``broadcast`` drops it beyond its range. Its uniforms
-hash (step, stream 3, slot, agent, node) with the network's key, a stream of its own beside
-the base's 0 (broadcast), 1 (relay) and 2 (packets), so a copy equals itself run alone. The
-node counters are zeroed by a call with ``slot`` 0 (the first node-packet round of a step)
-and by this network's ``begin``. The general home of this function is
-:class:`~coloc_env.networks.base.Network` (see :data:`NODE_STREAM`).
+In gao2016 the senders are the target's orbiting neighbours, which are part of the world,
+not agents: their packets go through the base's ``node_packets``, whose uniforms this
+network's ``packet_delays`` turns into delays.
 
 Arguments (``coloc_env.networks.RandomDelay``; defaults = ``nlos_horizon``'s)
 
@@ -54,13 +44,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from coloc_env.draws import uniforms
 from coloc_env.networks.base import Network
 from coloc_env.parts import NETWORKS, Block, PartConfig, check_flag
 from coloc_env.world.random_delay import BoundedRandomDelay
 from coloc_env.world.relay import check_distance
-
-NODE_STREAM = 3  # counter of world-node packets; the base uses 0 (broadcast), 1 (relay), 2 (packets)
 
 
 @NETWORKS.register
@@ -94,46 +81,12 @@ def delays_from_uniforms(probabilities, buffer_length: int, u: np.ndarray) -> np
     return np.where(tau > buffer_length, -1, tau).astype(np.int64)
 
 
-def node_packets(network: Network, sending: np.ndarray, distance: np.ndarray, floats: float,
-                 slot: int = 0) -> np.ndarray:
-    """World node -> agent packets of this step over ``network`` (see the module docstring).
-
-    ``sending`` (B, N, J) bool, ``distance`` (B, N, J) m. Returns delay (B, N, J) int64: the
-    packet of node j reaches agent i after that many steps (0 = this step), -1 if not sent,
-    out of range or lost. Accounts ``node_messages`` (packets sent to agent i) and
-    ``node_floats`` on the network, counted when transmitted.
-    """
-    sending = np.asarray(sending, bool)
-    distance = np.asarray(distance, float)
-    B, N, J = sending.shape
-    want = sending & network.usable(distance)
-    u = uniforms(network.keys, (network._k, NODE_STREAM, slot), (N, J))
-    delay = np.where(want, network.packet_delays(distance, u), -1).astype(np.int64)
-    if slot == 0 or getattr(network, "node_messages", None) is None:
-        network.node_messages = np.zeros((B, N))
-        network.node_floats = np.zeros((B, N))
-    sent = want.sum(axis=-1)
-    network.node_messages = network.node_messages + sent
-    network.node_floats = network.node_floats + floats * sent
-    return delay
-
-
 class RandomDelayNetwork(Network):
-    def __init__(self, config: RandomDelay, num_agents, batch, message_kind, rounds=1):
-        super().__init__(config, num_agents, batch, message_kind, rounds)
-        self.node_messages = np.zeros((self.batch, self.num_agents))
-        self.node_floats = np.zeros((self.batch, self.num_agents))
-
     def transport_blocks(self) -> list[Block]:
         if self.config.transmit_decision and self.message_kind == "packets":
             return [Block("transmit", self.rounds, 2, "transmit this step's packet (1) or not (0)", default=1,
                           maximum=1, minimum=0)]
         return []
-
-    def begin(self, k, positions, decisions) -> None:
-        super().begin(k, positions, decisions)
-        self.node_messages = np.zeros_like(self.node_messages)
-        self.node_floats = np.zeros_like(self.node_floats)
 
     def usable(self, distance):
         return np.asarray(distance) <= self.config.comm_range
@@ -148,6 +101,3 @@ class RandomDelayNetwork(Network):
         if not (self.config.transmit_decision and self.message_kind == "packets"):
             return super().transmits(round_index)
         return self._decisions[:, :, min(round_index, self.rounds - 1)].astype(bool)
-
-    def node_packets(self, sending, distance, floats, slot: int = 0) -> np.ndarray:
-        return node_packets(self, sending, distance, floats, slot)

@@ -163,7 +163,6 @@ import numpy as np
 
 import estimators.afge as af
 from coloc_env.config import as_array, check_choice, check_range, check_step_windows
-from coloc_env.networks.random_delay import node_packets
 from coloc_env.rendering import Link, Scene
 from coloc_env.scenarios.binding import PresetScenario
 from coloc_env.world.flight import OrbitingNeighbours, OrbitParameters, TurnSchedulePath
@@ -480,7 +479,7 @@ class NlosHorizonScenario(PresetScenario):
         out = np.empty((B, K1, self.num_agents, self.J), np.int64)
         for s in range(K1):
             net.begin(np.full(B, s), w.truth[:, s, :, :2], np.zeros((B, self.num_agents, 0), np.int64))
-            out[:, s] = node_packets(net, w.in_rsa[:, s], w.distance[:, s], self.backend.config.payload, slot=0)
+            out[:, s] = net.node_packets(w.in_rsa[:, s], w.distance[:, s], self.backend.config.payload, slot=0)
         return out
 
     # --- description ------------------------------------------------------------

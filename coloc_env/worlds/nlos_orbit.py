@@ -17,7 +17,7 @@ r_sup on the true distance) measures the RSS and the AOA of the target (spec §4
 :class:`~coloc_env.world.radio.RssAoaSensor`), the bias of its link's LOS/NLOS Markov chain
 (:class:`~coloc_env.world.los_nlos.LosNlosChain`) included, and sends a packet stamped k
 with its own navigation estimate (truth + N(0, sigma_nav^2 I)) to the target: the backend
-asks the network for its delivery (:func:`coloc_env.networks.random_delay.node_packets`).
+asks the network for its delivery (:meth:`coloc_env.networks.base.Network.node_packets`).
 
 | quantity       | value                                                                              |
 |----------------|------------------------------------------------------------------------------------|

@@ -6,7 +6,7 @@ import pytest
 import agents
 import coloc_env
 from coloc_env.backends.dead_reckoning import DeadReckoning
-from coloc_env.networks.random_delay import delays_from_uniforms, node_packets
+from coloc_env.networks.random_delay import delays_from_uniforms
 from coloc_env.scenarios.composed import ComposedScenario
 from coloc_env.world.random_delay import BoundedRandomDelay
 from coloc_env.worlds.nlos_orbit import NlosOrbit
@@ -146,13 +146,13 @@ def test_random_delay_draws_assumption_3_and_accounts_node_packets():
     sending[0, 0, 0] = False
     distance = np.full((2, 3, 4), 100.0)
     distance[1, 2, 3] = 600.0  # beyond comm_range: not sent
-    delay = node_packets(network, sending, distance, 5.0)
+    delay = network.node_packets(sending, distance, 5.0)
     assert delay[0, 0, 0] == -1 and delay[1, 2, 3] == -1
     np.testing.assert_array_equal(network.node_messages, [[3, 4, 4], [4, 4, 3]])
     np.testing.assert_array_equal(network.node_floats, 5.0 * network.node_messages)
     assert network.messages_sent.sum() == 0  # world nodes are no agents
     # the same draws again at the same step and slot (a slot-0 call restarts the step's node accounting)
-    again = node_packets(network, sending, distance, 5.0)
+    again = network.node_packets(sending, distance, 5.0)
     np.testing.assert_array_equal(again, delay)
     np.testing.assert_array_equal(network.node_messages, [[3, 4, 4], [4, 4, 3]])
     # agent -> agent packets go through the base's Network.packets with this network's delays
