@@ -44,6 +44,7 @@ class DeadReckoning(PartConfig):
 
 
 class DeadReckoningBackend(Backend):
+    reads_fixes = False  # the inputs only
     def reset(self, rngs, idx) -> None:
         mean, cov = self.world.initial_belief()
         if not hasattr(self, "mean"):

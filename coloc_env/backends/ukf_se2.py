@@ -12,9 +12,15 @@ batch axis, so the updates loop over the copies.
 Step k, in the world's file order (``Readings.extra["obs_*"]``, see
 :mod:`coloc_env.worlds.mrclam`):
 
-* a landmark sighting by robot m: ``dcl_update`` on the chain [m] alone (the
-  exact truncated-chain update: m and, through the cross terms, everyone's
-  sigma rows change; no communication);
+* a landmark sighting by robot m: with ``landmark_updates="local"``, ``dcl_update`` on
+  the chain [m] alone (the exact truncated-chain update: m and, through the cross
+  terms, everyone's sigma rows change; no communication); with ``"relay"``, on the
+  chain m -> ... the network delivers (:meth:`~coloc_env.networks.base.Network.relay`
+  with no measured robot, one slot per observation), so a chain that reaches everyone
+  gives exactly UKF-CCL's update: its unscented transform runs on the whole joint
+  state (L = 3N), where [m] alone runs it on m's three components (lambda = 0 spreads
+  the sigma points by sqrt(L)): for the nonlinear range+bearing a different update once
+  the robots' estimates are correlated (0.04 m apart within the first 60 s of dataset 6);
 * a robot m's range+bearing of robot n: a relay chain m -> n -> ... on the
   network (message kind ``chain``, :meth:`coloc_env.networks.base.Network.relay`,
   one slot per observation); if n is reached, ``dcl_update`` along the chain
@@ -40,9 +46,9 @@ loss uniforms (tests/coloc_env/test_mrclam_preset_parts.py, 1e-9): the parts of
 | motion kinds     | ``se2_odometry``                                                                     |
 | needs            | ``landmark_range_bearing`` (robot-robot range+bearing are used where the world has them) |
 | messages         | ``chain``; hop h (r = h + 1 robots reached) carries nu and Pz (2 + 3), the 3q x 2    |
-|                  | update weights g (12, q = 2), the reached robots' rows of A (3r(3r + 1)/2), their    |
-|                  | Pxz and Phi (6 + 9 each) and the unreached robots' r_U (6 each):                     |
-|                  | 17 + 3r(3r + 1)/2 + 15 r + 6 (N - r) floats                                          |
+|                  | update weights g (q = 2 robots observed, q = 1 for a relayed landmark sighting),     |
+|                  | the reached robots' rows of A (3r(3r + 1)/2), their Pxz and Phi (6 + 9 each) and     |
+|                  | the unreached robots' r_U (6 each): 5 + 6q + 3r(3r + 1)/2 + 15 r + 6 (N - r) floats  |
 | lost message     | the chain stops there; the reached robots update with the exact truncated-chain     |
 |                  | rule (the unreached keep their estimates); a chain that misses n applies nothing     |
 | under-determined | nothing to solve: a step without observations is a time update only                 |
@@ -51,15 +57,18 @@ loss uniforms (tests/coloc_env/test_mrclam_preset_parts.py, 1e-9): the parts of
 | records          | per observer m of the last step: ``partner`` (the robot its robot observation        |
 |                  | measured, -1), ``used`` (that observation reached it and passed the gate),           |
 |                  | ``landmarks_applied``, ``applied``, ``rejected``, and ``chains`` (rows b N + m: its   |
-|                  | chain); with several robot observations per observer (sensing "every robot"), the    |
-|                  | last one's                                                                           |
+|                  | robot observation's chain; relayed landmark chains are not recorded); with several   |
+|                  | robot observations per observer (sensing "every robot"), the last one's              |
 
 Arguments (``coloc_env.backends.UkfSe2``)
 
-| field      | default  | allowed                                                                  |
-|------------|----------|--------------------------------------------------------------------------|
-| ukf_lambda | 0.0      | (-15, 1e6] and > -3N at build (the UT's lambda; 0 = filterpy's)          |
-| gate       | 13.8155  | > 0 (chi-square(2) 99.9 %, ``coloc reproduce mrclam``); None = apply all |
+| field            | default  | allowed                                                                  |
+|------------------|----------|--------------------------------------------------------------------------|
+| ukf_lambda       | 0.0      | (-15, 1e6] and > -3N at build (the UT's lambda; 0 = filterpy's)          |
+| gate             | 13.8155  | > 0 (chi-square(2) 99.9 %, ``coloc reproduce mrclam``); None = apply all |
+| landmark_updates | "local"  | "local": a landmark sighting updates on [m] alone (the ``mrclam_relay``  |
+|                  |          | scenario's rule, no messages); "relay": along the network's chain from m |
+|                  |          | (``coloc reproduce mrclam``'s DCL; a complete chain is UKF-CCL)          |
 """
 
 from __future__ import annotations
@@ -71,14 +80,15 @@ import numpy as np
 import estimators.ukf_relay_se2 as se2
 from coloc_env.backends.base import Backend
 from coloc_env.data.mrclam import GATE_999
-from coloc_env.parts import BACKENDS, PartConfig, check_range
+from coloc_env.parts import BACKENDS, PartConfig, check_choice, check_range
 from coloc_env.world.relay import RelayChain
 
 
-def hop_floats(hop: int, num_agents: int) -> float:
-    """Floats of relay hop ``hop`` (0-based) of an SE(2) DCL chain over ``num_agents`` robots (module table)."""
+def hop_floats(hop: int, num_agents: int, observed: int = 2) -> float:
+    """Floats of relay hop ``hop`` (0-based) of an SE(2) DCL chain over ``num_agents`` robots (module table);
+    ``observed`` q: 2 for a robot-robot observation, 1 for a landmark sighting."""
     r = hop + 1
-    return 17 + 3 * r * (3 * r + 1) / 2 + 15 * r + 6 * (num_agents - r)
+    return 5 + 6 * observed + 3 * r * (3 * r + 1) / 2 + 15 * r + 6 * (num_agents - r)
 
 
 @BACKENDS.register
@@ -93,11 +103,13 @@ class UkfSe2(PartConfig):
     message_kind = "chain"
     ukf_lambda: float = 0.0
     gate: float | None = GATE_999
+    landmark_updates: str = "local"
 
     def check(self, prefix: str) -> None:
         check_range(f"{prefix}ukf_lambda", self.ukf_lambda, -15.0, 1e6, low_open=True)
         if self.gate is not None:
             check_range(f"{prefix}gate", self.gate, 0.0, 1e12, low_open=True)
+        check_choice(f"{prefix}landmark_updates", self.landmark_updates, ("local", "relay"))
 
     def build(self, world, network, batch: int) -> Backend:
         return UkfSe2Backend(self, world, network, batch)
@@ -165,9 +177,14 @@ class UkfSe2Backend(Backend):
         lam, gate = self.config.ukf_lambda, self.config.gate
         self._clear_records(np.arange(self.batch))
         floats = lambda hop: hop_floats(hop, N)  # noqa: E731
+        landmark_floats = lambda hop: hop_floats(hop, N, observed=1)  # noqa: E731
+        relay_landmarks = self.config.landmark_updates == "relay"
         for j in range(observer.shape[1]):
             robot = (observer[:, j] >= 0) & (subject[:, j] >= 0)
-            chain = None
+            chain = landmark_chain = None
+            if relay_landmarks and (sighting := (observer[:, j] >= 0) & ~robot).any():
+                landmark_chain = self.network.relay(np.where(sighting, observer[:, j], -1), -1, landmark_floats,
+                                                    slot=j)
             if robot.any():
                 chain = self.network.relay(np.where(robot, observer[:, j], -1), np.where(robot, subject[:, j], -1),
                                            floats, slot=j)
@@ -186,7 +203,8 @@ class UkfSe2Backend(Backend):
                     x, f, ok = se2.dcl_update(self.estimate[b], self._factors(b), path, z, R, lam=lam, gate=gate)
                     self.used[b, m] = ok
                 else:
-                    x, f, ok = se2.dcl_update(self.estimate[b], self._factors(b), [m], z, R,
+                    path = [m] if landmark_chain is None else landmark_chain.chain[b, :landmark_chain.length[b]]
+                    x, f, ok = se2.dcl_update(self.estimate[b], self._factors(b), path, z, R,
                                               measured_in_chain=False, landmark=extra["obs_target"][b, j],
                                               lam=lam, gate=gate)
                     self.landmarks_applied[b, m] += ok

@@ -38,7 +38,8 @@ Readings of step k (absolute a): ``inputs`` (B, N, 4) = (v', omega', var_v, var_
 (:meth:`~coloc_env.data.mrclam.NoiseModel.odometry` and ``odometry_var`` at a: the
 command logged ``odometry_delay_steps`` earlier, scaled). ``range``/``range_valid``
 (B, N, N): [m, n] the range of the first line (file order) in which robot m recorded
-robot n at a, where the sensing choice of m selects n. ``fix``/``fix_valid`` (B, N):
+robot n at a, where the sensing choice of m selects n (with ``robot_sightings="all"`` the
+``obs_*`` lists below hold every such line, the matrices still the first). ``fix``/``fix_valid`` (B, N):
 the landmark pseudo-fix of ``coloc reproduce mrclam_nbp`` (:func:`~coloc_env.data.mrclam.pseudo_fix`,
 the rule of :mod:`train.reproduce.mrclam_nbp` at a single step): each robot runs its own
 navigation filter, a UKF on (x, y, theta) from its odometry and its own landmark sightings
@@ -60,7 +61,9 @@ False. ``extra`` keys:
 | ``bearing``            | (B, N, N)     | bearing (rad) of the ``range`` reading [m, n], nan elsewhere      |
 | ``range_bearing_cov``  | (B, N, N, 2, 2) | its R = diag(r_range (a_r + b_r z_r^2), sigma_b^2) (noise model)|
 | ``obs_observer``       | (B, J)        | the step's selected observations in file order (robot by robot,   |
-|                        |               | each robot's lines in its file's order): the observer, -1 = none  |
+|                        |               | each robot's lines in its file's order): the observer, -1 = none; |
+|                        |               | a robot's sighting of robot n once per step (its first line) or, |
+|                        |               | with ``robot_sightings="all"``, every line                        |
 | ``obs_subject``        | (B, J)        | the observed robot, -1 for a landmark                              |
 | ``obs_landmark``       | (B, J)        | the landmark index 0..14, -1 for a robot                           |
 | ``obs_target``         | (B, J, 2)     | the landmark's surveyed position, nan for a robot                  |
@@ -82,10 +85,17 @@ Arguments (``coloc_env.worlds.Mrclam``)
 | calibration_s        | None         | (0, 3600] s of the run's start the noise is fitted on; None = the model's rule |
 | initial_position_std | 0.01         | [1e-6, 1000] m (smaller: P(0) not numerically definite)           |
 | initial_heading_std  | 0.01         | [1e-6, 10] rad                                                    |
+| measurement_inflation | True        | True, False: False leaves the calibrated model's burst inflation  |
+|                      |              | of R out (the ablation of ``coloc reproduce mrclam``); needs      |
+|                      |              | ``noise_model="calibrated"`` (the baseline has none)              |
+| robot_sightings      | "first"      | "first": robot m's sighting of robot n counts once per step (the  |
+|                      |              | ``mrclam_relay`` scenario's rule); "all": every line, as          |
+|                      |              | ``coloc reproduce mrclam`` applies them                           |
 """
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from dataclasses import dataclass
 
@@ -119,6 +129,8 @@ class Mrclam(PartConfig):
     calibration_s: float | None = None
     initial_position_std: float = 0.01
     initial_heading_std: float = 0.01
+    measurement_inflation: bool = True
+    robot_sightings: str = "first"
 
     def check(self, prefix: str) -> None:
         if self.data is not None and not isinstance(self.data, (str, os.PathLike)):
@@ -133,6 +145,11 @@ class Mrclam(PartConfig):
             check_range(f"{prefix}calibration_s", self.calibration_s, 0.0, 3600.0, low_open=True)
         check_range(f"{prefix}initial_position_std", self.initial_position_std, 1e-6, 1e3)
         check_range(f"{prefix}initial_heading_std", self.initial_heading_std, 1e-6, 10.0)
+        check_choice(f"{prefix}measurement_inflation", self.measurement_inflation, (True, False))
+        if not self.measurement_inflation and self.noise_model != "calibrated":
+            raise ValueError(f"{prefix}measurement_inflation=False needs noise_model='calibrated' (the "
+                             f"{self.noise_model!r} model has no measurement inflation), got {self.noise_model!r}")
+        check_choice(f"{prefix}robot_sightings", self.robot_sightings, ("first", "all"))
 
     def tables(self, prefix: str = "world."):
         """The replay tables of the run (loaded and calibrated once per path; ValueError naming ``data``)."""
@@ -141,9 +158,16 @@ class Mrclam(PartConfig):
         try:
             path = os.path.realpath(mrclam.resolve_data_path(self.data))
             calibration_s = None if self.calibration_s is None else float(self.calibration_s)
-            return _tables(path, float(self.dt), self.noise_model, calibration_s)
+            tables = _tables(path, float(self.dt), self.noise_model, calibration_s)
         except ValueError as exc:  # a missing or malformed dataset: name the field
             raise ValueError(f"{prefix}data: {str(exc).removeprefix('data: ')}") from exc
+        if self.measurement_inflation:
+            return tables
+        # the same fit without the burst inflation of R: the cached tables stay the scenario's
+        model = mrclam.NoiseModel.from_calibration(tables.noise, tables.noise_model.kind, inflate_measurements=False)
+        cov = model.measurement_cov(tables.data.meas_range)
+        cov.flags.writeable = False
+        return dataclasses.replace(tables, noise_model=model, measurement_cov=cov)
 
     def build(self, batch: int, horizon: int) -> MrclamWorld:
         return MrclamWorld(self, batch, horizon)
@@ -297,6 +321,8 @@ class MrclamWorld(World):
         robot = subject <= NUM_ROBOTS
         n = np.clip(subject - 1, 0, NUM_ROBOTS - 1)
         first = self.tables.first_index[a, np.minimum(m, NUM_ROBOTS - 1), n] == lines
+        if self.config.robot_sightings == "all":
+            first = np.ones_like(first)
         chosen = (choice[np.minimum(m, N - 1)] == N) | (choice[np.minimum(m, N - 1)] == n)
         keep &= ~robot | ((n < N) & first & chosen & (n != m))
         return lines[keep]
@@ -329,11 +355,14 @@ class MrclamWorld(World):
             target[b, :n][~is_robot] = self.landmarks[sub[~is_robot] - NUM_ROBOTS - 1]
             z[b, :n, 0], z[b, :n, 1] = d.meas_range[lines], d.meas_bearing[lines]
             cov[b, :n] = self.tables.measurement_cov[lines]
-            rm, rn = d.meas_robot[lines][is_robot], sub[is_robot] - 1
+            pair = lines[is_robot]
+            if self.config.robot_sightings == "all":  # the matrices keep each pair's first line, as with "first"
+                pair = pair[self.tables.first_index[a[b], d.meas_robot[pair], d.meas_subject[pair] - 1] == pair]
+            rm, rn = d.meas_robot[pair], d.meas_subject[pair] - 1
             valid[b, rm, rn] = True
-            ranges[b, rm, rn] = d.meas_range[lines][is_robot]
-            bearing[b, rm, rn] = d.meas_bearing[lines][is_robot]
-            pair_cov[b, rm, rn] = self.tables.measurement_cov[lines][is_robot]
+            ranges[b, rm, rn] = d.meas_range[pair]
+            bearing[b, rm, rn] = d.meas_bearing[pair]
+            pair_cov[b, rm, rn] = self.tables.measurement_cov[pair]
         extra = {"bearing": bearing, "range_bearing_cov": pair_cov, "obs_observer": observer,
                  "obs_subject": subject, "obs_landmark": landmark, "obs_target": target, "obs_z": z, "obs_cov": cov}
         extra["fix_var"] = self.fix_var.copy()

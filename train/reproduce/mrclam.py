@@ -9,11 +9,15 @@ multi-robot cooperative localization and mapping dataset", IJRR
 Estimators (:mod:`estimators.ukf_relay_se2`, state (x, y, theta) per robot):
 
 * ``IL``  dead reckoning from the odometry (v, w), covariance by the same
-  linearized time update (no measurements);
+  linearized time update (no measurements): the ``dead_reckoning`` backend;
 * ``CCL`` UKF-CCL on the joint state, every robot-to-robot (range, bearing)
-  and every landmark sighting, in file order within a step;
-* ``DCL`` UKF-DCL over the complete relay chain [m, n, the others ascending]
-  (landmark: [m, the others]) with the Roumeliotis-Bekey factorization.
+  and every landmark sighting, in file order within a step (its own loop
+  here: the independent check that DCL equals it);
+* ``DCL`` UKF-DCL over the complete relay chain m -> n -> each hop on to the
+  nearest robot not yet reached (landmark: m -> the others alike) with the
+  Roumeliotis-Bekey factorization (any complete chain gives the CCL update):
+  the ``ukf_se2`` backend (``landmark_updates="relay"``) over the ``ideal``
+  network; IL and DCL both driven by the ``mrclam`` world's replay (:func:`run_filters`).
 
 Setup (stated in ``report.md``): initial state = the Vicon pose at the first
 step with standard deviations ``INITIAL_STD`` (0.01 m, 0.01 m, 0.01 rad).
@@ -102,6 +106,44 @@ GATE = mrclam.GATE_999  # chi-square(2) 0.999 quantile
 N = mrclam.NUM_ROBOTS
 
 
+def _backend_parts(d: mrclam.MrclamData, noise: dict, kind: str, inflate_measurements: bool):
+    """The ``mrclam`` world replaying ``d`` (batch 1, start 0, horizon T - 1) and, over the ``ideal`` network,
+    the ``ukf_se2`` (DCL) and ``dead_reckoning`` (IL) backends on it, reset; the world's noise model is
+    checked to be the one ``noise`` gives (ValueError otherwise)."""
+    import coloc_env
+
+    full = mrclam.load_cached(d.path, d.dt)
+    if d.steps < 2 or d.t0 != full.t0 or d.steps > full.steps:
+        raise ValueError(f"run_filters needs a run or a prefix of it (the world replays {d.path} from step 0) "
+                         f"of at least 2 steps; got {d.steps} steps from t0 = {d.t0}")
+    if INITIAL_STD[0] != INITIAL_STD[1]:
+        raise ValueError(f"the world has one initial position std for x and y, got INITIAL_STD = {INITIAL_STD}")
+    world = {"name": "mrclam", "data": d.path, "dt": d.dt, "horizon": d.steps - 1, "start": 0,
+             "noise_model": kind, "calibration_s": float(noise["calibration_s"]),
+             "measurement_inflation": bool(inflate_measurements) or kind == "baseline",
+             "robot_sightings": "all", "initial_position_std": INITIAL_STD[0],
+             "initial_heading_std": INITIAL_STD[2]}
+    dcl = coloc_env.compose(world=world, network="ideal", backend={"name": "ukf_se2", "gate": GATE,
+                                                                       "landmark_updates": "relay"})
+    il = coloc_env.compose(world=dcl.world, network="ideal", backend="dead_reckoning")
+    w = dcl.world.build(1, dcl.episode_steps)
+    network = dcl.network.build(w.num_agents, 1, dcl.backend.message_kind)
+    backends = dcl.backend.build(w, network, 1), il.backend.build(w, network, 1)
+    w.fixes_needed = any(b.reads_fixes for b in backends)  # neither reads the pseudo-fixes: none are made
+    model = mrclam.NoiseModel.from_calibration(noise, kind, inflate_measurements=inflate_measurements)
+    if w.noise_model != model:  # the world fits its own model: it must be the one the caller calibrated
+        raise ValueError(f"the mrclam world's {kind} noise model (fitted on the first "
+                         f"{noise['calibration_s']:g} s of {d.path}) differs from the given noise dict")
+    # nothing is drawn (fixed start, lossless network); the generators only fill the interface
+    rngs = np.random.default_rng(0).spawn(3)
+    idx = np.arange(1)
+    w.reset(rngs[:1], idx)
+    network.reset(rngs[1:2], idx)
+    for backend in backends:
+        backend.reset(rngs[2:], idx)
+    return w, network, *backends
+
+
 def run_filters(d: mrclam.MrclamData, noise: dict, progress=None, baseline: bool = False,
                 inflate_measurements: bool = True) -> dict:
     """IL, CCL and DCL over the whole of ``d``; estimates (T, N, 3) and own-block covariances (T, N, 3, 3).
@@ -110,48 +152,63 @@ def run_filters(d: mrclam.MrclamData, noise: dict, progress=None, baseline: bool
     :class:`coloc_env.data.mrclam.NoiseModel`: ``baseline`` the constant 1.4826 x MAD noise on the
     raw commands (the model before calibration), else the calibrated model
     (``inflate_measurements=False``: without its measurement inflation, for the ablation).
+
+    DCL and IL are the composition's backends, driven step by step as
+    :meth:`coloc_env.scenarios.composed.ComposedScenario.advance` drives them: the ``mrclam`` world
+    (:mod:`coloc_env.worlds.mrclam`, ``robot_sightings="all"``, the same noise model, fitted on the same
+    window) replays ``d`` into ``ukf_se2`` (:mod:`coloc_env.backends.ukf_se2`: UKF-DCL over the ``ideal``
+    network's complete chains, landmark sightings relayed too: ``landmark_updates="relay"``) and ``dead_reckoning``
+    (:mod:`coloc_env.backends.dead_reckoning`). CCL (``ccl_update`` on the joint state) reads ``d`` and the
+    noise model itself: the independent check that DCL equals CCL (``max_abs_diff``, state and joint
+    covariance), and of the world's replay. ``d`` must be a loaded run or a prefix of it (``window(0, S)``)
+    and ``noise`` its :func:`~coloc_env.data.mrclam.calibrate_noise` of ``d`` (the world refits it on the
+    run: ValueError if the two differ).
     """
-    model = mrclam.NoiseModel.from_calibration(noise, "baseline" if baseline else "calibrated",
-                                               inflate_measurements=inflate_measurements)
+    kind = "baseline" if baseline else "calibrated"
+    model = mrclam.NoiseModel.from_calibration(noise, kind, inflate_measurements=inflate_measurements)
+    world, network, dcl, il = _backend_parts(d, noise, kind, inflate_measurements)
     odometry = model.odometry(d, np.arange(d.steps))  # corrected u'[k] (T, N, 2)
     Q = model.odometry_var(odometry)  # per-step, per-robot variances (T, N, 2)
     P0 = np.diag(np.tile(np.square(INITIAL_STD), N))
-    x_il, P_il = d.groundtruth[0].copy(), P0.copy()
-    x_c, P_c = x_il.copy(), P0.copy()
-    x_d, f = x_il.copy(), se2.factor(P0)
+    x_c, P_c = d.groundtruth[0].copy(), P0.copy()
     T = d.steps
     out = {name: np.empty((T, N, 3)) for name in ("IL", "CCL", "DCL")}
     cov = {name: np.empty((T, N, 3, 3)) for name in ("IL", "CCL", "DCL")}
     diag = np.arange(N)
     counts = {"robot": 0, "landmark": 0, "rejected": 0}
     worst = 0.0
+    sensing = np.full((1, N, 1), N)  # every robot each one recorded (with robot_sightings="all": every line)
+    transport, decisions = np.zeros((1, N, 0), np.int64), np.zeros((1, N, 0))  # neither part has any
     for k in range(T):
+        readings = world.readings(sensing)
+        network.begin(world.k, world.positions().copy(), transport)
+        dcl.update(readings, decisions)
+        il.update(readings, decisions)
         s = d.measurements_at(k)
+        applied, rejected = np.zeros(N), np.zeros(N)
         for r, sub, rg, b in zip(d.meas_robot[s], d.meas_subject[s], d.meas_range[s], d.meas_bearing[s], strict=True):
             z = np.array([rg, b])
             R = model.measurement_cov(float(rg))  # R from the measured range
             if sub <= N:
-                n = int(sub) - 1
-                chain = [int(r), n] + [i for i in range(N) if i not in (r, n)]
-                x_c, P_c, ok = se2.ccl_update(x_c, P_c, int(r), z, R, measured=n, gate=GATE)
-                x_d, f, ok_d = se2.dcl_update(x_d, f, chain, z, R, gate=GATE)
+                x_c, P_c, ok = se2.ccl_update(x_c, P_c, int(r), z, R, measured=int(sub) - 1, gate=GATE)
             else:
                 lm = d.landmarks[sub - N - 1]
-                chain = [int(r)] + [i for i in range(N) if i != r]
                 x_c, P_c, ok = se2.ccl_update(x_c, P_c, int(r), z, R, landmark=lm, gate=GATE)
-                x_d, f, ok_d = se2.dcl_update(x_d, f, chain, z, R, measured_in_chain=False, landmark=lm, gate=GATE)
-            if ok != ok_d:
-                raise RuntimeError(f"step {k}: the gate decided differently in CCL and DCL")
+            applied[r] += ok
+            rejected[r] += not ok
             counts["rejected" if not ok else ("robot" if sub <= N else "landmark")] += 1
-        out["IL"][k], out["CCL"][k], out["DCL"][k] = x_il, x_c, x_d
-        for name, P in (("IL", P_il), ("CCL", P_c)):
-            cov[name][k] = P.reshape(N, 3, N, 3)[diag, :, diag, :]
-        cov["DCL"][k] = f.P_ii
-        worst = max(worst, float(np.abs(x_c - x_d).max()), float(np.abs(P_c - f.joint()).max()))
-        u, q = odometry[k], Q[k]
-        x_il, P_il = se2.time_update(x_il, P_il, u, d.dt, q)
-        x_c, P_c = se2.time_update(x_c, P_c, u, d.dt, q)
-        x_d, f = se2.time_update_factored(x_d, f, u, d.dt, q)
+        # the backend records per observer and step, so the gate (and the world's replay) is compared at that grain
+        if not (np.array_equal(applied, dcl.applied[0]) and np.array_equal(rejected, dcl.rejected[0])):
+            raise RuntimeError(f"step {k}: the gate decided differently in CCL and DCL")
+        out["CCL"][k], out["DCL"][k], out["IL"][k] = x_c, dcl.estimate[0], il.mean[0]
+        cov["CCL"][k] = P_c.reshape(N, 3, N, 3)[diag, :, diag, :]
+        cov["DCL"][k], cov["IL"][k] = dcl.P_ii[0], il.cov[0]
+        worst = max(worst, float(np.abs(x_c - dcl.estimate[0]).max()), float(np.abs(P_c - dcl.joint_cov(0)).max()))
+        if k + 1 < T:  # the world's horizon is T - 1: step T - 1 is read and updated, not predicted past
+            dcl.predict(readings.inputs)
+            il.predict(readings.inputs)
+            world.advance()
+            x_c, P_c = se2.time_update(x_c, P_c, odometry[k], d.dt, Q[k])
         if progress and k % 1000 == 0:
             progress(f"step {k}/{T}")
     return {"estimate": out, "cov": cov, "counts": counts, "max_abs_diff": worst}
