@@ -15,7 +15,6 @@ paper policy's level as a line).
 
 from __future__ import annotations
 
-import importlib
 import json
 import os
 import shutil
@@ -183,11 +182,9 @@ def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = 
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import VecMonitor
 
-    from train.hyperparams import load
+    from train.hyperparams import budget, load, module
 
     if timesteps is None:
-        from train.hyperparams import budget
-
         timesteps = budget(scenario, DEFAULT_TIMESTEPS)
     if isinstance(timesteps, bool) or not isinstance(timesteps, (int, np.integer)) or timesteps < 1:
         raise ValueError(f"timesteps must be an integer >= 1, got {timesteps!r}")
@@ -199,7 +196,7 @@ def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = 
         except ImportError as exc:
             raise ValueError("--tensorboard needs the tensorboard package: pip install tensorboard") from exc
     hyper, env_config = load(scenario)
-    copies = importlib.import_module(f"train.hyperparams.{scenario}").NUM_COPIES
+    copies = module(scenario).NUM_COPIES
     from stable_baselines3.common.utils import set_random_seed
 
     venv = VecMonitor(make_vec_env(scenario, copies, env_config, seed, vec))

@@ -90,7 +90,7 @@ from coloc_env.backends.base import Backend
 from coloc_env.parts import BACKENDS, Block, PartConfig, check_choice, check_range
 from coloc_env.world.random_delay import NEVER
 
-INVALID_LOG_TRACE = 14.0  # log tr P shown for a horizon without an estimate (the scenario's value)
+INVALID_LOG_TRACE = 14.0  # log tr P shown for a horizon without an estimate (~ a 1 km spread)
 LOG_BOUND = 50.0
 RSS_BOUND = 20.0
 COST_BOUND = 50.0  # an AHG cost's excess over the group's best, shown up to this (and where invalid)

@@ -328,11 +328,9 @@ class ComposedScenario(Scenario):
         """What the network recorded of the last step, cleared for the copies that start anew (their infos at
         reset report no messages and no chain, not those of the episode before)."""
         net = self.network
-        net.messages_sent[idx] = 0.0
-        net.floats_sent[idx] = 0.0
-        net.delivered[idx] = False
-        if hasattr(net, "cost_sent"):
-            net.cost_sent[idx] = 0.0
+        for name in _RECORD_ARRAYS:
+            if getattr(net, name, None) is not None:
+                getattr(net, name)[idx] = 0
         chain = net.last_chain
         if chain is not None:
             chain.chain[idx] = -1

@@ -170,8 +170,6 @@ from coloc_env.world.los_nlos import LosNlosChain
 from coloc_env.world.radio import ReceiveSearchArea, RssAoaSensor
 from coloc_env.world.random_delay import NEVER, BoundedRandomDelay
 
-INVALID_LOG_TRACE = 14.0  # log tr P shown for a horizon without an estimate (~ a 1 km spread)
-
 
 @dataclass(frozen=True)
 class NlosHorizonConfig:
@@ -418,12 +416,6 @@ def fuse_buffer(config: NlosHorizonConfig, rss, aoa, nav, modes, delays, lags, k
     """
     return af.fuse_packets(config.signal, rss, aoa, nav, modes, delays, lags, keep, config.n_strongest,
                            config.mode_info, config.weighting, config.min_packets, fixes=fixes)
-
-
-def buffer_fixes(config: NlosHorizonConfig, rss, aoa, nav, modes):
-    """:func:`estimators.afge.packet_fixes` of buffered packets (z, R, r_hat): they depend on the
-    packet only, so one time step's two filters (last mask, then the agent's) share them."""
-    return af.packet_fixes(config.signal, nav, rss, aoa, af.mode_weight(config.mode_info, modes, config.signal.p_nlos))
 
 
 def fused_by_stamp_and_lag(config: NlosHorizonConfig, episode: Episode):

@@ -1,21 +1,23 @@
-"""Per-scenario PPO hyperparameters, one small module each (``HYPERPARAMS``, ``ENV_CONFIG``)."""
+"""Per-scenario PPO hyperparameters, one small module each (``HYPERPARAMS``, ``ENV_CONFIG``, ``NUM_COPIES``,
+optionally ``TIMESTEPS``)."""
 
 import importlib
 
 
-def load(scenario: str) -> tuple[dict, dict]:
-    """(PPO keyword arguments, env config used for training) of ``scenario``."""
+def module(scenario: str):
+    """The hyperparameter module of ``scenario`` (ValueError naming the scenario where it has none)."""
     try:
-        module = importlib.import_module(f"train.hyperparams.{scenario}")
+        return importlib.import_module(f"train.hyperparams.{scenario}")
     except ModuleNotFoundError as exc:
         raise ValueError(f"no training hyperparameters for scenario {scenario!r}") from exc
-    return dict(module.HYPERPARAMS), dict(module.ENV_CONFIG)
+
+
+def load(scenario: str) -> tuple[dict, dict]:
+    """(PPO keyword arguments, env config used for training) of ``scenario``."""
+    settings = module(scenario)
+    return dict(settings.HYPERPARAMS), dict(settings.ENV_CONFIG)
 
 
 def budget(scenario: str, default: int) -> int:
     """The scenario's training budget in timesteps (its module's ``TIMESTEPS``, else ``default``)."""
-    try:
-        module = importlib.import_module(f"train.hyperparams.{scenario}")
-    except ModuleNotFoundError as exc:
-        raise ValueError(f"no training hyperparameters for scenario {scenario!r}") from exc
-    return int(getattr(module, "TIMESTEPS", default))
+    return int(getattr(module(scenario), "TIMESTEPS", default))

@@ -106,10 +106,11 @@ GATE = mrclam.GATE_999  # chi-square(2) 0.999 quantile
 N = mrclam.NUM_ROBOTS
 
 
-def _backend_parts(d: mrclam.MrclamData, noise: dict, kind: str, inflate_measurements: bool):
+def _backend_parts(d: mrclam.MrclamData, noise: dict, model: mrclam.NoiseModel, kind: str,
+                   inflate_measurements: bool):
     """The ``mrclam`` world replaying ``d`` (batch 1, start 0, horizon T - 1) and, over the ``ideal`` network,
     the ``ukf_se2`` (DCL) and ``dead_reckoning`` (IL) backends on it, reset; the world's noise model is
-    checked to be the one ``noise`` gives (ValueError otherwise)."""
+    checked to be ``model``, the one ``noise`` gives (ValueError otherwise)."""
     import coloc_env
 
     full = mrclam.load_cached(d.path, d.dt)
@@ -130,7 +131,6 @@ def _backend_parts(d: mrclam.MrclamData, noise: dict, kind: str, inflate_measure
     network = dcl.network.build(w.num_agents, 1, dcl.backend.message_kind)
     backends = dcl.backend.build(w, network, 1), il.backend.build(w, network, 1)
     w.fixes_needed = any(b.reads_fixes for b in backends)  # neither reads the pseudo-fixes: none are made
-    model = mrclam.NoiseModel.from_calibration(noise, kind, inflate_measurements=inflate_measurements)
     if w.noise_model != model:  # the world fits its own model: it must be the one the caller calibrated
         raise ValueError(f"the mrclam world's {kind} noise model (fitted on the first "
                          f"{noise['calibration_s']:g} s of {d.path}) differs from the given noise dict")
@@ -166,7 +166,7 @@ def run_filters(d: mrclam.MrclamData, noise: dict, progress=None, baseline: bool
     """
     kind = "baseline" if baseline else "calibrated"
     model = mrclam.NoiseModel.from_calibration(noise, kind, inflate_measurements=inflate_measurements)
-    world, network, dcl, il = _backend_parts(d, noise, kind, inflate_measurements)
+    world, network, dcl, il = _backend_parts(d, noise, model, kind, inflate_measurements)
     odometry = model.odometry(d, np.arange(d.steps))  # corrected u'[k] (T, N, 2)
     Q = model.odometry_var(odometry)  # per-step, per-robot variances (T, N, 2)
     P0 = np.diag(np.tile(np.square(INITIAL_STD), N))
