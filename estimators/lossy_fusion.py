@@ -128,7 +128,8 @@ Departures from the printed equations
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass, replace
+import math
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg
@@ -225,11 +226,26 @@ def _identity(n: int) -> np.ndarray:
     return eye
 
 
+try:  # the gufunc behind np.linalg.solve: the same LAPACK call, without ~20 us of argument checks per call
+    from numpy.linalg._umath_linalg import solve as _lapack_solve
+except ImportError:  # pragma: no cover - a numpy that moved it: the public function
+    _lapack_solve = None
+
+
 def _right_solve(S: np.ndarray, B: np.ndarray) -> np.ndarray:
-    """B S^-1 for a symmetric positive definite S (Cholesky when unbatched)."""
+    """B S^-1 for a symmetric positive definite S (Cholesky when unbatched).
+
+    Batched, the values are np.linalg.solve's bit for bit (its gufunc, called directly when the operands are
+    float64 stacks of equal rank); a singular S gives non-finite values there (numpy warns of an invalid
+    value), and then np.linalg.solve raises its LinAlgError."""
     if S.ndim == 2 and B.ndim == 2:
         return scipy.linalg.cho_solve(scipy.linalg.cho_factor(S), B.T).T
-    return np.linalg.solve(S, B.swapaxes(-1, -2)).swapaxes(-1, -2)
+    Bt = B.swapaxes(-1, -2)
+    if _lapack_solve is not None and S.ndim == Bt.ndim and S.dtype == np.float64 and Bt.dtype == np.float64:
+        solved = _lapack_solve(S, Bt, signature="dd->d")
+        if math.isfinite(solved.sum()):  # one reduction: any NaN or inf makes the sum non-finite
+            return solved.swapaxes(-1, -2)
+    return np.linalg.solve(S, Bt).swapaxes(-1, -2)
 
 
 def deliver(fresh: np.ndarray, previous: np.ndarray, held: np.ndarray, outcome: np.ndarray) -> np.ndarray:
@@ -538,7 +554,7 @@ def compensation_weights(on_time, late) -> np.ndarray:
 
 def inverse_trace_weights(covariances: np.ndarray, factors: np.ndarray | None = None) -> np.ndarray:
     """Eq. (30): a_i proportional to factor_i / tr P_i (factor 1 = the paper), over axis -3 of (..., L, n, n)."""
-    weights = 1.0 / np.trace(covariances, axis1=-2, axis2=-1)
+    weights = 1.0 / np.asarray(covariances).trace(axis1=-2, axis2=-1)  # the method: np.trace's dispatch costs more
     if factors is not None:
         weights = np.asarray(factors, float) * weights
     return weights / weights.sum(axis=-1, keepdims=True)
@@ -639,8 +655,10 @@ def distributed_step(model: LossyModel, state: DistributedState, z: np.ndarray, 
     local, local_cov = kalman_update(one_step, one_step_cov, z[..., 1:, :], H, R[1:])
     packet = np.concatenate([local[..., None, :], state.prediction], axis=-2)
     packet_cov = np.concatenate([local_cov[..., None, :, :], state.prediction_cov], axis=-3)
-    prediction = np.stack([local, one_step], axis=-2) @ Phi.T
-    prediction_cov = _sym(Phi @ np.stack([local_cov, one_step_cov], axis=-3) @ Phi.T + Q)
+    # concatenate of the expanded pieces is np.stack's result with less dispatch
+    prediction = np.concatenate([local[..., None, :], one_step[..., None, :]], axis=-2) @ Phi.T
+    prediction_cov = _sym(Phi @ np.concatenate([local_cov[..., None, :, :], one_step_cov[..., None, :, :]],
+                                               axis=-3) @ Phi.T + Q)
 
     # delivery: eq. (3) on packets
     on_time = (followers == ON_TIME) & transmit
@@ -667,8 +685,8 @@ def distributed_step(model: LossyModel, state: DistributedState, z: np.ndarray, 
     weights = inverse_trace_weights(covariances, fusion_factors)
     fused = np.einsum("...i,...in->...n", weights, estimates)
     fused_cov = _sym(np.einsum("...i,...iab->...ab", weights**2, covariances))
-    return replace(
-        state, prediction=prediction, prediction_cov=prediction_cov, packet=packet, packet_cov=packet_cov,
+    return DistributedState(  # every field anew (dataclasses.replace would introspect them per call)
+        prediction=prediction, prediction_cov=prediction_cov, packet=packet, packet_cov=packet_cov,
         sent=transmit.copy(), held=held, held_cov=held_cov, held_age=held_age,
         leader_prediction=fused @ Phi.T, leader_prediction_cov=_sym(Phi @ fused_cov @ Phi.T + Q),
         fused=fused, fused_cov=fused_cov, weights=weights, compensated=compensated,

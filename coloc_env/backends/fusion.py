@@ -235,7 +235,9 @@ class LeaderLinks:
             self.late_next[:] = False
             return out
         delay = self.network.packets(self.senders, self.listening, floats, slot=0)[:, :, LEADER]
-        out = np.where(delay == 0, lf.ON_TIME, np.where(self.late_next, lf.LATE, lf.LOST)).astype(np.int8)
+        out = np.full((B, N), lf.LOST, np.int8)
+        out[self.late_next] = lf.LATE
+        out[delay == 0] = lf.ON_TIME  # the leader's own column too (no delay to itself: -1 there)
         out[:, LEADER] = lf.ON_TIME
         self.late_next = delay == 1
         return out

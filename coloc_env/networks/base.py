@@ -28,6 +28,7 @@ receiver) does not depend on the batch, so a copy equals itself run alone.
 
 from __future__ import annotations
 
+import functools
 from typing import ClassVar
 
 import numpy as np
@@ -39,6 +40,14 @@ from coloc_env.world.relay import RelayChain
 MESSAGE_KINDS = ("none", "broadcast", "chain", "central", "packets")
 CENTRE = 0  # the fusion centre of ``central`` backends
 NODE_STREAM = 3  # counter of world-node packets; broadcast uses 0, relay 1, packets 2
+
+
+@functools.lru_cache(maxsize=16)
+def _self_links(n: int) -> np.ndarray:
+    """The identity as bools (read only, one per size): no agent sends itself a packet."""
+    eye = np.eye(n, dtype=bool)
+    eye.flags.writeable = False
+    return eye
 
 
 class Network:
@@ -64,6 +73,18 @@ class Network:
         self._decisions = np.zeros((B, N, 0), dtype=np.int64)
         self._k = np.zeros(B, dtype=int)
         self._distance: np.ndarray | None = None  # the cache of distances()
+        self._stream = 2  # the counter stream of the packets being drawn (node_packets sets NODE_STREAM)
+        # which rules the subclass overrides, read once (packets runs every step): the base's rules (every link
+        # usable, none lost, on time) read no distance, nor does a delay rule of the uniforms alone
+        # (``_delays_read_distance`` False): then packets computes none
+        cls = type(self)
+        self._plain_delays = cls.packet_delays is Network.packet_delays
+        self._own_usable = cls.usable is not Network.usable
+        self._base_rules = self._plain_delays and not self._own_usable \
+            and cls.loss_probability is Network.loss_probability
+        self._reads_distance = self._own_usable or (
+            cls.loss_probability is not Network.loss_probability if self._plain_delays
+            else getattr(self, "_delays_read_distance", True))
 
     # --- description ---------------------------------------------------------------------
     def transport_blocks(self) -> list[Block]:
@@ -108,11 +129,13 @@ class Network:
         self._positions = np.asarray(positions, float)
         self._decisions = decisions
         self._distance = None  # this step's link distances, computed on first use
-        self.messages_sent = np.zeros_like(self.messages_sent)
-        self.floats_sent = np.zeros_like(self.floats_sent)
-        self.delivered = np.zeros_like(self.delivered)
-        self.node_messages = np.zeros_like(self.node_messages)
-        self.node_floats = np.zeros_like(self.node_floats)
+        # fresh arrays, not zeroed in place: the step before may still hold them (a view of delivered, a record)
+        B, N = self.batch, self.num_agents
+        self.messages_sent = np.zeros((B, N))
+        self.floats_sent = np.zeros((B, N))
+        self.delivered = np.zeros((B, N, N), dtype=bool)
+        self.node_messages = np.zeros((B, N))
+        self.node_floats = np.zeros((B, N))
         self.last_chain = None
 
     def distances(self) -> np.ndarray:
@@ -170,25 +193,16 @@ class Network:
         one message per link that carries a packet.
         """
         N = self.num_agents
-        cls = type(self)
-        plain = cls.packet_delays is Network.packet_delays
-        # the base's rules (every link usable, none lost, on time) read no distance, nor does a delay rule of
-        # the uniforms alone (``_delays_read_distance`` False): then none is computed
-        base_rules = plain and cls.usable is Network.usable and cls.loss_probability is Network.loss_probability
-        reads_distance = cls.usable is not Network.usable or (
-            cls.loss_probability is not Network.loss_probability if plain
-            else getattr(self, "_delays_read_distance", True))
-        distance = self.distances() if reads_distance else None
+        distance = self.distances() if self._reads_distance else None
         want = (np.asarray(senders, bool) & self.transmits(slot))[:, :, None] & np.asarray(listening, bool)
-        want &= ~np.eye(N, dtype=bool)
-        if cls.usable is not Network.usable:
+        want &= ~_self_links(N)
+        if self._own_usable:
             want &= self.usable(distance)
-        if plain and (base_rules or not np.any(self.loss_probability(distance) > 0)):
+        if self._plain_delays and (self._base_rules or not np.any(self.loss_probability(distance) > 0)):
             delay = np.where(want, 0, -1).astype(np.int64)  # lossless and on time: no draw decides anything
         else:
-            u = self._packet_uniforms(slot)
-            delay = np.where(want, self.packet_delays(distance, u), -1).astype(np.int64)
-        if np.ndim(floats) == 3:
+            delay = np.where(want, self._link_delays(distance, slot), -1).astype(np.int64)
+        if isinstance(floats, np.ndarray) and floats.ndim == 3:
             self.messages_sent += want.sum(axis=-1)
             self.floats_sent += np.where(want, floats, 0.0).sum(axis=-1)
         else:
@@ -215,7 +229,11 @@ class Network:
         N, J = sending.shape[1:]
         want = sending & self.usable(distance)
         u = uniforms(self.keys, (self._k, NODE_STREAM, slot), (N, J))
-        delay = np.where(want, self.packet_delays(distance, u), -1).astype(np.int64)
+        self._stream = NODE_STREAM  # a delay rule that draws more (bernoulli_delay's next slot) draws from this stream
+        try:
+            delay = np.where(want, self.packet_delays(distance, u), -1).astype(np.int64)
+        finally:
+            self._stream = 2
         if slot == 0:
             self.node_messages = np.zeros_like(self.node_messages)
             self.node_floats = np.zeros_like(self.node_floats)
@@ -224,10 +242,11 @@ class Network:
         self.node_floats = self.node_floats + floats * sent
         return delay
 
-    def _packet_uniforms(self, slot: int) -> np.ndarray:
-        """(B, N, N) the uniforms of this step's packets in ``slot``, counters (k, 2, slot); a network that
-        draws a later step's ahead may hand those back (the values depend on the counters only)."""
-        return uniforms(self.keys, (self._k, 2, slot), (self.num_agents, self.num_agents))
+    def _link_delays(self, distance: np.ndarray | None, slot: int) -> np.ndarray:
+        """(B, N, N) [t, s] the delay of every link's packet at this step in ``slot`` (before the transmit
+        decision and range apply): :meth:`packet_delays` of the uniforms of counters (k, 2, slot), the
+        step's packet stream. A network may hand back values it drew ahead (they depend on the counters only)."""
+        return self.packet_delays(distance, uniforms(self.keys, (self._k, 2, slot), (self.num_agents, self.num_agents)))
 
     def relay(self, source: np.ndarray, first: np.ndarray, floats_per_hop, slot: int = 0) -> RelayChain:
         """Relay chains source -> first -> ... (B,), following the holders' choices (or nearest first).

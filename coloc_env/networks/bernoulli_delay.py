@@ -72,6 +72,9 @@ class BernoulliDelay(PartConfig):
         return BernoulliDelayNetwork(self, num_agents, batch, message_kind, rounds)
 
 
+BLOCK_STEPS = 32  # steps of packet delays drawn at once (see BernoulliDelayNetwork._link_delays)
+
+
 class BernoulliDelayNetwork(Network):
     """The base's ``packets`` with fu2017's per-slot outcomes as packet delays."""
 
@@ -83,7 +86,10 @@ class BernoulliDelayNetwork(Network):
     def __init__(self, config: BernoulliDelay, num_agents, batch, message_kind, rounds=1):
         super().__init__(config, num_agents, batch, message_kind, rounds)
         self._slot = 0
-        self._ahead: dict[int, tuple] = {}  # slot -> (keys, steps, uniforms): the next step's draw, made this step
+        # slot -> (first step (B,), delays (B, BLOCK_STEPS, N, N)): every link's packet delays over the next
+        # BLOCK_STEPS steps, drawn in one call (a delay reads this step's uniform and the next one's)
+        self._blocks: dict[int, tuple] = {}
+        self._rows = np.arange(self.batch)
 
     def transport_blocks(self) -> list[Block]:
         if self.message_kind in ("packets", "components"):
@@ -103,28 +109,39 @@ class BernoulliDelayNetwork(Network):
     def max_delay(self) -> int:
         return 1
 
-    def packet_delays(self, distance: np.ndarray, u: np.ndarray) -> np.ndarray:
+    def _delay_codes(self, u: np.ndarray, u_next: np.ndarray) -> np.ndarray:
+        """The module's rule: on time if u_k < alpha1, one step late if the next slot's outcome is late."""
         a1 = float(self.config.on_time_probability)
         a2 = float(self.config.late_probability)
-        u_next = uniforms(self.keys, (self._k + 1, 2, self._slot), np.shape(u)[-2:])
-        if u_next.shape == (self.batch, self.num_agents, self.num_agents):
-            # the next step's packets draw exactly these (same keys and counters): _packet_uniforms hands them back
-            self._ahead[self._slot] = (self.keys.copy(), np.asarray(self._k) + 1, u_next)
         late = (u_next >= a1) & (u_next < a1 + a2)
         return np.where(u < a1, 0, np.where(late, 1, -1))
 
-    def _packet_uniforms(self, slot: int) -> np.ndarray:
-        ahead = self._ahead.get(slot)
-        if ahead is not None:
-            keys, steps, u = ahead
-            # drawn for these keys at this step (a copy reset since, or another step, draws afresh)
-            if (keys == self.keys).all() and (steps == self._k).all():
-                return u
-        return super()._packet_uniforms(slot)
+    def packet_delays(self, distance: np.ndarray, u: np.ndarray) -> np.ndarray:
+        u_next = uniforms(self.keys, (self._k + 1, self._stream, self._slot), np.shape(u)[-2:])
+        return self._delay_codes(u, u_next)
+
+    def _link_delays(self, distance, slot: int) -> np.ndarray:
+        if type(self).packet_delays is not BernoulliDelayNetwork.packet_delays:
+            return super()._link_delays(distance, slot)
+        # one counter-based draw of BLOCK_STEPS + 1 steps instead of two per step: the values depend on the
+        # counters only, so they equal the per-step draws bit for bit (tests/coloc_env/test_fast_paths.py)
+        k = self._k if np.shape(self._k) == (self.batch,) else np.broadcast_to(self._k, (self.batch,))
+        block = self._blocks.get(slot)  # the keys change only at reset, which drops the blocks
+        if block is not None:
+            first, delays = block
+            row = k - first
+            if row.min() >= 0 and row.max() < delays.shape[1]:
+                return delays[self._rows, row]
+        B, N, W = self.batch, self.num_agents, BLOCK_STEPS
+        steps = (k[:, None] + np.arange(W + 1)).reshape(-1)
+        u = uniforms(np.repeat(self.keys, W + 1), (steps, 2, slot), (N, N)).reshape(B, W + 1, N, N)
+        delays = self._delay_codes(u[:, :-1], u[:, 1:])
+        self._blocks[slot] = (np.array(k, dtype=np.int64), delays)
+        return delays[:, 0]
 
     def reset(self, rngs, idx) -> None:
         super().reset(rngs, idx)
-        self._ahead.clear()
+        self._blocks.clear()
 
     def slot_outcomes(self, steps, slot: int = 0) -> np.ndarray:
         """(B, len(steps), N, N) [t, s] eq. (3)'s outcome code of link t -> s at each of ``steps``: 0 on time

@@ -150,7 +150,7 @@ class Scenario(abc.ABC):
         expected = (self.batch, self.num_agents, *space.shape)
         if arr.shape != expected:
             raise ValueError(f"actions must have shape {expected} (batch, agents, *action_shape), got {arr.shape}")
-        if not np.all(np.isfinite(arr)):
+        if not np.isfinite(arr).all():
             bad = np.argwhere(~np.isfinite(arr.reshape(self.batch, self.num_agents, -1)).all(axis=-1))
             raise ValueError(
                 f"actions must be finite; non-finite action for (copy, agent) {bad[0].tolist()}"

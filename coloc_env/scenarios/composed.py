@@ -374,7 +374,7 @@ class ComposedScenario(Scenario):
         return np.concatenate(out, axis=-1) if out else flat[..., :0]
 
     def step(self, actions) -> None:
-        if np.any(self.k >= self.horizon):
+        if (self.k >= self.horizon).any():
             raise RuntimeError("step() on a copy whose episode is over; reset it first")
         self.advance(self.decode_actions(actions))
         self._reward = self.compute_reward()
@@ -394,8 +394,8 @@ class ComposedScenario(Scenario):
             self.network.begin(self.world.k, truth, transport)
         self.backend.step(readings, decisions)
         if self.estimand == "target":
-            self._truth_state = self.world.target_state().copy()
-            self._truth = self._target_truth()
+            self._truth_state = self.world.target_state()  # a gather: already a copy
+            self._truth = self._target_truth(state=self._truth_state)
         else:
             self._truth = truth
         self._received = self.network.delivered.transpose(0, 2, 1)  # [s, t]: s heard t
@@ -423,9 +423,10 @@ class ComposedScenario(Scenario):
         return -loss - (cost if network_cost is None else cost + network_cost)
 
     # --- views -------------------------------------------------------------------------
-    def _target_truth(self, offset: int = 0) -> np.ndarray:
-        """The target's true position (B, N, 2), repeated for every agent."""
-        p = self.world.target_position(offset)
+    def _target_truth(self, offset: int = 0, state: np.ndarray | None = None) -> np.ndarray:
+        """The target's true position (B, N, 2), repeated for every agent (of ``state`` = the world's
+        ``target_state(offset)`` where the caller holds it already)."""
+        p = self.world.target_position(offset) if state is None else state[:, list(self.world.position_index)]
         return np.repeat(p[:, None, :], self.num_agents, axis=1)
 
     def position_error(self) -> np.ndarray:

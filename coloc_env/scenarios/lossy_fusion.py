@@ -351,11 +351,12 @@ class LossyFusionScenario(PresetScenario):
         obs = np.zeros((B, L, self.obs_dim))
         obs[:, 0, 0] = 1.0
         obs[:, :, 1] = (self.k / self.horizon)[:, None]
-        obs[:, 0, 2] = np.log(np.trace(fusion.fused_cov, axis1=-2, axis2=-1))
-        obs[:, 1:, 2] = np.log(np.trace(self.local_cov, axis1=-2, axis2=-1))
+        # the ndarray.trace method: np.trace's dispatch costs more than the trace at these sizes
+        obs[:, 0, 2] = np.log(fusion.fused_cov.trace(axis1=-2, axis2=-1))
+        obs[:, 1:, 2] = np.log(self.local_cov.trace(axis1=-2, axis2=-1))
         age = fusion.held_age if self.config.time_stamps else self._since_arrival
         obs[:, 0, 3:3 + (L - 1)] = age / AGE_SCALE
-        obs[:, 0, 3 + (L - 1):] = np.log(np.trace(fusion.held_cov, axis1=-2, axis2=-1)).reshape(B, -1)
+        obs[:, 0, 3 + (L - 1):] = np.log(fusion.held_cov.trace(axis1=-2, axis2=-1)).reshape(B, -1)
         return obs.astype(np.float32)
 
     def episode_error(self, errors: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:

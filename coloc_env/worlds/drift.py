@@ -47,6 +47,7 @@ Arguments (``coloc_env.worlds.Drift``; defaults = the paper's Sec. 2)
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -56,6 +57,11 @@ from coloc_env.parts import WORLDS, PartConfig
 from coloc_env.world.sensors import LinearSensor
 from coloc_env.worlds.base import Readings, World
 from estimators.linear_models import LinearGaussian, LinearObservation
+
+
+def _read_only(array: np.ndarray) -> np.ndarray:
+    array.flags.writeable = False
+    return array
 
 
 def _eye(n):
@@ -103,7 +109,7 @@ class TargetWorld(World):
                 np.broadcast_to(cov, (B, N, *cov.shape)).copy())
 
     def target_state(self, offset: int = 0) -> np.ndarray:
-        """True x(k + offset), (B, n) (clipped to the last state drawn)."""
+        """True x(k + offset), (B, n) (clipped to the last state drawn), a new array."""
         k = np.minimum(self.k + offset, self.horizon)
         return self.truth[np.arange(self.batch), k]
 
@@ -112,20 +118,36 @@ class TargetWorld(World):
 
     def error(self, estimate: np.ndarray, truth: np.ndarray) -> np.ndarray:
         """||metric (estimate - truth)||^2, (B, N): estimate (B, N, n), truth (B, n)."""
-        return np.sum(((estimate - truth[:, None, :]) @ self.metric.T) ** 2, axis=-1)
+        return (((estimate - truth[:, None, :]) @ self.metric.T) ** 2).sum(axis=-1)
 
     def positions(self) -> np.ndarray:
         """The agents' positions (B, N, 2): the fixed ring (what the radios sense)."""
-        return np.broadcast_to(self._ring, (self.batch, self.num_agents, 2)).copy()
+        return self._ring_positions
+
+    @functools.cached_property
+    def _ring_positions(self) -> np.ndarray:
+        return np.broadcast_to(self._ring, (self.batch, self.num_agents, 2))  # read only: the ring never moves
 
     def readings(self, sensing: np.ndarray) -> Readings:
-        B, N = self.batch, self.num_agents
         k = np.minimum(self.k, self.horizon - 1)
-        y = self.observations[np.arange(B), k]
-        return Readings(inputs=np.zeros((B, N, 0)), range=np.full((B, N, N), np.nan),
-                        range_valid=np.zeros((B, N, N), bool), fix=np.zeros((B, N, 2)),
-                        fix_valid=np.zeros((B, N), bool),
-                        extra={"linear": y, "linear_valid": np.ones((B, N), bool)})
+        y = self.observations[self._copies, k]
+        return Readings(**self._no_other_sensors, extra={"linear": y, "linear_valid": self._all_valid})
+
+    @functools.cached_property
+    def _copies(self) -> np.ndarray:
+        return np.arange(self.batch)
+
+    @functools.cached_property
+    def _all_valid(self) -> np.ndarray:
+        return _read_only(np.ones((self.batch, self.num_agents), bool))
+
+    @functools.cached_property
+    def _no_other_sensors(self) -> dict:
+        """The Readings fields of sensors this world has not (read only, built once: readings runs every step)."""
+        B, N = self.batch, self.num_agents
+        return {"inputs": _read_only(np.zeros((B, N, 0))), "range": _read_only(np.full((B, N, N), np.nan)),
+                "range_valid": _read_only(np.zeros((B, N, N), bool)), "fix": _read_only(np.zeros((B, N, 2))),
+                "fix_valid": _read_only(np.zeros((B, N), bool))}
 
     def extent(self) -> float:
         return float(max(np.abs(self.target_position()).max(), float(self.config.formation_radius))) + 10.0

@@ -11,6 +11,7 @@ import coloc_env.draws as draws
 import estimators.bandwidth_fusion as bf
 from coloc_env.draws import uniforms
 from coloc_env.networks import BernoulliDelay
+from coloc_env.networks.bernoulli_delay import BLOCK_STEPS, BernoulliDelayNetwork
 
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 
@@ -59,26 +60,37 @@ def _bernoulli_network(batch, num_agents=5, seed=0):
     return net
 
 
-def test_bernoulli_delay_draw_made_ahead_equals_a_fresh_draw():
-    """Packets drawn with the uniforms kept from the step before (and after a reset of some copies, whose
-    keys change) equal those of a network that draws every step afresh."""
+class _PerStepBernoulli(BernoulliDelayNetwork):
+    """The plain per-step draw: a packet_delays of its own turns the block of draws off."""
+
+    def packet_delays(self, distance, u):
+        return super().packet_delays(distance, u)
+
+
+def test_bernoulli_delay_block_of_draws_equals_the_per_step_draw():
+    """Packets read from the block of delays drawn ahead (across block ends, and after a reset of some copies,
+    whose keys and steps change) equal those of a network that draws two uniforms at every step."""
     B, N = 3, 5
-    ahead, fresh = _bernoulli_network(B), _bernoulli_network(B)
+    block = _bernoulli_network(B)
+    plain = _PerStepBernoulli(BernoulliDelay(), N, B, "packets")
+    plain.reset([np.random.default_rng(b) for b in range(B)], np.arange(B))
     senders = np.ones((B, N), bool)
     listening = np.ones((B, N, N), bool)
     positions = np.zeros((B, N, 2))
     transmit = np.ones((B, N, 1), np.int64)
-    for k in range(12):
-        if k == 6:  # copy 1 starts a new episode: a new key
-            for net in (ahead, fresh):
+    delivered = 0
+    for k in range(3 * BLOCK_STEPS):
+        if k == 40:  # copy 1 starts a new episode: a new key, and its steps restart
+            for net in (block, plain):
                 net.reset([np.random.default_rng(99)], np.array([1]))
-        steps = np.array([k, k, k]) if k < 6 else np.array([k, k - 6, k])
-        for net in (ahead, fresh):
+        steps = np.array([k, k if k < 40 else k - 40, k])
+        for net in (block, plain):
             net.begin(steps, positions, transmit)
-        fresh._ahead.clear()
-        np.testing.assert_array_equal(ahead.packets(senders, listening, 2.0), fresh.packets(senders, listening, 2.0))
-        np.testing.assert_array_equal(ahead.messages_sent, fresh.messages_sent)
-    assert ahead._ahead  # the draw ahead was kept (and used: the sequence above)
+        got, want = block.packets(senders, listening, 2.0, slot=1), plain.packets(senders, listening, 2.0, slot=1)
+        np.testing.assert_array_equal(got, want)
+        np.testing.assert_array_equal(block.messages_sent, plain.messages_sent)
+        delivered += int((got == 1).sum())
+    assert block._blocks and not plain._blocks and delivered > 0  # the block was used; late packets occurred
 
 
 def test_one_per_link_packets_call_equals_one_call_per_receiver():
