@@ -246,15 +246,20 @@ class DriftWorld(TargetWorld):
         from coloc_env.scenarios.bandwidth_fusion import draw_episode
 
         A = self.motion_model
-        for c, rng in enumerate(rngs):
-            episode = draw_episode(self._scenario_config, rng, self._factors)
-            b = idx[c]
-            self.truth[b, 0] = episode["initial_state"]
-            for k in range(self.horizon):  # x(k+1) = A x(k) + B + w(k), as LinearMotion.step computes it
-                self.truth[b, k + 1] = (np.einsum("ab,b->a", A.transition, self.truth[b, k]) + A.drift
-                                        + episode["process_noise"][k])
-            self.observations[b] = self._sensor.measure(self.truth[b, :self.horizon, None, :],
-                                                        episode["measurement_noise"])
+        # each copy's noise from its own generator; the recursion then runs once over all of them (einsum's
+        # own loops: the same bits per copy as the copy alone, whatever the batch)
+        episodes = [draw_episode(self._scenario_config, rng, self._factors) for rng in rngs]
+        if not episodes:
+            return
+        idx = np.asarray(idx)
+        truth = np.empty((len(idx), self.horizon + 1, self.state_dim))
+        truth[:, 0] = [episode["initial_state"] for episode in episodes]
+        process = np.stack([episode["process_noise"] for episode in episodes])
+        for k in range(self.horizon):  # x(k+1) = A x(k) + B + w(k), as LinearMotion.step computes it
+            truth[:, k + 1] = np.einsum("ab,cb->ca", A.transition, truth[:, k]) + A.drift + process[:, k]
+        self.truth[idx] = truth
+        self.observations[idx] = self._sensor.measure(truth[:, :self.horizon, None, :],
+                                                      np.stack([episode["measurement_noise"] for episode in episodes]))
 
 
 __all__ = ["Drift", "DriftWorld", "TargetWorld", "check_linear_world", "ring"]
