@@ -170,7 +170,7 @@ class Network:
         N = self.num_agents
         distance = self.distances()
         want = (np.asarray(senders, bool) & self.transmits(slot))[:, :, None] & np.asarray(listening, bool)
-        want &= ~np.eye(N, dtype=bool) & self.usable(distance)
+        want &= ~_self_links(N) & self.usable(distance)
         u = uniforms(self.keys, (self._k, 0, slot), (N, N))
         delivered = want & (u >= self.loss_probability(distance))
         sent = delivered.any(axis=-1)

@@ -90,6 +90,8 @@ class BernoulliDelayNetwork(Network):
         # BLOCK_STEPS steps, drawn in one call (a delay reads this step's uniform and the next one's)
         self._blocks: dict[int, tuple] = {}
         self._rows = np.arange(self.batch)
+        # a subclass with a delay rule of its own draws per step through the base
+        self._draws_blocks = type(self).packet_delays is BernoulliDelayNetwork.packet_delays
 
     def transport_blocks(self) -> list[Block]:
         if self.message_kind in ("packets", "components"):
@@ -121,7 +123,7 @@ class BernoulliDelayNetwork(Network):
         return self._delay_codes(u, u_next)
 
     def _link_delays(self, distance, slot: int) -> np.ndarray:
-        if type(self).packet_delays is not BernoulliDelayNetwork.packet_delays:
+        if not self._draws_blocks:
             return super()._link_delays(distance, slot)
         # one counter-based draw of BLOCK_STEPS + 1 steps instead of two per step: the values depend on the
         # counters only, so they equal the per-step draws bit for bit (tests/coloc_env/test_fast_paths.py)

@@ -292,8 +292,9 @@ class ComposedScenario(Scenario):
         self.backend.reset([g[2] for g in generators], idx)
         self.k[idx] = 0
         if self.estimand == "target":
-            self._truth_state[idx] = self.world.target_state()[idx]
-            self._truth[idx] = self._target_truth()[idx]
+            state = self.world.target_state()
+            self._truth_state[idx] = state[idx]
+            self._truth[idx] = self._target_truth(state=state)[idx]
         else:
             self._truth[idx] = self.world.positions()[idx]
         self._received[idx] = 0.0

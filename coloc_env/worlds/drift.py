@@ -111,7 +111,7 @@ class TargetWorld(World):
     def target_state(self, offset: int = 0) -> np.ndarray:
         """True x(k + offset), (B, n) (clipped to the last state drawn), a new array."""
         k = np.minimum(self.k + offset, self.horizon)
-        return self.truth[np.arange(self.batch), k]
+        return self.truth[self._copies, k]
 
     def target_position(self, offset: int = 0) -> np.ndarray:
         return self.target_state(offset)[:, list(self.position_index)]
