@@ -226,6 +226,11 @@ class PacketFirBackend(Backend):
         self._features = np.zeros((B, N, self.feature_bounds()[0].size))
         self._features[:] = self.feature_defaults()
         self._view: tuple | None = None  # (filter, prediction) the features describe, until built
+        # index grids: a[copy, agent, j] gathers along the last axis with a (B, N, ...) index in one fancy
+        # index (take_along_axis builds these grids on every call)
+        self._copy, self._agent = np.arange(B)[:, None], np.arange(N)[None, :]
+        self._copy3, self._agent3 = self._copy[..., None], self._agent[..., None]
+        self._every_copy = np.arange(B)
 
     # --- episode -------------------------------------------------------------------------
     def reset(self, rngs, idx) -> None:
@@ -270,12 +275,14 @@ class PacketFirBackend(Backend):
         extra = readings.extra
         sending = np.asarray(extra["measured"], bool)
         delay = self.network.node_packets(sending, self.world.neighbour_distances(), self.config.payload, slot=0)
+        every = rows.dtype != bool and len(np.unique(rows)) == self.batch  # every copy: slices, not index arrays
+        rows = slice(None) if every else rows
         self.last_delays[rows] = delay[rows]
         for name, new in (("rss", extra["rss"]), ("aoa", extra["aoa"]), ("nav", extra["nav"]),
                           ("modes", extra.get("mode", np.zeros(sending.shape, np.int8))),
                           ("delays", np.where(delay >= 0, delay, NEVER))):
             buf = getattr(self, name)
-            buf[rows, :, :-1] = buf[rows, :, 1:]  # a copy: rows is an index array
+            buf[rows, :, :-1] = buf[rows, :, 1:]  # overlapping slices: numpy copies through a buffer
             buf[rows, :, -1] = new[rows]
         self._taken[rows] = True
 
@@ -328,10 +335,8 @@ class PacketFirBackend(Backend):
         t = pending if np.array_equal(mask, pending["mask"]) else self._filter(mask, pending["lags"],
                                                                                pending["fixes"])
         window = self._choose(decisions, t)
-        idx = (window - 1)[..., None]
-        valid_w = np.take_along_axis(t["valid"], idx, axis=-1)[..., 0]
-        x_w = np.take_along_axis(t["x"], idx[..., None], axis=-2)[..., 0, :]
-        P_w = np.take_along_axis(t["P"], idx[..., None, None], axis=-3)[..., 0, :, :]
+        at = (self._copy, self._agent, window - 1)
+        valid_w, x_w, P_w = t["valid"][at], t["x"][at], t["P"][at]
         self.out_x = np.where(valid_w[..., None], x_w, self.pred_x)
         self.out_P = np.where(valid_w[..., None, None], P_w, self.pred_P)
         self.horizon_used, self.valid_used = np.asarray(window, np.int64), valid_w
@@ -425,7 +430,7 @@ class AfgeBackend(PacketFirBackend):
     def _mask(self, decisions) -> np.ndarray:
         bits = np.asarray(decisions)[..., 1:1 + self.J] == 1
         mask = np.zeros((self.batch, self.num_agents, self.J), bool)
-        np.put_along_axis(mask, self.slots, bits, axis=-1)
+        mask[self._copy3, self._agent3, self.slots] = bits
         return mask
 
     @property
@@ -469,28 +474,36 @@ class AfgeBackend(PacketFirBackend):
     def _make_features(self, t, nis) -> np.ndarray:
         c = self.config
         P, valid = t["P"], t["valid"]
-        B, N, J = self.batch, self.num_agents, self.J
-        present = np.take_along_axis(self.delays[..., -1, :] == 0, self.slots, axis=-1)
-        rss = np.take_along_axis(self.rss[..., -1, :], self.slots, axis=-1)
-        mode = np.take_along_axis(self.modes[..., -1, :], self.slots, axis=-1)
-        flag = np.where(mode == 1, 1.0, -1.0) if c.mode_info == "known" else np.zeros((B, N, J))
-        slots = np.stack([present.astype(float),
-                          np.where(present, np.clip((rss + 80.0) / 10.0, -RSS_BOUND, RSS_BOUND), 0.0),
-                          np.where(present, flag, 0.0)], axis=-1).reshape(B, N, 3 * J)
+        B, N, J, M, D1 = self.batch, self.num_agents, self.J, self.M, self.D + 1
+        out = np.empty((B, N, D1 + 3 * J + 2 + 2 * M))
+        out[..., :D1] = self._per_lag(t["lags"])
+        by_slot = (self._copy3, self._agent3, self.slots)
+        present = (self.delays[..., -1, :] == 0)[by_slot]
+        slots = out[..., D1:D1 + 3 * J].reshape(B, N, J, 3)  # a view: present, RSS, mode per slot
+        slots[..., 0] = present
+        slots[..., 1] = np.where(present, np.clip((self.rss[..., -1, :][by_slot] + 80.0) / 10.0, -RSS_BOUND,
+                                                  RSS_BOUND), 0.0)
+        if c.mode_info == "known":
+            slots[..., 2] = np.where(present, np.where(self.modes[..., -1, :][by_slot] == 1, 1.0, -1.0), 0.0)
+        else:
+            slots[..., 2] = 0.0
         h = self.ahg.half * c.window_step
         centre = np.clip(np.where(self.horizon_used > 0, self.horizon_used, c.window_centre), c.window_min + h,
                          c.window_max - h)  # before the first output: the AHG's N_c(0)
-        group = af.ahg_group(self.ahg, centre)
-        trace = np.trace(P[..., :2, :2], axis1=-2, axis2=-1)
+        by_member = (self._copy3, self._agent3, af.ahg_group(self.ahg, centre) - 1)
+        last = D1 + 3 * J
+        out[..., last] = np.minimum(np.log1p(nis), LOG_BOUND)
+        out[..., last + 1] = self.horizon_used / c.window_max
+        trace = P[..., 0, 0] + P[..., 1, 1]
         log_trace = np.where(valid, np.clip(np.log(np.maximum(trace, 1e-300)), -LOG_BOUND, LOG_BOUND),
                              INVALID_LOG_TRACE)
-        last = np.stack([np.minimum(np.log1p(nis), LOG_BOUND), self.horizon_used / c.window_max], axis=-1)
-        cost = np.take_along_axis(np.where(valid, t[self.feature_likelihood], np.inf), group - 1, axis=-1)
+        out[..., last + 2:last + 2 + M] = log_trace[by_member]
+        cost = np.where(valid, t[self.feature_likelihood], np.inf)[by_member]
         best = np.min(cost, axis=-1, keepdims=True)
-        excess = np.where(np.isfinite(cost), np.minimum(cost - np.where(np.isfinite(best), best, 0.0), COST_BOUND),
-                          COST_BOUND)  # 0 marks the member AHG would pick
-        return np.concatenate([self._per_lag(t["lags"]), slots, last,
-                               np.take_along_axis(log_trace, group - 1, axis=-1), excess], axis=-1)
+        out[..., last + 2 + M:] = np.where(np.isfinite(cost),
+                                           np.minimum(cost - np.where(np.isfinite(best), best, 0.0), COST_BOUND),
+                                           COST_BOUND)  # 0 marks the member AHG would pick
+        return out
 
 
 class DfirBackend(PacketFirBackend):
