@@ -84,9 +84,15 @@ def info_action_mask(space, mask: np.ndarray) -> np.ndarray:
     ``MultiDiscrete`` of k equal sizes n (the shape of TorchRL's one-hot spec of such a space, which its
     PettingZoo wrapper fills from this key). ``reshape(-1)`` always gives the flat layout."""
     mask = np.asarray(mask, dtype=np.int8)
+    shape = _info_mask_shape(space)
+    return mask if shape is None else mask.reshape(shape)
+
+
+def _info_mask_shape(space) -> tuple[int, int] | None:
+    """(k, n) for a ``MultiDiscrete`` of k equal sizes n, else None (flat): :func:`info_action_mask`'s layout."""
     if isinstance(space, gymnasium.spaces.MultiDiscrete) and space.nvec.ndim == 1 and len(np.unique(space.nvec)) == 1:
-        return mask.reshape(len(space.nvec), int(space.nvec[0]))
-    return mask
+        return len(space.nvec), int(space.nvec[0])
+    return None
 
 
 class CoLocParallelEnv(ParallelEnv):
@@ -201,8 +207,13 @@ class CoLocParallelEnv(ParallelEnv):
         infos = {a: {k: v[0, i] for k, v in info.items()} for i, a in enumerate(self.possible_agents)}
         mask = self.scenario.action_mask()
         if mask is not None:  # a discrete action: its valid choices now (info_action_mask)
+            if not hasattr(self, "_mask_shape"):  # the action space is fixed: its layout once
+                self._mask_shape = _info_mask_shape(self._action_space)
+            mask = mask[0].astype(np.int8)
+            if self._mask_shape is not None:
+                mask = mask.reshape(len(self.possible_agents), *self._mask_shape)
             for i, a in enumerate(self.possible_agents):
-                infos[a]["action_mask"] = info_action_mask(self._action_space, mask[0, i])
+                infos[a]["action_mask"] = mask[i]
         return infos
 
     def state(self):

@@ -119,6 +119,8 @@ from coloc_env.scenarios.base import Scenario
 LOG_TRACE_BOUND = 50.0
 DISTANCE_SCALE = 100.0
 # what a network records of one step's sending (the infos report it); RelayChain last_chain apart
+# the action-mask rules of block_choice_masks that read the distances between the agents
+_DISTANCE_RULES = {("world", "circles", "partner"), ("network", "relay", "next_hop")}
 _RECORD_ARRAYS = ("messages_sent", "floats_sent", "delivered", "cost_sent", "node_messages", "node_floats")
 
 
@@ -252,16 +254,19 @@ class ComposedScenario(Scenario):
         entry now (the module's "Action masks" table), from the distances at the coming step, which every
         agent observes (link-layer knowledge)."""
         B, N = self.batch, self.num_agents
-        p = self.world.positions()
-        distance = np.sqrt(np.sum((p[:, :, None, :] - p[:, None, :, :]) ** 2, axis=-1))  # [i, j] (B, N, N)
-        others = ~np.eye(N, dtype=bool)
+        rules = getattr(self, "_mask_rules", None)
+        if rules is None:  # the blocks are fixed: which rule each follows, once
+            rules = self._mask_rules = [(part, getattr(self.composition, part).name, blk.name)
+                                        for blk, part in zip(self.blocks, self.block_parts, strict=True)]
+            self._other_platforms = ~np.eye(N, dtype=bool)
+        distance = self.world.distances() if any(r in _DISTANCE_RULES for r in rules) else None  # [i, j] (B, N, N)
+        others = self._other_platforms
         masks: list[np.ndarray | None] = []
-        for blk, part in zip(self.blocks, self.block_parts, strict=True):
+        for blk, rule in zip(self.blocks, rules, strict=True):
             if not blk.discrete:
                 masks.append(None)
                 continue
             mask = np.ones((B, N, blk.size, blk.choices), dtype=bool)
-            rule = (part, getattr(self.composition, part).name, blk.name)
             if rule == ("world", "circles", "partner"):
                 # a platform beyond sensing_range gives no measurement, as itself does (kept: "none");
                 # the nearest is beyond it only when every platform is

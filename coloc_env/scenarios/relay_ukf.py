@@ -408,7 +408,7 @@ class RelayUKFScenario(PresetScenario):
         obs = np.empty((B, N, 2 * N + 3), dtype=np.float32)  # each entry cast from float64, as astype would
         obs[:, :, :N] = np.eye(N)
         obs[:, :, N] = np.arange(N)[None, :] == self.world.measuring()[:, None]
-        obs[:, :, N + 1:2 * N + 1] = np.take(cached[1], self.world.k, axis=0)
+        obs[:, :, N + 1:2 * N + 1] = cached[1][self.world.k]
         obs[:, :, 2 * N + 1] = np.log(self.own_traces())
         obs[:, :, 2 * N + 2] = (self.k / self.horizon)[:, None]
         return obs

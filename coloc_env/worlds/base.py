@@ -114,6 +114,12 @@ class World:
         """True positions at k, (B, N, 2)."""
         raise NotImplementedError
 
+    def distances(self) -> np.ndarray:
+        """True distances between the agents at k (B, N, N): ||p_i - p_j|| of :meth:`positions` (a world with a
+        table of them returns the same floats from it)."""
+        p = self.positions()
+        return np.sqrt(np.sum((p[:, :, None, :] - p[:, None, :, :]) ** 2, axis=-1))
+
     def initial_belief(self) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - interface
         """What the agents know at k = 0: mean (B, N, d) and per-agent covariance (B, N, d, d)."""
         raise NotImplementedError

@@ -136,6 +136,8 @@ class CirclesWorld(World):
         N, K, B = config.num_agents, self.horizon, self.batch
         self.tracks = config.tracks
         self.truth, self.true_heading, self._speed, self._turn_rate = self.tracks.trajectory(K)
+        # C order: np.take and fancy indexing of a strided table copy the whole table on every call
+        self.truth = np.ascontiguousarray(self.truth)
         # every copy flies the same tracks: the distances between the platforms at each step, once
         # (sqrt of the summed squared differences, the same floats as ||p_i - p_j|| at each step)
         self.distance_table = np.sqrt(np.sum((self.truth[:, :, None, :] - self.truth[:, None, :, :]) ** 2, axis=-1))
@@ -176,11 +178,11 @@ class CirclesWorld(World):
         self.measured_heading[idx] = np.swapaxes(heading, 1, 2)
 
     def positions(self) -> np.ndarray:
-        return np.take(self.truth, self.k, axis=0)
+        return self.truth[self.k]
 
     def distances(self) -> np.ndarray:
         """True distances between the platforms at k (B, N, N), from :attr:`distance_table`."""
-        return np.take(self.distance_table, self.k, axis=0)
+        return self.distance_table[self.k]
 
     def initial_belief(self):
         B, N = self.batch, self.num_agents
