@@ -128,6 +128,7 @@ class CoLocParallelEnv(ParallelEnv):
         if type(self._action_space) is gymnasium.spaces.MultiDiscrete:  # sample(mask) takes the infos' mask
             space = self._action_space
             self._action_space = MaskableMultiDiscrete(space.nvec, dtype=space.dtype, start=space.start)
+        self._mask_shape = _info_mask_shape(self._action_space)  # the infos' action-mask layout (fixed)
         self.state_space = self.scenario.state_space()
 
     @functools.cache  # noqa: B019 - one space per agent name, shared by design
@@ -207,8 +208,6 @@ class CoLocParallelEnv(ParallelEnv):
         infos = {a: {k: v[0, i] for k, v in info.items()} for i, a in enumerate(self.possible_agents)}
         mask = self.scenario.action_mask()
         if mask is not None:  # a discrete action: its valid choices now (info_action_mask)
-            if not hasattr(self, "_mask_shape"):  # the action space is fixed: its layout once
-                self._mask_shape = _info_mask_shape(self._action_space)
             mask = mask[0].astype(np.int8)
             if self._mask_shape is not None:
                 mask = mask.reshape(len(self.possible_agents), *self._mask_shape)

@@ -118,9 +118,9 @@ from coloc_env.scenarios.base import Scenario
 
 LOG_TRACE_BOUND = 50.0
 DISTANCE_SCALE = 100.0
-# what a network records of one step's sending (the infos report it); RelayChain last_chain apart
 # the action-mask rules of block_choice_masks that read the distances between the agents
 _DISTANCE_RULES = {("world", "circles", "partner"), ("network", "relay", "next_hop")}
+# what a network records of one step's sending (the infos report it); RelayChain last_chain apart
 _RECORD_ARRAYS = ("messages_sent", "floats_sent", "delivered", "cost_sent", "node_messages", "node_floats")
 
 

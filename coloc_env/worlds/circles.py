@@ -136,7 +136,7 @@ class CirclesWorld(World):
         N, K, B = config.num_agents, self.horizon, self.batch
         self.tracks = config.tracks
         self.truth, self.true_heading, self._speed, self._turn_rate = self.tracks.trajectory(K)
-        # C order: np.take and fancy indexing of a strided table copy the whole table on every call
+        # C order: np.take(truth, k, axis=0) of the strided trajectory copied the whole table on every call
         self.truth = np.ascontiguousarray(self.truth)
         # every copy flies the same tracks: the distances between the platforms at each step, once
         # (sqrt of the summed squared differences, the same floats as ||p_i - p_j|| at each step)
