@@ -230,7 +230,6 @@ class PacketFirBackend(Backend):
         # index (take_along_axis builds these grids on every call)
         self._copy, self._agent = np.arange(B)[:, None], np.arange(N)[None, :]
         self._copy3, self._agent3 = self._copy[..., None], self._agent[..., None]
-        self._every_copy = np.arange(B)
 
     # --- episode -------------------------------------------------------------------------
     def reset(self, rngs, idx) -> None:
