@@ -33,32 +33,11 @@ $(STAMP): $(PY) pyproject.toml
 
 install: $(STAMP)
 
-# The demo's training budget is reduced (one seed, a few rollouts per scenario; the full budgets and
-# their results are in README "Learned policies"), and so are the evaluation episodes of the two
-# slow scenarios (1000-step episodes for nlos_horizon, particle BP for gps_denied_nbp).
-DEMO_RUNS := bandwidth_fusion:20000:100 lossy_fusion:40000:100 relay_ukf:20000:20 nlos_horizon:20000:6 \
-             gps_denied_nbp:4800:6
-
-# Each stage appends "START END STAGE" (date +%s stamps) to results/.demo_times; the summary reads them.
-DEMO_TIMES := results/.demo_times
-
+# The demo's stages run in two lanes, one per core, each single-threaded (train/demo.py: the stages, their
+# reduced budgets, DEMO_RUNS, and why); its stage times go to results/.demo_times, each lane's output to
+# results/.demo_lane<N>.log, and the summary (train/demo_summary.py) ends it.
 demo: $(STAMP)
-	mkdir -p results && rm -f $(DEMO_TIMES)
-	t=$$(date +%s) && MPLBACKEND=Agg $(VENV)/bin/coloc reproduce all --quick --out results && \
-	  echo "$$t $$(date +%s) reproduce all --quick" >> $(DEMO_TIMES)
-	for run in $(DEMO_RUNS); do \
-	  set -e; scenario=$${run%%:*}; rest=$${run#*:}; steps=$${rest%%:*}; episodes=$${rest#*:}; \
-	  t=$$(date +%s); \
-	  MPLBACKEND=Agg $(VENV)/bin/coloc train $$scenario --timesteps $$steps --seed 0 --out results/train \
-	    --curve-points 2; \
-	  echo "$$t $$(date +%s) train $$scenario ($$steps timesteps)" >> $(DEMO_TIMES); t=$$(date +%s); \
-	  MPLBACKEND=Agg $(VENV)/bin/coloc evaluate $$scenario --policy all --models results/train \
-	    --episodes $$episodes --out results; \
-	  echo "$$t $$(date +%s) evaluate $$scenario ($$episodes episodes)" >> $(DEMO_TIMES); \
-	done
-	t=$$(date +%s) && MPLBACKEND=Agg $(VENV)/bin/coloc evaluate nlos_horizon --policy constant:6 --episodes 6 \
-	  --out results && echo "$$t $$(date +%s) evaluate nlos_horizon constant:6" >> $(DEMO_TIMES)
-	@$(PY) -m train.demo_summary results
+	$(PY) -m train.demo --out results --coloc $(VENV)/bin/coloc
 
 test: $(STAMP)
 	$(VENV)/bin/ruff check .

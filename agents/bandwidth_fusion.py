@@ -89,9 +89,14 @@ class GreedyPolicy(Policy):
         self.scenario = _scenario(env)
         self.weights = paper_weights(p_name)
 
+    batching = "core"
+
+    def batch_actions(self):
+        selection = greedy_selection(self.scenario, self.weights[None])  # (B, N, N-1, n)
+        return np.stack([self.scenario.encode_actions(s, self.weights) for s in selection])
+
     def act(self, observations):
-        selection = greedy_selection(self.scenario, self.weights[None])[0]
-        actions = self.scenario.encode_actions(selection, self.weights)
+        actions = self.batch_actions()[0]
         order = self.env.possible_agents
         dtype = self.env.action_space(order[0]).dtype
         return {a: actions[order.index(a)].astype(dtype) for a in observations}

@@ -4,13 +4,39 @@ from __future__ import annotations
 
 import numpy as np
 
+# The second word of every policy's per-episode seed, [seed, POLICY_STREAM]: the env draws episode e from
+# default_rng(seed), so a policy seeded with the bare seed would replay the env's own random numbers.
+POLICY_STREAM = 0x9E3779B9
+
+
+def episode_generator(seed: int) -> np.random.Generator:
+    """The generator a stochastic policy draws from in the episode ``env.reset(seed=seed)`` plays:
+    ``default_rng([seed, POLICY_STREAM])``, a stream apart from the env's ``default_rng(seed)``."""
+    return np.random.default_rng([int(seed), POLICY_STREAM])
+
 
 class Policy:
     """Maps a dict of observations (one per live agent) to a dict of actions.
 
     Policies that read privileged state (``greedy``, ``oracle_*``) keep a
     reference to the env and say so in their docstring.
+
+    ``batching`` says how an evaluation (``train.evaluate``) may play many episodes at
+    once on the scenario's batched core, with the same actions as the env loop:
+
+    ========== ===========================================================================
+    batching   what the policy reads, and how it is batched
+    ========== ===========================================================================
+    per_copy   only the observations ``act`` is given, the env's spaces and agent names, and
+               its own generator: one instance per episode, each given its copy's
+               observations
+    core       the scenario core it was built on, every copy at once: built on a view of the
+               batched core, :meth:`batch_actions` returns every copy's actions
+    None       the env (or its core at batch 1) in ways that do not batch: the env loop only
+    ========== ===========================================================================
     """
+
+    batching: str | None = None
 
     def __init__(self, env):
         self.env = env
@@ -18,18 +44,33 @@ class Policy:
     def act(self, observations: dict) -> dict:  # pragma: no cover - interface
         raise NotImplementedError
 
+    def start_episode(self, seed: int) -> None:
+        """Called by an evaluation before the episode ``env.reset(seed=seed)`` plays. A stochastic
+        policy restarts its generator there (:func:`episode_generator`), so that episode e's actions
+        depend on its seed alone, whether the episodes run one after another or side by side."""
+
+    def batch_actions(self) -> np.ndarray:  # pragma: no cover - interface of batching = "core"
+        """Every copy's actions (B, N, *action_shape) for the batched core this policy was built on."""
+        raise NotImplementedError
+
 
 class RandomPolicy(Policy):
-    """Uniform samples of each agent's action space, from its own generator (``seed``)."""
+    """Uniform samples of each agent's action space, from its own generator (``seed``; an evaluation
+    restarts it for each episode: :meth:`Policy.start_episode`)."""
+
+    batching = "per_copy"
 
     def __init__(self, env, seed: int | None = None):
         super().__init__(env)
         self.rng = np.random.default_rng(seed)
 
+    def start_episode(self, seed: int) -> None:
+        self.rng = episode_generator(seed)
+
     def act(self, observations):
         actions = {}
         for agent in observations:
-            space = self.env.action_space(agent)
+            space = self.env.action_space(agent)  # seeded just before its sample: spaces are shared
             space.seed(int(self.rng.integers(2**31 - 1)))
             actions[agent] = space.sample()
         return actions
@@ -37,6 +78,8 @@ class RandomPolicy(Policy):
 
 class FixedActionPolicy(Policy):
     """Plays the same per-agent action every step (``actions``: (N, *action_shape) in agent order)."""
+
+    batching = "per_copy"
 
     def __init__(self, env, actions: np.ndarray):
         super().__init__(env)

@@ -74,6 +74,8 @@ class SilentPolicy(FixedActionPolicy):
 class ThresholdPolicy(Policy):
     """Fault UAVs broadcast only while their own prior's spread is at most ``spread`` metres."""
 
+    batching = "per_copy"
+
     def __init__(self, env, spread: float | None = None, tables: str | None = None):
         super().__init__(env)
         self.iterations = _scenario(env).config.num_iterations

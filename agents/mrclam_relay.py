@@ -61,6 +61,7 @@ class PaperPolicy(Policy):
     """The lowest-index recorded robot; complete chains m -> n -> the others ascending."""
 
     relay = True
+    batching = "per_copy"
 
     def act(self, observations):
         order = list(self.env.possible_agents)

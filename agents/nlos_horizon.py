@@ -34,7 +34,10 @@ def _scenario(env):
 
 
 class _EpisodePolicy(Policy):
-    """Restarts its own state when the scenario starts a new episode."""
+    """Restarts its own state when the scenario starts a new episode. Each policy computes every copy of
+    the scenario it reads at once (:meth:`batch_actions`); ``act`` hands out copy 0's actions."""
+
+    batching = "core"
 
     def __init__(self, env):
         super().__init__(env)
@@ -47,8 +50,8 @@ class _EpisodePolicy(Policy):
         self._episode = current
         return fresh
 
-    def _actions(self, window: np.ndarray, observations, encoded: bool = False) -> dict:
-        actions = (window if encoded else self.scenario.encode_actions(window))[0]
+    def act(self, observations):
+        actions = self.batch_actions()[0]
         order = self.env.possible_agents
         return {a: actions[order.index(a)] for a in observations}
 
@@ -64,7 +67,7 @@ class PaperPolicy(_EpisodePolicy):
         if self.likelihood not in af.LIKELIHOODS:
             raise ValueError(f"likelihood must be one of {af.LIKELIHOODS}, got {self.likelihood!r}")
 
-    def act(self, observations):
+    def batch_actions(self):
         sc = self.scenario
         shape = (sc.batch, sc.num_agents)
         if self._new_episode():
@@ -79,7 +82,7 @@ class PaperPolicy(_EpisodePolicy):
                 self.raw, self.count, costs = af.smooth_costs(self.raw, self.count, costs, self.params.smoothing)
         chosen, self.centre = af.ahg_select(self.params, self.centre, costs, sc.horizon_valid, sc.fresh)
         # chosen = 0: no member has an estimate; the centre (also without one) makes the env predict
-        return self._actions(np.where(chosen > 0, chosen, self.centre), observations)
+        return sc.encode_actions(np.where(chosen > 0, chosen, self.centre))
 
 
 class ConstantPolicy(_EpisodePolicy):
@@ -94,22 +97,22 @@ class ConstantPolicy(_EpisodePolicy):
         if not c.window_min <= self.window <= c.window_max:
             raise ValueError(f"window must be in [{c.window_min}, {c.window_max}], got {window}")
 
-    def act(self, observations):
+    def batch_actions(self):
         sc = self.scenario
-        return self._actions(np.full((sc.batch, sc.num_agents), self.window), observations)
+        return sc.encode_actions(np.full((sc.batch, sc.num_agents), self.window))
 
 
 class OracleConstantPolicy(_EpisodePolicy):
     """The constant horizon with the lowest summed squared error over the episode (privileged: hindsight
     and the truth; ``bound_hindsight_constant``)."""
 
-    def act(self, observations):
+    def batch_actions(self):
         sc = self.scenario
         if self._new_episode():
             c = sc.config
             errors = sc.constant_horizon_errors()[..., c.window_min - 1:c.window_max]
             self.window = c.window_min + np.argmin(errors, axis=-1)
-        return self._actions(self.window, observations)
+        return sc.encode_actions(self.window)
 
 
 # The validation sweep behind ``best_constant`` (default config; re-run it after a change of the scenario):
@@ -134,11 +137,10 @@ class BestConstantPolicy(ConstantPolicy):
 class SilentPolicy(_EpisodePolicy):
     """No neighbour packet used (every slot bit 0), the AHG's N_c(0): the least communication there is."""
 
-    def act(self, observations):
+    def batch_actions(self):
         sc = self.scenario
         window = np.full((sc.batch, sc.num_agents), sc.config.window_centre)
-        return self._actions(sc.encode_actions(window, np.zeros((*window.shape, sc.J), np.int64)), observations,
-                             encoded=True)
+        return sc.encode_actions(window, np.zeros((*window.shape, sc.J), np.int64))
 
 
 POLICIES = {"paper": PaperPolicy, "constant": ConstantPolicy, "best_constant": BestConstantPolicy,

@@ -2,7 +2,8 @@
 
 * ``paper``: the paper's choices (Sec. 4). The measuring platform ranges with a
   partner drawn uniformly among the others (from the policy's own generator,
-  ``seed``); the location information then goes to the nearest platform not yet
+  ``seed``, which an evaluation restarts for each episode from the episode's seed:
+  ``agents.base.episode_generator``); the location information then goes to the nearest platform not yet
   reached, until every platform is reached (the paper's "closest neighbour"
   topology). One relay choice per agent is enough: a chain is a path, so each
   platform has at most one successor; the last one stops.
@@ -23,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from agents.base import Policy
+from agents.base import Policy, episode_generator
 from coloc_env.scenarios.relay_ukf import DISTANCE_SCALE
 
 
@@ -79,10 +80,14 @@ class PaperPolicy(Policy):
     """Random partner, nearest-not-yet-reached relay until everyone is reached (Sec. 4)."""
 
     relay = True
+    batching = "per_copy"
 
     def __init__(self, env, seed: int | None = None):
         super().__init__(env)
         self.rng = np.random.default_rng(seed)
+
+    def start_episode(self, seed: int) -> None:
+        self.rng = episode_generator(seed)
 
     def act(self, observations):
         order = list(self.env.possible_agents)
@@ -104,6 +109,8 @@ class NoRelayPolicy(PaperPolicy):
 
 class NearestLocalPolicy(Policy):
     """Each agent from its own observation: range with the nearest, relay to the nearest."""
+
+    batching = "per_copy"
 
     def act(self, observations):
         N = len(self.env.possible_agents)

@@ -151,7 +151,13 @@ def evaluate_policy(scenario: str, policy_name: str, episodes: int, seed_base: i
                 progress()
         return result
     if not policy_name.endswith(".zip"):
-        return run_episodes(scenario, policy_name, episodes, seed_base, progress)
+        result = run_policy_batched(scenario, policy_name, episodes, seed_base)
+        if result is None:
+            return run_episodes(scenario, policy_name, episodes, seed_base, progress)
+        if progress:
+            for _ in range(episodes):
+                progress()
+        return result
     import agents
     import coloc_env
 
@@ -210,6 +216,7 @@ def run_episodes(scenario: str, policy_name: str, episodes: int, seed_base: int 
     costs, comms = [], []
     for e in range(episodes):
         observations, _ = env.reset(seed=seed_base + e)
+        policy.start_episode(seed_base + e)
         errors, weights, comm = [], [], 0.0
         while env.agents:
             observations, _, _, _, infos = env.step(policy.act(observations))
@@ -244,6 +251,75 @@ def _run_core(scenario: str, episodes: int, seed_base: int, choose, env_config: 
     # (episodes, T, N) -> (episodes,)
     cost = core.episode_error(np.stack(errors, axis=1), np.stack(weights, axis=1) if weights else None)
     return cost, comm / len(errors), core.initial_cost()
+
+
+# Copies of the batched core one call of run_policy_batched steps at once: enough to amortize the step's
+# per-call cost, few enough that a particle backend's arrays stay small.
+EVALUATION_BATCH = 128
+
+
+class _CoreView:
+    """What a policy of ``batching = "core"`` reads of its env, with the batched core as the scenario:
+    ``scenario`` and ``unwrapped.scenario`` are the core; agents and spaces are the single env's."""
+
+    def __init__(self, core, env):
+        self.scenario = core
+        self.unwrapped = self
+        self.possible_agents = env.possible_agents
+        self.agents = list(env.possible_agents)
+        self.action_space = env.action_space
+        self.observation_space = env.observation_space
+
+
+def run_policy_batched(scenario: str, policy_name: str, episodes: int, seed_base: int = EVAL_SEED_BASE,
+                       **env_config) -> dict | None:
+    """A named policy on copies of the batched core, every episode of a chunk in one call per step; None
+    where the policy does not batch (``Policy.batching`` is None: :func:`run_episodes` plays it).
+
+    Episode e is the copy seeded ``seed_base + e`` and plays what :func:`run_episodes` plays for it:
+    a ``per_copy`` policy acts on copy e's observations alone (a shallow copy of the policy per episode,
+    its generator restarted by ``start_episode(seed_base + e)``); a ``core`` policy is built on the
+    batched core (:class:`_CoreView`) and computes every copy at once. Tests hold the two paths equal.
+    """
+    import copy
+
+    import agents
+    import coloc_env
+
+    if episodes < 2:
+        raise ValueError(f"episodes must be >= 2 for a confidence interval, got {episodes}")
+    env = coloc_env.parallel_env(scenario, **env_config)
+    probe = agents.make_policy(policy_name, env, seed=seed_base)
+    if probe.batching not in ("per_copy", "core"):
+        return None
+    order = list(env.possible_agents)
+    costs, comms, initial = [], [], 0.0
+    for start in range(0, episodes, EVALUATION_BATCH):
+        count = min(EVALUATION_BATCH, episodes - start)
+        if probe.batching == "core":
+            built = {}
+
+            def choose(core, built=built):
+                if "policy" not in built:  # built on the reset core, so that it reads this batch
+                    built["policy"] = agents.make_policy(policy_name, _CoreView(core, env), seed=seed_base)
+                return np.asarray(built["policy"].batch_actions(), float)
+        else:
+            policies = [copy.copy(probe) for _ in range(count)]
+            for e, policy in enumerate(policies):
+                policy.start_episode(seed_base + start + e)
+
+            def choose(core, policies=policies):
+                observations = core.observation()
+                actions = []
+                for e, policy in enumerate(policies):
+                    chosen = policy.act({a: observations[e, i] for i, a in enumerate(order)})
+                    actions.append(np.stack([np.asarray(chosen[a]).astype(float) for a in order]))
+                return np.stack(actions)
+
+        cost, comm, initial = _run_core(scenario, count, seed_base + start, choose, env_config)
+        costs.append(cost)
+        comms.append(comm)
+    return summarize(scenario, policy_name, np.concatenate(costs), np.concatenate(comms), seed_base, initial)
 
 
 def run_model_batched(model, scenario: str, episodes: int, seed_base: int, deterministic: bool = True,

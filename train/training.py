@@ -143,10 +143,10 @@ def write_learning_curve(folder: str, scenario: str, curve: list, title: str) ->
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from train.evaluate import VALIDATION_SEED_BASE, run_episodes
+    from train.evaluate import VALIDATION_SEED_BASE, evaluate_policy
     from train.io import save_figure
 
-    paper = run_episodes(scenario, "paper", CURVE_EPISODES, VALIDATION_SEED_BASE)
+    paper = evaluate_policy(scenario, "paper", CURVE_EPISODES, VALIDATION_SEED_BASE)
     write_json(os.path.join(folder, "curve.json"), {
         "scenario": scenario, "validation_seed_base": VALIDATION_SEED_BASE, "episodes": CURVE_EPISODES,
         "points": [{"timesteps": t, "mean_cost": c, "ci95": h} for t, c, h in curve],

@@ -81,7 +81,7 @@ def test_learning_curve_bands_are_labelled(monkeypatch, tmp_path):
     import train.io
     from train import training
 
-    monkeypatch.setattr(train.evaluate, "run_episodes",
+    monkeypatch.setattr(train.evaluate, "evaluate_policy",
                         lambda *args, **kwargs: {"mean_cost": 3.0, "ci95": 0.4})
     saved = _capture(monkeypatch, train.io)
     training.write_learning_curve(str(tmp_path), "bandwidth_fusion", [(100, 5.0, 1.0), (200, 4.0, 0.5)], "t")
@@ -154,7 +154,8 @@ def test_demo_summary_reads_claims_verdicts_and_stage_times(tmp_path, capsys):
     (tmp_path / "leaderboard.md").write_text(
         "# Leaderboard\n\n## bandwidth_fusion (`bandwidth_fusion`)\n\nTarget: beat it. seed0: beats: **met**.\n\n"
         "## relay_ukf (`relay_ukf`)\n\nTarget: beat it. seed0: worse: **not met**.\n\n## x (`x`)\n\nno target\n")
-    (tmp_path / ".demo_times").write_text("100 130 reproduce all --quick\n130 205 train relay_ukf\nbad line\n")
+    (tmp_path / ".demo_times").write_text("100 130 reproduce all --quick\n130 205 train relay_ukf\nbad line\n"
+                                          "110 150 train nlos_horizon\n")
     demo_summary.main([str(tmp_path)])
     text = capsys.readouterr().out
     assert "zhao2020  1 held, 1 failed; failed: b" in text
@@ -166,7 +167,8 @@ def test_demo_summary_reads_claims_verdicts_and_stage_times(tmp_path, capsys):
     assert any("relay_ukf (`relay_ukf`)" in s and "target not met" in s for s in lines)
     assert any(s.strip().startswith("reproduce all --quick") and s.strip().endswith("30 s") for s in lines)
     assert any(s.strip().startswith("train relay_ukf") and s.strip().endswith("1 min 15 s") for s in lines)
-    assert any(s.strip().startswith("total") and s.strip().endswith("1 min 45 s") for s in lines)
+    assert any(s.strip().startswith("total of the stages") and s.strip().endswith("2 min 25 s") for s in lines)
+    assert any(s.strip().startswith("wall clock") and s.strip().endswith("1 min 45 s") for s in lines)
 
 
 def test_gao2016_fig6_log_ticks_are_plain():

@@ -53,13 +53,13 @@ def test_evaluate_paper_policy_equals_the_reproduction_on_the_same_seeds(scenari
 def _wang2019_by_the_estimator_functions(seeds, config) -> np.ndarray:
     """Per-episode paper metric of UKF-DCL from ``estimators.ukf_relay`` on chains resolved by
     :class:`coloc_env.world.relay.RelayChainLinks` (the paper scenario's own delivery code): no backend,
-    no network, no env. The paper policy's partners come from one generator seeded with the first seed
-    and continued over the episodes, as ``coloc evaluate`` seeds it."""
+    no network, no env. The paper policy's partners in episode e come from ``episode_generator(seeds[e])``,
+    as ``coloc evaluate`` seeds it."""
+    from agents.base import episode_generator
     from tests.train.test_reproductions_drive_backends import _reference_wang2019
 
-    policy_rng = np.random.default_rng(seeds[0])
     dcl = 2  # rows IL, CCL, DCL
-    return np.array([_reference_wang2019(config, [np.random.default_rng(s)], policy_rng)[dcl].mean()
+    return np.array([_reference_wang2019(config, [np.random.default_rng(s)], episode_generator(s))[dcl].mean()
                      for s in seeds])
 
 

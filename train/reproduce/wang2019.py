@@ -182,23 +182,21 @@ def simulate_runs(config: RelayUKFConfig, copies: list, policy_rng: np.random.Ge
     }
 
 
-def paper_policy_costs(seeds, config: RelayUKFConfig | None = None, policy_seed: int | None = None) -> np.ndarray:
+def paper_policy_costs(seeds, config: RelayUKFConfig | None = None) -> np.ndarray:
     """Per-episode mean distance error of UKF-DCL under the paper's policy (the env's ``paper``: random
     partner, nearest-not-yet-reached relay until the chain is complete) on the episodes the env plays
     for ``seeds``: the error at each measurement time k = 0..K-1 after its update, averaged over the
     steps and platforms (this reproduction's ``mean_distance_error`` of one run).
 
-    Episode e is the world reset with ``default_rng(seeds[e])``, as ``env.reset(seed=seeds[e])`` resets the scenario.
-    The paper policy draws its partners from its own generator, seeded ``policy_seed`` (default
-    ``seeds[0]``, as ``coloc evaluate`` seeds it with its seed base) and continued over the episodes
-    in order, one draw per step; so the episodes run one after another through
-    :func:`simulate_runs` (a batch would interleave their draws).
+    Episode e is the world reset with ``default_rng(seeds[e])``, as ``env.reset(seed=seeds[e])`` resets the
+    scenario. The paper policy draws its partners, one draw per step, from the generator ``coloc evaluate``
+    gives it for that episode (``agents.base.episode_generator(seeds[e])``, restarted for each episode).
     """
+    from agents.base import episode_generator
+
     config = config or build_config(RelayUKFConfig, {})
-    seeds = list(seeds)
-    policy_rng = np.random.default_rng(seeds[0] if policy_seed is None else policy_seed)
     dcl = ESTIMATORS.index("DCL")
-    return np.array([simulate_runs(config, [np.random.default_rng(s)], policy_rng)["per_run"][dcl, 0]
+    return np.array([simulate_runs(config, [np.random.default_rng(s)], episode_generator(s))["per_run"][dcl, 0]
                      for s in seeds])
 
 
