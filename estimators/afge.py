@@ -265,13 +265,53 @@ def mode_weight(mode_info: str, modes: np.ndarray, p_nlos: float) -> np.ndarray:
     raise ValueError(f"mode_info must be one of {MODE_INFOS}, got {mode_info!r}")
 
 
-def packet_fixes(signal: SignalModel, sender_position, rss, aoa, m):
+def _fixes_kernel_source(sender, rss, aoa, m, constants, z, R, r_hat):  # pragma: no cover - compiled by numba
+    """Per packet: :func:`packet_fixes` with the same operations in the same order, one pass over the
+    packets instead of some twenty numpy temporaries of the buffer's size."""
+    (sd2, nsd2, nbd2, st2, nst2, nbt2, nbias_db, nbias_theta, tx_less_ref, ten_n, d0, kappa, nav2) = constants
+    for p in _prange(rss.shape[0]):
+        w = m[p]
+        var_db = sd2 + w * nsd2 + w * (1.0 - w) * nbd2
+        var_theta = st2 + w * nst2 + w * (1.0 - w) * nbt2
+        r = d0 * 10.0 ** ((tx_less_ref - (rss[p] + w * nbias_db)) / ten_n)
+        theta = aoa[p] - w * nbias_theta
+        c, s = np.cos(theta), np.sin(theta)
+        z[p, 0] = sender[p, 0] + r * c
+        z[p, 1] = sender[p, 1] + r * s
+        var_r = (kappa * r) ** 2 * var_db
+        var_t = r**2 * var_theta
+        R[p, 0, 0] = c * c * var_r + s * s * var_t + nav2
+        R[p, 1, 1] = s * s * var_r + c * c * var_t + nav2
+        R[p, 0, 1] = R[p, 1, 0] = c * s * (var_r - var_t)
+        r_hat[p] = r
+
+
+def packet_fixes(signal: SignalModel, sender_position, rss, aoa, m, compiled: bool | None = None):
     """Target position fix of each packet (spec §4, eqs. 4-6 + sender error) [reconstructed].
 
     ``sender_position`` (..., 2) p_hat_j, ``rss`` (...) dBm, ``aoa`` (...) rad (bearing of the
     target seen from j), ``m`` (...) mode weight. Returns ``z`` (..., 2), ``R`` (..., 2, 2),
-    ``r_hat`` (...).
+    ``r_hat`` (...). ``compiled`` (default: where numba is installed) runs
+    :func:`_fixes_kernel_source`, equal to this numpy form (``compiled=False``, the reference) to
+    rounding: tests hold it to 1e-9.
     """
+    kernels = _compiled("fixes") if compiled in (None, True) else None
+    if compiled and kernels is None:
+        raise ValueError("compiled=True needs numba, which is not installed")
+    if kernels is not None:
+        shape = np.broadcast_shapes(np.shape(sender_position)[:-1], np.shape(rss), np.shape(aoa), np.shape(m))
+        P = int(np.prod(shape, dtype=np.int64))
+        sender = np.ascontiguousarray(np.broadcast_to(sender_position, (*shape, 2)), float).reshape(P, 2)
+        flat = [np.ascontiguousarray(np.broadcast_to(a, shape), float).reshape(P) for a in (rss, aoa, m)]
+        constants = (signal.sigma_db**2, signal.nlos_sigma_db**2, signal.nlos_bias_db**2, signal.sigma_theta**2,
+                     signal.nlos_sigma_theta**2, signal.nlos_bias_theta**2, float(signal.nlos_bias_db),
+                     float(signal.nlos_bias_theta), signal.tx_power_dbm - signal.reference_loss_db,
+                     10.0 * signal.exponent, float(signal.d0), np.log(10.0) / (10.0 * signal.exponent),
+                     signal.sigma_nav**2)
+        z, R, r_hat = np.empty((P, 2)), np.empty((P, 2, 2)), np.empty(P)
+        kernel = kernels[1] if P >= _PARALLEL_ELEMENTS else kernels[0]
+        kernel(sender, *flat, tuple(float(v) for v in constants), z, R, r_hat)
+        return z.reshape(*shape, 2), R.reshape(*shape, 2, 2), r_hat.reshape(shape)
     m = np.asarray(m, float)
     var_db = signal.sigma_db**2 + m * signal.nlos_sigma_db**2 + m * (1.0 - m) * signal.nlos_bias_db**2
     var_theta = (signal.sigma_theta**2 + m * signal.nlos_sigma_theta**2
@@ -864,7 +904,8 @@ def _buffer_kernel_source(final_info, final_vector, final_stamps, buffer_info, b
 
 def _compiled(name: str):
     """[serial, parallel] numba forms of the kernel ``name`` (``"buffer"``:
-    :func:`_buffer_kernel_source`, ``"fuse"``: :func:`_fuse_kernel_source`), compiled on first
+    :func:`_buffer_kernel_source`, ``"fuse"``: :func:`_fuse_kernel_source`, ``"costs"``:
+    :func:`_costs_kernel_source`, ``"fixes"``: :func:`_fixes_kernel_source`), compiled on first
     use and cached on disk, or ``None`` where numba is not installed."""
     global _KERNELS, _prange
     if _KERNELS is None:
@@ -878,7 +919,8 @@ def _compiled(name: str):
             global _numpy_sum
             _numpy_sum = numba.njit(**options)(_numpy_sum)
             _KERNELS = {key: [numba.njit(**options)(fn), numba.njit(parallel=True, **options)(fn)]
-                        for key, fn in (("buffer", _buffer_kernel_source), ("fuse", _fuse_kernel_source))}
+                        for key, fn in (("buffer", _buffer_kernel_source), ("fuse", _fuse_kernel_source),
+                                        ("costs", _costs_kernel_source), ("fixes", _fixes_kernel_source))}
     return _KERNELS.get(name)
 
 
@@ -930,15 +972,57 @@ def _quadratic2(e0, e1, S):
     return (S[3] * e0 * e0 - (S[1] + S[2]) * e0 * e1 + S[0] * e1 * e1) / det, det
 
 
-def predictive_costs(motion: MotionModel, prev_x, prev_P, prev_valid, z, R):
+def _costs_kernel_source(prev_x, prev_P, prev_valid, z, R, T, G, out):  # pragma: no cover - compiled by numba
+    """Per element m and horizon j: :func:`predictive_costs` with the same sums in the same order
+    (S's six terms left to right, as ``_lin`` adds them), on the rows of ``prev_P`` where they lie
+    instead of the strided 2x2 views the numpy form multiplies 48 times over the batch."""
+    M, S = prev_valid.shape
+    TT = T * T
+    for m in _prange(M):
+        z0, z1 = z[m, 0], z[m, 1]
+        r0, r1, r2, r3 = R[m, 0, 0], R[m, 0, 1], R[m, 1, 0], R[m, 1, 1]
+        for j in range(S):
+            if not prev_valid[m, j]:
+                out[m, j] = np.inf
+                continue
+            x = prev_x[m, j]
+            P = prev_P[m, j]
+            e0 = z0 - (x[0] + T * x[2])
+            e1 = z1 - (x[1] + T * x[3])
+            s0 = P[0, 0] + T * P[0, 2] + T * P[0, 2] + TT * P[2, 2] + G[0, 0] + r0
+            s1 = P[0, 1] + T * P[0, 3] + T * P[1, 2] + TT * P[2, 3] + G[0, 1] + r1
+            s2 = P[1, 0] + T * P[1, 2] + T * P[0, 3] + TT * P[3, 2] + G[1, 0] + r2
+            s3 = P[1, 1] + T * P[1, 3] + T * P[1, 3] + TT * P[3, 3] + G[1, 1] + r3
+            det = s0 * s3 - s1 * s2
+            quad = (s3 * e0 * e0 - (s1 + s2) * e0 * e1 + s0 * e1 * e1) / det
+            out[m, j] = quad + np.log(det)
+
+
+def predictive_costs(motion: MotionModel, prev_x, prev_P, prev_valid, z, R, compiled: bool | None = None):
     """One-step predictive likelihood cost of the newest observation for every horizon
     (``likelihood="predictive"``) [reconstructed]:
     ``e = z(k) - H A x_N(k-1)``, ``S = H (A P_N(k-1) A^T + Gam) H^T + R(k)``, ``J = e^T S^-1 e + ln det S``.
 
     ``prev_x`` (..., S, 4), ``prev_P`` (..., S, 4, 4), ``prev_valid`` (..., S), ``z`` (..., 2),
-    ``R`` (..., 2, 2). Invalid -> +inf.
+    ``R`` (..., 2, 2). Invalid -> +inf. ``compiled`` (default: where numba is installed) runs
+    :func:`_costs_kernel_source`, equal to this numpy form (``compiled=False``, the reference) to
+    rounding: tests hold it to 1e-9.
     """
+    kernels = _compiled("costs") if compiled in (None, True) else None
+    if compiled and kernels is None:
+        raise ValueError("compiled=True needs numba, which is not installed")
     T = float(motion.period)
+    if kernels is not None:
+        batch = np.broadcast_shapes(np.shape(prev_valid)[:-1], np.shape(z)[:-1], np.shape(R)[:-2])
+        S = np.shape(prev_valid)[-1]
+        M = int(np.prod(batch, dtype=np.int64))
+        flat = [np.ascontiguousarray(np.broadcast_to(a, (*batch, *tail)), dtype).reshape(M, *tail)
+                for a, tail, dtype in ((prev_x, (S, 4), float), (prev_P, (S, 4, 4), float),
+                                       (prev_valid, (S,), bool), (z, (2,), float), (R, (2, 2), float))]
+        out = np.empty((M, S))
+        kernel = kernels[1] if M >= _PARALLEL_ELEMENTS else kernels[0]
+        kernel(*flat, T, np.ascontiguousarray(motion.process_cov, float), out)
+        return out.reshape(*batch, S)
     e0 = z[..., None, 0] - (prev_x[..., 0] + T * prev_x[..., 2])
     e1 = z[..., None, 1] - (prev_x[..., 1] + T * prev_x[..., 3])
     P11, P12, P22 = _blk(prev_P, 0, 0), _blk(prev_P, 0, 2), _blk(prev_P, 2, 2)

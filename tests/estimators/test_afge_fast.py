@@ -77,6 +77,42 @@ def test_compiled_kalman_form_equals_the_numpy_stack():
         fast, slow = a[0], b[0]
 
 
+@pytest.mark.parametrize("shape", [(3, 4, 2, 5), (40, 4, 6, 8)])  # serial, and threaded from 4096 packets
+def test_compiled_packet_fixes_equal_numpy(shape):
+    """Mode weights 0, 1 and in between (known / blind / mean), senders shared by a stamp's packets."""
+    rng = np.random.default_rng(shape[0])
+    signal = af.SignalModel()
+    sender = rng.normal(scale=300.0, size=(*shape[:-1], 1, 2))
+    rss = rng.uniform(-95.0, -40.0, size=shape)
+    aoa = rng.uniform(-np.pi, np.pi, size=shape)
+    m = rng.choice([0.0, 1.0, signal.p_nlos], size=shape)
+    fast = af.packet_fixes(signal, sender, rss, aoa, m, compiled=True)
+    slow = af.packet_fixes(signal, sender, rss, aoa, m, compiled=False)
+    for a, b in zip(fast, slow, strict=True):
+        assert a.shape == b.shape
+        np.testing.assert_allclose(a, b, rtol=1e-9, atol=0)
+
+
+@pytest.mark.parametrize("shape", [(3, 4), (1100, 4)])  # the serial kernel, and the threaded one from 4096
+def test_compiled_predictive_costs_equal_numpy(shape):
+    """From the estimates of a real buffer re-run (SPD covariances, invalid horizons among them) and
+    fused fixes of which some share one R by broadcasting."""
+    rng = np.random.default_rng(len(shape) + shape[0])
+    motion = af.MotionModel()
+    stack = af.empty_stack(shape, 12)
+    for Y, y, gamma in _buffers(rng, shape, 2, 6):
+        stack, x, P, valid = af.buffer_estimates(motion, stack, 5, Y, y, gamma)
+    assert valid.any() and not valid.all()
+    z = rng.normal(scale=50.0, size=(*shape, 2))
+    A = rng.normal(size=(shape[-1], 2, 2))
+    R = A @ np.swapaxes(A, -1, -2) + 0.5 * np.eye(2)  # (N, 2, 2): broadcast over the copies
+    fast = af.predictive_costs(motion, x, P, valid, z, R, compiled=True)
+    slow = af.predictive_costs(motion, x, P, valid, z, R, compiled=False)
+    assert fast.shape == slow.shape == (*shape, 12)
+    np.testing.assert_array_equal(np.isinf(fast), ~valid)
+    np.testing.assert_allclose(fast[valid], slow[valid], rtol=1e-9, atol=1e-9)
+
+
 @pytest.mark.parametrize("weighting, n_strongest, min_packets", [("distance", 4, 1), ("information", 3, 2),
                                                                   ("distance", 8, 2)])
 def test_compiled_fusion_equals_numpy_with_rss_ties_masks_and_delays(weighting, n_strongest, min_packets):
