@@ -494,11 +494,13 @@ class AfgeBackend(PacketFirBackend):
         last = D1 + 3 * J
         out[..., last] = np.minimum(np.log1p(nis), LOG_BOUND)
         out[..., last + 1] = self.horizon_used / c.window_max
-        trace = P[..., 0, 0] + P[..., 1, 1]
-        log_trace = np.where(valid, np.minimum(np.maximum(np.log(np.maximum(trace, 1e-300)), -LOG_BOUND), LOG_BOUND),
-                             INVALID_LOG_TRACE)
-        out[..., last + 2:last + 2 + M] = log_trace[by_member]
-        cost = np.where(valid, t[self.feature_likelihood], np.inf)[by_member]
+        # gathered to the M members before the arithmetic: the other S - M horizons' logs would be discarded
+        member_valid = valid[by_member]
+        trace = P[..., 0, 0][by_member] + P[..., 1, 1][by_member]
+        out[..., last + 2:last + 2 + M] = np.where(
+            member_valid, np.minimum(np.maximum(np.log(np.maximum(trace, 1e-300)), -LOG_BOUND), LOG_BOUND),
+            INVALID_LOG_TRACE)
+        cost = np.where(member_valid, t[self.feature_likelihood][by_member], np.inf)
         best = np.min(cost, axis=-1, keepdims=True)
         out[..., last + 2 + M:] = np.where(np.isfinite(cost),
                                            np.minimum(cost - np.where(np.isfinite(best), best, 0.0), COST_BOUND),
