@@ -71,12 +71,20 @@ def _bandwidth_fusion_estimator_step(batch: int) -> Callable[[], None]:
     config = build_config(BandwidthFusionConfig, {})
     model = config.fusion_model()
     selection, weights = paper_selection("T1"), paper_weights("P1")
-    box = {"state": bf.initial_state(model, np.asarray(config.initial_state), np.asarray(config.initial_cov),
-                                     (batch,))}
+
+    def start():
+        return bf.initial_state(model, np.asarray(config.initial_state), np.asarray(config.initial_cov), (batch,))
+
+    box = {"state": start(), "k": 0}
     y = np.random.default_rng(0).normal(size=(batch, config.num_uavs, 3)) + 10.0
 
     def step() -> None:
+        # restarted every episode length, as the env resets: a run of many episodes' steps on the one
+        # fixed reading would take the state (and the exact covariance) past float range
+        if box["k"] == config.horizon:
+            box["state"], box["k"] = start(), 0
         box["state"] = bf.step(model, box["state"], y, selection, weights)
+        box["k"] += 1
 
     return step
 

@@ -52,3 +52,16 @@ def test_compare_rows_joins_on_scenario_what_and_batch():
     assert rows[("w", 1)]["ratio"] == pytest.approx(3.0)
     assert rows[("new", 1)]["ratio"] is None and rows[("new", 1)]["reference_env_steps_per_s"] is None
     assert rows[("gone", 4)]["ratio"] is None and rows[("gone", 4)]["current_env_steps_per_s"] is None
+
+
+def test_the_bandwidth_estimator_row_stays_finite_over_many_episodes():
+    """It restarts every episode length, as the env resets; without that the state overflowed near step 1,750."""
+    import warnings
+
+    from train.bench import _bandwidth_fusion_estimator_step
+
+    step = _bandwidth_fusion_estimator_step(4)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # an overflow is a RuntimeWarning
+        for _ in range(2_500):
+            step()
