@@ -83,13 +83,13 @@ def greedy_selection(scenario, weights: np.ndarray) -> np.ndarray:
 class GreedyPolicy(Policy):
     """Per-step greedy selection on the exact next-step covariance, weights P1 (privileged)."""
 
+    batching = "core"
+
     def __init__(self, env, tables: str | None = None):
         super().__init__(env)
         _, p_name = parse_tables(tables)
         self.scenario = _scenario(env)
         self.weights = paper_weights(p_name)
-
-    batching = "core"
 
     def batch_actions(self):
         selection = greedy_selection(self.scenario, self.weights[None])  # (B, N, N-1, n)

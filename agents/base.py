@@ -28,8 +28,9 @@ class Policy:
     batching   what the policy reads, and how it is batched
     ========== ===========================================================================
     per_copy   only the observations ``act`` is given, the env's spaces and agent names, and
-               its own generator: one instance per episode, each given its copy's
-               observations
+               its own generator: a shallow copy per episode, each given its copy's
+               observations (so state is replaced, as ``start_episode`` replaces the
+               generator, never mutated in place)
     core       the scenario core it was built on, every copy at once: built on a view of the
                batched core, :meth:`batch_actions` returns every copy's actions
     None       the env (or its core at batch 1) in ways that do not batch: the env loop only
