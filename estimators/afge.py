@@ -85,6 +85,8 @@ from functools import cached_property
 import numpy as np
 import scipy.linalg
 
+from estimators.compiled import renamed
+
 __all__ = [
     "SPEED_OF_LIGHT",
     "MODE_INFOS",
@@ -918,7 +920,9 @@ def _compiled(name: str):
             options = {"cache": True, "nogil": True, "boundscheck": False}
             global _numpy_sum
             _numpy_sum = numba.njit(**options)(_numpy_sum)
-            _KERNELS = {key: [numba.njit(**options)(fn), numba.njit(parallel=True, **options)(fn)]
+            # the threaded form compiles a renamed copy: with the same name it shares the serial form's
+            # disk-cache entry, and one of them loads the other's code (estimators.compiled.renamed)
+            _KERNELS = {key: [numba.njit(**options)(fn), numba.njit(parallel=True, **options)(renamed(fn, "_threaded"))]
                         for key, fn in (("buffer", _buffer_kernel_source), ("fuse", _fuse_kernel_source),
                                         ("costs", _costs_kernel_source), ("fixes", _fixes_kernel_source))}
     return _KERNELS.get(name)

@@ -124,12 +124,12 @@ at M = 400); unimodal tracking beliefs are not affected (h_rot ~ 1 m).
 from __future__ import annotations
 
 import math
-import types
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from estimators.compiled import renamed as _renamed
 from estimators.cv_models import ConstantVelocityAccel
 
 __all__ = [
@@ -933,19 +933,6 @@ def _fused_kernels() -> dict | None:
               for name, fn in (("weights", _belief_weights_source), ("resample", _belief_resample_source))}
     _FUSED["chunks"] = numba.parallel_chunksize
     return _FUSED
-
-
-def _renamed(fn, suffix: str):
-    """A copy of the function ``fn`` under the name ``fn.__name__ + suffix`` (same code, globals and closure).
-
-    numba's disk cache files a function's compiled forms by its name and signature, not by ``parallel``: a
-    serial and a threaded form of one function share an entry, and the next process's serial dispatcher may
-    load the threaded code (found so: the serial mixture kernel ran threaded, 7x slower, on a loaded machine).
-    """
-    copy = types.FunctionType(fn.__code__, fn.__globals__, fn.__name__ + suffix, fn.__defaults__, fn.__closure__)
-    copy.__qualname__ = fn.__qualname__ + suffix
-    copy.__module__ = fn.__module__
-    return copy
 
 
 # --- Algorithm 1 -------------------------------------------------------------------------------------------------

@@ -169,3 +169,12 @@ def test_compiled_without_numba_and_an_unknown_weighting_are_refused(monkeypatch
     monkeypatch.setattr(af, "_KERNELS", {})
     with pytest.raises(ValueError, match="compiled=True needs numba"):
         af.buffer_estimates(motion, af.empty_stack((2,), 4), 0, Y, y, gamma, compiled=True)
+
+
+@pytest.mark.parametrize("name", ["buffer", "fuse", "costs", "fixes"])
+def test_threaded_kernels_have_their_own_cache_entry(name):
+    """numba files cached code by function name and signature, not by ``parallel``: a threaded form compiled
+    from the serial function itself shared its entry and ran serial (estimators.compiled.renamed)."""
+    serial, threaded = af._compiled(name)
+    assert threaded.py_func.__name__ == serial.py_func.__name__ + "_threaded"
+    assert threaded.targetoptions.get("parallel") and not serial.targetoptions.get("parallel")
