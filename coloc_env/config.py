@@ -146,6 +146,11 @@ def check_psd(name: str, value: Any, n: int | None = None, strict: bool = False,
     return arr
 
 
+# The smallest standard deviation (m, m/s^2) or kernel bandwidth (m) a particle filter's config may set: it
+# divides by them squared, and a subnormal sigma squares to 0 (numba raises ZeroDivisionError there).
+MIN_STD = 1e-3
+
+
 def check_range(name: str, value: Any, low: float, high: float, integer: bool = False,
                 low_open: bool = False) -> None:
     """``low <= value <= high`` (``low < value`` if ``low_open``), or ``ValueError`` naming ``name``.

@@ -46,7 +46,7 @@ Arguments (``coloc_env.backends.Dnbp``; defaults = ``gps_denied_nbp``'s)
 | init               | "warm"     | "warm": particles from the initial belief; "cold": uniform over the |
 |                    |            | world's start region (wan2014's cold start; cv_accel worlds only)   |
 | box_margin         | 150        | [0, 1e7] m             |
-| min_bandwidth      | 0.5        | (0, 1e4] m             |
+| min_bandwidth      | 0.5        | [0.001, 1e4] m         |
 | initial_threshold  | 3          | 1..64 (at most N)      |
 | schedule           | "modified" | "modified", "parallel" |
 
@@ -72,6 +72,7 @@ import numpy as np
 import estimators.dnbp as dn
 import estimators.range_ls as rl
 from coloc_env.backends.base import Backend
+from coloc_env.config import MIN_STD
 from coloc_env.parts import BACKENDS, PartConfig, check_choice, check_range
 from estimators.kalman import symmetrize
 from estimators.models import predict_joint
@@ -105,7 +106,7 @@ class Dnbp(PartConfig):
         check_range(f"{prefix}oversampling", self.oversampling, 1, 16, integer=True)
         check_range(f"{prefix}defensive_weight", self.defensive_weight, 0.0, 0.999)
         check_range(f"{prefix}box_margin", self.box_margin, 0.0, 1e7)
-        check_range(f"{prefix}min_bandwidth", self.min_bandwidth, 0.0, 1e4, low_open=True)
+        check_range(f"{prefix}min_bandwidth", self.min_bandwidth, MIN_STD, 1e4)
         check_range(f"{prefix}initial_threshold", self.initial_threshold, 1, 64, integer=True)
         check_choice(f"{prefix}schedule", self.schedule, ("modified", "parallel"))
         check_choice(f"{prefix}init", self.init, ("warm", "cold"))

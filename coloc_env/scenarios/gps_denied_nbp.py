@@ -106,9 +106,9 @@ Arguments (fields of :class:`GpsDeniedNbpConfig`, defaults = spec §1)
 | nominal_velocity   | (20, 0)     | (2,)                      | v_nom [chosen]                               |
 | velocity_spread    | 2.0         | >= 0                      | sigma_v0 [chosen]                            |
 | accel_std          | 0.5         | >= 0                      | sigma_a,true [chosen]                        |
-| accel_noise_std    | 0.3         | > 0                       | sigma_acc [chosen]                           |
-| gps_std            | 3.0         | > 0                       | sigma_gps [chosen]                           |
-| range_std          | 2.0         | > 0                       | sigma_d [chosen]                             |
+| accel_noise_std    | 0.3         | [0.001, 1000]             | sigma_acc [chosen]                           |
+| gps_std            | 3.0         | [0.001, 10000]            | sigma_gps [chosen]                           |
+| range_std          | 2.0         | [0.001, 10000]            | sigma_d [chosen]                             |
 | comm_range         | 300         | > 0                       | R [chosen]; interesting band 200-350 [paper] |
 | p_normal_to_fault  | 0.02        | [0, 1]                    | p_nf [chosen]                                |
 | p_fault_to_normal  | 0.02        | [0, 1]                    | p_fn [chosen]                                |
@@ -119,7 +119,7 @@ Arguments (fields of :class:`GpsDeniedNbpConfig`, defaults = spec §1)
 | defensive_weight   | 0.01        | [0, 1)                    | eps_def [chosen]                             |
 | init               | "warm"      | "warm", "cold"            | tau = 0 knowledge [chosen]                   |
 | box_margin         | 150         | >= 0                      | cold box [-m, area+m]^2 [chosen]             |
-| min_bandwidth      | 0.5         | > 0                       | floor of h_ts [chosen]                       |
+| min_bandwidth      | 0.5         | [0.001, 10000]            | floor of h_ts [chosen]                       |
 | initial_threshold  | 3           | 1..N                      | theta_0 [paper]                              |
 | schedule           | "modified"  | "modified", "parallel"    | Sec. 3.4 [paper]; parallel = ablation        |
 | reward             | "team"      | "team", "own"             | see the reward table                         |
@@ -135,7 +135,7 @@ import numpy as np
 
 import estimators.dnbp as dn
 from coloc_env.backends.particles import Dnbp
-from coloc_env.config import as_array, check_choice, check_range
+from coloc_env.config import MIN_STD, as_array, check_choice, check_range
 from coloc_env.networks.broadcast import Broadcast
 from coloc_env.rendering import Link, Scene
 from coloc_env.scenarios.binding import PresetScenario
@@ -197,9 +197,10 @@ class GpsDeniedNbpConfig:
         check_range("velocity_spread", self.velocity_spread, 0.0, 1e4)
         check_range("dt", self.dt, 0.0, 1e3, low_open=True)
         check_range("accel_std", self.accel_std, 0.0, 1e3)
-        check_range("accel_noise_std", self.accel_noise_std, 0.0, 1e3, low_open=True)
-        check_range("gps_std", self.gps_std, 0.0, 1e4, low_open=True)
-        check_range("range_std", self.range_std, 0.0, 1e4, low_open=True)
+        # the particle filter divides by these squared (kernel bandwidths, likelihoods): coloc_env.config.MIN_STD
+        check_range("accel_noise_std", self.accel_noise_std, MIN_STD, 1e3)
+        check_range("gps_std", self.gps_std, MIN_STD, 1e4)
+        check_range("range_std", self.range_std, MIN_STD, 1e4)
         for part in (self.motion, self.gps, self.network):  # the fields above are checked under their own names
             part.validate()
         if self.num_normal is not None:
@@ -210,7 +211,7 @@ class GpsDeniedNbpConfig:
         check_range("defensive_weight", self.defensive_weight, 0.0, 0.999)
         check_choice("init", self.init, ("warm", "cold"))
         check_range("box_margin", self.box_margin, 0.0, 1e7)
-        check_range("min_bandwidth", self.min_bandwidth, 0.0, 1e4, low_open=True)
+        check_range("min_bandwidth", self.min_bandwidth, MIN_STD, 1e4)
         check_range("initial_threshold", self.initial_threshold, 1, self.num_uavs, integer=True)
         check_choice("schedule", self.schedule, ("modified", "parallel"))
         check_choice("reward", self.reward, ("team", "own"))

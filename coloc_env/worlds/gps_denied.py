@@ -33,9 +33,9 @@ Arguments (``coloc_env.worlds.GpsDenied``; defaults = ``gps_denied_nbp``'s)
 | nominal_velocity   | (20, 0)   | (2,) m/s                                     |
 | velocity_spread    | 2.0       | [0, 1e4] m/s                                 |
 | accel_std          | 0.5       | [0, 1000] m/s^2 true acceleration            |
-| accel_noise_std    | 0.3       | (0, 1000] m/s^2 accelerometer noise          |
-| gps_std            | 3.0       | (0, 1e4] m                                   |
-| range_std          | 2.0       | (0, 1e4] m                                   |
+| accel_noise_std    | 0.3       | [0.001, 1000] m/s^2 accelerometer noise    |
+| gps_std            | 3.0       | [0.001, 1e4] m                               |
+| range_std          | 2.0       | [0.001, 1e4] m                               |
 | comm_range         | 300       | (0, 1e7] m: the ranging radius               |
 | p_normal_to_fault  | 0.02      | [0, 1]                                       |
 | p_fault_to_normal  | 0.02      | [0, 1]                                       |
@@ -48,7 +48,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from coloc_env.config import as_array
+from coloc_env.config import MIN_STD, as_array
 from coloc_env.parts import WORLDS, PartConfig, check_range
 from coloc_env.world.cv_uav import ConstantVelocityUAVs
 from coloc_env.world.gps_markov import MarkovGPS
@@ -102,9 +102,9 @@ class GpsDenied(PartConfig):
         as_array(f"{prefix}nominal_velocity", self.nominal_velocity, shape=(2,))
         check_range(f"{prefix}velocity_spread", self.velocity_spread, 0.0, 1e4)
         check_range(f"{prefix}accel_std", self.accel_std, 0.0, 1e3)
-        check_range(f"{prefix}accel_noise_std", self.accel_noise_std, 0.0, 1e3, low_open=True)
-        check_range(f"{prefix}gps_std", self.gps_std, 0.0, 1e4, low_open=True)
-        check_range(f"{prefix}range_std", self.range_std, 0.0, 1e4, low_open=True)
+        check_range(f"{prefix}accel_noise_std", self.accel_noise_std, MIN_STD, 1e3)
+        check_range(f"{prefix}gps_std", self.gps_std, MIN_STD, 1e4)
+        check_range(f"{prefix}range_std", self.range_std, MIN_STD, 1e4)
         check_range(f"{prefix}comm_range", self.comm_range, 0.0, 1e7, low_open=True)
         check_range(f"{prefix}p_normal_to_fault", self.p_normal_to_fault, 0.0, 1.0)
         check_range(f"{prefix}p_fault_to_normal", self.p_fault_to_normal, 0.0, 1.0)

@@ -71,6 +71,10 @@ def test_spaces_state_render_and_infos():
     ({"num_uavs": 1}, "num_uavs"),
     ({"p_normal_to_fault": 1.5}, "p_normal_to_fault"),
     ({"gps_std": 0.0}, "gps_std"),
+    # subnormal: squared it is 0, and the particle kernels divide by it (found by hypothesis)
+    ({"gps_std": 5e-324}, r"gps_std must be in \[0.001, 10000"),
+    ({"min_bandwidth": 5e-324}, "min_bandwidth"),
+    ({"accel_noise_std": 1e-300}, "accel_noise_std"),
     ({"range_std": -1.0}, "range_std"),
     ({"comm_range": 0.0}, "comm_range"),
     ({"num_normal": 11}, "num_normal"),
