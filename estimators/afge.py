@@ -297,22 +297,19 @@ def packet_fixes(signal: SignalModel, sender_position, rss, aoa, m, compiled: bo
     :func:`_fixes_kernel_source`, equal to this numpy form (``compiled=False``, the reference) to
     rounding: tests hold it to 1e-9.
     """
-    kernels = _compiled("fixes") if compiled in (None, True) else None
-    if compiled and kernels is None:
-        raise ValueError("compiled=True needs numba, which is not installed")
+    kernels = _kernels("fixes", compiled)
     if kernels is not None:
         shape = np.broadcast_shapes(np.shape(sender_position)[:-1], np.shape(rss), np.shape(aoa), np.shape(m))
         P = int(np.prod(shape, dtype=np.int64))
-        sender = np.ascontiguousarray(np.broadcast_to(sender_position, (*shape, 2)), float).reshape(P, 2)
-        flat = [np.ascontiguousarray(np.broadcast_to(a, shape), float).reshape(P) for a in (rss, aoa, m)]
+        sender = _flat(sender_position, shape, (2,), float)
+        flat = [_flat(a, shape, (), float) for a in (rss, aoa, m)]
         constants = (signal.sigma_db**2, signal.nlos_sigma_db**2, signal.nlos_bias_db**2, signal.sigma_theta**2,
                      signal.nlos_sigma_theta**2, signal.nlos_bias_theta**2, float(signal.nlos_bias_db),
                      float(signal.nlos_bias_theta), signal.tx_power_dbm - signal.reference_loss_db,
                      10.0 * signal.exponent, float(signal.d0), np.log(10.0) / (10.0 * signal.exponent),
                      signal.sigma_nav**2)
         z, R, r_hat = np.empty((P, 2)), np.empty((P, 2, 2)), np.empty(P)
-        kernel = kernels[1] if P >= _PARALLEL_ELEMENTS else kernels[0]
-        kernel(sender, *flat, tuple(float(v) for v in constants), z, R, r_hat)
+        _for_size(kernels, P)(sender, *flat, tuple(float(v) for v in constants), z, R, r_hat)
         return z.reshape(*shape, 2), R.reshape(*shape, 2, 2), r_hat.reshape(shape)
     m = np.asarray(m, float)
     var_db = signal.sigma_db**2 + m * signal.nlos_sigma_db**2 + m * (1.0 - m) * signal.nlos_bias_db**2
@@ -421,9 +418,7 @@ def fuse_packets(signal: SignalModel, rss, aoa, nav, modes, delays, lags, keep, 
     if weighting not in WEIGHTINGS:
         raise ValueError(f"weighting must be one of {WEIGHTINGS}, got {weighting!r}")
     lags = np.asarray(lags)
-    kernels = _compiled("fuse") if compiled in (None, True) else None
-    if compiled and kernels is None:
-        raise ValueError("compiled=True needs numba, which is not installed")
+    kernels = _kernels("fuse", compiled)
     if kernels is None:
         known = known_at_lag(delays, np.where(lags >= 0, lags, -1)[..., None]) & (lags >= 0)[..., None]
         used = select_strongest(rss, known & keep, n_strongest)
@@ -434,14 +429,14 @@ def fuse_packets(signal: SignalModel, rss, aoa, nav, modes, delays, lags, keep, 
     M = int(np.prod(batch, dtype=np.int64))
 
     def flat(a, tail, dtype):
-        return np.ascontiguousarray(np.broadcast_to(a, (*batch, *tail)), dtype).reshape(M, *tail)
+        return _flat(a, batch, tail, dtype)
 
     out_Y, out_y = np.empty((M, 2, 2)), np.empty((M, 2))
     out_gamma, out_used = np.empty(M, bool), np.empty((M, J), bool)
-    kernel = kernels[1] if M >= _PARALLEL_ELEMENTS else kernels[0]
-    kernel(flat(z, (J, 2), float), flat(R, (J, 2, 2), float), flat(r_hat, (J,), float), flat(rss, (J,), float),
-           flat(delays, (J,), np.int64), flat(lags, (), np.int64), flat(keep, (J,), bool), int(n_strongest),
-           weighting == "distance", int(min_packets), out_Y, out_y, out_gamma, out_used)
+    _for_size(kernels, M)(
+        flat(z, (J, 2), float), flat(R, (J, 2, 2), float), flat(r_hat, (J,), float), flat(rss, (J,), float),
+        flat(delays, (J,), np.int64), flat(lags, (), np.int64), flat(keep, (J,), bool), int(n_strongest),
+        weighting == "distance", int(min_packets), out_Y, out_y, out_gamma, out_used)
     return (out_Y.reshape(*batch, 2, 2), out_y.reshape(*batch, 2), out_gamma.reshape(batch),
             out_used.reshape(*batch, J))
 
@@ -928,6 +923,27 @@ def _compiled(name: str):
     return _KERNELS.get(name)
 
 
+
+def _kernels(name: str, compiled: bool | None):
+    """:func:`_compiled` ``name`` where ``compiled`` asks for it (None: where numba is installed), else None
+    (the numpy reference path); ``compiled=True`` without numba is refused."""
+    kernels = _compiled(name) if compiled in (None, True) else None
+    if compiled and kernels is None:
+        raise ValueError("compiled=True needs numba, which is not installed")
+    return kernels
+
+
+def _for_size(kernels, elements: int):
+    """The threaded form from :data:`_PARALLEL_ELEMENTS` elements on, the serial one below."""
+    return kernels[1] if elements >= _PARALLEL_ELEMENTS else kernels[0]
+
+
+def _flat(a, batch: tuple, tail: tuple, dtype) -> np.ndarray:
+    """``a`` broadcast to (*batch, *tail) as a C-ordered (prod(batch), *tail) array of ``dtype``: the kernels'
+    row layout."""
+    rows = int(np.prod(batch, dtype=np.int64))
+    return np.ascontiguousarray(np.broadcast_to(a, (*batch, *tail)), dtype).reshape(rows, *tail)
+
 def buffer_estimates(motion: MotionModel, final: HorizonStack, k, buffer_info, buffer_vector, buffer_success,
                      shift: bool = True, accel_var=None, min_stamps: int = 2, compiled: bool | None = None):
     """:func:`buffer_step` then :func:`stack_estimates` of the current stack: (final, x, P, valid).
@@ -938,9 +954,7 @@ def buffer_estimates(motion: MotionModel, final: HorizonStack, k, buffer_info, b
     numpy path to rounding: tests hold it to 1e-9), instead of the numpy block form
     (``compiled=False``), which is the reference and the path without numba.
     """
-    kernels = _compiled("buffer") if compiled in (None, True) else None
-    if compiled and kernels is None:
-        raise ValueError("compiled=True needs numba, which is not installed")
+    kernels = _kernels("buffer", compiled)
     if kernels is None:
         final, current = buffer_step(motion, final, k, buffer_info, buffer_vector, buffer_success, shift, accel_var)
         return (final, *stack_estimates(current, min_stamps))
@@ -948,20 +962,19 @@ def buffer_estimates(motion: MotionModel, final: HorizonStack, k, buffer_info, b
     D1 = np.shape(buffer_success)[-1]
     M = int(np.prod(batch, dtype=np.int64))
     q = motion.accel_sigma**2 if accel_var is None else np.asarray(accel_var, float)
-    inv_q = np.ascontiguousarray(np.broadcast_to(1.0 / q, batch), float).reshape(M)
-    info = np.ascontiguousarray(final.info, float).reshape(M, S, 4, 4)
-    vector = np.ascontiguousarray(final.vector, float).reshape(M, S, 4)
-    stamps = np.ascontiguousarray(final.stamps, np.int64).reshape(M, S)
-    Yb = np.ascontiguousarray(np.broadcast_to(buffer_info, (*batch, D1, 2, 2)), float).reshape(M, D1, 2, 2)
-    yb = np.ascontiguousarray(np.broadcast_to(buffer_vector, (*batch, D1, 2)), float).reshape(M, D1, 2)
-    gb = np.ascontiguousarray(np.broadcast_to(buffer_success, (*batch, D1)), np.int64).reshape(M, D1)
-    kk = np.ascontiguousarray(np.broadcast_to(np.asarray(k, np.int64), batch)).reshape(M)
+    inv_q = _flat(1.0 / q, batch, (), float)
+    info = _flat(final.info, batch, (S, 4, 4), float)
+    vector = _flat(final.vector, batch, (S, 4), float)
+    stamps = _flat(final.stamps, batch, (S,), np.int64)
+    Yb = _flat(buffer_info, batch, (D1, 2, 2), float)
+    yb = _flat(buffer_vector, batch, (D1, 2), float)
+    gb = _flat(buffer_success, batch, (D1,), np.int64)
+    kk = _flat(np.asarray(k, np.int64), batch, (), np.int64)
     out_info, out_vector = np.empty_like(info), np.empty_like(vector)
     out_stamps = np.empty_like(stamps)
     x, P, valid = np.empty((M, S, 4)), np.empty((M, S, 4, 4)), np.empty((M, S), bool)
-    kernel = kernels[1] if M >= _PARALLEL_ELEMENTS else kernels[0]
-    kernel(info, vector, stamps, Yb, yb, gb, kk, bool(shift), inv_q, float(motion.period), int(min_stamps),
-           out_info, out_vector, out_stamps, x, P, valid)
+    _for_size(kernels, M)(info, vector, stamps, Yb, yb, gb, kk, bool(shift), inv_q, float(motion.period),
+                          int(min_stamps), out_info, out_vector, out_stamps, x, P, valid)
     new_final = HorizonStack(out_info.reshape(*batch, S, 4, 4), out_vector.reshape(*batch, S, 4),
                              out_stamps.reshape(*batch, S))
     return new_final, x.reshape(*batch, S, 4), P.reshape(*batch, S, 4, 4), valid.reshape(*batch, S)
@@ -1012,20 +1025,17 @@ def predictive_costs(motion: MotionModel, prev_x, prev_P, prev_valid, z, R, comp
     :func:`_costs_kernel_source`, equal to this numpy form (``compiled=False``, the reference) to
     rounding: tests hold it to 1e-9.
     """
-    kernels = _compiled("costs") if compiled in (None, True) else None
-    if compiled and kernels is None:
-        raise ValueError("compiled=True needs numba, which is not installed")
+    kernels = _kernels("costs", compiled)
     T = float(motion.period)
     if kernels is not None:
         batch = np.broadcast_shapes(np.shape(prev_valid)[:-1], np.shape(z)[:-1], np.shape(R)[:-2])
         S = np.shape(prev_valid)[-1]
         M = int(np.prod(batch, dtype=np.int64))
-        flat = [np.ascontiguousarray(np.broadcast_to(a, (*batch, *tail)), dtype).reshape(M, *tail)
-                for a, tail, dtype in ((prev_x, (S, 4), float), (prev_P, (S, 4, 4), float),
-                                       (prev_valid, (S,), bool), (z, (2,), float), (R, (2, 2), float))]
+        flat = [_flat(a, batch, tail, dtype) for a, tail, dtype in ((prev_x, (S, 4), float), (prev_P, (S, 4, 4), float),
+                                                                     (prev_valid, (S,), bool), (z, (2,), float),
+                                                                     (R, (2, 2), float))]
         out = np.empty((M, S))
-        kernel = kernels[1] if M >= _PARALLEL_ELEMENTS else kernels[0]
-        kernel(*flat, T, np.ascontiguousarray(motion.process_cov, float), out)
+        _for_size(kernels, M)(*flat, T, np.ascontiguousarray(motion.process_cov, float), out)
         return out.reshape(*batch, S)
     e0 = z[..., None, 0] - (prev_x[..., 0] + T * prev_x[..., 2])
     e1 = z[..., None, 1] - (prev_x[..., 1] + T * prev_x[..., 3])
