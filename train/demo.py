@@ -1,6 +1,6 @@
 """``make demo``: every paper reproduced in quick mode and a short PPO run per simulated scenario, on both cores.
 
-``python -m train.demo [--out results] [--python PY]`` runs the stages below in two lanes side by side,
+``python -m train.demo [--out results] [--coloc COMMAND]`` runs the stages below in two lanes side by side,
 one process per lane at a time, each single-threaded (BLAS, numba and torch: two lanes of one thread fill
 two cores without oversubscribing them; numbers do not depend on the thread count beyond the last bits
 of a BLAS sum). Each stage is a ``coloc`` command; its output goes to ``OUT/.demo_lane<L>.log`` and this

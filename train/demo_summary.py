@@ -115,19 +115,15 @@ def _records(folder: str) -> tuple[list[tuple[int, int, str]] | None, str]:
     return records, path
 
 
-def stage_times(folder: str) -> tuple[list[tuple[str, int]] | None, str]:
-    """[(stage, seconds)] from ``.demo_times``, or (None, what is missing). Malformed lines are skipped."""
+def stage_times(folder: str) -> tuple[list[tuple[str, int]] | None, int | None, str]:
+    """([(stage, seconds)], wall-clock seconds, where) from ``.demo_times``, or (None, None, what is missing).
+    The wall clock runs from the first stage's start to the last one's end (the demo runs stages side by
+    side, so it is less than their sum; None without a stage). Malformed lines are skipped."""
     records, where = _records(folder)
-    return (None if records is None else [(stage, end - start) for start, end, stage in records]), where
-
-
-def wall_seconds(folder: str) -> int | None:
-    """Seconds from the first stage's start to the last one's end (the demo runs stages side by side, so
-    this is less than their sum); None without a stage."""
-    records, _ = _records(folder)
-    if not records:
-        return None
-    return max(end for _, end, _ in records) - min(start for start, _, _ in records)
+    if records is None:
+        return None, None, where
+    wall = max(e for _, e, _ in records) - min(s for s, _, _ in records) if records else None
+    return [(stage, end - start) for start, end, stage in records], wall, where
 
 
 def _duration(seconds: int) -> str:
@@ -172,7 +168,7 @@ def summary(folder: str) -> str:
                  f"{len(curves)} learning curves in {folder}/train/<scenario>/seed*/learning_curve.png")
 
     lines += ["", "Stage times:"]
-    stages, where = stage_times(folder)
+    stages, wall, where = stage_times(folder)
     if stages is None:
         lines.append(f"  {where}")
     elif not stages:
@@ -182,7 +178,7 @@ def summary(folder: str) -> str:
         lines += [f"  {stage:<{width}}  {_duration(sec):>12}" for stage, sec in stages]
         width = max(width, len("wall clock (two lanes side by side)"))
         lines.append(f"  {'total of the stages':<{width}}  {_duration(sum(s for _, s in stages)):>12}")
-        lines.append(f"  {'wall clock (two lanes side by side)':<{width}}  {_duration(wall_seconds(folder)):>12}")
+        lines.append(f"  {'wall clock (two lanes side by side)':<{width}}  {_duration(wall):>12}")
     return "\n".join(lines)
 
 

@@ -8,7 +8,7 @@ import pytest
 
 import agents
 import train.evaluate as ev
-from tests.conftest import MRCLAM_DATASET6, MRCLAM_SKIP_REASON
+from tests.conftest import MRCLAM_DATASET6, needs_mrclam
 
 SMALL = {
     "bandwidth_fusion": {"horizon": 12},
@@ -23,22 +23,14 @@ SMALL = {
 def _cases():
     for scenario in SMALL:
         names = agents.available_policies(scenario) + agents.bound_policies(scenario)
+        marks = [needs_mrclam] if scenario == "mrclam_relay" else []
         for name in [*names, *ev.EXTRA_ROWS.get(scenario, ())]:
-            yield scenario, name
-
-
-def _config(scenario):
-    if scenario == "mrclam_relay":
-        import os
-
-        if not os.path.isdir(MRCLAM_DATASET6):
-            pytest.skip(MRCLAM_SKIP_REASON)
-    return SMALL[scenario]
+            yield pytest.param(scenario, name, marks=marks)
 
 
 @pytest.mark.parametrize(("scenario", "name"), list(_cases()))
 def test_batched_policy_equals_the_env_loop(scenario, name):
-    config = _config(scenario)
+    config = SMALL[scenario]
     batched = ev.run_policy_batched(scenario, name, 3, 77, **config)
     assert batched is not None, f"{scenario} {name} does not batch"
     looped = ev.run_episodes(scenario, name, 3, 77, **config)
