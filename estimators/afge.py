@@ -923,7 +923,6 @@ def _compiled(name: str):
     return _KERNELS.get(name)
 
 
-
 def _kernels(name: str, compiled: bool | None):
     """:func:`_compiled` ``name`` where ``compiled`` asks for it (None: where numba is installed), else None
     (the numpy reference path); ``compiled=True`` without numba is refused."""
@@ -943,6 +942,7 @@ def _flat(a, batch: tuple, tail: tuple, dtype) -> np.ndarray:
     row layout."""
     rows = int(np.prod(batch, dtype=np.int64))
     return np.ascontiguousarray(np.broadcast_to(a, (*batch, *tail)), dtype).reshape(rows, *tail)
+
 
 def buffer_estimates(motion: MotionModel, final: HorizonStack, k, buffer_info, buffer_vector, buffer_success,
                      shift: bool = True, accel_var=None, min_stamps: int = 2, compiled: bool | None = None):
