@@ -43,10 +43,9 @@ test: $(STAMP)
 	$(VENV)/bin/ruff check .
 	MPLBACKEND=Agg $(PY) -m pytest -q -n 2
 
-# TorchRL's check_env_specs on every preset and some compositions, and the client examples of docs/clients
-# (TorchRL installs beside torch 2.13.0; its import alone takes seconds, so it stays out of `make test`).
+# The client checks alone (they are part of `make test` too): PettingZoo's module convention, TorchRL's
+# check_env_specs on every preset and some compositions, and the SB3 / TorchRL examples of docs/clients.
 test-clients: $(STAMP)
-	$(PY) -m pip install --quiet -e '.[test,torchrl]'
 	MPLBACKEND=Agg $(PY) -m pytest -q -p no:xdist tests/test_clients.py
 
 # RLlib pins an older gymnasium (ray[rllib] 2.60: gymnasium==1.2.2) than the main venv's: its example

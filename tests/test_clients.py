@@ -1,6 +1,7 @@
 """The MARL clients people use run on coloc: PettingZoo's module convention (``max_cycles``), TorchRL's
 ``PettingZooWrapper`` + ``check_env_specs`` on every preset and on compositions, and the client examples
 under ``docs/clients`` (SB3 + SuperSuit, TorchRL; the RLlib one runs in its own venv, ``make rllib-example``).
+TorchRL is in the ``test`` extra, so ``make test`` runs its checks; they skip only where it is not installed.
 """
 
 from __future__ import annotations
@@ -18,13 +19,13 @@ from pettingzoo.utils.wrappers import OrderEnforcingWrapper
 import coloc_env
 from coloc_env.env import episode_length_field
 from coloc_env.envs import PRESET_MODULES
+from tests.conftest import MRCLAM_DATASET6 as DATASET6
+from tests.conftest import MRCLAM_SKIP_REASON as NO_MRCLAM
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CLIENTS = os.path.join(REPO, "docs", "clients")
-DATASET6 = os.environ.get("COLOC_MRCLAM_DATA") or os.path.join(REPO, "..", "shared", "data", "mrclam",
-                                                                  "MRCLAM_Dataset6")
 HAVE_MRCLAM = os.path.isdir(DATASET6)
-NO_MRCLAM = f"MRCLAM dataset 6 not found at {DATASET6} (set COLOC_MRCLAM_DATA)"
+NO_TORCHRL = "torchrl is not installed (it is in the test extra: pip install -e '.[test]')"
 
 # Small settings keeping each check under a second or two (episode length comes from max_cycles).
 FAST = {"gps_denied_nbp": {"num_particles": 40}, "mrclam_relay": {"data": DATASET6}}
@@ -147,7 +148,7 @@ COMPOSITIONS = [
 
 def _torchrl_check(env, steps: int) -> None:
     """``check_env_specs`` and a rollout whose rewards are those the coloc env gives for the same actions."""
-    torchrl_pettingzoo = pytest.importorskip("torchrl.envs.libs.pettingzoo", reason="torchrl is not installed")
+    torchrl_pettingzoo = pytest.importorskip("torchrl.envs.libs.pettingzoo", reason=NO_TORCHRL)
     from torchrl.envs.utils import check_env_specs
 
     with warnings.catch_warnings():
@@ -165,7 +166,7 @@ def _torchrl_check(env, steps: int) -> None:
 
 def _torchrl_matches_coloc(make_env, steps: int) -> None:
     """Replaying a TorchRL rollout's actions in a fresh coloc env with the same seed gives its rewards."""
-    torchrl_pettingzoo = pytest.importorskip("torchrl.envs.libs.pettingzoo", reason="torchrl is not installed")
+    torchrl_pettingzoo = pytest.importorskip("torchrl.envs.libs.pettingzoo", reason=NO_TORCHRL)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         wrapped = torchrl_pettingzoo.PettingZooWrapper(make_env(), use_mask=False, categorical_actions=False)
@@ -216,7 +217,7 @@ def test_sb3_supersuit_example_trains_the_transitions_it_says():
 
 
 def test_torchrl_example_rolls_out_every_platform():
-    pytest.importorskip("torchrl", reason="torchrl is not installed")
+    pytest.importorskip("torchrl", reason="torchrl is not installed (pip install -e '.[test]')")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         rollout = _example("torchrl_rollout.py")["main"](steps=5, seed=0)

@@ -47,16 +47,19 @@ to the receiver (neighbour k of ``uav_i`` is ``uav_{(i+1+k) mod N}``).
 
 Out-of-range actions are clipped to [-1, 1]; a NaN or inf is a ``ValueError``.
 
-Observation (per agent, ``Box(-inf, inf, shape=(n + (N-1)*n + 1,), float32)``)
----------------------------------------------------------------------------
-| index                    | meaning                                                      |
-|--------------------------|--------------------------------------------------------------|
-| ``[0, n)``               | log of the diagonal of the node's own bound matrix M_i(k)    |
-|                          | (eq. 19; local: it needs only the neighbours' M, which the   |
-|                          | paper assumes known). Log because M can grow like 1.5^k.     |
-| ``[n, n + (N-1)*n)``     | steps since each (neighbour, component) was last received,   |
-|                          | divided by the horizon (0 at reset: all nodes start equal)   |
-| ``[-1]``                 | step fraction k / horizon                                    |
+Observation (per agent, ``Box(shape=(n + (N-1)*n + 1,), float32)``)
+---------------------------------------------------------------
+| index                    | meaning                                                      | bounds    |
+|--------------------------|--------------------------------------------------------------|-----------|
+| ``[0, n)``               | log of the diagonal of the node's own bound matrix M_i(k)    | unbounded |
+|                          | (eq. 19; local: it needs only the neighbours' M, which the   |           |
+|                          | paper assumes known). Log because M can grow like 1.5^k.     |           |
+| ``[n, n + (N-1)*n)``     | steps since each (neighbour, component) was last received,   | [0, 1]    |
+|                          | divided by the horizon (0 at reset: all nodes start equal)   |           |
+| ``[-1]``                 | step fraction k / horizon                                    | [0, 1]    |
+
+The log-diagonal is unbounded: a selection that starves a component lets M_i grow without limit
+(like 1.5^k), and a well-fed one shrinks it towards 0. (Before, every entry was unbounded.)
 
 ``state()`` (centralized critic): every agent's observation, then
 log diag Sigma_i(k) of the exact error covariance of every node.
@@ -400,7 +403,10 @@ class BandwidthFusionScenario(PresetScenario):
         return self.n + (self.num_agents - 1) * self.n + 1
 
     def observation_space(self):
-        return gymnasium.spaces.Box(-np.inf, np.inf, shape=(self.obs_dim,), dtype=np.float32)
+        unbounded, fractions = self.n, (self.num_agents - 1) * self.n + 1
+        low = np.concatenate([np.full(unbounded, -np.inf), np.zeros(fractions)])
+        high = np.concatenate([np.full(unbounded, np.inf), np.ones(fractions)])
+        return gymnasium.spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
 
     def action_space(self):
         return self._preset_action_space

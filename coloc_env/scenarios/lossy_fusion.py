@@ -52,18 +52,22 @@ clipped, a NaN or inf is a ``ValueError``.
 
 The followers' weight entries and the leader's transmit entry are ignored.
 
-Observation (per agent, ``Box(-inf, inf, shape=(3 + 4 (L-1),), float32)``)
---------------------------------------------------------------------------
-| index                      | leader                                        | follower                |
-|----------------------------|-----------------------------------------------|-------------------------|
-| ``[0]``                    | 1 (role)                                      | 0                       |
-| ``[1]``                    | slots done / horizon                          | same                    |
-| ``[2]``                    | log tr P0 (its fused covariance, eq. 30)      | log tr of its own P(k|k)|
-| ``[3, 3+(L-1))``           | per follower, slots since its held packet     | 0                       |
-|                            | arrived, / 10 (with ``time_stamps``: the      |                         |
-|                            | packet's age, slots since it was formed)      |                         |
-| ``[3+(L-1), 3+4(L-1))``    | log tr of the three covariances in that       | 0                       |
-|                            | packet, follower-major                        |                         |
+Observation (per agent, ``Box(shape=(3 + 4 (L-1),), float32)``)
+-------------------------------------------------------------
+| index                      | leader                                        | follower                | bounds    |
+|----------------------------|-----------------------------------------------|-------------------------|-----------|
+| ``[0]``                    | 1 (role)                                      | 0                       | [0, 1]    |
+| ``[1]``                    | slots done / horizon                          | same                    | [0, 1]    |
+| ``[2]``                    | log tr P0 (its fused covariance, eq. 30)      | log tr of its own P(k|k)| unbounded |
+| ``[3, 3+(L-1))``           | per follower, slots since its held packet     | 0                       | [0, inf)  |
+|                            | arrived, / 10 (with ``time_stamps``: the      |                         |           |
+|                            | packet's age, slots since it was formed)      |                         |           |
+| ``[3+(L-1), 3+4(L-1))``    | log tr of the three covariances in that       | 0                       | unbounded |
+|                            | packet, follower-major                        |                         |           |
+
+The log-traces are unbounded (a filter fed by nothing but losses grows its covariance without
+limit); the packet ages have no upper bound, since a link can lose every packet of an episode of any
+``horizon``. (Before, every entry was unbounded.)
 
 Packets carry no time stamp in the paper, so without ``time_stamps`` the leader cannot
 tell a late packet from an on-time one: it knows only when each packet arrived (a late
@@ -305,7 +309,10 @@ class LossyFusionScenario(PresetScenario):
         return 3 + 4 * (self.num_agents - 1)
 
     def observation_space(self):
-        return gymnasium.spaces.Box(-np.inf, np.inf, shape=(self.obs_dim,), dtype=np.float32)
+        followers = self.num_agents - 1
+        low = np.concatenate([[0.0, 0.0, -np.inf], np.zeros(followers), np.full(3 * followers, -np.inf)])
+        high = np.concatenate([[1.0, 1.0, np.inf], np.full(followers, np.inf), np.full(3 * followers, np.inf)])
+        return gymnasium.spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
 
     def state_space(self):
         dim = self.num_agents * self.obs_dim + 3 * (self.num_agents - 1)

@@ -86,18 +86,22 @@ If a robot recorded the same robot twice in one step, the first line in file
 order is the one used (dataset 6 has no such case). Non-integer or
 out-of-range actions and NaN/inf are a ``ValueError``.
 
-Observation (per agent, ``Box(-inf, inf, shape=(3N + 3,), float32)``)
---------------------------------------------------------------------
-| index             | meaning                                                                 |
-|-------------------|-------------------------------------------------------------------------|
-| ``[0, N)``        | one-hot of the agent's own index (shared policy, absolute actions)       |
-| ``[N, 2N)``       | 1 where the agent recorded a measurement of robot j at this step (the    |
-|                   | choices of action index 0), else 0                                      |
-| ``[2N]``          | landmark sightings it recorded at this step                             |
-| ``[2N+1, 3N+1)``  | distance to each robot / 10 m (Vicon; 0 for itself): link-layer          |
-|                   | knowledge, as in ``relay_ukf``                                           |
-| ``[3N+1]``        | log tr of its own position covariance (m^2)                             |
-| ``[3N+2]``        | step fraction k / window_steps                                          |
+Observation (per agent, ``Box(shape=(3N + 3,), float32)``)
+--------------------------------------------------------
+| index             | meaning                                                                 | bounds    |
+|-------------------|-------------------------------------------------------------------------|-----------|
+| ``[0, N)``        | one-hot of the agent's own index (shared policy, absolute actions)       | [0, 1]    |
+| ``[N, 2N)``       | 1 where the agent recorded a measurement of robot j at this step (the    | [0, 1]    |
+|                   | choices of action index 0), else 0                                      |           |
+| ``[2N]``          | landmark sightings it recorded at this step                             | [0, inf)  |
+| ``[2N+1, 3N+1)``  | distance to each robot / 10 m (Vicon; 0 for itself): link-layer          | [0, inf)  |
+|                   | knowledge, as in ``relay_ukf``                                           |           |
+| ``[3N+1]``        | log tr of its own position covariance (m^2)                             | unbounded |
+| ``[3N+2]``        | step fraction k / window_steps                                          | [0, 1]    |
+
+The sighting count and the distances have no upper bound in the model (a data set may hold any
+number of sightings per step, robots anywhere); the log-trace is unbounded because a robot that sees
+nothing dead-reckons with a growing covariance. (Before, every entry was unbounded.)
 
 After the last step the measurement entries are 0. ``state()`` (centralized
 critic): every agent's observation, then the log of the diagonal of each
@@ -410,7 +414,10 @@ class MrclamRelayScenario(PresetScenario):
         return 3 * self.num_agents + 3
 
     def observation_space(self):
-        return gymnasium.spaces.Box(-np.inf, np.inf, shape=(self.obs_dim,), dtype=np.float32)
+        N = self.num_agents
+        low = np.concatenate([np.zeros(2 * N + 1 + N), [-np.inf], [0.0]])
+        high = np.concatenate([np.ones(2 * N), np.full(1 + N, np.inf), [np.inf], [1.0]])
+        return gymnasium.spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
 
     def action_space(self):
         N = self.num_agents
