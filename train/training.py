@@ -18,10 +18,12 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import sys
 
 import numpy as np
 
 from train.io import write_json
+from train.leaderboard import metric
 
 MAX_TRAINING_SEED = 10**5  # keeps S + c far below the validation and evaluation seed ranges
 CURVE_POINTS = 10
@@ -89,7 +91,7 @@ def make_vec_env(scenario: str, copies: int, env_config: dict, seed: int, vec: s
     raise ValueError(f"vec must be 'native' or 'supersuit', got {vec!r}")
 
 
-def _callbacks(scenario: str, folder: str, timesteps: int, curve: list, points: int):
+def _callbacks(scenario: str, folder: str, timesteps: int, curve: list, points: int, report=None):
     from stable_baselines3.common.callbacks import BaseCallback
 
     from train.evaluate import VALIDATION_SEED_BASE, run_model_batched
@@ -127,11 +129,17 @@ def _callbacks(scenario: str, folder: str, timesteps: int, curve: list, points: 
                 result = run_model_batched(self.model, scenario, CURVE_EPISODES, VALIDATION_SEED_BASE)
                 curve.append((int(self.num_timesteps), result["mean_cost"], result["ci95"]))
                 # the best point on the validation seeds is the model that is kept (never the evaluation seeds)
-                if self.best is None or result["mean_cost"] < self.best[0]:
+                better = self.best is None or result["mean_cost"] < self.best[0]
+                if better:
                     tmp = os.path.join(folder, ".tmp-best.zip")
                     self.model.save(tmp)
                     os.replace(tmp, os.path.join(folder, "best.zip"))
                     self.best = (float(result["mean_cost"]), int(self.num_timesteps))
+                if report is not None:
+                    unit = metric(scenario)[1]
+                    report(f"{self.num_timesteps:,} timesteps (budget {timesteps:,}): validation error "
+                           f"{result['mean_cost']:.4g} +- {result['ci95']:.3g} {unit} ({CURVE_EPISODES} episodes)"
+                           + (", the best so far" if better else ""))
 
     return CheckpointAndCurve()
 
@@ -212,8 +220,15 @@ def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = 
                     tensorboard_log=os.path.join(folder, "tb") if tensorboard else None, **hyper)
         model.action_space.seed(seed)
         curve: list = []
-        callback = _callbacks(scenario, folder, timesteps, curve, curve_points)
-        model.learn(total_timesteps=timesteps, progress_bar=progress_bar, callback=callback)
+        # SB3's live bar on a terminal; elsewhere (a pipe, a log file) a plain line per validation point,
+        # since a redrawn bar there is one line hundreds of columns wide
+        live_bar = progress_bar and sys.stdout.isatty()
+        report = None
+        if progress_bar and not live_bar:
+            def report(message: str) -> None:
+                print(f"{scenario} seed {seed}: {message}", flush=True)
+        callback = _callbacks(scenario, folder, timesteps, curve, curve_points, report)
+        model.learn(total_timesteps=timesteps, progress_bar=live_bar, callback=callback)
     finally:
         torch.set_num_threads(threads)
     path = os.path.join(folder, "model.zip")

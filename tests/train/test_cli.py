@@ -41,6 +41,13 @@ def test_train_then_evaluate_a_saved_model(tmp_path, capsys):
     assert curve["points"][-1]["timesteps"] >= 512 and len(curve["points"]) >= 2
     assert os.path.isfile(os.path.join(folder, "learning_curve.png"))
     assert os.path.isfile(os.path.join(folder, "checkpoint.zip"))
+    # off a terminal (capsys): no redrawn bar, one plain line per validation point, in the metric's unit
+    printed = capsys.readouterr().out.splitlines()
+    points = [line for line in printed if line.startswith("bandwidth_fusion seed 3: ")]
+    assert len(points) == len(curve["points"]) and all(" (budget 512): validation error " in p for p in points)
+    assert all(p.split(" m^2 (")[0].endswith(f"{q['mean_cost']:.4g} +- {q['ci95']:.3g}")
+               for p, q in zip(points, curve["points"], strict=True))
+    assert max(len(line) for line in printed) < 200
     assert main(["evaluate", "bandwidth_fusion", "--policy", model, "--episodes", "3", "--out", out]) == 0
     assert main(["evaluate", "bandwidth_fusion", "--policy", "paper", "--episodes", "3", "--out", out]) == 0
     table = read_json(os.path.join(out, "zhao2020", "leaderboard.json"))
