@@ -11,6 +11,7 @@ from stable_baselines3 import PPO
 
 import agents
 import coloc_env
+from tests.conftest import MRCLAM_DATA_ENV, MRCLAM_DATASET6, needs_mrclam
 from train.training import train
 
 # Short evaluation configs with the training spaces (the spaces do not depend on these fields).
@@ -20,9 +21,11 @@ SHORT = {
     "relay_ukf": {"horizon": 5},
     "nlos_horizon": {"horizon": 60},
     "gps_denied_nbp": {"horizon": 3, "num_particles": 20},
+    "mrclam_relay": {"window_steps": 5, "data": MRCLAM_DATASET6},
 }
 # A field per scenario whose change changes the agents' spaces; nlos_horizon's keeps the shape and type and
 # changes only the action space's nvec (27 horizon choices -> 17), the case a shape-and-type check lets through.
+# (mrclam_relay has none: its five robots are the data set's.)
 OTHER_SPACES = {
     "bandwidth_fusion": {"num_uavs": 3},
     "lossy_fusion": {"num_uavs": 3},
@@ -37,8 +40,10 @@ def _spaces(env):
     return env.observation_space(agent), env.action_space(agent)
 
 
-@pytest.mark.parametrize("scenario", sorted(SHORT))
-def test_short_training_saves_reloads_and_plays(scenario, tmp_path):
+@pytest.mark.parametrize("scenario", [pytest.param(s, marks=needs_mrclam) if s == "mrclam_relay" else s
+                                      for s in sorted(SHORT)])
+def test_short_training_saves_reloads_and_plays(scenario, tmp_path, monkeypatch):
+    monkeypatch.setenv(MRCLAM_DATA_ENV, MRCLAM_DATASET6)  # training builds mrclam_relay from its default config
     path = train(scenario, timesteps=1, seed=0, out=str(tmp_path), progress_bar=False, curve_points=0)
     env = coloc_env.parallel_env(scenario, **SHORT[scenario])
     policy = agents.make_policy(path, env)
@@ -60,16 +65,18 @@ def test_short_training_saves_reloads_and_plays(scenario, tmp_path):
         agents.make_policy(path, coloc_env.parallel_env(other, **SHORT[other]))
 
     # the same scenario with other spaces passes the scenario check and is refused by the space check
-    changed = coloc_env.parallel_env(scenario, **SHORT[scenario], **OTHER_SPACES[scenario])
-    model = PPO.load(path, device="cpu")
-    assert _spaces(changed) != (model.observation_space, model.action_space)  # the change does change a space
-    if scenario == "nlos_horizon":
-        ours, theirs = changed.action_space(changed.possible_agents[0]), model.action_space
-        # both MultiDiscrete of one shape (the env's is MaskableMultiDiscrete, a subclass), another nvec
-        assert isinstance(ours, gymnasium.spaces.MultiDiscrete) and isinstance(theirs, gymnasium.spaces.MultiDiscrete)
-        assert ours.shape == theirs.shape and ours.nvec[0] != theirs.nvec[0]
-    with pytest.raises(ValueError, match=r"(?s)has (observation|action) space .*, the env has"):
-        agents.make_policy(path, changed)
+    if scenario in OTHER_SPACES:
+        changed = coloc_env.parallel_env(scenario, **SHORT[scenario], **OTHER_SPACES[scenario])
+        model = PPO.load(path, device="cpu")
+        assert _spaces(changed) != (model.observation_space, model.action_space)  # the change does change a space
+        if scenario == "nlos_horizon":
+            ours, theirs = changed.action_space(changed.possible_agents[0]), model.action_space
+            # both MultiDiscrete of one shape (the env's is MaskableMultiDiscrete, a subclass), another nvec
+            multi = gymnasium.spaces.MultiDiscrete
+            assert isinstance(ours, multi) and isinstance(theirs, multi)
+            assert ours.shape == theirs.shape and ours.nvec[0] != theirs.nvec[0]
+        with pytest.raises(ValueError, match=r"(?s)has (observation|action) space .*, the env has"):
+            agents.make_policy(path, changed)
 
     # without its model.json a model for another scenario is still refused, by its spaces
     os.remove(os.path.splitext(path)[0] + ".json")
