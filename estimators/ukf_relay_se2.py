@@ -95,6 +95,9 @@ __all__ = [
     "observe",
     "odometry_variance",
     "time_update",
+    "dcl_update_batch",
+    "dcl_update_rows",
+    "time_update_batch",
     "time_update_factored",
     "wrap",
 ]
@@ -121,11 +124,15 @@ def motion(estimate: np.ndarray, odometry: np.ndarray, dt: float):
 
 
 def _noise(G: np.ndarray, odometry_var) -> np.ndarray:
+    """Q_i = G_i diag(sigma_v,i^2, sigma_w,i^2) G_i^T, (..., N, 3, 3); ``odometry_var`` (2,), (N, 2) or, with
+    leading batch axes on G, (..., N, 2)."""
     q = np.asarray(odometry_var, float)
-    if q.ndim not in (1, 2) or q.shape[-1] != 2 or (q.ndim == 2 and q.shape[0] != G.shape[0]) or np.any(q < 0):
+    robots = G.shape[:-2]
+    if (q.ndim < 1 or q.shape[-1] != 2 or (q.ndim >= 2 and q.shape[:-1] not in (robots, robots[-1:]))
+            or np.any(q < 0)):
         raise ValueError(
             f"odometry_var must be (sigma_v^2, sigma_w^2) >= 0, shape (2,) or (N, 2), got {odometry_var!r}")
-    return np.einsum("...ab,...b,...cb->...ac", G, np.broadcast_to(q, (*G.shape[:-2], 2)), G)
+    return np.einsum("...ab,...b,...cb->...ac", G, np.broadcast_to(q, (*robots, 2)), G)
 
 
 def correct_odometry(odometry, scale=(1.0, 1.0), delay: int = 0) -> np.ndarray:
@@ -204,10 +211,24 @@ def factor(cov: np.ndarray) -> FactoredCov:
 
 
 def time_update_factored(estimate, fcov: FactoredCov, odometry, dt: float, odometry_var):
-    """Each robot alone: s_i <- f(s_i, u_i), P_ii <- F_i P_ii F_i^T + Q_i, Phi_i <- F_i Phi_i."""
+    """Each robot alone: s_i <- f(s_i, u_i), P_ii <- F_i P_ii F_i^T + Q_i, Phi_i <- F_i Phi_i.
+
+    Leading batch axes are allowed (see :func:`time_update_batch`); sigma is copied unchanged."""
+    new, P_ii, phi = time_update_batch(estimate, fcov.P_ii, fcov.phi, odometry, dt, odometry_var)
+    return new, FactoredCov(P_ii, phi, fcov.sigma.copy())
+
+
+def time_update_batch(estimate, P_ii, phi, odometry, dt: float, odometry_var):
+    """The factored time update on arrays with leading batch axes: ``estimate`` (..., N, 3), ``P_ii`` and
+    ``phi`` (..., N, 3, 3), ``odometry`` (..., N, 2), ``odometry_var`` (2,), (N, 2) or (..., N, 2).
+
+    Returns new ``(estimate, P_ii, phi)``; sigma does not change (the module's time update: F_i and
+    Q_i = G_i diag(sigma_v,i^2, sigma_w,i^2) G_i^T per robot and copy). Every copy is computed by the
+    same elementwise and stacked-matrix operations, so copy b equals the same copy updated alone.
+    """
     new, F, G = motion(estimate, odometry, dt)
-    P_ii = F @ fcov.P_ii @ np.swapaxes(F, -1, -2) + _noise(G, odometry_var)
-    return new, FactoredCov(0.5 * (P_ii + np.swapaxes(P_ii, -1, -2)), F @ fcov.phi, fcov.sigma.copy())
+    P = F @ P_ii @ np.swapaxes(F, -1, -2) + _noise(G, odometry_var)
+    return new, 0.5 * (P + np.swapaxes(P, -1, -2)), F @ phi
 
 
 def observe(observer_state: np.ndarray, target_xy: np.ndarray) -> np.ndarray:
@@ -371,3 +392,172 @@ def dcl_update(estimate, fcov: FactoredCov, chain, z, R, measured_in_chain: bool
             f.sigma[u, ci] = f.sigma[ci, u].T
     x[:, 2] = wrap(x[:, 2])
     return x, f, True
+
+
+def dcl_update_batch(estimate, fcov: FactoredCov, chain, z, R, measured_in_chain: bool = True, landmark=None,
+                     lam: float = 0.0, gate: float | None = None):
+    """:func:`dcl_update` of G copies at once: ``estimate`` (G, N, 3), ``fcov`` with a leading axis G
+    (``P_ii``, ``phi`` (G, N, 3, 3), ``sigma`` (G, N, N, 3, 3)), ``chain`` (G, k) (one chain length for
+    all copies, each row distinct robots), ``z`` (G, 2), ``R`` (G, 2, 2) or (2, 2), ``landmark`` (G, 2)
+    or (2,). Returns ``(estimate, fcov, applied)``, new objects, ``applied`` (G,) bool.
+
+    Copy g equals ``dcl_update`` of copy g alone (to rounding: the same equations in stacked-matrix form,
+    tests hold 1e-12); see :func:`dcl_update_rows`.
+    """
+    x = np.array(estimate, dtype=float)
+    f = fcov.copy()
+    applied = dcl_update_rows(x, f.P_ii, f.phi, f.sigma, np.arange(len(x)), chain, z, R,
+                              measured_in_chain=measured_in_chain, landmark=landmark, lam=lam, gate=gate)
+    return x, f, applied
+
+
+def _look_up_rows(A, P_ii, sigma, rows, chain, phic, i):
+    """Row block i of A for every copy: the look-up Cholesky (15)-(16) by receiver chain[:, i].
+
+    P_{c_i c_j} = Phi_{c_i} sigma_{c_i c_j} Phi_{c_j}^T (j < i), A_{i, <i} = P_{c_i, c_<i} A_{<i}^-T,
+    A_ii = chol(P_{c_i c_i} - A_{i, <i} A_{i, <i}^T): the prior factors (a receiver's own row of sigma and
+    its P_ii change only when it updates, after its row of A is formed).
+    """
+    G = len(rows)
+    ci = chain[:, i]
+    if i:
+        S = sigma[rows[:, None], ci[:, None], chain[:, :i]]  # (G, i, 3, 3): sigma_{c_i c_j}
+        blocks = phic[:, i:i + 1] @ S @ np.swapaxes(phic[:, :i], -1, -2)
+        own = blocks.transpose(0, 2, 1, 3).reshape(G, 3, 3 * i)  # (G, 3, 3i) = [P_{c_i c_0}, ..., P_{c_i c_i-1}]
+        left = np.swapaxes(np.linalg.solve(A[:, :3 * i, :3 * i], np.swapaxes(own, -1, -2)), -1, -2)
+        A[:, 3 * i:3 * i + 3, :3 * i] = left
+        schur = P_ii[rows, ci] - left @ np.swapaxes(left, -1, -2)
+    else:
+        schur = P_ii[rows, ci]
+    A[:, 3 * i:3 * i + 3, 3 * i:3 * i + 3] = np.linalg.cholesky(0.5 * (schur + np.swapaxes(schur, -1, -2)))
+
+
+def _moments_batch(h_points: np.ndarray, h0: np.ndarray, w: np.ndarray, R: np.ndarray):
+    """:func:`_moments` per copy: h_points (G, P, 2), h0 (G, 2); zbar (G, 2), deviations (G, P, 2), Pz (G, 2, 2).
+
+    Sums over the sigma points as stacked matrix products (w @ d, (d w)^T d), so that every copy is computed
+    by the same operation whatever G is."""
+    d = h_points - h0[:, None]
+    d[..., 1] = wrap(d[..., 1])
+    mu = w @ d
+    dz = d - mu[:, None]
+    Pz = np.swapaxes(dz * w[:, None], -1, -2) @ dz + R
+    return h0 + mu, dz, 0.5 * (Pz + np.swapaxes(Pz, -1, -2))
+
+
+def dcl_update_rows(estimate, P_ii, phi, sigma, rows, chain, z, R, measured_in_chain: bool = True,
+                    landmark=None, lam: float = 0.0, gate: float | None = None) -> np.ndarray:
+    """UKF-DCL of :func:`dcl_update` on copies ``rows`` of batched arrays, in place.
+
+    ``estimate`` (B, N, 3), ``P_ii``, ``phi`` (B, N, 3, 3), ``sigma`` (B, N, N, 3, 3) are updated at the
+    distinct copies ``rows`` (G,); ``chain`` (G, k): copy rows[g]'s chain, one length k for all (group the
+    copies by chain length); ``z`` (G, 2); ``R`` (G, 2, 2) or (2, 2); ``landmark`` (G, 2) or (2,) when not
+    ``measured_in_chain``. Returns ``applied`` (G,) bool (False: the gate refused z, the copy is unchanged).
+
+    The equations of the module docstring, each a stacked operation over the G copies (no loop over
+    copies; the loops run over the k receivers and their up-neighbours, as the chain does):
+
+    * A, row blocks 0..q-1 (observers), then q..k-1 (receivers): the look-up Cholesky (15)-(16)
+      (:func:`_look_up_rows`);
+    * sigma points of the observed robots x_o +- sqrt(L + lambda) A_o (columns p <= 3q), h on them and
+      h0 = h(xbar) for the other 2(L - 3q) + 1 points, zbar, dz, Pz with bearings as offsets from h0
+      (:func:`_moments_batch`), nu = wrap(z - zbar), the gate nu^T Pz^-1 nu > ``gate``;
+    * g = sqrt(L + lambda) w_p (dz_p^+ - dz_p^-) (3q x 2); r_U = g^T A_o^-1 [Phi_o sigma_{o,U}] for the
+      unreached robots U (truncated chains);
+    * receiver c_i: Pxz_{c_i} = A_{i, o} g (20), K_i = Pxz_{c_i} Pz^-1, s_{c_i} += K_i nu (21),
+      P_{c_i c_i} -= K_i Pxz_{c_i}^T, sigma_{c_i c_j} -= Phi_{c_i}^-1 K_i Pxz_{c_j}^T Phi_{c_j}^-T (22)-(23),
+      sigma_{c_i u} -= Phi_{c_i}^-1 K_i r_u (u in U); headings wrapped after.
+    """
+    x = estimate
+    rows = np.asarray(rows, dtype=int).reshape(-1)
+    G = len(rows)
+    chain = np.asarray(chain, dtype=int).reshape(G, -1)
+    N = x.shape[-2]
+    k = chain.shape[1]
+    q = 2 if measured_in_chain else 1
+    if k < q:
+        raise ValueError("a chain must reach the measuring and the measured robot")
+    if G and (np.any(chain < 0) or np.any(chain >= N) or np.any(np.diff(np.sort(chain, axis=1), axis=1) == 0)):
+        raise ValueError(f"chain must list distinct robots in [0, {N - 1}] in each row, got {chain.tolist()}")
+    if np.any(np.diff(np.sort(rows)) == 0):
+        raise ValueError(f"rows must be distinct copies, got {rows.tolist()}")
+    if not measured_in_chain and landmark is None:
+        raise ValueError("landmark: a landmark observation needs its position")
+    applied = np.zeros(G, dtype=bool)
+    if not G:
+        return applied
+    L = 3 * N
+    w = ukf_weights(L, lam)
+    wp = w[1]
+    scale = np.sqrt(L + lam)
+    z = np.broadcast_to(np.asarray(z, float), (G, 2))
+    R = np.broadcast_to(np.asarray(R, float), (G, 2, 2))
+    phic = phi[rows[:, None], chain]  # (G, k, 3, 3): Phi of the chain's robots
+    A = np.zeros((G, 3 * k, 3 * k))
+    for i in range(q):
+        _look_up_rows(A, P_ii, sigma, rows, chain, phic, i)
+    m = chain[:, 0]
+    dev = scale * A[:, :3 * q, :3 * q]
+    x_o = x[rows[:, None], chain[:, :q]].reshape(G, 3 * q)
+    plus, minus = x_o[:, :, None] + dev, x_o[:, :, None] - dev  # (G, 3q, 3q): column p = point p
+    pts = np.concatenate([np.swapaxes(plus, -1, -2), np.swapaxes(minus, -1, -2)], axis=1)  # (G, 6q, 3q)
+    if measured_in_chain:
+        h, h0 = observe(pts[..., 0:3], pts[..., 3:5]), observe(x[rows, m], x[rows, chain[:, 1], :2])
+    else:
+        lm = np.broadcast_to(np.asarray(landmark, float), (G, 2))
+        h, h0 = observe(pts[..., 0:3], lm[:, None]), observe(x[rows, m], lm)
+    rest = np.repeat(h0[:, None], L - 3 * q, axis=1)  # the other points leave z at h0
+    h_all = np.concatenate([h0[:, None], h[:, :3 * q], rest, h[:, 3 * q:], rest], axis=1)
+    z_bar, dz, Pz = _moments_batch(h_all, h0.copy(), w, R)
+    nu = z - z_bar
+    nu[:, 1] = wrap(nu[:, 1])
+    Pz_inv = np.linalg.inv(Pz)
+    if gate is not None:
+        applied = ~((nu[:, None, :] @ Pz_inv @ nu[:, :, None])[:, 0, 0] > gate)
+    else:
+        applied[:] = True
+    keep = np.flatnonzero(applied)
+    if not len(keep):
+        return applied
+    if len(keep) < G:
+        rows, chain, phic, A, dz, nu, Pz_inv = (a[keep] for a in (rows, chain, phic, A, dz, nu, Pz_inv))
+        G = len(keep)
+    g = scale * wp * (dz[:, 1:1 + 3 * q] - dz[:, 1 + L:1 + L + 3 * q])  # (G, 3q, 2)
+    for i in range(q, k):
+        _look_up_rows(A, P_ii, sigma, rows, chain, phic, i)
+    r = rows[:, None]
+    U = N - k
+    if U:  # observers: r_U = g^T A_o^-1 [Phi_o sigma_{o,U}]
+        in_chain = np.zeros((G, N), dtype=bool)
+        in_chain[np.arange(G)[:, None], chain] = True
+        unreached = np.argsort(in_chain, axis=1, kind="stable")[:, :U]  # (G, U), ascending
+        obs = chain[:, :q]
+        prod = phi[r, obs][:, :, None] @ sigma[r[:, :, None], obs[:, :, None], unreached[:, None, :]]
+        rows_o = prod.transpose(0, 1, 3, 2, 4).reshape(G, 3 * q, 3 * U)
+        r_U = (np.swapaxes(g, -1, -2) @ np.linalg.solve(A[:, :3 * q, :3 * q], rows_o)).reshape(G, 2, U, 3)
+        r_U = r_U.transpose(0, 2, 1, 3)  # (G, U, 2, 3)
+    phic_inv = np.linalg.inv(phic)
+    weights = []
+    for i in range(k):
+        ci = chain[:, i]
+        Pxz_i = A[:, 3 * i:3 * i + 3, :3 * q] @ g  # (20)
+        weights.append(Pxz_i)
+        K_i = Pxz_i @ Pz_inv
+        x[rows, ci] = x[rows, ci] + (K_i @ nu[:, :, None])[..., 0]  # (21)
+        phi_inv = phic_inv[:, i]
+        for j in range(i + 1):  # (22)-(23)
+            delta = K_i @ np.swapaxes(weights[j], -1, -2)
+            if j == i:
+                P = P_ii[rows, ci] - delta
+                P_ii[rows, ci] = 0.5 * (P + np.swapaxes(P, -1, -2))
+            else:
+                cj = chain[:, j]
+                new = sigma[rows, ci, cj] - phi_inv @ delta @ np.swapaxes(phic_inv[:, j], -1, -2)
+                sigma[rows, ci, cj] = new
+                sigma[rows, cj, ci] = np.swapaxes(new, -1, -2)
+        if U:
+            new = sigma[r, ci[:, None], unreached] - (phi_inv @ K_i)[:, None] @ r_U
+            sigma[r, ci[:, None], unreached] = new
+            sigma[r, unreached, ci[:, None]] = np.swapaxes(new, -1, -2)
+    x[rows, :, 2] = wrap(x[rows, :, 2])
+    return applied

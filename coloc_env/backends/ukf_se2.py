@@ -6,8 +6,11 @@ observation through the UT on the joint state L = 3N, the Roumeliotis-Bekey
 factored cross-covariances P_ij = Phi_i sigma_ij Phi_j^T, the look-up
 Cholesky along the relay chain, the exact update of robots a truncated chain
 does not reach, the chi-square outlier gate). Each copy keeps its robots'
-estimates (B, N, 3) and the factors P_ii, Phi_i, sigma_ij; the estimator has no
-batch axis, so the updates loop over the copies.
+estimates (B, N, 3) and the factors P_ii, Phi_i, sigma_ij (B, ...). The updates are stacked over the
+copies: per observation slot, the copies whose observation of that slot is of one kind (landmark or robot)
+and whose delivered chain has one length are updated together
+(:func:`~estimators.ukf_relay_se2.dcl_update_rows`), and every copy predicts at once
+(:func:`~estimators.ukf_relay_se2.time_update_batch`); copy b equals the same copy run alone.
 
 Step k, in the world's file order (``Readings.extra["obs_*"]``, see
 :mod:`coloc_env.worlds.mrclam`):
@@ -167,14 +170,10 @@ class UkfSe2Backend(Backend):
     def _factors(self, b: int) -> se2.FactoredCov:
         return se2.FactoredCov(self.P_ii[b], self.phi[b], self.sigma[b])
 
-    def _store(self, b: int, x: np.ndarray, f: se2.FactoredCov) -> None:
-        self.estimate[b], self.P_ii[b], self.phi[b], self.sigma[b] = x, f.P_ii, f.phi, f.sigma
-
     def update(self, readings, decisions) -> None:
         N = self.num_agents
         extra = readings.extra
         observer, subject = extra["obs_observer"], extra["obs_subject"]
-        lam, gate = self.config.ukf_lambda, self.config.gate
         self._clear_records(np.arange(self.batch))
         floats = lambda hop: hop_floats(hop, N)  # noqa: E731
         landmark_floats = lambda hop: hop_floats(hop, N, observed=1)  # noqa: E731
@@ -193,31 +192,43 @@ class UkfSe2Backend(Backend):
                 for name in ("chain", "length", "hop_distance", "stop"):
                     getattr(self.chains, name)[rows] = getattr(chain, name)[copies]
                 self.partner[copies, observer[copies, j]] = subject[copies, j]
-            for b in np.flatnonzero(observer[:, j] >= 0):
-                m = int(observer[b, j])
-                z, R = extra["obs_z"][b, j], extra["obs_cov"][b, j]
-                if robot[b]:
-                    if chain.length[b] < 2:
-                        continue
-                    path = chain.chain[b, :chain.length[b]]
-                    x, f, ok = se2.dcl_update(self.estimate[b], self._factors(b), path, z, R, lam=lam, gate=gate)
-                    self.used[b, m] = ok
+            sighting = np.flatnonzero((observer[:, j] >= 0) & ~robot)
+            if len(sighting):
+                if landmark_chain is None:
+                    paths, lengths = observer[sighting, j][:, None], np.ones(len(sighting), dtype=int)
                 else:
-                    path = [m] if landmark_chain is None else landmark_chain.chain[b, :landmark_chain.length[b]]
-                    x, f, ok = se2.dcl_update(self.estimate[b], self._factors(b), path, z, R,
-                                              measured_in_chain=False, landmark=extra["obs_target"][b, j],
-                                              lam=lam, gate=gate)
-                    self.landmarks_applied[b, m] += ok
-                self._store(b, x, f)
-                self.applied[b, m] += ok
-                self.rejected[b, m] += not ok
+                    paths, lengths = landmark_chain.chain[sighting], landmark_chain.length[sighting]
+                ok = self._dcl(sighting, j, paths, lengths, extra, landmark=True)
+                self.landmarks_applied[sighting, observer[sighting, j]] += ok
+                self._count(sighting, observer[sighting, j], ok)
+            if robot.any():
+                copies = np.flatnonzero(robot & (chain.length >= 2))  # a chain that misses n applies nothing
+                ok = self._dcl(copies, j, chain.chain[copies], chain.length[copies], extra, landmark=False)
+                self.used[copies, observer[copies, j]] = ok
+                self._count(copies, observer[copies, j], ok)
+
+    def _dcl(self, copies, j, paths, lengths, extra, landmark: bool) -> np.ndarray:
+        """UKF-DCL of observation slot j in the given copies, along their chains ``paths`` (n, N) of ``lengths``
+        (n,): one stacked update per chain length (:func:`estimators.ukf_relay_se2.dcl_update_rows`).
+        Returns applied (n,) bool."""
+        ok = np.zeros(len(copies), dtype=bool)
+        for k in np.unique(lengths):
+            sel = np.flatnonzero(lengths == k)
+            b = copies[sel]
+            ok[sel] = se2.dcl_update_rows(
+                self.estimate, self.P_ii, self.phi, self.sigma, b, paths[sel, :k], extra["obs_z"][b, j],
+                extra["obs_cov"][b, j], measured_in_chain=not landmark,
+                landmark=extra["obs_target"][b, j] if landmark else None, lam=self.config.ukf_lambda,
+                gate=self.config.gate)
+        return ok
+
+    def _count(self, copies, observers, ok) -> None:
+        self.applied[copies, observers] += ok
+        self.rejected[copies, observers] += ~ok
 
     def predict(self, inputs) -> None:
-        dt = self.world.motion_model.dt
-        for b in range(self.batch):
-            x, f = se2.time_update_factored(self.estimate[b], self._factors(b), inputs[b, :, :2], dt,
-                                            inputs[b, :, 2:4])
-            self._store(b, x, f)
+        self.estimate[:], self.P_ii[:], self.phi[:] = se2.time_update_batch(
+            self.estimate, self.P_ii, self.phi, inputs[..., :2], self.world.motion_model.dt, inputs[..., 2:4])
 
     def position(self) -> np.ndarray:
         return self.estimate[..., :2]

@@ -166,10 +166,12 @@ and hop is the relay network's counter-based draw from its own key (a child
 of the episode's generator), so the same seed gives the same window and the
 same losses whatever the policy and the loss probability.
 
-Batching: the estimator (:mod:`estimators.ukf_relay_se2`) has no batch axis,
-so the estimator updates loop over the copies; the relay chains of every copy
-are resolved in one vectorized network call per observation slot, and the
-state is held in arrays indexed by copy.
+Batching: the state is held in arrays indexed by copy, and nothing loops over
+the copies: per observation slot the relay chains of every copy are resolved in
+one vectorized network call and the estimator updates the copies with one
+stacked UKF-DCL update per kind of observation and chain length
+(:func:`estimators.ukf_relay_se2.dcl_update_rows`); the time update, the
+world's readings and the dead reckoning are one call for all copies.
 """
 
 from __future__ import annotations
@@ -461,8 +463,7 @@ class MrclamRelayScenario(PresetScenario):
         self.measured = (self.tables.first_index[self.absolute_step()] >= 0).sum(axis=-1).astype(float)
         super().advance(decoded)
         u = self.readings.inputs[..., :2]  # u'[a], the noise model's odometry the backend predicted with
-        for b in range(self.batch):
-            self.dead_reckoning[b] = se2.motion(self.dead_reckoning[b], u[b], self.data.dt)[0]
+        self.dead_reckoning[:] = se2.motion(self.dead_reckoning, u, self.data.dt)[0]
 
     def compute_reward(self) -> np.ndarray:
         """The team's: minus the mean over robots of the error (or RMS) after the time update to k + 1, minus the

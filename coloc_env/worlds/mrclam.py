@@ -311,21 +311,30 @@ class MrclamWorld(World):
         cov = np.broadcast_to(np.diag(std**2), (B, N, 3, 3)).copy()
         return mean, cov
 
-    def _lines(self, a: int, choice: np.ndarray) -> np.ndarray:
-        """Indices of the measurement lines of step a that copy's robots report, in file order."""
-        d, N = self.data, self.num_agents
-        s = d.measurements_at(int(a))
-        lines = np.arange(s.start, s.stop)
-        m, subject = d.meas_robot[lines], d.meas_subject[lines]
-        keep = m < N
-        robot = subject <= NUM_ROBOTS
-        n = np.clip(subject - 1, 0, NUM_ROBOTS - 1)
-        first = self.tables.first_index[a, np.minimum(m, NUM_ROBOTS - 1), n] == lines
+    def _lines(self, a: np.ndarray, choice: np.ndarray):
+        """The measurement lines of step a[b] that copy b's robots report, in file order: ``lines`` (B, J)
+        (0 where ``valid`` is False) and ``valid`` (B, J), J the largest count; all copies at once."""
+        d, N, NR = self.data, self.num_agents, NUM_ROBOTS
+        lo, hi = np.searchsorted(d.meas_step, a), np.searchsorted(d.meas_step, a + 1)
+        width = int((hi - lo).max(initial=0))
+        cand = lo[:, None] + np.arange(width)  # (B, W): the lines binned to a[b], file order
+        inside = cand < hi[:, None]
+        cand = np.where(inside, cand, 0)
+        m, subject = d.meas_robot[cand], d.meas_subject[cand]
+        keep = inside & (m < N)
+        robot = subject <= NR
+        n = np.clip(subject - 1, 0, NR - 1)
+        first = self.tables.first_index[a[:, None], np.minimum(m, NR - 1), n] == cand
         if self.config.robot_sightings == "all":
             first = np.ones_like(first)
-        chosen = (choice[np.minimum(m, N - 1)] == N) | (choice[np.minimum(m, N - 1)] == n)
+        mine = np.take_along_axis(choice, np.minimum(m, N - 1), axis=1)
+        chosen = (mine == N) | (mine == n)
         keep &= ~robot | ((n < N) & first & chosen & (n != m))
-        return lines[keep]
+        count = keep.sum(axis=1)
+        J = int(count.max(initial=0))
+        order = np.argsort(~keep, axis=1, kind="stable")[:, :J]  # the kept lines first, in file order
+        valid = np.arange(J) < count[:, None]
+        return np.where(valid, np.take_along_axis(cand, order, axis=1), 0), valid
 
     def readings(self, sensing: np.ndarray) -> Readings:
         B, N, d = self.batch, self.num_agents, self.data
@@ -333,40 +342,35 @@ class MrclamWorld(World):
         choice = np.asarray(sensing, int).reshape(B, N, -1)[..., 0]
         u = self.noise_model.odometry(d, a)[:, :N]  # (B, N, 2): u'[a]
         inputs = np.concatenate([u, self.noise_model.odometry_var(u)], axis=-1)
-        per_copy = [self._lines(a[b], choice[b]) for b in range(B)]
-        J = max((len(x) for x in per_copy), default=0)
-        observer = np.full((B, J), -1)
-        subject = np.full((B, J), -1)
-        landmark = np.full((B, J), -1)
-        target = np.full((B, J, 2), np.nan)
-        z = np.full((B, J, 2), np.nan)
-        cov = np.zeros((B, J, 2, 2))
+        lines, valid = self._lines(a, choice)
+        sub = d.meas_subject[lines]
+        is_robot = valid & (sub <= NUM_ROBOTS)
+        sighting = valid & (sub > NUM_ROBOTS)
+        landmark = np.where(sighting, sub - NUM_ROBOTS - 1, -1)
+        observer = np.where(valid, d.meas_robot[lines], -1)
+        subject = np.where(is_robot, sub - 1, -1)
+        target = np.where(sighting[..., None], self.landmarks[np.maximum(landmark, 0)], np.nan)
+        z = np.where(valid[..., None], np.stack([d.meas_range[lines], d.meas_bearing[lines]], axis=-1), np.nan)
+        cov = np.where(valid[..., None, None], self.tables.measurement_cov[lines], 0.0)
+        pair = is_robot
+        if self.config.robot_sightings == "all":  # the matrices keep each pair's first line, as with "first"
+            first = self.tables.first_index[a[:, None], d.meas_robot[lines], np.clip(sub - 1, 0, NUM_ROBOTS - 1)]
+            pair = pair & (first == lines)
+        b, j = np.nonzero(pair)
+        line = lines[b, j]
+        rm, rn = d.meas_robot[line], d.meas_subject[line] - 1
         ranges = np.full((B, N, N), np.nan)
         bearing = np.full((B, N, N), np.nan)
         pair_cov = np.zeros((B, N, N, 2, 2))
-        valid = np.zeros((B, N, N), dtype=bool)
-        for b, lines in enumerate(per_copy):
-            n = len(lines)
-            sub = d.meas_subject[lines]
-            is_robot = sub <= NUM_ROBOTS
-            observer[b, :n] = d.meas_robot[lines]
-            subject[b, :n] = np.where(is_robot, sub - 1, -1)
-            landmark[b, :n] = np.where(is_robot, -1, sub - NUM_ROBOTS - 1)
-            target[b, :n][~is_robot] = self.landmarks[sub[~is_robot] - NUM_ROBOTS - 1]
-            z[b, :n, 0], z[b, :n, 1] = d.meas_range[lines], d.meas_bearing[lines]
-            cov[b, :n] = self.tables.measurement_cov[lines]
-            pair = lines[is_robot]
-            if self.config.robot_sightings == "all":  # the matrices keep each pair's first line, as with "first"
-                pair = pair[self.tables.first_index[a[b], d.meas_robot[pair], d.meas_subject[pair] - 1] == pair]
-            rm, rn = d.meas_robot[pair], d.meas_subject[pair] - 1
-            valid[b, rm, rn] = True
-            ranges[b, rm, rn] = d.meas_range[pair]
-            bearing[b, rm, rn] = d.meas_bearing[pair]
-            pair_cov[b, rm, rn] = self.tables.measurement_cov[pair]
+        valid_pairs = np.zeros((B, N, N), dtype=bool)
+        valid_pairs[b, rm, rn] = True
+        ranges[b, rm, rn] = d.meas_range[line]
+        bearing[b, rm, rn] = d.meas_bearing[line]
+        pair_cov[b, rm, rn] = self.tables.measurement_cov[line]
         extra = {"bearing": bearing, "range_bearing_cov": pair_cov, "obs_observer": observer,
                  "obs_subject": subject, "obs_landmark": landmark, "obs_target": target, "obs_z": z, "obs_cov": cov}
         extra["fix_var"] = self.fix_var.copy()
-        return Readings(inputs=inputs, range=ranges, range_valid=valid, fix=self.fix.copy(),
+        return Readings(inputs=inputs, range=ranges, range_valid=valid_pairs, fix=self.fix.copy(),
                         fix_valid=self.fix_valid.copy(), extra=extra)
 
     def observation_features(self) -> np.ndarray:

@@ -151,3 +151,104 @@ def test_per_robot_odometry_variance():
     assert np.max(np.abs(a[0] - b[0])) < 1e-9 and np.max(np.abs(a[1] - b[1].joint())) < 1e-9
     with pytest.raises(ValueError, match="odometry_var"):
         se2.time_update(x, P, u, 0.1, np.ones((N - 1, 2)))
+
+
+def _factored_copies(rng, copies, N=5):
+    """``copies`` independent (estimate, FactoredCov) with Phi_i != I (three factored time updates each)."""
+    out = []
+    for _ in range(copies):
+        x, P = _random_state(rng, N)
+        f = se2.factor(P)
+        for _ in range(3):
+            x, f = se2.time_update_factored(x, f, rng.normal(size=(N, 2)) * [0.3, 0.5], 0.1, Q)
+        out.append((x, f))
+    return out
+
+
+def _stack(copies):
+    x = np.stack([c[0] for c in copies])
+    return x, se2.FactoredCov(*(np.stack([getattr(c[1], a) for c in copies]) for a in ("P_ii", "phi", "sigma")))
+
+
+@pytest.mark.parametrize(("landmark", "length"), [(True, k) for k in range(1, 6)] + [(False, k) for k in range(2, 6)])
+def test_batched_dcl_equals_dcl_of_each_copy_alone(landmark, length):
+    """dcl_update_batch on G = 6 copies (different states, chains, measurements; one refused by the gate) equals
+    dcl_update of each copy (1e-12), and a copy's result does not depend on the others of its batch."""
+    rng = np.random.default_rng(10 + length + 10 * landmark)
+    N, G = 5, 6
+    copies = _factored_copies(rng, G, N)
+    chains = np.stack([rng.permutation(N)[:length] for _ in range(G)])
+    lm = rng.uniform(-3, 3, (G, 2))
+    z = np.stack([se2.observe(x[c[0]], lm[g] if landmark else x[c[1], :2])
+                  for g, ((x, _), c) in enumerate(zip(copies, chains, strict=True))])
+    z += rng.normal(size=(G, 2)) * [0.1, 0.05]
+    z[3, 0] += 50.0  # an outlier: the gate refuses it in this copy only
+    Rs = np.stack([np.diag([(0.05 + 0.02 * g) ** 2, 0.05**2]) for g in range(G)])
+    kw = {"measured_in_chain": not landmark, "lam": 0.5, "gate": 13.8}
+    x, f = _stack(copies)
+    xb, fb, applied = se2.dcl_update_batch(x, f, chains, z, Rs, landmark=lm if landmark else None, **kw)
+    assert applied.tolist() == [True, True, True, False, True, True]
+    for g, (x1, f1) in enumerate(copies):
+        x2, f2, ok = se2.dcl_update(x1, f1, chains[g], z[g], Rs[g], landmark=lm[g] if landmark else None, **kw)
+        assert ok == applied[g]
+        np.testing.assert_allclose(xb[g], x2, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(fb.P_ii[g], f2.P_ii, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(fb.sigma[g], f2.sigma, rtol=0, atol=1e-12)
+        np.testing.assert_array_equal(fb.phi[g], f2.phi)
+    np.testing.assert_array_equal(xb[3], x[3])  # refused: unchanged
+    np.testing.assert_array_equal(fb.sigma[3], f.sigma[3])
+    # copies 1 and 4 alone, in place, inside the batch: the same bits, the other copies untouched
+    xi, fi = x.copy(), f.copy()
+    ok = se2.dcl_update_rows(xi, fi.P_ii, fi.phi, fi.sigma, [4, 1], chains[[4, 1]], z[[4, 1]], Rs[[4, 1]],
+                             landmark=lm[[4, 1]] if landmark else None, **kw)
+    assert ok.tolist() == [True, True]
+    for g in range(G):
+        source = (xb, fb) if g in (1, 4) else (x, f)
+        np.testing.assert_array_equal(xi[g], source[0][g])
+        np.testing.assert_array_equal(fi.P_ii[g], source[1].P_ii[g])
+        np.testing.assert_array_equal(fi.sigma[g], source[1].sigma[g])
+
+
+def test_batched_dcl_of_a_complete_chain_is_ccl():
+    rng = np.random.default_rng(21)
+    copies = _factored_copies(rng, 3, 4)
+    chains = np.array([[0, 2, 1, 3], [3, 1, 0, 2], [1, 0, 3, 2]])
+    z = np.array([[2.0, 0.3], [1.5, -0.4], [0.8, 2.9]])
+    xb, fb, applied = se2.dcl_update_batch(*_stack(copies), chains, z, R)
+    assert applied.all()
+    for g, (x, f) in enumerate(copies):
+        x1, P1, _ = se2.ccl_update(x, f.joint(), chains[g, 0], z[g], R, measured=chains[g, 1])
+        assert np.max(np.abs(x1 - xb[g])) < 1e-9
+        joint = se2.FactoredCov(fb.P_ii[g], fb.phi[g], fb.sigma[g]).joint()
+        assert np.max(np.abs(P1 - joint)) < 1e-9
+
+
+def test_batched_time_update_equals_each_copy_alone():
+    rng = np.random.default_rng(22)
+    copies = _factored_copies(rng, 4, 5)
+    u = rng.normal(size=(4, 5, 2)) * [0.3, 0.5]
+    q = se2.odometry_variance(u, (1e-4, 1e-3), (0.1, 0.2))
+    x, f = _stack(copies)
+    for var in (q, Q, q[0]):  # per copy and robot, one pair, one pair per robot shared by the copies
+        xb, P_ii, phi = se2.time_update_batch(x, f.P_ii, f.phi, u, 0.1, var)
+        for g, (x1, f1) in enumerate(copies):
+            x2, f2 = se2.time_update_factored(x1, f1, u[g], 0.1, var if np.ndim(var) < 3 else var[g])
+            np.testing.assert_allclose(xb[g], x2, rtol=0, atol=1e-12)
+            np.testing.assert_allclose(P_ii[g], f2.P_ii, rtol=0, atol=1e-12)
+            np.testing.assert_allclose(phi[g], f2.phi, rtol=0, atol=1e-12)
+    with pytest.raises(ValueError, match="odometry_var"):
+        se2.time_update_batch(x, f.P_ii, f.phi, u, 0.1, q[:, :4])
+
+
+def test_batched_dcl_bad_arguments():
+    x, f = _stack(_factored_copies(np.random.default_rng(23), 2, 4))
+    with pytest.raises(ValueError, match="chain must list distinct robots"):
+        se2.dcl_update_batch(x, f, [[0, 1, 1], [0, 1, 2]], [[1, 0], [1, 0]], R)
+    with pytest.raises(ValueError, match="chain must list distinct robots"):
+        se2.dcl_update_batch(x, f, [[0, 4], [0, 1]], [[1, 0], [1, 0]], R)
+    with pytest.raises(ValueError, match="must reach the measuring and the measured"):
+        se2.dcl_update_batch(x, f, [[0], [1]], [[1, 0], [1, 0]], R)
+    with pytest.raises(ValueError, match="rows must be distinct copies"):
+        se2.dcl_update_rows(x, f.P_ii, f.phi, f.sigma, [1, 1], [[0, 1], [2, 3]], [[1, 0], [1, 0]], R)
+    with pytest.raises(ValueError, match="landmark"):
+        se2.dcl_update_batch(x, f, [[0], [1]], [[1, 0], [1, 0]], R, measured_in_chain=False)
