@@ -49,6 +49,10 @@ Arguments (``coloc_env.backends.Dnbp``; defaults = ``gps_denied_nbp``'s)
 | min_bandwidth      | 0.5        | [0.001, 1e4] m         |
 | initial_threshold  | 3          | 1..64 (at most N)      |
 | schedule           | "modified" | "modified", "parallel" |
+| kernel             | "exact"    | "exact", "truncated": the belief update's mixture kernel |
+|                    |            | (:data:`estimators.dnbp.KERNELS`; truncated: approximate, faster)  |
+| truncation         | 6.0        | [1, 10] bandwidths: r of the truncated kernel (terms below         |
+|                    |            | e^(-r^2/2) of the largest left out; unused by the exact kernel)    |
 
 The defensive box is the world's flight area, ``[-box_margin, area + box_margin + |v_nom| dt horizon]``
 per axis, as in the scenario. Warm start only: particles drawn around the world's initial belief.
@@ -95,6 +99,8 @@ class Dnbp(PartConfig):
     initial_threshold: int = 3
     schedule: str = "modified"
     init: str = "warm"
+    kernel: str = "exact"
+    truncation: float = 6.0
 
     @property
     def rounds(self) -> int:
@@ -110,6 +116,8 @@ class Dnbp(PartConfig):
         check_range(f"{prefix}initial_threshold", self.initial_threshold, 1, 64, integer=True)
         check_choice(f"{prefix}schedule", self.schedule, ("modified", "parallel"))
         check_choice(f"{prefix}init", self.init, ("warm", "cold"))
+        check_choice(f"{prefix}kernel", self.kernel, dn.KERNELS)
+        check_range(f"{prefix}truncation", self.truncation, *dn.TRUNCATION_RANGE)
 
     def build(self, world, network, batch: int) -> Backend:
         return DnbpBackend(self, world, network, batch)
@@ -167,7 +175,8 @@ class DnbpBackend(Backend):
             num_particles=M, num_iterations=config.num_iterations, oversampling=config.oversampling,
             defensive_weight=config.defensive_weight, defensive_box=(episode[0] - m, episode[1] + m),
             cold_box=(start[0] - m, start[1] + m), min_bandwidth=config.min_bandwidth,
-            initial_threshold=config.initial_threshold, schedule=config.schedule)
+            initial_threshold=config.initial_threshold, schedule=config.schedule, kernel=config.kernel,
+            truncation=float(config.truncation))
         d = motion.state_dim
         particles = np.zeros((B, N, M, d))
         self.state = dn.DnbpState(prior=particles, prior_bandwidth=np.ones((B, N)),

@@ -122,6 +122,9 @@ Arguments (fields of :class:`GpsDeniedNbpConfig`, defaults = spec §1)
 | min_bandwidth      | 0.5         | [0.001, 10000]            | floor of h_ts [chosen]                       |
 | initial_threshold  | 3           | 1..N                      | theta_0 [paper]                              |
 | schedule           | "modified"  | "modified", "parallel"    | Sec. 3.4 [paper]; parallel = ablation        |
+| kernel             | "exact"     | "exact", "truncated"      | belief-update mixture kernel [chosen]; the   |
+|                    |             |                           | truncated one approximates (estimators.dnbp) |
+| truncation         | 6.0         | [1, 10] bandwidths        | r of the truncated kernel [chosen]           |
 | reward             | "team"      | "team", "own"             | see the reward table                         |
 | broadcast_cost     | 0.0         | [0, 1e12]                 | lambda_c, metres per broadcast               |
 """
@@ -174,6 +177,8 @@ class GpsDeniedNbpConfig:
     min_bandwidth: float = 0.5
     initial_threshold: int = 3
     schedule: str = "modified"
+    kernel: str = "exact"
+    truncation: float = 6.0
     reward: str = "team"
     broadcast_cost: float = 0.0
 
@@ -214,6 +219,8 @@ class GpsDeniedNbpConfig:
         check_range("min_bandwidth", self.min_bandwidth, MIN_STD, 1e4)
         check_range("initial_threshold", self.initial_threshold, 1, self.num_uavs, integer=True)
         check_choice("schedule", self.schedule, ("modified", "parallel"))
+        check_choice("kernel", self.kernel, dn.KERNELS)
+        check_range("truncation", self.truncation, *dn.TRUNCATION_RANGE)
         check_choice("reward", self.reward, ("team", "own"))
         check_range("broadcast_cost", self.broadcast_cost, 0.0, 1e12)
 
@@ -229,7 +236,8 @@ class GpsDeniedNbpConfig:
         backend = Dnbp(num_particles=self.num_particles, num_iterations=self.num_iterations,
                        oversampling=self.oversampling, defensive_weight=self.defensive_weight,
                        box_margin=self.box_margin, min_bandwidth=self.min_bandwidth,
-                       initial_threshold=self.initial_threshold, schedule=self.schedule, init=self.init)
+                       initial_threshold=self.initial_threshold, schedule=self.schedule, init=self.init,
+                       kernel=self.kernel, truncation=self.truncation)
         return world, Broadcast(comm_range=self.comm_range, loss=0.0), backend
 
     def estimator_model(self) -> dn.DnbpModel:
@@ -241,7 +249,8 @@ class GpsDeniedNbpConfig:
             num_particles=self.num_particles, num_iterations=self.num_iterations, oversampling=self.oversampling,
             defensive_weight=self.defensive_weight, defensive_box=(-m, self.area + m + travel),
             cold_box=(-m, self.area + m), min_bandwidth=self.min_bandwidth,
-            initial_threshold=self.initial_threshold, schedule=self.schedule)
+            initial_threshold=self.initial_threshold, schedule=self.schedule, kernel=self.kernel,
+            truncation=self.truncation)
 
 
 @dataclass

@@ -1,0 +1,106 @@
+"""dNBP's optional truncated kernel (``DnbpModel.kernel = "truncated"``) approximates the exact one within its
+stated bound: the importance weights of real belief updates to 1e-6 in total variation at r = 6, seeded episodes
+to 1e-3 m; a radius too small moves them visibly (so these tolerances test the truncation, not a copy of the exact
+path); the exact kernel stays the default; bad values are refused by name."""
+
+import numpy as np
+import pytest
+
+import coloc_env
+import estimators.dnbp as dn
+
+pytest.importorskip("numba")
+
+
+def _updates(steps=4, num_particles=50):
+    """The fused belief updates' inputs of a short gps_denied_nbp episode (exact kernel)."""
+    captured = []
+    original = dn._belief_update_fused
+
+    def record(kernels, model, *args):
+        captured.append((model, args))
+        return original(kernels, model, *args)
+
+    env = coloc_env.parallel_env("gps_denied_nbp", num_particles=num_particles, horizon=steps)
+    env.reset(seed=3)
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(dn, "_belief_update_fused", record)
+        while env.agents:
+            env.step({a: np.ones(5, np.int64) for a in env.agents})
+    return captured
+
+
+def _weights(model, args, radius):
+    prior, prior_bandwidth, prior_uniform, centres, log_weights, bandwidth, present, draws, _, _, C = args
+    proposals, log_w = np.empty((prior.shape[0], C, 2)), np.empty((prior.shape[0], C))
+    lo, hi = model.defensive_box
+    lo_c, hi_c = model.cold_box
+    dn._fused_kernels()["weights"][0](prior, prior_bandwidth, prior_uniform, centres, log_weights, bandwidth, present,
+                                      draws["pick"], draws["box"], draws["noise"], model.oversampling,
+                                      model.defensive_weight, lo, hi, lo_c, hi_c, radius, proposals, log_w)
+    return proposals, log_w
+
+
+def _total_variation(updates, radius):
+    worst = 0.0
+    for model, args in updates:
+        proposals, exact = _weights(model, args, 0.0)
+        same, approximate = _weights(model, args, radius)
+        np.testing.assert_array_equal(same, proposals)  # the same draws: only the weights differ
+        for a, b in zip(exact, approximate, strict=True):
+            assert np.isfinite(a).any() == np.isfinite(b).any()
+            if np.isfinite(a).any():
+                pa, pb = np.exp(a - a.max()), np.exp(b - b.max())
+                worst = max(worst, float(np.abs(pa / pa.sum() - pb / pb.sum()).sum()))
+    return worst
+
+
+def test_truncated_importance_weights_equal_the_exact_ones_within_the_bound():
+    updates = _updates()
+    assert len(updates) > 10
+    assert _total_variation(updates, 6.0) < 1e-6
+    assert _total_variation(updates, 1.0) > 1e-3  # a radius too small is visible in the same measure
+
+
+def test_exp_small_is_exp_to_1e12_on_its_range():
+    dn._fused_kernels()
+    x = np.linspace(-50.0, 0.0, 2001)
+    approx = np.array([dn._exp_small(v) for v in x])
+    np.testing.assert_allclose(approx, np.exp(x), rtol=1e-12, atol=0)
+
+
+def _means(kernel, truncation, seed=0):
+    env = coloc_env.parallel_env("gps_denied_nbp", num_particles=50, horizon=8, kernel=kernel, truncation=truncation)
+    env.reset(seed=seed)
+    means = []
+    while env.agents:
+        _, _, _, _, infos = env.step({a: np.ones(5, np.int64) for a in env.agents})
+        means.append([infos[a]["estimated_position"] for a in sorted(infos)])
+    return np.array(means)
+
+
+def test_seeded_episodes_agree_with_the_exact_kernel_and_a_small_radius_does_not():
+    exact = _means("exact", 6.0)
+    assert np.abs(_means("truncated", 6.0) - exact).max() < 1e-3
+    assert np.abs(_means("truncated", 1.0) - exact).max() > 0.1
+
+
+def test_the_exact_kernel_is_the_default():
+    assert dn.DnbpModel().kernel == "exact"
+    assert coloc_env.backends.Dnbp().kernel == "exact"
+    assert coloc_env.scenarios.gps_denied_nbp.GpsDeniedNbpConfig().kernel == "exact"
+
+
+@pytest.mark.parametrize(("options", "message"), [
+    ({"kernel": "grid"}, r"kernel must be one of \('exact', 'truncated'\), got 'grid'"),
+    ({"truncation": 0.5}, r"truncation must be in \[1.0, 10.0\], got 0.5"),
+    ({"truncation": 12.0}, r"truncation must be in \[1.0, 10.0\], got 12.0"),
+])
+def test_bad_kernel_options_are_refused_by_name(options, message):
+    with pytest.raises(ValueError, match=message):
+        coloc_env.parallel_env("gps_denied_nbp", **options)
+    with pytest.raises(ValueError, match="backend." + message):
+        coloc_env.compose(world="gps_denied", network="broadcast", backend={"name": "dnbp", **options})
+    field = next(iter(options))
+    with pytest.raises(ValueError, match=f"^{field} must be"):
+        dn.DnbpModel(**options)
