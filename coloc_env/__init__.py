@@ -33,15 +33,46 @@ NETWORKS: tuple[str, ...] = tuple(_NETWORKS)
 BACKENDS: tuple[str, ...] = tuple(_BACKENDS)
 
 
+def is_composition_name(name) -> bool:
+    """True for a composition's name ``WORLD/NETWORK/BACKEND`` (``Composition.name``, as ``coloc list`` prints it)."""
+    return isinstance(name, str) and "/" in name
+
+
+def composition_named(name: str, **options) -> Composition:
+    """The composition of the parts ``WORLD/NETWORK/BACKEND`` names, each at its defaults, with composition-level
+    ``options`` (``reward``, ``communication_cost``, ``horizon``); a ValueError says which name or option is wrong."""
+    parts = name.split("/")
+    if len(parts) != 3 or not all(parts):
+        raise ValueError(f"a composition name is WORLD/NETWORK/BACKEND (e.g. circles/broadcast/ukf_ccl), got {name!r}")
+    return compose(*parts, **options)
+
+
 def scenario_class(name: str):
-    """The :class:`~coloc_env.scenarios.base.Scenario` subclass registered as ``name``."""
+    """The :class:`~coloc_env.scenarios.base.Scenario` subclass registered as ``name``; for a composition's name
+    ``WORLD/NETWORK/BACKEND`` the composed core's class, once the parts are known to compose."""
+    if is_composition_name(name):
+        composition_named(name)
+        return ComposedScenario
     if not isinstance(name, str) or name not in REGISTRY:
-        raise ValueError(f"unknown scenario {name!r}; available: {list(SCENARIOS)} (or a coloc_env.compose(...))")
+        raise ValueError(f"unknown scenario {name!r}; available: {list(SCENARIOS)}, a composition's name "
+                         "WORLD/NETWORK/BACKEND (coloc list) or a coloc_env.compose(...)")
     return REGISTRY[name]
 
 
+def make_core(name, batch: int = 1, **config):
+    """The batched core (:class:`~coloc_env.scenarios.base.Scenario`) of ``batch`` copies of a preset name, a
+    composition's name or a Composition, as :func:`parallel_env` and :func:`vector_env` build it."""
+    from coloc_env.env import build_scenario
+
+    cls, spec, config = _spec(name, config)
+    return build_scenario(cls, batch, spec, **config)
+
+
 def _spec(name_or_spec, config: dict):
-    """(scenario class, composition or None) for a preset name or a Composition."""
+    """(scenario class, composition or None, config) for a preset name, a composition's name or a Composition
+    (a composition's name takes the composition-level options as its config)."""
+    if is_composition_name(name_or_spec):
+        return ComposedScenario, composition_named(name_or_spec, **config), {}
     if isinstance(name_or_spec, Composition):
         if name_or_spec.preset is not None:
             return scenario_class(name_or_spec.preset), None, {**dict(name_or_spec.preset_config), **config}
@@ -53,7 +84,8 @@ def _spec(name_or_spec, config: dict):
 
 
 def parallel_env(name, render_mode: str | None = None, max_cycles: int | None = None, **config) -> CoLocParallelEnv:
-    """The PettingZoo ``ParallelEnv`` of a preset name (``config`` = its dataclass fields) or a Composition.
+    """The PettingZoo ``ParallelEnv`` of a preset name (``config`` = its dataclass fields), a composition's name
+    ``WORLD/NETWORK/BACKEND`` (``config`` = the composition-level options) or a Composition.
 
     ``max_cycles`` is PettingZoo's name for the episode length: a preset's ``horizon`` (``window_steps`` for
     mrclam_relay), a composition's ``horizon``."""
@@ -75,5 +107,5 @@ def env(name, render_mode: str | None = None, max_cycles: int | None = None, **c
 
 
 __all__ = ["BACKENDS", "NETWORKS", "PRESETS", "SCENARIOS", "WORLDS", "CoLocParallelEnv", "Composition",
-           "backends", "compatibility", "compose", "env", "networks", "parallel_env", "scenario_class",
-           "vector_env", "worlds"]
+           "backends", "compatibility", "compose", "composition_named", "env", "is_composition_name", "make_core",
+           "networks", "parallel_env", "scenario_class", "vector_env", "worlds"]

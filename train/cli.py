@@ -58,7 +58,14 @@ class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescrip
 def _scenarios_help() -> str:
     import coloc_env
 
-    return "one of: " + ", ".join(coloc_env.SCENARIOS)
+    return ("one of: " + ", ".join(coloc_env.SCENARIOS) + "; or a composition's name WORLD/NETWORK/BACKEND "
+            "(coloc list), e.g. circles/broadcast/ukf_ccl")
+
+
+def _result_key(scenario: str) -> str:
+    """The folder of a scenario's leaderboard under OUT: the paper key of a preset (zhao2020), a composition's
+    name with '_' for '/' (circles_broadcast_ukf_ccl)."""
+    return SCENARIO_TO_PAPER.get(scenario, scenario.replace("/", "_"))
 
 
 def _policies_epilog() -> str:
@@ -311,14 +318,14 @@ def cmd_evaluate(args) -> int:
     scenarios = _runnable_scenarios(console) if args.scenario == "all" else [args.scenario]
     for scenario in scenarios:
         coloc_env.scenario_class(scenario)
-        check_output_folder(os.path.join(args.out, SCENARIO_TO_PAPER.get(scenario, scenario)))
+        check_output_folder(os.path.join(args.out, _result_key(scenario)))
         for policy in _policies_for(scenario, args.policy, args.models):
             with Progress(console=console, transient=True) as bar:
                 task = bar.add_task(f"{scenario} / {policy}", total=args.episodes)
                 result = evaluate_policy(scenario, policy, args.episodes,
                                          progress=lambda task=task: bar.advance(task),
                                          stochastic=args.stochastic and policy.endswith(".zip"))
-            path = record(result, args.out, SCENARIO_TO_PAPER.get(scenario, scenario))
+            path = record(result, args.out, _result_key(scenario))
             console.print(_evaluation_line(scenario, policy, result, args.episodes, path), highlight=False)
     return 0
 

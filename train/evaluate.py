@@ -235,10 +235,8 @@ def _run_core(scenario: str, episodes: int, seed_base: int, choose, env_config: 
     """Steps ``episodes`` copies of the batched core (copy e seeded ``seed_base + e``) with
     ``choose(core) -> actions (episodes, N, *action_shape)``; returns (costs, comms per step, initial cost)."""
     import coloc_env
-    from coloc_env.config import build_config
 
-    cls = coloc_env.scenario_class(scenario)
-    core = cls(build_config(cls.Config, env_config), batch=episodes)
+    core = coloc_env.make_core(scenario, batch=episodes, **env_config)
     core.reset([np.random.default_rng(seed_base + e) for e in range(episodes)])
     errors, weights, comm = [], [], np.zeros(episodes)
     while not core.done().all():

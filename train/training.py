@@ -144,8 +144,17 @@ def _callbacks(scenario: str, folder: str, timesteps: int, curve: list, points: 
     return CheckpointAndCurve()
 
 
+def curve_reference(scenario: str) -> str:
+    """The fixed policy a learning curve is drawn against: the paper's policy, or ``always`` for a composition
+    (no paper ran it; ``always`` is its strongest baseline that sends)."""
+    import coloc_env
+
+    return "always" if coloc_env.is_composition_name(scenario) else "paper"
+
+
 def write_learning_curve(folder: str, scenario: str, curve: list, title: str) -> None:
-    """``curve.json`` and ``learning_curve.png`` with the paper policy on the same validation seeds."""
+    """``curve.json`` and ``learning_curve.png`` with the paper policy (a composition: ``always``) on the same
+    validation seeds."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -154,11 +163,12 @@ def write_learning_curve(folder: str, scenario: str, curve: list, title: str) ->
     from train.evaluate import VALIDATION_SEED_BASE, evaluate_policy
     from train.io import save_figure
 
-    paper = evaluate_policy(scenario, "paper", CURVE_EPISODES, VALIDATION_SEED_BASE)
+    reference = curve_reference(scenario)
+    paper = evaluate_policy(scenario, reference, CURVE_EPISODES, VALIDATION_SEED_BASE)
     write_json(os.path.join(folder, "curve.json"), {
         "scenario": scenario, "validation_seed_base": VALIDATION_SEED_BASE, "episodes": CURVE_EPISODES,
         "points": [{"timesteps": t, "mean_cost": c, "ci95": h} for t, c, h in curve],
-        "paper": {"mean_cost": paper["mean_cost"], "ci95": paper["ci95"]},
+        reference: {"mean_cost": paper["mean_cost"], "ci95": paper["ci95"]},
     })
     fig, ax = plt.subplots(figsize=(7.5, 4.5), layout="constrained")
     steps, costs, half = (np.array(v, dtype=float) for v in zip(*curve, strict=True))
@@ -168,9 +178,9 @@ def write_learning_curve(folder: str, scenario: str, curve: list, title: str) ->
     ax.fill_between(steps, costs - half, costs + half, color="tab:blue", alpha=0.2,
                     label=f"trained policy: 95 % interval over {n} validation episodes")
     p_mean, p_half = float(paper["mean_cost"]), float(paper["ci95"])
-    ax.axhline(p_mean, color="k", ls="--", label=f"paper policy on the same {n} episodes: {p_mean:.4g}")
+    ax.axhline(p_mean, color="k", ls="--", label=f"{reference} policy on the same {n} episodes: {p_mean:.4g}")
     ax.axhspan(p_mean - p_half, p_mean + p_half, color="0.5", alpha=0.15,
-               label=f"paper policy: 95 % interval over {n} validation episodes (±{p_half:.2g})")
+               label=f"{reference} policy: 95 % interval over {n} validation episodes (±{p_half:.2g})")
     ax.set_xlabel("timesteps (agent transitions)")
     ax.set_ylabel("episode estimation error (scenario metric)")
     ax.set_title(title, fontsize=10)

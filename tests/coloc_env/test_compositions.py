@@ -195,3 +195,40 @@ def test_a_relays_hop_cost_is_charged_in_the_composed_reward_at_the_holder():
         assert not np.any(free_cost)
         charged += cost.sum()
     assert charged > 0.5 * len(priced)  # hops were sent (and priced) at most steps
+
+
+def test_a_composition_name_builds_the_composition_it_names():
+    """``WORLD/NETWORK/BACKEND`` (``Composition.name``) is accepted wherever a preset name is: the same env,
+    copy for copy, as ``compose`` of the three parts, with the composition-level options as its config."""
+    name = "circles/broadcast/ukf_ccl"
+    spec = coloc_env.compose("circles", "broadcast", "ukf_ccl", reward="trace", horizon=6)
+    by_name = coloc_env.parallel_env(name, reward="trace", horizon=6)
+    by_spec = coloc_env.parallel_env(spec)
+    assert by_name.unwrapped.scenario.composition == spec and by_name.unwrapped.scenario.name == name
+    obs_a, _ = by_name.reset(seed=3)
+    obs_b, _ = by_spec.reset(seed=3)
+    assert all(np.array_equal(obs_a[a], obs_b[a]) for a in obs_b)
+    for a in by_name.possible_agents:
+        by_name.action_space(a).seed(7)
+    for _ in range(6):
+        actions = {a: by_name.action_space(a).sample() for a in by_name.agents}
+        step_a, step_b = by_name.step(actions), by_spec.step(actions)
+        for got, want in zip(step_a[:2], step_b[:2], strict=True):
+            assert all(np.array_equal(got[a], want[a]) for a in want)
+    core = coloc_env.make_core(name, batch=3, horizon=6)
+    assert core.batch == 3 and core.composition == spec.replace(reward="error")
+    assert coloc_env.scenario_class(name) is type(core)
+
+
+@pytest.mark.parametrize(("name", "config", "message"), [
+    ("circles/broadcast", {}, "a composition name is WORLD/NETWORK/BACKEND"),
+    ("circles/telepathy/ukf_ccl", {}, "unknown network 'telepathy'"),
+    ("drift/ideal/ukf_ccl", {}, "ukf_ccl estimates each agent's own position"),
+    ("circles/broadcast/ukf_ccl", {"hop_cost": 1.0}, r"unknown composition option\(s\) \['hop_cost'\]"),
+])
+def test_a_bad_composition_name_says_what_is_wrong(name, config, message):
+    with pytest.raises(ValueError, match=message):
+        coloc_env.parallel_env(name, **config)
+    if not config:
+        with pytest.raises(ValueError, match=message):
+            coloc_env.scenario_class(name)

@@ -228,3 +228,22 @@ def test_list_prints_every_composition_with_its_verdict(capsys):
         verdict = "ok" if r["ok"] else "no: " + r["reason"]
         assert f"{r['world']}/{r['network']}/{r['backend']}" in out and verdict in out
     assert "relay_ukf          circles / relay / ukf_dcl" in out
+
+
+def test_a_composition_trains_and_evaluates_by_its_name(tmp_path, capsys):
+    """``coloc train WORLD/NETWORK/BACKEND`` (issue 15's cross-combination) uses the composition's settings
+    module (train/hyperparams/circles__broadcast__ukf_ccl.py), and ``coloc evaluate --policy all`` judges its
+    model against always and silent in OUT/circles_broadcast_ukf_ccl/."""
+    name, out = "circles/broadcast/ukf_ccl", str(tmp_path)
+    assert main(["train", name, "--timesteps", "64", "--curve-points", "0", "--out", out]) == 0
+    model = os.path.join(out, *name.split("/"), "seed0", "model.zip")
+    meta = read_json(os.path.join(os.path.dirname(model), "model.json"))
+    assert meta["scenario"] == name and meta["env_config"] == {"reward": "trace", "communication_cost": 0.5}
+    assert main(["evaluate", name, "--policy", "all", "--models", out, "--episodes", "2", "--out", out]) == 0
+    table = read_json(os.path.join(out, "circles_broadcast_ukf_ccl", "leaderboard.json"))
+    assert {"always", "silent", "random", model} <= set(table)
+    summary = (tmp_path / "leaderboard.md").read_text()
+    assert f"## circles_broadcast_ukf_ccl (`{name}`)" in summary and "error-communication trade-off" in summary
+    capsys.readouterr()
+    assert main(["evaluate", "circles/telepathy/ukf_ccl", "--out", out]) == 2
+    assert "unknown network 'telepathy'" in capsys.readouterr().err

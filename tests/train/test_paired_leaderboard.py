@@ -37,6 +37,17 @@ def test_paired_interval_is_scipys_t_interval_on_the_differences():
     assert diff["episodes"] == 25
 
 
+def test_rounding_differences_are_equal_not_a_number_of_episodes_away():
+    """Two policies playing the same episodes (greedy = always on a composition) differ by float rounding:
+    'equal to rounding', not 'not distinguishable; ~5 episodes would resolve it'; a real difference of 1e-6
+    relative still gets its verdict and its episode count."""
+    reference = np.random.default_rng(4).uniform(0.5, 1.5, size=8)
+    rounding = paired_difference(reference + np.array([2e-16, -1e-16, 3e-16, 0, 1e-16, 2e-16, 0, 4e-16]), reference)
+    assert rounding["equal"] and verdict(rounding) == "equal to rounding" and rounding["episodes_needed"] is None
+    small = paired_difference(reference + 1e-6 * np.linspace(0.5, 1.5, 8), reference)
+    assert not small["equal"] and verdict(small) == "worse"
+
+
 @pytest.mark.parametrize("seed", range(8))
 def test_interval_excludes_zero_exactly_when_the_paired_t_test_rejects(seed):
     rng = np.random.default_rng(seed)

@@ -4,12 +4,19 @@ optionally ``TIMESTEPS``)."""
 import importlib
 
 
+def module_name(scenario: str) -> str:
+    """The module of ``scenario``'s settings: the preset's name, or a composition's ``WORLD/NETWORK/BACKEND``
+    with ``__`` for each ``/`` (``circles__broadcast__ukf_ccl``)."""
+    return scenario.replace("/", "__")
+
+
 def module(scenario: str):
     """The hyperparameter module of ``scenario`` (ValueError naming the scenario where it has none)."""
     try:
-        return importlib.import_module(f"train.hyperparams.{scenario}")
+        return importlib.import_module(f"train.hyperparams.{module_name(scenario)}")
     except ModuleNotFoundError as exc:
-        raise ValueError(f"no training hyperparameters for scenario {scenario!r}") from exc
+        raise ValueError(f"no training hyperparameters for scenario {scenario!r} (train/hyperparams/"
+                         f"{module_name(scenario)}.py)") from exc
 
 
 def load(scenario: str) -> tuple[dict, dict]:
