@@ -85,28 +85,34 @@ in a log density at kilometre coordinates); seeded episodes agree to 1e-9.
 Kernels (``DnbpModel.kernel``). ``"exact"`` (the default everywhere: the
 ``gps_denied_nbp`` env, the ``dnbp`` backend, ``coloc reproduce wan2014``) is
 the path above, bit for bit. ``"truncated"`` is an optional approximation of
-the fused belief update only (the correction weights and the numpy path are
-the exact ones): at each point a mixture's terms more than r^2/2 below the
-point's largest exponent are left out (r = ``truncation``, 6 by default, in
-[1, 10]; with equal weights: every component more than ~r bandwidths farther
-than the nearest; the exact kernel's cut is 50, r = 10), the rest summed
-relative to the largest with a branch-free polynomial exp (``_exp_small``,
-relative error < 1e-12 on [-50, 0]) in fastmath loops that LLVM vectorizes
-(numba without SVML calls libm's exp one term at a time); the velocity
-completion drops prior particles below e^(-r^2/2) of the largest weight the
-same way. Bound: each left-out term is < e^(-r^2/2) of the largest (1.5e-8 at
-r = 6), so a log density moves by < K e^(-r^2/2) (1.5e-6 at K = 100).
+the compiled belief update and correction weights (the numpy path is the
+exact one): at each point a mixture's terms more than r^2/2 below the point's
+largest exponent are left out (r = ``truncation``, 6 by default, in [1, 10];
+with equal weights: every component more than ~r bandwidths farther than the
+nearest; the exact kernel's cut is 50, r = 10), the rest summed relative to
+the largest with a branch-free polynomial exp (``_exp_small``, relative error
+< 1e-12 on [-50, 0]) in fastmath loops that LLVM vectorizes (numba without
+SVML calls libm's exp one term at a time); the velocity completion drops
+prior particles below e^(-r^2/2) of the largest weight the same way; and a
+proposal is left out (weight 0) as soon as its weight is certainly below
+e^(-r^2/2) / C of the best one so far (its unevaluated messages bounded by
+their peak density sum_k w_k / (2 pi h^2), q by any evaluated term / (K+1)),
+so proposals deep in one message's tail skip the other messages. Bounds: each
+left-out term is < e^(-r^2/2) of the largest (1.5e-8 at r = 6), a log density
+moves by < K e^(-r^2/2) (1.5e-6 at K = 100), the proposals left out carry
+< e^(-r^2/2) of the normalized weight together.
 Measured (r = 6, M = 100): the normalized importance weights of 180 captured
 gps_denied_nbp updates (B = 4, 30 steps) differ from the exact ones by at most
-3.2e-8 in total variation; seeded 30-step episodes (seeds 0-2) give belief
-means within 2.6e-5 m of the exact path (median 1e-9 m), the same episode
-errors to 4 digits; ``coloc reproduce wan2014 --quick --runs 8`` gives every
-claim the same verdict and every dNBP err_fault within 0.2 combined standard
-errors of the exact path (20 of 23 points within 1e-4 m, the largest
-difference 0.12 m at M = 200). At r = 3 or 1 the
-episodes part by metres from the first step (1.3-3.6 m median difference of
-the means). Speed (in-process A/B on the captured updates, 2-core machine):
-the weights kernel 1.6-2.3x, the resampling kernel 3x faster than exact.
+3.2e-8 in total variation (median 4e-9); seeded 30-step episodes (seeds 0-2)
+give belief means within 1.5e-5 m of the exact path (median 1e-9 m), the same
+episode errors to 4 digits; ``coloc reproduce wan2014 --quick --runs 8``
+gives every claim the same verdict and every dNBP err_fault within 0.2
+combined standard errors of the exact path. At r = 3 or 1 the episodes part
+by metres from the first step (1.3-3.6 m median difference of the means).
+Speed (2-core machine, load ~4.5, alternating A/B in one process): the
+weights kernel 2.4-3.2x, the resampling kernel 3x, the correction weights
+~9x faster than exact; the gps_denied_nbp vector_env 1.8x at B = 1, 1.9x at
+B = 4, 2.3x at B = 16.
 
 Departures from the spec
 ------------------------
@@ -326,8 +332,10 @@ def _logsumexp(a: np.ndarray, axis: int) -> np.ndarray:
 # Terms more than this below a row's largest exponent are left out of the fast kernel sums: K of them add less
 # than K e^-50 ~ 2e-20 (relative), far below float64 resolution of the sum.
 _NEGLIGIBLE = 50.0
-# Above this many kernel entries per call the compiled kernels run their rows on all cores (threads).
-_PARALLEL_ELEMENTS = 1 << 17
+# Above this many kernel entries per call the compiled kernels run their rows on all cores (threads). 2^21 (was
+# 2^17): the correction weights' kernel (10^5-10^6 entries per step at M = 100) measured 1.3-2x slower threaded
+# than serial on the loaded 2-core machine at B = 1-16 (gps_denied_nbp env 35 vs 48 env-steps/s at B = 1).
+_PARALLEL_ELEMENTS = 1 << 21
 
 _KERNELS: dict | None = None
 
@@ -740,6 +748,19 @@ def _mixture_point_truncated(x, y, inv, cx, cy, centre_term, log_norm, buffer, l
     return math.log(total) + top - log_norm
 
 
+def _mixture_rows_truncated_source(points, cx, cy, centre_term, inv, log_norm, limit, out
+                                   ):  # pragma: no cover - compiled by numba
+    """The truncated kernel (_mixture_point_truncated) of J mixtures at their own points (J, P, 2): centres'
+    coordinates cx, cy (J, K), centre terms log w_k - 0.5 ||c_k||^2 inv (J, K), inv = 1 / h^2 and log(2 pi h^2)
+    (J,) -> out (J, P)."""
+    J, P = points.shape[0], points.shape[1]
+    buffer = np.empty(cx.shape[1])
+    for j in range(J):
+        for p in range(P):
+            out[j, p] = _mixture_point_truncated(points[j, p, 0], points[j, p, 1], inv[j], cx[j], cy[j],
+                                                 centre_term[j], log_norm[j], buffer, limit)
+
+
 def _velocity_row_truncated(positions, prior, denominator, uniform, u, limit, out
                             ):  # pragma: no cover - compiled by numba (fastmath)
     """The truncated kernel's v | p draw for the new particles of one receiver: j ~ softmax_j(-||p_i - x_j||^2 /
@@ -863,6 +884,22 @@ def _belief_weights_source(prior, prior_bandwidth, prior_uniform, centres, log_w
         truncated = radius > 0.0
         limit = 0.5 * radius * radius
         log_m = np.empty(S)
+        # truncated: a proposal whose log-weight is certainly below the best so far by more than ``prune`` is left
+        # out (-inf) before its remaining messages are evaluated; a mixture's density is at most its peak
+        # sum_k w_k / (2 pi h^2) (``upper``), and q >= (K+1)^-1 times any evaluated term
+        upper = np.zeros(S)
+        upper_total, best, prune = 0.0, -np.inf, limit + math.log(C)
+        if truncated:
+            for s in range(S):
+                if present[r, s]:
+                    peak = -np.inf
+                    for k in range(K):
+                        peak = max(peak, log_weights[r, s, k])
+                    mass = 0.0
+                    for k in range(K):
+                        mass += math.exp(log_weights[r, s, k] - peak)
+                    upper[s] = peak + math.log(mass) - norm_m[s]
+                    upper_total += upper[s]
         for j in range(C):
             rank = min(j // per, count)
             if rank == 0:
@@ -902,11 +939,20 @@ def _belief_weights_source(prior, prior_bandwidth, prior_uniform, centres, log_w
             # log m_s at the proposal, then the combination of importance_rows
             target = 0.0
             top = log_rho
+            partial, rest, pruned = log_rho, upper_total, False
             for s in range(S):
                 if present[r, s]:
-                    if truncated and not identical[s]:
-                        value = _mixture_point_truncated(x, y, inv_m[s], xs[s], ys[s], terms[s], norm_m[s], buffer,
-                                                         limit)
+                    if truncated:
+                        if partial == -np.inf or partial + rest - top + log_count < best - prune:
+                            pruned = True  # pi = 0, or the weight is certainly negligible
+                            break
+                        if identical[s]:
+                            value = _mixture_point(x, y, inv_m[s], xs[s], ys[s], terms[s], norm_m[s], buffer, True)
+                        else:
+                            value = _mixture_point_truncated(x, y, inv_m[s], xs[s], ys[s], terms[s], norm_m[s],
+                                                             buffer, limit)
+                        partial += value
+                        rest -= upper[s]
                     else:
                         value = _mixture_point(x, y, inv_m[s], xs[s], ys[s], terms[s], norm_m[s], buffer,
                                                identical[s])
@@ -916,6 +962,9 @@ def _belief_weights_source(prior, prior_bandwidth, prior_uniform, centres, log_w
                 log_m[s] = value
                 if value > top:
                     top = value
+            if pruned:
+                log_w[r, j] = -np.inf
+                continue
             target += log_rho
             if not np.isfinite(top):
                 top = 0.0
@@ -926,6 +975,8 @@ def _belief_weights_source(prior, prior_bandwidth, prior_uniform, centres, log_w
             log_q = (math.log(q) if q > 0.0 else -np.inf) + top - log_count
             fine = np.isfinite(log_q) and np.isfinite(target)
             log_w[r, j] = target - log_q if fine else -np.inf
+            if truncated and log_w[r, j] > best:
+                best = log_w[r, j]
 
 
 def _velocity_row(positions, prior, denominator, uniform, u, r, out):  # pragma: no cover - compiled by numba
@@ -1069,6 +1120,7 @@ def _fused_kernels() -> dict | None:
     _FUSED = {name: (numba.njit(**options)(fn), numba.njit(parallel=True, **options)(_renamed(fn, "_threaded")))
               for name, fn in (("weights", _belief_weights_source), ("resample", _belief_resample_source))}
     _FUSED["chunks"] = numba.parallel_chunksize
+    _FUSED["mixture_truncated"] = numba.njit(**options)(_mixture_rows_truncated_source)
     return _FUSED
 
 
@@ -1096,9 +1148,23 @@ def sample_messages(model: DnbpModel, sender_points: np.ndarray, distance: np.nd
 
 
 def correction_weights(sender_points: np.ndarray, reverse_centres: np.ndarray, reverse_log_weights: np.ndarray,
-                       reverse_bandwidth: np.ndarray) -> np.ndarray:
-    """log w_i ∝ -log m_st(p_t^i), normalized (Alg. 1 step 1, Ihler's double-counting correction)."""
-    log_m = mixture_logpdf(sender_points, reverse_centres, reverse_log_weights, reverse_bandwidth, exact=False)
+                       reverse_bandwidth: np.ndarray, truncation: float = 0.0) -> np.ndarray:
+    """log w_i ∝ -log m_st(p_t^i), normalized (Alg. 1 step 1, Ihler's double-counting correction).
+
+    ``truncation`` r > 0: m_st by the truncated kernel (the module's Kernels note) where numba is installed;
+    0 (default): the fast kernel of :func:`mixture_logpdf`."""
+    kernels = _fused_kernels() if truncation > 0.0 else None
+    if kernels is not None:
+        centres = np.asarray(reverse_centres, float)
+        h = np.asarray(reverse_bandwidth, float)
+        inv = 1.0 / h**2
+        cx, cy = np.ascontiguousarray(centres[..., 0]), np.ascontiguousarray(centres[..., 1])
+        centre_term = np.ascontiguousarray(reverse_log_weights - 0.5 * (cx * cx + cy * cy) * inv[:, None])
+        log_m = np.empty(np.shape(sender_points)[:2])
+        kernels["mixture_truncated"](np.ascontiguousarray(sender_points, float), cx, cy, centre_term, inv,
+                                     np.log(2.0 * np.pi * h**2), 0.5 * truncation * truncation, log_m)
+    else:
+        log_m = mixture_logpdf(sender_points, reverse_centres, reverse_log_weights, reverse_bandwidth, exact=False)
     log_w = -log_m
     log_w = np.where(np.isfinite(log_w), log_w, np.nanmax(np.where(np.isfinite(log_w), log_w, -np.inf)))
     return log_w - _logsumexp(log_w, axis=-1)[:, None]
@@ -1404,6 +1470,7 @@ def step(model: DnbpModel, state: DnbpState, gps_normal: np.ndarray, gps_fix: np
     if broadcast.shape != (B, N, n_iter):
         raise ValueError(f"broadcast must have shape {(B, N, n_iter)}, got {broadcast.shape}")
     parallel = model.schedule == "parallel"
+    truncation = float(model.truncation) if model.kernel == "truncated" else 0.0
     belief = state.prior.copy()
 
     # message store [b, sender, receiver]; slot N holds the GPS "message" of a normal UAV
@@ -1468,7 +1535,7 @@ def step(model: DnbpModel, state: DnbpState, gps_normal: np.ndarray, gps_fix: np
             if reverse.any():
                 rb, rt, rs = b_idx[reverse], t_idx[reverse], s_idx[reverse]
                 corr[reverse] = correction_weights(points[reverse], centres[rb, rs, rt], log_weights[rb, rs, rt],
-                                                   bandwidth[rb, rs, rt])
+                                                   bandwidth[rb, rs, rt], truncation)
             draws = _draw_per_copy(rngs, b_idx, B, draw_messages, model)
             c, lw, h = sample_messages(model, points, ranges[b_idx, t_idx, s_idx], corr, draws["permutation"],
                                        draws["offset"], draws["range_noise"])
