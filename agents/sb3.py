@@ -83,32 +83,61 @@ def check_spaces(path: str, env, model) -> None:
             raise ValueError(f"model {path!r} has {kind} space {theirs!r}, the env has {ours!r}")
 
 
+def is_maskable(model) -> bool:
+    """True for sb3-contrib's MaskablePPO (its ``predict`` takes the action masks)."""
+    try:
+        from sb3_contrib import MaskablePPO
+    except ImportError:  # pragma: no cover - sb3-contrib is a dependency
+        return False
+    return isinstance(model, MaskablePPO)
+
+
+def _algorithm(path: str, meta: dict | None):
+    """The class that saved ``path``: model.json's ``algorithm``, else what the zip's policy class says."""
+    from sb3_contrib import MaskablePPO
+    from stable_baselines3 import PPO
+
+    name = (meta or {}).get("algorithm")
+    if name is None:  # a model without model.json (or from before the field): MaskablePPO saves its policy class
+        with zipfile.ZipFile(path) as archive:
+            name = "maskable_ppo" if b"Maskable" in archive.read("data") else "ppo"
+    if name not in ("ppo", "maskable_ppo"):
+        raise ValueError(f"model {path!r}: algorithm must be 'ppo' or 'maskable_ppo', got {name!r}")
+    return MaskablePPO if name == "maskable_ppo" else PPO
+
+
 class SB3Policy(Policy):
-    """Deterministic actions of a trained SB3 model, shared by all agents (parameter sharing)."""
+    """Deterministic actions of a trained SB3 model, shared by all agents (parameter sharing); a MaskablePPO
+    model reads the env's action masks of the current step, as it did in training."""
 
     def __init__(self, env, path: str, deterministic: bool = True):
         super().__init__(env)
-        from stable_baselines3 import PPO
-
         if not os.path.isfile(path):
             raise ValueError(f"policy model {path!r} does not exist")
         meta_file = metadata_path(path)
         scenario_name = env.unwrapped.scenario.name
+        meta = None
         if os.path.isfile(meta_file):
             meta = read_metadata(meta_file)
             if meta.get("scenario") != scenario_name:
                 raise ValueError(f"model {path!r} was trained on {meta.get('scenario')!r}, not {scenario_name!r}")
         check_model_zip(path)
         try:
-            self.model = PPO.load(path, device="cpu")
+            self.model = _algorithm(path, meta).load(path, device="cpu")
         except Exception as exc:  # SB3 reports a damaged model with assorted exceptions that name no file
             raise ValueError(f"model {path!r} cannot be loaded by stable-baselines3: "
                              f"{type(exc).__name__}: {exc}") from exc
         check_spaces(path, env, self.model)
         self.deterministic = deterministic
+        self.masked = is_maskable(self.model)
 
     def act(self, observations):
         agents = list(observations)
         batch = np.stack([observations[a] for a in agents])
-        actions, _ = self.model.predict(batch, deterministic=self.deterministic)
+        masks = {}
+        if self.masked:  # the core's masks of this step, rows in possible_agents order
+            rows = np.asarray(self.env.unwrapped.scenario.action_mask(), bool)[0]
+            order = list(self.env.possible_agents)
+            masks["action_masks"] = rows[[order.index(a) for a in agents]]
+        actions, _ = self.model.predict(batch, deterministic=self.deterministic, **masks)
         return {a: actions[i] for i, a in enumerate(agents)}

@@ -325,7 +325,8 @@ def run_model_batched(model, scenario: str, episodes: int, seed_base: int, deter
     """An SB3 model on ``episodes`` copies of the batched core at once (copy e seeded ``seed_base + e``).
 
     Steps the scenario core directly rather than the VecEnv, whose auto-reset
-    would discard the last step's infos. Deterministic actions by default; sampled
+    would discard the last step's infos. A MaskablePPO model gets the core's action
+    masks, as in training. Deterministic actions by default; sampled
     ones (``deterministic=False``) draw from torch's generator, seeded here with
     ``seed_base`` so that the run repeats.
     """
@@ -334,10 +335,16 @@ def run_model_batched(model, scenario: str, episodes: int, seed_base: int, deter
 
         torch.manual_seed(seed_base)
 
+    from agents.sb3 import is_maskable
+
+    masked = is_maskable(model)
+
     def choose(core):
         observation = core.observation()
-        actions, _ = model.predict(observation.reshape(episodes * core.num_agents, *observation.shape[2:]),
-                                   deterministic=deterministic)
+        rows = episodes * core.num_agents
+        masks = {"action_masks": np.asarray(core.action_mask(), bool).reshape(rows, -1)} if masked else {}
+        actions, _ = model.predict(observation.reshape(rows, *observation.shape[2:]), deterministic=deterministic,
+                                   **masks)
         return np.asarray(actions, dtype=float).reshape(episodes, core.num_agents, *core.action_space().shape)
 
     cost, comm, initial = _run_core(scenario, episodes, seed_base, choose, env_config)

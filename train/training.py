@@ -78,6 +78,19 @@ def seed_supersuit_vec_env(venv, seed: int) -> None:
         markov_env.par_env.seed_generator(seed + c)
 
 
+def algorithm_class(name: str):
+    """stable-baselines3's PPO for ``"ppo"``, sb3-contrib's MaskablePPO for ``"maskable_ppo"``."""
+    if name == "maskable_ppo":
+        from sb3_contrib import MaskablePPO
+
+        return MaskablePPO
+    if name == "ppo":
+        from stable_baselines3 import PPO
+
+        return PPO
+    raise ValueError(f"algorithm must be 'ppo' or 'maskable_ppo', got {name!r}")
+
+
 def make_vec_env(scenario: str, copies: int, env_config: dict, seed: int, vec: str = "native"):
     """The training VecEnv: the native batched ``vector_env`` (default) or SuperSuit's, seeded alike."""
     import coloc_env
@@ -197,10 +210,9 @@ def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = 
     curve (0: no curve, only checkpoints).
     """
     import torch
-    from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import VecMonitor
 
-    from train.hyperparams import budget, load, module
+    from train.hyperparams import algorithm, budget, load, module
 
     if timesteps is None:
         timesteps = budget(scenario, DEFAULT_TIMESTEPS)
@@ -215,6 +227,11 @@ def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = 
             raise ValueError("--tensorboard needs the tensorboard package: pip install tensorboard") from exc
     hyper, env_config = load(scenario)
     copies = module(scenario).NUM_COPIES
+    algorithm_name = algorithm(scenario)
+    if algorithm_name == "maskable_ppo" and vec != "native":
+        raise ValueError(f"{scenario} trains with maskable_ppo, which reads the native vector env's action masks; "
+                         f"use --vec native, not {vec!r}")
+    Algorithm = algorithm_class(algorithm_name)
     from stable_baselines3.common.utils import set_random_seed
 
     venv = VecMonitor(make_vec_env(scenario, copies, env_config, seed, vec))
@@ -226,7 +243,7 @@ def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = 
     torch.set_num_threads(1)
     try:
         set_random_seed(seed)
-        model = PPO("MlpPolicy", venv, device="cpu", verbose=0,
+        model = Algorithm("MlpPolicy", venv, device="cpu", verbose=0,
                     tensorboard_log=os.path.join(folder, "tb") if tensorboard else None, **hyper)
         model.action_space.seed(seed)
         curve: list = []
@@ -257,7 +274,7 @@ def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = 
     write_json(os.path.join(folder, "model.json"), {
         "checkpoint": selected,
         "scenario": scenario, "seed": seed, "timesteps": timesteps, "env_config": env_config,
-        "hyperparams": json.loads(json.dumps(hyper)), "vec": vec, "copies": copies,
+        "hyperparams": json.loads(json.dumps(hyper)), "vec": vec, "copies": copies, "algorithm": algorithm_name,
         "observation_space": repr(venv.observation_space), "action_space": repr(venv.action_space),
     })
     venv.close()

@@ -247,3 +247,42 @@ def test_a_composition_trains_and_evaluates_by_its_name(tmp_path, capsys):
     capsys.readouterr()
     assert main(["evaluate", "circles/telepathy/ukf_ccl", "--out", out]) == 2
     assert "unknown network 'telepathy'" in capsys.readouterr().err
+
+
+def test_a_maskable_ppo_model_trains_loads_and_never_plays_a_masked_choice(tmp_path, monkeypatch):
+    """ALGORITHM = "maskable_ppo" in a settings module trains sb3-contrib's MaskablePPO on the vector env's masks;
+    model.json names it, make_policy loads it as such (also without model.json), its env-loop actions respect the
+    infos' masks, and the batched evaluation (which hands it the core's masks) equals the env loop."""
+    from sb3_contrib import MaskablePPO
+
+    import agents
+    import coloc_env
+    import train.hyperparams.relay_ukf as settings
+    from train.evaluate import run_episodes, run_model_batched
+    from train.training import train
+
+    monkeypatch.setattr(settings, "ALGORITHM", "maskable_ppo", raising=False)
+    path = train("relay_ukf", timesteps=256, seed=2, out=str(tmp_path), progress_bar=False, curve_points=0)
+    assert read_json(os.path.join(os.path.dirname(path), "model.json"))["algorithm"] == "maskable_ppo"
+    env = coloc_env.parallel_env("relay_ukf", horizon=40)
+    policy = agents.make_policy(path, env)
+    assert isinstance(policy.model, MaskablePPO)
+    observations, infos = env.reset(seed=5)
+    masked_somewhere = False
+    while env.agents:
+        actions = policy.act(observations)
+        for agent, action in actions.items():
+            nvec = env.action_space(agent).nvec
+            mask = np.split(np.asarray(infos[agent]["action_mask"], bool).ravel(), np.cumsum(nvec)[:-1])
+            masked_somewhere |= not all(m.all() for m in mask)
+            assert all(mask[i][int(choice)] for i, choice in enumerate(action))
+        observations, _, _, _, infos = env.step(actions)
+    assert masked_somewhere  # the check above had masks to respect
+    batched = run_model_batched(policy.model, "relay_ukf", 3, seed_base=91, horizon=40)
+    looped = run_episodes("relay_ukf", path, 3, seed_base=91, horizon=40)
+    assert batched["per_episode_cost"] == pytest.approx(looped["per_episode_cost"], rel=1e-9)
+    os.remove(os.path.join(os.path.dirname(path), "model.json"))
+    assert isinstance(agents.make_policy(path, env).model, MaskablePPO)  # read from the zip's policy class
+    monkeypatch.setattr(settings, "ALGORITHM", "a2c")
+    with pytest.raises(ValueError, match=r"ALGORITHM of train/hyperparams/relay_ukf.py must be one of"):
+        train("relay_ukf", timesteps=1, seed=0, out=str(tmp_path), progress_bar=False, curve_points=0)

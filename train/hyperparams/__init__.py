@@ -1,5 +1,6 @@
 """Per-scenario PPO hyperparameters, one small module each (``HYPERPARAMS``, ``ENV_CONFIG``, ``NUM_COPIES``,
-optionally ``TIMESTEPS``)."""
+optionally ``TIMESTEPS`` and ``ALGORITHM``: ``"ppo"`` (stable-baselines3's PPO, the default) or ``"maskable_ppo"``
+(sb3-contrib's MaskablePPO, which never samples a choice the env's action mask rules out))."""
 
 import importlib
 
@@ -23,6 +24,18 @@ def load(scenario: str) -> tuple[dict, dict]:
     """(PPO keyword arguments, env config used for training) of ``scenario``."""
     settings = module(scenario)
     return dict(settings.HYPERPARAMS), dict(settings.ENV_CONFIG)
+
+
+ALGORITHMS = ("ppo", "maskable_ppo")
+
+
+def algorithm(scenario: str) -> str:
+    """The scenario's training algorithm, one of :data:`ALGORITHMS` (its module's ``ALGORITHM``, else ``"ppo"``)."""
+    name = getattr(module(scenario), "ALGORITHM", "ppo")
+    if name not in ALGORITHMS:
+        raise ValueError(f"ALGORITHM of train/hyperparams/{module_name(scenario)}.py must be one of "
+                         f"{list(ALGORITHMS)}, got {name!r}")
+    return name
 
 
 def budget(scenario: str, default: int) -> int:
