@@ -32,8 +32,8 @@ A value other than 0 or 1, a NaN or inf is a ``ValueError`` naming the iteration
 (all ones) is the paper's schedule; all zeros reduces every fault UAV to dead
 reckoning.
 
-Observation (per UAV, ``Box(shape=(8,), float32)``: entries 0-3, 6 and 7 in [0, 1], 4 and 5 in
-[0, inf)), about the coming step tau
+Observation (per UAV, ``Box(shape=(8,), float32)``: entries 0-3 and 5-7 in [0, 1], 4 in [0, inf)),
+about the coming step tau
 ----------------------------------------------------------------------------------------------
 | index | meaning                                                                         |
 |-------|---------------------------------------------------------------------------------|
@@ -43,11 +43,16 @@ Observation (per UAV, ``Box(shape=(8,), float32)``: entries 0-3, 6 and 7 in [0, 
 | 3     | distinct UAVs heard from in the previous step, / (N - 1) (0 at reset)           |
 | 4     | log(1 + spread) of the prior rho_tau, spread = sqrt(tr Cov(positions)) in metres |
 | 5     | bimodality coefficient (g^2 + 1) / kappa of the prior along its principal axis  |
-|       | (1/3 Gaussian, > 5/9 suggests a ring or two modes)                              |
+|       | (1/3 Gaussian, > 5/9 suggests a ring or two modes; at most 1 by Pearson's       |
+|       | inequality kappa >= g^2 + 1, which the particles' moments obey too; clipped     |
+|       | to 1 against rounding)                                                          |
 | 6     | step fraction tau / horizon                                                     |
 | 7     | what its neighbours already heard: the mean over its neighbours within R at tau |
 |       | of the distinct UAVs each heard from in the previous step, / (N - 1) (0 without |
 |       | neighbours and at reset) [chosen: each UAV's count rides on its beacon]          |
+
+Entry 4 alone is unbounded: a lost fault UAV's prior spreads without limit. (Before, entry 5 was
+bounded by [0, inf) too.)
 
 Entry 7 was added for learning (issue 15): a broadcast helps most where the neighbours heard
 little; without it a UAV knew only its own count (entry 3).
@@ -316,7 +321,8 @@ def bimodality(points: np.ndarray) -> np.ndarray:
     safe = np.maximum(m2, 1e-300)
     skew = np.mean(x**3, axis=-1) / safe**1.5
     kurt = np.mean(x**4, axis=-1) / safe**2
-    return np.where(m2 > 1e-18, (skew**2 + 1.0) / np.maximum(kurt, 1e-12), 1.0 / 3.0)
+    # Pearson's inequality kappa >= g^2 + 1 (empirical moments included) bounds it by 1; rounding may not
+    return np.minimum(np.where(m2 > 1e-18, (skew**2 + 1.0) / np.maximum(kurt, 1e-12), 1.0 / 3.0), 1.0)
 
 
 class GpsDeniedNbpScenario(PresetScenario):
@@ -378,7 +384,7 @@ class GpsDeniedNbpScenario(PresetScenario):
 
     def observation_space(self):
         low = np.zeros(OBS_DIM, np.float32)
-        high = np.array([1.0, 1.0, 1.0, 1.0, np.inf, np.inf, 1.0, 1.0], np.float32)
+        high = np.array([1.0, 1.0, 1.0, 1.0, np.inf, 1.0, 1.0, 1.0], np.float32)
         return gymnasium.spaces.Box(low, high, dtype=np.float32)
 
     def action_space(self):

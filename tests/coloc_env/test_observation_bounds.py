@@ -40,3 +40,17 @@ def test_every_observation_of_random_episodes_lies_in_the_bounded_space(name):
         assert not outside.any(), f"entries {sorted(set(np.nonzero(outside)[1]))} leave their bounds"
         actions = np.stack([venv.action_space.sample() for _ in range(venv.num_envs)])
         obs, _, _, _ = venv.step(actions)
+
+
+def test_the_bimodality_entry_is_at_most_one_and_one_for_two_equal_clusters():
+    """gps_denied_nbp's entry 5, Sarle's (g^2 + 1) / kappa, is bounded by 1 (Pearson's inequality, which the
+    particles' own moments obey) and reaches it for two equal point masses; a Gaussian cloud is near 1/3."""
+    from coloc_env.scenarios.gps_denied_nbp import bimodality
+
+    rng = np.random.default_rng(8)
+    clouds = rng.standard_normal((200, 60, 2)) * rng.uniform(0.1, 50, (200, 1, 2))
+    clouds[100:, :30] += rng.uniform(5, 500, (100, 1, 2))  # two clusters of various spreads and distances
+    values = bimodality(clouds)
+    assert np.all(values <= 1.0) and np.all(values > 0)
+    assert bimodality(np.array([[0.0, 0.0]] * 25 + [[7.0, 3.0]] * 25)) == pytest.approx(1.0, abs=1e-12)
+    assert abs(float(np.mean(bimodality(rng.standard_normal((400, 400, 2))))) - 1 / 3) < 0.02
