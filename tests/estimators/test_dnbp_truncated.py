@@ -104,3 +104,19 @@ def test_bad_kernel_options_are_refused_by_name(options, message):
     field = next(iter(options))
     with pytest.raises(ValueError, match=f"^{field} must be"):
         dn.DnbpModel(**options)
+
+
+def test_truncated_correction_weights_are_within_the_log_density_bound():
+    """log w_i = -log m_st(p_i) normalized: a log density moves by < K e^(-r^2/2) (1.5e-6 at r = 6, K = 100)."""
+    rng = np.random.default_rng(4)
+    E, M = 5, 100
+    senders = 700.0 + rng.normal(size=(E, M, 2)) * 4.0
+    angle = rng.random((E, M)) * 2 * np.pi
+    centres = senders.mean(axis=1, keepdims=True) + (150.0 + 2.0 * rng.normal(size=(E, M)))[..., None] * np.stack(
+        [np.cos(angle), np.sin(angle)], axis=-1)
+    senders[:, : M // 2] = centres[:, : M // 2] + rng.normal(size=(E, M // 2, 2)) * 5.0  # half near the ring
+    log_w = np.log(rng.dirichlet(np.ones(M), size=E))
+    h = np.array([1.0, 3.0, 6.0, 9.0, 12.0])
+    exact = dn.correction_weights(senders, centres, log_w, h)
+    assert np.abs(dn.correction_weights(senders, centres, log_w, h, truncation=6.0) - exact).max() < 2 * M * np.exp(-18)
+    assert np.abs(dn.correction_weights(senders, centres, log_w, h, truncation=1.0) - exact).max() > 1e-2
