@@ -72,13 +72,34 @@ Outlier gate (both forms identically): an observation whose normalized
 innovation nu^T Pz^-1 nu exceeds ``gate`` is not applied (MRCLAM holds
 misread barcodes and occluded detections); ``gate=None`` applies all.
 
-Arrays (one copy, no batch axis; the position-only module batches):
-``estimate`` (N, 3), ``cov`` (3N, 3N); :class:`FactoredCov` holds
+Arrays: ``estimate`` (N, 3), ``cov`` (3N, 3N); :class:`FactoredCov` holds
 ``P_ii`` (N, 3, 3), ``phi`` (N, 3, 3), ``sigma`` (N, N, 3, 3) (sigma[i, i] unused).
+:func:`ccl_update`, :func:`dcl_update` and :func:`time_update` take one copy;
+the factored form also has a leading batch axis B: :func:`time_update_factored`
+/ :func:`time_update_batch` on (B, N, ...) and :func:`dcl_update_batch` /
+:func:`dcl_update_rows` on G copies at once (one chain length per call; in
+place at chosen copies of (B, ...) arrays for the env backend).
+
+Batched form (the same equations, no loop over copies)
+------------------------------------------------------
+The receivers of a chain update independently once the message (nu, Pz, g, the
+rows of A, the Pxz of the up-neighbours, r_U) is formed, so the batched update
+stacks them as well as the copies: A is the lower Cholesky factor of the chain's
+covariance P_cc, whose rows the look-up Cholesky (15)-(16) forms receiver by
+receiver (the observers' 3q x 3q block first, for the sigma points; the rest
+only for copies the gate passes); Pxz = A[:, :3q] g for all receivers (20); the
+decrements (22)-(23) as one product (Phi_c^-1 K)(Phi_c^-1 Pxz)^T over the
+chain's 3k x 3k block, of which the pairs i > j are kept, and
+Phi_{c_i}^-1 K_i r_U for the unreached robots; r_U = (A_o^-T g)^T [Phi_o sigma_{o,U}];
+Phi_i^-1 [K_i, Pxz_i] by one LU solve per Phi_i. Every sum is a stacked
+matrix product or a linalg gufunc, so copy b's result does not depend on the
+other copies of the call (bit for bit), and it equals :func:`dcl_update` to
+rounding (tests: 1e-12).
 """
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -132,7 +153,7 @@ def _noise(G: np.ndarray, odometry_var) -> np.ndarray:
             or np.any(q < 0)):
         raise ValueError(
             f"odometry_var must be (sigma_v^2, sigma_w^2) >= 0, shape (2,) or (N, 2), got {odometry_var!r}")
-    return np.einsum("...ab,...b,...cb->...ac", G, np.broadcast_to(q, (*robots, 2)), G)
+    return (G * q[..., None, :]) @ np.swapaxes(G, -1, -2)
 
 
 def correct_odometry(odometry, scale=(1.0, 1.0), delay: int = 0) -> np.ndarray:
@@ -411,34 +432,61 @@ def dcl_update_batch(estimate, fcov: FactoredCov, chain, z, R, measured_in_chain
     return x, f, applied
 
 
-def _look_up_rows(A, P_ii, sigma, rows, chain, phic, i):
-    """Row block i of A for every copy: the look-up Cholesky (15)-(16) by receiver chain[:, i].
-
-    P_{c_i c_j} = Phi_{c_i} sigma_{c_i c_j} Phi_{c_j}^T (j < i), A_{i, <i} = P_{c_i, c_<i} A_{<i}^-T,
-    A_ii = chol(P_{c_i c_i} - A_{i, <i} A_{i, <i}^T): the prior factors (a receiver's own row of sigma and
-    its P_ii change only when it updates, after its row of A is formed).
-    """
-    G = len(rows)
-    ci = chain[:, i]
-    if i:
-        S = sigma[rows[:, None], ci[:, None], chain[:, :i]]  # (G, i, 3, 3): sigma_{c_i c_j}
-        blocks = phic[:, i:i + 1] @ S @ np.swapaxes(phic[:, :i], -1, -2)
-        own = blocks.transpose(0, 2, 1, 3).reshape(G, 3, 3 * i)  # (G, 3, 3i) = [P_{c_i c_0}, ..., P_{c_i c_i-1}]
-        left = np.swapaxes(np.linalg.solve(A[:, :3 * i, :3 * i], np.swapaxes(own, -1, -2)), -1, -2)
-        A[:, 3 * i:3 * i + 3, :3 * i] = left
-        schur = P_ii[rows, ci] - left @ np.swapaxes(left, -1, -2)
-    else:
-        schur = P_ii[rows, ci]
-    A[:, 3 * i:3 * i + 3, 3 * i:3 * i + 3] = np.linalg.cholesky(0.5 * (schur + np.swapaxes(schur, -1, -2)))
+@functools.lru_cache(maxsize=64)
+def _lower(k: int) -> tuple[np.ndarray, np.ndarray]:
+    """The index pairs (i, j), i > j, of a k x k lower triangle (read-only, cached)."""
+    pairs = np.tril_indices(k, -1)
+    for a in pairs:
+        a.flags.writeable = False
+    return pairs
 
 
-def _moments_batch(h_points: np.ndarray, h0: np.ndarray, w: np.ndarray, R: np.ndarray):
-    """:func:`_moments` per copy: h_points (G, P, 2), h0 (G, 2); zbar (G, 2), deviations (G, P, 2), Pz (G, 2, 2).
+@functools.lru_cache(maxsize=64)
+def _weights(L: int, lam: float) -> np.ndarray:
+    """:func:`estimators.ukf_relay.ukf_weights` (read-only, cached)."""
+    w = ukf_weights(L, lam)
+    w.flags.writeable = False
+    return w
 
-    Sums over the sigma points as stacked matrix products (w @ d, (d w)^T d), so that every copy is computed
-    by the same operation whatever G is."""
-    d = h_points - h0[:, None]
-    d[..., 1] = wrap(d[..., 1])
+
+def _chain_blocks(P_ii, sigma, rows, chain, phic):
+    """The chain's covariance blocks per copy, (G, k, k, 3, 3): P_{c_i c_i} = P_ii, and for i > j
+    P_{c_i c_j} = Phi_{c_i} sigma_{c_i c_j} Phi_{c_j}^T (what receiver c_i forms from its own row of sigma and
+    the Phi_{c_j} in the message); the upper blocks are left at zero (a lower Cholesky reads the lower
+    triangle). Also returns the gathered sigma_{c_i c_j} (G, k(k-1)/2, 3, 3) of the pairs i > j."""
+    G, k = chain.shape
+    if k == 1:
+        return P_ii[rows, chain[:, 0]][:, None, None], None
+    lower_i, lower_j = _lower(k)
+    S = sigma[rows[:, None], chain[:, lower_i], chain[:, lower_j]]
+    blocks = np.zeros((G, k, k, 3, 3))
+    blocks[:, lower_i, lower_j] = phic[:, lower_i] @ S @ np.swapaxes(phic[:, lower_j], -1, -2)
+    diagonal = np.arange(k)
+    blocks[:, diagonal, diagonal] = P_ii[rows[:, None], chain]
+    return blocks, S
+
+
+def _cholesky_blocks(blocks: np.ndarray) -> np.ndarray:
+    """Lower Cholesky factor (G, 3k, 3k) of the block matrix (G, k, k, 3, 3) (its lower triangle)."""
+    G, k = blocks.shape[:2]
+    return np.linalg.cholesky(blocks.transpose(0, 1, 3, 2, 4).reshape(G, 3 * k, 3 * k))
+
+
+def _moments_batch(h: np.ndarray, h0: np.ndarray, w: np.ndarray, R: np.ndarray):
+    """:func:`_moments` per copy from the 2 x 3q points that move h: h (G, 6q, 2) (plus points, then minus),
+    h0 (G, 2); the centre and the other 2(L - 3q) points sit at h0 (deviation exactly 0 from h0).
+
+    Returns zbar (G, 2), deviations (G, 2L + 1, 2) in the order of :func:`dcl_update`, Pz (G, 2, 2). The sums
+    over the points are stacked matrix products (w @ d, (d w)^T d), so every copy is computed by the same
+    operation whatever G is."""
+    G, P = h.shape[:2]
+    half = P // 2
+    L = (len(w) - 1) // 2
+    moved = h - h0[:, None]
+    moved[..., 1] = wrap(moved[..., 1])
+    d = np.zeros((G, 2 * L + 1, 2))
+    d[:, 1:1 + half] = moved[:, :half]
+    d[:, 1 + L:1 + L + half] = moved[:, half:]
     mu = w @ d
     dz = d - mu[:, None]
     Pz = np.swapaxes(dz * w[:, None], -1, -2) @ dz + R
@@ -454,19 +502,27 @@ def dcl_update_rows(estimate, P_ii, phi, sigma, rows, chain, z, R, measured_in_c
     copies by chain length); ``z`` (G, 2); ``R`` (G, 2, 2) or (2, 2); ``landmark`` (G, 2) or (2,) when not
     ``measured_in_chain``. Returns ``applied`` (G,) bool (False: the gate refused z, the copy is unchanged).
 
-    The equations of the module docstring, each a stacked operation over the G copies (no loop over
-    copies; the loops run over the k receivers and their up-neighbours, as the chain does):
+    The equations of the module docstring, stacked over the G copies and over the k receivers of the chain
+    (each receiver's arithmetic uses its own row of A, of sigma, its Phi and the message, so the receivers'
+    steps are independent given the message and run as one stacked operation; no Python loop over copies
+    or receivers):
 
-    * A, row blocks 0..q-1 (observers), then q..k-1 (receivers): the look-up Cholesky (15)-(16)
-      (:func:`_look_up_rows`);
+    * A: the rows the look-up Cholesky (15)-(16) forms receiver by receiver are the rows of the lower
+      Cholesky factor of the chain's covariance P_cc (blocks Phi_{c_i} sigma_{c_i c_j} Phi_{c_j}^T,
+      P_{c_i c_i}), factored here in one stacked call: first the observers' 3q x 3q block (the sigma
+      points), then, for the copies the gate passes, the whole 3k x 3k (its rows for c_q, ..., c_k-1);
     * sigma points of the observed robots x_o +- sqrt(L + lambda) A_o (columns p <= 3q), h on them and
       h0 = h(xbar) for the other 2(L - 3q) + 1 points, zbar, dz, Pz with bearings as offsets from h0
       (:func:`_moments_batch`), nu = wrap(z - zbar), the gate nu^T Pz^-1 nu > ``gate``;
     * g = sqrt(L + lambda) w_p (dz_p^+ - dz_p^-) (3q x 2); r_U = g^T A_o^-1 [Phi_o sigma_{o,U}] for the
       unreached robots U (truncated chains);
-    * receiver c_i: Pxz_{c_i} = A_{i, o} g (20), K_i = Pxz_{c_i} Pz^-1, s_{c_i} += K_i nu (21),
-      P_{c_i c_i} -= K_i Pxz_{c_i}^T, sigma_{c_i c_j} -= Phi_{c_i}^-1 K_i Pxz_{c_j}^T Phi_{c_j}^-T (22)-(23),
-      sigma_{c_i u} -= Phi_{c_i}^-1 K_i r_u (u in U); headings wrapped after.
+    * every receiver c_i: Pxz_{c_i} = A_{i, o} g (20), K_i = Pxz_{c_i} Pz^-1, s_{c_i} += K_i nu (21),
+      P_{c_i c_i} -= K_i Pxz_{c_i}^T, sigma_{c_i c_j} -= Phi_{c_i}^-1 K_i Pxz_{c_j}^T Phi_{c_j}^-T (i > j;
+      sigma_{c_j c_i} its transpose) (22)-(23), sigma_{c_i u} -= Phi_{c_i}^-1 K_i r_u (u in U); headings
+      wrapped after.
+
+    Sums run as stacked matrix products (matmul, the linalg gufuncs), so a copy's bits do not depend on the
+    other copies of the call; they match :func:`dcl_update` to rounding (tests: 1e-12).
     """
     x = estimate
     rows = np.asarray(rows, dtype=int).reshape(-1)
@@ -477,38 +533,44 @@ def dcl_update_rows(estimate, P_ii, phi, sigma, rows, chain, z, R, measured_in_c
     q = 2 if measured_in_chain else 1
     if k < q:
         raise ValueError("a chain must reach the measuring and the measured robot")
-    if G and (np.any(chain < 0) or np.any(chain >= N) or np.any(np.diff(np.sort(chain, axis=1), axis=1) == 0)):
-        raise ValueError(f"chain must list distinct robots in [0, {N - 1}] in each row, got {chain.tolist()}")
-    if np.any(np.diff(np.sort(rows)) == 0):
-        raise ValueError(f"rows must be distinct copies, got {rows.tolist()}")
     if not measured_in_chain and landmark is None:
         raise ValueError("landmark: a landmark observation needs its position")
     applied = np.zeros(G, dtype=bool)
     if not G:
         return applied
+    in_chain = np.zeros((G, N), dtype=bool)  # each row: the robots its chain reaches
+    if chain.min() >= 0 and chain.max() < N:
+        in_chain[np.arange(G)[:, None], chain] = True
+    if np.count_nonzero(in_chain) != G * k:
+        raise ValueError(f"chain must list distinct robots in [0, {N - 1}] in each row, got {chain.tolist()}")
+    copies = np.zeros(x.shape[0], dtype=bool)
+    copies[rows] = True
+    if np.count_nonzero(copies) != G:
+        raise ValueError(f"rows must be distinct copies, got {rows.tolist()}")
     L = 3 * N
-    w = ukf_weights(L, lam)
+    w = _weights(L, lam)
     wp = w[1]
     scale = np.sqrt(L + lam)
-    z = np.broadcast_to(np.asarray(z, float), (G, 2))
-    R = np.broadcast_to(np.asarray(R, float), (G, 2, 2))
-    phic = phi[rows[:, None], chain]  # (G, k, 3, 3): Phi of the chain's robots
-    A = np.zeros((G, 3 * k, 3 * k))
-    for i in range(q):
-        _look_up_rows(A, P_ii, sigma, rows, chain, phic, i)
-    m = chain[:, 0]
-    dev = scale * A[:, :3 * q, :3 * q]
-    x_o = x[rows[:, None], chain[:, :q]].reshape(G, 3 * q)
+    z, R = np.asarray(z, float), np.asarray(R, float)
+    if z.shape != (G, 2):
+        z = np.broadcast_to(z, (G, 2))
+    if R.shape != (G, 2, 2):
+        R = np.broadcast_to(R, (G, 2, 2))
+    r = rows[:, None]
+    phic = phi[r, chain]  # (G, k, 3, 3): Phi of the chain's robots
+    blocks, S = _chain_blocks(P_ii, sigma, rows, chain, phic)
+    A_o = _cholesky_blocks(blocks[:, :q, :q])  # the observers' rows (15)-(16)
+    dev = scale * A_o
+    x_o = x[r, chain[:, :q]].reshape(G, 3 * q)
     plus, minus = x_o[:, :, None] + dev, x_o[:, :, None] - dev  # (G, 3q, 3q): column p = point p
-    pts = np.concatenate([np.swapaxes(plus, -1, -2), np.swapaxes(minus, -1, -2)], axis=1)  # (G, 6q, 3q)
+    # the mean (point 0: h0 = h(xbar)), then the 2 x 3q points that move h, (G, 6q + 1, 3q)
+    pts = np.concatenate([x_o[:, None], np.swapaxes(plus, -1, -2), np.swapaxes(minus, -1, -2)], axis=1)
     if measured_in_chain:
-        h, h0 = observe(pts[..., 0:3], pts[..., 3:5]), observe(x[rows, m], x[rows, chain[:, 1], :2])
+        h = observe(pts[..., 0:3], pts[..., 3:5])
     else:
-        lm = np.broadcast_to(np.asarray(landmark, float), (G, 2))
-        h, h0 = observe(pts[..., 0:3], lm[:, None]), observe(x[rows, m], lm)
-    rest = np.repeat(h0[:, None], L - 3 * q, axis=1)  # the other points leave z at h0
-    h_all = np.concatenate([h0[:, None], h[:, :3 * q], rest, h[:, 3 * q:], rest], axis=1)
-    z_bar, dz, Pz = _moments_batch(h_all, h0.copy(), w, R)
+        h = observe(pts[..., 0:3], np.asarray(landmark, float).reshape(-1, 1, 2))
+    h0 = h[:, 0]
+    z_bar, dz, Pz = _moments_batch(h[:, 1:], h0, w, R)  # the other points leave z at h0
     nu = z - z_bar
     nu[:, 1] = wrap(nu[:, 1])
     Pz_inv = np.linalg.inv(Pz)
@@ -520,44 +582,38 @@ def dcl_update_rows(estimate, P_ii, phi, sigma, rows, chain, z, R, measured_in_c
     if not len(keep):
         return applied
     if len(keep) < G:
-        rows, chain, phic, A, dz, nu, Pz_inv = (a[keep] for a in (rows, chain, phic, A, dz, nu, Pz_inv))
-        G = len(keep)
+        rows, chain, phic, blocks, A_o, dz, nu, Pz_inv, in_chain = (
+            a[keep] for a in (rows, chain, phic, blocks, A_o, dz, nu, Pz_inv, in_chain))
+        S = None if S is None else S[keep]
+        G, r = len(keep), rows[:, None]
     g = scale * wp * (dz[:, 1:1 + 3 * q] - dz[:, 1 + L:1 + L + 3 * q])  # (G, 3q, 2)
-    for i in range(q, k):
-        _look_up_rows(A, P_ii, sigma, rows, chain, phic, i)
-    r = rows[:, None]
+    A = _cholesky_blocks(blocks) if k > q else A_o  # (G, 3k, 3k): every receiver's row of A
     U = N - k
-    if U:  # observers: r_U = g^T A_o^-1 [Phi_o sigma_{o,U}]
-        in_chain = np.zeros((G, N), dtype=bool)
-        in_chain[np.arange(G)[:, None], chain] = True
+    Pxz = (A[:, :, :3 * q] @ g).reshape(G, k, 3, 2)  # (20), receiver i: rows 3i..3i+2
+    K = Pxz @ Pz_inv[:, None]
+    x[r, chain] = x[r, chain] + (K @ nu[:, None, :, None])[..., 0]  # (21)
+    P = P_ii[r, chain] - K @ np.swapaxes(Pxz, -1, -2)  # (22)-(23), i = j
+    P_ii[r, chain] = 0.5 * (P + np.swapaxes(P, -1, -2))
+    # (G, k, 3, 2) each: M_i = Phi_{c_i}^-1 K_i, V_i = Phi_{c_i}^-1 Pxz_{c_i} (one solve per Phi)
+    MV = np.linalg.solve(phic, np.concatenate([K, Pxz], axis=-1)) if k > 1 or U else None
+    if k > 1:  # (22)-(23), i > j: sigma_{c_i c_j} -= (Phi_{c_i}^-1 K_i) (Phi_{c_j}^-1 Pxz_{c_j})^T
+        lower_i, lower_j = _lower(k)
+        M, V = MV[..., :2], MV[..., 2:]
+        delta = (M.reshape(G, 3 * k, 2) @ np.swapaxes(V.reshape(G, 3 * k, 2), -1, -2)).reshape(G, k, 3, k, 3)
+        new = S - delta.transpose(0, 1, 3, 2, 4)[:, lower_i, lower_j]
+        ci, cj = chain[:, lower_i], chain[:, lower_j]
+        sigma[r, ci, cj] = new
+        sigma[r, cj, ci] = np.swapaxes(new, -1, -2)
+    if U:  # observers: r_U = g^T A_o^-1 [Phi_o sigma_{o,U}]; every receiver: sigma_{c_i u} -= Phi^-1 K_i r_u
         unreached = np.argsort(in_chain, axis=1, kind="stable")[:, :U]  # (G, U), ascending
         obs = chain[:, :q]
-        prod = phi[r, obs][:, :, None] @ sigma[r[:, :, None], obs[:, :, None], unreached[:, None, :]]
+        prod = phic[:, :q, None] @ sigma[r[:, :, None], obs[:, :, None], unreached[:, None, :]]
         rows_o = prod.transpose(0, 1, 3, 2, 4).reshape(G, 3 * q, 3 * U)
-        r_U = (np.swapaxes(g, -1, -2) @ np.linalg.solve(A[:, :3 * q, :3 * q], rows_o)).reshape(G, 2, U, 3)
-        r_U = r_U.transpose(0, 2, 1, 3)  # (G, U, 2, 3)
-    phic_inv = np.linalg.inv(phic)
-    weights = []
-    for i in range(k):
-        ci = chain[:, i]
-        Pxz_i = A[:, 3 * i:3 * i + 3, :3 * q] @ g  # (20)
-        weights.append(Pxz_i)
-        K_i = Pxz_i @ Pz_inv
-        x[rows, ci] = x[rows, ci] + (K_i @ nu[:, :, None])[..., 0]  # (21)
-        phi_inv = phic_inv[:, i]
-        for j in range(i + 1):  # (22)-(23)
-            delta = K_i @ np.swapaxes(weights[j], -1, -2)
-            if j == i:
-                P = P_ii[rows, ci] - delta
-                P_ii[rows, ci] = 0.5 * (P + np.swapaxes(P, -1, -2))
-            else:
-                cj = chain[:, j]
-                new = sigma[rows, ci, cj] - phi_inv @ delta @ np.swapaxes(phic_inv[:, j], -1, -2)
-                sigma[rows, ci, cj] = new
-                sigma[rows, cj, ci] = np.swapaxes(new, -1, -2)
-        if U:
-            new = sigma[r, ci[:, None], unreached] - (phi_inv @ K_i)[:, None] @ r_U
-            sigma[r, ci[:, None], unreached] = new
-            sigma[r, unreached, ci[:, None]] = np.swapaxes(new, -1, -2)
+        y = np.linalg.solve(np.swapaxes(A[:, :3 * q, :3 * q], -1, -2), g)  # A_o^-T g
+        r_U = (np.swapaxes(y, -1, -2) @ rows_o).reshape(G, 2, U, 3)
+        r3, c3, u3 = r[:, :, None], chain[:, :, None], unreached[:, None, :]
+        new = sigma[r3, c3, u3] - MV[:, :, None, :, :2] @ r_U.transpose(0, 2, 1, 3)[:, None]
+        sigma[r3, c3, u3] = new
+        sigma[r3, u3, c3] = np.swapaxes(new, -1, -2)
     x[rows, :, 2] = wrap(x[rows, :, 2])
     return applied
