@@ -127,8 +127,9 @@ Arguments (fields of :class:`GpsDeniedNbpConfig`, defaults = spec §1)
 | min_bandwidth      | 0.5         | [0.001, 10000]            | floor of h_ts [chosen]                       |
 | initial_threshold  | 3           | 1..N                      | theta_0 [paper]                              |
 | schedule           | "modified"  | "modified", "parallel"    | Sec. 3.4 [paper]; parallel = ablation        |
-| kernel             | "exact"     | "exact", "truncated"      | belief-update mixture kernel [chosen]; the   |
-|                    |             |                           | truncated one approximates (estimators.dnbp) |
+| kernel             | "truncated" | "exact", "truncated"      | belief-update mixture kernel [chosen]; the   |
+|                    |             |                           | truncated one approximates (estimators.dnbp; |
+|                    |             |                           | the default since issue 18, "exact" before)  |
 | truncation         | 6.0         | [1, 10] bandwidths        | r of the truncated kernel [chosen]           |
 | reward             | "team"      | "team", "own"             | see the reward table                         |
 | broadcast_cost     | 0.0         | [0, 1e12]                 | lambda_c, metres per broadcast               |
@@ -182,7 +183,7 @@ class GpsDeniedNbpConfig:
     min_bandwidth: float = 0.5
     initial_threshold: int = 3
     schedule: str = "modified"
-    kernel: str = "exact"
+    kernel: str = "truncated"
     truncation: float = 6.0
     reward: str = "team"
     broadcast_cost: float = 0.0

@@ -1,7 +1,8 @@
 """dNBP's optional truncated kernel (``DnbpModel.kernel = "truncated"``) approximates the exact one within its
 stated bound: the importance weights of real belief updates to 1e-6 in total variation at r = 6, seeded episodes
 to 1e-3 m; a radius too small moves them visibly (so these tolerances test the truncation, not a copy of the exact
-path); the exact kernel stays the default; bad values are refused by name."""
+path); the library's default stays the exact kernel, the env's is the truncated one; bad values are refused by
+name."""
 
 import numpy as np
 import pytest
@@ -21,7 +22,7 @@ def _updates(steps=4, num_particles=50):
         captured.append((model, args))
         return original(kernels, model, *args)
 
-    env = coloc_env.parallel_env("gps_denied_nbp", num_particles=num_particles, horizon=steps)
+    env = coloc_env.parallel_env("gps_denied_nbp", num_particles=num_particles, horizon=steps, kernel="exact")
     env.reset(seed=3)
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(dn, "_belief_update_fused", record)
@@ -85,10 +86,11 @@ def test_seeded_episodes_agree_with_the_exact_kernel_and_a_small_radius_does_not
     assert np.abs(_means("truncated", 1.0) - exact).max() > 0.1
 
 
-def test_the_exact_kernel_is_the_default():
+def test_the_library_defaults_to_the_exact_kernel_and_the_env_to_the_truncated_one():
     assert dn.DnbpModel().kernel == "exact"
-    assert coloc_env.backends.Dnbp().kernel == "exact"
-    assert coloc_env.scenarios.gps_denied_nbp.GpsDeniedNbpConfig().kernel == "exact"
+    assert coloc_env.backends.Dnbp().kernel == "truncated"
+    assert coloc_env.scenarios.gps_denied_nbp.GpsDeniedNbpConfig().kernel == "truncated"
+    assert coloc_env.parallel_env("gps_denied_nbp", kernel="exact").unwrapped.scenario.model.kernel == "exact"
 
 
 @pytest.mark.parametrize(("options", "message"), [
