@@ -91,7 +91,7 @@ only for copies the gate passes); Pxz = A[:, :3q] g for all receivers (20); the
 decrements (22)-(23) as one product (Phi_c^-1 K)(Phi_c^-1 Pxz)^T over the
 chain's 3k x 3k block, of which the pairs i > j are kept, and
 Phi_{c_i}^-1 K_i r_U for the unreached robots; r_U = (A_o^-T g)^T [Phi_o sigma_{o,U}];
-Phi_i^-1 [K_i, Pxz_i] by one LU solve per Phi_i. Every sum is a stacked
+Phi_i^-1 [K_i, Pxz_i] by one LU solve per Phi_i; Pz^-1 (2 x 2) by its adjugate. Every sum is a stacked
 matrix product or a linalg gufunc, so copy b's result does not depend on the
 other copies of the call (bit for bit), and it equals :func:`dcl_update` to
 rounding (tests: 1e-12).
@@ -466,6 +466,13 @@ def _chain_blocks(P_ii, sigma, rows, chain, phic):
     return blocks, S
 
 
+def _inv2(M: np.ndarray) -> np.ndarray:
+    """Inverses of 2 x 2 matrices (G, 2, 2) by the adjugate, elementwise over the stack (Pz, positive definite)."""
+    a, b, c, d = M.reshape(-1, 4).T
+    det = a * d - b * c
+    return (np.stack([d, -b, -c, a], axis=-1) / det[:, None]).reshape(M.shape)
+
+
 def _cholesky_blocks(blocks: np.ndarray) -> np.ndarray:
     """Lower Cholesky factor (G, 3k, 3k) of the block matrix (G, k, k, 3, 3) (its lower triangle)."""
     G, k = blocks.shape[:2]
@@ -474,23 +481,28 @@ def _cholesky_blocks(blocks: np.ndarray) -> np.ndarray:
 
 def _moments_batch(h: np.ndarray, h0: np.ndarray, w: np.ndarray, R: np.ndarray):
     """:func:`_moments` per copy from the 2 x 3q points that move h: h (G, 6q, 2) (plus points, then minus),
-    h0 (G, 2); the centre and the other 2(L - 3q) points sit at h0 (deviation exactly 0 from h0).
+    h0 (G, 2). The centre and the other 2(L - 3q) points sit at h0 (deviation 0 from h0), so with
+    d_p = wrap(h_p - h0) on the moving points, w_p = w[1] on each of them and 1 - 6q w_p on the rest:
 
-    Returns zbar (G, 2), deviations (G, 2L + 1, 2) in the order of :func:`dcl_update`, Pz (G, 2, 2). The sums
-    over the points are stacked matrix products (w @ d, (d w)^T d), so every copy is computed by the same
-    operation whatever G is."""
-    G, P = h.shape[:2]
-    half = P // 2
-    L = (len(w) - 1) // 2
-    moved = h - h0[:, None]
-    moved[..., 1] = wrap(moved[..., 1])
-    d = np.zeros((G, 2 * L + 1, 2))
-    d[:, 1:1 + half] = moved[:, :half]
-    d[:, 1 + L:1 + L + half] = moved[:, half:]
-    mu = w @ d
+        mu = w_p sum_p d_p,  Pz = w_p sum_p (d_p - mu)(d_p - mu)^T + (1 - 6q w_p) mu mu^T + R.
+
+    Returns zbar = h0 + mu (G, 2), the moving points' deviations d_p - mu (G, 6q, 2) and Pz (G, 2, 2). The sums
+    are stacked matrix products, so every copy is computed by the same operation whatever G is."""
+    wp = w[1]
+    d = h - h0[:, None]
+    d[..., 1] = wrap(d[..., 1])
+    mu = wp * (_ones(d.shape[1]) @ d)
     dz = d - mu[:, None]
-    Pz = np.swapaxes(dz * w[:, None], -1, -2) @ dz + R
+    rest = 1.0 - d.shape[1] * wp  # the centre's weight and the 2(L - 3q) points that stay at h0
+    Pz = wp * (np.swapaxes(dz, -1, -2) @ dz) + rest * (mu[:, :, None] * mu[:, None, :]) + R
     return h0 + mu, dz, 0.5 * (Pz + np.swapaxes(Pz, -1, -2))
+
+
+@functools.lru_cache(maxsize=16)
+def _ones(n: int) -> np.ndarray:
+    out = np.ones(n)
+    out.flags.writeable = False
+    return out
 
 
 def dcl_update_rows(estimate, P_ii, phi, sigma, rows, chain, z, R, measured_in_chain: bool = True,
@@ -573,7 +585,7 @@ def dcl_update_rows(estimate, P_ii, phi, sigma, rows, chain, z, R, measured_in_c
     z_bar, dz, Pz = _moments_batch(h[:, 1:], h0, w, R)  # the other points leave z at h0
     nu = z - z_bar
     nu[:, 1] = wrap(nu[:, 1])
-    Pz_inv = np.linalg.inv(Pz)
+    Pz_inv = _inv2(Pz)
     if gate is not None:
         applied = ~((nu[:, None, :] @ Pz_inv @ nu[:, :, None])[:, 0, 0] > gate)
     else:
@@ -586,7 +598,7 @@ def dcl_update_rows(estimate, P_ii, phi, sigma, rows, chain, z, R, measured_in_c
             a[keep] for a in (rows, chain, phic, blocks, A_o, dz, nu, Pz_inv, in_chain))
         S = None if S is None else S[keep]
         G, r = len(keep), rows[:, None]
-    g = scale * wp * (dz[:, 1:1 + 3 * q] - dz[:, 1 + L:1 + L + 3 * q])  # (G, 3q, 2)
+    g = scale * wp * (dz[:, :3 * q] - dz[:, 3 * q:])  # (G, 3q, 2)
     A = _cholesky_blocks(blocks) if k > q else A_o  # (G, 3k, 3k): every receiver's row of A
     U = N - k
     Pxz = (A[:, :, :3 * q] @ g).reshape(G, k, 3, 2)  # (20), receiver i: rows 3i..3i+2

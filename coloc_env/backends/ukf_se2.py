@@ -212,9 +212,14 @@ class UkfSe2Backend(Backend):
         (n,): one stacked update per chain length (:func:`estimators.ukf_relay_se2.dcl_update_rows`).
         Returns applied (n,) bool."""
         ok = np.zeros(len(copies), dtype=bool)
-        for k in np.unique(lengths):
-            sel = np.flatnonzero(lengths == k)
+        if not len(copies):
+            return ok
+        shortest, longest = int(lengths.min()), int(lengths.max())
+        for k in range(shortest, longest + 1):
+            sel = np.flatnonzero(lengths == k) if shortest < longest else slice(None)
             b = copies[sel]
+            if not len(b):
+                continue
             ok[sel] = se2.dcl_update_rows(
                 self.estimate, self.P_ii, self.phi, self.sigma, b, paths[sel, :k], extra["obs_z"][b, j],
                 extra["obs_cov"][b, j], measured_in_chain=not landmark,

@@ -315,7 +315,7 @@ class MrclamWorld(World):
         """The measurement lines of step a[b] that copy b's robots report, in file order: ``lines`` (B, J)
         (0 where ``valid`` is False) and ``valid`` (B, J), J the largest count; all copies at once."""
         d, N, NR = self.data, self.num_agents, NUM_ROBOTS
-        lo, hi = np.searchsorted(d.meas_step, a), np.searchsorted(d.meas_step, a + 1)
+        lo, hi = np.searchsorted(d.meas_step, np.stack([a, a + 1]))
         width = int((hi - lo).max(initial=0))
         cand = lo[:, None] + np.arange(width)  # (B, W): the lines binned to a[b], file order
         inside = cand < hi[:, None]
@@ -323,11 +323,11 @@ class MrclamWorld(World):
         m, subject = d.meas_robot[cand], d.meas_subject[cand]
         keep = inside & (m < N)
         robot = subject <= NR
-        n = np.clip(subject - 1, 0, NR - 1)
+        n = np.minimum(np.maximum(subject - 1, 0), NR - 1)
         first = self.tables.first_index[a[:, None], np.minimum(m, NR - 1), n] == cand
         if self.config.robot_sightings == "all":
             first = np.ones_like(first)
-        mine = np.take_along_axis(choice, np.minimum(m, N - 1), axis=1)
+        mine = choice[np.arange(len(a))[:, None], np.minimum(m, N - 1)]
         chosen = (mine == N) | (mine == n)
         keep &= ~robot | ((n < N) & first & chosen & (n != m))
         count = keep.sum(axis=1)
