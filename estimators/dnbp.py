@@ -160,6 +160,7 @@ at M = 400); unimodal tracking beliefs are not affected (h_rot ~ 1 m).
 
 from __future__ import annotations
 
+import contextlib
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -1284,7 +1285,7 @@ def _belief_update_fused(kernels, model, prior, prior_bandwidth, prior_uniform, 
     lo, hi = model.defensive_box
     lo_c, hi_c = model.cold_box
     radius = float(model.truncation) if model.kernel == "truncated" else 0.0  # 0: the exact kernel
-    with kernels["chunks"](1 if which else 0):
+    with kernels["chunks"](1) if which else contextlib.nullcontext():
         kernels["weights"][which](prior, prior_bandwidth, prior_uniform, centres, log_weights, bandwidth, present,
                                   np.ascontiguousarray(draws["pick"], float),
                                   np.ascontiguousarray(draws["box"], float),
@@ -1300,7 +1301,7 @@ def _belief_update_fused(kernels, model, prior, prior_bandwidth, prior_uniform, 
             log_weights[redo], bandwidth[redo], present[redo], valid, K_r[redo], exact=True)
         ok = np.isfinite(log_w).any(axis=1)
     out = np.empty_like(prior)
-    with kernels["chunks"](1 if which else 0):
+    with kernels["chunks"](1) if which else contextlib.nullcontext():
         kernels["resample"][which](prior, prior_bandwidth, prior_uniform, proposals, log_w, ok,
                                    np.ascontiguousarray(draws["resample"], float),
                                    np.ascontiguousarray(draws["jitter"], float),
@@ -1376,6 +1377,8 @@ def _draw_per_copy(rngs: Sequence[np.random.Generator], copies: np.ndarray, batc
     """Draw each copy's block from its own generator and stack them in ``copies`` order (copies sorted)."""
     counts = np.bincount(copies, minlength=batch)
     blocks = [draw(rngs[b], int(counts[b]), model) for b in range(batch) if counts[b]]
+    if len(blocks) == 1:  # one copy (B = 1): its block as drawn
+        return blocks[0]
     return {key: np.concatenate([blk[key] for blk in blocks]) for key in blocks[0]}
 
 
