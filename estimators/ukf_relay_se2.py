@@ -460,7 +460,7 @@ def _chain_blocks(P_ii, sigma, rows, chain, phic):
     lower_i, lower_j = _lower(k)
     S = sigma[rows[:, None], chain[:, lower_i], chain[:, lower_j]]
     blocks = np.zeros((G, k, k, 3, 3))
-    blocks[:, lower_i, lower_j] = phic[:, lower_i] @ S @ np.swapaxes(phic[:, lower_j], -1, -2)
+    blocks[:, lower_i, lower_j] = phic[:, lower_i] @ S @ phic[:, lower_j].mT
     diagonal = np.arange(k)
     blocks[:, diagonal, diagonal] = P_ii[rows[:, None], chain]
     return blocks, S
@@ -494,8 +494,8 @@ def _moments_batch(h: np.ndarray, h0: np.ndarray, w: np.ndarray, R: np.ndarray):
     mu = wp * (_ones(d.shape[1]) @ d)
     dz = d - mu[:, None]
     rest = 1.0 - d.shape[1] * wp  # the centre's weight and the 2(L - 3q) points that stay at h0
-    Pz = wp * (np.swapaxes(dz, -1, -2) @ dz) + rest * (mu[:, :, None] * mu[:, None, :]) + R
-    return h0 + mu, dz, 0.5 * (Pz + np.swapaxes(Pz, -1, -2))
+    Pz = wp * (dz.mT @ dz) + rest * (mu[:, :, None] * mu[:, None, :]) + R
+    return h0 + mu, dz, 0.5 * (Pz + Pz.mT)
 
 
 @functools.lru_cache(maxsize=16)
@@ -576,7 +576,7 @@ def dcl_update_rows(estimate, P_ii, phi, sigma, rows, chain, z, R, measured_in_c
     x_o = x[r, chain[:, :q]].reshape(G, 3 * q)
     plus, minus = x_o[:, :, None] + dev, x_o[:, :, None] - dev  # (G, 3q, 3q): column p = point p
     # the mean (point 0: h0 = h(xbar)), then the 2 x 3q points that move h, (G, 6q + 1, 3q)
-    pts = np.concatenate([x_o[:, None], np.swapaxes(plus, -1, -2), np.swapaxes(minus, -1, -2)], axis=1)
+    pts = np.concatenate([x_o[:, None], plus.mT, minus.mT], axis=1)
     if measured_in_chain:
         h = observe(pts[..., 0:3], pts[..., 3:5])
     else:
@@ -604,28 +604,28 @@ def dcl_update_rows(estimate, P_ii, phi, sigma, rows, chain, z, R, measured_in_c
     Pxz = (A[:, :, :3 * q] @ g).reshape(G, k, 3, 2)  # (20), receiver i: rows 3i..3i+2
     K = Pxz @ Pz_inv[:, None]
     x[r, chain] = x[r, chain] + (K @ nu[:, None, :, None])[..., 0]  # (21)
-    P = P_ii[r, chain] - K @ np.swapaxes(Pxz, -1, -2)  # (22)-(23), i = j
-    P_ii[r, chain] = 0.5 * (P + np.swapaxes(P, -1, -2))
+    P = P_ii[r, chain] - K @ Pxz.mT  # (22)-(23), i = j
+    P_ii[r, chain] = 0.5 * (P + P.mT)
     # (G, k, 3, 2) each: M_i = Phi_{c_i}^-1 K_i, V_i = Phi_{c_i}^-1 Pxz_{c_i} (one solve per Phi)
     MV = np.linalg.solve(phic, np.concatenate([K, Pxz], axis=-1)) if k > 1 or U else None
     if k > 1:  # (22)-(23), i > j: sigma_{c_i c_j} -= (Phi_{c_i}^-1 K_i) (Phi_{c_j}^-1 Pxz_{c_j})^T
         lower_i, lower_j = _lower(k)
         M, V = MV[..., :2], MV[..., 2:]
-        delta = (M.reshape(G, 3 * k, 2) @ np.swapaxes(V.reshape(G, 3 * k, 2), -1, -2)).reshape(G, k, 3, k, 3)
+        delta = (M.reshape(G, 3 * k, 2) @ V.reshape(G, 3 * k, 2).mT).reshape(G, k, 3, k, 3)
         new = S - delta.transpose(0, 1, 3, 2, 4)[:, lower_i, lower_j]
         ci, cj = chain[:, lower_i], chain[:, lower_j]
         sigma[r, ci, cj] = new
-        sigma[r, cj, ci] = np.swapaxes(new, -1, -2)
+        sigma[r, cj, ci] = new.mT
     if U:  # observers: r_U = g^T A_o^-1 [Phi_o sigma_{o,U}]; every receiver: sigma_{c_i u} -= Phi^-1 K_i r_u
         unreached = np.argsort(in_chain, axis=1, kind="stable")[:, :U]  # (G, U), ascending
         obs = chain[:, :q]
         prod = phic[:, :q, None] @ sigma[r[:, :, None], obs[:, :, None], unreached[:, None, :]]
         rows_o = prod.transpose(0, 1, 3, 2, 4).reshape(G, 3 * q, 3 * U)
-        y = np.linalg.solve(np.swapaxes(A[:, :3 * q, :3 * q], -1, -2), g)  # A_o^-T g
-        r_U = (np.swapaxes(y, -1, -2) @ rows_o).reshape(G, 2, U, 3)
+        y = np.linalg.solve(A[:, :3 * q, :3 * q].mT, g)  # A_o^-T g
+        r_U = (y.mT @ rows_o).reshape(G, 2, U, 3)
         r3, c3, u3 = r[:, :, None], chain[:, :, None], unreached[:, None, :]
         new = sigma[r3, c3, u3] - MV[:, :, None, :, :2] @ r_U.transpose(0, 2, 1, 3)[:, None]
         sigma[r3, c3, u3] = new
-        sigma[r3, u3, c3] = np.swapaxes(new, -1, -2)
+        sigma[r3, u3, c3] = new.mT
     x[rows, :, 2] = wrap(x[rows, :, 2])
     return applied
