@@ -952,8 +952,10 @@ def _belief_weights_source(prior, prior_bandwidth, prior_uniform, centres, log_w
                         if partial == -np.inf or partial + rest - top + log_count < best - prune:
                             pruned = True  # pi = 0, or the weight is certainly negligible
                             break
-                        if identical[s]:
-                            value = _mixture_point(x, y, inv_m[s], xs[s], ys[s], terms[s], norm_m[s], buffer, True)
+                        if identical[s]:  # a GPS fix: K equal terms, their sum K e^a (the exact kernel adds K times)
+                            a = (x * inv_m[s] * xs[s, 0] + y * inv_m[s] * ys[s, 0] - 0.5 * (x * x + y * y) * inv_m[s]
+                                 ) + terms[s, 0]
+                            value = a + math.log(K) - norm_m[s] if a > _EXP_FLOOR else -np.inf
                         else:
                             value = _mixture_point_truncated(x, y, inv_m[s], xs[s], ys[s], terms[s], norm_m[s],
                                                              buffer, limit)
