@@ -93,9 +93,10 @@ with equal weights: every component more than ~r bandwidths farther than the
 nearest; the exact kernel's cut is 50, r = 10), the rest summed relative to
 the largest with a branch-free polynomial exp (``_exp_small``, relative error
 < 1e-12 on [-50, 0]) in fastmath loops that LLVM vectorizes (numba without
-SVML calls libm's exp one term at a time); the velocity completion drops
-prior particles below e^(-r^2/2) of the largest weight the same way; and a
-proposal is left out (weight 0) as soon as its weight is certainly below
+SVML calls libm's exp one term at a time), a GPS fix's K equal terms as
+K e^a (the exact kernel adds e^a K times, for numpy's bits); the velocity
+completion drops prior particles below e^(-r^2/2) of the largest weight the
+same way; and a proposal is left out (weight 0) as soon as its weight is certainly below
 e^(-r^2/2) / C of the best one so far (its unevaluated messages bounded by
 their peak density sum_k w_k / (2 pi h^2), q by any evaluated term / (K+1)),
 so proposals deep in one message's tail skip the other messages. Bounds: each
