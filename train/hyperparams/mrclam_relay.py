@@ -18,6 +18,12 @@ the episode, while the realized error scatters by centimetres from window to win
 * 5 agents x 8 copies = 40 sub-envs, n_steps 64 -> 2,560 transitions per update (batches of 320).
 * Networks (64, 64): the observation has 3N + 3 = 18 numbers; a little entropy (0.01), since most
   steps offer an agent no choice (it recorded nobody and holds no chain).
+* ``ALGORITHM = "maskable_ppo"``: the measurement choice (action index 0) of a robot it did not record,
+  and the next hops to itself, the source or beyond range, are masked (``MrclamRelayScenario.action_mask``),
+  so every recorded measurement is used and the policy only decides which and how far it travels. Plain PPO
+  (first run, 2026-12-03, seed 0, 300k steps) spent its budget learning to name a recorded robot: its best
+  validation error was 0.0676 m against the paper's 0.0621 m on the same 16 episodes (seed 1 0.0665 m at
+  180k steps).
 """
 
 ENV_CONFIG = {"reward": "trace", "hop_cost": 5e-5}
@@ -34,5 +40,6 @@ HYPERPARAMS = {
     "policy_kwargs": {"net_arch": [64, 64]},
 }
 
+ALGORITHM = "maskable_ppo"
 NUM_COPIES = 8
 TIMESTEPS = 300_000
