@@ -142,7 +142,8 @@ def composition_parts(config: GpsDeniedNbpConfig) -> tuple:
     dnbp = Dnbp(num_particles=config.num_particles, num_iterations=config.num_iterations,
                 oversampling=config.oversampling, defensive_weight=config.defensive_weight,
                 box_margin=config.box_margin, min_bandwidth=config.min_bandwidth,
-                initial_threshold=config.initial_threshold, schedule=config.schedule)
+                initial_threshold=config.initial_threshold, schedule=config.schedule, kernel=config.kernel,
+                truncation=config.truncation)
     ls = RangeLs(min_anchors=rl.LsParams.min_anchors, max_rms=rl.LsParams.max_rms, max_std=rl.LsParams.max_std,
                  gate_chi2=rl.LsParams.gate_chi2)
     return world, {"dnbp": (medium, dnbp, 1), "ls": (medium, ls, 1), "dr": (medium, ls, 0)}
