@@ -112,7 +112,11 @@ episode errors to 4 digits; ``coloc reproduce wan2014 --quick --runs 8``
 gives every claim the same verdict and every dNBP err_fault within 0.12
 combined standard errors of the exact path (20 of 23 points within 1e-4 m;
 one of three runs flipped the wall-clock claim "time grows with M" under a
-load of ~4 on 2 cores, a timing verdict either path can lose); the pinned
+load of ~4 on 2 cores, a timing verdict either path can lose); the full
+``coloc reproduce wan2014`` (12 runs, its config's ``kernel``) gives every
+claim the same verdict and all 21 dNBP err_fault points within 0.38 combined
+standard errors of the exact path (15 within 0.02; 84 s exact, 44 s
+truncated, one run each on a loaded machine); the pinned
 numbers of tests/test_pinned_numbers.py hold to 1e-9 with either kernel. At r = 3 or 1 the episodes part
 by metres from the first step (1.3-3.6 m median difference of the means).
 Speed (2-core machine, load ~4.5, alternating A/B in one process): the
