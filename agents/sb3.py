@@ -92,18 +92,32 @@ def is_maskable(model) -> bool:
     return isinstance(model, MaskablePPO)
 
 
+ALGORITHMS = ("ppo", "maskable_ppo")  # stable-baselines3's PPO; sb3-contrib's MaskablePPO (reads action masks)
+
+
+def algorithm_class(name: str):
+    """The class of a training algorithm's name in :data:`ALGORITHMS`."""
+    if name == "maskable_ppo":
+        from sb3_contrib import MaskablePPO
+
+        return MaskablePPO
+    if name == "ppo":
+        from stable_baselines3 import PPO
+
+        return PPO
+    raise ValueError(f"algorithm must be one of {list(ALGORITHMS)}, got {name!r}")
+
+
 def _algorithm(path: str, meta: dict | None):
     """The class that saved ``path``: model.json's ``algorithm``, else what the zip's policy class says."""
-    from sb3_contrib import MaskablePPO
-    from stable_baselines3 import PPO
-
     name = (meta or {}).get("algorithm")
     if name is None:  # a model without model.json (or from before the field): MaskablePPO saves its policy class
         with zipfile.ZipFile(path) as archive:
             name = "maskable_ppo" if b"Maskable" in archive.read("data") else "ppo"
-    if name not in ("ppo", "maskable_ppo"):
-        raise ValueError(f"model {path!r}: algorithm must be 'ppo' or 'maskable_ppo', got {name!r}")
-    return MaskablePPO if name == "maskable_ppo" else PPO
+    try:
+        return algorithm_class(name)
+    except ValueError as exc:
+        raise ValueError(f"model {path!r}: {exc}") from exc
 
 
 class SB3Policy(Policy):

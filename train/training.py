@@ -78,19 +78,6 @@ def seed_supersuit_vec_env(venv, seed: int) -> None:
         markov_env.par_env.seed_generator(seed + c)
 
 
-def algorithm_class(name: str):
-    """stable-baselines3's PPO for ``"ppo"``, sb3-contrib's MaskablePPO for ``"maskable_ppo"``."""
-    if name == "maskable_ppo":
-        from sb3_contrib import MaskablePPO
-
-        return MaskablePPO
-    if name == "ppo":
-        from stable_baselines3 import PPO
-
-        return PPO
-    raise ValueError(f"algorithm must be 'ppo' or 'maskable_ppo', got {name!r}")
-
-
 def make_vec_env(scenario: str, copies: int, env_config: dict, seed: int, vec: str = "native"):
     """The training VecEnv: the native batched ``vector_env`` (default) or SuperSuit's, seeded alike."""
     import coloc_env
@@ -212,6 +199,7 @@ def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = 
     import torch
     from stable_baselines3.common.vec_env import VecMonitor
 
+    from agents.sb3 import algorithm_class
     from train.hyperparams import algorithm, budget, load, module
 
     if timesteps is None:

@@ -26,11 +26,11 @@ def load(scenario: str) -> tuple[dict, dict]:
     return dict(settings.HYPERPARAMS), dict(settings.ENV_CONFIG)
 
 
-ALGORITHMS = ("ppo", "maskable_ppo")
-
-
 def algorithm(scenario: str) -> str:
-    """The scenario's training algorithm, one of :data:`ALGORITHMS` (its module's ``ALGORITHM``, else ``"ppo"``)."""
+    """The scenario's training algorithm, one of ``agents.sb3.ALGORITHMS`` (its module's ``ALGORITHM``, else
+    ``"ppo"``)."""
+    from agents.sb3 import ALGORITHMS
+
     name = getattr(module(scenario), "ALGORITHM", "ppo")
     if name not in ALGORITHMS:
         raise ValueError(f"ALGORITHM of train/hyperparams/{module_name(scenario)}.py must be one of "
