@@ -337,6 +337,9 @@ def cmd_bench(args) -> int:
 
     check_output_folder(os.path.join(args.out, "bench"))
     for name in args.scenarios or []:
+        if coloc_env.is_composition_name(name):  # its rows replay the paper policy's actions and raw backend step
+            raise ValueError(f"coloc bench measures the presets ({', '.join(coloc_env.SCENARIOS)}), not a "
+                             f"composition such as {name!r}")
         coloc_env.scenario_class(name)
     scenarios = args.scenarios or _runnable_scenarios(_console())
     with _open(args, os.path.join(args.out, "bench")):

@@ -247,6 +247,8 @@ def test_a_composition_trains_and_evaluates_by_its_name(tmp_path, capsys):
     capsys.readouterr()
     assert main(["evaluate", "circles/telepathy/ukf_ccl", "--out", out]) == 2
     assert "unknown network 'telepathy'" in capsys.readouterr().err
+    assert main(["bench", "--quick", "--scenarios", name, "--out", out]) == 2  # the bench replays presets only
+    assert "coloc bench measures the presets (bandwidth_fusion" in capsys.readouterr().err
 
 
 def test_a_maskable_ppo_model_trains_loads_and_never_plays_a_masked_choice(tmp_path, monkeypatch):
