@@ -27,6 +27,11 @@
 * A little entropy (0.01): the relay choice only matters when the location
   information reaches the agent, so most samples carry no gradient and the
   policy should not collapse early.
+* ``ALGORITHM = "maskable_ppo"`` (since 2026-12-03, on the composable core): a
+  next hop to itself or beyond ``comm_range``, and a ranging partner beyond
+  ``sensing_range``, are masked (``RelayUKFScenario.action_mask``), so the
+  policy never spends samples on choices that do what "stop" does. The run of
+  2026-11-23 (plain PPO, before the core) is the README's older table.
 """
 
 ENV_CONFIG = {"reward": "trace", "hop_cost": 0.01}
@@ -43,5 +48,6 @@ HYPERPARAMS = {
     "policy_kwargs": {"net_arch": [64, 64]},
 }
 
+ALGORITHM = "maskable_ppo"
 NUM_COPIES = 4
 TIMESTEPS = 600_000  # the README's budget: `coloc train relay_ukf` at its defaults reproduces the table
