@@ -112,7 +112,7 @@ def _t975(dof: int) -> float:
     return float(stats.t.ppf(0.975, dof))
 
 
-ROUNDING = 1e-9  # relative to the reference's mean cost: a paired interval within it of 0 is float rounding
+ROUNDING = 1e-9  # times the reference's mean cost (at least 1): a paired interval this close to 0 is float rounding
 
 
 def episodes_needed(mean: float, sd: float, limit: int = 10**7) -> int | None:
@@ -151,7 +151,7 @@ def paired_difference(costs, reference) -> dict:
 
 def verdict(diff: dict) -> str:
     """"beats" when the paired interval lies below zero (lower cost), "worse" above it, "equal to rounding" when
-    the whole interval is within :data:`ROUNDING` (relative) of zero, else "not distinguishable (n episodes)"."""
+    the whole interval is within :data:`ROUNDING` of zero, else "not distinguishable (n episodes)"."""
     if diff.get("equal"):
         return "equal to rounding"
     if diff["high"] < 0:
