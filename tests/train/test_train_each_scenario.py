@@ -7,9 +7,9 @@ import os
 import gymnasium
 import numpy as np
 import pytest
-from stable_baselines3 import PPO
 
 import agents
+import agents.sb3
 import coloc_env
 from tests.conftest import MRCLAM_DATA_ENV, MRCLAM_DATASET6, needs_mrclam
 from train.training import train
@@ -69,7 +69,8 @@ def test_short_training_saves_reloads_and_plays(scenario, tmp_path, monkeypatch)
     # the same scenario with other spaces passes the scenario check and is refused by the space check
     if scenario in OTHER_SPACES:
         changed = coloc_env.parallel_env(scenario, **SHORT[scenario], **OTHER_SPACES[scenario])
-        model = PPO.load(path, device="cpu")
+        algorithm = agents.sb3.read_metadata(agents.sb3.metadata_path(path))["algorithm"]  # relay_ukf: MaskablePPO
+        model = agents.sb3.algorithm_class(algorithm).load(path, device="cpu")
         assert _spaces(changed) != (model.observation_space, model.action_space)  # the change does change a space
         if scenario == "nlos_horizon":
             ours, theirs = changed.action_space(changed.possible_agents[0]), model.action_space
