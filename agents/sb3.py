@@ -108,8 +108,11 @@ def algorithm_class(name: str):
     raise ValueError(f"algorithm must be one of {list(ALGORITHMS)}, got {name!r}")
 
 
-def _algorithm(path: str, meta: dict | None):
-    """The class that saved ``path``: model.json's ``algorithm``, else what the zip's policy class says."""
+def model_class(path: str, meta: dict | None = None):
+    """The class that saved ``path``: the ``algorithm`` of ``meta`` (read from the model.json beside it when not
+    given), else what the zip's policy class says."""
+    if meta is None and os.path.isfile(metadata_path(path)):
+        meta = read_metadata(metadata_path(path))
     name = (meta or {}).get("algorithm")
     if name is None:  # a model without model.json (or from before the field): MaskablePPO saves its policy class
         with zipfile.ZipFile(path) as archive:
@@ -137,7 +140,7 @@ class SB3Policy(Policy):
                 raise ValueError(f"model {path!r} was trained on {meta.get('scenario')!r}, not {scenario_name!r}")
         check_model_zip(path)
         try:
-            self.model = _algorithm(path, meta).load(path, device="cpu")
+            self.model = model_class(path, meta).load(path, device="cpu")
         except Exception as exc:  # SB3 reports a damaged model with assorted exceptions that name no file
             raise ValueError(f"model {path!r} cannot be loaded by stable-baselines3: "
                              f"{type(exc).__name__}: {exc}") from exc

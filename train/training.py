@@ -145,11 +145,12 @@ def _callbacks(scenario: str, folder: str, timesteps: int, curve: list, points: 
 
 
 def curve_reference(scenario: str) -> str:
-    """The fixed policy a learning curve is drawn against: the paper's policy, or ``always`` for a composition
-    (no paper ran it; ``always`` is its strongest baseline that sends)."""
+    """The fixed policy a learning curve is drawn against: the paper's policy, or for a composition (no paper
+    ran it) the first of its baselines, ``always``."""
+    import agents
     import coloc_env
 
-    return "always" if coloc_env.is_composition_name(scenario) else "paper"
+    return agents.COMPOSITION_BASELINES[0] if coloc_env.is_composition_name(scenario) else "paper"
 
 
 def write_learning_curve(folder: str, scenario: str, curve: list, title: str) -> None:
