@@ -75,9 +75,15 @@ def read_metadata(meta_file: str) -> dict:
 def check_spaces(path: str, env, model) -> None:
     """The model's observation and action spaces must equal the env's in full: type, shape, dtype and every
     bound (Box low/high, MultiDiscrete nvec/start, Discrete n/start), not only type and shape: a policy
-    trained for ``nvec = [27, 2, ...]`` plays nonsense on ``[17, 2, ...]`` of the same shape."""
+    trained for ``nvec = [27, 2, ...]`` plays nonsense on ``[17, 2, ...]`` of the same shape. A model with a
+    centralized critic saw ``[observation | state]``: that is the space it must match."""
+    from agents.centralized_critic import critic_observation_space, is_centralized
+
     agent = env.possible_agents[0]
-    for kind, ours, theirs in (("observation", env.observation_space(agent), model.observation_space),
+    observation_space = env.observation_space(agent)
+    if is_centralized(model):
+        observation_space = critic_observation_space(observation_space, env.unwrapped.state_space)
+    for kind, ours, theirs in (("observation", observation_space, model.observation_space),
                                ("action", env.action_space(agent), model.action_space)):
         if ours != theirs or ours.dtype != theirs.dtype:
             raise ValueError(f"model {path!r} has {kind} space {theirs!r}, the env has {ours!r}")
@@ -125,7 +131,8 @@ def model_class(path: str, meta: dict | None = None):
 
 class SB3Policy(Policy):
     """Deterministic actions of a trained SB3 model, shared by all agents (parameter sharing); a MaskablePPO
-    model reads the env's action masks of the current step, as it did in training."""
+    model reads the env's action masks of the current step, as it did in training, and a model trained with a
+    centralized critic gets the env's ``state()`` after each observation (its actor ignores it)."""
 
     def __init__(self, env, path: str, deterministic: bool = True):
         super().__init__(env)
@@ -147,10 +154,17 @@ class SB3Policy(Policy):
         check_spaces(path, env, self.model)
         self.deterministic = deterministic
         self.masked = is_maskable(self.model)
+        from agents.centralized_critic import is_centralized
+
+        self.centralized = is_centralized(self.model)
 
     def act(self, observations):
         agents = list(observations)
         batch = np.stack([observations[a] for a in agents])
+        if self.centralized:  # the input it was trained on; its actor reads only the own observation
+            from agents.centralized_critic import extend_observation
+
+            batch = extend_observation(batch, self.env.unwrapped.state())
         masks = {}
         if self.masked:  # the core's masks of this step, rows in possible_agents order
             rows = np.asarray(self.env.unwrapped.scenario.action_mask(), bool)[0]

@@ -16,7 +16,8 @@ Episodes end by truncation at the scenario's horizon (``max_cycles`` sets it, as
 in :class:`~coloc_env.env.CoLocParallelEnv`): finished copies are
 reset automatically, and their sub-envs' infos carry ``terminal_observation``
 and ``TimeLimit.truncated = True`` so that SB3 bootstraps the value of the
-last observation.
+last observation, and ``terminal_state`` (the copy's ``state()`` before the
+reset, for a centralized critic).
 
 Action masks (discrete actions): :meth:`CoLocVecEnv.action_masks` gives one row per sub-env,
 what ``sb3_contrib.MaskablePPO`` reads before every step (``get_action_masks``).
@@ -97,10 +98,12 @@ class CoLocVecEnv(VecEnv):
         infos: list[dict[str, Any]] = [{} for _ in repeat(None, self.num_envs)]
         finished = np.flatnonzero(done_copies)
         if len(finished):
+            states = self.scenario.state()
             for b in finished:
                 for i in range(self.num_agents):
                     sub = b * self.num_agents + i
-                    infos[sub] = {"terminal_observation": observation[sub].copy(), "TimeLimit.truncated": True}
+                    infos[sub] = {"terminal_observation": observation[sub].copy(), "TimeLimit.truncated": True,
+                                  "terminal_state": states[b].copy()}
             self.scenario.reset([self._rngs[b] for b in finished], env_index=finished)
             fresh = self.scenario.observation()[finished]
             observation = observation.reshape(self.num_copies, self.num_agents, *observation.shape[1:])

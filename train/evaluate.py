@@ -326,21 +326,25 @@ def run_model_batched(model, scenario: str, episodes: int, seed_base: int, deter
 
     Steps the scenario core directly rather than the VecEnv, whose auto-reset
     would discard the last step's infos. A MaskablePPO model gets the core's action
-    masks, as in training. Deterministic actions by default; sampled
-    ones (``deterministic=False``) draw from torch's generator, seeded here with
-    ``seed_base`` so that the run repeats.
+    masks, as in training, and a centralized-critic model the core's ``state()``.
+    Deterministic actions by default; sampled ones (``deterministic=False``) draw from torch's
+    generator, seeded here with ``seed_base`` so that the run repeats.
     """
     if not deterministic:
         import torch
 
         torch.manual_seed(seed_base)
 
+    from agents.centralized_critic import extend_observation, is_centralized
     from agents.sb3 import is_maskable
 
     masked = is_maskable(model)
+    centralized = is_centralized(model)
 
     def choose(core):
         observation = core.observation()
+        if centralized:  # the model's input; its actor reads only the own observation
+            observation = extend_observation(observation, core.state())
         rows = episodes * core.num_agents
         masks = {"action_masks": np.asarray(core.action_mask(), bool).reshape(rows, -1)} if masked else {}
         actions, _ = model.predict(observation.reshape(rows, *observation.shape[2:]), deterministic=deterministic,

@@ -201,7 +201,7 @@ def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = 
     from stable_baselines3.common.vec_env import VecMonitor
 
     from agents.sb3 import algorithm_class
-    from train.hyperparams import algorithm, budget, load, module
+    from train.hyperparams import algorithm, budget, critic, load, module
 
     if timesteps is None:
         timesteps = budget(scenario, DEFAULT_TIMESTEPS)
@@ -220,10 +220,22 @@ def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = 
     if algorithm_name == "maskable_ppo" and vec != "native":
         raise ValueError(f"{scenario} trains with maskable_ppo, which reads the native vector env's action masks; "
                          f"use --vec native, not {vec!r}")
+    critic_name = critic(scenario)
+    if critic_name == "centralized" and vec != "native":
+        raise ValueError(f"{scenario} trains with a centralized critic, which reads the native vector env's state(); "
+                         f"use --vec native, not {vec!r}")
     Algorithm = algorithm_class(algorithm_name)
     from stable_baselines3.common.utils import set_random_seed
 
-    venv = VecMonitor(make_vec_env(scenario, copies, env_config, seed, vec))
+    inner = make_vec_env(scenario, copies, env_config, seed, vec)
+    policy = "MlpPolicy"
+    if critic_name == "centralized":
+        from agents.centralized_critic import CriticStateObservation, policy_class
+
+        inner = CriticStateObservation(inner)
+        policy = policy_class(algorithm_name)
+        hyper["policy_kwargs"] = {**hyper.get("policy_kwargs", {}), "local_dim": inner.local_dim}
+    venv = VecMonitor(inner)
     folder = os.path.join(out, scenario, f"seed{seed}")
     os.makedirs(folder, exist_ok=True)
     # One torch thread: a Ray worker runs with one, and a different thread count changes the
@@ -232,7 +244,7 @@ def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = 
     torch.set_num_threads(1)
     try:
         set_random_seed(seed)
-        model = Algorithm("MlpPolicy", venv, device="cpu", verbose=0,
+        model = Algorithm(policy, venv, device="cpu", verbose=0,
                     tensorboard_log=os.path.join(folder, "tb") if tensorboard else None, **hyper)
         model.action_space.seed(seed)
         curve: list = []
@@ -264,6 +276,7 @@ def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = 
         "checkpoint": selected,
         "scenario": scenario, "seed": seed, "timesteps": timesteps, "env_config": env_config,
         "hyperparams": json.loads(json.dumps(hyper)), "vec": vec, "copies": copies, "algorithm": algorithm_name,
+        "critic": critic_name,
         "observation_space": repr(venv.observation_space), "action_space": repr(venv.action_space),
     })
     venv.close()

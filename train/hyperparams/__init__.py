@@ -1,6 +1,8 @@
 """Per-scenario PPO hyperparameters, one small module each (``HYPERPARAMS``, ``ENV_CONFIG``, ``NUM_COPIES``,
-optionally ``TIMESTEPS`` and ``ALGORITHM``: ``"ppo"`` (stable-baselines3's PPO, the default) or ``"maskable_ppo"``
-(sb3-contrib's MaskablePPO, which never samples a choice the env's action mask rules out))."""
+optionally ``TIMESTEPS``, ``ALGORITHM``: ``"ppo"`` (stable-baselines3's PPO, the default) or ``"maskable_ppo"``
+(sb3-contrib's MaskablePPO, which never samples a choice the env's action mask rules out), and ``CRITIC``:
+``"decentralized"`` (the default: the critic sees what the actor sees) or ``"centralized"`` (the critic also sees
+the copy's ``state()``; :mod:`agents.centralized_critic`))."""
 
 import importlib
 
@@ -41,3 +43,15 @@ def algorithm(scenario: str) -> str:
 def budget(scenario: str, default: int) -> int:
     """The scenario's training budget in timesteps (its module's ``TIMESTEPS``, else ``default``)."""
     return int(getattr(module(scenario), "TIMESTEPS", default))
+
+
+def critic(scenario: str) -> str:
+    """The scenario's critic, one of ``agents.centralized_critic.CRITICS`` (its module's ``CRITIC``, else
+    ``"decentralized"``)."""
+    from agents.centralized_critic import CRITICS
+
+    name = getattr(module(scenario), "CRITIC", "decentralized")
+    if name not in CRITICS:
+        raise ValueError(f"CRITIC of train/hyperparams/{module_name(scenario)}.py must be one of {list(CRITICS)}, "
+                         f"got {name!r}")
+    return name
