@@ -6,15 +6,24 @@ all its agents; agent-steps = env-steps x N):
 * ``parallel_env``  a Python loop over the PettingZoo env (B = 1);
 * ``supersuit``     SuperSuit's ``concat_vec_envs_v1`` over B copies;
 * ``vector_env``    coloc's batched SB3 VecEnv at B = 1, 64, 1024;
-* ``estimator``     the raw batched estimator step at the same B, where the
-  scenario registers one in :data:`ESTIMATOR_STEPS` (so the env's overhead
-  is the ratio of the two);
-* peers            for relay_ukf, filterpy's ``UnscentedKalmanFilter`` doing the
-  same range update one copy at a time (:data:`PEERS`);
+* ``estimator step``  the raw batched estimator step at the same B, where the
+  scenario registers one in :data:`ESTIMATOR_STEPS`; the table's ``env / est.``
+  column (``env_time_over_estimator`` in the JSON, on the vector_env row) is the
+  env's time per step over it, so the env's overhead is read off directly.
+  relay_ukf's and mrclam_relay's replay the estimator calls their backend made
+  in a recorded vector_env rollout at that B (:func:`record_backend_calls`,
+  :func:`replay_step`): the same functions on the same shapes and inputs as the
+  env's step; the others time their estimator on synthetic inputs of the env's
+  shapes;
+* peers            for relay_ukf, filterpy's ``UnscentedKalmanFilter`` doing one
+  full-chain range update one copy at a time (:data:`PEERS`), beside our
+  ``dcl_update`` doing the same update for the B copies at once;
 * ``vmas``          VMAS's batched ``simple_spread`` with 4 agents on the CPU at
   the same B, when ``vmas`` is installed (``pip install 'coloc[bench]'``).
 
-Every env is driven by its ``paper`` policy's actions (computed once, tiled).
+Every env is driven by its ``paper`` policy's actions, computed once and tiled,
+except where those change over an episode and use no measurement at reset
+(relay_ukf, mrclam_relay: :class:`ActionSource`).
 Writes ``OUT/bench/bench.json`` (atomic) and ``OUT/bench/throughput.png``.
 No test asserts a speed: this is where speed is reported.
 
@@ -198,8 +207,9 @@ def _relay_ukf_inputs(batch: int, platforms: int = 4):
     return estimate, cov, z
 
 
-def _relay_ukf_estimator_step(batch: int, platforms: int = 4) -> Callable[[], None]:
-    """One UKF-DCL range update relayed along the full chain 0 -> 1 -> 2 -> 3 for B copies."""
+def _relay_ukf_full_chain_update(batch: int, platforms: int = 4) -> Callable[[], None]:
+    """One UKF-DCL range update relayed along the full chain 0 -> 1 -> 2 -> 3 for B copies, on synthetic
+    dense covariances: the work of the filterpy peer, not the env's step (that is the estimator row)."""
     import estimators.ukf_relay as ukf
 
     estimate, cov, z = _relay_ukf_inputs(batch, platforms)
@@ -224,10 +234,153 @@ def _relay_ukf_filterpy_loop(batch: int, platforms: int = 4) -> Callable[[], Non
     return step
 
 
-# Peers measured beside a scenario's estimator: (label, factory(batch) -> step callable).
-PEERS: dict[str, tuple[str, Callable[[int], Callable[[], None]]]] = {
-    "relay_ukf": ("filterpy UnscentedKalmanFilter loop", _relay_ukf_filterpy_loop),
+# Peers measured beside a scenario's estimator, each after the row of our estimator doing the peer's work:
+# (label, factory(batch) -> step callable, our label, our factory).
+PEERS: dict[str, tuple[str, Callable[[int], Callable[[], None]], str, Callable[[int], Callable[[], None]]]] = {
+    "relay_ukf": ("filterpy UnscentedKalmanFilter loop", _relay_ukf_filterpy_loop,
+                  "UKF-DCL full-chain update (peer's work)", _relay_ukf_full_chain_update),
 }
+
+
+# --- estimator rows that replay the env's own estimator calls ---------------------------------------------------
+# Per preset, the estimator functions its backend calls in a step, where the backend looks them up
+# (module, attribute), with the names of the leading arguments that are the backend's own state arrays
+# (updated in place; empty: a pure function, every argument recorded) and whether the function returns
+# new values of them (the backend assigns them into its arrays) or updates them in place.
+BACKEND_CALLS: dict[str, dict[tuple[str, str], tuple[tuple[str, ...], bool]]] = {
+    "relay_ukf": {("estimators.ukf_relay", "dcl_update"): ((), False),
+                  ("estimators.ukf_relay", "ccl_update"): ((), False),
+                  ("coloc_env.backends.ukf", "predict_joint"): ((), False),
+                  ("coloc_env.backends.ukf", "joseph_update"): ((), False)},
+    "mrclam_relay": {("estimators.ukf_relay_se2", "dcl_update_rows"): (("estimate", "P_ii", "phi", "sigma"), False),
+                     ("estimators.ukf_relay_se2", "time_update_batch"): (("estimate", "P_ii", "phi"), True)},
+}
+REPLAY_SAMPLES = 2048  # env-steps recorded for a replay: 2048 / B steps, at least 8, at most one episode
+
+
+def _copied(value):
+    if isinstance(value, np.ndarray):
+        return value.copy()
+    if isinstance(value, (tuple, list)):
+        return type(value)(_copied(v) for v in value)
+    if isinstance(value, dict):
+        return {k: _copied(v) for k, v in value.items()}
+    return value
+
+
+class BackendTape:
+    """The calls a preset's backend made into its estimator functions (:data:`BACKEND_CALLS`) over the steps
+    of a vector_env rollout: ``steps[t]`` lists step t's calls in order, each ``(key, args, kwargs)`` with
+    copies of the arguments as they were at the call, the state arguments left out; ``state`` holds a copy
+    of each state array as the first call that passed it saw it (the state before the first step)."""
+
+    def __init__(self, calls: dict):
+        self.calls = calls
+        self.steps: list[list[tuple]] = []
+        self.state: dict[str, np.ndarray] = {}
+        self._state_ids: dict[str, int] = {}
+
+    def record(self, key, args, kwargs) -> None:
+        names, _ = self.calls[key]
+        for name, value in zip(names, args, strict=False):
+            if name not in self._state_ids:
+                self._state_ids[name], self.state[name] = id(value), value.copy()
+            elif id(value) != self._state_ids[name]:
+                raise RuntimeError(f"{key[1]}: the backend passed a new {name} array; a replay needs one")
+        self.steps[-1].append((key, _copied(args[len(names):]), _copied(kwargs)))
+
+    def shapes(self) -> list[list[tuple]]:
+        """Per step, each call's (function name, shapes of its array arguments): what the test compares."""
+        def shape(v):
+            return np.shape(v) if isinstance(v, np.ndarray) else None
+        return [[(key[1], tuple(shape(a) for a in args), tuple((k, shape(v)) for k, v in sorted(kwargs.items())))
+                 for key, args, kwargs in step] for step in self.steps]
+
+
+def record_backend_calls(name: str, batch: int, steps: int | None = None, seed: int = 0,
+                         source: ActionSource | None = None):
+    """Step a ``vector_env(name)`` of ``batch`` copies with the actions of its vector_env row (:class:`ActionSource`)
+    for ``steps`` steps (default :data:`REPLAY_SAMPLES` / B, at least 8, at most one episode), recording
+    its backend's estimator calls. Returns (the env, after those steps; the :class:`BackendTape`)."""
+    import importlib
+
+    import coloc_env
+
+    calls = BACKEND_CALLS[name]
+    source = source or ActionSource(name)
+    venv = coloc_env.vector_env(name, num_envs=batch, seed=seed)
+    venv.reset()
+    horizon = int(venv.scenario.horizon)
+    steps = steps or min(horizon, max(8, -(-REPLAY_SAMPLES // batch)))
+    if steps > horizon:
+        raise ValueError(f"record at most one episode ({horizon} steps), got {steps}")
+    tape = BackendTape(calls)
+    patched, depth = [], [0]
+
+    def wrap(key, fn):
+        def recorded(*args, **kwargs):
+            if depth[0] == 0:  # the backend's call, not one the estimator makes of another recorded function
+                tape.record(key, args, kwargs)
+            depth[0] += 1
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                depth[0] -= 1
+        return recorded
+
+    try:
+        for key in calls:
+            module = importlib.import_module(key[0])
+            patched.append((module, key[1], getattr(module, key[1])))
+            setattr(module, key[1], wrap(key, patched[-1][2]))
+        for _ in range(steps):
+            tape.steps.append([])
+            venv.step(source([venv.scenario]))
+    finally:
+        for module, attribute, fn in reversed(patched):
+            setattr(module, attribute, fn)
+    return venv, tape
+
+
+def replay_step(tape: BackendTape) -> Callable[[], None]:
+    """One env step's estimator calls per call, cycling over the tape's steps: the recorded arguments, with
+    the state arrays (copies of the recorded start) carried from call to call as the backend carries its
+    own, restored to the start when the cycle begins again (as the env resets). Each function is looked up
+    where the backend looks it up, at each call."""
+    import importlib
+
+    modules = {key: importlib.import_module(key[0]) for key in tape.calls}
+    state = {name: value.copy() for name, value in tape.state.items()}
+    box = {"t": 0}
+
+    def step() -> None:
+        t = box["t"]
+        if t == 0:
+            for name, value in tape.state.items():
+                np.copyto(state[name], value)
+        for key, args, kwargs in tape.steps[t]:
+            names, returns_state = tape.calls[key]
+            out = getattr(modules[key], key[1])(*(state[n] for n in names), *args, **kwargs)
+            if returns_state:
+                for n, value in zip(names, out, strict=True):
+                    state[n][...] = value
+        box["t"] = (t + 1) % len(tape.steps)
+
+    step.state = state  # the replayed state arrays (the test compares them with the env's)
+    return step
+
+
+def _replayed_estimator_step(name: str) -> Callable[[int], Callable[[], None]]:
+    """The estimator row of a preset in :data:`BACKEND_CALLS`: its backend's estimator calls recorded from a
+    vector_env of B copies driven as its vector_env row is, replayed (:func:`replay_step`)."""
+
+    def factory(batch: int) -> Callable[[], None]:
+        venv, tape = record_backend_calls(name, batch)
+        venv.close()
+        return replay_step(tape)
+
+    factory.__doc__ = f"{name}: the env's own estimator calls, recorded and replayed"
+    return factory
 
 
 def _lossy_fusion_estimator_step(batch: int) -> Callable[[], None]:
@@ -253,7 +406,8 @@ def _lossy_fusion_estimator_step(batch: int) -> Callable[[], None]:
 
 ESTIMATOR_STEPS: dict[str, Callable[[int], Callable[[], None]]] = {
     "lossy_fusion": _lossy_fusion_estimator_step,
-    "relay_ukf": _relay_ukf_estimator_step,
+    "relay_ukf": _replayed_estimator_step("relay_ukf"),
+    "mrclam_relay": _replayed_estimator_step("mrclam_relay"),
     "gps_denied_nbp": _gps_denied_nbp_estimator_step,
     "bandwidth_fusion": _bandwidth_fusion_estimator_step,
     "nlos_horizon": _nlos_horizon_estimator_step,
@@ -271,13 +425,71 @@ def _paper_actions(name: str) -> np.ndarray:
     return np.stack([np.asarray(actions[a]) for a in env.possible_agents])
 
 
+class ActionSource:
+    """The actions that drive a preset's env rows and its recorded estimator calls: ``source(cores)`` gives
+    the actions (sum of the cores' batches x N, *shape) of the next step of the given scenario cores.
+
+    By default the paper policy's actions at reset, tiled: bandwidth_fusion's, lossy_fusion's and
+    gps_denied_nbp's do not change over an episode (nlos_horizon's AHG horizon does; it is tiled from
+    reset too). relay_ukf's and mrclam_relay's change, and their reset actions use no measurement at all
+    (only the measuring platform ranges, and at reset none measures; at its first step no robot recorded
+    another), so those envs did no range update in the bench; they are driven by the paper's work instead:
+
+    * ``relay_ukf``: platform i ranges with i + 1 and relays to i + 1 (mod N), fixed: every measurement the
+      world draws is ranged and its chain m -> m + 1 -> ... reaches all N platforms, the paper's complete
+      chain (the paper's partner is random, the work the same);
+    * ``mrclam_relay``: the paper policy's actions at each copy's data step (a table over the run's steps
+      made by :func:`agents.mrclam_relay.paper_actions` from the recorded flags its observation shows),
+      looked up per step.
+    """
+
+    def __init__(self, name: str):
+        self.name = name
+        self.paper = _paper_actions(name)
+        self.num_agents = self.paper.shape[0]
+        self._tiles: dict[int, np.ndarray] = {}
+        self._table: np.ndarray | None = None
+        if name == "relay_ukf":
+            N = self.num_agents
+            ring = (np.arange(N) + 1) % N
+            self.paper = np.stack([ring, ring], axis=-1).astype(self.paper.dtype)
+
+    def constant(self) -> bool:
+        return self.name != "mrclam_relay"
+
+    def tiled(self, batch: int) -> np.ndarray:
+        if batch not in self._tiles:
+            self._tiles[batch] = np.tile(self.paper, (batch, *([1] * (self.paper.ndim - 1))))
+        return self._tiles[batch]
+
+    def table(self, core) -> np.ndarray:
+        """mrclam_relay: the paper policy's actions (T, N, 1 + N) at every data step of the run."""
+        if self._table is None:
+            from agents.mrclam_relay import paper_actions
+
+            N = self.num_agents
+            self._table = paper_actions(core.tables.first_index[:, :N, :N] >= 0)
+        return self._table
+
+    def __call__(self, cores) -> np.ndarray:
+        if self.constant():
+            return self.tiled(sum(core.batch for core in cores))
+        steps = np.concatenate([core.absolute_step() for core in cores])
+        table = self.table(cores[0])
+        return table[np.minimum(steps, len(table) - 1)].reshape(-1, *table.shape[2:])
+
+
+def _supersuit_cores(venv) -> list:
+    return [markov_env.par_env.scenario for markov_env in venv.venv.venv.vec_envs]
+
+
 def bench_scenario(name: str, min_seconds: float, batches=BATCHES) -> list[dict]:
     import coloc_env
     from train.training import make_supersuit_vec_env, seed_supersuit_vec_env
 
     rows: list[dict] = []
-    paper = _paper_actions(name)
-    num_agents = paper.shape[0]
+    source = ActionSource(name)
+    num_agents = source.num_agents
     batches = SCENARIO_BATCHES.get(name, batches)
 
     def add(what: str, batch: int, calls_per_s: float) -> None:
@@ -286,12 +498,12 @@ def bench_scenario(name: str, min_seconds: float, batches=BATCHES) -> list[dict]
 
     env = coloc_env.parallel_env(name)
     env.reset(seed=0)
-    actions = {a: paper[i] for i, a in enumerate(env.possible_agents)}
 
     def loop_step() -> None:
         if not env.agents:
             env.reset()
-        env.step(actions)
+        actions = source([env.scenario])
+        env.step({a: actions[i] for i, a in enumerate(env.possible_agents)})
 
     add("parallel_env loop", 1, _rate(loop_step, min_seconds))
 
@@ -299,19 +511,21 @@ def bench_scenario(name: str, min_seconds: float, batches=BATCHES) -> list[dict]
     supersuit = make_supersuit_vec_env(name, supersuit_batch, {})
     seed_supersuit_vec_env(supersuit, 0)
     supersuit.reset()
-    tiled = np.tile(paper, (supersuit_batch, *([1] * (paper.ndim - 1))))
-    add("supersuit concat_vec_envs_v1", supersuit_batch, _rate(lambda: supersuit.step(tiled), min_seconds))
+    cores = _supersuit_cores(supersuit)
+    add("supersuit concat_vec_envs_v1", supersuit_batch, _rate(lambda: supersuit.step(source(cores)), min_seconds))
     supersuit.close()
 
     for batch in batches:
         venv = coloc_env.vector_env(name, num_envs=batch, seed=0)
         venv.reset()
-        tiled = np.tile(paper, (batch, *([1] * (paper.ndim - 1))))
-        add("vector_env", batch, _rate(lambda venv=venv, tiled=tiled: venv.step(tiled), min_seconds))
+        core = [venv.scenario]
+        add("vector_env", batch, _rate(lambda venv=venv, core=core: venv.step(source(core)), min_seconds))
+        venv.close()
         if name in ESTIMATOR_STEPS:
             add("estimator step", batch, _rate(ESTIMATOR_STEPS[name](batch), min_seconds))
         if name in PEERS:
-            label, factory = PEERS[name]
+            label, factory, ours, our_factory = PEERS[name]
+            add(ours, batch, _rate(our_factory(batch), min_seconds))
             add(label, batch, _rate(factory(batch), min_seconds))
     if name in EXTRA_BENCHES:
         rows += EXTRA_BENCHES[name](min_seconds)
@@ -342,8 +556,8 @@ REFERENCE_SCENARIOS = ("vmas simple_spread",)  # drawn in every panel as a grey 
 
 def _figure(rows: list[dict], path: str) -> None:
     """One panel per preset (its env rows, estimator step and peers, each line labelled in the
-    panel's own short legend), VMAS as a dashed grey reference in every panel: a single axes
-    with every series in one legend (26 entries) hid the lines it described."""
+    panel's own short legend, below the panel), VMAS as a dashed grey reference in every panel: a
+    single axes with every series in one legend (26 entries) hid the lines it described."""
     import math
 
     import matplotlib
@@ -359,7 +573,7 @@ def _figure(rows: list[dict], path: str) -> None:
     references = {name: series[name] for name in REFERENCE_SCENARIOS if name in series}
     columns = min(3, max(1, len(panels)))
     lines = max(1, math.ceil(len(panels) / columns))
-    fig, axes = plt.subplots(lines, columns, figsize=(5.2 * columns, 3.9 * lines), squeeze=False)
+    fig, axes = plt.subplots(lines, columns, figsize=(5.2 * columns, 5.0 * lines), squeeze=False)
     for ax, name in zip(axes.flat, panels, strict=False):
         for what, points in series[name].items():
             points.sort()
@@ -372,9 +586,9 @@ def _figure(rows: list[dict], path: str) -> None:
                 ax.loglog(batches, rates, "--", color="0.6", linewidth=1, label=f"{ref_name} ({what})")
         ax.set_title(name, fontsize=10)
         ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=6.5, loc="best", framealpha=0.85)
-    for ax in axes[-1]:
-        ax.set_xlabel("batch B (copies)")
+        ax.set_xlabel("batch B (copies)", fontsize=8)
+        # below the panel, not on it: inside, the legend of a panel with five or more lines covered them
+        ax.legend(fontsize=6.5, loc="upper center", bbox_to_anchor=(0.5, -0.2), ncol=2, frameon=False)
     for ax in axes[:, 0]:
         ax.set_ylabel("env-steps / s")
     for ax in list(axes.flat)[len(panels):]:
@@ -382,6 +596,16 @@ def _figure(rows: list[dict], path: str) -> None:
     fig.suptitle(f"coloc bench: throughput vs batch size ({os.cpu_count()}-core CPU)")
     fig.tight_layout()
     save_figure(path, fig)
+
+
+def add_overheads(rows: list[dict]) -> None:
+    """On each vector_env row with an estimator row of the same scenario and batch: ``env_time_over_estimator``,
+    the env's time per step over the estimator step's (the estimator's rate over the env's; 1 = no overhead)."""
+    estimator = {(r["scenario"], r["batch"]): r["env_steps_per_s"] for r in rows if r["what"] == "estimator step"}
+    for row in rows:
+        key = (row["scenario"], row["batch"])
+        if row["what"] == "vector_env" and key in estimator and row["env_steps_per_s"] > 0:
+            row["env_time_over_estimator"] = estimator[key] / row["env_steps_per_s"]
 
 
 def run(out: str, quick: bool = False, scenarios: list[str] | None = None) -> list[dict]:
@@ -400,12 +624,15 @@ def run(out: str, quick: bool = False, scenarios: list[str] | None = None) -> li
             rows += bench_scenario(name, min_seconds)
         status.update("benchmarking vmas (if installed)")
         rows += bench_vmas(min_seconds)
-    table = Table(title="coloc bench (env-step: one copy advancing one step with all its agents)")
-    for column in ("scenario", "what", "B", "env-steps/s", "agent-steps/s"):
+    add_overheads(rows)
+    table = Table(title="coloc bench (env-step: one copy advancing one step with all its agents; "
+                        "env / est.: the vector_env's time per step over its estimator step's)")
+    for column in ("scenario", "what", "B", "env-steps/s", "agent-steps/s", "env / est."):
         table.add_column(column, justify="right" if column != "what" and column != "scenario" else "left")
     for row in rows:
+        overhead = row.get("env_time_over_estimator")
         table.add_row(row["scenario"], row["what"], str(row["batch"]), f"{row['env_steps_per_s']:,.0f}",
-                      f"{row['agent_steps_per_s']:,.0f}")
+                      f"{row['agent_steps_per_s']:,.0f}", "" if overhead is None else f"{overhead:.2f}x")
     console.print(table)
     for row in rows:
         if "time_per_fault_uav_step_s" in row:
