@@ -102,6 +102,8 @@ def test_bench_quick_runs_and_writes_json(tmp_path):
     assert {r["what"] for r in ours} == {"parallel_env loop", "supersuit concat_vec_envs_v1", "vector_env",
                                          "estimator step"}
     assert {r["batch"] for r in ours if r["what"] == "vector_env"} == {1, 64, 1024}
+    assert {r["batch"] for r in ours if r["what"] == "estimator step"} == {1, 64, 1024}
+    assert all("env_time_over_estimator" in r for r in ours if r["what"] == "vector_env")
     assert all(r["env_steps_per_s"] > 0 and r["agent_steps_per_s"] == 4 * r["env_steps_per_s"] for r in ours)
     assert (tmp_path / "bench" / "throughput.png").stat().st_size > 1000
 
@@ -194,14 +196,115 @@ def test_episode_metrics_follow_each_paper():
     assert core("gps_denied_nbp").episode_error(errors, np.zeros((3, 4))) == 0.0
 
 
-@pytest.mark.parametrize("name", ["bandwidth_fusion", "lossy_fusion", "relay_ukf", "nlos_horizon", "gps_denied_nbp"])
-def test_every_scenario_has_a_raw_estimator_benchmark(name):
+@pytest.mark.parametrize("name", ["bandwidth_fusion", "lossy_fusion", "relay_ukf", "nlos_horizon", "gps_denied_nbp",
+                                  "mrclam_relay"])
+def test_every_scenario_has_a_raw_estimator_benchmark(name, request, monkeypatch):
     import coloc_env
     from train.bench import ESTIMATOR_STEPS
 
-    assert name in coloc_env.SCENARIOS and name in ESTIMATOR_STEPS
+    if name == "mrclam_relay":
+        monkeypatch.setenv("COLOC_MRCLAM_DATA", request.getfixturevalue("mrclam_dataset6"))
+    assert set(ESTIMATOR_STEPS) == set(coloc_env.SCENARIOS)
     step = ESTIMATOR_STEPS[name](2)
     step()  # one batched step of two copies runs
+
+
+def _logging(monkeypatch, targets, log):
+    """Wrap each (module, attribute) so that its calls append (name, shapes of the array arguments, result)."""
+    import importlib
+
+    for module_name, attribute in targets:
+        module = importlib.import_module(module_name)
+        fn = getattr(module, attribute)
+
+        def logged(*args, _fn=fn, _name=attribute, **kwargs):
+            shapes = tuple(np.shape(a) if isinstance(a, np.ndarray) else None for a in args)
+            out = _fn(*args, **kwargs)
+            log.append((_name, shapes, out))
+            return out
+
+        monkeypatch.setattr(module, attribute, logged)
+
+
+def test_the_relay_ukf_estimator_row_makes_the_envs_own_estimator_calls(monkeypatch):
+    """The estimator row replays what the env's backend computes in a step: the same functions (the time update
+    and the UKF-DCL range updates the driving actions trigger) on the same shapes, and the replayed time update
+    gives the env's estimates bit for bit; the driving actions make every drawn measurement a complete chain."""
+    import coloc_env
+    from train import bench
+
+    B, steps = 6, 24
+    targets = [("estimators.ukf_relay", "dcl_update"), ("coloc_env.backends.ukf", "predict_joint")]
+    _, tape = bench.record_backend_calls("relay_ukf", B, steps=steps)
+    assert len(tape.steps) == steps
+    replayed, env_calls = [], []
+    with monkeypatch.context() as patch:
+        _logging(patch, targets, replayed)
+        step = bench.replay_step(tape)
+        for _ in range(steps):
+            step()
+    with monkeypatch.context() as patch:
+        _logging(patch, targets, env_calls)
+        source = bench.ActionSource("relay_ukf")
+        venv = coloc_env.vector_env("relay_ukf", num_envs=B, seed=0)
+        venv.reset()
+        N = venv.scenario.num_agents
+        for k in range(steps):
+            venv.step(source([venv.scenario]))
+            chain = venv.scenario.network.last_chain
+            measured = venv.scenario.world.schedule[:, k] >= 0
+            assert np.all(chain.length[measured] == N)  # ranged and relayed to every platform
+    assert [(n, s) for n, s, _ in replayed] == [(n, s) for n, s, _ in env_calls]
+    names = [n for n, _, _ in replayed]
+    assert names.count("predict_joint") == steps and names.count("dcl_update") > steps // 4
+    assert np.array_equal(replayed[-1][2][0], venv.scenario.backend.mean)  # the last step's time update
+    assert np.array_equal(replayed[-1][2][1], venv.scenario.backend.cov)
+
+
+def test_the_mrclam_estimator_row_replays_the_envs_backend_state(monkeypatch, mrclam_dataset6):
+    """mrclam_relay's estimator row: the stacked SE(2) updates and time updates its backend made, replayed on its
+    own state arrays, end where the env's backend did (bit for bit), robot-robot chains included (the driving
+    actions are the paper policy's of each data step, as PaperPolicy plays them)."""
+    import agents
+    import coloc_env
+    from train import bench
+
+    monkeypatch.setenv("COLOC_MRCLAM_DATA", mrclam_dataset6)
+    source = bench.ActionSource("mrclam_relay")
+    venv, tape = bench.record_backend_calls("mrclam_relay", 3, steps=30, source=source)
+    step = bench.replay_step(tape)
+    for _ in range(30):
+        step()
+    backend = venv.scenario.backend
+    for name in ("estimate", "P_ii", "phi", "sigma"):
+        assert np.array_equal(step.state[name], getattr(backend, name)), name
+    chains = [args[1].shape[1] for calls in tape.steps for key, args, kwargs in calls
+              if key[1] == "dcl_update_rows" and kwargs.get("measured_in_chain", True)]
+    assert chains and max(chains) == backend.num_agents  # robot observations relayed along complete chains
+
+    env = coloc_env.parallel_env("mrclam_relay")
+    observations, _ = env.reset(seed=3)
+    policy = agents.make_policy("paper", env)
+    for _ in range(40):
+        played = policy.act(observations)
+        table = source([env.scenario])
+        assert all(np.array_equal(played[a], table[i]) for i, a in enumerate(env.possible_agents))
+        observations, *_ = env.step(played)
+
+
+def test_bench_rows_put_the_env_beside_its_estimator(monkeypatch, mrclam_dataset6):
+    """An estimator row beside every vector_env row of mrclam_relay (when its data is there), and the env's time
+    over the estimator's on the vector_env row."""
+    from train import bench
+
+    monkeypatch.setenv("COLOC_MRCLAM_DATA", mrclam_dataset6)
+    rows = bench.bench_scenario("mrclam_relay", 0.01, batches=(1, 2))
+    bench.add_overheads(rows)
+    env = {r["batch"]: r for r in rows if r["what"] == "vector_env"}
+    estimator = {r["batch"]: r for r in rows if r["what"] == "estimator step"}
+    assert set(env) == set(estimator) == {1, 2}
+    for batch, row in env.items():
+        assert row["env_time_over_estimator"] == estimator[batch]["env_steps_per_s"] / row["env_steps_per_s"]
 
 
 def test_all_skips_a_scenario_whose_data_is_missing(monkeypatch, capsys):
