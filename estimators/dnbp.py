@@ -748,11 +748,11 @@ def _mixture_point_truncated(x, y, inv, cx, cy, centre_term, log_norm, buffer, l
     K = cx.shape[0]
     s0, s1 = x * inv, y * inv
     pt = -0.5 * (x * x + y * y) * inv
+    for k in range(K):  # the exponents, then their largest, as two loops: both vectorize (one did not)
+        buffer[k] = (s0 * cx[k] + s1 * cy[k] + pt) + centre_term[k]
     top = -np.inf
     for k in range(K):
-        a = (s0 * cx[k] + s1 * cy[k] + pt) + centre_term[k]
-        buffer[k] = a
-        top = max(top, a)
+        top = max(top, buffer[k])
     if top <= _EXP_FLOOR:  # every component ~35 bandwidths away or more: density 0, as in the exact kernel
         return -np.inf
     total = 0.0
@@ -792,10 +792,11 @@ def _velocity_row_truncated(positions, prior, denominator, uniform, u, limit, ou
     w = np.empty(Mp)
     for i in range(M):
         x, y = positions[i, 0], positions[i, 1]
-        top = -np.inf
         for j in range(Mp):
             dx, dy = x - px[j], y - py[j]
             w[j] = -(dx * dx + dy * dy) * scale
+        top = -np.inf
+        for j in range(Mp):
             top = max(top, w[j])
         for j in range(Mp):
             d = w[j] - top
@@ -1182,7 +1183,9 @@ def correction_weights(sender_points: np.ndarray, reverse_centres: np.ndarray, r
     else:
         log_m = mixture_logpdf(sender_points, reverse_centres, reverse_log_weights, reverse_bandwidth, exact=False)
     log_w = -log_m
-    log_w = np.where(np.isfinite(log_w), log_w, np.nanmax(np.where(np.isfinite(log_w), log_w, -np.inf)))
+    finite = np.isfinite(log_w)
+    if not finite.all():  # a 1/m_st at a zero of m_st: capped at the largest finite one
+        log_w = np.where(finite, log_w, np.nanmax(np.where(finite, log_w, -np.inf)))
     return log_w - _logsumexp(log_w, axis=-1)[:, None]
 
 
@@ -1490,30 +1493,45 @@ def step(model: DnbpModel, state: DnbpState, gps_normal: np.ndarray, gps_fix: np
     parallel = model.schedule == "parallel"
     truncation = float(model.truncation) if model.kernel == "truncated" else 0.0
     belief = state.prior.copy()
+    # the prior's arrays with the copy and UAV axes merged: a (copy, UAV) pair is one row, gathered by one take
+    d = state.prior.shape[3]
+    prior_rows = np.ascontiguousarray(state.prior, float).reshape(B * N, M, d)
+    prior_bandwidth_rows = np.ascontiguousarray(state.prior_bandwidth, float).reshape(B * N)
+    prior_uniform_rows = np.ascontiguousarray(state.prior_uniform, bool).reshape(B * N)
+    belief_rows = belief.reshape(B * N, M, d)
 
-    # message store [b, sender, receiver]; slot N holds the GPS "message" of a normal UAV
+    # message store by receiver [b, receiver, slot] (rows b * N + receiver): slot t < N holds t's message, slot N
+    # the GPS "message" of a normal UAV; the receiver's slots are contiguous, gathered by one take per update
     S = N + 1
-    centres = np.zeros((B, S, N, M, 2))
-    log_weights = np.full((B, S, N, M), -np.log(M))
-    bandwidth = np.ones((B, S, N))
-    have = np.zeros((B, S, N), bool)
-    fix = np.where(gps_normal[..., None], np.nan_to_num(gps_fix), 0.0)
-    centres[:, N] = fix[:, :, None, :]
+    centres = np.zeros((B * N, S, M, 2))
+    log_weights = np.full((B * N, S, M), -np.log(M))
+    bandwidth = np.ones((B * N, S))
+    have = np.zeros((B * N, S), bool)
+    centres[:, N] = np.where(gps_normal[..., None], np.nan_to_num(gps_fix), 0.0).reshape(B * N, 1, 2)
     bandwidth[:, N] = model.gps_std
-    have[:, N] = gps_normal
+    have[:, N] = gps_normal.reshape(B * N)
+    kernels = _fused_kernels()
 
-    def update(b_idx: np.ndarray, s_idx: np.ndarray) -> None:
+    def update(b_idx: np.ndarray, rows: np.ndarray) -> None:
         draws = _draw_per_copy(rngs, b_idx, B, draw_belief, model)
-        new, _ = belief_update(
-            model, state.prior[b_idx, s_idx], state.prior_bandwidth[b_idx, s_idx], state.prior_uniform[b_idx, s_idx],
-            centres[b_idx, :, s_idx], log_weights[b_idx, :, s_idx], bandwidth[b_idx, :, s_idx],
-            have[b_idx, :, s_idx], draws)
-        belief[b_idx, s_idx] = new
+        present = have[rows]
+        if kernels is None:
+            new, _ = belief_update(model, prior_rows[rows], prior_bandwidth_rows[rows], prior_uniform_rows[rows],
+                                   centres[rows], log_weights[rows], bandwidth[rows], present, draws)
+        else:  # belief_update's fused path, its checks included
+            K_r = present.sum(axis=1)
+            total = -(-model.oversampling * M // (K_r + 1)) * (K_r + 1)
+            if total.max() > model.proposal_capacity:
+                raise ValueError(f"too many incoming messages for the proposal capacity {model.proposal_capacity}")
+            new, _ = _belief_update_fused(kernels, model, prior_rows[rows], prior_bandwidth_rows[rows],
+                                          prior_uniform_rows[rows], centres[rows], log_weights[rows],
+                                          bandwidth[rows], present, draws, K_r, total, int(total.max()))
+        belief_rows[rows] = new
 
     # 1. normal UAVs: prior x GPS, fixed for the step in the modified schedule
-    b_idx, s_idx = np.nonzero(gps_normal)
-    if len(b_idx):
-        update(b_idx, s_idx)
+    rows = np.flatnonzero(gps_normal)
+    if len(rows):
+        update(rows // N, rows)
 
     heard = np.zeros((B, N, N), bool)
     qualified = np.zeros((B, N), bool)
@@ -1521,22 +1539,24 @@ def step(model: DnbpModel, state: DnbpState, gps_normal: np.ndarray, gps_fix: np
     delivered_all = np.zeros((B, n_iter, N, N), bool)
     broadcasts = np.zeros((B, N), int)
     history = []
-    eye = np.eye(N, dtype=bool)
+    not_self = ~np.eye(N, dtype=bool)
+    listening_fault = fault[:, None, :] & not_self
+    both_fault = fault[:, :, None] & fault[:, None, :]  # [b, t, s]: the reverse-message correction applies
+    log_uniform = -np.log(M)
     for n in range(n_iter):
         if parallel:
             allowed = np.ones((B, N), bool)
-            listening = np.ones((B, N, N), bool)
+            listening = np.broadcast_to(not_self, (B, N, N))
         else:
             if n == 0:
-                allowed = gps_normal.copy()
+                allowed = gps_normal
             else:
                 qualified, threshold = fault_senders(fault, heard.sum(axis=1), qualified, threshold)
                 allowed = qualified & fault
-            listening = np.broadcast_to(fault[:, None, :], (B, N, N))
+            listening = listening_fault
         senders = allowed & broadcast[:, :, n]
-        listening = listening & ~eye
         may = senders[:, :, None] & listening  # formed before the call: deliver cannot widen it
-        delivered = np.asarray(deliver(senders, listening))
+        delivered = np.asarray(deliver(senders, listening.copy()))
         if delivered.shape != (B, N, N) or delivered.dtype != bool:
             raise ValueError(f"deliver must return a ({B}, {N}, {N}) bool array, got {delivered.dtype} "
                              f"{delivered.shape}")
@@ -1546,25 +1566,26 @@ def step(model: DnbpModel, state: DnbpState, gps_normal: np.ndarray, gps_fix: np
         broadcasts += delivered.any(axis=2)
         b_idx, t_idx, s_idx = np.nonzero(delivered)
         if len(b_idx):
-            points = belief[b_idx, t_idx, :, :2]
+            t_rows, s_rows = b_idx * N + t_idx, b_idx * N + s_idx
+            points = belief_rows[t_rows, :, :2]
             # correction with the reverse message t holds from s, fault <-> fault only
-            reverse = have[b_idx, s_idx, t_idx] & fault[b_idx, t_idx] & fault[b_idx, s_idx]
-            corr = np.full((len(b_idx), M), -np.log(M))
+            reverse = have[t_rows, s_idx] & both_fault[b_idx, t_idx, s_idx]
             if reverse.any():
-                rb, rt, rs = b_idx[reverse], t_idx[reverse], s_idx[reverse]
-                corr[reverse] = correction_weights(points[reverse], centres[rb, rs, rt], log_weights[rb, rs, rt],
-                                                   bandwidth[rb, rs, rt], truncation)
+                corr = np.full((len(b_idx), M), log_uniform)
+                rt, rs = t_rows[reverse], s_idx[reverse]
+                corr[reverse] = correction_weights(points[reverse], centres[rt, rs], log_weights[rt, rs],
+                                                   bandwidth[rt, rs], truncation)
+            else:
+                corr = None
             draws = _draw_per_copy(rngs, b_idx, B, draw_messages, model)
             c, lw, h = sample_messages(model, points, ranges[b_idx, t_idx, s_idx], corr, draws["permutation"],
                                        draws["offset"], draws["range_noise"])
             # written only after every message of this iteration is built (synchronous iteration)
-            centres[b_idx, t_idx, s_idx], log_weights[b_idx, t_idx, s_idx], bandwidth[b_idx, t_idx, s_idx] = c, lw, h
-            have[b_idx, t_idx, s_idx] = True
+            centres[s_rows, t_idx], log_weights[s_rows, t_idx], bandwidth[s_rows, t_idx] = c, lw, h
+            have[s_rows, t_idx] = True
             heard[b_idx, t_idx, s_idx] = True
-            receivers = np.zeros((B, N), bool)
-            receivers[b_idx, s_idx] = True
-            rb, rs = np.nonzero(receivers)
-            update(rb, rs)
+            receivers = np.unique(s_rows)
+            update(receivers // N, receivers)
         if record:
             history.append(belief.copy())
 

@@ -171,8 +171,11 @@ class Network:
         distance = self.distances()
         want = (np.asarray(senders, bool) & self.transmits(slot))[:, :, None] & np.asarray(listening, bool)
         want &= ~_self_links(N) & self.usable(distance)
-        u = uniforms(self.keys, (self._k, 0, slot), (N, N))
-        delivered = want & (u >= self.loss_probability(distance))
+        loss = self.loss_probability(distance)
+        if (loss <= 0.0).all():  # lossless: every uniform passes u >= 0, none needs drawing (counter-based draws)
+            delivered = want
+        else:
+            delivered = want & (uniforms(self.keys, (self._k, 0, slot), (N, N)) >= loss)
         sent = delivered.any(axis=-1)
         self.messages_sent += sent
         self.floats_sent += floats * sent
