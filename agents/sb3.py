@@ -98,7 +98,17 @@ def is_maskable(model) -> bool:
     return isinstance(model, MaskablePPO)
 
 
-ALGORITHMS = ("ppo", "maskable_ppo")  # stable-baselines3's PPO; sb3-contrib's MaskablePPO (reads action masks)
+def is_recurrent(model) -> bool:
+    """True for sb3-contrib's RecurrentPPO (its ``predict`` takes and returns the LSTM's memory)."""
+    try:
+        from sb3_contrib import RecurrentPPO
+    except ImportError:  # pragma: no cover - sb3-contrib is a dependency
+        return False
+    return isinstance(model, RecurrentPPO)
+
+
+# stable-baselines3's PPO; sb3-contrib's MaskablePPO (reads action masks) and RecurrentPPO (an LSTM policy)
+ALGORITHMS = ("ppo", "maskable_ppo", "recurrent_ppo")
 
 
 def algorithm_class(name: str):
@@ -107,6 +117,10 @@ def algorithm_class(name: str):
         from sb3_contrib import MaskablePPO
 
         return MaskablePPO
+    if name == "recurrent_ppo":
+        from sb3_contrib import RecurrentPPO
+
+        return RecurrentPPO
     if name == "ppo":
         from stable_baselines3 import PPO
 
@@ -120,9 +134,10 @@ def model_class(path: str, meta: dict | None = None):
     if meta is None and os.path.isfile(metadata_path(path)):
         meta = read_metadata(metadata_path(path))
     name = (meta or {}).get("algorithm")
-    if name is None:  # a model without model.json (or from before the field): MaskablePPO saves its policy class
+    if name is None:  # a model without model.json (or from before the field): the zip names its policy class
         with zipfile.ZipFile(path) as archive:
-            name = "maskable_ppo" if b"Maskable" in archive.read("data") else "ppo"
+            data = archive.read("data")
+        name = "maskable_ppo" if b"Maskable" in data else "recurrent_ppo" if b"RecurrentActorCritic" in data else "ppo"
     try:
         return algorithm_class(name)
     except ValueError as exc:
@@ -132,7 +147,12 @@ def model_class(path: str, meta: dict | None = None):
 class SB3Policy(Policy):
     """Deterministic actions of a trained SB3 model, shared by all agents (parameter sharing); a MaskablePPO
     model reads the env's action masks of the current step, as it did in training, and a model trained with a
-    centralized critic gets the env's ``state()`` after each observation (its actor ignores it)."""
+    centralized critic gets the env's ``state()`` after each observation (its actor ignores it).
+
+    A RecurrentPPO model carries each agent's LSTM memory from one step to the next. It starts afresh at the
+    episode's first step (the env's ``step_count`` is 0), and a second call of ``act`` at the same step
+    starts again from that step's memory instead of advancing it twice.
+    """
 
     def __init__(self, env, path: str, deterministic: bool = True):
         super().__init__(env)
@@ -157,6 +177,12 @@ class SB3Policy(Policy):
         from agents.centralized_critic import is_centralized
 
         self.centralized = is_centralized(self.model)
+        self.recurrent = is_recurrent(self.model)
+        self._memory_step: int | None = None  # the env step the memories below belong to
+        self._memory_in = self._memory_out = None  # LSTM memory before and after that step's act
+
+    def start_episode(self, seed: int) -> None:
+        self._memory_step = self._memory_in = self._memory_out = None
 
     def act(self, observations):
         agents = list(observations)
@@ -170,5 +196,14 @@ class SB3Policy(Policy):
             rows = np.asarray(self.env.unwrapped.scenario.action_mask(), bool)[0]
             order = list(self.env.possible_agents)
             masks["action_masks"] = rows[[order.index(a) for a in agents]]
-        actions, _ = self.model.predict(batch, deterministic=self.deterministic, **masks)
+        if self.recurrent:
+            step = self.env.unwrapped.step_count
+            if step != self._memory_step:  # a new step: the memory the last step produced is its input
+                self._memory_in = None if step == 0 else self._memory_out
+                self._memory_step = step
+            starts = np.full(len(agents), self._memory_in is None)
+            actions, self._memory_out = self.model.predict(batch, state=self._memory_in, episode_start=starts,
+                                                           deterministic=self.deterministic)
+        else:
+            actions, _ = self.model.predict(batch, deterministic=self.deterministic, **masks)
         return {a: actions[i] for i, a in enumerate(agents)}

@@ -122,6 +122,7 @@ class CoLocParallelEnv(ParallelEnv):
         self.render_mode = render_mode
         self.possible_agents = self.scenario.agent_names
         self.agents: list[str] = []
+        self.step_count = 0  # steps of the current episode (a recurrent policy starts its memory at 0)
         self._rng: np.random.Generator | None = None
         self._observation_space = self.scenario.observation_space()
         self._action_space = self.scenario.action_space()
@@ -155,6 +156,7 @@ class CoLocParallelEnv(ParallelEnv):
             self._rng = np.random.default_rng(seed)
         self.scenario.reset([self._rng])
         self.agents = list(self.possible_agents)
+        self.step_count = 0
         return self._observations(), self._infos()
 
     def step(self, actions):
@@ -162,6 +164,7 @@ class CoLocParallelEnv(ParallelEnv):
             raise RuntimeError("step() called on a finished episode; call reset() first")
         stacked = self._stack_actions(actions)
         self.scenario.step(stacked[None])
+        self.step_count += 1
         rewards = self.scenario.reward()[0]
         done = bool(self.scenario.done()[0])
         observations = self._observations()

@@ -326,7 +326,8 @@ def run_model_batched(model, scenario: str, episodes: int, seed_base: int, deter
 
     Steps the scenario core directly rather than the VecEnv, whose auto-reset
     would discard the last step's infos. A MaskablePPO model gets the core's action
-    masks, as in training, and a centralized-critic model the core's ``state()``.
+    masks, as in training, a centralized-critic model the core's ``state()``, and a RecurrentPPO model its
+    LSTM memory from the step before (fresh at each episode's first step).
     Deterministic actions by default; sampled ones (``deterministic=False``) draw from torch's
     generator, seeded here with ``seed_base`` so that the run repeats.
     """
@@ -336,19 +337,24 @@ def run_model_batched(model, scenario: str, episodes: int, seed_base: int, deter
         torch.manual_seed(seed_base)
 
     from agents.centralized_critic import extend_observation, is_centralized
-    from agents.sb3 import is_maskable
+    from agents.sb3 import is_maskable, is_recurrent
 
     masked = is_maskable(model)
     centralized = is_centralized(model)
+    memory = {"lstm": None} if is_recurrent(model) else None  # every agent's LSTM memory, carried step to step
 
     def choose(core):
         observation = core.observation()
         if centralized:  # the model's input; its actor reads only the own observation
             observation = extend_observation(observation, core.state())
         rows = episodes * core.num_agents
-        masks = {"action_masks": np.asarray(core.action_mask(), bool).reshape(rows, -1)} if masked else {}
-        actions, _ = model.predict(observation.reshape(rows, *observation.shape[2:]), deterministic=deterministic,
-                                   **masks)
+        extra = {"action_masks": np.asarray(core.action_mask(), bool).reshape(rows, -1)} if masked else {}
+        if memory is not None:
+            extra = {"state": memory["lstm"], "episode_start": np.full(rows, memory["lstm"] is None)}
+        actions, carried = model.predict(observation.reshape(rows, *observation.shape[2:]),
+                                         deterministic=deterministic, **extra)
+        if memory is not None:
+            memory["lstm"] = carried
         return np.asarray(actions, dtype=float).reshape(episodes, core.num_agents, *core.action_space().shape)
 
     cost, comm, initial = _run_core(scenario, episodes, seed_base, choose, env_config)

@@ -227,8 +227,10 @@ def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = 
     Algorithm = algorithm_class(algorithm_name)
     from stable_baselines3.common.utils import set_random_seed
 
+    if critic_name == "centralized" and algorithm_name == "recurrent_ppo":
+        raise ValueError(f"{scenario}: the centralized critic is built for ppo and maskable_ppo, not recurrent_ppo")
     inner = make_vec_env(scenario, copies, env_config, seed, vec)
-    policy = "MlpPolicy"
+    policy = "MlpLstmPolicy" if algorithm_name == "recurrent_ppo" else "MlpPolicy"
     if critic_name == "centralized":
         from agents.centralized_critic import CriticStateObservation, policy_class
 

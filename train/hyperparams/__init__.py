@@ -1,6 +1,7 @@
 """Per-scenario PPO hyperparameters, one small module each (``HYPERPARAMS``, ``ENV_CONFIG``, ``NUM_COPIES``,
 optionally ``TIMESTEPS``, ``ALGORITHM``: ``"ppo"`` (stable-baselines3's PPO, the default) or ``"maskable_ppo"``
-(sb3-contrib's MaskablePPO, which never samples a choice the env's action mask rules out), and ``CRITIC``:
+(sb3-contrib's MaskablePPO, which never samples a choice the env's action mask rules out) or ``"recurrent_ppo"``
+(sb3-contrib's RecurrentPPO: an LSTM policy that carries a memory over the episode), and ``CRITIC``:
 ``"decentralized"`` (the default: the critic sees what the actor sees) or ``"centralized"`` (the critic also sees
 the copy's ``state()``; :mod:`agents.centralized_critic`))."""
 
