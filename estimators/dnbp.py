@@ -74,8 +74,9 @@ fix (M identical components) is evaluated once per point and added M times
 weights, and of a numpy-path update: the fast kernel, the velocity draw, the
 importance-weight combination) are compiled per row. Those run on threads
 above ``_PARALLEL_ELEMENTS`` kernel entries; the fused kernels run on one
-thread (their threaded form, over receivers, is ``_FUSED_THREADS``, off: it
-measured slower on the 2-core machine); a row (receiver) reads only its own
+thread (their threaded form, over receivers, and the truncated correction
+weights' over messages, is ``_FUSED_THREADS``, off: 1.5x faster on the idle
+2-core machine, 2x slower beside one busy process; see its note); a row (receiver) reads only its own
 inputs, so the results depend neither on the batch nor on the thread count. The numpy formulations
 stay (``compiled=False``; also used where numba is not installed) and are
 what the compiled kernels are tested against
@@ -768,8 +769,8 @@ def _mixture_rows_truncated_source(points, cx, cy, centre_term, inv, log_norm, l
     coordinates cx, cy (J, K), centre terms log w_k - 0.5 ||c_k||^2 inv (J, K), inv = 1 / h^2 and log(2 pi h^2)
     (J,) -> out (J, P)."""
     J, P = points.shape[0], points.shape[1]
-    buffer = np.empty(cx.shape[1])
-    for j in range(J):
+    for j in _prange(J):
+        buffer = np.empty(cx.shape[1])
         for p in range(P):
             out[j, p] = _mixture_point_truncated(points[j, p, 0], points[j, p, 1], inv[j], cx[j], cy[j],
                                                  centre_term[j], log_norm[j], buffer, limit)
@@ -1104,10 +1105,18 @@ def _belief_resample_source(prior, prior_bandwidth, prior_uniform, proposals, lo
 
 
 _FUSED: dict | None = None
-# The fused kernels' threaded form (over receivers) is off: on the 2-core machine it measured 2x slower than one
-# thread (B = 4 receivers of gps_denied_nbp, load ~2.6, numba's omp layer), where the per-row kernels' threads
-# are not; it gives the same results (tests/estimators/test_dnbp_fast.py) for a machine where it pays.
+# The fused kernels' threaded form (over receivers; the truncated correction weights' over messages) is off: on
+# the 2-core machine it measured 2x slower than one thread (B = 4 receivers of gps_denied_nbp, load ~2.6, numba's
+# omp layer), where the per-row kernels' threads are not. Issue 18 (dn.step wall clock, truncated kernel, every
+# call threaded): 1.46x at B = 1, 1.53x at B = 4, 1.50x at B = 64 on the idle machine (load ~0.5), but 0.49x at
+# B = 4 and 0.89x at B = 64 beside one busy process (libgomp's waiting threads spin); with OMP_WAIT_POLICY=passive
+# (process-wide: torch's OpenMP too, so not set here) 1.30x / 1.54x idle and 1.04x / 0.98x beside the busy process.
+# It gives the same bits (8 seeded gps_denied_nbp rollouts; tests/estimators/test_dnbp_fast.py,
+# test_dnbp_truncated.py) for a machine where it pays.
 _FUSED_THREADS = False
+# kernel entries (proposals x mixtures x components, points x components) of one call from which the threaded
+# form runs when _FUSED_THREADS is on
+_FUSED_THREAD_ELEMENTS = 8 * _PARALLEL_ELEMENTS
 
 
 def _fused_kernels() -> dict | None:
@@ -1137,7 +1146,9 @@ def _fused_kernels() -> dict | None:
     _FUSED = {name: (numba.njit(**options)(fn), numba.njit(parallel=True, **options)(_renamed(fn, "_threaded")))
               for name, fn in (("weights", _belief_weights_source), ("resample", _belief_resample_source))}
     _FUSED["chunks"] = numba.parallel_chunksize
-    _FUSED["mixture_truncated"] = numba.njit(**options)(_mixture_rows_truncated_source)
+    _FUSED["mixture_truncated"] = (numba.njit(**options)(_mixture_rows_truncated_source),
+                                   numba.njit(parallel=True, **options)(_renamed(_mixture_rows_truncated_source,
+                                                                                 "_threaded")))
     return _FUSED
 
 
@@ -1178,8 +1189,11 @@ def correction_weights(sender_points: np.ndarray, reverse_centres: np.ndarray, r
         cx, cy = np.ascontiguousarray(centres[..., 0]), np.ascontiguousarray(centres[..., 1])
         centre_term = np.ascontiguousarray(reverse_log_weights - 0.5 * (cx * cx + cy * cy) * inv[:, None])
         log_m = np.empty(np.shape(sender_points)[:2])
-        kernels["mixture_truncated"](np.ascontiguousarray(sender_points, float), cx, cy, centre_term, inv,
-                                     np.log(2.0 * np.pi * h**2), 0.5 * truncation * truncation, log_m)
+        points = np.ascontiguousarray(sender_points, float)
+        elements = points.shape[0] * points.shape[1] * cx.shape[1]
+        which = 1 if _FUSED_THREADS and elements >= _FUSED_THREAD_ELEMENTS else 0
+        kernels["mixture_truncated"][which](points, cx, cy, centre_term, inv,
+                                            np.log(2.0 * np.pi * h**2), 0.5 * truncation * truncation, log_m)
     else:
         log_m = mixture_logpdf(sender_points, reverse_centres, reverse_log_weights, reverse_bandwidth, exact=False)
     log_w = -log_m
@@ -1285,7 +1299,7 @@ def _belief_update_fused(kernels, model, prior, prior_bandwidth, prior_uniform, 
     the exact log-domain recomputation of a receiver whose every fast weight vanished in between."""
     R, M = prior.shape[:2]
     # threads (off by default, see _FUSED_THREADS) over receivers, taken one at a time (dynamic chunks of 1)
-    which = 1 if _FUSED_THREADS and R >= 4 and int(np.dot(total, K_r + 1)) * M >= 8 * _PARALLEL_ELEMENTS else 0
+    which = 1 if _FUSED_THREADS and R >= 4 and int(np.dot(total, K_r + 1)) * M >= _FUSED_THREAD_ELEMENTS else 0
     prior = np.ascontiguousarray(prior, float)
     prior_bandwidth = np.ascontiguousarray(prior_bandwidth, float)
     prior_uniform = np.ascontiguousarray(prior_uniform, bool)

@@ -122,3 +122,23 @@ def test_truncated_correction_weights_are_within_the_log_density_bound():
     exact = dn.correction_weights(senders, centres, log_w, h)
     assert np.abs(dn.correction_weights(senders, centres, log_w, h, truncation=6.0) - exact).max() < 2 * M * np.exp(-18)
     assert np.abs(dn.correction_weights(senders, centres, log_w, h, truncation=1.0) - exact).max() > 1e-2
+
+
+def test_truncated_correction_weights_depend_neither_on_threads_nor_on_the_batch(monkeypatch):
+    """The correction weights' truncated kernel, threaded over messages (its renamed copy) or serial, and one message
+    alone: the same bits (each message's row reads only its own inputs)."""
+    rng = np.random.default_rng(5)
+    E, M = 7, 60
+    senders = 500.0 + rng.normal(size=(E, M, 2)) * 6.0
+    centres = 500.0 + rng.normal(size=(E, M, 2)) * 40.0
+    log_w = np.log(rng.dirichlet(np.ones(M), size=E))
+    h = rng.uniform(1.0, 8.0, size=E)
+    monkeypatch.setattr(dn, "_FUSED_THREADS", True)
+    monkeypatch.setattr(dn, "_FUSED_THREAD_ELEMENTS", 1)
+    threaded = dn.correction_weights(senders, centres, log_w, h, truncation=6.0)
+    monkeypatch.setattr(dn, "_FUSED_THREADS", False)
+    serial = dn.correction_weights(senders, centres, log_w, h, truncation=6.0)
+    np.testing.assert_array_equal(threaded, serial)
+    for e in (0, 3, 6):
+        alone = dn.correction_weights(senders[e:e + 1], centres[e:e + 1], log_w[e:e + 1], h[e:e + 1], truncation=6.0)
+        np.testing.assert_array_equal(alone[0], serial[e])
