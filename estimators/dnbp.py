@@ -74,9 +74,16 @@ fix (M identical components) is evaluated once per point and added M times
 weights, and of a numpy-path update: the fast kernel, the velocity draw, the
 importance-weight combination) are compiled per row. Those run on threads
 above ``_PARALLEL_ELEMENTS`` kernel entries; the fused kernels run on one
-thread (their threaded form, over receivers, and the truncated correction
-weights' over messages, is ``_FUSED_THREADS``, off: 1.5x faster on the idle
-2-core machine, 2x slower beside one busy process; see its note); a row (receiver) reads only its own
+thread per call or, from 4 receivers and 2^20 kernel entries (B >= 4 of
+gps_denied_nbp), on slices of the receivers run by worker threads
+(``_split_rows``: Python threads, the kernels release the GIL; as many as the
+cores and NUMBA_NUM_THREADS, so NUMBA_NUM_THREADS=1 runs one thread), each
+slice given its first row for the flat offsets, so the bits are the whole
+call's. dn.step wall clock on the 2-core machine (issue 18): 1.25x at B = 4,
+1.35x at B = 64 idle (load ~0-1), 0.96x / 0.98x beside one busy process; B = 1
+unsplit. numba's own threaded form (over receivers; the truncated correction
+weights' over messages) is ``_FUSED_THREADS``, off: 1.5x idle but 2x slower
+beside one busy process (libgomp's waiting threads spin; see its note). A row (receiver) reads only its own
 inputs, so the results depend neither on the batch nor on the thread count. The numpy formulations
 stay (``compiled=False``; also used where numba is not installed) and are
 what the compiled kernels are tested against
@@ -819,9 +826,10 @@ def _velocity_row_truncated(positions, prior, denominator, uniform, u, limit, ou
 
 
 def _belief_weights_source(prior, prior_bandwidth, prior_uniform, centres, log_weights, bandwidth, present, pick,
-                           box, noise, oversampling, eps, box_lo, box_hi, cold_lo, cold_hi, radius, proposals,
+                           box, noise, oversampling, eps, box_lo, box_hi, cold_lo, cold_hi, radius, row0, proposals,
                            log_w):  # pragma: no cover - compiled by numba
-    """Algorithm 2's proposals and fast importance log-weights, one receiver r per iteration.
+    """Algorithm 2's proposals and fast importance log-weights, one receiver r per iteration (``row0`` + r its row
+    in the whole update, for the flat offsets: a slice of the receivers computes what the whole call computes).
 
     proposals (R, C, 2) and log_w (R, C) are filled as :func:`belief_update`'s numpy path fills them: every
     column's proposal (the invalid ones too, they are drawable by the clipped resampling index), the weights
@@ -931,7 +939,7 @@ def _belief_weights_source(prior, prior_bandwidth, prior_uniform, centres, log_w
                     y = prior[r, i, 1] + h * noise[r, j, 1]
             else:
                 s = slots[rank]
-                offset = float(r * S + s)  # the flat-offset comparison of the numpy path's searchsorted
+                offset = float((row0 + r) * S + s)  # the flat-offset comparison of the numpy path's searchsorted
                 target = offset + pick[r, j]
                 comp = min(_count_at_most(cdf[s], offset, target, 0, K), K - 1)
                 x = centres[r, s, comp, 0] + bandwidth[r, s] * noise[r, j, 0]
@@ -1036,7 +1044,7 @@ def _velocity_row(positions, prior, denominator, uniform, u, r, out):  # pragma:
 
 
 def _belief_resample_source(prior, prior_bandwidth, prior_uniform, proposals, log_w, ok, resample, jitter, velocity,
-                            radius, out):  # pragma: no cover - compiled by numba
+                            radius, row0, out):  # pragma: no cover - compiled by numba
     """Algorithm 2's normalization, systematic resampling, jitter and velocity completion, one receiver per
     iteration (the numpy path's order: pairwise weight sum, sequential CDF, flat row offsets r of _categorical)."""
     R, d = prior.shape[0], prior.shape[2]
@@ -1081,7 +1089,7 @@ def _belief_resample_source(prior, prior_bandwidth, prior_uniform, proposals, lo
         var /= 2.0
         h_rot = math.sqrt(max(var, 0.0)) * (1.0 / ss) ** (-1.0 / 6.0)
         positions = np.empty((M, 2))
-        offset = float(r)
+        offset = float(row0 + r)
         idx = 0  # the targets do not decrease with i: the count only grows (a merge of the two sorted lists)
         for i in range(M):
             target = (resample[r] + i) / M + offset
@@ -1096,7 +1104,7 @@ def _belief_resample_source(prior, prior_bandwidth, prior_uniform, proposals, lo
                                     prior_uniform[r], velocity[r], 0.5 * radius * radius, index)
         else:
             _velocity_row(positions, prior[r], 2.0 * (prior_bandwidth[r] * prior_bandwidth[r]), prior_uniform[r],
-                          velocity[r], r, index)
+                          velocity[r], row0 + r, index)
         for i in range(M):
             out[r, i, 0] = positions[i, 0]
             out[r, i, 1] = positions[i, 1]
@@ -1298,8 +1306,11 @@ def _belief_update_fused(kernels, model, prior, prior_bandwidth, prior_uniform, 
     """:func:`belief_update` by the two fused kernels (proposals and weights; resampling and completion), with
     the exact log-domain recomputation of a receiver whose every fast weight vanished in between."""
     R, M = prior.shape[:2]
+    elements = int(np.dot(total, K_r + 1)) * M
     # threads (off by default, see _FUSED_THREADS) over receivers, taken one at a time (dynamic chunks of 1)
-    which = 1 if _FUSED_THREADS and R >= 4 and int(np.dot(total, K_r + 1)) * M >= _FUSED_THREAD_ELEMENTS else 0
+    which = 1 if _FUSED_THREADS and R >= 4 and elements >= _FUSED_THREAD_ELEMENTS else 0
+    # or slices of the receivers on the worker threads (_SPLIT_WORKERS; each slice's row offset passed: the same bits)
+    pieces = _split_pieces(R, elements) if not which else 1
     prior = np.ascontiguousarray(prior, float)
     prior_bandwidth = np.ascontiguousarray(prior_bandwidth, float)
     prior_uniform = np.ascontiguousarray(prior_uniform, bool)
@@ -1307,18 +1318,23 @@ def _belief_update_fused(kernels, model, prior, prior_bandwidth, prior_uniform, 
     log_weights = np.ascontiguousarray(log_weights, float)
     bandwidth = np.ascontiguousarray(bandwidth, float)
     present = np.ascontiguousarray(present, bool)
+    pick = np.ascontiguousarray(draws["pick"], float)
+    box = np.ascontiguousarray(draws["box"], float)
+    noise = np.ascontiguousarray(draws["noise"], float)
     proposals = np.empty((R, C, 2))
     log_w = np.empty((R, C))
     lo, hi = model.defensive_box
     lo_c, hi_c = model.cold_box
     radius = float(model.truncation) if model.kernel == "truncated" else 0.0  # 0: the exact kernel
+    weights = kernels["weights"][which]
+
+    def weights_rows(a: int, b: int) -> None:
+        weights(prior[a:b], prior_bandwidth[a:b], prior_uniform[a:b], centres[a:b], log_weights[a:b], bandwidth[a:b],
+                present[a:b], pick[a:b], box[a:b], noise[a:b], int(model.oversampling), float(model.defensive_weight),
+                float(lo), float(hi), float(lo_c), float(hi_c), radius, a, proposals[a:b], log_w[a:b])
+
     with kernels["chunks"](1) if which else contextlib.nullcontext():
-        kernels["weights"][which](prior, prior_bandwidth, prior_uniform, centres, log_weights, bandwidth, present,
-                                  np.ascontiguousarray(draws["pick"], float),
-                                  np.ascontiguousarray(draws["box"], float),
-                                  np.ascontiguousarray(draws["noise"], float), int(model.oversampling),
-                                  float(model.defensive_weight), float(lo), float(hi), float(lo_c), float(hi_c),
-                                  radius, proposals, log_w)
+        _split_rows(weights_rows, R, pieces)
     ok = np.isfinite(log_w).any(axis=1)
     if not ok.all():
         redo = np.flatnonzero(~ok)
@@ -1328,12 +1344,71 @@ def _belief_update_fused(kernels, model, prior, prior_bandwidth, prior_uniform, 
             log_weights[redo], bandwidth[redo], present[redo], valid, K_r[redo], exact=True)
         ok = np.isfinite(log_w).any(axis=1)
     out = np.empty_like(prior)
+    resample = np.ascontiguousarray(draws["resample"], float)
+    jitter = np.ascontiguousarray(draws["jitter"], float)
+    velocity = np.ascontiguousarray(draws["velocity"], float)
+    resample_kernel = kernels["resample"][which]
+
+    def resample_rows(a: int, b: int) -> None:
+        resample_kernel(prior[a:b], prior_bandwidth[a:b], prior_uniform[a:b], proposals[a:b], log_w[a:b], ok[a:b],
+                        resample[a:b], jitter[a:b], velocity[a:b], radius, a, out[a:b])
+
     with kernels["chunks"](1) if which else contextlib.nullcontext():
-        kernels["resample"][which](prior, prior_bandwidth, prior_uniform, proposals, log_w, ok,
-                                   np.ascontiguousarray(draws["resample"], float),
-                                   np.ascontiguousarray(draws["jitter"], float),
-                                   np.ascontiguousarray(draws["velocity"], float), radius, out)
+        _split_rows(resample_rows, R, pieces)
     return out, ok
+
+
+# Slices of a fused kernel's rows run on Python threads (the kernels release the GIL): a thread waiting for work
+# sleeps (unlike libgomp's spinning threads, see _FUSED_THREADS). _SPLIT_WORKERS threads (at most the cores and
+# numba's thread count; 1: no split), the calling one included; a call is split from _SPLIT_RECEIVERS receivers
+# and _SPLIT_ELEMENTS kernel entries on, into _SPLIT_PER_WORKER slices per worker. Measured (dn.step wall clock,
+# truncated kernel, 2 cores, issue 18): 1 slice per worker 1.09x / 1.23x / 1.35x at B = 1 / 4 / 64 idle, 0.92x /
+# 0.96x / 0.98x beside one busy process; 2 per worker 0.84x / 1.00x / 1.01x idle (more wake-ups than balance);
+# from 2^20 entries B = 1 is not split (0.99x) and B = 4 1.25x.
+_SPLIT_WORKERS: int | None = None
+_SPLIT_RECEIVERS = 4
+_SPLIT_ELEMENTS = 1 << 20
+_SPLIT_PER_WORKER = 1
+_POOL = None
+
+
+def _split_workers() -> int:
+    global _SPLIT_WORKERS
+    if _SPLIT_WORKERS is None:
+        import os
+
+        try:
+            import numba
+
+            threads = int(numba.config.NUMBA_NUM_THREADS)
+        except ImportError:  # pragma: no cover - numba is a dependency
+            threads = 1
+        _SPLIT_WORKERS = max(1, min(os.cpu_count() or 1, threads))
+    return _SPLIT_WORKERS
+
+
+def _split_pieces(rows: int, elements: int) -> int:
+    workers = _split_workers()
+    if workers < 2 or rows < _SPLIT_RECEIVERS or elements < _SPLIT_ELEMENTS:
+        return 1
+    return min(rows, workers * _SPLIT_PER_WORKER)
+
+
+def _split_rows(call: Callable[[int, int], None], rows: int, pieces: int) -> None:
+    """call(a, b) for ``pieces`` consecutive slices [a, b) of range(rows): on the worker threads when pieces > 1."""
+    if pieces <= 1:
+        call(0, rows)
+        return
+    global _POOL
+    if _POOL is None:
+        from concurrent.futures import ThreadPoolExecutor
+
+        _POOL = ThreadPoolExecutor(max_workers=_split_workers() - 1, thread_name_prefix="dnbp")
+    edges = [rows * i // pieces for i in range(pieces + 1)]
+    futures = [_POOL.submit(call, a, b) for a, b in zip(edges[:-2], edges[1:-1], strict=True) if b > a]
+    call(edges[-2], rows)  # the last slice on this thread
+    for future in futures:
+        future.result()
 
 
 def _velocity_index(positions: np.ndarray, prior: np.ndarray, prior_bandwidth: np.ndarray, prior_uniform: np.ndarray,

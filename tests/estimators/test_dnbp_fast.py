@@ -2,6 +2,8 @@
 float rounding, the same velocity draws exactly, the same belief updates (the fused kernels) up to rounding, on
 any batch and thread count, and the same seeded episodes."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -203,3 +205,21 @@ def test_compiled_sum_is_numpys_pairwise_sum(n):
     dn._fused_kernels()
     values = np.exp(np.random.default_rng(n).normal(size=n) * 4)
     assert dn._numpy_sum(values, n) == values.sum()
+
+
+def test_fused_belief_update_split_over_worker_threads_gives_the_same_bits(monkeypatch):
+    """Slices of the receivers on the worker threads (each slice's row offset passed to the kernels) compute the
+    whole call's bits."""
+    for kernel, far in (("exact", False), ("truncated", False), ("exact", True)):
+        model, args = _receivers(np.random.default_rng(6), R=11, far=far)
+        model = dataclasses.replace(model, kernel=kernel)
+        monkeypatch.setattr(dn, "_SPLIT_WORKERS", 1)
+        serial, ok_serial = dn.belief_update(model, *args)
+        monkeypatch.setattr(dn, "_SPLIT_WORKERS", 2)
+        monkeypatch.setattr(dn, "_SPLIT_ELEMENTS", 0)
+        for per_worker in (1, 3, 11):
+            monkeypatch.setattr(dn, "_SPLIT_PER_WORKER", per_worker)
+            assert dn._split_pieces(11, 1) == min(11, 2 * per_worker)
+            split, ok_split = dn.belief_update(model, *args)
+            np.testing.assert_array_equal(split, serial)
+            np.testing.assert_array_equal(ok_split, ok_serial)

@@ -38,7 +38,7 @@ def _weights(model, args, radius):
     lo_c, hi_c = model.cold_box
     dn._fused_kernels()["weights"][0](prior, prior_bandwidth, prior_uniform, centres, log_weights, bandwidth, present,
                                       draws["pick"], draws["box"], draws["noise"], model.oversampling,
-                                      model.defensive_weight, lo, hi, lo_c, hi_c, radius, proposals, log_w)
+                                      model.defensive_weight, lo, hi, lo_c, hi_c, radius, 0, proposals, log_w)
     return proposals, log_w
 
 
