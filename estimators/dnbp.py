@@ -1200,8 +1200,12 @@ def correction_weights(sender_points: np.ndarray, reverse_centres: np.ndarray, r
         points = np.ascontiguousarray(sender_points, float)
         elements = points.shape[0] * points.shape[1] * cx.shape[1]
         which = 1 if _FUSED_THREADS and elements >= _FUSED_THREAD_ELEMENTS else 0
-        kernels["mixture_truncated"][which](points, cx, cy, centre_term, inv,
-                                            np.log(2.0 * np.pi * h**2), 0.5 * truncation * truncation, log_m)
+        kernel, log_norm, limit = kernels["mixture_truncated"][which], np.log(2.0 * np.pi * h**2), 0.5 * truncation**2
+
+        def rows(a: int, b: int) -> None:  # messages a..b-1 (each row reads only its own inputs)
+            kernel(points[a:b], cx[a:b], cy[a:b], centre_term[a:b], inv[a:b], log_norm[a:b], limit, log_m[a:b])
+
+        _split_rows(rows, len(points), 1 if which else _split_pieces(len(points), elements))
     else:
         log_m = mixture_logpdf(sender_points, reverse_centres, reverse_log_weights, reverse_bandwidth, exact=False)
     log_w = -log_m

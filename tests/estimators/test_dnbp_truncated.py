@@ -125,8 +125,8 @@ def test_truncated_correction_weights_are_within_the_log_density_bound():
 
 
 def test_truncated_correction_weights_depend_neither_on_threads_nor_on_the_batch(monkeypatch):
-    """The correction weights' truncated kernel, threaded over messages (its renamed copy) or serial, and one message
-    alone: the same bits (each message's row reads only its own inputs)."""
+    """The correction weights' truncated kernel, threaded over messages (its renamed copy), split over the worker
+    threads, or serial, and one message alone: the same bits (each message's row reads only its own inputs)."""
     rng = np.random.default_rng(5)
     E, M = 7, 60
     senders = 500.0 + rng.normal(size=(E, M, 2)) * 6.0
@@ -139,6 +139,10 @@ def test_truncated_correction_weights_depend_neither_on_threads_nor_on_the_batch
     monkeypatch.setattr(dn, "_FUSED_THREADS", False)
     serial = dn.correction_weights(senders, centres, log_w, h, truncation=6.0)
     np.testing.assert_array_equal(threaded, serial)
+    monkeypatch.setattr(dn, "_SPLIT_WORKERS", 2)
+    monkeypatch.setattr(dn, "_SPLIT_ELEMENTS", 0)
+    split = dn.correction_weights(senders, centres, log_w, h, truncation=6.0)  # slices on the worker threads
+    np.testing.assert_array_equal(split, serial)
     for e in (0, 3, 6):
         alone = dn.correction_weights(senders[e:e + 1], centres[e:e + 1], log_w[e:e + 1], h[e:e + 1], truncation=6.0)
         np.testing.assert_array_equal(alone[0], serial[e])
