@@ -29,16 +29,21 @@ def load(scenario: str) -> tuple[dict, dict]:
     return dict(settings.HYPERPARAMS), dict(settings.ENV_CONFIG)
 
 
+def _setting_choice(scenario: str, field: str, allowed, default: str) -> str:
+    """The scenario module's ``field`` (``default`` where it sets none), which must be one of ``allowed``."""
+    name = getattr(module(scenario), field, default)
+    if name not in allowed:
+        raise ValueError(f"{field} of train/hyperparams/{module_name(scenario)}.py must be one of "
+                         f"{list(allowed)}, got {name!r}")
+    return name
+
+
 def algorithm(scenario: str) -> str:
     """The scenario's training algorithm, one of ``agents.sb3.ALGORITHMS`` (its module's ``ALGORITHM``, else
     ``"ppo"``)."""
     from agents.sb3 import ALGORITHMS
 
-    name = getattr(module(scenario), "ALGORITHM", "ppo")
-    if name not in ALGORITHMS:
-        raise ValueError(f"ALGORITHM of train/hyperparams/{module_name(scenario)}.py must be one of "
-                         f"{list(ALGORITHMS)}, got {name!r}")
-    return name
+    return _setting_choice(scenario, "ALGORITHM", ALGORITHMS, "ppo")
 
 
 def budget(scenario: str, default: int) -> int:
@@ -51,8 +56,4 @@ def critic(scenario: str) -> str:
     ``"decentralized"``)."""
     from agents.centralized_critic import CRITICS
 
-    name = getattr(module(scenario), "CRITIC", "decentralized")
-    if name not in CRITICS:
-        raise ValueError(f"CRITIC of train/hyperparams/{module_name(scenario)}.py must be one of {list(CRITICS)}, "
-                         f"got {name!r}")
-    return name
+    return _setting_choice(scenario, "CRITIC", CRITICS, "decentralized")
