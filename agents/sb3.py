@@ -91,20 +91,12 @@ def check_spaces(path: str, env, model) -> None:
 
 def is_maskable(model) -> bool:
     """True for sb3-contrib's MaskablePPO (its ``predict`` takes the action masks)."""
-    try:
-        from sb3_contrib import MaskablePPO
-    except ImportError:  # pragma: no cover - sb3-contrib is a dependency
-        return False
-    return isinstance(model, MaskablePPO)
+    return isinstance(model, algorithm_class("maskable_ppo"))
 
 
 def is_recurrent(model) -> bool:
     """True for sb3-contrib's RecurrentPPO (its ``predict`` takes and returns the LSTM's memory)."""
-    try:
-        from sb3_contrib import RecurrentPPO
-    except ImportError:  # pragma: no cover - sb3-contrib is a dependency
-        return False
-    return isinstance(model, RecurrentPPO)
+    return isinstance(model, algorithm_class("recurrent_ppo"))
 
 
 # stable-baselines3's PPO; sb3-contrib's MaskablePPO (reads action masks) and RecurrentPPO (an LSTM policy)
