@@ -246,3 +246,38 @@ def test_policy_all_runs_realizable_policies_bounds_and_reference_filters():
     nlos = all_rows("nlos_horizon")
     assert {"best_constant", "bound_hindsight_constant"} <= set(nlos) and "oracle_constant" not in nlos
     assert len(nlos) == len(set(nlos))
+
+
+def _composition_table(model_costs, model_comm):
+    rng = np.random.default_rng(9)
+    always = 1.0 + 0.05 * rng.standard_normal(60)
+    silent = 3.0 + 0.2 * rng.standard_normal(60)
+    scenario = "circles/broadcast/ukf_ccl"
+    return {"always": _row("always", always, comm=2.4, scenario=scenario),
+            "silent": _row("silent", silent, comm=0.0, scenario=scenario),
+            "r/seed0/model.zip": _row("r/seed0/model.zip", model_costs(always, silent, rng), comm=model_comm,
+                                      scenario=scenario)}, scenario
+
+
+def test_a_composition_model_below_the_always_silent_line_meets_the_trade_off_target():
+    """A model 10 % less accurate than always with 79 % fewer messages is worse than always and not a match,
+    but far better than always and silent time-shared to send as many messages (always in 21 % of episodes)."""
+    table, scenario = _composition_table(lambda a, s, rng: 1.1 * a + 0.01 * rng.standard_normal(60), 0.5)
+    line = target_verdict(scenario, table)
+    assert "seed0: worse" in line
+    assert "mixed to send as many messages (always in 21 % of episodes): beats" in line and "**met**" in line
+
+
+def test_a_model_on_the_always_silent_line_does_not_meet_the_trade_off_target():
+    """The mix itself (its expected error in every episode, at its message rate) is no gain: equal to rounding."""
+    p = 0.5 / 2.4
+    table, scenario = _composition_table(lambda a, s, rng: p * a + (1 - p) * s, 0.5)
+    line = target_verdict(scenario, table)
+    assert "mixed to send as many messages (always in 21 % of episodes): equal to rounding" in line
+    assert "**not met**" in line
+
+
+def test_a_model_sending_more_than_always_is_compared_with_always_itself():
+    table, scenario = _composition_table(lambda a, s, rng: a + 0.02 + 0.01 * rng.standard_normal(60), 3.0)
+    line = target_verdict(scenario, table)
+    assert "(always in 100 % of episodes): worse" in line and "**not met**" in line
