@@ -62,6 +62,23 @@ def write_text(path: str, text: str) -> None:
     _atomic(path, lambda fh: fh.write(text.encode()))
 
 
+def save_model(path: str, model) -> None:
+    """Save a stable-baselines3 model's zip atomically: Ctrl-C or a full disk mid-save leaves the previous file
+    (or none), never a half-written zip or a temporary file beside it."""
+    _atomic(path, model.save)
+
+
+def copy_file(source: str, path: str) -> None:
+    """Copy ``source`` to ``path`` atomically (as :func:`save_model`)."""
+    import shutil
+
+    def write(fh) -> None:
+        with open(source, "rb") as src:
+            shutil.copyfileobj(src, fh)
+
+    _atomic(path, write)
+
+
 def save_figure(path: str, figure) -> None:
     """Save a matplotlib figure as PNG atomically and close it."""
     _atomic(path, lambda fh: figure.savefig(fh, format="png", dpi=110, bbox_inches="tight"))

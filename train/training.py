@@ -17,12 +17,11 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import sys
 
 import numpy as np
 
-from train.io import write_json
+from train.io import copy_file, save_model, write_json
 from train.leaderboard import metric
 
 MAX_TRAINING_SEED = 10**5  # keeps S + c far below the validation and evaluation seed ranges
@@ -122,18 +121,14 @@ def _callbacks(scenario: str, folder: str, timesteps: int, curve: list, points: 
                 self._record()
 
         def _record(self) -> None:
-            tmp = os.path.join(folder, ".tmp-checkpoint.zip")
-            self.model.save(tmp)
-            os.replace(tmp, os.path.join(folder, "checkpoint.zip"))
+            save_model(os.path.join(folder, "checkpoint.zip"), self.model)
             if points:
                 result = run_model_batched(self.model, scenario, CURVE_EPISODES, VALIDATION_SEED_BASE)
                 curve.append((int(self.num_timesteps), result["mean_cost"], result["ci95"]))
                 # the best point on the validation seeds is the model that is kept (never the evaluation seeds)
                 better = self.best is None or result["mean_cost"] < self.best[0]
                 if better:
-                    tmp = os.path.join(folder, ".tmp-best.zip")
-                    self.model.save(tmp)
-                    os.replace(tmp, os.path.join(folder, "best.zip"))
+                    save_model(os.path.join(folder, "best.zip"), self.model)
                     self.best = (float(result["mean_cost"]), int(self.num_timesteps))
                 if report is not None:
                     unit = metric(scenario)[1]
@@ -262,9 +257,7 @@ def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = 
     finally:
         torch.set_num_threads(threads)
     path = os.path.join(folder, "model.zip")
-    tmp = os.path.join(folder, ".tmp-last.zip")
-    model.save(tmp)
-    os.replace(tmp, os.path.join(folder, "last.zip"))
+    save_model(os.path.join(folder, "last.zip"), model)
     if callback.best is not None:  # model.zip is the best validation checkpoint; last.zip the final weights
         selected = {"selected": "best on the validation seeds", "timesteps": callback.best[1],
                     "validation_mean_cost": callback.best[0], "validation_episodes": CURVE_EPISODES}
@@ -272,8 +265,7 @@ def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = 
     else:
         selected = {"selected": "last (no validation curve)", "timesteps": int(model.num_timesteps)}
         source = os.path.join(folder, "last.zip")
-    shutil.copyfile(source, os.path.join(folder, ".tmp-model.zip"))
-    os.replace(os.path.join(folder, ".tmp-model.zip"), path)
+    copy_file(source, path)
     write_json(os.path.join(folder, "model.json"), {
         "checkpoint": selected,
         "scenario": scenario, "seed": seed, "timesteps": timesteps, "env_config": env_config,

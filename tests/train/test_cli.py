@@ -131,6 +131,30 @@ def test_atomic_write_keeps_the_old_file_on_failure(tmp_path):
     assert os.listdir(tmp_path) == ["m.json"]
 
 
+def test_a_model_save_interrupted_midway_keeps_the_previous_zip_and_leaves_no_temporary(tmp_path):
+    """training's checkpoint / best / last saves go through save_model: Ctrl-C in the middle of SB3's zip write
+    leaves the previous checkpoint as it was."""
+    from stable_baselines3 import PPO
+
+    from train.io import save_model
+
+    model = PPO("MlpPolicy", "CartPole-v1", n_steps=64, batch_size=64, device="cpu", seed=0)
+    path = str(tmp_path / "checkpoint.zip")
+    save_model(path, model)
+    before = open(path, "rb").read()
+
+    class InterruptedMidway:
+        def save(self, fh):
+            model.save(fh)
+            fh.flush()
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        save_model(path, InterruptedMidway())
+    assert open(path, "rb").read() == before and os.listdir(tmp_path) == ["checkpoint.zip"]
+    assert PPO.load(path, device="cpu").policy.state_dict().keys() == model.policy.state_dict().keys()
+
+
 def test_ray_executor_equals_local(tmp_path):
     ray = pytest.importorskip("ray")
     import torch
