@@ -1112,6 +1112,39 @@ def _belief_resample_source(prior, prior_bandwidth, prior_uniform, proposals, lo
                 out[r, i, e] = prior[r, index[i], e]
 
 
+def _message_rows_source(points, distance, weights, permutation, offset, range_noise, range_std, centres, var,
+                         square_sum):  # pragma: no cover - compiled by numba
+    """Algorithm 1 step 2 for E messages in :func:`sample_messages`' numpy arithmetic, each row from its own inputs:
+    centres c_i = p_i + (d + sigma_d nu_i) [cos theta_i, sin theta_i], theta_i = 2 pi (pi_i + U_i) / M (cos and
+    sin are libm's in both), and the sums of h_rot (rule_of_thumb_bandwidth) in einsum's orders: the weighted
+    mean summed over i, the variance as sum_i w_i ((x_i - mx)^2 + (y_i - my)^2) (einsum's order for "p,pd->"),
+    sum_i w_i^2 in numpy's pairwise order (_numpy_sum). The exp of the weights and the power of the ESS stay
+    numpy's (its exp and pow round differently from libm's)."""
+    E, M = points.shape[0], points.shape[1]
+    two_pi = 2.0 * np.pi
+    squares = np.empty(M)
+    for e in range(E):
+        d = distance[e]
+        for i in range(M):
+            theta = two_pi * (permutation[e, i] + offset[e, i]) / M
+            radius = d + range_std * range_noise[e, i]
+            centres[e, i, 0] = points[e, i, 0] + radius * math.cos(theta)
+            centres[e, i, 1] = points[e, i, 1] + radius * math.sin(theta)
+        mx, my = 0.0, 0.0
+        for i in range(M):
+            mx += weights[e, i] * points[e, i, 0]
+        for i in range(M):
+            my += weights[e, i] * points[e, i, 1]
+        total = 0.0
+        for i in range(M):
+            dx = points[e, i, 0] - mx
+            dy = points[e, i, 1] - my
+            total = total + weights[e, i] * (dx * dx + dy * dy)
+            squares[i] = weights[e, i] * weights[e, i]
+        var[e] = total / 2.0
+        square_sum[e] = _numpy_sum(squares, M)
+
+
 _FUSED: dict | None = None
 # The fused kernels' threaded form (over receivers; the truncated correction weights' over messages) is off: on
 # the 2-core machine it measured 2x slower than one thread (B = 4 receivers of gps_denied_nbp, load ~2.6, numba's
@@ -1154,6 +1187,7 @@ def _fused_kernels() -> dict | None:
     _FUSED = {name: (numba.njit(**options)(fn), numba.njit(parallel=True, **options)(_renamed(fn, "_threaded")))
               for name, fn in (("weights", _belief_weights_source), ("resample", _belief_resample_source))}
     _FUSED["chunks"] = numba.parallel_chunksize
+    _FUSED["messages"] = numba.njit(**options)(_message_rows_source)
     _FUSED["mixture_truncated"] = (numba.njit(**options)(_mixture_rows_truncated_source),
                                    numba.njit(parallel=True, **options)(_renamed(_mixture_rows_truncated_source,
                                                                                  "_threaded")))
@@ -1163,18 +1197,30 @@ def _fused_kernels() -> dict | None:
 # --- Algorithm 1 -------------------------------------------------------------------------------------------------
 def sample_messages(model: DnbpModel, sender_points: np.ndarray, distance: np.ndarray,
                     correction_log_weights: np.ndarray | None, permutation: np.ndarray, offset: np.ndarray,
-                    range_noise: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                    range_noise: np.ndarray, compiled: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Algorithm 1 for E messages t -> s.
 
     sender_points (E, M, 2): t's belief positions; distance (E,): d_ts;
     correction_log_weights (E, M): log w_i (normalized; None = uniform);
     permutation (E, M) a permutation of 0..M-1 per row, offset (E, M) U[0,1),
     range_noise (E, M) standard normal. Returns centres (E, M, 2),
-    log-weights (E, M), bandwidths (E,).
+    log-weights (E, M), bandwidths (E,). ``compiled`` (default, where numba
+    is installed): the centres and h_rot's sums by one compiled pass
+    (``_message_rows_source``), the same floats as the numpy path (False).
     """
     E, M = sender_points.shape[:2]
     if correction_log_weights is None:
         correction_log_weights = np.full((E, M), -np.log(M))
+    kernels = _fused_kernels() if compiled else None
+    if kernels is not None and E:
+        centres, var, square_sum = np.empty((E, M, 2)), np.empty(E), np.empty(E)
+        kernels["messages"](np.ascontiguousarray(sender_points, float), np.ascontiguousarray(distance, float),
+                            np.exp(correction_log_weights), np.ascontiguousarray(permutation),
+                            np.ascontiguousarray(offset, float), np.ascontiguousarray(range_noise, float),
+                            float(model.range_std), centres, var, square_sum)
+        h_rot = np.sqrt(np.maximum(var, 0.0)) * (1.0 / square_sum) ** (-1.0 / 6.0)  # rule_of_thumb_bandwidth's
+        bandwidth = np.maximum(np.sqrt(h_rot**2 + (np.pi * distance / M) ** 2), model.min_bandwidth)
+        return centres, correction_log_weights, bandwidth
     theta = 2.0 * np.pi * (permutation + offset) / M
     radius = distance[:, None] + model.range_std * range_noise
     centres = sender_points + radius[..., None] * np.stack([np.cos(theta), np.sin(theta)], axis=-1)
@@ -1211,8 +1257,19 @@ def correction_weights(sender_points: np.ndarray, reverse_centres: np.ndarray, r
     log_w = -log_m
     finite = np.isfinite(log_w)
     if not finite.all():  # a 1/m_st at a zero of m_st: capped at the largest finite one
-        log_w = np.where(finite, log_w, np.nanmax(np.where(finite, log_w, -np.inf)))
-    return log_w - _logsumexp(log_w, axis=-1)[:, None]
+        cap = np.nanmax(np.where(finite, log_w, -np.inf))
+        log_w = np.where(finite, log_w, cap)
+        if not np.isfinite(cap):
+            return log_w - _logsumexp(log_w, axis=-1)[:, None]
+    # every weight finite: _logsumexp's arithmetic without its guards for infinities
+    top = np.max(log_w, axis=-1, keepdims=True)
+    shifted = np.subtract(log_w, top)
+    np.maximum(shifted, _EXP_FLOOR, out=shifted)
+    np.exp(shifted, out=shifted)
+    total = np.log(np.sum(shifted, axis=-1))
+    total += top[:, 0]
+    log_w -= total[:, None]
+    return log_w
 
 
 # --- Algorithm 2 -------------------------------------------------------------------------------------------------
@@ -1331,14 +1388,19 @@ def _belief_update_fused(kernels, model, prior, prior_bandwidth, prior_uniform, 
     lo_c, hi_c = model.cold_box
     radius = float(model.truncation) if model.kernel == "truncated" else 0.0  # 0: the exact kernel
     weights = kernels["weights"][which]
+    constants = (int(model.oversampling), float(model.defensive_weight), float(lo), float(hi), float(lo_c),
+                 float(hi_c), radius)
 
     def weights_rows(a: int, b: int) -> None:
         weights(prior[a:b], prior_bandwidth[a:b], prior_uniform[a:b], centres[a:b], log_weights[a:b], bandwidth[a:b],
-                present[a:b], pick[a:b], box[a:b], noise[a:b], int(model.oversampling), float(model.defensive_weight),
-                float(lo), float(hi), float(lo_c), float(hi_c), radius, a, proposals[a:b], log_w[a:b])
+                present[a:b], pick[a:b], box[a:b], noise[a:b], *constants, a, proposals[a:b], log_w[a:b])
 
-    with kernels["chunks"](1) if which else contextlib.nullcontext():
-        _split_rows(weights_rows, R, pieces)
+    if pieces == 1 and not which:  # one call on this thread (B = 1): no slicing
+        weights(prior, prior_bandwidth, prior_uniform, centres, log_weights, bandwidth, present, pick, box, noise,
+                *constants, 0, proposals, log_w)
+    else:
+        with kernels["chunks"](1) if which else contextlib.nullcontext():
+            _split_rows(weights_rows, R, pieces)
     ok = np.isfinite(log_w).any(axis=1)
     if not ok.all():
         redo = np.flatnonzero(~ok)
@@ -1357,8 +1419,12 @@ def _belief_update_fused(kernels, model, prior, prior_bandwidth, prior_uniform, 
         resample_kernel(prior[a:b], prior_bandwidth[a:b], prior_uniform[a:b], proposals[a:b], log_w[a:b], ok[a:b],
                         resample[a:b], jitter[a:b], velocity[a:b], radius, a, out[a:b])
 
-    with kernels["chunks"](1) if which else contextlib.nullcontext():
-        _split_rows(resample_rows, R, pieces)
+    if pieces == 1 and not which:
+        resample_kernel(prior, prior_bandwidth, prior_uniform, proposals, log_w, ok, resample, jitter, velocity,
+                        radius, 0, out)
+    else:
+        with kernels["chunks"](1) if which else contextlib.nullcontext():
+            _split_rows(resample_rows, R, pieces)
     return out, ok
 
 
@@ -1481,6 +1547,8 @@ def draw_messages(rng: np.random.Generator, count: int, model: DnbpModel) -> dic
 
 def _draw_per_copy(rngs: Sequence[np.random.Generator], copies: np.ndarray, batch: int, draw, model) -> dict:
     """Draw each copy's block from its own generator and stack them in ``copies`` order (copies sorted)."""
+    if batch == 1:
+        return draw(rngs[0], len(copies), model)
     counts = np.bincount(copies, minlength=batch)
     blocks = [draw(rngs[b], int(counts[b]), model) for b in range(batch) if counts[b]]
     if len(blocks) == 1:  # one copy (B = 1): its block as drawn
@@ -1677,7 +1745,7 @@ def step(model: DnbpModel, state: DnbpState, gps_normal: np.ndarray, gps_fix: np
             centres[s_rows, t_idx], log_weights[s_rows, t_idx], bandwidth[s_rows, t_idx] = c, lw, h
             have[s_rows, t_idx] = True
             heard[b_idx, t_idx, s_idx] = True
-            receivers = np.unique(s_rows)
+            receivers = np.flatnonzero(delivered.any(axis=1))  # np.unique(s_rows): rows b * N + s, sorted
             update(receivers // N, receivers)
         if record:
             history.append(belief.copy())

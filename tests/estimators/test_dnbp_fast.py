@@ -223,3 +223,49 @@ def test_fused_belief_update_split_over_worker_threads_gives_the_same_bits(monke
             split, ok_split = dn.belief_update(model, *args)
             np.testing.assert_array_equal(split, serial)
             np.testing.assert_array_equal(ok_split, ok_serial)
+
+
+@pytest.mark.parametrize("M", [2, 7, 100, 129, 300])
+def test_compiled_messages_equal_the_numpy_messages_bit_for_bit(M):
+    """sample_messages' compiled pass (centres, h_rot's sums in einsum's and numpy's orders) gives the numpy
+    path's floats exactly, with and without correction weights, for one message and for many."""
+    rng = np.random.default_rng(M)
+    model = dn.DnbpModel(num_particles=M)
+    for E in (1, 13):
+        senders = rng.uniform(-200, 1200, size=(E, 1, 2)) + rng.normal(size=(E, M, 2)) * rng.uniform(0.5, 60)
+        distance = rng.random(E) * 200
+        raw = rng.normal(size=(E, M)) * 3
+        for correction in (None, raw - np.log(np.exp(raw).sum(axis=1, keepdims=True))):
+            draws = dn.draw_messages(rng, E, model)
+            compiled = dn.sample_messages(model, senders, distance, correction, **draws)
+            numpy = dn.sample_messages(model, senders, distance, correction, **draws, compiled=False)
+            for a, b in zip(compiled, numpy, strict=True):
+                np.testing.assert_array_equal(a, b)
+
+
+def test_correction_weights_normalize_as_logsumexp_does():
+    """The correction weights' normalization (every weight finite, or capped first) equals
+    log w - _logsumexp(log w) bit for bit."""
+    rng = np.random.default_rng(8)
+    E, M = 6, 80
+    senders = 400.0 + rng.normal(size=(E, M, 2)) * 30.0
+    centres = 400.0 + rng.normal(size=(E, M, 2)) * 30.0
+    centres[2] += 3000.0  # m_st = 0 at every particle of message 2 (capped at the largest finite weight)
+    senders[4, :5] += 5000.0  # and at a few particles of message 4
+    log_w = np.log(rng.dirichlet(np.ones(M), size=E))
+    h = rng.uniform(1.0, 8.0, size=E)
+    for truncation in (0.0, 6.0):
+        if truncation:
+            log_m, inv = np.empty((E, M)), 1.0 / h**2  # the kernel's inputs as correction_weights forms them
+            cx, cy = np.ascontiguousarray(centres[..., 0]), np.ascontiguousarray(centres[..., 1])
+            dn._fused_kernels()["mixture_truncated"][0](
+                senders, cx, cy, log_w - 0.5 * (cx * cx + cy * cy) * inv[:, None], inv, np.log(2.0 * np.pi * h**2),
+                0.5 * truncation**2, log_m)
+        else:
+            log_m = dn.mixture_logpdf(senders, centres, log_w, h, exact=False)
+        raw = -log_m
+        finite = np.isfinite(raw)
+        assert not finite[2].any() and not finite[4].all() and finite[0].all()
+        raw = np.where(finite, raw, np.nanmax(np.where(finite, raw, -np.inf)))
+        expected = raw - dn._logsumexp(raw, axis=-1)[:, None]
+        np.testing.assert_array_equal(dn.correction_weights(senders, centres, log_w, h, truncation), expected)
