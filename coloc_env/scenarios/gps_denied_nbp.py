@@ -312,9 +312,11 @@ def initial_beliefs(config: GpsDeniedNbpConfig, model: dn.DnbpModel, episodes: l
     return dn.initial_state(model, rngs, config.init, position, velocity, config.velocity_spread)
 
 
-def bimodality(points: np.ndarray) -> np.ndarray:
-    """Sarle's bimodality coefficient (g^2 + 1) / kappa of points (..., M, 2) along their principal axis."""
-    centred = points - points.mean(axis=-2, keepdims=True)
+def bimodality(points: np.ndarray, centred: np.ndarray | None = None) -> np.ndarray:
+    """Sarle's bimodality coefficient (g^2 + 1) / kappa of points (..., M, 2) along their principal axis
+    (``centred``: points minus their mean, where the caller has them)."""
+    if centred is None:
+        centred = points - points.mean(axis=-2, keepdims=True)
     cov = np.einsum("...mi,...mj->...ij", centred, centred) / points.shape[-2]
     _, vectors = np.linalg.eigh(cov)
     x = np.einsum("...mi,...i->...m", centred, vectors[..., :, -1])
@@ -412,6 +414,12 @@ class GpsDeniedNbpScenario(PresetScenario):
     def decode_actions(self, actions) -> np.ndarray:
         """Actions (B, N, n_iter) of 0/1 -> the broadcast network's ``transmit`` block (one entry per round)."""
         n = int(self.config.num_iterations)
+        raw = np.asarray(actions)
+        # integers of the right shape, each 0 or 1 (a policy's usual output): nothing check_discrete_actions would
+        # refuse or change; anything else goes through it (its errors name the iteration)
+        if raw.shape == (self.batch, self.num_agents, n) and (
+                raw.dtype.kind == "b" or (raw.dtype.kind in "iu" and ((raw == 0) | (raw == 1)).all())):
+            return raw.astype(np.int64)
         return self.check_discrete_actions(actions, [f"action[{i}] (broadcast in NBP iteration {i})"
                                                      for i in range(n)])
 
@@ -450,7 +458,7 @@ class GpsDeniedNbpScenario(PresetScenario):
             (adjacency & normal[:, None, :]).sum(axis=-1) / (N - 1),
             self.heard / (N - 1),
             np.log1p(spread),
-            bimodality(prior),
+            bimodality(prior, centred),
             frac,
             neighbours_heard / (N - 1),
         ], axis=-1)

@@ -105,6 +105,25 @@ def test_non_finite_or_misshaped_action_is_refused(bad):
         env.step({a: np.ones(4) for a in env.agents})
 
 
+def test_integer_and_bool_actions_decode_as_the_discrete_check_does():
+    """decode_actions' shortcut for 0/1 integers and bools gives check_discrete_actions' int64 array; other values
+    and dtypes still reach the check and its errors."""
+    scenario = coloc_env.vector_env(NAME, num_envs=2, **SMALL).scenario
+    labels = [f"action[{i}] (broadcast in NBP iteration {i})" for i in range(5)]
+    bits = np.random.default_rng(0).integers(0, 2, size=(2, 5, 5))
+    for actions in (bits, bits.astype(np.int8), bits.astype(np.uint16), bits.astype(bool), bits.astype(float)):
+        decoded = scenario.decode_actions(actions)
+        assert decoded.dtype == np.int64
+        np.testing.assert_array_equal(decoded, scenario.check_discrete_actions(actions, labels))
+    for value in (2, -1, 0.5):
+        bad = bits.astype(type(value))
+        bad[1, 3, 2] = value
+        with pytest.raises(ValueError, match=r"action\[2\] \(broadcast in NBP iteration 2\)"):
+            scenario.decode_actions(bad)
+    with pytest.raises(ValueError, match="shape"):
+        scenario.decode_actions(bits[:, :, :4])
+
+
 def test_same_seed_gives_identical_episodes_and_reset_continues_the_generator():
     env_a, env_b = coloc_env.parallel_env(NAME, **SMALL), coloc_env.parallel_env(NAME, **SMALL)
     first_a = play(env_a, agents.make_policy("random", env_a, seed=5), 11)
