@@ -81,7 +81,11 @@ cores and NUMBA_NUM_THREADS, so NUMBA_NUM_THREADS=1 runs one thread), each
 slice given its first row for the flat offsets, so the bits are the whole
 call's. dn.step wall clock on the 2-core machine (issue 18): 1.25x at B = 4,
 1.35x at B = 64 idle (load ~0-1), 0.96x / 0.98x beside one busy process; B = 1
-unsplit. numba's own threaded form (over receivers; the truncated correction
+unsplit. Algorithm 1's centres and h_rot sums are one compiled pass too
+(``_message_rows_source``): the numpy path's floats, since numpy's cos and sin
+are libm's and the sums keep einsum's and the pairwise sum's orders; numpy's
+exp, log and pow are not libm's (its AVX-512 loops round differently), so what
+needs them stays numpy. numba's own threaded form (over receivers; the truncated correction
 weights' over messages) is ``_FUSED_THREADS``, off: 1.5x idle but 2x slower
 beside one busy process (libgomp's waiting threads spin; see its note). A row (receiver) reads only its own
 inputs, so the results depend neither on the batch nor on the thread count. The numpy formulations
