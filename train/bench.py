@@ -10,11 +10,12 @@ all its agents; agent-steps = env-steps x N):
   scenario registers one in :data:`ESTIMATOR_STEPS`; the table's ``env / est.``
   column (``env_time_over_estimator`` in the JSON, on the vector_env row) is the
   env's time per step over it, so the env's overhead is read off directly.
-  relay_ukf's and mrclam_relay's replay the estimator calls their backend made
-  in a recorded vector_env rollout at that B (:func:`record_backend_calls`,
-  :func:`replay_step`): the same functions on the same shapes and inputs as the
-  env's step; the others time their estimator on synthetic inputs of the env's
-  shapes;
+  Every preset's row but gps_denied_nbp's replays the estimator calls its
+  backend made in a recorded vector_env rollout at that B
+  (:data:`BACKEND_CALLS`, :func:`record_backend_calls`, :func:`replay_step`):
+  the same functions on the same shapes and inputs as the env's step
+  (relay_ukf, mrclam_relay, nlos_horizon, lossy_fusion, bandwidth_fusion).
+  gps_denied_nbp's steps dNBP over its own sampled episode at the env's sizes;
 * peers            for relay_ukf, filterpy's ``UnscentedKalmanFilter`` doing one
   full-chain range update one copy at a time (:data:`PEERS`), beside our
   ``dcl_update`` doing the same update for the B copies at once;
@@ -40,6 +41,8 @@ rounds (current, REF, REF, current) keeping each row's best rate. Writes
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 import gc
 import json
 import os
@@ -69,62 +72,6 @@ def _rate(fn: Callable[[], None], min_seconds: float) -> float:
         elapsed = time.perf_counter() - start
         if elapsed >= min_seconds:
             return count / elapsed
-
-
-def _bandwidth_fusion_estimator_step(batch: int) -> Callable[[], None]:
-    """One step of :func:`estimators.bandwidth_fusion.step` (with the exact covariance) for B copies."""
-    import estimators.bandwidth_fusion as bf
-    from coloc_env.config import build_config
-    from coloc_env.scenarios.bandwidth_fusion import BandwidthFusionConfig, paper_selection, paper_weights
-
-    config = build_config(BandwidthFusionConfig, {})
-    model = config.fusion_model()
-    selection, weights = paper_selection("T1"), paper_weights("P1")
-
-    def start():
-        return bf.initial_state(model, np.asarray(config.initial_state), np.asarray(config.initial_cov), (batch,))
-
-    box = {"state": start(), "k": 0}
-    y = np.random.default_rng(0).normal(size=(batch, config.num_uavs, 3)) + 10.0
-
-    def step() -> None:
-        # restarted every episode length, as the env resets: a run of many episodes' steps on the one
-        # fixed reading would take the state (and the exact covariance) past float range
-        if box["k"] == config.horizon:
-            box["state"], box["k"] = start(), 0
-        box["state"] = bf.step(model, box["state"], y, selection, weights)
-        box["k"] += 1
-
-    return step
-
-
-def _nlos_horizon_estimator_step(batch: int, agents: int = 4, stack_size: int = 30) -> Callable[[], None]:
-    """One AFGE step of :mod:`estimators.afge` for B copies x ``agents`` targets: the delay-aware
-    re-run of the D + 1 buffer stamps over a stack of ``stack_size`` horizons, the estimates,
-    the predictive costs and the AHG choice (fused observations drawn once)."""
-    import estimators.afge as af
-
-    # the spec's AHG for 30 horizons; other stack sizes spread the group of 5 over 4..stack_size
-    params = af.AHGParams() if stack_size == 30 else af.AHGParams(
-        window_max=stack_size, window_step=max(1, (stack_size - 4) // 4), centre0=(4 + stack_size) // 2)
-    motion, D = af.MotionModel(), 3
-    rng = np.random.default_rng(0)
-    shape = (batch, agents)
-    info = np.broadcast_to(np.diag([0.05, 0.08]), (*shape, D + 1, 2, 2)).copy()
-    vector = np.einsum("...ab,...b->...a", info, rng.normal(scale=100.0, size=(*shape, D + 1, 2)))
-    success = np.ones((*shape, D + 1), bool)
-    box = {"final": af.empty_stack(shape, stack_size), "k": 0, "centre": np.full(shape, params.centre0),
-           "prev": (np.zeros((*shape, stack_size, 4)), np.broadcast_to(np.eye(4), (*shape, stack_size, 4, 4)),
-                    np.zeros((*shape, stack_size), bool))}
-
-    def step() -> None:
-        box["final"], x, P, valid = af.buffer_estimates(motion, box["final"], box["k"], info, vector, success)
-        z, R = af.fused_fix(info[..., -1, :, :], vector[..., -1, :], success[..., -1])
-        costs = af.predictive_costs(motion, *box["prev"], z, R)
-        _, box["centre"] = af.ahg_select(params, box["centre"], costs, valid, success[..., -1])
-        box["prev"], box["k"] = (x, P, valid), box["k"] + 1
-
-    return step
 
 
 def _gps_denied_nbp_episode(batch: int, num_particles: int = 100):
@@ -254,17 +201,43 @@ BACKEND_CALLS: dict[str, dict[tuple[str, str], tuple[tuple[str, ...], bool]]] = 
                   ("coloc_env.backends.ukf", "joseph_update"): ((), False)},
     "mrclam_relay": {("estimators.ukf_relay_se2", "dcl_update_rows"): (("estimate", "P_ii", "phi", "sigma"), False),
                      ("estimators.ukf_relay_se2", "time_update_batch"): (("estimate", "P_ii", "phi"), True)},
+    # The afge backend's estimator math. Every one returns new arrays and writes into none of its arguments, and
+    # the backend replaces (never updates in place) its stack and last estimates, so all are recorded whole.
+    # Left out: ahg_group, which the backend calls only to lay out the observation's AHG group (the env's view),
+    # and its inline prediction (two batched 4 x 4 products, no function to record). The preset never calls
+    # in_sample_costs, smooth_costs or ahg_select (predictive costs; its agent, not the backend, runs AHG),
+    # listed for the backend's other settings.
+    "nlos_horizon": {("estimators.afge", name): ((), False) for name in (
+        "mode_weight", "packet_fixes", "fuse_packets", "buffer_estimates", "fused_fix", "predictive_costs",
+        "in_sample_costs", "smooth_costs", "ahg_select")},
+    # Both return a new state and leave the one passed unchanged; node_covariances is the view of the exact
+    # covariance the backend reports every step.
+    "lossy_fusion": {("estimators.lossy_fusion", "distributed_step"): ((), False)},
+    "bandwidth_fusion": {("estimators.bandwidth_fusion", "step"): ((), False),
+                         ("estimators.bandwidth_fusion", "node_covariances"): ((), False)},
 }
 REPLAY_SAMPLES = 2048  # env-steps recorded for a replay: 2048 / B steps, at least 8, at most one episode
 
 
 def _copied(value):
     if isinstance(value, np.ndarray):
+        if any(stride == 0 and size > 1 for stride, size in zip(value.strides, value.shape, strict=True)):
+            # a broadcast argument stays one: the kernels' _flat copies it to full size, and a replay handed
+            # the full array would skip that copy
+            compact = value[tuple(slice(0, 1) if stride == 0 else slice(None) for stride in value.strides)]
+            return np.broadcast_to(compact.copy(), value.shape)
         return value.copy()
     if isinstance(value, (tuple, list)):
         return type(value)(_copied(v) for v in value)
     if isinstance(value, dict):
         return {k: _copied(v) for k, v in value.items()}
+    if dataclasses.is_dataclass(value) and not isinstance(value, type) and not value.__dataclass_params__.frozen:
+        # an estimator's state (HorizonStack, FusionState, DistributedState): the backend may later write into
+        # the arrays it passed (a reset assigns rows in place); frozen ones are models, read only
+        out = copy.copy(value)
+        for field in dataclasses.fields(value):
+            object.__setattr__(out, field.name, _copied(getattr(value, field.name)))
+        return out
     return value
 
 
@@ -383,34 +356,9 @@ def _replayed_estimator_step(name: str) -> Callable[[int], Callable[[], None]]:
     return factory
 
 
-def _lossy_fusion_estimator_step(batch: int) -> Callable[[], None]:
-    """One slot of the distributed prediction-compensation filter (B) of :mod:`estimators.lossy_fusion`."""
-    import estimators.lossy_fusion as lf
-    from coloc_env.config import build_config
-    from coloc_env.scenarios.lossy_fusion import LossyFusionConfig
-
-    config = build_config(LossyFusionConfig, {})
-    model = config.lossy_model()
-    rng = np.random.default_rng(0)
-    x0, P0 = np.asarray(config.initial_state, float), np.asarray(config.initial_cov, float)
-    box = {"state": lf.distributed_initial(model, x0, P0, (batch,))}
-    z = x0[[0, 2, 4]] + rng.normal(size=(batch, config.num_uavs, 3))
-    outcome = rng.integers(0, 3, size=(batch, config.num_uavs))
-    outcome[:, 0] = lf.ON_TIME
-
-    def step() -> None:
-        box["state"] = lf.distributed_step(model, box["state"], z, outcome)
-
-    return step
-
-
 ESTIMATOR_STEPS: dict[str, Callable[[int], Callable[[], None]]] = {
-    "lossy_fusion": _lossy_fusion_estimator_step,
-    "relay_ukf": _replayed_estimator_step("relay_ukf"),
-    "mrclam_relay": _replayed_estimator_step("mrclam_relay"),
+    **{name: _replayed_estimator_step(name) for name in BACKEND_CALLS},
     "gps_denied_nbp": _gps_denied_nbp_estimator_step,
-    "bandwidth_fusion": _bandwidth_fusion_estimator_step,
-    "nlos_horizon": _nlos_horizon_estimator_step,
 }
 
 

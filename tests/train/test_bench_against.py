@@ -55,12 +55,13 @@ def test_compare_rows_joins_on_scenario_what_and_batch():
 
 
 def test_the_bandwidth_estimator_row_stays_finite_over_many_episodes():
-    """It restarts every episode length, as the env resets; without that the state overflowed near step 1,750."""
+    """It restarts every recorded cycle (at most an episode), as the env resets; a row that carried its state over
+    many episodes' steps on the one fixed reading (the synthetic row before the replay) overflowed near step 1,750."""
     import warnings
 
-    from train.bench import _bandwidth_fusion_estimator_step
+    from train.bench import ESTIMATOR_STEPS
 
-    step = _bandwidth_fusion_estimator_step(4)
+    step = ESTIMATOR_STEPS["bandwidth_fusion"](4)
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # an overflow is a RuntimeWarning
         for _ in range(2_500):
