@@ -90,7 +90,7 @@ def make_vec_env(scenario: str, copies: int, env_config: dict, seed: int, vec: s
     raise ValueError(f"vec must be 'native' or 'supersuit', got {vec!r}")
 
 
-def _callbacks(scenario: str, folder: str, timesteps: int, curve: list, points: int, report=None):
+def _callbacks(scenario: str, folder: str, timesteps: int, curve: list, points: int, episodes: int, report=None):
     from stable_baselines3.common.callbacks import BaseCallback
 
     from train.evaluate import VALIDATION_SEED_BASE, run_model_batched
@@ -123,7 +123,7 @@ def _callbacks(scenario: str, folder: str, timesteps: int, curve: list, points: 
         def _record(self) -> None:
             save_model(os.path.join(folder, "checkpoint.zip"), self.model)
             if points:
-                result = run_model_batched(self.model, scenario, CURVE_EPISODES, VALIDATION_SEED_BASE)
+                result = run_model_batched(self.model, scenario, episodes, VALIDATION_SEED_BASE)
                 curve.append((int(self.num_timesteps), result["mean_cost"], result["ci95"]))
                 # the best point on the validation seeds is the model that is kept (never the evaluation seeds)
                 better = self.best is None or result["mean_cost"] < self.best[0]
@@ -133,7 +133,7 @@ def _callbacks(scenario: str, folder: str, timesteps: int, curve: list, points: 
                 if report is not None:
                     unit = metric(scenario)[1]
                     report(f"{self.num_timesteps:,} timesteps (budget {timesteps:,}): validation error "
-                           f"{result['mean_cost']:.4g} +- {result['ci95']:.3g} {unit} ({CURVE_EPISODES} episodes)"
+                           f"{result['mean_cost']:.4g} +- {result['ci95']:.3g} {unit} ({episodes} episodes)"
                            + (", the best so far" if better else ""))
 
     return CheckpointAndCurve()
@@ -148,7 +148,7 @@ def curve_reference(scenario: str) -> str:
     return agents.COMPOSITION_BASELINES[0] if coloc_env.is_composition_name(scenario) else "paper"
 
 
-def write_learning_curve(folder: str, scenario: str, curve: list, title: str) -> None:
+def write_learning_curve(folder: str, scenario: str, curve: list, title: str, episodes: int = CURVE_EPISODES) -> None:
     """``curve.json`` and ``learning_curve.png`` with the paper policy (a composition: ``always``) on the same
     validation seeds."""
     import matplotlib
@@ -160,15 +160,15 @@ def write_learning_curve(folder: str, scenario: str, curve: list, title: str) ->
     from train.io import save_figure
 
     reference = curve_reference(scenario)
-    paper = evaluate_policy(scenario, reference, CURVE_EPISODES, VALIDATION_SEED_BASE)
+    paper = evaluate_policy(scenario, reference, episodes, VALIDATION_SEED_BASE)
     write_json(os.path.join(folder, "curve.json"), {
-        "scenario": scenario, "validation_seed_base": VALIDATION_SEED_BASE, "episodes": CURVE_EPISODES,
+        "scenario": scenario, "validation_seed_base": VALIDATION_SEED_BASE, "episodes": episodes,
         "points": [{"timesteps": t, "mean_cost": c, "ci95": h} for t, c, h in curve],
         reference: {"mean_cost": paper["mean_cost"], "ci95": paper["ci95"]},
     })
     fig, ax = plt.subplots(figsize=(7.5, 4.5), layout="constrained")
     steps, costs, half = (np.array(v, dtype=float) for v in zip(*curve, strict=True))
-    n = CURVE_EPISODES
+    n = episodes
     ax.plot(steps, costs, "o-", color="tab:blue", label=f"trained policy (deterministic): mean over {n} "
                                                         "validation episodes")
     ax.fill_between(steps, costs - half, costs + half, color="tab:blue", alpha=0.2,
@@ -196,7 +196,7 @@ def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = 
     from stable_baselines3.common.vec_env import VecMonitor
 
     from agents.sb3 import algorithm_class
-    from train.hyperparams import algorithm, budget, critic, load, module
+    from train.hyperparams import algorithm, budget, critic, curve_episodes, load, module
 
     if timesteps is None:
         timesteps = budget(scenario, DEFAULT_TIMESTEPS)
@@ -210,6 +210,7 @@ def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = 
         except ImportError as exc:
             raise ValueError("--tensorboard needs the tensorboard package: pip install tensorboard") from exc
     hyper, env_config = load(scenario)
+    episodes = curve_episodes(scenario, CURVE_EPISODES)
     copies = module(scenario).NUM_COPIES
     algorithm_name = algorithm(scenario)
     if algorithm_name == "maskable_ppo" and vec != "native":
@@ -252,7 +253,7 @@ def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = 
         if progress_bar and not live_bar:
             def report(message: str) -> None:
                 print(f"{scenario} seed {seed}: {message}", flush=True)
-        callback = _callbacks(scenario, folder, timesteps, curve, curve_points, report)
+        callback = _callbacks(scenario, folder, timesteps, curve, curve_points, episodes, report)
         model.learn(total_timesteps=timesteps, progress_bar=live_bar, callback=callback)
     finally:
         torch.set_num_threads(threads)
@@ -260,7 +261,7 @@ def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = 
     save_model(os.path.join(folder, "last.zip"), model)
     if callback.best is not None:  # model.zip is the best validation checkpoint; last.zip the final weights
         selected = {"selected": "best on the validation seeds", "timesteps": callback.best[1],
-                    "validation_mean_cost": callback.best[0], "validation_episodes": CURVE_EPISODES}
+                    "validation_mean_cost": callback.best[0], "validation_episodes": episodes}
         source = os.path.join(folder, "best.zip")
     else:
         selected = {"selected": "last (no validation curve)", "timesteps": int(model.num_timesteps)}
@@ -275,5 +276,6 @@ def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = 
     })
     venv.close()
     if curve:
-        write_learning_curve(folder, scenario, curve, f"{scenario}, seed {seed}: validation error vs timesteps")
+        write_learning_curve(folder, scenario, curve, f"{scenario}, seed {seed}: validation error vs timesteps",
+                             episodes)
     return path

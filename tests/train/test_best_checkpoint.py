@@ -3,6 +3,8 @@
 import json
 import os
 
+import pytest
+
 from train.training import train
 
 
@@ -28,3 +30,27 @@ def test_without_a_curve_model_zip_is_the_last_weights(tmp_path):
     with open(os.path.join(os.path.dirname(path), "model.json")) as handle:
         assert json.load(handle)["checkpoint"]["selected"] == "last (no validation curve)"
     assert not os.path.exists(os.path.join(os.path.dirname(path), "best.zip"))
+
+
+def test_a_settings_module_sets_how_many_validation_episodes_score_each_point(tmp_path, monkeypatch):
+    import train.hyperparams.bandwidth_fusion as settings
+
+    monkeypatch.setattr(settings, "CURVE_EPISODES", 4, raising=False)
+    path = train("bandwidth_fusion", timesteps=2 * 2048, seed=0, out=str(tmp_path), progress_bar=False,
+                 curve_points=2)
+    folder = os.path.dirname(path)
+    with open(os.path.join(folder, "curve.json")) as handle:
+        assert json.load(handle)["episodes"] == 4
+    with open(os.path.join(folder, "model.json")) as handle:
+        assert json.load(handle)["checkpoint"]["validation_episodes"] == 4
+
+
+@pytest.mark.parametrize("bad", [1, 0, True, "16", 1e308, None, 16.0])
+def test_a_bad_curve_episodes_setting_is_refused_before_training(tmp_path, monkeypatch, bad):
+    import train.hyperparams.bandwidth_fusion as settings
+
+    monkeypatch.setattr(settings, "CURVE_EPISODES", bad, raising=False)
+    with pytest.raises(ValueError, match=r"CURVE_EPISODES of train/hyperparams/bandwidth_fusion.py must be an "
+                                         r"integer >= 2"):
+        train("bandwidth_fusion", timesteps=2048, seed=0, out=str(tmp_path), progress_bar=False)
+    assert os.listdir(tmp_path) == []

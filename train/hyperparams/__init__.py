@@ -3,7 +3,9 @@ optionally ``TIMESTEPS``, ``ALGORITHM``: ``"ppo"`` (stable-baselines3's PPO, the
 (sb3-contrib's MaskablePPO, which never samples a choice the env's action mask rules out) or ``"recurrent_ppo"``
 (sb3-contrib's RecurrentPPO: an LSTM policy that carries a memory over the episode), and ``CRITIC``:
 ``"decentralized"`` (the default: the critic sees what the actor sees) or ``"centralized"`` (the critic also sees
-the copy's ``state()``; :mod:`agents.centralized_critic`))."""
+the copy's ``state()``; :mod:`agents.centralized_critic`)), and ``CURVE_EPISODES``: how many validation episodes
+score each learning-curve point, the best of which becomes ``model.zip`` (default
+``train.training.CURVE_EPISODES``)."""
 
 import importlib
 
@@ -49,6 +51,16 @@ def algorithm(scenario: str) -> str:
 def budget(scenario: str, default: int) -> int:
     """The scenario's training budget in timesteps (its module's ``TIMESTEPS``, else ``default``)."""
     return int(getattr(module(scenario), "TIMESTEPS", default))
+
+
+def curve_episodes(scenario: str, default: int) -> int:
+    """Validation episodes per learning-curve point (its module's ``CURVE_EPISODES``, else ``default``): an
+    integer >= 2, since a point carries a 95 % interval."""
+    value = getattr(module(scenario), "CURVE_EPISODES", default)
+    if isinstance(value, bool) or not isinstance(value, int) or value < 2:
+        raise ValueError(f"CURVE_EPISODES of train/hyperparams/{module_name(scenario)}.py must be an integer >= 2, "
+                         f"got {value!r}")
+    return value
 
 
 def critic(scenario: str) -> str:
