@@ -38,6 +38,12 @@
   were 1.709 / 1.637 / 1.502 m against 1.581 / 1.580 / 1.581 m for these settings' own runs, on the same
   16 validation episodes (paper 1.467 m there). Mean 1.616 vs 1.581 m: no gain, and two seeds worse,
   so the cheaper critic stays.
+* ``ALGORITHM`` stays "maskable_ppo", not "recurrent_ppo". Measured on 2026-12-03 with ``ALGORITHM =
+  "recurrent_ppo"`` (an LSTM of 64 units after the (64, 64) layers; sb3-contrib's RecurrentPPO reads no action
+  masks, so masked choices act as "stop"), seeds 0..2, otherwise these settings: 360k steps, the most that fits
+  the 10 CPU-minute budget (6.8 / 7.2 / 8.1 CPU min under load, against 2.2-3.5 for 600k MaskablePPO steps).
+  The best validation errors were 1.586 / 1.718 / 1.609 m, against 1.581 / 1.580 / 1.581 m for these settings,
+  on the same 16 validation episodes. The memory did not help within the budget, and seed 1 is worse.
 """
 
 ENV_CONFIG = {"reward": "trace", "hop_cost": 0.01}
