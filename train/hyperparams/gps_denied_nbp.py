@@ -1,12 +1,33 @@
 """PPO settings for ``gps_denied_nbp`` (set by reasoning, not tuned on evaluation seeds).
 
-* ``broadcast_cost=0.05`` m per broadcast: without a price on the channel the
+* ``broadcast_cost=0.02`` m per broadcast: without a price on the channel the
   paper's schedule (broadcast whenever allowed) is already the best a policy
-  can do in expectation, so there would be nothing to learn. 0.05 m is small
-  against the few-metre error of a localized fault UAV and against the tens
-  of metres of a lost one, so a policy should stay silent only where its
+  can do in expectation, so there would be nothing to learn. The price should
+  be small against the few-metre error of a localized fault UAV and against
+  the tens of metres of a lost one, so a policy stays silent only where its
   message adds little (e.g. a normal UAV whose fault neighbours already hear
-  three anchors).
+  three anchors). Up to 2026-12-03 it was 0.05 m; the target then asked for
+  the error of the 20 m ``threshold`` rule within 5 %, and at 20 broadcasts
+  per step 0.05 m weighs 1 m a step against a ~6 m error, so the policies
+  bought their 64 % saving with 4 % more error. Chosen on validation episodes
+  that neither training nor the learning curve uses (256 episodes at M = 100,
+  ``train.evaluate.evaluate_policy("gps_denied_nbp", policy, 256,
+  VALIDATION_SEED_BASE + 10_000)``, each model paired against ``threshold``),
+  seeds 0..2, otherwise these settings:
+
+  | setting | seed 0 | seed 1 | seed 2 | broadcasts/step |
+  |---|---|---|---|---|
+  | 0.05 (before) | +0.340 m | (= seed 0's policy) | +0.331 m | 7.6 / 7.4 |
+  | 0.02 | +0.133 m | +0.029 m | -0.115 m | 8.8 / 11.8 / 8.1 |
+  | 0.05, ``CURVE_EPISODES = 64`` | +0.340 m | +0.084 m | +0.331 m | 7.6 / 12.0 / 7.4 |
+  | 0.02, ``CURVE_EPISODES = 64`` | +0.340 m | +0.029 m | +0.070 m | 7.6 / 11.8 / 10.4 |
+
+  (``threshold`` there: 6.290 m at 20.5 broadcasts per step.) The training
+  curves hop between a few deterministic behaviours (the same validation
+  errors recur across seeds and settings, e.g. 6.84 m and 9.01 m on the 16
+  curve episodes), so the kept checkpoint matters as much as the price; more
+  curve episodes did not pick better ones here, so ``CURVE_EPISODES`` stays
+  at the default.
 * ``num_particles=50``: training needs many environment steps and dNBP costs
   O(M^2) per message; the decisions (who talks when) do not depend on M.
 * The team reward (mean fault-UAV error) is shared and noisy; 10 agents x 4
@@ -17,7 +38,7 @@
 * Small networks (64, 64): the observation has 7 numbers.
 """
 
-ENV_CONFIG = {"broadcast_cost": 0.05, "num_particles": 50}
+ENV_CONFIG = {"broadcast_cost": 0.02, "num_particles": 50}
 
 HYPERPARAMS = {
     "n_steps": 60,
