@@ -289,11 +289,11 @@ def comparison(scenario: str, row: dict, baseline: dict | None) -> dict | None:
 def tradeoff_comparison(row: dict, always: dict, silent: dict) -> dict | None:
     """The row's paired difference against the mix of ``always`` and ``silent`` that sends as many messages.
 
-    The mix plays ``always`` with probability p = m / m_always in each episode (m: the row's messages per step,
-    p clipped to [0, 1]) and ``silent`` otherwise; its expected error in episode e is
-    p cost_e(always) + (1 - p) cost_e(silent) and its expected messages per step p m_always + (1 - p) m_silent,
-    which is m where silent sends nothing (a composition's ``silent``). Beating it is "a lower error at equal
-    messages" on the line that joins the two baselines' (messages, error) points. Returns
+    The mix plays ``always`` with probability p = (m - m_silent) / (m_always - m_silent) in each episode (m: the
+    row's messages per step; p clipped to [0, 1]; m / m_always where silent sends nothing, as a composition's
+    ``silent``) and ``silent`` otherwise, so its expected messages per step p m_always + (1 - p) m_silent are m
+    and its expected error in episode e is p cost_e(always) + (1 - p) cost_e(silent). Beating it is "a lower
+    error at equal messages" on the line that joins the two baselines' (messages, error) points. Returns
     :func:`paired_difference`'s dict with ``verdict`` and ``probability`` p; None where a row lacks paired
     episodes or ``always`` sends no more than ``silent``.
     """
