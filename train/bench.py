@@ -5,7 +5,12 @@ all its agents; agent-steps = env-steps x N):
 
 * ``parallel_env``  a Python loop over the PettingZoo env (B = 1);
 * ``supersuit``     SuperSuit's ``concat_vec_envs_v1`` over B copies;
-* ``vector_env``    coloc's batched SB3 VecEnv at B = 1, 64, 1024;
+* ``vector_env``    coloc's batched SB3 VecEnv at B = 1, 64, 1024 (copy b plays
+  the episode of seed b, as in training);
+* ``vector_env, one episode``  the same with every copy playing episode 0, for
+  the scenarios whose work per copy depends on the episode
+  (:data:`ONE_EPISODE_ROWS`: gps_denied_nbp), so that the rows at different B
+  time the same work per copy and show what batching itself buys;
 * ``estimator step``  the raw batched estimator step at the same B, where the
   scenario registers one in :data:`ESTIMATOR_STEPS`; the table's ``env / est.``
   column (``env_time_over_estimator`` in the JSON, on the vector_env row) is the
@@ -44,6 +49,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import gc
+import inspect
 import json
 import os
 import subprocess
@@ -143,6 +149,39 @@ def _gps_denied_nbp_particle_rows(min_seconds: float, batch: int | None = None, 
 SCENARIO_BATCHES: dict[str, tuple[int, ...]] = {"gps_denied_nbp": (1, 4, 64)}
 # Extra rows a scenario reports (name -> fn(min_seconds) -> rows).
 EXTRA_BENCHES: dict[str, Callable[[float], list[dict]]] = {"gps_denied_nbp": _gps_denied_nbp_particle_rows}
+# Scenarios whose work per copy depends on the episode (dNBP: how many messages arrive, how many proposals the
+# truncated kernel prunes): a vector_env of B copies plays episodes 0..B-1, so its rows at B = 1 and B = 4 time
+# different work. These also get a row with every copy playing episode 0 (ONE_EPISODE), where only B changes.
+ONE_EPISODE_ROWS = ("gps_denied_nbp",)
+ONE_EPISODE = "vector_env, one episode"
+
+
+def one_episode_rate(coloc_env, name: str, batch: int, paper: np.ndarray, min_seconds: float) -> float:
+    """Steps per second of ``vector_env(name, num_envs=batch)`` with every copy seeded 0 (the same episode in
+    each copy) and the paper actions ``paper`` (N, ...) tiled: constant actions only (gps_denied_nbp's).
+
+    Self-contained (its arguments, numpy, time, gc): ``coloc bench --against`` runs this source in the reference
+    tree's process too, on that tree's coloc_env, for a tree whose bench has no such row. It sets the env's
+    ``_copy_seeds``, from which every version of the batched VecEnv reseeds copy b at reset."""
+    import gc
+    import time
+
+    import numpy as np
+
+    venv = coloc_env.vector_env(name, num_envs=batch, seed=0)
+    venv._copy_seeds = [0] * batch
+    venv.reset()
+    tiled = np.tile(paper, (batch, *([1] * (paper.ndim - 1))))
+    venv.step(tiled)
+    gc.collect()
+    count, start = 0, time.perf_counter()
+    while True:
+        venv.step(tiled)
+        count += 1
+        elapsed = time.perf_counter() - start
+        if elapsed >= min_seconds:
+            venv.close()
+            return count / elapsed
 
 
 def _relay_ukf_inputs(batch: int, platforms: int = 4):
@@ -469,6 +508,8 @@ def bench_scenario(name: str, min_seconds: float, batches=BATCHES) -> list[dict]
         core = [venv.scenario]
         add("vector_env", batch, _rate(lambda venv=venv, core=core: venv.step(source(core)), min_seconds))
         venv.close()
+        if name in ONE_EPISODE_ROWS:
+            add(ONE_EPISODE, batch, one_episode_rate(coloc_env, name, batch, source.paper, min_seconds))
         if name in ESTIMATOR_STEPS:
             add("estimator step", batch, _rate(ESTIMATOR_STEPS[name](batch), min_seconds))
         if name in PEERS:
@@ -603,6 +644,15 @@ bench.SCENARIO_BATCHES = {spec["name"]: tuple(spec["batches"])}
 if not spec["extras"]:
     bench.EXTRA_BENCHES = {}
 rows = bench.bench_scenario(spec["name"], spec["min_seconds"], tuple(spec["batches"]))
+if spec["name"] in spec["one_episode"] and not hasattr(bench, "ONE_EPISODE_ROWS"):  # a tree before that row
+    import coloc_env
+    space = {}
+    exec("from __future__ import annotations\\n" + spec["one_episode_source"], space)
+    paper = bench._paper_actions(spec["name"])
+    for batch in spec["batches"]:
+        rate = space["one_episode_rate"](coloc_env, spec["name"], batch, paper, spec["min_seconds"])
+        rows.append({"scenario": spec["name"], "what": spec["one_episode_label"], "batch": batch,
+                     "env_steps_per_s": rate * batch, "agent_steps_per_s": rate * batch * paper.shape[0]})
 with open(spec["out"], "w") as f:
     json.dump({"source": train.__file__, "rows": rows}, f)
 """
@@ -635,7 +685,9 @@ def bench_tree(tree: str, name: str, min_seconds: float, batches, extras: bool =
     cannot run the scenario (e.g. it did not exist there)."""
     with tempfile.TemporaryDirectory(prefix="coloc-bench-") as scratch:
         out = os.path.join(scratch, "rows.json")
-        spec = {"name": name, "min_seconds": min_seconds, "batches": list(batches), "extras": extras, "out": out}
+        spec = {"name": name, "min_seconds": min_seconds, "batches": list(batches), "extras": extras, "out": out,
+                "one_episode": list(ONE_EPISODE_ROWS), "one_episode_label": ONE_EPISODE,
+                "one_episode_source": inspect.getsource(one_episode_rate)}
         env = dict(os.environ, PYTHONPATH=os.pathsep.join([tree, os.environ.get("PYTHONPATH", "")]).rstrip(os.pathsep),
                    MPLBACKEND="Agg")
         try:

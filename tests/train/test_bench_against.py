@@ -66,3 +66,46 @@ def test_the_bandwidth_estimator_row_stays_finite_over_many_episodes():
         warnings.simplefilter("error")  # an overflow is a RuntimeWarning
         for _ in range(2_500):
             step()
+
+
+def test_the_one_episode_row_plays_the_same_episode_in_every_copy():
+    """The row's premise: with every copy seeded 0 the copies' observations are equal; the default seeds differ."""
+    import numpy as np
+
+    import coloc_env
+
+    paper = bench.ActionSource("gps_denied_nbp").paper
+    observations = {}
+    for label, seeds in (("one episode", [0, 0, 0]), ("default", None)):
+        venv = coloc_env.vector_env("gps_denied_nbp", num_envs=3, seed=0)
+        if seeds is not None:
+            venv._copy_seeds = seeds
+        venv.reset()
+        for _ in range(3):
+            obs, *_ = venv.step(np.tile(paper, (3, 1)))
+        observations[label] = obs.reshape(3, venv.num_agents, -1)
+    same = observations["one episode"]
+    assert np.array_equal(same[0], same[1]) and np.array_equal(same[0], same[2])
+    assert not np.array_equal(observations["default"][0], observations["default"][1])
+
+
+def test_a_reference_tree_without_the_one_episode_row_gets_it_from_the_driver(tmp_path, monkeypatch):
+    """``--against`` an older commit: the driver measures the row with this tree's one_episode_rate in that tree."""
+    bench.export_commit("HEAD", str(tmp_path))
+    with open(bench.__file__) as f:  # this bench, less its row
+        source = f.read()
+    older = source.replace('ONE_EPISODE_ROWS = ("gps_denied_nbp",)\n', "").replace(
+        "if name in ONE_EPISODE_ROWS:", "if False:")
+    assert "ONE_EPISODE_ROWS =" not in older and older.count("if False:") == 1
+    (tmp_path / "train" / "bench.py").write_text(older)
+    monkeypatch.setattr(bench, "ONE_EPISODE_ROWS", ("lossy_fusion",))
+    result = bench.bench_tree(str(tmp_path), "lossy_fusion", 0.01, (1, 2), extras=False)
+    rows = {(r["what"], r["batch"]): r for r in result["rows"]}
+    agents = bench.ActionSource("lossy_fusion").num_agents
+    for batch in (1, 2):
+        row = rows[(bench.ONE_EPISODE, batch)]
+        assert row["env_steps_per_s"] > 0
+        assert row["agent_steps_per_s"] == pytest.approx(row["env_steps_per_s"] * agents)
+    monkeypatch.setattr(bench, "SCENARIO_BATCHES", {})
+    current = {(r["what"], r["batch"]) for r in bench.bench_scenario("lossy_fusion", 0.01, (1,))}
+    assert (bench.ONE_EPISODE, 1) in current and ("vector_env", 1) in current
