@@ -129,16 +129,21 @@ class TargetCvWorld(TargetWorld):
     def draw_episode(self, rngs, idx) -> None:
         K, L = self.horizon, self.num_agents
         x0_mean, P0 = self.prior()
+        C = len(rngs)
+        x0, accelerations, noise = np.empty((C, 6)), np.empty((C, K, 3)), np.empty((C, K, L, 3))
         for c, rng in enumerate(rngs):
-            # the order of LossyFusionConfig.sample_episodes: x(0), accelerations, measurement noise
-            x0 = rng.multivariate_normal(x0_mean, P0)
-            accelerations = self.target.sample_noise(rng, (K - 1,))
-            noise = self.sensor.sample_noise(rng, (K, L))
-            last = self.target.sample_noise(rng, (1,))  # w(K-1), for x(K) only
-            truth = self.target.trajectory(x0, np.concatenate([accelerations, last]))
-            b = idx[c]
-            self.truth[b] = truth
-            self.observations[b] = self.sensor.measure(truth[:K, None, :], noise)
+            # the order of LossyFusionConfig.sample_episodes: x(0), accelerations, measurement noise, then w(K-1)
+            # (for x(K) only)
+            x0[c] = rng.multivariate_normal(x0_mean, P0)
+            accelerations[c, :K - 1] = self.target.sample_noise(rng, (K - 1,))
+            noise[c] = self.sensor.sample_noise(rng, (K, L))
+            accelerations[c, K - 1:] = self.target.sample_noise(rng, (1,))
+        # every copy's trajectory and measurements at once (a Python loop over the horizon per copy cost 0.37 s
+        # of a 1024-copy reset): the same numbers, the motion being written per axis (ConstantVelocityTarget.step)
+        truth = self.target.trajectory(x0, accelerations)
+        idx = np.asarray(idx)
+        self.truth[idx] = truth
+        self.observations[idx] = self.sensor.measure(truth[:, :K, None, :], noise)
 
 
 __all__ = ["TargetCv", "TargetCvWorld"]

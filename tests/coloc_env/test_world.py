@@ -100,6 +100,25 @@ def test_constant_velocity_target_matrices_and_noise():
             ConstantVelocityTarget(**kwargs).validate()
 
 
+@pytest.mark.parametrize("period", [0.1, 0.37, 1.0])
+def test_a_batch_of_trajectories_equals_each_copy_drawn_alone(period):
+    """The world draws every reset copy's trajectory at once: copy b must not depend on the batch around it (matrix
+    products of a batch round differently from one row's at T = 0.1), and it follows Phi x + G w to rounding."""
+    from coloc_env.world.target import ConstantVelocityTarget
+
+    target = ConstantVelocityTarget(axes=3, period=period, accel_noise=5.0)
+    rng = np.random.default_rng(3)
+    x0, noise = rng.normal(0.0, 300.0, (257, 6)), target.sample_noise(rng, (257, 50))
+    batch = target.trajectory(x0, noise)
+    for b in (0, 100, 256):
+        np.testing.assert_array_equal(batch[b], target.trajectory(x0[b], noise[b]))
+        np.testing.assert_array_equal(batch[b], target.trajectory(x0[b:b + 1], noise[b:b + 1])[0])
+    x = x0[100]
+    for k in range(50):
+        x = target.transition @ x + target.noise_gain @ noise[100, k]
+    np.testing.assert_allclose(batch[100, -1], x, rtol=1e-12, atol=1e-9)
+
+
 def test_bernoulli_delay_link_frequencies_and_indicator_covariance():
     from coloc_env.world.delay_links import LATE, LOST, ON_TIME, BernoulliDelayLink
 
