@@ -391,9 +391,17 @@ def in_turn(config: NlosHorizonConfig, targets: int, steps: int) -> np.ndarray:
 def draw_episode(config: NlosHorizonConfig, rng: np.random.Generator, targets: int | None = None) -> Episode:
     """Draw one copy's episode from ``rng`` in a fixed order (orbits, modes, RSS/AOA noise,
     navigation noise, delays, prior); ``targets`` defaults to ``num_uavs``."""
+    return draw_episode_parts(config, rng, targets)[0]
+
+
+def draw_episode_parts(config: NlosHorizonConfig, rng: np.random.Generator, targets: int | None = None,
+                       truth: np.ndarray | None = None) -> tuple[Episode, np.ndarray]:
+    """:func:`draw_episode` and the target-neighbour distances (K+1, T, J) it computed. ``truth``: the targets'
+    paths if the caller has them (:func:`target_paths` of the same config, targets and horizon: they draw
+    nothing, so a batch's reset computes them once)."""
     T = config.num_uavs if targets is None else targets
     K1, J = config.horizon + 1, config.num_neighbours
-    truth = target_paths(config, T, K1)
+    truth = target_paths(config, T, K1) if truth is None else truth
     orbits = config.neighbours.sample(rng, (T,))
     senders = truth[:, :, None, :2] + config.neighbours.offsets(orbits, K1)  # (K+1, T, J, 2)
     modes = config.chain.sample(rng, K1, (T, J))
@@ -403,7 +411,7 @@ def draw_episode(config: NlosHorizonConfig, rng: np.random.Generator, targets: i
     distance = np.linalg.norm(truth[:, :, None, :2] - senders, axis=-1)
     delays = np.where(config.area.contains(distance), config.delay.sample(rng, (K1, T, J)), NEVER).astype(np.int16)
     prior = truth[0] + rng.standard_normal((T, 4)) * np.asarray(config.prior_std, float)
-    return Episode(truth, rss, aoa, nav, modes, delays, prior, orbits)
+    return Episode(truth, rss, aoa, nav, modes, delays, prior, orbits), distance
 
 
 def fuse_buffer(config: NlosHorizonConfig, rss, aoa, nav, modes, delays, lags, keep, fixes=None):

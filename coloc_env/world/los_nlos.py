@@ -45,11 +45,28 @@ class LosNlosChain:
         return np.array([[1.0 - self.p01, self.p01], [self.p10, 1.0 - self.p10]])
 
     def sample(self, rng: np.random.Generator, steps: int, size: tuple = ()) -> np.ndarray:
-        """Modes (steps, *size) as int8 (1 = NLOS), one uniform per link and step; loops over steps only."""
+        """Modes (steps, *size) as int8 (1 = NLOS), one uniform u_k per link and step:
+
+            mode_0 = [u_0 < pi],   mode_k = [u_k < 1 - p10] if mode_{k-1} = 1 else [u_k < p01].
+
+        Computed without a loop over steps: step k maps mode_{k-1} to a constant (both tests agree), to itself
+        or to its negation, so mode_k is the constant of the last constant map at or before k (mode_0 if none)
+        flipped once per negating map since then (a count difference of a cumulative sum). Booleans and
+        integers only: the same modes as the recursion (a Python loop over steps was 3.5 ms of each copy's
+        ~11 ms nlos_horizon reset)."""
         u = rng.random((steps, *size))
-        modes = np.empty((steps, *size), dtype=np.int8)
-        modes[0] = u[0] < self.p_nlos
-        stay_nlos, enter_nlos = 1.0 - self.p10, self.p01
-        for k in range(1, steps):
-            modes[k] = np.where(modes[k - 1] == 1, u[k] < stay_nlos, u[k] < enter_nlos)
-        return modes
+        if steps == 0:
+            return np.zeros((0, *size), np.int8)
+        if_nlos = u < 1.0 - self.p10  # mode_k when mode_{k-1} = 1 (row 0 unused)
+        if_los = u < self.p01  # mode_k when mode_{k-1} = 0
+        constant = if_nlos == if_los
+        constant[0] = True  # step 0 "sets" mode_0
+        value = np.where(np.arange(steps).reshape(steps, *([1] * len(size))) == 0, u < self.p_nlos, if_nlos)
+        negating = if_los & ~if_nlos
+        negating[0] = False
+        flips = np.cumsum(negating, axis=0, dtype=np.int64)
+        steps_index = np.broadcast_to(np.arange(steps).reshape(steps, *([1] * len(size))), u.shape)
+        last = np.maximum.accumulate(np.where(constant, steps_index, 0), axis=0)
+        start = np.take_along_axis(value, last, axis=0)
+        parity = (flips - np.take_along_axis(flips, last, axis=0)) & 1
+        return (start ^ parity.astype(bool)).astype(np.int8)

@@ -90,7 +90,7 @@ import numpy as np
 
 from coloc_env.config import as_array, check_step_windows
 from coloc_env.parts import WORLDS, PartConfig, check_flag, check_range
-from coloc_env.scenarios.nlos_horizon import NlosHorizonConfig, draw_episode
+from coloc_env.scenarios.nlos_horizon import NlosHorizonConfig, draw_episode_parts, target_paths
 from coloc_env.world.flight import OrbitParameters
 from coloc_env.world.los_nlos import LosNlosChain
 from coloc_env.world.radio import ReceiveSearchArea
@@ -245,14 +245,14 @@ class NlosOrbitWorld(World):
 
     def draw_episode(self, rngs, idx) -> None:
         """Each copy's episode by :func:`~coloc_env.scenarios.nlos_horizon.draw_episode` (its delays unused)."""
-        sc, K1 = self.scenario_config, self.horizon + 1
+        sc = self.scenario_config
+        truth = target_paths(sc, sc.num_uavs, sc.horizon + 1)  # every copy's: drawn from nothing
         for b, rng in zip(idx, rngs, strict=True):
-            ep = draw_episode(sc, rng)
+            ep, distance = draw_episode_parts(sc, rng, truth=truth)
             self.truth[b], self.rss[b], self.aoa[b], self.nav[b] = ep.truth, ep.rss, ep.aoa, ep.nav
             self.modes[b], self.prior[b] = ep.modes, ep.prior
             self.in_rsa[b] = ep.delays != NEVER  # draw_episode marks the neighbours outside the RSA with NEVER
-            senders = ep.truth[:, :, None, :2] + sc.neighbours.offsets(ep.orbits, K1)
-            self.distance[b] = np.linalg.norm(ep.truth[:, :, None, :2] - senders, axis=-1)
+            self.distance[b] = distance
             for name in ("radius", "wobble", "wobble_rate", "phase", "bearing_rate"):
                 getattr(self.orbits, name)[b] = getattr(ep.orbits, name)
 

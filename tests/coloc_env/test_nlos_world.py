@@ -96,6 +96,23 @@ def test_los_nlos_chain_is_stationary_at_pi_with_sojourn_one_over_p10():
             LosNlosChain(**kwargs).validate()
 
 
+@pytest.mark.parametrize("p_nlos, p10", [(0.3, 0.1), (0.0, 0.5), (1.0, 0.0), (0.5, 0.9), (0.6, 0.6), (0.2, 1.0)])
+def test_los_nlos_chain_sample_follows_its_recursion_step_by_step(p_nlos, p10):
+    """sample() has no loop over steps; its modes are the recursion's, given the same uniforms. (0.5, 0.9) and
+    (0.6, 0.6) have p01 > 1 - p10, where a step can flip the mode (the negating maps)."""
+    chain = LosNlosChain(p_nlos, p10)
+    chain.validate()
+    for steps, size in ((1, ()), (2, (3,)), (400, (4, 8))):
+        modes = chain.sample(np.random.default_rng(11), steps, size)
+        u = np.random.default_rng(11).random((steps, *size))
+        assert modes.dtype == np.int8 and modes.shape == u.shape
+        expected = u[0] < p_nlos
+        np.testing.assert_array_equal(modes[0], expected)
+        for k in range(1, steps):
+            expected = np.where(expected, u[k] < 1.0 - p10, u[k] < chain.p01)
+            np.testing.assert_array_equal(modes[k], expected)
+
+
 def test_bounded_delay_frequencies_and_losses():
     delay = BoundedRandomDelay()
     delay.validate()
