@@ -142,6 +142,9 @@ def build_parser() -> argparse.ArgumentParser:
     be.add_argument("--against", metavar="REF", default=None,
                     help="also measure git commit REF (e.g. HEAD~3, a tag) side by side in the same run and print "
                          "both rates and the ratio current / REF (OUT/bench/against.json)")
+    be.add_argument("--rounds", type=_positive, default=None,
+                    help="with --against: alternating rounds per scenario, each row keeping its best rate (default "
+                         "2; more on a machine whose speed wanders)")
 
     _add_study_parser(sub)
 
@@ -341,10 +344,14 @@ def cmd_bench(args) -> int:
             raise ValueError(f"coloc bench measures the presets ({', '.join(coloc_env.SCENARIOS)}), not a "
                              f"composition such as {name!r}")
         coloc_env.scenario_class(name)
+    if args.rounds is not None and not args.against:
+        raise ValueError(f"--rounds {args.rounds} needs --against REF (the rounds alternate the two trees)")
+    if args.rounds is not None and args.rounds > 20:
+        raise ValueError(f"--rounds must be in 1..20, got {args.rounds}")
     scenarios = args.scenarios or _runnable_scenarios(_console())
     with _open(args, os.path.join(args.out, "bench")):
         if args.against:
-            run_against(args.out, args.against, quick=args.quick, scenarios=scenarios)
+            run_against(args.out, args.against, quick=args.quick, scenarios=scenarios, rounds=args.rounds or 2)
         else:
             run(args.out, quick=args.quick, scenarios=scenarios)
     return 0

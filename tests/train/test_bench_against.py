@@ -109,3 +109,21 @@ def test_a_reference_tree_without_the_one_episode_row_gets_it_from_the_driver(tm
     monkeypatch.setattr(bench, "SCENARIO_BATCHES", {})
     current = {(r["what"], r["batch"]) for r in bench.bench_scenario("lossy_fusion", 0.01, (1,))}
     assert (bench.ONE_EPISODE, 1) in current and ("vector_env", 1) in current
+
+
+def test_bench_rounds_reach_run_against_and_bad_values_are_refused(tmp_path, monkeypatch, capsys):
+    from train.cli import main
+
+    seen = {}
+    monkeypatch.setattr(bench, "run_against", lambda out, ref, **kwargs: seen.update(ref=ref, **kwargs) or [])
+    assert main(["bench", "--quick", "--scenarios", "lossy_fusion", "--against", "HEAD", "--rounds", "3",
+                 "--out", str(tmp_path)]) == 0
+    assert seen["ref"] == "HEAD" and seen["rounds"] == 3
+    assert main(["bench", "--scenarios", "lossy_fusion", "--rounds", "3", "--out", str(tmp_path)]) == 2
+    assert "--rounds 3 needs --against REF" in capsys.readouterr().err
+    assert main(["bench", "--against", "HEAD", "--rounds", "21", "--out", str(tmp_path)]) == 2
+    assert "--rounds must be in 1..20, got 21" in capsys.readouterr().err
+    for bad in ("0", "-1", "1e308", "two", "True", ""):
+        with pytest.raises(SystemExit):
+            main(["bench", "--against", "HEAD", "--rounds", bad, "--out", str(tmp_path)])
+        assert "--rounds: must be a positive integer" in capsys.readouterr().err
