@@ -76,10 +76,10 @@ class ConstantVelocityTarget:
         """x(k+1) = Phi x(k) + G w(k) for a batch ``state`` (..., 2 axes) and ``noise`` (..., axes).
 
         Written per axis (position + T velocity + T^2/2 w, velocity + T w), not as the two matrix products:
-        BLAS rounds a product of many rows differently from that of one row, so the products made copy b of a
-        batch differ from the copy drawn alone by ~1e-12 at T = 0.1; per axis, every batch size gives the same
-        numbers. Where T and T^2/2 times a float are exact (T = 1 or 2, the presets' T = 1) these are the
-        products' numbers too."""
+        BLAS rounds a product of many rows differently from a product of one row, so with the products copy b
+        of a batch differed from the same copy drawn alone by ~1e-12 at T = 0.1; per axis, every batch size
+        gives the same numbers. Where multiplying by T and T^2/2 is exact (T a power of 2; the presets' T = 1)
+        these are also the numbers the products gave."""
         state = np.asarray(state, float)
         noise = np.asarray(noise, float)
         T, half = float(self.period), self.period**2 / 2.0
