@@ -187,3 +187,34 @@ if __name__ == "__main__":
     n, found = count_all()
     print("\n".join(found))
     print(f"action cases tried: {n}, defects: {len(found)}")
+
+
+def _discrete_presets() -> list[str]:
+    out = []
+    for name in presets():
+        env = make(("preset", name))
+        if isinstance(env.action_space(env.possible_agents[0]), gymnasium.spaces.MultiDiscrete):
+            out.append(name)
+    return out
+
+
+@pytest.mark.parametrize("name", _discrete_presets())
+def test_integer_actions_take_the_discrete_checks_shortcut_only_when_in_range(name):
+    """check_discrete_actions returns in-range integer arrays as they are (int64), the values its full checks give
+    the same actions as floats; an integer at nvec or -1 still gets the full checks' error."""
+    scenario = coloc_env.vector_env(name, num_envs=2, **CHEAP_PRESET.get(name, {})).scenario
+    nvec = np.asarray(scenario.action_space().nvec)
+    shape = (2, scenario.num_agents, *nvec.shape)
+    actions = np.random.default_rng(0).integers(0, np.broadcast_to(nvec, shape))
+    for dtype in (np.int64, np.int16, np.uint8):
+        got = scenario.check_discrete_actions(actions.astype(dtype))
+        assert got.dtype == np.int64
+        np.testing.assert_array_equal(got, scenario.check_discrete_actions(actions.astype(float)))
+    for value in (-1, int(nvec.reshape(-1)[0])):
+        bad = actions.copy()
+        bad[1, 0].reshape(-1)[0] = value  # a view: the first entry of copy 1, agent 0
+        with pytest.raises(ValueError) as as_int:
+            scenario.check_discrete_actions(bad)
+        with pytest.raises(ValueError) as as_float:
+            scenario.check_discrete_actions(bad.astype(float))
+        assert str(as_int.value) == str(as_float.value) and "must be integers in" in str(as_int.value)

@@ -161,8 +161,14 @@ class Scenario(abc.ABC):
         """MultiDiscrete actions as int64 (B, N, k): finite (:meth:`check_actions`), integral and in
         [0, nvec). A value out of range is a ValueError naming its index by ``labels[i]`` (what index
         i chooses; default ``action[i]``)."""
-        arr = self.check_actions(actions)
         nvec = np.asarray(self.action_space().nvec)
+        raw = np.asarray(actions)
+        # integers (or bools) of the right shape, all in range: a policy's usual output, which the checks below
+        # would pass unchanged; anything else goes through them (and their errors)
+        if raw.dtype.kind in "biu" and raw.shape == (self.batch, self.num_agents, *nvec.shape) and (
+                (raw >= 0) & (raw < nvec)).all():
+            return raw.astype(np.int64)
+        arr = self.check_actions(actions)
         flat = arr.reshape(*arr.shape[:2], -1)
 
         def refuse(bad: np.ndarray, rule: str):

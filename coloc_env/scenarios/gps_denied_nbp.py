@@ -414,12 +414,6 @@ class GpsDeniedNbpScenario(PresetScenario):
     def decode_actions(self, actions) -> np.ndarray:
         """Actions (B, N, n_iter) of 0/1 -> the broadcast network's ``transmit`` block (one entry per round)."""
         n = int(self.config.num_iterations)
-        raw = np.asarray(actions)
-        # integers of the right shape, each 0 or 1 (a policy's usual output): nothing check_discrete_actions would
-        # refuse or change; anything else goes through it (its errors name the iteration)
-        if raw.shape == (self.batch, self.num_agents, n) and (
-                raw.dtype.kind == "b" or (raw.dtype.kind in "iu" and ((raw == 0) | (raw == 1)).all())):
-            return raw.astype(np.int64)
         return self.check_discrete_actions(actions, [f"action[{i}] (broadcast in NBP iteration {i})"
                                                      for i in range(n)])
 

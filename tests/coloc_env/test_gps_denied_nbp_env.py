@@ -106,15 +106,16 @@ def test_non_finite_or_misshaped_action_is_refused(bad):
 
 
 def test_integer_and_bool_actions_decode_as_the_discrete_check_does():
-    """decode_actions' shortcut for 0/1 integers and bools gives check_discrete_actions' int64 array; other values
-    and dtypes still reach the check and its errors."""
+    """check_discrete_actions' shortcut for in-range integers and bools gives the int64 array that its full checks
+    give the same values as floats; other values and dtypes still reach the checks and their errors."""
     scenario = coloc_env.vector_env(NAME, num_envs=2, **SMALL).scenario
-    labels = [f"action[{i}] (broadcast in NBP iteration {i})" for i in range(5)]
     bits = np.random.default_rng(0).integers(0, 2, size=(2, 5, 5))
-    for actions in (bits, bits.astype(np.int8), bits.astype(np.uint16), bits.astype(bool), bits.astype(float)):
+    checked = scenario.decode_actions(bits.astype(float))  # floats take the full checks
+    assert checked.dtype == np.int64
+    for actions in (bits, bits.astype(np.int8), bits.astype(np.uint16), bits.astype(bool)):
         decoded = scenario.decode_actions(actions)
         assert decoded.dtype == np.int64
-        np.testing.assert_array_equal(decoded, scenario.check_discrete_actions(actions, labels))
+        np.testing.assert_array_equal(decoded, checked)
     for value in (2, -1, 0.5):
         bad = bits.astype(type(value))
         bad[1, 3, 2] = value
