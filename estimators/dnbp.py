@@ -1416,12 +1416,8 @@ def _belief_update_fused(kernels, model, prior, prior_bandwidth, prior_uniform, 
         weights(prior[a:b], prior_bandwidth[a:b], prior_uniform[a:b], centres[a:b], log_weights[a:b], bandwidth[a:b],
                 present[a:b], pick[a:b], box[a:b], noise[a:b], *constants, a, proposals[a:b], log_w[a:b])
 
-    if pieces == 1 and not which:  # one call on this thread (B = 1): no slicing
-        weights(prior, prior_bandwidth, prior_uniform, centres, log_weights, bandwidth, present, pick, box, noise,
-                *constants, 0, proposals, log_w)
-    else:
-        with kernels["chunks"](1) if which else contextlib.nullcontext():
-            _split_rows(weights_rows, R, pieces)
+    with kernels["chunks"](1) if which else contextlib.nullcontext():
+        _split_rows(weights_rows, R, pieces)
     ok = np.isfinite(log_w).any(axis=1)
     if not ok.all():
         redo = np.flatnonzero(~ok)
@@ -1440,12 +1436,8 @@ def _belief_update_fused(kernels, model, prior, prior_bandwidth, prior_uniform, 
         resample_kernel(prior[a:b], prior_bandwidth[a:b], prior_uniform[a:b], proposals[a:b], log_w[a:b], ok[a:b],
                         resample[a:b], jitter[a:b], velocity[a:b], radius, a, out[a:b])
 
-    if pieces == 1 and not which:
-        resample_kernel(prior, prior_bandwidth, prior_uniform, proposals, log_w, ok, resample, jitter, velocity,
-                        radius, 0, out)
-    else:
-        with kernels["chunks"](1) if which else contextlib.nullcontext():
-            _split_rows(resample_rows, R, pieces)
+    with kernels["chunks"](1) if which else contextlib.nullcontext():
+        _split_rows(resample_rows, R, pieces)
     return out, ok
 
 
