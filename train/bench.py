@@ -154,34 +154,25 @@ EXTRA_BENCHES: dict[str, Callable[[float], list[dict]]] = {"gps_denied_nbp": _gp
 # different work. These also get a row with every copy playing episode 0 (ONE_EPISODE), where only B changes.
 ONE_EPISODE_ROWS = ("gps_denied_nbp",)
 ONE_EPISODE = "vector_env, one episode"
+# what one_episode_rate and _rate's sources need where --against runs them in a reference tree's process
+_ONE_EPISODE_PREAMBLE = "from __future__ import annotations\nimport gc\nimport time\n\nimport numpy as np\n\n"
 
 
 def one_episode_rate(coloc_env, name: str, batch: int, paper: np.ndarray, min_seconds: float) -> float:
-    """Steps per second of ``vector_env(name, num_envs=batch)`` with every copy seeded 0 (the same episode in
-    each copy) and the paper actions ``paper`` (N, ...) tiled: constant actions only (gps_denied_nbp's).
+    """Steps per second (:func:`_rate`) of ``vector_env(name, num_envs=batch)`` with every copy seeded 0 (the same
+    episode in each copy) and the paper actions ``paper`` (N, ...) tiled: constant actions only (gps_denied_nbp's).
 
-    Self-contained (its arguments, numpy, time, gc): ``coloc bench --against`` runs this source in the reference
-    tree's process too, on that tree's coloc_env, for a tree whose bench has no such row. It sets the env's
-    ``_copy_seeds``, from which every version of the batched VecEnv reseeds copy b at reset."""
-    import gc
-    import time
-
-    import numpy as np
-
+    ``coloc bench --against`` also runs this source and :func:`_rate`'s in the reference tree's process, on that
+    tree's coloc_env, for a tree whose bench has no such row: they use only their arguments, numpy, gc and time.
+    It sets the env's ``_copy_seeds``, from which every version of the batched VecEnv reseeds copy b at reset."""
     venv = coloc_env.vector_env(name, num_envs=batch, seed=0)
     venv._copy_seeds = [0] * batch
     venv.reset()
     tiled = np.tile(paper, (batch, *([1] * (paper.ndim - 1))))
-    venv.step(tiled)
-    gc.collect()
-    count, start = 0, time.perf_counter()
-    while True:
-        venv.step(tiled)
-        count += 1
-        elapsed = time.perf_counter() - start
-        if elapsed >= min_seconds:
-            venv.close()
-            return count / elapsed
+    try:
+        return _rate(lambda: venv.step(tiled), min_seconds)
+    finally:
+        venv.close()
 
 
 def _relay_ukf_inputs(batch: int, platforms: int = 4):
@@ -647,7 +638,7 @@ rows = bench.bench_scenario(spec["name"], spec["min_seconds"], tuple(spec["batch
 if spec["name"] in spec["one_episode"] and not hasattr(bench, "ONE_EPISODE_ROWS"):  # a tree before that row
     import coloc_env
     space = {}
-    exec("from __future__ import annotations\\n" + spec["one_episode_source"], space)
+    exec(spec["one_episode_source"], space)
     paper = bench._paper_actions(spec["name"])
     for batch in spec["batches"]:
         rate = space["one_episode_rate"](coloc_env, spec["name"], batch, paper, spec["min_seconds"])
@@ -687,7 +678,8 @@ def bench_tree(tree: str, name: str, min_seconds: float, batches, extras: bool =
         out = os.path.join(scratch, "rows.json")
         spec = {"name": name, "min_seconds": min_seconds, "batches": list(batches), "extras": extras, "out": out,
                 "one_episode": list(ONE_EPISODE_ROWS), "one_episode_label": ONE_EPISODE,
-                "one_episode_source": inspect.getsource(one_episode_rate)}
+                "one_episode_source": _ONE_EPISODE_PREAMBLE + inspect.getsource(_rate)
+                + inspect.getsource(one_episode_rate)}
         env = dict(os.environ, PYTHONPATH=os.pathsep.join([tree, os.environ.get("PYTHONPATH", "")]).rstrip(os.pathsep),
                    MPLBACKEND="Agg")
         try:
