@@ -119,8 +119,8 @@ class KalmanBackend(TargetBackend):
         self.held[idx] = self.buffer_init
         self.previous[idx] = self.buffer_init
         self.links.reset(idx)
-        self.estimate[idx] = self.mean[idx, :n]
-        self.cov[idx] = self.full_cov[idx, :n, :n]
+        self.estimate[idx] = self.mean[idx, None, :n]  # c(0) = 0: xt(0) = x(0); one estimate for every agent
+        self.cov[idx] = self.full_cov[idx, None, :n, :n]
         self._record(idx)
 
     def update(self, readings, decisions) -> None:
