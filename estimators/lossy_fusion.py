@@ -78,9 +78,43 @@ x(k-1) and skips duplicates and lost slots; given y and the ages it is the
 MMSE estimator, so it bounds (A) from below) and ``ideal_kf`` (every z_i(k) on
 time).
 
-Two diagnostics that are not the paper's algorithms, used by the reproduction
-to explain its numbers: ``distributed_filter(..., age_aware=True)`` predicts
-each held packet forward by its age before (29), and
+Three readings of (B)'s compensation (29) (``distributed_step(..., reading=...)``,
+:data:`READINGS`), all with the weights w = (w0, w1, w2) of (29):
+
+* ``"current"`` (the default; the printed algorithm): the leader weighs the held
+  packet's three entries [x(k'|k'), x(k'|k'-1), x(k'|k'-2)], formed at the
+  slot k' <= k it left the follower, as if k' = k.
+* ``"forward"`` (realizable; ours): (22) names what the leader should use at
+  slot k: x(k|k) if the packet of k is on time, x(k|k-1) = Phi x(k-1|k-1) if the
+  held packet is one slot old (late now, or lost now after an on-time one),
+  x(k|k-2) = Phi^2 x(k-2|k-2) otherwise: the held packet's own filtered
+  estimate x_h = x(k-a|k-a), predicted forward by its age a. The leader does
+  not know a (no time stamps), so the expectation (26) over the link outcomes
+  becomes an expectation over a = 0, 1, 2 with the same probabilities:
+
+      xbar = sum_a w_a Phi^a x_h,
+      Pbar = sum_a w_a (P_a + (Phi^a x_h - xbar)(Phi^a x_h - xbar)^T),
+      P_a  = Phi^a P_h Phi^aT + sum_{j<a} Phi^j Q Phi^jT.
+
+  w_a is the probability that the held packet is a slots old under (22):
+  w0 = alpha1 (on time now), w1 = alpha2 + (1 - alpha1 - alpha2) alpha1 (late
+  now, or lost now after an on-time one), w2 = the rest ((22) lumps every
+  older packet into x(k|k-2)). Pbar is the error covariance of xbar given
+  the age distribution (the law of total covariance: the mean of the
+  hypotheses' covariances plus the spread of their means). (26) prints only
+  the first term, sum_a w_a P_a, which claims the age's uncertainty costs
+  nothing; the fusion weights (30) then trust the follower as if its age were
+  known (``forward_spread=False`` keeps the printed form, to measure that).
+  Every held packet is now an estimate of x(k): the lag of a stale one is
+  removed on average (the mean predicted age is sum_a a w_a), where
+  ``"current"`` leaves it all. With every link on time (alpha1 = 1) both
+  readings are the filtered estimate of the fresh packet.
+* ``"age_aware"`` (assumes time stamps the paper's agents do not have; a
+  diagnostic): the leader knows the held packet's age a and predicts each of
+  its three entries forward by a (x -> Phi^a x, P -> Phi^a P Phi^aT +
+  sum_{j<a} Phi^j Q Phi^jT) before (29).
+
+One more diagnostic, used by the reproduction to explain its numbers:
 ``centralized_filter(..., moments="printed")`` runs (A) with the second
 moments exactly as printed in (12)-(14), (20).
 
@@ -120,8 +154,9 @@ Departures from the printed equations
   is what (4) gives.
 * (B): the leader's fusion includes its own estimate (27) as i = 1 of (30);
   the paper's (29) fixes the weights on the packet contents without their age,
-  which is what we implement (a delivered packet of age 1 or more is used as
-  if it were current). Before k = 0 the held packet is the prior
+  which is what ``reading="current"`` implements (a delivered packet of age 1
+  or more is used as if it were current); ``reading="forward"`` is the
+  realizable reading of (22) and (26) derived above. Before k = 0 the held packet is the prior
   [x0_mean] * 3 with covariances P0 (the follower's x(0|-1) and x(0|-2)).
 """
 
@@ -161,12 +196,14 @@ __all__ = [
     "DistributedState",
     "distributed_initial",
     "age_propagators",
+    "READINGS",
     "distributed_step",
     "distributed_filter",
     "run_filters",
 ]
 
 ON_TIME, LATE, LOST = 0, 1, 2
+READINGS = ("current", "forward", "age_aware")  # of (B)'s compensation (29): see the module docstring
 FILTERS = ("naive_kf", "centralized", "centralized_paper_gain", "distributed", "informed_kf",
            "leader_only_kf", "ideal_kf")
 
@@ -627,18 +664,25 @@ def age_propagators(model: LossyModel, max_age: int) -> tuple[np.ndarray, np.nda
 
 def distributed_step(model: LossyModel, state: DistributedState, z: np.ndarray, outcome: np.ndarray,
                      transmit: np.ndarray | None = None, compensation: np.ndarray | None = None,
-                     fusion_factors: np.ndarray | None = None, age_aware: bool = False) -> DistributedState:
+                     fusion_factors: np.ndarray | None = None, reading: str = "current",
+                     forward_spread: bool = True) -> DistributedState:
     """One slot of (B) with this slot's z (..., L, p) and link outcomes (..., L).
 
     ``transmit`` (..., L-1) bool: whether each follower sends its packet this
     slot (default all; a packet not sent cannot arrive on time now nor late
-    next slot). ``compensation`` (..., L-1, 3): weights on the held packet's
-    three estimates (default eq. 29). ``fusion_factors`` (..., L): a_i is
-    proportional to factor_i / tr P_i (default 1, eq. 30). ``age_aware=True``
-    is *not* the paper: the leader first predicts the held packet forward by
-    its age (x -> Phi^a x, P -> Phi^a P Phi^aT + sum_j Phi^j Q Phi^jT), a
-    diagnostic of what ignoring the age costs.
+    next slot). ``compensation`` (..., L-1, 3): weights (default eq. 29) on the
+    three estimates ``reading`` makes of the held packet (:data:`READINGS`,
+    module docstring): ``"current"`` its entries [x(k'|k'), x(k'|k'-1),
+    x(k'|k'-2)] as if current (the paper as printed); ``"forward"`` its
+    filtered estimate predicted forward by 0, 1 and 2 slots (the age unknown:
+    realizable); ``"age_aware"`` its entries predicted forward by its known
+    age (assumes time stamps). ``forward_spread`` (``"forward"`` only): the
+    compensated covariance includes the spread of the three predictions (the
+    derived Pbar); False: (26)'s printed sum_a w_a P_a. ``fusion_factors``
+    (..., L): a_i is proportional to factor_i / tr P_i (default 1, eq. 30).
     """
+    if reading not in READINGS:
+        raise ValueError(f"reading must be one of {READINGS}, got {reading!r}")
     Phi, Q = np.asarray(model.transition, float), np.asarray(model.process_noise, float)
     H, R = np.asarray(model.measurement, float), np.asarray(model.measurement_noise, float)
     z, outcome = np.asarray(z, float), np.asarray(outcome)
@@ -673,13 +717,20 @@ def distributed_step(model: LossyModel, state: DistributedState, z: np.ndarray, 
 
     # (29) compensation, (30) fusion, (31) feedback
     used, used_cov = held, held_cov
-    if age_aware:
+    if reading == "age_aware":
         powers, noise = age_propagators(model, int(held_age.max(initial=0)))
         step = powers[held_age][..., None, :, :]
         used = np.einsum("...ab,...b->...a", step, held)
         used_cov = _sym(step @ held_cov @ np.swapaxes(step, -1, -2) + noise[held_age][..., None, :, :])
+    elif reading == "forward":  # Phi^a x_h, Phi^a P_h Phi^aT + sum_{j<a} Phi^j Q Phi^jT for a = 0, 1, 2
+        powers, noise = age_propagators(model, 2)
+        used = np.einsum("aij,...j->...ai", powers, held[..., 0, :])
+        used_cov = _sym(powers @ held_cov[..., 0, None, :, :] @ np.swapaxes(powers, -1, -2) + noise)
     compensated = np.einsum("...j,...jn->...n", compensation, used)
     compensated_cov = np.einsum("...j,...jab->...ab", compensation, used_cov)
+    if reading == "forward" and forward_spread:  # + sum_a w_a (m_a - xbar)(m_a - xbar)^T
+        spread = used - compensated[..., None, :]
+        compensated_cov = _sym(compensated_cov + np.einsum("...j,...ja,...jb->...ab", compensation, spread, spread))
     estimates = np.concatenate([own[..., None, :], compensated], axis=-2)
     covariances = np.concatenate([own_cov[..., None, :, :], compensated_cov], axis=-3)
     weights = inverse_trace_weights(covariances, fusion_factors)
@@ -694,17 +745,20 @@ def distributed_step(model: LossyModel, state: DistributedState, z: np.ndarray, 
     )
 
 
-def distributed_filter(model: LossyModel, x0_mean, P0, z: np.ndarray, outcome: np.ndarray, age_aware: bool = False):
+def distributed_filter(model: LossyModel, x0_mean, P0, z: np.ndarray, outcome: np.ndarray, reading: str = "current",
+                       forward_spread: bool = True):
     """(B) over an episode with the paper's weights: estimates (..., K, n), own covariances P0(k) (..., K, n, n).
 
-    ``age_aware=True``: the diagnostic variant of :func:`distributed_step` (not the paper).
+    ``reading``, ``forward_spread``: how the leader compensates a held packet (:func:`distributed_step`;
+    ``"current"`` is the paper as printed).
     """
     z = np.asarray(z, float)
     K, batch, n = z.shape[-3], z.shape[:-3], model.state_dim
     state = distributed_initial(model, x0_mean, P0, batch)
     estimates, covariances = np.empty((*batch, K, n)), np.empty((*batch, K, n, n))
     for k in range(K):
-        state = distributed_step(model, state, z[..., k, :, :], outcome[..., k, :], age_aware=age_aware)
+        state = distributed_step(model, state, z[..., k, :, :], outcome[..., k, :], reading=reading,
+                                 forward_spread=forward_spread)
         estimates[..., k, :], covariances[..., k, :, :] = state.fused, state.fused_cov
     return estimates, covariances
 

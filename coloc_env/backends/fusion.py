@@ -43,11 +43,26 @@ reports the leader's xhat(k|k) and P(k|k) (the estimate is shared: the team's).
 Kalman filter and sends the leader the packet [x(k|k), x(k|k-1), x(k|k-2)]
 with covariances; the leader holds the last packet delivered (on time, late,
 or the one it held), compensates it with the weights (29), fuses by
-inverse-trace weights (30) and feeds back (31). Decisions (the leader's
-action, agent 0; the others' entries are ignored): the fusion tilt t_i
-(a_i proportional to exp(scale t_i) / tr P_i) and the compensation tilt per
-follower and packet entry (weights proportional to c_j exp(scale t_fj),
-c = eq. 29); 0 = the paper, exactly as in the ``lossy_fusion`` scenario.
+inverse-trace weights (30) and feeds back (31). ``reading`` says what the
+weights (29) act on (:data:`estimators.lossy_fusion.READINGS`, derived in that
+module's docstring):
+
+| reading       | the three compensated estimates of a held packet              | the leader needs      |
+|---------------|----------------------------------------------------------------|-----------------------|
+| ``current``   | its entries x(k'|k'), x(k'|k'-1), x(k'|k'-2) as if k' = k     | nothing more (paper)  |
+|               | (the algorithm as printed; a stale packet lags the target)     |                       |
+| ``forward``   | its filtered x(k'|k') predicted forward by 0, 1 and 2 slots    | nothing more          |
+|               | (the possible ages, (22)); covariance with the spread of the   | (realizable)          |
+|               | three predictions                                              |                       |
+| ``age_aware`` | its entries predicted forward by the packet's true age         | time stamps, which    |
+|               |                                                                | the paper's agents    |
+|               |                                                                | do not have           |
+
+Decisions (the leader's action, agent 0; the others' entries are ignored):
+the fusion tilt t_i (a_i proportional to exp(scale t_i) / tr P_i) and the
+compensation tilt per follower and compensated estimate (weights
+proportional to c_j exp(scale t_fj), c = eq. 29); 0 = the paper, exactly as
+in the ``lossy_fusion`` scenario.
 
 A packet later than one slot (a network with delays of 2 or more) is
 discarded by both fu2017 backends: their model (eq. 3) has one-slot lateness
@@ -95,7 +110,8 @@ from z - C c(k).
 | needs            | ``linear_observation``                                                          |
 | messages         | ``packets``: each follower's packet to agent 0                                  |
 | payload          | 3 n + 3 n (n + 1) / 2 floats (three estimates, three symmetric covariances)     |
-| lost message     | the held packet is used again, compensated by (29) as if current                |
+| lost message     | the held packet is used again, compensated by (29) (``reading``: as if current, |
+|                  | or predicted forward by each possible age)                                      |
 | late message     | the previous slot's packet is held (eq. 3); delays of 2 or more are discarded   |
 | under-determined | never: the leader's own z_0 every slot                                          |
 | decisions        | ``fusion_tilt`` Box[-1, 1]^N, ``compensation_tilt`` Box[-1, 1]^(3(N-1))         |
@@ -108,6 +124,7 @@ Arguments
 | bandwidth_fusion         | weight_logit_scale  | 4.0        | (0, 1000]                |
 | centralized_lmmse        | gain                | "optimal"  | "optimal", "paper" (eq. 21) |
 | prediction_compensation  | weight_logit_scale  | 3.0        | (0, 50]                  |
+| prediction_compensation  | reading             | "current"  | "current", "forward", "age_aware" (time stamps) |
 """
 
 from __future__ import annotations
@@ -455,9 +472,11 @@ class PredictionCompensation(PartConfig):
     requires = NEEDS_LINEAR
     message_kind = "packets"
     weight_logit_scale: float = 3.0
+    reading: str = "current"
 
     def check(self, prefix: str) -> None:
         check_range(f"{prefix}weight_logit_scale", self.weight_logit_scale, 0.0, 50.0, low_open=True)
+        check_choice(f"{prefix}reading", self.reading, lf.READINGS)
 
     def build(self, world, network, batch: int) -> Backend:
         return PredictionCompensationBackend(self, world, network, batch)
@@ -482,8 +501,9 @@ class PredictionCompensationBackend(TargetBackend):
         N = self.num_agents
         return [Block("fusion_tilt", N, None, "leader: fusion tilt t_i for [leader, agent 1, ...]: a_i ~ "
                       "exp(scale t_i) / tr P_i (0: eq. 30)", low=-1.0, high=1.0, default=0.0),
-                Block("compensation_tilt", 3 * (N - 1), None, "leader: per follower f and packet entry j "
-                      "(x(k|k), x(k|k-1), x(k|k-2)) at 3(f-1)+j: weights ~ c_j exp(scale t) (0: eq. 29)",
+                Block("compensation_tilt", 3 * (N - 1), None, "leader: per follower f and compensated "
+                      "estimate j (the held packet's x(k|k), x(k|k-1), x(k|k-2); reading forward: predicted 0, 1, 2 "
+                      "slots) at 3(f-1)+j: weights ~ c_j exp(scale t) (0: eq. 29)",
                       low=-1.0, high=1.0, default=0.0)]
 
     def reset(self, rngs, idx) -> None:
@@ -509,7 +529,7 @@ class PredictionCompensationBackend(TargetBackend):
         self.outcome = self.links.outcomes(float(self.payload))
         compensation, fusion_factors = self.decode(decisions)
         self.fusion = lf.distributed_step(self.model, self.fusion, z, self.outcome, None, compensation,
-                                          fusion_factors)
+                                          fusion_factors, self.config.reading)
         self.estimate[:] = (self.fusion.fused + self.shift.now())[:, None, :]
         self.cov[:] = self.fusion.fused_cov[:, None]
 

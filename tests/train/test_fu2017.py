@@ -53,15 +53,29 @@ def test_reproduce_fu2017_writes_metrics_report_and_figures(tmp_path, capsys):
         assert growth["difference"] == pytest.approx(window["mse_k90_99"] - window["mse_k40_49"], abs=1e-9)
         if m["claims"][setting]["naive_diverges"]:
             assert window["mse_k90_99"] > window["mse_k40_49"]
+        # (B)'s readings of (29), each against the references on the same runs
+        readings = m["readings"][setting]
+        assert sorted(readings) == sorted(["distributed", "distributed_forward",
+                                           "distributed_forward_printed_covariance", "distributed_age_aware"])
+        assert readings["distributed"]["mse"] == pytest.approx(mse["distributed"], abs=1e-9)
+        for name, row in readings.items():
+            assert sorted(row["versus"]) == sorted(["informed_kf", "leader_only_kf", "centralized", "naive_kf"])
+            for ref, v in row["versus"].items():
+                assert v["difference"] == pytest.approx(row["mse"] - mse[ref], abs=1e-9), (name, ref)
+        # predicting the held packet forward removes the lag the printed reading keeps
+        assert readings["distributed_forward"]["versus"]["naive_kf"]["difference"] < readings["distributed"][
+            "versus"]["naive_kf"]["difference"]
         # Fig. 3 holds at this seed by a wide margin (the paper's main result)
         assert m["claims"][setting]["centralized_beats_naive"]
         assert se["centralized"] > 0
     for name in ("fig3_centralized_vs_naive.png", "fig4_distributed_vs_naive.png",
-                 "fig5_centralized_vs_distributed.png", "all_filters.png", "consistency.png", "report.md"):
+                 "fig5_centralized_vs_distributed.png", "all_filters.png", "consistency.png", "readings.png",
+                 "report.md"):
         assert (folder / name).stat().st_size > 1000
     report = (folder / "report.md").read_text()
     assert "| the centralized algorithm beats the general Kalman filter (Fig. 3) | L2 |" in report
     assert f"{m['mse']['L4']['distributed']:.2f}" in report
+    assert "| L2 | `distributed_forward` | " in report
     printed = capsys.readouterr().out
     assert "L2.centralized_beats_naive" in printed and "L4.naive_diverges" in printed
 

@@ -14,6 +14,12 @@ setting ``L2`` / ``L4`` and filter (``naive_kf``, ``centralized``,
 * ``naive_divergence``           the naive filter's MSE over k = 40..49 and k = 90..99
 * ``comparisons``                paired differences behind each claim (mean, standard error)
 * ``claims``                     booleans from these numbers
+* ``diagnostics``                per setting, filters outside the comparison proper (:data:`DIAGNOSTICS`):
+                                 ``mse``, ``mse_se``, ``mse_late``, ``mse_late_se``, ``own_covariance_late``
+* ``readings``                   per setting, (B) under each reading of (29) (:data:`READINGS`; ``reading`` of
+                                 :func:`estimators.lossy_fusion.distributed_step`): ``mse``, ``mse_se``,
+                                 ``mse_late``, ``own_covariance_late``, and ``versus``: the paired difference
+                                 (reading minus reference; mean, se) against each of :data:`REFERENCES`
 * ``runs``, ``seed``, ``steps``
 
 plus ``report.md`` and PNG figures. Monte Carlo blocks of at most
@@ -69,9 +75,26 @@ BEATS = {
     "distributed_beats_leader_only": ("distributed", "leader_only_kf",
                                       "cooperation helps: (B) beats the leader alone (Sec. 1, implied)"),
 }
-# not in the comparison proper: (B) with each held packet predicted forward by its age (ours), and (A) with
-# the paper's gain (21) and its second moments exactly as printed (12)-(14), (20)
-DIAGNOSTICS = ("distributed_age_aware", "centralized_printed_moments")
+# not in the comparison proper: (B) under the other readings of (29) (estimators.lossy_fusion.READINGS: each
+# held packet predicted forward by its possible ages, realizable; with (26)'s printed covariance, without the
+# spread of the predictions; predicted forward by its known age, which needs time stamps), and (A) with the
+# paper's gain (21) and its second moments exactly as printed (12)-(14), (20)
+DIAGNOSTICS = ("distributed_forward", "distributed_forward_printed_covariance", "distributed_age_aware",
+               "centralized_printed_moments")
+# (B)'s readings side by side: row name -> (reading, forward_spread, what the leader needs)
+READINGS = {
+    "distributed": ("current", True, "nothing beyond the paper: the held packet as if current (as printed)"),
+    "distributed_forward": ("forward", True, "nothing beyond the paper: predicted by each possible age (realizable)"),
+    "distributed_forward_printed_covariance": ("forward", False, "as forward, covariance as (26) prints it"),
+    "distributed_age_aware": ("age_aware", True, "time stamps: each packet's age"),
+}
+REFERENCES = ("informed_kf", "leader_only_kf", "centralized", "naive_kf")
+DIAGNOSTIC_LABELS = {
+    "distributed_forward": "(B), held packet predicted by each possible age",
+    "distributed_forward_printed_covariance": "(B) forward, (26)'s covariance",
+    "distributed_age_aware": "(B), held packet predicted by its known age",
+    "centralized_printed_moments": "(A), paper gain and printed moments",
+}
 PAPER_FILTER = "distributed"  # the env's ``paper`` policy: (B), all transmit, weights (29)/(30)
 SIGNIFICANCE = 2.0  # a difference counts when it exceeds this many standard errors
 
@@ -106,7 +129,9 @@ def run_block_filters(config: LossyFusionConfig, sim: dict) -> dict:
     H = config.target.position_matrix
     x0, P0 = np.asarray(config.initial_state, float), np.asarray(config.initial_cov, float)
     results = lf.run_filters(model, x0, P0, sim["z"], sim["outcome"])
-    results["distributed_age_aware"] = lf.distributed_filter(model, x0, P0, sim["z"], sim["outcome"], age_aware=True)
+    for name, (reading, spread, _) in READINGS.items():
+        if name != "distributed":  # run_filters' (B) is the printed reading
+            results[name] = lf.distributed_filter(model, x0, P0, sim["z"], sim["outcome"], reading, spread)
     y = lf.received_measurements(sim["z"], sim["outcome"], H @ x0)
     results["centralized_printed_moments"] = lf.centralized_filter(model, x0, P0, y, "paper", "printed")
     errors, own = {}, {}
@@ -155,7 +180,7 @@ def run(out: str, runs: int = RUNS, seed: int = 0, quick: bool = False, executor
 
     metrics: dict = {"runs": runs, "seed": seed, "steps": K}
     for key in ("mse", "mse_se", "mse_late", "mse_late_se", "claimed_late", "own_covariance_late",
-                "naive_divergence", "comparisons", "claims", "diagnostics"):
+                "naive_divergence", "comparisons", "claims", "diagnostics", "readings"):
         metrics[key] = {}
     for key, d in data.items():
         err, own = d["errors"], d["own"]
@@ -172,6 +197,15 @@ def run(out: str, runs: int = RUNS, seed: int = 0, quick: bool = False, executor
             metrics["diagnostics"][key][f] = {"mse": mse, "mse_se": se, "mse_late": mse_late,
                                               "mse_late_se": se_late,
                                               "own_covariance_late": float(own[f][..., late].mean())}
+        metrics["readings"][key] = {}
+        for f in READINGS:
+            mse, se = _mean_se(err[f].mean(axis=1))
+            versus = {}
+            for ref in REFERENCES:
+                diff, diff_se = _mean_se(err[f].mean(axis=1) - err[ref].mean(axis=1))
+                versus[ref] = {"difference": diff, "se": diff_se}
+            metrics["readings"][key][f] = {"mse": mse, "mse_se": se, "mse_late": float(err[f][:, late].mean()),
+                                           "own_covariance_late": float(own[f][..., late].mean()), "versus": versus}
         metrics["claimed_late"][key] = {f: metrics["own_covariance_late"][key][f] for f in CLAIMED}
         naive = err["naive_kf"]
         metrics["naive_divergence"][key] = {"mse_k40_49": float(naive[:, 40:50].mean()),
@@ -216,12 +250,14 @@ def _figures(folder: str, data: dict, K: int) -> None:
     ks = np.arange(K)
     colours = dict(zip(lf.FILTERS, ["tab:red", "tab:blue", "tab:cyan", "tab:orange", "tab:green", "tab:purple",
                                     "k"], strict=True))
+    colours.update(zip(DIAGNOSTICS, ["tab:brown", "tab:pink", "tab:olive", "tab:gray"], strict=True))
+    labels = {**LABELS, **DIAGNOSTIC_LABELS}
 
     def curves(filters, title, name, own=False):
         fig, axes = plt.subplots(1, len(data), figsize=(6 * len(data), 4), sharey=True)
         for ax, (key, d) in zip(np.atleast_1d(axes), data.items(), strict=True):
             for f in filters:
-                ax.semilogy(ks, d["errors"][f].mean(axis=0), color=colours[f], label=LABELS[f])
+                ax.semilogy(ks, d["errors"][f].mean(axis=0), color=colours[f], label=labels[f])
                 if own:
                     claimed = d["own"][f] if d["own"][f].ndim == 1 else d["own"][f].mean(axis=0)
                     ax.semilogy(ks, claimed, "--", color=colours[f], lw=1)
@@ -241,6 +277,8 @@ def _figures(folder: str, data: dict, K: int) -> None:
     curves(("centralized", "distributed", "leader_only_kf"), "Fig. 5: centralized vs distributed (leader alone "
            "for reference)", "fig5_centralized_vs_distributed.png")
     curves(lf.FILTERS, "every filter on the same runs", "all_filters.png")
+    curves((*READINGS, "leader_only_kf", "centralized", "informed_kf"), "(B) under each reading of (29), against "
+           "the leader alone, (A) and the informed KF", "readings.png")
     curves(("centralized", "centralized_paper_gain", "distributed", "naive_kf", "leader_only_kf", "ideal_kf"),
            "consistency: measured MSE (solid) vs the filter's own covariance (dashed)", "consistency.png", own=True)
 
@@ -294,19 +332,38 @@ def _report(metrics: dict, config: LossyFusionConfig, quick: bool) -> str:
             verdict = f"(B) beats the leader alone: {b:.2f} vs {lo:.2f} m^2."
         else:
             verdict = f"(B) and the leader alone do not differ significantly: {b:.2f} vs {lo:.2f} m^2."
-        aware = m["diagnostics"][key]["distributed_age_aware"]
-        verdict += (f" Predicting each held packet forward by its age before (29) (our diagnostic, not the paper's "
-                    f"algorithm) gives {_fmt(aware['mse'], aware['mse_se'])} m^2")
-        if b > lo:
-            closed = 100 * (b - aware["mse"]) / (b - lo)
-            verdict += f", closing {closed:.0f} % of the gap between (B) and the leader alone."
-        else:
-            verdict += "."
         lines.append(f"* {key}: {verdict}")
     for key in SETTINGS:
         c = m["mse"][key]
         lines.append(f"* {key}: for scale, (A) {c['centralized']:.2f}, the informed KF (knows the ages) "
                      f"{c['informed_kf']:.2f}, the ideal KF {c['ideal_kf']:.2f} m^2.")
+    lines += [
+        "",
+        "## (B) under each reading of (29)",
+        "",
+        "The paper's leader does not know a held packet's age. `distributed` weighs the held packet's entries as if "
+        "current (the algorithm as printed); `distributed_forward` predicts its filtered estimate forward by each "
+        "possible age 0, 1, 2 and weighs the predictions with (29)'s probabilities, its covariance including their "
+        "spread (realizable: the derivation is in `estimators/lossy_fusion.py`); `..._printed_covariance` is the "
+        "same estimate with (26)'s covariance; `distributed_age_aware` needs time stamps the paper's agents do not "
+        "have. MSE in m^2 over k = 0..99 ± its standard error; the columns 'minus X' are paired differences "
+        "(negative: the reading is better); **bold** where the difference exceeds "
+        f"{SIGNIFICANCE:g} standard errors.",
+        "",
+        "| setting | reading | the leader needs | MSE | MSE k=50..99 | own covariance k=50..99 | "
+        + " | ".join(f"minus {r}" for r in REFERENCES) + " |",
+        "|---|---|---|---|---|---|" + "---|" * len(REFERENCES),
+    ]
+    for key in SETTINGS:
+        for f, (_, _, needs) in READINGS.items():
+            r = m["readings"][key][f]
+            cells = []
+            for ref in REFERENCES:
+                v = r["versus"][ref]
+                text = _fmt(v["difference"], v["se"])
+                cells.append(f"**{text}**" if abs(v["difference"]) > SIGNIFICANCE * v["se"] else text)
+            lines.append(f"| {key} | `{f}` | {needs} | {_fmt(r['mse'], r['mse_se'])} | {r['mse_late']:.2f} | "
+                         f"{r['own_covariance_late']:.2f} | " + " | ".join(cells) + " |")
     lines += [
         "",
         "## Every filter",
