@@ -1,6 +1,6 @@
 """Every compatible composition runs batched: copy b of ``vector_env(spec, num_envs=3, seed=s)`` is the
 parallel env reset with seed s + b, step for step (the seeding rule of the design, for compositions as
-``test_vector_env`` checks it for the presets); a copy reset alone mid-run starts over as a fresh env."""
+``test_vector_env`` checks it for the presets), and a copy reset alone mid-run starts over as a fresh env."""
 
 import numpy as np
 import pytest
@@ -11,15 +11,17 @@ from coloc_env.data import mrclam
 
 OK_ROWS = [r for r in coloc_env.compatibility() if r["ok"]]
 B, SEED, STEPS = 3, 20, 4
+SPECS = {f"{r['world']}/{r['network']}/{r['backend']}": dict(world=r["world"], network=r["network"],
+                                                             backend=r["backend"]) for r in OK_ROWS}
 # the backend options the compatibility rows (defaults only) do not reach, on a lossy network
-VARIANT_SPECS = {f"target_cv/bernoulli_delay/kalman:{v}": dict(world="target_cv", network="bernoulli_delay",
-                                                               backend={"name": "kalman", "variant": v})
-                 for v in VARIANTS if v != "naive"}
-VARIANT_SPECS["drift/bernoulli_delay/centralized_lmmse:paper"] = dict(
+SPECS.update({f"target_cv/bernoulli_delay/kalman:{v}": dict(world="target_cv", network="bernoulli_delay",
+                                                            backend={"name": "kalman", "variant": v})
+              for v in VARIANTS if v != "naive"})
+SPECS["drift/bernoulli_delay/centralized_lmmse:paper"] = dict(
     world="drift", network="bernoulli_delay", backend={"name": "centralized_lmmse", "gain": "paper"})
-TARGET_SPECS = {f"{r['world']}/{r['network']}/{r['backend']}": dict(world=r["world"], network=r["network"],
-                                                                    backend=r["backend"])
-                for r in OK_ROWS if r["world"] in ("drift", "target_cv")} | VARIANT_SPECS
+SPECS.update({f"drift/bernoulli_delay/prediction_compensation:{r}": dict(
+    world="drift", network="bernoulli_delay", backend={"name": "prediction_compensation", "reading": r})
+    for r in ("forward", "age_aware")})
 
 
 def _assert_copies_equal_singles(venv, singles, single_obs, actions_of):
@@ -50,23 +52,14 @@ def _sampler(venv):
     return lambda step: np.stack([space.sample() for _ in range(venv.num_envs)])
 
 
-@pytest.mark.parametrize("row", OK_ROWS, ids=lambda r: f"{r['world']}/{r['network']}/{r['backend']}")
-def test_copy_b_of_a_batched_composition_equals_the_single_env_seeded_s_plus_b(row, request, monkeypatch):
-    if row["world"] == "mrclam":  # recorded data: its default data=None reads $COLOC_MRCLAM_DATA at build time
+@pytest.mark.parametrize("name", list(SPECS))
+def test_copy_b_of_a_batched_composition_equals_the_single_env_seeded_s_plus_b(name, request, monkeypatch):
+    """Copy b equals the single env reset with seed SEED + b for STEPS steps; then copy 1 alone restarts with
+    its own generator (a reset of a subset of copies) while copies 0 and 2 go on, and each copy still equals
+    its single env."""
+    if name.startswith("mrclam/"):  # recorded data: its default data=None reads $COLOC_MRCLAM_DATA at build time
         monkeypatch.setenv(mrclam.ENV_VAR, request.getfixturevalue("mrclam_dataset6"))
-    spec = coloc_env.compose(world=row["world"], network=row["network"], backend=row["backend"])
-    venv = coloc_env.vector_env(spec, num_envs=B, seed=SEED)
-    singles = [coloc_env.parallel_env(spec) for _ in range(B)]
-    venv.reset()
-    single_obs = [env.reset(seed=SEED + b)[0] for b, env in enumerate(singles)]
-    _assert_copies_equal_singles(venv, singles, single_obs, _sampler(venv))
-
-
-@pytest.mark.parametrize("name", list(TARGET_SPECS))
-def test_a_target_backend_copy_reset_alone_mid_run_equals_a_fresh_env(name):
-    """The target backends (and their options) reset a subset of copies: copy 1 restarts at step 2 with its own
-    generator while copies 0 and 2 go on; each still equals its single env."""
-    spec = coloc_env.compose(**TARGET_SPECS[name])
+    spec = coloc_env.compose(**SPECS[name])
     venv = coloc_env.vector_env(spec, num_envs=B, seed=SEED)
     singles = [coloc_env.parallel_env(spec) for _ in range(B)]
     venv.reset()
