@@ -9,6 +9,8 @@
 ``WORLDS``, ``NETWORKS`` and ``BACKENDS`` name the composable parts;
 ``compatibility()`` says which combinations run and why the others do not;
 ``PRESETS[name]`` is the Composition each scenario name stands for.
+Importing the package registers every preset with PettingZoo as
+``coloc/<preset>-v<N>`` (:mod:`coloc_env.registry`).
 """
 
 from __future__ import annotations
@@ -105,6 +107,10 @@ def env(name, render_mode: str | None = None, max_cycles: int | None = None, **c
     """The AEC view of :func:`parallel_env` (``pettingzoo.utils.parallel_to_aec``)."""
     return parallel_to_aec(parallel_env(name, render_mode=render_mode, max_cycles=max_cycles, **config))
 
+
+from coloc_env.registry import register_presets as _register_presets  # noqa: E402
+
+_register_presets()  # every preset as coloc/<preset>-v<N> in PettingZoo's registry (coloc_env.registry)
 
 __all__ = ["BACKENDS", "NETWORKS", "PRESETS", "SCENARIOS", "WORLDS", "CoLocParallelEnv", "Composition",
            "backends", "compatibility", "compose", "composition_named", "env", "is_composition_name", "make_core",
