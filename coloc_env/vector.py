@@ -25,6 +25,7 @@ what ``sb3_contrib.MaskablePPO`` reads before every step (``get_action_masks``).
 
 from __future__ import annotations
 
+import time
 from collections.abc import Sequence
 from itertools import repeat
 from typing import Any
@@ -55,6 +56,9 @@ class CoLocVecEnv(VecEnv):
         self._copy_seeds: list[int] | None = None
         self.seed(seed)
         self._actions: np.ndarray | None = None
+        self._t_start = time.time()
+        self._episode_returns = np.zeros(self.num_envs, dtype=np.float32)
+        self._episode_lengths = np.zeros(self.num_envs, dtype=np.int64)
 
     # --- seeding and reset ---------------------------------------------------
     def seed(self, seed: int | None = None) -> Sequence[int | None]:
@@ -71,6 +75,8 @@ class CoLocVecEnv(VecEnv):
             self._rngs = [np.random.default_rng(s) for s in seeds]
             self._copy_seeds = None
         self.scenario.reset(self._rngs)
+        self._episode_returns[:] = 0.0
+        self._episode_lengths[:] = 0
         self.reset_infos = [{} for _ in range(self.num_envs)]
         return self._flat_observation()
 
@@ -94,16 +100,24 @@ class CoLocVecEnv(VecEnv):
         rewards = self.scenario.reward().reshape(self.num_envs).astype(np.float32)
         done_copies = self.scenario.done()
         dones = np.repeat(done_copies, self.num_agents)
+        self._episode_returns += rewards
+        self._episode_lengths += 1
         # a fresh dict per sub-env (SB3 may write into them); repeat() makes no int per item, a quarter faster
         infos: list[dict[str, Any]] = [{} for _ in repeat(None, self.num_envs)]
         finished = np.flatnonzero(done_copies)
         if len(finished):
             states = self.scenario.state()
+            elapsed = round(time.time() - self._t_start, 6)
             for b in finished:
                 for i in range(self.num_agents):
                     sub = b * self.num_agents + i
+                    episode = {"r": float(self._episode_returns[sub]), "l": int(self._episode_lengths[sub]),
+                               "t": elapsed}
                     infos[sub] = {"terminal_observation": observation[sub].copy(), "TimeLimit.truncated": True,
-                                  "terminal_state": states[b].copy()}
+                                  "terminal_state": states[b].copy(), "episode": episode}
+            ended = np.repeat(done_copies, self.num_agents)
+            self._episode_returns[ended] = 0.0
+            self._episode_lengths[ended] = 0
             self.scenario.reset([self._rngs[b] for b in finished], env_index=finished)
             fresh = self.scenario.observation()[finished]
             observation = observation.reshape(self.num_copies, self.num_agents, *observation.shape[1:])

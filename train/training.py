@@ -42,6 +42,13 @@ def _mark_truncation_wrapper():
         episodes end only by truncation, so every end is marked.
         """
 
+        def get_attr(self, attr_name, indices=None):
+            # SB3's VecEnv constructor asks for render_mode through get_attr; SuperSuit's SB3 wrapper forwards
+            # get_attr to its ConcatVecEnv, which has none, so SB3 would warn that render_mode is not defined.
+            if attr_name == "render_mode":
+                return [self.venv.render_mode for _ in self._get_indices(indices)]
+            return self.venv.get_attr(attr_name, indices)
+
         def reset(self):
             return self.venv.reset()
 

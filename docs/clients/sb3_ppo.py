@@ -28,6 +28,13 @@ class MarkTruncation(VecEnvWrapper):
     of the last observation: coloc's episodes end only at ``max_cycles``, and SuperSuit reports that as a
     plain ``done``."""
 
+    def get_attr(self, attr_name, indices=None):
+        # SB3's VecEnv constructor asks for render_mode through get_attr; SuperSuit's SB3 wrapper forwards
+        # get_attr to its ConcatVecEnv, which has none, so SB3 would warn that render_mode is not defined.
+        if attr_name == "render_mode":
+            return [self.venv.render_mode for _ in self._get_indices(indices)]
+        return self.venv.get_attr(attr_name, indices)
+
     def reset(self):
         return self.venv.reset()
 

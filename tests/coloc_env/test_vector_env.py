@@ -2,18 +2,18 @@
 
 import dataclasses
 import os
+import warnings
 
 import numpy as np
 import pytest
 
 import coloc_env
+from tests.conftest import MRCLAM_DATASET6, MRCLAM_SKIP_REASON
 
 NAME = "bandwidth_fusion"
 HORIZON = 6  # short episodes so that two auto-resets happen quickly
-MRCLAM_DATA = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))),
-                           "..", "shared", "data", "mrclam", "MRCLAM_Dataset6")
 # scenarios whose episode length is not ``horizon`` or that replay recorded data (skipped without it)
-SHORT_CONFIGS = {"mrclam_relay": {"data": MRCLAM_DATA, "window_steps": HORIZON}}
+SHORT_CONFIGS = {"mrclam_relay": {"data": MRCLAM_DATASET6, "window_steps": HORIZON}}
 
 
 def short_config(name: str) -> dict:
@@ -21,7 +21,7 @@ def short_config(name: str) -> dict:
     if name in SHORT_CONFIGS:
         config = dict(SHORT_CONFIGS[name])
         if "data" in config and not os.path.isdir(config["data"]):
-            pytest.skip(f"{name}: recorded data not found at {config['data']}")
+            pytest.skip(MRCLAM_SKIP_REASON)
         return config
     fields = {f.name for f in dataclasses.fields(coloc_env.scenario_class(name).Config)}
     return {"horizon": HORIZON} if "horizon" in fields else {}
@@ -40,6 +40,8 @@ def test_copy_b_equals_parallel_env_seeded_s_plus_b_across_auto_resets(name):
     space = venv.action_space
     space.seed(0)
     ended = 0
+    returns = np.zeros(B * N, dtype=np.float32)  # what VecMonitor accumulates
+    lengths = np.zeros(B * N, dtype=int)
     for _step in range(2 * horizon + 3):
         actions = np.stack([space.sample() for _ in range(B * N)])
         for b, env in enumerate(singles):
@@ -52,9 +54,15 @@ def test_copy_b_equals_parallel_env_seeded_s_plus_b_across_auto_resets(name):
                 sub = b * N + i
                 assert rewards[sub] == np.float32(r[agent])
                 assert dones[sub] == trunc[agent]
+                returns[sub] += np.float32(r[agent])
+                lengths[sub] += 1
                 if trunc[agent]:
                     np.testing.assert_array_equal(infos[sub]["terminal_observation"], o[agent])
                     assert infos[sub]["TimeLimit.truncated"] is True
+                    assert infos[sub]["episode"]["r"] == float(returns[sub])
+                    assert infos[sub]["episode"]["l"] == lengths[sub] == horizon
+                    assert infos[sub]["episode"]["t"] >= 0
+                    returns[sub] = lengths[sub] = 0
                     ended += 1
                 else:
                     batched_info = venv.scenario.info()
@@ -119,3 +127,53 @@ def test_native_and_supersuit_give_identical_transitions():
                 assert a["TimeLimit.truncated"] and b["TimeLimit.truncated"]
                 ended += 1
     assert ended == 2 * B * 4
+
+
+def test_episode_infos_are_vecmonitors():
+    """The VecEnv's own ``episode`` infos are the ones SB3's VecMonitor computes from the same steps."""
+    from stable_baselines3.common.vec_env import VecMonitor
+
+    bare = coloc_env.vector_env(NAME, num_envs=2, seed=5, horizon=HORIZON)
+    monitored = VecMonitor(coloc_env.vector_env(NAME, num_envs=2, seed=5, horizon=HORIZON))
+    bare.reset()
+    monitored.reset()
+    rng = np.random.default_rng(2)
+    seen = 0
+    for _ in range(2 * HORIZON):
+        actions = rng.uniform(-1, 1, size=(bare.num_envs, bare.action_space.shape[0]))
+        _, _, dones, infos = bare.step(actions)
+        _, _, _, monitor_infos = monitored.step(actions)
+        for sub in np.flatnonzero(dones):
+            assert infos[sub]["episode"]["r"] == monitor_infos[sub]["episode"]["r"]
+            assert infos[sub]["episode"]["l"] == monitor_infos[sub]["episode"]["l"] == HORIZON
+            seen += 1
+        assert all("episode" not in infos[sub] for sub in np.flatnonzero(~dones))
+    assert seen == 2 * bare.num_envs
+
+
+def test_ppo_logs_the_episode_return_and_no_render_mode_warning(tmp_path):
+    """A tiny PPO run on the bare VecEnv logs rollout/ep_rew_mean (the mean of the episodes' returns), and
+    building SB3 VecEnvs over coloc (native, or SuperSuit through train.training) warns about no render_mode."""
+    import csv
+
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.logger import configure
+
+    from train.training import make_supersuit_vec_env
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        venv = coloc_env.vector_env(NAME, num_envs=1, seed=0, horizon=HORIZON)
+        make_supersuit_vec_env(NAME, 2, {"horizon": HORIZON}).close()
+        model = PPO("MlpPolicy", venv, n_steps=2 * HORIZON, batch_size=4 * HORIZON, n_epochs=1, seed=0,
+                    device="cpu", verbose=0)
+    assert not [str(w.message) for w in caught if "render_mode" in str(w.message)]
+    model.set_logger(configure(str(tmp_path), ["csv"]))
+    model.learn(total_timesteps=8 * HORIZON)
+    with open(tmp_path / "progress.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert rows and all(row["rollout/ep_rew_mean"] != "" for row in rows)
+    returns = [info["r"] for info in model.ep_info_buffer]
+    assert len(returns) == 2 * 4  # two rollouts of 2 episodes x 4 agents
+    assert float(rows[-1]["rollout/ep_rew_mean"]) == pytest.approx(np.mean(returns), rel=1e-6)
+    assert float(rows[-1]["rollout/ep_len_mean"]) == HORIZON
