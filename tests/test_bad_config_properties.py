@@ -30,6 +30,7 @@ from hypothesis import strategies as st
 
 import coloc_env
 from coloc_env.parts import BACKENDS, NETWORKS, WORLDS
+from tests.conftest import MRCLAM_DATASET6
 
 settings.register_profile("default_bad_input", max_examples=12, deadline=None,
                           suppress_health_check=list(HealthCheck))
@@ -37,8 +38,7 @@ settings.register_profile("slow", max_examples=400, deadline=None, suppress_heal
 PROFILE = "slow" if os.environ.get("HYPOTHESIS_PROFILE") == "slow" else "default_bad_input"
 EXAMPLES = settings.get_profile(PROFILE).max_examples
 
-MRCLAM_DATA = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "..", "shared", "data",
-                           "mrclam", "MRCLAM_Dataset6")
+MRCLAM_DATA = MRCLAM_DATASET6  # COLOC_MRCLAM_DATA, else the default beside the clone (tests/conftest.py)
 HAVE_MRCLAM = os.path.isdir(MRCLAM_DATA)
 STEPS = 3
 

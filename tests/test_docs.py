@@ -161,3 +161,19 @@ def test_readme_ppo_snippet_states_its_rollout_size():
         assert int(transitions.replace(",", "")) == venv.num_envs * n_steps
     finally:
         venv.close()
+
+
+def test_tests_look_for_the_mrclam_data_in_one_place():
+    """Only tests/conftest.py says where the MRCLAM data are (COLOC_MRCLAM_DATA, else its default beside the
+    clone): every other test imports MRCLAM_DATASET6 from there and skips with its one reason."""
+    offenders = []
+    for path in glob.glob(os.path.join(REPO_ROOT, "tests", "**", "*.py"), recursive=True):
+        if os.path.basename(path) == "conftest.py":
+            continue
+        code = re.sub(r'"""(?:.|\n)*?"""', "", read(path))  # docstrings may name the default folder
+        for pattern in (r"[\"']MRCLAM_Dataset6[\"']", r"[\"']shared[\"']\s*,\s*[\"']data[\"']",
+                        r"environ(?:\.get)?\(\s*(?:mrclam\.ENV_VAR|[\"']COLOC_MRCLAM_DATA[\"'])\s*\)"):
+            if re.search(pattern, code):
+                offenders.append((os.path.relpath(path, REPO_ROOT), pattern))
+    assert not offenders, f"tests that find the MRCLAM data on their own (use tests.conftest.MRCLAM_DATASET6): " \
+                          f"{offenders}"

@@ -148,8 +148,14 @@ def build_parser() -> argparse.ArgumentParser:
 
     _add_study_parser(sub)
 
-    sub.add_parser("list", help="worlds, networks, backends, presets and the compatibility table",
-                   formatter_class=_HelpFormatter)
+    ls = sub.add_parser("list", help="worlds, networks, backends, presets and the compatibility table",
+                        formatter_class=_HelpFormatter,
+                        description="The parts, the presets and one line per (world, network, backend): ok, or "
+                                    "why that composition does not run. --ok and the part filters narrow the table.")
+    ls.add_argument("--ok", action="store_true", help="only the compositions that run")
+    ls.add_argument("--world", help="only compositions of this world")
+    ls.add_argument("--network", help="only compositions over this network")
+    ls.add_argument("--backend", help="only compositions with this backend")
     return parser
 
 
@@ -389,9 +395,17 @@ def cmd_study(args) -> int:
 
 
 def cmd_list(args) -> int:
-    """Print the parts, the presets and one line per (world, network, backend): ok, or why not."""
+    """Print the parts, the presets and one line per (world, network, backend): ok, or why not; ``--ok`` keeps
+    the compatible rows, ``--world`` / ``--network`` / ``--backend`` the rows of that part (a ValueError names
+    the flag and the known names)."""
     import coloc_env
 
+    filters = {part: getattr(args, part, None) for part in ("world", "network", "backend")}
+    known = {"world": coloc_env.WORLDS, "network": coloc_env.NETWORKS, "backend": coloc_env.BACKENDS}
+    for part, value in filters.items():
+        if value is not None and value not in known[part]:
+            raise ValueError(f"--{part} must be one of {', '.join(known[part])}; got {value!r}")
+    only_ok = bool(getattr(args, "ok", False))
     print("worlds:   " + ", ".join(coloc_env.WORLDS))
     print("networks: " + ", ".join(coloc_env.NETWORKS))
     print("backends: " + ", ".join(coloc_env.BACKENDS))
@@ -401,9 +415,15 @@ def cmd_list(args) -> int:
                  for part in ("world", "network", "backend")]
         print(f"  {name:<18} {' / '.join(parts)}")
     rows = coloc_env.compatibility()
-    print(f"compositions ({sum(r['ok'] for r in rows)} of {len(rows)} compatible):")
-    width = max(len(f"{r['world']}/{r['network']}/{r['backend']}") for r in rows)
-    for r in rows:
+    shown = [r for r in rows if (r["ok"] or not only_ok)
+             and all(value is None or r[part] == value for part, value in filters.items())]
+    narrowed = [f"--{part} {value}" for part, value in filters.items() if value is not None]
+    if only_ok:
+        narrowed.insert(0, "--ok")
+    note = f"; {len(shown)} shown ({' '.join(narrowed)})" if narrowed else ""
+    print(f"compositions ({sum(r['ok'] for r in rows)} of {len(rows)} compatible{note}):")
+    width = max((len(f"{r['world']}/{r['network']}/{r['backend']}") for r in shown), default=0)
+    for r in shown:
         label = f"{r['world']}/{r['network']}/{r['backend']}"
         print(f"  {label:<{width}}  {'ok' if r['ok'] else 'no: ' + r['reason']}")
     return 0

@@ -2,8 +2,8 @@
 
 It reads what the demo's commands wrote and prints, for a reader who has not opened a file yet:
 
-* each paper reproduction's claims, held / failed (``<paper>/metrics.json``'s ``claims``; where that has
-  none, the claims table of ``<paper>/report.md``);
+* each paper reproduction's claims, held / failed: every row of the claims table of ``<paper>/report.md``
+  (where there is no report, ``<paper>/metrics.json``'s ``claims``);
 * each leaderboard's target verdict (the ``Target:`` line of ``leaderboard.md``);
 * where the files are;
 * how long each stage took, their sum and the wall clock from the first start to the last end
@@ -36,41 +36,52 @@ def _flatten(claims: dict) -> list[tuple[str, bool]]:
 
 
 def _report_claims(path: str) -> list[tuple[str, bool]] | None:
-    """The rows of a report's claims table (``| claim | our numbers | criterion | holds |``), or None."""
+    """The rows of every claims table of a report (a table whose header's last cell is ``holds``, e.g.
+    ``| claim | our numbers | criterion | holds |``), or None when it has none or cannot be read."""
     try:
         with open(path) as fh:
             lines = fh.read().splitlines()
     except OSError:
         return None
-    claims, inside = [], False
+    claims, found, inside = [], False, False
     for line in lines:
         cells = [c.strip() for c in line.strip().strip("|").split("|")]
         if line.startswith("|") and cells[-1] == "holds":
-            inside = True
+            inside = found = True
             continue
         if inside and line.startswith("|"):
             if set(cells[0]) <= {"-", ":"}:
                 continue
             claims.append((cells[0], cells[-1].strip("*") == "yes"))
-        elif inside:
-            break
-    return claims if inside else None
+        else:
+            inside = False
+    return claims if found else None
+
+
+def _metrics_claims(path: str) -> list[tuple[str, bool]] | None:
+    """``metrics.json``'s ``claims`` flattened, or None when it has none or cannot be read."""
+    try:
+        with open(path) as fh:
+            claims = json.load(fh).get("claims")
+    except (OSError, ValueError, AttributeError):
+        return None
+    return _flatten(claims) if isinstance(claims, dict) and claims else None
 
 
 def paper_claims(folder: str, paper: str) -> tuple[list[tuple[str, bool]] | None, str]:
-    """(claims, where they were read or what is missing) of one reproduction."""
+    """(claims, where they were read or what is missing) of one reproduction: every row of the claims tables
+    of ``report.md`` (what its reader sees), else ``metrics.json``'s ``claims``. Where both exist and count
+    differently, ``where`` says so (the two files of one run should list the same claims)."""
     base = os.path.join(folder, paper)
     metrics_path, report_path = os.path.join(base, "metrics.json"), os.path.join(base, "report.md")
-    try:
-        with open(metrics_path) as fh:
-            claims = json.load(fh).get("claims")
-        if isinstance(claims, dict) and claims:
-            return _flatten(claims), metrics_path
-    except (OSError, ValueError, AttributeError):
-        pass
-    claims = _report_claims(report_path)
-    if claims is not None:
-        return claims, report_path
+    from_report, from_metrics = _report_claims(report_path), _metrics_claims(metrics_path)
+    if from_report is not None:
+        where = report_path
+        if from_metrics is not None and len(from_metrics) != len(from_report):
+            where += f"; metrics.json lists {len(from_metrics)} of its {len(from_report)} claims"
+        return from_report, where
+    if from_metrics is not None:
+        return from_metrics, metrics_path
     if not os.path.isdir(base):
         return None, f"missing: {base}/ (not reproduced)"
     return None, f"missing: no claims in {metrics_path} or {report_path}"

@@ -21,9 +21,9 @@ from coloc_env.rendering import (
     nice_factor,
     separate_nodes,
 )
+from tests.conftest import MRCLAM_DATASET6, MRCLAM_SKIP_REASON
 
-DATASET6 = os.environ.get("COLOC_MRCLAM_DATA") or os.path.join(
-    os.path.dirname(__file__), "..", "..", "..", "shared", "data", "mrclam", "MRCLAM_Dataset6")
+DATASET6 = MRCLAM_DATASET6
 FRAMES_DIR = os.environ.get("COLOC_FRAMES_DIR", "/tmp/frames")
 MIN_WIDTH = 720
 
@@ -74,7 +74,7 @@ def _check_frame(frame: np.ndarray, name: str) -> None:
 def test_preset_frame_is_legible_and_not_blank(name):
     config = dict(PRESETS[name])
     if name == "mrclam_relay" and not os.path.isdir(DATASET6):
-        pytest.skip(f"MRCLAM dataset 6 not found at {DATASET6} (set COLOC_MRCLAM_DATA)")
+        pytest.skip(MRCLAM_SKIP_REASON)
     env = coloc_env.parallel_env(name, render_mode="rgb_array", **config)
     _check_frame(_rollout_frame(env, steps=5), name)
     env.close()

@@ -2,8 +2,8 @@
 barcodes are refused with a ValueError naming the file and the line (coloc_env.data.mrclam's bounds).
 
 Each test writes a short excerpt of dataset 6 (a few seconds of every robot's files) into tmp_path, checks that
-the excerpt loads, then damages one line of one file. Set COLOC_MRCLAM_DATA to the dataset folder, or put the
-project's shared folder beside the clone (../shared/data/mrclam/MRCLAM_Dataset6)."""
+the excerpt loads, then damages one line of one file. The data are looked for where tests/conftest.py says
+(``COLOC_MRCLAM_DATA``, else ../shared/data/mrclam/MRCLAM_Dataset6 beside the clone)."""
 
 from __future__ import annotations
 
@@ -14,10 +14,9 @@ import numpy as np
 import pytest
 
 from coloc_env.data import mrclam
+from tests.conftest import MRCLAM_DATASET6, MRCLAM_SKIP_REASON
 
-REPO_ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-DATASET6 = os.environ.get(mrclam.ENV_VAR) or os.path.join(REPO_ROOT, "..", "shared", "data", "mrclam",
-                                                         "MRCLAM_Dataset6")
+DATASET6 = MRCLAM_DATASET6
 WINDOW = (1248444191.5, 1248444197.0)  # seconds of dataset 6 in which every robot has odometry and ground truth
 MEASUREMENT_LINES = 40  # the first sightings of each robot (those outside the window are dropped by the loader)
 
@@ -32,7 +31,7 @@ def _header_and_data(path: str) -> tuple[list[str], list[str]]:
 def excerpt(tmp_path):
     """A loadable excerpt of dataset 6 in tmp_path/excerpt: {file name: (header lines, data lines)}."""
     if not os.path.isdir(DATASET6):
-        pytest.skip(f"MRCLAM dataset 6 not found at {DATASET6} (set {mrclam.ENV_VAR})")
+        pytest.skip(MRCLAM_SKIP_REASON)
     folder = tmp_path / "excerpt"
     folder.mkdir()
     files = {}
@@ -164,7 +163,7 @@ def test_a_subject_given_twice_is_refused(excerpt):
 def test_the_real_dataset_lies_inside_every_bound():
     """The bounds refuse only the impossible: every line of dataset 6 passes them (the full files)."""
     if not os.path.isdir(DATASET6):
-        pytest.skip(f"MRCLAM dataset 6 not found at {DATASET6} (set {mrclam.ENV_VAR})")
+        pytest.skip(MRCLAM_SKIP_REASON)
     for kind, bounds in mrclam.PHYSICAL_BOUNDS.items():
         names = [n for n in os.listdir(DATASET6) if re.fullmatch(rf"(Robot\d_)?{kind}\.dat", n)]
         assert names, kind

@@ -357,6 +357,28 @@ def test_list_prints_every_composition_with_its_verdict(capsys):
     assert "relay_ukf          circles / relay / ukf_dcl" in out
 
 
+def test_list_ok_and_part_filters_keep_only_their_rows(capsys):
+    import coloc_env
+    from train.cli import main
+
+    rows = coloc_env.compatibility()
+    assert main(["list", "--ok"]) == 0
+    out = capsys.readouterr().out
+    table = out.split("compositions (")[1].splitlines()[1:]
+    ok_names = [f"{r['world']}/{r['network']}/{r['backend']}" for r in rows if r["ok"]]
+    assert [line.split() for line in table] == [[name, "ok"] for name in ok_names]
+    assert f"{len(ok_names)} shown (--ok)" in out
+    assert main(["list", "--world", "circles", "--backend", "dnbp"]) == 0
+    out = capsys.readouterr().out
+    expected = [r for r in rows if r["world"] == "circles" and r["backend"] == "dnbp"]
+    assert f"{len(expected)} shown (--world circles --backend dnbp)" in out
+    for r in expected:
+        assert f"circles/{r['network']}/dnbp" in out
+    assert "drift/" not in out.split("compositions (")[1] and "/ukf_ccl" not in out.split("compositions (")[1]
+    assert main(["list", "--network", "relay", "--world", "nope"]) == 2
+    assert "--world must be one of drift" in capsys.readouterr().err
+
+
 def test_a_composition_trains_and_evaluates_by_its_name(tmp_path, capsys):
     """``coloc train WORLD/NETWORK/BACKEND`` (issue 15's cross-combination) uses the composition's settings
     module (train/hyperparams/circles__broadcast__ukf_ccl.py), and ``coloc evaluate --policy all`` judges its

@@ -162,6 +162,15 @@ def test_demo_summary_reads_claims_verdicts_and_stage_times(tmp_path, capsys):
     assert "fu2017    2 held, 0 failed" in text
     assert "gao2016   1 held, 1 failed; failed: c2" in text
     assert "missing: " + str(tmp_path / "wan2014") in text
+    # a report's table is what is counted, and a metrics.json listing fewer of its claims is pointed out
+    (tmp_path / "wan2014").mkdir()
+    (tmp_path / "wan2014" / "metrics.json").write_text(json.dumps({"claims": {"c1": True}}))
+    (tmp_path / "wan2014" / "report.md").write_text(
+        "| claim | our numbers | criterion | holds |\n|---|---|---|---|\n| c1 | 1 | < 2 | yes |\n"
+        "| c2 | 3 | < 2 | **no** |\n| c3 | 3 | < 2 | **no** |\n")
+    assert demo_summary.paper_claims(str(tmp_path), "wan2014") == (
+        [("c1", True), ("c2", False), ("c3", False)],
+        f"{tmp_path / 'wan2014' / 'report.md'}; metrics.json lists 1 of its 3 claims")
     lines = text.splitlines()
     assert any("bandwidth_fusion (`bandwidth_fusion`)" in s and "target met" in s for s in lines)
     assert any("relay_ukf (`relay_ukf`)" in s and "target not met" in s for s in lines)
