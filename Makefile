@@ -5,7 +5,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-$(shell cat pyproject.toml | cksum | cut -d' ' -f1)
 
-.PHONY: demo test install clean test-clients rllib-example
+.PHONY: demo test install clean test-clients rllib-example docs
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -43,6 +43,11 @@ test: $(STAMP)
 	$(VENV)/bin/ruff check .
 	MPLBACKEND=Agg $(PY) -m pytest -q -n 2
 
+# The documentation site (mkdocs.yml) into site/, strictly: a warning (a broken link or reference) is an error.
+# tests/test_docs.py runs the same build in `make test`.
+docs: $(STAMP)
+	$(PY) -m mkdocs build --strict --quiet
+
 # The client checks alone (they are part of `make test` too): PettingZoo's module convention, TorchRL's
 # check_env_specs on every preset and some compositions, and the SB3 / TorchRL examples of docs/clients.
 test-clients: $(STAMP)
@@ -74,4 +79,4 @@ rllib-example: $(RLLIB_STAMP)
 	PYTHONHASHSEED=0 MPLBACKEND=Agg $(RLLIB_PY) docs/clients/rllib_ppo.py $(RLLIB_ARGS)
 
 clean:
-	rm -rf $(VENV) $(RLLIB_VENV) results .pytest_cache
+	rm -rf $(VENV) $(RLLIB_VENV) results site .pytest_cache

@@ -10,7 +10,7 @@
 ``compatibility()`` says which combinations run and why the others do not;
 ``PRESETS[name]`` is the Composition each scenario name stands for.
 Importing the package registers every preset with PettingZoo as
-``coloc/<preset>-v<N>`` (:mod:`coloc_env.registry`).
+``coloc/<preset>-v<N>`` (`coloc_env.registry`).
 """
 
 from __future__ import annotations

@@ -4,10 +4,12 @@ complete, and the install instructions of the README, the Makefile and pyproject
 from __future__ import annotations
 
 import glob
+import importlib.util
 import os
 import re
 import shutil
 import subprocess
+import sys
 import tomllib
 
 import pytest
@@ -63,9 +65,10 @@ def test_every_relative_link_resolves(path):
 
 @pytest.mark.parametrize("path", markdown_files(), ids=lambda p: os.path.relpath(p, REPO_ROOT))
 def test_documentation_names_no_file_a_user_does_not_have(path):
-    """The shared design notes, the reconstruction specs and the issue tracker are not in the clone."""
+    """The shared design notes, the reconstruction specs and the issue tracker are not in the clone (the
+    tests' default data folder beside the clone, ``../shared/data/``, is documented where the data are)."""
     text = read(path)
-    for pattern in (r"DESIGN\.md", r"shared/", r"specs/", r"spec §", r"\bissue \d+"):
+    for pattern in (r"DESIGN\.md", r"shared/(?!data/)", r"specs/", r"spec §", r"\bissue \d+"):
         hits = [line.strip() for line in text.splitlines() if re.search(pattern, line)]
         assert not hits, f"{os.path.relpath(path, REPO_ROOT)} refers to {pattern!r}: {hits[:3]}"
 
@@ -177,3 +180,38 @@ def test_tests_look_for_the_mrclam_data_in_one_place():
                 offenders.append((os.path.relpath(path, REPO_ROOT), pattern))
     assert not offenders, f"tests that find the MRCLAM data on their own (use tests.conftest.MRCLAM_DATASET6): " \
                           f"{offenders}"
+
+
+@pytest.mark.skipif(importlib.util.find_spec("mkdocs") is None or importlib.util.find_spec("mkdocstrings") is None,
+                    reason="mkdocs / mkdocstrings-python are not installed (pip install -e '.[test]')")
+def test_documentation_site_builds_strictly(tmp_path):
+    """`make docs`'s build: every page and every docstring the API reference renders, with warnings as errors
+    (a broken link, an unresolved cross-reference, a module that does not import)."""
+    env = {**os.environ, "NO_MKDOCS_2_WARNING": "1", "PYTHONPATH": os.pathsep.join(
+        [REPO_ROOT, *filter(None, [os.environ.get("PYTHONPATH")])])}
+    done = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(tmp_path / "site")],
+                          cwd=REPO_ROOT, capture_output=True, text=True, env=env)
+    assert done.returncode == 0, done.stderr[-3000:]
+    for page in ("index.html", "getting-started/index.html", "env-ids/index.html", "api/coloc_env/index.html",
+                 "api/parts/index.html", "api/presets/index.html", "api/estimators/index.html",
+                 "api/agents/index.html"):
+        assert (tmp_path / "site" / page).is_file(), page
+    # the presets' and parts' option tables are rendered from their docstrings
+    assert read(str(tmp_path / "site" / "api" / "presets" / "index.html")).count("<table>") >= len(coloc_env.SCENARIOS)
+
+
+def test_navigation_leaves_out_pages_that_do_not_exist(tmp_path):
+    """Pages the navigation names before they are written are dropped from it, sections left empty too."""
+    sys.path.insert(0, REPO_ROOT)
+    try:
+        import mkdocs_hooks
+    finally:
+        sys.path.remove(REPO_ROOT)
+    (tmp_path / "a.md").write_text("# a\n")
+    (tmp_path / "api").mkdir()
+    (tmp_path / "api" / "b.md").write_text("# b\n")
+    nav = [{"A": "a.md"}, {"Missing": "missing.md"}, "a.md", "gone.md",
+           {"Section": [{"B": "api/b.md"}, {"C": "api/c.md"}]}, {"Empty": [{"D": "d.md"}]},
+           {"Site": "https://example.org"}]
+    assert mkdocs_hooks._existing(nav, str(tmp_path)) == [
+        {"A": "a.md"}, "a.md", {"Section": [{"B": "api/b.md"}]}, {"Site": "https://example.org"}]
