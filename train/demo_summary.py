@@ -37,22 +37,25 @@ def _flatten(claims: dict) -> list[tuple[str, bool]]:
 
 def _report_claims(path: str) -> list[tuple[str, bool]] | None:
     """The rows of every claims table of a report (a table whose header's last cell is ``holds``, e.g.
-    ``| claim | our numbers | criterion | holds |``), or None when it has none or cannot be read."""
+    ``| claim | our numbers | criterion | holds |``; a ``setting`` column is appended to the claim's name), or
+    None when it has none or cannot be read."""
     try:
         with open(path) as fh:
             lines = fh.read().splitlines()
     except OSError:
         return None
-    claims, found, inside = [], False, False
+    claims, found, inside, setting = [], False, False, None
     for line in lines:
         cells = [c.strip() for c in line.strip().strip("|").split("|")]
         if line.startswith("|") and cells[-1] == "holds":
             inside = found = True
+            setting = cells.index("setting") if "setting" in cells else None  # a claim checked per setting
             continue
         if inside and line.startswith("|"):
             if set(cells[0]) <= {"-", ":"}:
                 continue
-            claims.append((cells[0], cells[-1].strip("*") == "yes"))
+            name = cells[0] if setting is None else f"{cells[0]} ({cells[setting]})"
+            claims.append((name, cells[-1].strip("*") == "yes"))
         else:
             inside = False
     return claims if found else None

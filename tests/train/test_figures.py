@@ -168,6 +168,10 @@ def test_demo_summary_reads_claims_verdicts_and_stage_times(tmp_path, capsys):
     (tmp_path / "wan2014" / "report.md").write_text(
         "| claim | our numbers | criterion | holds |\n|---|---|---|---|\n| c1 | 1 | < 2 | yes |\n"
         "| c2 | 3 | < 2 | **no** |\n| c3 | 3 | < 2 | **no** |\n")
+    (tmp_path / "fu2017" / "report.md").write_text(
+        "| claim | setting | our numbers | holds |\n|---|---|---|---|\n| c1 | n3 | 1 | yes |\n"
+        "| c1 | n5 | 2 | **no** |\n")
+    assert demo_summary.paper_claims(str(tmp_path), "fu2017")[0] == [("c1 (n3)", True), ("c1 (n5)", False)]
     assert demo_summary.paper_claims(str(tmp_path), "wan2014") == (
         [("c1", True), ("c2", False), ("c3", False)],
         f"{tmp_path / 'wan2014' / 'report.md'}; metrics.json lists 1 of its 3 claims")
