@@ -100,8 +100,10 @@ def test_code_block_runs(lang, code, data, prints, tmp_path, monkeypatch, capfd)
         if prints is not None:
             assert prints in capfd.readouterr().out, f"the block's output has no {prints!r}"
         return
-    slow = re.findall(r"^\s*(?:\S+/)?(?:pip install|make\b|python3? -m venv)", code, re.MULTILINE)
-    assert not slow, f"the block runs {slow}: mark it <!-- docs-test: skip (REASON) --> rather than install here"
+    # installs and the commands that run for minutes (reproductions, training, benchmarks) must be marked
+    slow = re.findall(r"^\s*(?:\S+/)?(?:pip install|make\b|python3? -m venv|coloc (?:reproduce|train|bench)\b)",
+                      code, re.MULTILINE)
+    assert not slow, f"the block runs {slow}: mark it <!-- docs-test: skip (REASON) --> rather than run it here"
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([REPO_ROOT, *filter(None, [os.environ.get("PYTHONPATH")])]),
            "DOCS_TEST_PYTHON": sys.executable}
     prelude = ('coloc() { "$DOCS_TEST_PYTHON" -m train.cli "$@"; }\n'
