@@ -113,3 +113,13 @@ def test_code_block_runs(lang, code, data, prints, tmp_path, monkeypatch, capfd)
     assert done.returncode == 0, f"exit {done.returncode}\n{done.stdout[-2000:]}\n{done.stderr[-2000:]}"
     if prints is not None:
         assert prints in done.stdout, f"the block's output has no {prints!r}"
+
+
+def test_blocks_and_their_markers_are_read(tmp_path):
+    page = tmp_path / "page.md"
+    page.write_text("# t\n\n```python\nx = 1\n```\n\n<!-- docs-test: skip (needs a GPU) -->\n```bash\nnvidia-smi\n```\n"
+                    "\n<!-- docs-test: prints (hello) -->\n```sh\necho hello\n```\n\n```\ncoloc list\n```\n")
+    assert code_blocks(str(page)) == [(3, "python", "x = 1\n", None),
+                                      (8, "bash", "nvidia-smi\n", ("skip", "needs a GPU")),
+                                      (13, "sh", "echo hello\n", ("prints", "hello")),
+                                      (17, "", "coloc list\n", None)]
