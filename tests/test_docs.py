@@ -200,6 +200,13 @@ def test_documentation_site_builds_strictly(tmp_path):
     assert read(str(tmp_path / "site" / "api" / "presets" / "index.html")).count("<table>") >= len(coloc_env.SCENARIOS)
 
 
+@pytest.mark.skipif(shutil.which("make") is None, reason="make is not installed")
+def test_make_docs_builds_strictly():
+    printed = subprocess.run(["make", "-n", "-B", "docs"], cwd=REPO_ROOT, capture_output=True, text=True,
+                             check=True).stdout
+    assert [line for line in printed.splitlines() if "-m mkdocs build --strict" in line], printed
+
+
 def test_navigation_leaves_out_pages_that_do_not_exist(tmp_path):
     """Pages the navigation names before they are written are dropped from it, sections left empty too."""
     sys.path.insert(0, REPO_ROOT)

@@ -395,10 +395,11 @@ def cmd_study(args) -> int:
 
 
 def cmd_list(args) -> int:
-    """Print the parts, the presets and one line per (world, network, backend): ok, or why not; ``--ok`` keeps
-    the compatible rows, ``--world`` / ``--network`` / ``--backend`` the rows of that part (a ValueError names
-    the flag and the known names)."""
+    """Print the parts, the presets (with their registered env ids) and one line per (world, network,
+    backend): ok, or why not; ``--ok`` keeps the compatible rows, ``--world`` / ``--network`` / ``--backend``
+    the rows of that part (a ValueError names the flag and the known names)."""
     import coloc_env
+    from coloc_env.registry import env_id
 
     filters = {part: getattr(args, part, None) for part in ("world", "network", "backend")}
     known = {"world": coloc_env.WORLDS, "network": coloc_env.NETWORKS, "backend": coloc_env.BACKENDS}
@@ -413,7 +414,7 @@ def cmd_list(args) -> int:
     for name, spec in coloc_env.PRESETS.items():
         parts = [getattr(spec, part).name if getattr(spec, part) is not None else "(binding only)"
                  for part in ("world", "network", "backend")]
-        print(f"  {name:<18} {' / '.join(parts)}")
+        print(f"  {name:<18} {' / '.join(parts)}  ({env_id(name)})")
     rows = coloc_env.compatibility()
     shown = [r for r in rows if (r["ok"] or not only_ok)
              and all(value is None or r[part] == value for part, value in filters.items())]
