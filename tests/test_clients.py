@@ -216,6 +216,13 @@ def test_sb3_supersuit_example_trains_the_transitions_it_says():
         np.testing.assert_allclose(p.detach().numpy(), q.detach().numpy(), rtol=0, atol=1e-9)
 
 
+def test_sb3_supersuit_example_records_its_episodes():
+    """The example's VecMonitor gives SB3 the episodes' returns and lengths (rollout/ep_rew_mean)."""
+    model = _example("sb3_ppo.py")["main"](total_timesteps=512, copies=1, seed=0)
+    assert len(model.ep_info_buffer) == 2 * 4  # 128 steps of 4 agent-envs: two episodes of max_cycles = 64 each
+    assert all(episode["l"] == 64 for episode in model.ep_info_buffer)
+
+
 def test_torchrl_example_rolls_out_every_platform():
     pytest.importorskip("torchrl", reason="torchrl is not installed (pip install -e '.[test]')")
     with warnings.catch_warnings():

@@ -18,7 +18,7 @@ from __future__ import annotations
 import supersuit as ss
 from stable_baselines3 import PPO
 from stable_baselines3.common.utils import set_random_seed
-from stable_baselines3.common.vec_env import VecEnvWrapper
+from stable_baselines3.common.vec_env import VecEnvWrapper, VecMonitor
 
 from coloc_env.envs import relay_ukf
 
@@ -46,7 +46,7 @@ class MarkTruncation(VecEnvWrapper):
         return observations, rewards, dones, infos
 
 
-def make_vec_env(copies: int = 2, max_cycles: int = 64, seed: int = 0) -> MarkTruncation:
+def make_vec_env(copies: int = 2, max_cycles: int = 64, seed: int = 0) -> VecMonitor:
     """``copies`` x 4 platforms of relay_ukf as one SB3 VecEnv; copy c starts as ``reset(seed=seed + c)``."""
     env = relay_ukf.parallel_env(max_cycles=max_cycles)
     vec = ss.concat_vec_envs_v1(ss.pettingzoo_env_to_vec_env_v1(env), copies, num_cpus=0,
@@ -54,7 +54,8 @@ def make_vec_env(copies: int = 2, max_cycles: int = 64, seed: int = 0) -> MarkTr
     # SuperSuit's reset() passes no seed (and its VecEnv has no seed()): seed each copy's generator.
     for c, markov_env in enumerate(vec.venv.vec_envs):
         markov_env.par_env.seed_generator(seed + c)
-    return MarkTruncation(vec)
+    # VecMonitor writes SB3's episode info (return, length), so that PPO logs rollout/ep_rew_mean
+    return VecMonitor(MarkTruncation(vec))
 
 
 def main(total_timesteps: int = 512, copies: int = 2, seed: int = 0) -> PPO:
@@ -68,5 +69,7 @@ def main(total_timesteps: int = 512, copies: int = 2, seed: int = 0) -> PPO:
 
 if __name__ == "__main__":
     trained = main()
+    returns = [episode["r"] for episode in trained.ep_info_buffer]
     print(f"trained on {trained.num_timesteps} transitions "
-          f"({trained.num_timesteps // (trained.n_steps * trained.n_envs)} PPO updates)")
+          f"({trained.num_timesteps // (trained.n_steps * trained.n_envs)} PPO updates); "
+          f"ep_rew_mean {sum(returns) / len(returns):.2f} over the last {len(returns)} agent-episodes")
