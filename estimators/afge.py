@@ -61,6 +61,17 @@ Departures
 * Where no horizon in the group has a finite cost (e.g. the previous estimate of every
   member was invalid) AHG is treated like a step without a fresh observation: the centre's
   estimate (or the largest valid member) is output and the centre kept.
+* Numerical health (every documented extreme stays finite, symmetric and PSD): the
+  information predict is formed in Joseph form, ``Y <- L M L^T + K Q^-1 K^T`` (a sum of
+  congruences; the short Woodbury form ``M - K B^T M`` went indefinite to rounding once one
+  step's process noise dwarfs the fixes, e.g. T = 1e4 s), and the inverse ``P = Y^-1`` is
+  guarded: a horizon with two observed stamps whose Y is nonetheless singular to rounding (one
+  fix with 1e-20 of the other's information, as sigma_db = 100 dB produces) has no estimate
+  (``valid = False``: the output is the prediction) instead of dividing by zero
+  (:func:`information_predict`, :func:`_spd_inverse4`). Information form rather than a
+  covariance filter because a horizon starts with zero information; Joseph form rather than a
+  square-root (QR) information filter because it keeps the 2x2 block closed forms and the
+  compiled kernel's cost.
 * Speed: the recursion is written on the 2x2 blocks of the CV model and inverts only 2x2
   blocks in closed form (Woodbury in the predict, a Schur complement of the velocity block
   for Y^-1): numpy's stacked matmul/solve on 4x4 matrices is dominated by per-matrix
@@ -605,12 +616,20 @@ def _assemble(P11, P12, P22, shape) -> np.ndarray:
 
 
 def information_predict(motion: MotionModel, info: np.ndarray, vector: np.ndarray, accel_var=None):
-    """Information-form prediction valid for singular Y (spec §6) [reconstructed].
+    """Information-form prediction valid for singular Y (spec §6) [reconstructed], in Joseph form.
 
     ``M = A^-T Y A^-1``, ``Y <- (I + M Gam)^-1 M``, ``y <- (I + M Gam)^-1 A^-T y``. With
-    Gam = B Q B^T, Woodbury gives ``(I + M Gam)^-1 = I - M B (Q^-1 + B^T M B)^-1 B^T``: only a
-    2x2 matrix is inverted, and it is positive definite whatever Y is. Written on the 2x2
-    blocks of the CV model (A = [[I, T I], [0, I]], B = [[T^2/2 I], [T I]]). ``accel_var``
+    Gam = B Q B^T, Woodbury gives ``(I + M Gam)^-1 = I - K B^T``, ``K = M B W^-1``,
+    ``W = Q^-1 + B^T M B``: only a 2x2 matrix is inverted, and it is positive definite whatever
+    Y is. The information is formed in Joseph form,
+    ``Y <- L M L^T + K Q^-1 K^T``, ``L = I - K B^T``, algebraically equal to ``M - K B^T M``
+    (expand and use ``B^T M B = W - Q^-1``) but a sum of two congruences of PSD matrices, so it
+    stays PSD to rounding. The short form subtracts two nearly equal matrices when the process
+    noise wipes out most of the information along B (a long period T with anisotropic fused fixes:
+    at T = 1e4 s, sigma_a = 0.3 m/s^2 the position noise of one step is 1.5e7 m): there its
+    rounding error exceeded the small eigenvalues of Y, Y went indefinite and P = Y^-1 had
+    negative variances. Written on the 2x2 blocks of the CV model
+    (A = [[I, T I], [0, I]], B = [[T^2/2 I], [T I]]). ``accel_var``
     (scalar or broadcastable to the leading shape of ``info`` without the last two axes)
     overrides sigma_a^2, e.g. per batch element.
     """
@@ -626,10 +645,21 @@ def information_predict(motion: MotionModel, info: np.ndarray, vector: np.ndarra
     W = _lin((b1, U1), (b2, U2))
     W = (W[0] + 1.0 / q, W[1], W[2], W[3] + 1.0 / q)  # Q^-1 + B^T M B
     Wi = _inv(W)
-    G1, G2 = _mul(U1, Wi), _mul(U2, Wi)
-    P11 = _lin((1.0, M11), (-1.0, _mul_t(G1, U1)))
-    P12 = _lin((1.0, M12), (-1.0, _mul_t(G1, U2)))
-    P22 = _lin((1.0, M22), (-1.0, _mul_t(G2, U2)))
+    G1, G2 = _mul(U1, Wi), _mul(U2, Wi)  # K = [G1; G2]
+    # L = I - K B^T = [[I - b1 G1, -b2 G1], [-b1 G2, I - b2 G2]]; N = L M
+    L11 = (1.0 - b1 * G1[0], -b1 * G1[1], -b1 * G1[2], 1.0 - b1 * G1[3])
+    L12 = (-b2 * G1[0], -b2 * G1[1], -b2 * G1[2], -b2 * G1[3])
+    L21 = (-b1 * G2[0], -b1 * G2[1], -b1 * G2[2], -b1 * G2[3])
+    L22 = (1.0 - b2 * G2[0], -b2 * G2[1], -b2 * G2[2], 1.0 - b2 * G2[3])
+    M21 = _tr(M12)
+    N11 = _lin((1.0, _mul(L11, M11)), (1.0, _mul(L12, M21)))
+    N12 = _lin((1.0, _mul(L11, M12)), (1.0, _mul(L12, M22)))
+    N21 = _lin((1.0, _mul(L21, M11)), (1.0, _mul(L22, M21)))
+    N22 = _lin((1.0, _mul(L21, M12)), (1.0, _mul(L22, M22)))
+    iq = 1.0 / q
+    P11 = _lin((1.0, _mul_t(N11, L11)), (1.0, _mul_t(N12, L12)), (iq, _mul_t(G1, G1)))
+    P12 = _lin((1.0, _mul_t(N11, L21)), (1.0, _mul_t(N12, L22)), (iq, _mul_t(G1, G2)))
+    P22 = _lin((1.0, _mul_t(N21, L21)), (1.0, _mul_t(N22, L22)), (iq, _mul_t(G2, G2)))
     v1 = (vector[..., 0], vector[..., 1])
     v2 = (vector[..., 2] - T * v1[0], vector[..., 3] - T * v1[1])
     c = (b1 * v1[0] + b2 * v2[0], b1 * v1[1] + b2 * v2[1])
@@ -689,22 +719,51 @@ def stack_advance(motion: MotionModel, stack: HorizonStack, obs_info, obs_vector
     return new if active.all() else new.select(active, stack)
 
 
-def _spd_inverse4(Y: np.ndarray) -> np.ndarray:
-    """Inverse of symmetric positive definite 4x4 blocks by the Schur complement of the
-    velocity block (2x2 closed forms)."""
+INVERTIBLE_TOL = 1e-12  # relative margin of the guarded inverse (see _spd_inverse4)
+
+
+def _spd_inverse4(Y: np.ndarray):
+    """Inverse of symmetric PSD 4x4 blocks by the Schur complement of the velocity block (2x2
+    closed forms), guarded: returns ``(P, ok)``.
+
+    ``P = [[Sc^-1, -Sc^-1 T1], [-T1^T Sc^-1, Y22^-1 + T1^T Sc^-1 T1]]``, ``T1 = Y12 Y22^-1``,
+    ``Sc = Y11 - T1 Y12^T``: a congruence of ``diag(Sc^-1, Y22^-1)``, so P is PSD exactly when both
+    2x2 blocks are positive definite. ``ok`` says they are, with a margin that rounding cannot
+    cross: ``det Y22 > tol tr(Y22)^2`` and ``det Sc > tol tr(Sc) tr(Y11)`` (det / tr is the
+    smallest eigenvalue to a factor of 2; Sc is a difference of matrices of the size of Y11, so its
+    rounding error is relative to Y11), tol = :data:`INVERTIBLE_TOL`. Where not ``ok`` the
+    divisions are guarded (P is that of the identity) and the caller treats the slot as having no
+    estimate: two observed stamps make Y invertible in exact arithmetic, but not in floating
+    point when one stamp's fix carries almost no information (sigma_db = 100 dB gives ranges
+    r_hat = d0 10^(eps / 10n) over tens of decades, so a fix's information can be 1e-20 of the
+    other stamp's) or when every fix constrains the same direction.
+    """
     Y11, Y12, Y22 = _blk(Y, 0, 0), _blk(Y, 0, 2), _blk(Y, 2, 2)
+    tol = INVERTIBLE_TOL
+    det22, tr22 = Y22[0] * Y22[3] - Y22[1] * Y22[2], Y22[0] + Y22[3]
+    ok = (tr22 > 0.0) & (det22 > tol * tr22 * tr22)
+    one, zero = np.ones_like(det22), np.zeros_like(det22)
+    Y22 = tuple(np.where(ok, a, b) for a, b in zip(Y22, (one, zero, zero, one), strict=True))
     Y22i = _inv(Y22)
     T1 = _mul(Y12, Y22i)
-    Sci = _inv(_lin((1.0, Y11), (-1.0, _mul_t(T1, Y12))))
+    Sc = _lin((1.0, Y11), (-1.0, _mul_t(T1, Y12)))
+    detS, trS = Sc[0] * Sc[3] - Sc[1] * Sc[2], Sc[0] + Sc[3]
+    ok &= (trS > 0.0) & (detS > tol * trS * (Y11[0] + Y11[3]))
+    Sc = tuple(np.where(ok, a, b) for a, b in zip(Sc, (one, zero, zero, one), strict=True))
+    Sci = _inv(Sc)
     P12 = _lin((-1.0, _mul(Sci, T1)))
     P22 = _lin((1.0, Y22i), (-1.0, _mul(_tr(T1), P12)))
-    return _assemble(Sci, P12, P22, Y.shape[:-2])
+    return _assemble(Sci, P12, P22, Y.shape[:-2]), ok
 
 
 def stack_estimates(stack: HorizonStack, min_stamps: int = 2):
-    """x_hat_N = Y^-1 y, P_N = Y^-1 and validity (>= ``min_stamps`` observed stamps) per slot."""
+    """x_hat_N = Y^-1 y, P_N = Y^-1 and validity per slot: at least ``min_stamps`` observed
+    stamps and Y numerically invertible (:func:`_spd_inverse4`); an invalid slot has no estimate
+    (its x and P are placeholders: those of Y = I, y = 0)."""
     valid = stack.stamps >= min_stamps
-    P = _spd_inverse4(np.where(valid[..., None, None], stack.info, np.eye(4)))
+    P, ok = _spd_inverse4(np.where(valid[..., None, None], stack.info, np.eye(4)))
+    valid = valid & ok
+    P = np.where(valid[..., None, None], P, np.eye(4))
     y = np.where(valid[..., None], stack.vector, 0.0)
     x = np.stack([P[..., i, 0] * y[..., 0] + P[..., i, 1] * y[..., 1] + P[..., i, 2] * y[..., 2]
                   + P[..., i, 3] * y[..., 3] for i in range(4)], axis=-1)
@@ -758,6 +817,26 @@ _prange = range  # numba.prange once numba is imported (the kernel's loop over e
 _PARALLEL_ELEMENTS = 4096  # (copy, agent) elements from which threads pay for themselves
 
 
+def _kmul(a, b):
+    """a @ b on 2x2 blocks as 4-tuples (:func:`_mul`; jitted for the kernels)."""
+    return (a[0] * b[0] + a[1] * b[2], a[0] * b[1] + a[1] * b[3], a[2] * b[0] + a[3] * b[2], a[2] * b[1] + a[3] * b[3])
+
+
+def _kmul_t(a, b):
+    """a @ b^T on 2x2 blocks as 4-tuples (:func:`_mul_t`; jitted for the kernels)."""
+    return (a[0] * b[0] + a[1] * b[1], a[0] * b[2] + a[1] * b[3], a[2] * b[0] + a[3] * b[1], a[2] * b[2] + a[3] * b[3])
+
+
+def _add2(a, b):
+    """a + b on 4-tuples, in :func:`_lin`'s order."""
+    return (a[0] + b[0], a[1] + b[1], a[2] + b[2], a[3] + b[3])
+
+
+def _add3(a, b, c, d):
+    """a + b + c d on 4-tuples, in :func:`_lin`'s order."""
+    return (a[0] + b[0] + c * d[0], a[1] + b[1] + c * d[1], a[2] + b[2] + c * d[2], a[3] + b[3] + c * d[3])
+
+
 def _buffer_kernel_source(final_info, final_vector, final_stamps, buffer_info, buffer_vector, buffer_success,
                           k, shift, inv_q, T, min_stamps, out_info, out_vector, out_stamps, out_x, out_P,
                           out_valid):  # pragma: no cover - compiled by numba; the numpy path is the reference
@@ -772,6 +851,7 @@ def _buffer_kernel_source(final_info, final_vector, final_stamps, buffer_info, b
     D1 = buffer_success.shape[1]
     D = D1 - 1
     b1, b2 = 0.5 * T * T, T
+    tol = INVERTIBLE_TOL
     for m in _prange(M):
         # a ring: logical slot j lives at (head + j) % S, so the shift moves no data
         info = final_info[m].copy()
@@ -814,18 +894,28 @@ def _buffer_kernel_source(final_info, final_vector, final_stamps, buffer_info, b
                         g1c, g1d = u1c * ia + u1d * ic, u1c * ib + u1d * id_
                         g2a, g2b = u2a * ia + u2b * ic, u2a * ib + u2b * id_
                         g2c, g2d = u2c * ia + u2d * ic, u2c * ib + u2d * id_
-                        p11a = m11a - (g1a * u1a + g1b * u1b)
-                        p11b = m11b - (g1a * u1c + g1b * u1d)
-                        p11c = m11c - (g1c * u1a + g1d * u1b)
-                        p11d = m11d - (g1c * u1c + g1d * u1d)
-                        p12a = m12a - (g1a * u2a + g1b * u2b)
-                        p12b = m12b - (g1a * u2c + g1b * u2d)
-                        p12c = m12c - (g1c * u2a + g1d * u2b)
-                        p12d = m12d - (g1c * u2c + g1d * u2d)
-                        p22a = m22a - (g2a * u2a + g2b * u2b)
-                        p22b = m22b - (g2a * u2c + g2b * u2d)
-                        p22c = m22c - (g2c * u2a + g2d * u2b)
-                        p22d = m22d - (g2c * u2c + g2d * u2d)
+                        # Joseph form (information_predict): Y = L M L^T + K Q^-1 K^T, L = I - K B^T
+                        L11 = (1.0 - b1 * g1a, -b1 * g1b, -b1 * g1c, 1.0 - b1 * g1d)
+                        L12 = (-b2 * g1a, -b2 * g1b, -b2 * g1c, -b2 * g1d)
+                        L21 = (-b1 * g2a, -b1 * g2b, -b1 * g2c, -b1 * g2d)
+                        L22 = (1.0 - b2 * g2a, -b2 * g2b, -b2 * g2c, 1.0 - b2 * g2d)
+                        M11 = (m11a, m11b, m11c, m11d)
+                        M12 = (m12a, m12b, m12c, m12d)
+                        M21 = (m12a, m12c, m12b, m12d)
+                        M22 = (m22a, m22b, m22c, m22d)
+                        G1 = (g1a, g1b, g1c, g1d)
+                        G2 = (g2a, g2b, g2c, g2d)
+                        N11 = _add2(_kmul(L11, M11), _kmul(L12, M21))
+                        N12 = _add2(_kmul(L11, M12), _kmul(L12, M22))
+                        N21 = _add2(_kmul(L21, M11), _kmul(L22, M21))
+                        N22 = _add2(_kmul(L21, M12), _kmul(L22, M22))
+                        iq = inv_q[m]  # 1 / q, as 1.0 / q in the numpy form
+                        P11 = _add3(_kmul_t(N11, L11), _kmul_t(N12, L12), iq, _kmul_t(G1, G1))
+                        P12 = _add3(_kmul_t(N11, L21), _kmul_t(N12, L22), iq, _kmul_t(G1, G2))
+                        P22 = _add3(_kmul_t(N21, L21), _kmul_t(N22, L22), iq, _kmul_t(G2, G2))
+                        p11a, p11b, p11c, p11d = P11
+                        p12a, p12b, p12c, p12d = P12
+                        p22a, p22b, p22c, p22d = P22
                         v = vec[j]
                         v10, v11 = v[0], v[1]
                         v20, v21 = v[2] - T * v10, v[3] - T * v11
@@ -869,7 +959,13 @@ def _buffer_kernel_source(final_info, final_vector, final_stamps, buffer_info, b
                 y12a, y12b, y12c, y12d = 0.0, 0.0, 0.0, 0.0
                 y22a, y22b, y22c, y22d = 1.0, 0.0, 0.0, 1.0
                 ya, yb, yc, yd = 0.0, 0.0, 0.0, 0.0
+            # the guarded inverse of _spd_inverse4: no estimate where Y is not numerically invertible
             det = y22a * y22d - y22b * y22c
+            tr = y22a + y22d
+            ok = tr > 0.0 and det > tol * tr * tr
+            if not ok:
+                y22a, y22b, y22c, y22d = 1.0, 0.0, 0.0, 1.0
+                det = 1.0
             i22a, i22b, i22c, i22d = y22d / det, -y22b / det, -y22c / det, y22a / det
             t1a, t1b = y12a * i22a + y12b * i22c, y12a * i22b + y12b * i22d
             t1c, t1d = y12c * i22a + y12d * i22c, y12c * i22b + y12d * i22d
@@ -878,6 +974,18 @@ def _buffer_kernel_source(final_info, final_vector, final_stamps, buffer_info, b
             sc = y11c - (t1c * y12a + t1d * y12b)
             sd = y11d - (t1c * y12c + t1d * y12d)
             det = sa * sd - sb * sc
+            tr = sa + sd
+            ok = ok and tr > 0.0 and det > tol * tr * (y11a + y11d)
+            if not ok:
+                sa, sb, sc, sd = 1.0, 0.0, 0.0, 1.0
+                det = 1.0
+            if valid and not ok:  # placeholders, as the numpy form's: P = I, x = 0
+                valid = False
+                out_valid[m, j] = False
+                y12a, y12b, y12c, y12d = 0.0, 0.0, 0.0, 0.0
+                t1a, t1b, t1c, t1d = 0.0, 0.0, 0.0, 0.0
+                i22a, i22b, i22c, i22d = 1.0, 0.0, 0.0, 1.0
+                ya, yb, yc, yd = 0.0, 0.0, 0.0, 0.0
             s1a, s1b, s1c, s1d = sd / det, -sb / det, -sc / det, sa / det
             q12a, q12b = -(s1a * t1a + s1b * t1c), -(s1a * t1b + s1b * t1d)
             q12c, q12d = -(s1c * t1a + s1d * t1c), -(s1c * t1b + s1d * t1d)
@@ -913,8 +1021,10 @@ def _compiled(name: str):
         else:
             _prange = numba.prange
             options = {"cache": True, "nogil": True, "boundscheck": False}
-            global _numpy_sum
+            global _numpy_sum, _kmul, _kmul_t, _add2, _add3
             _numpy_sum = numba.njit(**options)(_numpy_sum)
+            _kmul, _kmul_t = numba.njit(**options)(_kmul), numba.njit(**options)(_kmul_t)
+            _add2, _add3 = numba.njit(**options)(_add2), numba.njit(**options)(_add3)
             # the threaded form compiles a renamed copy: with the same name it shares the serial form's
             # disk-cache entry, and one of them loads the other's code (estimators.compiled.renamed)
             _KERNELS = {key: [numba.njit(**options)(fn), numba.njit(parallel=True, **options)(renamed(fn, "_threaded"))]
