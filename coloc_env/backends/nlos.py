@@ -69,7 +69,7 @@ Arguments (``coloc_env.backends.Afge``; defaults = ``nlos_horizon``'s, spec §9)
 | group_size     | 5            | M, odd                                            |
 | window_centre  | 12           | N_c(0) in [N_min, N_max]                          |
 | likelihood     | "predictive" | "predictive", "paper", "smoothed"                 |
-| smoothing      | 0.8          | lam in (0, 1)                                     |
+| smoothing      | 0.5          | lam in (0, 1)                                     |
 
 Arguments (``coloc_env.backends.Dfir``)
 
@@ -134,7 +134,7 @@ class Afge(_PacketFirConfig):
     group_size: int = 5
     window_centre: int = 12
     likelihood: str = "predictive"
-    smoothing: float = 0.8
+    smoothing: float = 0.5
 
     @property
     def ahg(self) -> af.AHGParams:
@@ -319,10 +319,10 @@ class PacketFirBackend(Backend):
         predicted to k against the fused fix of k; ``paper``: in-sample), computed once per filter."""
         if likelihood not in t:
             if likelihood == "paper":
-                t[likelihood] = af.in_sample_costs(t["x"], t["valid"], t["z"], t["R"])
+                t[likelihood] = af.in_sample_costs(t["x"], t["valid"], t["z"], t["R"], t["fresh"])
             else:
                 t[likelihood] = af.predictive_costs(self.motion, self.prev_x, self.prev_P, self.prev_valid, t["z"],
-                                                    t["R"])
+                                                    t["R"], fresh=t["fresh"])
         return t[likelihood]
 
     def update(self, readings, decisions) -> None:

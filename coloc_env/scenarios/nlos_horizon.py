@@ -144,7 +144,7 @@ Arguments (fields of :class:`NlosHorizonConfig`, defaults = spec §9)
 | group_size          | 5                            | M, odd >= 1                                       |
 | window_centre       | 12                           | N_c(0) in [N_min, N_max] (paper's best N)         |
 | likelihood          | "predictive"                 | AHG cost for ``paper``: predictive, paper, smoothed |
-| smoothing           | 0.8                          | lam in (0, 1) [chosen]                            |
+| smoothing           | 0.5                          | lam in (0, 1) [chosen]                            |
 | prior_std           | (50, 50, 5, 5)               | > 0; x_hat before any estimate = truth + N(0, P0) |
 | reward              | "error"                      | "error", "trace"                                  |
 | packet_cost         | 0.0                          | [0, 1e12] per packet used                         |
@@ -216,7 +216,7 @@ class NlosHorizonConfig:
     group_size: int = 5
     window_centre: int = 12
     likelihood: str = "predictive"
-    smoothing: float = 0.8
+    smoothing: float = 0.5
     prior_std: tuple = (50.0, 50.0, 5.0, 5.0)
     reward: str = "error"
     packet_cost: float = 0.0

@@ -25,9 +25,12 @@ def test_reproduce_gao2016_writes_the_spec_metrics_report_and_figures(tmp_path, 
     assert metrics["afge_beats_best_constant"] == (metrics["afge_rmse"] < metrics["dfir_best_rmse"])
     assert (metrics["runs"], metrics["seed"], metrics["steps"], metrics["warmup"]) == (2, 2016, 1000, 50)
     sweep = metrics["sweep"]
-    assert [(s["p_nlos"], s["delay_probs"]) for s in sweep] == [
-        (0.3, [0.6, 0.2, 0.1, 0.05]), (0.1, [0.6, 0.2, 0.1, 0.05]), (0.5, [0.6, 0.2, 0.1, 0.05]),
-        (0.3, [1.0, 0.0, 0.0, 0.0]), (0.3, [0.3, 0.25, 0.2, 0.15])]
+    no_delay, heavy = [1.0, 0.0, 0.0, 0.0], [0.3, 0.25, 0.2, 0.15]
+    assert [(s["p_nlos"], s["delay_probs"], s["mode_info"]) for s in sweep] == [
+        (0.3, [0.6, 0.2, 0.1, 0.05], "known"), (0.1, [0.6, 0.2, 0.1, 0.05], "known"),
+        (0.5, [0.6, 0.2, 0.1, 0.05], "known"), (0.3, no_delay, "known"), (0.3, heavy, "known"),
+        (0.3, no_delay, "mean"), (0.3, no_delay, "blind"), (0.3, heavy, "mean"), (0.3, heavy, "blind")]
+    assert sweep[0]["afge_smoothed_rmse"] == metrics["afge_smoothed_rmse"]
     assert sweep[0]["afge_rmse"] == metrics["afge_rmse"] and sweep[0]["kf_rmse"] == metrics["kf_oracle_rmse"]
     assert 4 <= metrics["afge_mean_horizon"] <= 30
     assert 0 < metrics["fused_obs_rate_lag0"] <= metrics["fused_obs_rate_final"] <= 1
