@@ -52,7 +52,8 @@ same episode and the same delays (``tests/coloc_env/test_nlos_composition.py``).
 |                 | (RSS + 80) / 10, mode (+1 NLOS / -1 LOS with ``known``, else 0);    | known / J (l = 0..D);    |
 |                 | log(1 + NIS); last horizon / N_max; log tr P_N over the AHG group   | 1 if the output had an   |
 |                 | of the last horizon (14 where invalid); each member's AHG cost J_N  | estimate of its own      |
-|                 | minus the group's lowest (0 = AHG's pick; 50 where invalid, capped) |                          |
+|                 | minus the group's lowest (0 = AHG's pick; 50 where invalid or       |                          |
+|                 | without a fresh observation, capped)                                |                          |
 
 RSS slots (``keep``): the neighbours ordered by the RSS of their packet of the newest stamp
 as the agent's observation showed it (strongest first, then the neighbours without one, by
