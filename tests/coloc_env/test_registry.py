@@ -33,7 +33,7 @@ PINS = {
     "coloc/nlos_horizon-v1": (
         "4 agents; observation Box(shape=(41,), dtype=float32, low=[-50.0, -20.0, -1.0, 0.0], high=[1.0, 20.0, 50.0]); "
         "action MultiDiscrete([27, 2, 2, 2, 2, 2, 2, 2, 2])",
-        [3123.7995815912436, -16802.978441501436, 282.17563519149553]),
+        [3373.7995815912436, -16802.978441201354, 282.1756351899859]),
     "coloc/mrclam_relay-v1": (
         "5 agents; observation Box(shape=(18,), dtype=float32, low=[-inf, 0.0], high=[1.0, inf]); "
         "action MultiDiscrete([5, 6, 6, 6, 6, 6])",
