@@ -88,7 +88,6 @@ __all__ = [
     "initial_state",
     "step",
     "expected_cost",
-    "simulate",
 ]
 
 
@@ -406,52 +405,3 @@ def expected_cost(
         bound.append(np.trace(state.bound, axis1=-2, axis2=-1))
     return np.stack(exact), np.stack(bound)
 
-
-def simulate(
-    model: FusionModel,
-    initial_estimate: np.ndarray,
-    initial_bound: np.ndarray,
-    selection: np.ndarray,
-    weights: np.ndarray,
-    horizon: int,
-    rng: np.random.Generator | None,
-    runs: int = 1,
-    noise: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
-) -> dict[str, np.ndarray]:
-    """Monte Carlo runs of the system and the fusion estimator, vectorized over runs.
-
-    x(0) ~ N(xhat(0), M(0)); selection and weights fixed over time. Returns
-    ``truth`` (horizon+1, runs, n), ``estimate`` (horizon+1, runs, N, n) and
-    ``squared_error`` (horizon+1, runs, N).
-
-    ``noise``: pre-drawn ``(x(0), w, v)`` of shapes (runs, n), (horizon, runs, n)
-    and (horizon, runs, N, m) instead of drawing them from ``rng`` (which may then
-    be ``None``), so that a caller can replay episodes drawn elsewhere.
-    """
-    N, n, m = model.num_nodes, model.state_dim, model.measurement_dim
-    if noise is not None:
-        x, process, meas_noise = (np.asarray(a, float) for a in noise)
-        expected = ((runs, n), (horizon, runs, n), (horizon, runs, N, m))
-        if (x.shape, process.shape, meas_noise.shape) != expected:
-            raise ValueError(f"noise must have shapes {expected} (x(0), w, v), got "
-                             f"{(x.shape, process.shape, meas_noise.shape)}")
-    else:
-        x = rng.multivariate_normal(np.asarray(initial_estimate, float), initial_bound, size=runs)
-        process = rng.multivariate_normal(np.zeros(n), model.process_noise, size=(horizon, runs))
-        meas_noise = np.stack(
-            [rng.multivariate_normal(np.zeros(m), model.measurement_noise[j], size=(horizon, runs))
-             for j in range(N)],
-            axis=2,
-        )
-    state = initial_state(model, initial_estimate, initial_bound, (runs,))
-    state.error_cov = None
-    truth, estimate = [x], [state.estimate]
-    for k in range(horizon):
-        y = np.einsum("mn,rn->rm", model.measurement, x)[:, None, :] + meas_noise[k]
-        state = step(model, state, y, selection, weights)
-        x = np.einsum("ab,rb->ra", model.transition, x) + model.drift + process[k]
-        truth.append(x)
-        estimate.append(state.estimate)
-    truth, estimate = np.stack(truth), np.stack(estimate)
-    squared_error = np.sum((estimate - truth[:, :, None, :]) ** 2, axis=-1)
-    return {"truth": truth, "estimate": estimate, "squared_error": squared_error}

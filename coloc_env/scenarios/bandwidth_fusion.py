@@ -317,9 +317,7 @@ def draw_episode(config: BandwidthFusionConfig, rng: np.random.Generator,
     world draws it from the episode's generator itself: :meth:`BandwidthFusionScenario.part_generators`).
 
     Returns ``initial_state`` x(0) ~ N(xhat(0), M(0)) (n,), ``process_noise`` w(0..K-1) (K, n)
-    and ``measurement_noise`` v_j(0..K-1) of every node (K, N, m). The reproduction
-    (``train/reproduce/zhao2020.py``) feeds the same draws to
-    :func:`estimators.bandwidth_fusion.simulate`, so that both see the same episodes.
+    and ``measurement_noise`` v_j(0..K-1) of every node (K, N, m).
     ``factors``: :func:`noise_factors` of ``config``, when the caller has them.
     """
     factors = noise_factors(config) if factors is None else factors

@@ -1,23 +1,27 @@
-"""The Monte Carlo loops of wang2019 and wan2014 drive the composable backends (issue 14 §5) and still
+"""The Monte Carlo loops of wang2019, wan2014, zhao2020 and fu2017 drive the composable backends and still
 compute what the validated estimator code computes on the same draws.
 
 The references here are the estimators' own functions, run on the episodes the scenarios draw from the
 same generators (``relay_ukf``'s draws and relay rules, :class:`coloc_env.world.relay.RelayChainLinks`, with
 ``estimators.ukf_relay``; ``gps_denied_nbp``'s
-``sample_episode`` with ``estimators.range_ls.step``), so a change in the backends, the worlds or the
+``sample_episode`` with ``estimators.range_ls.step``; ``bandwidth_fusion``'s ``draw_episode`` with
+``estimators.bandwidth_fusion.step``; the ``target_cv`` world's episodes and the ``bernoulli_delay`` network's
+link outcomes with ``estimators.lossy_fusion``'s filters), so a change in the backends, the worlds or the
 seeding that moved a reproduction's numbers fails here.
 """
 
 import numpy as np
 
+import estimators.bandwidth_fusion as bf
 import estimators.range_ls as rl
 import estimators.ukf_relay as ukf
 from agents.relay_ukf import paper_actions
 from coloc_env.config import build_config
+from coloc_env.scenarios.bandwidth_fusion import BandwidthFusionConfig, draw_episode, paper_selection, paper_weights
 from coloc_env.scenarios.gps_denied_nbp import GpsDeniedNbpConfig, sample_episode
 from coloc_env.scenarios.relay_ukf import RelayUKFConfig
 from coloc_env.world.unicycle import UnicycleMotion
-from train.reproduce import wan2014, wang2019
+from train.reproduce import wan2014, wang2019, zhao2020
 
 
 def _reference_wang2019(config, copies, policy_rng):
@@ -131,3 +135,36 @@ def test_wan2014_counts_dnbp_messages_and_broadcasts_from_the_network():
     assert 0 < out["broadcasts"] <= out["messages"]
     assert out["broadcasts"] <= 2 * config.horizon * config.num_uavs * config.num_iterations
     assert out["seconds"]["dnbp"] > 0
+
+
+def _reference_zhao2020(config, pair, generators):
+    """Squared errors (K+1, runs, N) of :func:`estimators.bandwidth_fusion.step` under the tables ``pair`` on the
+    episodes :func:`~coloc_env.scenarios.bandwidth_fusion.draw_episode` draws from ``generators`` (the preset's
+    sampler, in its order): the truth recursion x(k+1) = A x(k) + B + w(k) and y_j = C x + v_j written out."""
+    model = config.fusion_model()
+    episodes = [draw_episode(config, rng) for rng in generators]
+    x = np.stack([e["initial_state"] for e in episodes])
+    w = np.stack([e["process_noise"] for e in episodes], axis=1)
+    v = np.stack([e["measurement_noise"] for e in episodes], axis=1)
+    selection, weights = paper_selection(pair[:2]), paper_weights(pair[2:])
+    state = bf.initial_state(model, np.asarray(config.initial_state, float), np.asarray(config.initial_cov, float),
+                             (len(episodes),))
+    errors = [np.sum((state.estimate - x[:, None]) ** 2, axis=-1)]
+    for k in range(config.horizon):
+        state = bf.step(model, state, x[:, None] @ model.measurement.T + v[k], selection, weights)
+        x = x @ model.transition.T + model.drift + w[k]
+        errors.append(np.sum((state.estimate - x[:, None]) ** 2, axis=-1))
+    return np.stack(errors)
+
+
+def test_zhao2020_preset_gives_the_estimator_functions_numbers_on_the_same_draws():
+    config = build_config(BandwidthFusionConfig, {"horizon": 12})
+    seed, runs = 5, 4
+    blocks = {pair: zhao2020.monte_carlo_block(pair, runs, seed, config) for pair in ("T1P1", "T2P3")}
+    for pair, block in blocks.items():
+        reference = _reference_zhao2020(config, pair, zhao2020.episode_generators(seed, runs))
+        np.testing.assert_allclose(block["per_run_cost"], reference.sum(axis=(0, 2)), rtol=1e-12, atol=0)
+        np.testing.assert_allclose(block["mean_curve"], reference.sum(axis=2).mean(axis=1), rtol=1e-12, atol=0)
+    # the runs are real and paired: the same episodes, other estimates under other tables
+    assert not np.allclose(blocks["T1P1"]["per_run_cost"], blocks["T2P3"]["per_run_cost"])
+    np.testing.assert_array_equal(blocks["T1P1"]["example_truth"], blocks["T2P3"]["example_truth"])

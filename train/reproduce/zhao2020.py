@@ -12,11 +12,20 @@ Writes ``OUT/zhao2020/metrics.json`` with
 
 plus ``report.md`` (claim, our number, holds or not) and PNG figures.
 
+The Monte Carlo runs are the ``bandwidth_fusion`` preset (the composition ``drift`` /
+``bandwidth`` / ``bandwidth_fusion``) stepped batched over the runs under the action of the
+env's ``paper:<pair>`` policy, one copy per run (:func:`run_pair`): the ``drift`` world draws
+the truth and the readings, the ``bandwidth`` network delivers the selected components, the
+``bandwidth_fusion`` backend fuses, and the errors are the preset's infos. Run r of every pair is
+seeded ``default_rng([seed, r])`` (common random numbers across the pairs). The exact J and the
+bound are the estimator's covariance recursions (:func:`estimators.bandwidth_fusion.expected_cost`),
+no Monte Carlo.
+
 ``paper_policy_costs(seeds)`` gives this reproduction's per-episode number for the tables T1P1
 of the env's ``paper`` policy; J_K without its k = 0 term, which :func:`initial_term` gives, on
-the episodes ``env.reset(seed=s)`` draws for each s in ``seeds`` (the scenario's own sampler),
-through the same estimator code as the Monte Carlo above; a test checks that it equals what
-``coloc evaluate`` reports for the ``paper`` policy on the same seeds.
+the episodes ``env.reset(seed=s)`` draws for each s in ``seeds``, through the same path as the
+Monte Carlo above; a test checks that it equals what ``coloc evaluate`` reports for the
+``paper`` policy on the same seeds.
 """
 
 from __future__ import annotations
@@ -27,14 +36,17 @@ import numpy as np
 
 import estimators.bandwidth_fusion as bf
 from agents.bandwidth_fusion import greedy_selection, oracle_static_search, parse_tables
+from coloc_env.backends import Kalman
+from coloc_env.composition import compose
 from coloc_env.config import build_config
+from coloc_env.networks import Ideal
 from coloc_env.scenarios.bandwidth_fusion import (
     BandwidthFusionConfig,
     BandwidthFusionScenario,
-    draw_episode,
     paper_selection,
     paper_weights,
 )
+from coloc_env.scenarios.composed import ComposedScenario
 from train.executor import map_tasks
 from train.io import claims_table, save_figure, write_json, write_text
 
@@ -49,44 +61,62 @@ def _tables(pair: str) -> tuple[np.ndarray, np.ndarray]:
     return paper_selection(pair[:2]), paper_weights(pair[2:])
 
 
-def simulate_pair(pair: str, config: BandwidthFusionConfig, runs: int, rng: np.random.Generator | None = None,
-                  noise: tuple | None = None) -> dict:
-    """``runs`` realizations of one (T, P) pair by :func:`estimators.bandwidth_fusion.simulate`, their
-    noise drawn from ``rng`` (batched) or given as ``noise`` (x(0), w, v) (see ``simulate``)."""
-    model = config.fusion_model()
-    selection, weights = _tables(pair)
-    return bf.simulate(model, np.asarray(config.initial_state, float), np.asarray(config.initial_cov, float),
-                       selection, weights, config.horizon, rng, runs, noise=noise)
+def run_pair(pair: str, config: BandwidthFusionConfig, generators: list) -> dict:
+    """The paper's fixed tables ``pair`` on the ``bandwidth_fusion`` preset (``drift`` / ``bandwidth`` /
+    ``bandwidth_fusion``), one copy per generator, stepped batched over the episode.
+
+    Copy r is the preset reset with ``generators[r]`` (the world draws x(0), w and v from it, as
+    ``env.reset(seed=...)`` does) and driven by the action the env's ``paper:<pair>`` policy takes
+    (:meth:`BandwidthFusionScenario.encode_actions` of the tables). Returns, from the infos at reset
+    (k = 0) and after each step (k = 1..K), ``squared_error`` ||xhat_i(k) - x(k)||^2 (K+1, runs, N) and,
+    for copy 0, ``example_truth`` x(k) (K+1, n) and ``example_estimate`` xhat_i(k) (K+1, N, n).
+    """
+    runs = len(generators)
+    scenario = BandwidthFusionScenario(config, batch=runs)
+    scenario.reset(list(generators))
+    actions = np.broadcast_to(scenario.encode_actions(*_tables(pair)), (runs, scenario.num_agents,
+                                                                        scenario.action_dim))
+    infos = [scenario.info()]
+    for _ in range(config.horizon):
+        scenario.step(actions)
+        infos.append(scenario.info())
+    return {
+        "squared_error": np.stack([info["error"] for info in infos]),
+        "example_truth": np.stack([info["true_position"][0, 0] for info in infos]),
+        "example_estimate": np.stack([info["estimated_position"][0] for info in infos]),
+    }
+
+
+def episode_generators(seed: int, runs: int) -> list:
+    """Run r's generator, ``default_rng([seed, r])``: the same episodes for every (T, P) pair (common random
+    numbers, so the pairs compare on paired runs) whatever the number of runs."""
+    return [np.random.default_rng([seed, r]) for r in range(runs)]
 
 
 def monte_carlo_block(pair: str, runs: int, seed: int, config: BandwidthFusionConfig) -> dict:
-    """``runs`` realizations of one (T, P) pair; the generator is seeded by (seed, pair index)."""
-    sim = simulate_pair(pair, config, runs, rng=np.random.default_rng([seed, PAIRS.index(pair)]))
-    per_run = sim["squared_error"].sum(axis=(0, 2))  # J_50 of each realization
+    """``runs`` realizations of one (T, P) pair (:func:`run_pair`) on the episodes of
+    :func:`episode_generators`."""
+    sim = run_pair(pair, config, episode_generators(seed, runs))
     return {
         "pair": pair,
-        "per_run_cost": per_run,
+        "per_run_cost": sim["squared_error"].sum(axis=(0, 2)),  # J_50 of each realization
         "mean_curve": sim["squared_error"].sum(axis=2).mean(axis=1),  # (K+1,) sum over nodes
-        "example_truth": sim["truth"][:, 0],
-        "example_estimate": sim["estimate"][:, 0],
+        "example_truth": sim["example_truth"],
+        "example_estimate": sim["example_estimate"],
     }
 
 
 def paper_policy_costs(seeds, config: BandwidthFusionConfig | None = None) -> np.ndarray:
     """Per-episode cost of the env's ``paper`` policy (:data:`PAPER_PAIR`) on the episodes the env
-    draws for ``seeds``, computed by this reproduction's Monte Carlo path (:func:`simulate_pair`).
+    draws for ``seeds``, by this reproduction's Monte Carlo path (:func:`run_pair`).
 
-    Episode e's randomness is :func:`coloc_env.scenarios.bandwidth_fusion.draw_episode` of
-    ``default_rng(seeds[e])``, what ``env.reset(seed=seeds[e])`` draws. Returns, per episode, the
-    sum over k = 1..K and the nodes of ||xhat_i(k) - x(k)||^2: J_K without its k = 0 term, which an
-    env episode does not contain (its expectation is :func:`initial_term`).
+    Episode e is the preset reset with ``default_rng(seeds[e])``, as ``env.reset(seed=seeds[e])``
+    resets it. Returns, per episode, the sum over k = 1..K and the nodes of ||xhat_i(k) - x(k)||^2:
+    J_K without its k = 0 term, which an env episode does not contain (its expectation is
+    :func:`initial_term`).
     """
     config = config or build_config(BandwidthFusionConfig, {})
-    episodes = [draw_episode(config, np.random.default_rng(s)) for s in seeds]
-    noise = (np.stack([e["initial_state"] for e in episodes]),
-             np.stack([e["process_noise"] for e in episodes], axis=1),
-             np.stack([e["measurement_noise"] for e in episodes], axis=1))
-    sim = simulate_pair(PAPER_PAIR, config, len(episodes), noise=noise)
+    sim = run_pair(PAPER_PAIR, config, [np.random.default_rng(s) for s in seeds])
     return sim["squared_error"][1:].sum(axis=(0, 2))
 
 
@@ -101,24 +131,28 @@ def initial_term(config: BandwidthFusionConfig | None = None, pair: str = PAPER_
 def kalman_predictor_cost(config: BandwidthFusionConfig, nodes_pooled: int) -> np.ndarray:
     """Per-step tr P(k) of the optimal one-step Kalman predictor using ``nodes_pooled`` nodes' measurements.
 
-    P(k+1) = A P A^T + W - A P H^T (H P H^T + R)^-1 H P A^T with H, R the
-    stacked C and V. ``nodes_pooled=1``: a node alone (no communication);
-    ``nodes_pooled=N``: the centralized predictor.
+    ``nodes_pooled=1``: a node alone (no communication; the ``kalman`` backend's ``leader_only``
+    variant, node 0's measurements); ``nodes_pooled=N``: the centralized predictor (``ideal``: every
+    node's). The filter is the ``kalman`` backend on the preset's ``drift`` world over the ``ideal``
+    network (one copy: its covariance does not depend on the data); its filtered P(k|k) gives the
+    predictor's P(k+1|k) = A P(k|k) A^T + W, and P(0) = M(0).
     """
-    A, W = np.asarray(config.transition, float), np.asarray(config.process_noise, float)
-    V = config.sensor_noise[:nodes_pooled]
-    H = np.vstack([np.asarray(config.measurement, float)] * nodes_pooled)
-    m = V.shape[-1]
-    R = np.zeros((nodes_pooled * m, nodes_pooled * m))
-    for j in range(nodes_pooled):
-        R[j * m:(j + 1) * m, j * m:(j + 1) * m] = V[j]
-    P = np.asarray(config.initial_cov, float)
-    traces = [np.trace(P)]
+    N = config.num_uavs
+    if nodes_pooled not in (1, N):
+        raise ValueError(f"nodes_pooled must be 1 or num_uavs={N}, got {nodes_pooled}")
+    world = config.parts()[0]
+    spec = compose(world=world, network=Ideal(), backend=Kalman(variant="leader_only" if nodes_pooled == 1
+                                                                 else "ideal"), horizon=config.horizon)
+    scenario = ComposedScenario(spec, batch=1)
+    scenario.reset([np.random.default_rng(0)])
+    actions = scenario.action_vector("maximum")[None, None].repeat(N, axis=1)
+    motion = scenario.world.motion_model
+    A, W = motion.transition, motion.process_noise
+    traces = [np.trace(np.asarray(config.initial_cov, float))]
     for _ in range(config.horizon):
-        S = H @ P @ H.T + R
-        APH = A @ P @ H.T
-        P = A @ P @ A.T + W - APH @ np.linalg.solve(S, APH.T)
-        traces.append(np.trace(P))
+        scenario.step(actions)
+        P = scenario.backend.posterior_state_cov[0, 0]
+        traces.append(np.trace(A @ P @ A.T + W))
     return np.array(traces)
 
 
