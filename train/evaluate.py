@@ -46,7 +46,7 @@ BOUND_PREFIX = "bound_"
 
 # lossy_fusion (fu2017): row name -> (the filter of estimators.lossy_fusion.FILTERS, packets each follower
 # sends per slot, what it is). Every row runs on the episode env.reset(seed=seed_base + e) draws
-# (lossy_fusion.drawn_episodes; a test checks that "distributed" equals the env's paper row).
+# (train.reproduce.fu2017.filter_runs; a test checks that "distributed" equals the env's paper row).
 REFERENCE_FILTERS = {
     "lossy_fusion": {
         "leader_only_kf": ("leader_only_kf", 0.0, "the leader's Kalman filter on its own measurements"),
@@ -191,14 +191,14 @@ def reference_filter_costs(scenario: str, filter_name: str, episodes: int, seed_
                            **env_config) -> tuple[np.ndarray, float]:
     """Per-episode costs (episodes,) of one of fu2017's filters and the followers' count L - 1."""
     from coloc_env.config import build_config
-    from coloc_env.scenarios.lossy_fusion import LossyFusionConfig, drawn_episodes
-    from train.reproduce.fu2017 import run_block_filters
+    from coloc_env.scenarios.lossy_fusion import LossyFusionConfig
+    from train.reproduce.fu2017 import filter_runs
 
     if scenario != "lossy_fusion":
         raise ValueError(f"reference filters exist for {list(REFERENCE_FILTERS)}, not {scenario!r}")
     config = build_config(LossyFusionConfig, env_config)
-    sim = drawn_episodes(config, [seed_base + e for e in range(episodes)])
-    errors = run_block_filters(config, sim)["errors"][filter_name]  # (episodes, K) squared position errors
+    seeds = [seed_base + e for e in range(episodes)]
+    errors = filter_runs(config, seeds, (filter_name,))["errors"][filter_name]  # (episodes, K) squared errors
     return errors.mean(axis=1), float(config.num_uavs - 1)
 
 

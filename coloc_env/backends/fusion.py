@@ -123,8 +123,17 @@ Arguments
 |--------------------------|---------------------|------------|--------------------------|
 | bandwidth_fusion         | weight_logit_scale  | 4.0        | (0, 1000]                |
 | centralized_lmmse        | gain                | "optimal"  | "optimal", "paper" (eq. 21) |
+| centralized_lmmse        | moments             | "derived"  | "derived", "printed"     |
 | prediction_compensation  | weight_logit_scale  | 3.0        | (0, 50]                  |
 | prediction_compensation  | reading             | "current"  | "current", "forward", "age_aware" (time stamps) |
+| prediction_compensation  | forward_spread      | True       | True, False              |
+
+``moments``: the second moments of the link terms in (A)'s recursion, as derived (the true MSE) or as
+the paper prints them (eqs. 12-14, 20; :func:`estimators.lossy_fusion.centralized_step`), to measure
+what the printed ones cost; the filter's covariance is then no longer its MSE. ``forward_spread``
+(``reading="forward"`` only): the compensated covariance includes the spread of the three predictions
+(True, the derived one) or is (26)'s printed sum_a w_a P_a (False;
+:func:`estimators.lossy_fusion.distributed_step`).
 """
 
 from __future__ import annotations
@@ -136,7 +145,7 @@ import numpy as np
 import estimators.bandwidth_fusion as bf
 import estimators.lossy_fusion as lf
 from coloc_env.backends.base import Backend
-from coloc_env.parts import BACKENDS, Block, PartConfig, check_choice, check_range
+from coloc_env.parts import BACKENDS, Block, PartConfig, check_choice, check_flag, check_range
 
 LEADER = 0
 LINEAR = frozenset({"linear_gaussian"})
@@ -403,9 +412,11 @@ class CentralizedLmmse(PartConfig):
     requires = NEEDS_LINEAR
     message_kind = "packets"
     gain: str = "optimal"
+    moments: str = "derived"
 
     def check(self, prefix: str) -> None:
         check_choice(f"{prefix}gain", self.gain, ("optimal", "paper"))
+        check_choice(f"{prefix}moments", self.moments, ("derived", "printed"))
 
     def build(self, world, network, batch: int) -> Backend:
         return CentralizedLmmseBackend(self, world, network, batch)
@@ -453,7 +464,7 @@ class CentralizedLmmseBackend(TargetBackend):
             cov, mean_m, cov_m = self._moments[step]
             state = lf.CentralizedState(self.augmented[rows], cov, mean_m, cov_m)
             nxt, filtered, filtered_cov = lf.centralized_step(self.model, state, self.held[rows], self.config.gain,
-                                                              self.mats)
+                                                              self.mats, self.config.moments)
             self.augmented[rows] = nxt.estimate
             if len(self._moments) == step + 1:
                 self._moments.append((nxt.covariance, nxt.moment_mean, nxt.moment_cov))
@@ -473,10 +484,12 @@ class PredictionCompensation(PartConfig):
     message_kind = "packets"
     weight_logit_scale: float = 3.0
     reading: str = "current"
+    forward_spread: bool = True
 
     def check(self, prefix: str) -> None:
         check_range(f"{prefix}weight_logit_scale", self.weight_logit_scale, 0.0, 50.0, low_open=True)
         check_choice(f"{prefix}reading", self.reading, lf.READINGS)
+        check_flag(f"{prefix}forward_spread", self.forward_spread)
 
     def build(self, world, network, batch: int) -> Backend:
         return PredictionCompensationBackend(self, world, network, batch)
@@ -529,7 +542,7 @@ class PredictionCompensationBackend(TargetBackend):
         self.outcome = self.links.outcomes(float(self.payload))
         compensation, fusion_factors = self.decode(decisions)
         self.fusion = lf.distributed_step(self.model, self.fusion, z, self.outcome, None, compensation,
-                                          fusion_factors, self.config.reading)
+                                          fusion_factors, self.config.reading, self.config.forward_spread)
         self.estimate[:] = (self.fusion.fused + self.shift.now())[:, None, :]
         self.cov[:] = self.fusion.fused_cov[:, None]
 

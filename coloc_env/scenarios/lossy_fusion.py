@@ -222,8 +222,8 @@ class LossyFusionConfig:
 
     def sample_episodes(self, rng: np.random.Generator, size: tuple[int, ...] = ()) -> dict[str, np.ndarray]:
         """Whole episodes drawn from ``rng`` in blocks, in this order: x(0), accelerations, measurement
-        noise, link outcomes (the reproduction's sampler; the env draws the same truth and measurements
-        but its network draws the link outcomes: :func:`drawn_episodes`). Returns ``truth`` (*size, K, 6),
+        noise, link outcomes (the env's world draws the same truth and measurements, but its network draws
+        the link outcomes: :meth:`LossyFusionScenario.link_outcomes`). Returns ``truth`` (*size, K, 6),
         ``z`` (*size, K, L, 3) and ``outcome`` (*size, K, L) (the leader's column always on time)."""
         K, L = self.horizon, self.num_uavs
         target, sensor = self.target, self.sensor
@@ -293,9 +293,8 @@ class LossyFusionScenario(PresetScenario):
 
     def link_outcomes(self) -> np.ndarray:
         """(B, K, L) each follower's link outcome to the leader at each slot (0 on time, 1 late, 2 lost; the
-        leader's own column on time): the network's draws, fixed at reset. With every follower transmitting
-        these are the ``outcome`` of :meth:`LossyFusionConfig.sample_episodes` that the reproduction's
-        filters take."""
+        leader's own column on time): the network's draws, fixed at reset (its
+        :meth:`~coloc_env.networks.bernoulli_delay.BernoulliDelayNetwork.slot_outcomes`)."""
         return self._outcomes.copy()
 
     # --- description ------------------------------------------------------------
@@ -447,14 +446,3 @@ class LossyFusionScenario(PresetScenario):
                    f"fused squared error {fused_err:.1f} m^2, claimed tr P0 {self._claimed_trace()[b]:.1f} m^2"],
         )
 
-
-def drawn_episodes(config: LossyFusionConfig, seeds) -> dict[str, np.ndarray]:
-    """The episodes ``env.reset(seed=s)`` draws for each of ``seeds``, in
-    :meth:`LossyFusionConfig.sample_episodes`' layout: ``truth`` (E, K, 6), ``z`` (E, K, L, 3) and
-    ``outcome`` (E, K, L), the link outcomes of the env's network. Filters run on these are paired with the
-    env's policies episode by episode."""
-    seeds = list(seeds)
-    core = LossyFusionScenario(config, batch=len(seeds))
-    core.reset([np.random.default_rng(s) for s in seeds])
-    K = config.horizon
-    return {"truth": core.truth[:, :K].copy(), "z": core.z.copy(), "outcome": core.link_outcomes()}

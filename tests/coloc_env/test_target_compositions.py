@@ -158,7 +158,7 @@ def test_the_lossy_fusion_preset_is_target_cv_bernoulli_delay_prediction_compens
 ])
 def test_fu2017_backends_equal_the_reproduction_filters(backend, reference):
     """On the episode and link outcomes the composition drew, each backend gives the filter of
-    estimators.lossy_fusion.run_filters (the reproduction's) to 1e-9, with L = 3 UAVs."""
+    estimators.lossy_fusion.run_filters to 1e-9, with L = 3 UAVs."""
     seed, L = 11, 3
     spec = coloc_env.compose(world={"name": "target_cv", "num_agents": L, "horizon": 40}, network="bernoulli_delay",
                              backend=backend)

@@ -13,15 +13,17 @@ seeding that moved a reproduction's numbers fails here.
 import numpy as np
 
 import estimators.bandwidth_fusion as bf
+import estimators.lossy_fusion as lf
 import estimators.range_ls as rl
 import estimators.ukf_relay as ukf
 from agents.relay_ukf import paper_actions
 from coloc_env.config import build_config
 from coloc_env.scenarios.bandwidth_fusion import BandwidthFusionConfig, draw_episode, paper_selection, paper_weights
 from coloc_env.scenarios.gps_denied_nbp import GpsDeniedNbpConfig, sample_episode
+from coloc_env.scenarios.lossy_fusion import LossyFusionConfig
 from coloc_env.scenarios.relay_ukf import RelayUKFConfig
 from coloc_env.world.unicycle import UnicycleMotion
-from train.reproduce import wan2014, wang2019, zhao2020
+from train.reproduce import fu2017, wan2014, wang2019, zhao2020
 
 
 def _reference_wang2019(config, copies, policy_rng):
@@ -168,3 +170,41 @@ def test_zhao2020_preset_gives_the_estimator_functions_numbers_on_the_same_draws
     # the runs are real and paired: the same episodes, other estimates under other tables
     assert not np.allclose(blocks["T1P1"]["per_run_cost"], blocks["T2P3"]["per_run_cost"])
     np.testing.assert_array_equal(blocks["T1P1"]["example_truth"], blocks["T2P3"]["example_truth"])
+
+
+def _reference_fu2017(config, seeds):
+    """Every filter of the reproduction by :mod:`estimators.lossy_fusion`'s own episode functions on the truth and
+    measurements :meth:`LossyFusionConfig.sample_episodes` draws from ``default_rng(seed)`` (the order the
+    ``target_cv`` world draws them in) and the link outcomes of a ``bernoulli_delay`` network reset with that
+    generator's first child (the preset's rule): name -> (squared position errors (runs, K), own traces)."""
+    K = config.horizon
+    sims = [config.sample_episodes(np.random.default_rng(s)) for s in seeds]
+    truth, z = np.stack([e["truth"] for e in sims]), np.stack([e["z"] for e in sims])
+    network = config.parts()[1].build(config.num_uavs, len(seeds), "packets")
+    network.reset([np.random.default_rng(s).spawn(2)[0] for s in seeds], np.arange(len(seeds)))
+    outcome = network.slot_outcomes(range(K))[:, :, :, 0].copy()  # each agent's link to the leader
+    outcome[..., 0] = lf.ON_TIME
+    model, H = config.lossy_model(), config.target.position_matrix
+    x0, P0 = np.asarray(config.initial_state, float), np.asarray(config.initial_cov, float)
+    runs = lf.run_filters(model, x0, P0, z, outcome)
+    for name, (reading, spread, _) in fu2017.READINGS.items():
+        runs[name] = lf.distributed_filter(model, x0, P0, z, outcome, reading, spread)
+    y = lf.received_measurements(z, outcome, H @ x0)
+    runs["centralized_printed_moments"] = lf.centralized_filter(model, x0, P0, y, "paper", "printed")
+    return {name: (np.sum(((estimates - truth) @ H.T) ** 2, axis=-1), np.trace(H @ cov @ H.T, axis1=-2, axis2=-1))
+            for name, (estimates, cov) in runs.items()}
+
+
+def test_fu2017_compositions_give_the_estimator_filters_numbers_on_the_same_draws():
+    config = build_config(LossyFusionConfig, {"num_uavs": 3, "horizon": 30})
+    block = fu2017.monte_carlo_block(3, 3, 4, 1, config)
+    reference = _reference_fu2017(config, fu2017.block_seeds(3, 3, 4, 1))
+    assert set(block["errors"]) == set(reference) == {*lf.FILTERS, *fu2017.DIAGNOSTICS}
+    for name, (errors, own) in reference.items():
+        np.testing.assert_allclose(block["errors"][name], errors, rtol=1e-9, atol=1e-9, err_msg=name)
+        np.testing.assert_allclose(np.broadcast_to(block["own"][name], own.shape), own, rtol=1e-9, atol=1e-9,
+                                   err_msg=name)
+    # the runs are real and paired: every link outcome occurs, and the filters differ on the same episodes
+    assert np.all(block["delivered"] > 0.1)
+    assert block["errors"]["ideal_kf"].mean() < block["errors"]["informed_kf"].mean() < block["errors"][
+        "naive_kf"].mean()

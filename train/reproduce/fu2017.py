@@ -22,16 +22,21 @@ setting ``L2`` / ``L4`` and filter (``naive_kf``, ``centralized``,
                                  (reading minus reference; mean, se) against each of :data:`REFERENCES`
 * ``runs``, ``seed``, ``steps``
 
-plus ``report.md`` and PNG figures. Monte Carlo blocks of at most
-``BLOCK_RUNS`` runs are independent tasks seeded by
-``np.random.default_rng([seed, L, block])``, so a run's numbers do not
-depend on the executor or on how many other runs there are.
+plus ``report.md`` and PNG figures.
+
+Every filter is a composition stepped batched over the runs (:func:`filter_runs`): the ``lossy_fusion``
+preset's world (``target_cv``: the truth and the measurements) and network (``bernoulli_delay``: the
+followers' link outcomes, eq. 3) with the filter's backend (:func:`filter_backend`: ``kalman``,
+``centralized_lmmse`` or ``prediction_compensation``), every follower transmitting every slot; the
+errors and the filters' own covariances are what the compositions report. Run r of setting L is seeded
+``default_rng([seed, L, r])`` and every filter sees the same episodes and link outcomes (paired
+comparisons). Monte Carlo blocks of at most ``BLOCK_RUNS`` runs are independent tasks, so a run's
+numbers do not depend on the executor or on how many other runs there are.
 
 ``paper_policy_costs(seeds)`` gives this reproduction's per-episode number for algorithm (B),
 the filter of the env's ``paper`` policy, on the episodes ``env.reset(seed=s)`` draws for each s
-in ``seeds`` (the scenario's own sampler), through the same estimator code as the Monte Carlo
-above; a test checks that it equals what ``coloc evaluate`` reports for the ``paper`` policy on
-the same seeds.
+in ``seeds``, through the same path as the Monte Carlo above; a test checks that it equals what
+``coloc evaluate`` reports for the ``paper`` policy on the same seeds.
 """
 
 from __future__ import annotations
@@ -42,7 +47,12 @@ import os
 import numpy as np
 
 import estimators.lossy_fusion as lf
+from coloc_env.backends import CentralizedLmmse, Kalman
+from coloc_env.backends.fusion import LEADER
+from coloc_env.composition import compose
 from coloc_env.config import build_config
+from coloc_env.scenarios.binding import PresetScenario
+from coloc_env.scenarios.composed import ComposedScenario
 from coloc_env.scenarios.lossy_fusion import LossyFusionConfig
 from train.executor import map_tasks
 from train.io import save_figure, write_json, write_text
@@ -99,47 +109,103 @@ PAPER_FILTER = "distributed"  # the env's ``paper`` policy: (B), all transmit, w
 SIGNIFICANCE = 2.0  # a difference counts when it exceeds this many standard errors
 
 
+def filter_backend(name: str, config: LossyFusionConfig):
+    """The backend config that runs filter ``name`` (of :data:`estimators.lossy_fusion.FILTERS` or
+    :data:`DIAGNOSTICS`) at the leader:
+
+    | filter                        | backend                                                         |
+    |-------------------------------|-----------------------------------------------------------------|
+    | ``naive_kf``, ``informed_kf``, | ``kalman`` (``variant`` naive, informed, leader_only, ideal)   |
+    | ``leader_only_kf``, ``ideal_kf`` |                                                              |
+    | ``centralized``               | ``centralized_lmmse`` (gain optimal)                            |
+    | ``centralized_paper_gain``    | ``centralized_lmmse`` (gain paper, eq. 21)                      |
+    | ``centralized_printed_moments`` | ``centralized_lmmse`` (gain paper, moments printed)           |
+    | ``distributed`` and its       | the preset's ``prediction_compensation`` with the row's         |
+    | readings (:data:`READINGS`)   | ``reading`` and ``forward_spread``                              |
+    """
+    if name in READINGS:
+        reading, spread, _ = READINGS[name]
+        return dataclasses.replace(config.parts()[2], reading=reading, forward_spread=spread)
+    backends = {
+        "naive_kf": Kalman(variant="naive"),
+        "informed_kf": Kalman(variant="informed"),
+        "leader_only_kf": Kalman(variant="leader_only"),
+        "ideal_kf": Kalman(variant="ideal"),
+        "centralized": CentralizedLmmse(gain="optimal"),
+        "centralized_paper_gain": CentralizedLmmse(gain="paper"),
+        "centralized_printed_moments": CentralizedLmmse(gain="paper", moments="printed"),
+    }
+    if name not in backends:
+        raise ValueError(f"unknown filter {name!r}; available: {[*lf.FILTERS, *DIAGNOSTICS]}")
+    return backends[name]
+
+
+class PairedComposition(ComposedScenario):
+    """A composition whose copies draw their episodes by the ``lossy_fusion`` preset's rule
+    (:meth:`~coloc_env.scenarios.binding.PresetScenario.part_generators`: the world from the episode's
+    generator itself, the network from its first child): reset with ``default_rng(s)``, every backend
+    on the preset's world and network sees the episode and the link outcomes ``env.reset(seed=s)``
+    draws."""
+
+    part_generators = PresetScenario.part_generators
+
+
+def filter_runs(config: LossyFusionConfig, seeds, names=(*lf.FILTERS, *DIAGNOSTICS)) -> dict:
+    """Each filter of ``names`` on the episodes of ``seeds``, as a composition stepped batched.
+
+    Filter f is the composition of the ``lossy_fusion`` preset's world (``target_cv``) and network
+    (``bernoulli_delay``) with :func:`filter_backend` ``(f)``, one copy per seed, reset with
+    ``default_rng(seed)`` (:class:`PairedComposition`: every filter on the same episodes and link
+    outcomes, those of ``env.reset(seed=seed)``), every follower transmitting every slot and every
+    decision at its paper default (the ``always`` action). Returns, per filter, ``errors`` (runs, K):
+    the infos' ``error`` ||H (xhat(k|k) - x(k))||^2 (:meth:`ComposedScenario.target_error`) of the
+    leader's estimate (shared by every agent), and ``own`` the trace of the position block of the
+    filter's own covariance P(k|k) (the infos' ``trace`` over the world's metric, :meth:`metric_traces`)
+    (runs, K), or (K,) where it does not depend on the data (the same for every run); and ``delivered``
+    the frequencies of the followers' link outcomes (on time, late, lost; eq. 3) the network drew.
+    """
+    seeds = list(seeds)
+    world, network, _ = config.parts()
+    errors, own, delivered = {}, {}, None
+    for name in names:
+        spec = compose(world=world, network=network, backend=filter_backend(name, config), horizon=config.horizon)
+        scenario = PairedComposition(spec, batch=len(seeds))
+        scenario.reset([np.random.default_rng(s) for s in seeds])
+        actions = np.broadcast_to(scenario.action_vector("maximum"), (len(seeds), scenario.num_agents,
+                                                                      scenario.action_space().shape[0]))
+        err, tr = np.empty((len(seeds), config.horizon)), np.empty((len(seeds), config.horizon))
+        for k in range(config.horizon):
+            scenario.step(actions)
+            err[:, k] = scenario.target_error()[:, LEADER]
+            tr[:, k] = scenario.metric_traces()[:, LEADER]
+        errors[name], own[name] = err, (tr[0] if np.all(tr == tr[0]) else tr)
+        if delivered is None:
+            outcome = scenario.network.slot_outcomes(range(config.horizon))[:, :, 1:, LEADER]
+            delivered = np.bincount(outcome.ravel(), minlength=3) / outcome.size
+    return {"errors": errors, "own": own, "delivered": delivered}
+
+
+def block_seeds(num_uavs: int, runs: int, seed: int, block: int) -> list:
+    """The episode seeds of one block: run r of block b is ``[seed, L, b * BLOCK_RUNS + r]``."""
+    return [[seed, num_uavs, block * BLOCK_RUNS + r] for r in range(runs)]
+
+
 def monte_carlo_block(num_uavs: int, runs: int, seed: int, block: int, config: LossyFusionConfig) -> dict:
-    """``runs`` episodes with ``num_uavs`` UAVs, every filter on the same runs; rng seeded by (seed, L, block)."""
+    """``runs`` episodes with ``num_uavs`` UAVs, every filter on the same episodes (:func:`filter_runs` on
+    :func:`block_seeds`)."""
     config = dataclasses.replace(config, num_uavs=num_uavs)
-    sim = config.sample_episodes(np.random.default_rng([seed, num_uavs, block]), (runs,))
-    return {"num_uavs": num_uavs, "block": block, **run_block_filters(config, sim)}
+    return {"num_uavs": num_uavs, "block": block,
+            **filter_runs(config, block_seeds(num_uavs, runs, seed, block))}
 
 
 def paper_policy_costs(seeds, config: LossyFusionConfig | None = None) -> np.ndarray:
     """Per-episode MSE (mean over the slots of the squared position error) of :data:`PAPER_FILTER`,
-    the filter the env's ``paper`` policy runs, on the episodes the env draws for ``seeds``.
-
-    Episode e is what ``env.reset(seed=seeds[e])`` draws (the truth and measurements of
-    ``config.sample_episodes(default_rng(seeds[e]))``, the link outcomes of the env's network:
-    :func:`coloc_env.scenarios.lossy_fusion.drawn_episodes`); the filters run by this reproduction's own
-    path (:func:`run_block_filters`), with ``config.num_uavs`` UAVs (the env's default 2: setting L2).
+    the filter the env's ``paper`` policy runs, on the episodes the env draws for ``seeds``
+    (:func:`filter_runs`: the preset's composition reset with ``default_rng(seeds[e])``), with
+    ``config.num_uavs`` UAVs (the env's default 2: setting L2).
     """
-    from coloc_env.scenarios.lossy_fusion import drawn_episodes
-
     config = config or build_config(LossyFusionConfig, {})
-    return run_block_filters(config, drawn_episodes(config, seeds))["errors"][PAPER_FILTER].mean(axis=1)
-
-
-def run_block_filters(config: LossyFusionConfig, sim: dict) -> dict:
-    """Every filter (and the diagnostics) on the episodes ``sim`` (``truth``, ``z``, ``outcome`` with a
-    leading run axis, as :meth:`LossyFusionConfig.sample_episodes` returns them): squared position
-    errors (runs, K) and own covariance traces per filter, and the link outcome frequencies."""
-    model = config.lossy_model()
-    H = config.target.position_matrix
-    x0, P0 = np.asarray(config.initial_state, float), np.asarray(config.initial_cov, float)
-    results = lf.run_filters(model, x0, P0, sim["z"], sim["outcome"])
-    for name, (reading, spread, _) in READINGS.items():
-        if name != "distributed":  # run_filters' (B) is the printed reading
-            results[name] = lf.distributed_filter(model, x0, P0, sim["z"], sim["outcome"], reading, spread)
-    y = lf.received_measurements(sim["z"], sim["outcome"], H @ x0)
-    results["centralized_printed_moments"] = lf.centralized_filter(model, x0, P0, y, "paper", "printed")
-    errors, own = {}, {}
-    for name, (estimates, covariances) in results.items():
-        errors[name] = np.sum(((estimates - sim["truth"]) @ H.T) ** 2, axis=-1)  # (runs, K)
-        own[name] = np.trace(H @ covariances @ H.T, axis1=-2, axis2=-1)  # (K,) or (runs, K)
-    return {"errors": errors, "own": own,
-            "delivered": np.bincount(sim["outcome"][..., 1:].ravel(), minlength=3) / sim["outcome"][..., 1:].size}
+    return filter_runs(config, seeds, (PAPER_FILTER,))["errors"][PAPER_FILTER].mean(axis=1)
 
 
 def _blocks(runs: int) -> list[int]:
@@ -152,7 +218,11 @@ def _merge(blocks: list[dict]) -> dict:
     own = {}
     for f in (*lf.FILTERS, *DIAGNOSTICS):
         parts = [b["own"][f] for b in blocks]
-        own[f] = np.concatenate(parts) if parts[0].ndim == 2 else parts[0]
+        if any(p.ndim == 2 for p in parts):  # a block of one run reports its curve as (K,)
+            own[f] = np.concatenate([np.broadcast_to(p, (len(b["errors"][f]), p.shape[-1]))
+                                     for p, b in zip(parts, blocks, strict=True)])
+        else:
+            own[f] = parts[0]
     weights = np.array([len(b["errors"]["ideal_kf"]) for b in blocks], float)
     delivered = np.average([b["delivered"] for b in blocks], axis=0, weights=weights)
     return {"errors": errors, "own": own, "delivered": delivered}
