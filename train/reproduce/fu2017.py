@@ -56,6 +56,7 @@ from coloc_env.scenarios.composed import ComposedScenario
 from coloc_env.scenarios.lossy_fusion import LossyFusionConfig
 from train.executor import map_tasks
 from train.io import save_figure, write_json, write_text
+from train.reproduce.common import block_sizes, mean_se, pyplot
 
 KEY = "fu2017"
 RUNS = 500
@@ -208,11 +209,6 @@ def paper_policy_costs(seeds, config: LossyFusionConfig | None = None) -> np.nda
     return filter_runs(config, seeds, (PAPER_FILTER,))["errors"][PAPER_FILTER].mean(axis=1)
 
 
-def _blocks(runs: int) -> list[int]:
-    sizes = [BLOCK_RUNS] * (runs // BLOCK_RUNS)
-    return sizes + ([runs % BLOCK_RUNS] if runs % BLOCK_RUNS else [])
-
-
 def _merge(blocks: list[dict]) -> dict:
     errors = {f: np.concatenate([b["errors"][f] for b in blocks]) for f in (*lf.FILTERS, *DIAGNOSTICS)}
     own = {}
@@ -228,10 +224,6 @@ def _merge(blocks: list[dict]) -> dict:
     return {"errors": errors, "own": own, "delivered": delivered}
 
 
-def _mean_se(per_run: np.ndarray) -> tuple[float, float]:
-    return float(per_run.mean()), float(per_run.std(ddof=1) / np.sqrt(len(per_run)))
-
-
 def run(out: str, runs: int = RUNS, seed: int = 0, quick: bool = False, executor: str = "local",
         address: str | None = None, config: LossyFusionConfig | None = None, progress=None) -> dict:
     """Compute everything, write ``out/fu2017/``, return the metrics dict."""
@@ -242,7 +234,8 @@ def run(out: str, runs: int = RUNS, seed: int = 0, quick: bool = False, executor
     if K < 100:
         raise ValueError(f"the paper's windows need horizon >= 100 slots, got {K}")
     late = slice(K // 2, K)
-    items = [(L, size, seed, block, config) for L in SETTINGS.values() for block, size in enumerate(_blocks(runs))]
+    items = [(L, size, seed, block, config) for L in SETTINGS.values()
+             for block, size in enumerate(block_sizes(runs, BLOCK_RUNS))]
     blocks = map_tasks(monte_carlo_block, items, executor, address)
     data = {key: _merge([b for b in blocks if b["num_uavs"] == L]) for key, L in SETTINGS.items()}
     if progress:
@@ -257,22 +250,22 @@ def run(out: str, runs: int = RUNS, seed: int = 0, quick: bool = False, executor
         metrics["mse"][key], metrics["mse_se"][key] = {}, {}
         metrics["mse_late"][key], metrics["mse_late_se"][key] = {}, {}
         for f in lf.FILTERS:
-            metrics["mse"][key][f], metrics["mse_se"][key][f] = _mean_se(err[f].mean(axis=1))
-            metrics["mse_late"][key][f], metrics["mse_late_se"][key][f] = _mean_se(err[f][:, late].mean(axis=1))
+            metrics["mse"][key][f], metrics["mse_se"][key][f] = mean_se(err[f].mean(axis=1))
+            metrics["mse_late"][key][f], metrics["mse_late_se"][key][f] = mean_se(err[f][:, late].mean(axis=1))
         metrics["own_covariance_late"][key] = {f: float(own[f][..., late].mean()) for f in lf.FILTERS}
         metrics["diagnostics"][key] = {}
         for f in DIAGNOSTICS:
-            mse, se = _mean_se(err[f].mean(axis=1))
-            mse_late, se_late = _mean_se(err[f][:, late].mean(axis=1))
+            mse, se = mean_se(err[f].mean(axis=1))
+            mse_late, se_late = mean_se(err[f][:, late].mean(axis=1))
             metrics["diagnostics"][key][f] = {"mse": mse, "mse_se": se, "mse_late": mse_late,
                                               "mse_late_se": se_late,
                                               "own_covariance_late": float(own[f][..., late].mean())}
         metrics["readings"][key] = {}
         for f in READINGS:
-            mse, se = _mean_se(err[f].mean(axis=1))
+            mse, se = mean_se(err[f].mean(axis=1))
             versus = {}
             for ref in REFERENCES:
-                diff, diff_se = _mean_se(err[f].mean(axis=1) - err[ref].mean(axis=1))
+                diff, diff_se = mean_se(err[f].mean(axis=1) - err[ref].mean(axis=1))
                 versus[ref] = {"difference": diff, "se": diff_se}
             metrics["readings"][key][f] = {"mse": mse, "mse_se": se, "mse_late": float(err[f][:, late].mean()),
                                            "own_covariance_late": float(own[f][..., late].mean()), "versus": versus}
@@ -282,14 +275,14 @@ def run(out: str, runs: int = RUNS, seed: int = 0, quick: bool = False, executor
                                             "mse_k90_99": float(naive[:, 90:100].mean())}
         comparisons = {}
         for claim, (better, worse, _) in BEATS.items():
-            diff, se = _mean_se(err[better].mean(axis=1) - err[worse].mean(axis=1))
+            diff, se = mean_se(err[better].mean(axis=1) - err[worse].mean(axis=1))
             comparisons[claim] = {"difference": diff, "se": se}
         for name in ("naive_kf", "ideal_kf"):
-            diff, se = _mean_se(err[name][:, 90:100].mean(axis=1) - err[name][:, 40:50].mean(axis=1))
+            diff, se = mean_se(err[name][:, 90:100].mean(axis=1) - err[name][:, 40:50].mean(axis=1))
             comparisons[f"{name}_growth_k90_99_minus_k40_49"] = {"difference": diff, "se": se}
-        diff, se = _mean_se(err["centralized"].mean(axis=1) - err["centralized_paper_gain"].mean(axis=1))
+        diff, se = mean_se(err["centralized"].mean(axis=1) - err["centralized_paper_gain"].mean(axis=1))
         comparisons["optimal_minus_paper_gain"] = {"difference": diff, "se": se}
-        diff, se = _mean_se(err["informed_kf"].mean(axis=1) - err["centralized"].mean(axis=1))
+        diff, se = mean_se(err["informed_kf"].mean(axis=1) - err["centralized"].mean(axis=1))
         comparisons["informed_minus_centralized"] = {"difference": diff, "se": se}
         metrics["comparisons"][key] = comparisons
         claims = {claim: bool(c["difference"] < -SIGNIFICANCE * c["se"])
@@ -312,10 +305,7 @@ def run(out: str, runs: int = RUNS, seed: int = 0, quick: bool = False, executor
 
 
 def _figures(folder: str, data: dict, K: int) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     ks = np.arange(K)
     colours = dict(zip(lf.FILTERS, ["tab:red", "tab:blue", "tab:cyan", "tab:orange", "tab:green", "tab:purple",

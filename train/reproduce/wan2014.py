@@ -54,7 +54,8 @@ from coloc_env.scenarios.gps_denied_nbp import GpsDeniedNbpConfig
 from coloc_env.world.broadcast_medium import BroadcastMedium
 from coloc_env.worlds import GpsDenied
 from train.executor import map_tasks
-from train.io import claims_table, save_figure, write_json, write_text
+from train.io import save_figure, write_json, write_text
+from train.reproduce.common import claims_section, pyplot
 
 KEY = "wan2014"
 # 16 runs cost ~15 min of CPU on the 2-core development machine (13.8 min user + 1.4 min sys, measured), so the
@@ -439,10 +440,7 @@ def _claims(m: dict) -> list[dict]:
 
 
 def _figures(folder: str, m: dict, history: list[np.ndarray], config: GpsDeniedNbpConfig) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     # Fig. 4: beliefs of the fault UAVs after each iteration of the case study
     cs = m["case_study"]
@@ -545,10 +543,8 @@ def _report(m: dict, claims: list[dict], config: GpsDeniedNbpConfig) -> str:
         f"{m['seed_base']}, common random numbers across points" + (" (quick mode)." if m["quick"] else ".")
         + f" Wall time {m['wall_time_s']:.0f} s.",
         "",
-        "## Claims",
-        "",
     ]
-    lines += claims_table(claims)
+    lines += claims_section(claims)
     lines += [
         "",
         "## Default point",

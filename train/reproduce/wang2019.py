@@ -47,7 +47,8 @@ from coloc_env.scenarios.relay_ukf import RelayUKFConfig
 from coloc_env.world.relay import STOP_REASONS
 from estimators.models import predict_joint
 from train.executor import map_tasks
-from train.io import claims_table, save_figure, write_json, write_text
+from train.io import save_figure, write_json, write_text
+from train.reproduce.common import block_sizes, ci95, claims_section, pyplot
 
 KEY = "wang2019"
 RUNS = 50
@@ -284,7 +285,7 @@ def run(out: str, runs: int = RUNS, seed: int = 0, quick: bool = False, executor
     if runs < 2:
         raise ValueError(f"runs must be >= 2 for a confidence interval, got {runs}")
     folder = os.path.join(out, KEY)
-    sizes = [BLOCK_SIZE] * (runs // BLOCK_SIZE) + ([runs % BLOCK_SIZE] if runs % BLOCK_SIZE else [])
+    sizes = block_sizes(runs, BLOCK_SIZE)
     variants = {"default": {}, "paper_literal": {"heading_noise": False}}
     cases = [(name, p) for name in variants for p in PROBABILITIES]
     cases.append(("no_turn_rate_noise", config.measurement_probability))
@@ -366,7 +367,7 @@ def _claims(metrics: dict, summary: dict) -> list[dict]:
     key = ("default", p0) if ("default", p0) in summary else ("default", 0.5)
     per_run = summary[key]["per_run"]
     gain = per_run[0] - per_run[2]  # IL - DCL per run
-    gain_ci = 1.96 * gain.std(ddof=1) / np.sqrt(len(gain))
+    gain_ci = ci95(gain)
     err = metrics["mean_distance_error"]
     claims = [{
         "id": "dcl_equals_ccl",
@@ -437,10 +438,7 @@ def _claims(metrics: dict, summary: dict) -> list[dict]:
 
 
 def _figures(folder: str, summary: dict, truncation: dict, config: RelayUKFConfig) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     from coloc_env.rendering import AGENT_COLOURS
 
@@ -536,10 +534,8 @@ def _report(metrics: dict, claims: list[dict], quick: bool) -> str:
         f"Monte Carlo: {metrics['runs']} runs per setting, seed {metrics['seed']}"
         + (" (quick mode)." if quick else ".") + " Stop reasons of a chain: " + ", ".join(STOP_REASONS) + ".",
         "",
-        "## Claims",
-        "",
     ]
-    lines += claims_table(claims)
+    lines += claims_section(claims)
     lines += [
         "",
         f"## Mean distance error at p = {metrics['measurement_probability']} (m, 95 % interval over runs)",

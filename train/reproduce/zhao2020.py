@@ -48,7 +48,8 @@ from coloc_env.scenarios.bandwidth_fusion import (
 )
 from coloc_env.scenarios.composed import ComposedScenario
 from train.executor import map_tasks
-from train.io import claims_table, save_figure, write_json, write_text
+from train.io import save_figure, write_json, write_text
+from train.reproduce.common import ci95, claims_section, pyplot
 
 KEY = "zhao2020"
 RUNS = 500
@@ -202,9 +203,6 @@ def run(out: str, runs: int = 500, seed: int = 0, quick: bool = False, executor:
     local_kf = N * kalman_predictor_cost(config, 1)
     central_kf = N * kalman_predictor_cost(config, N)
 
-    def ci95(values):
-        return 1.96 * float(np.std(values, ddof=1)) / np.sqrt(len(values))
-
     metrics = {
         "cost_exact": {p: float(exact_curves[p].sum()) for p in PAIRS},
         "cost_bound": {p: float(bound_curves[p].sum()) for p in PAIRS},
@@ -317,10 +315,7 @@ def _bound_growth_example(config) -> str:
 
 
 def _figures(folder, exact_curves, bound_curves, mc, greedy_curve, best, config) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     K = config.horizon
     ks = np.arange(K + 1)
@@ -384,10 +379,8 @@ def _report(metrics, claims, quick) -> str:
         f"Monte Carlo: {metrics['runs']} runs per pair, seed {metrics['seed']}"
         + (" (quick mode)." if quick else "."),
         "",
-        "## Claims",
-        "",
     ]
-    lines += claims_table(claims)
+    lines += claims_section(claims)
     lines += [
         "",
         "## J_50 per (T, P) pair",
