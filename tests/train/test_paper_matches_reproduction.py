@@ -4,9 +4,10 @@ The env side is :func:`train.evaluate.run_episodes` with the ``paper`` policy on
 evaluation seeds ``EVAL_SEED_BASE + e``. The reproduction side is each paper module's
 ``paper_policy_costs``: the same episodes (drawn with the scenario's own sampler from
 ``default_rng(seed)``, as ``env.reset(seed=...)`` draws them), run through the
-reproduction's own estimator path (its Monte Carlo code, not the env's step). The two
-paths sum or average in different orders and batch differently, so the numbers agree to
-rounding (1e-9 relative), not bit for bit.
+reproduction's Monte Carlo code (batched, not the env's step). The two paths sum or average
+in different orders and batch differently, so the numbers agree to rounding (1e-9
+relative), not bit for bit. Where a reproduction drives the same backends as the env, the
+second test also checks the env against the estimator functions run without the core.
 
 Shorter episodes than the papers' where a default episode is slow; both sides get the
 same config.
@@ -90,14 +91,33 @@ def _wan2014_by_the_estimator_function(seeds, config) -> np.ndarray:
     return np.array(costs)
 
 
-INDEPENDENT = {"relay_ukf": _wang2019_by_the_estimator_functions, "gps_denied_nbp": _wan2014_by_the_estimator_function}
+def _zhao2020_by_the_estimator_functions(seeds, config) -> np.ndarray:
+    """J_K without its k = 0 term of :func:`estimators.bandwidth_fusion.step` under T1P1 on ``draw_episode``'s
+    draws: no backend, no network, no env."""
+    from tests.train.test_reproductions_drive_backends import _reference_zhao2020
+
+    errors = _reference_zhao2020(config, "T1P1", [np.random.default_rng(s) for s in seeds])
+    return errors[1:].sum(axis=(0, 2))
+
+
+def _fu2017_by_the_estimator_functions(seeds, config) -> np.ndarray:
+    """Per-episode MSE of (B) as printed, :func:`estimators.lossy_fusion.distributed_filter`, on
+    ``sample_episodes``' truth and measurements and the network's link outcomes: no backend, no env."""
+    from tests.train.test_reproductions_drive_backends import _reference_fu2017
+
+    return _reference_fu2017(config, seeds)["distributed"][0].mean(axis=1)
+
+
+INDEPENDENT = {"relay_ukf": _wang2019_by_the_estimator_functions, "gps_denied_nbp": _wan2014_by_the_estimator_function,
+               "bandwidth_fusion": _zhao2020_by_the_estimator_functions,
+               "lossy_fusion": _fu2017_by_the_estimator_functions}
 
 
 @pytest.mark.parametrize("scenario", list(INDEPENDENT))
 def test_evaluate_paper_policy_equals_an_independent_estimator_path(scenario):
-    """relay_ukf and gps_denied_nbp are bindings on the core and their reproductions drive the same backends,
-    so the test above is nearly circular for them: here the reference is the estimator functions on the
-    scenario's draws, without the composable core."""
+    """Every preset here is a binding on the core and its reproduction drives the same backends, so the test
+    above is nearly circular for them: here the reference is the estimator functions on the scenario's draws,
+    without the composable core."""
     _, episodes, overrides = CASES[scenario]
     config = build_config(coloc_env.scenario_class(scenario).Config, overrides)
     seeds = [EVAL_SEED_BASE + e for e in range(episodes)]
