@@ -275,6 +275,12 @@ def test_bad_target_options_name_the_part_and_field():
                           backend="kalman")
     with pytest.raises(ValueError, match=r"backend\.variant must be one of"):
         coloc_env.compose(world="drift", network="ideal", backend={"name": "kalman", "variant": "smart"})
+    with pytest.raises(ValueError, match=r"backend\.moments must be one of"):
+        coloc_env.compose(world="target_cv", network="bernoulli_delay",
+                          backend={"name": "centralized_lmmse", "moments": "exact"})
+    with pytest.raises(ValueError, match=r"backend\.forward_spread must be True or False"):
+        coloc_env.compose(world="target_cv", network="bernoulli_delay",
+                          backend={"name": "prediction_compensation", "forward_spread": "yes"})
     spec = coloc_env.compose(world="drift", network={"name": "bandwidth", "budget": 10}, backend="bandwidth_fusion")
     with pytest.raises(ValueError, match=r"network\.budget must be in \[3, 9\], got 10"):
         coloc_env.parallel_env(spec)
