@@ -53,7 +53,7 @@ from train.reproduce.common import ci95, claims_section, pyplot
 
 KEY = "zhao2020"
 RUNS = 500
-QUICK_RUNS = 500  # the full reproduction takes ~20 s on 2 cores: quick mode keeps every run
+QUICK_RUNS = 500  # the full reproduction takes ~30 s on 2 cores: quick mode keeps every run
 PAIRS = ("T1P1", "T1P2", "T1P3", "T2P1", "T3P1")
 PAPER_PAIR = "".join(parse_tables(None))  # the tables of the env's ``paper`` policy (T1P1)
 
