@@ -1,0 +1,51 @@
+"""Bound models: for each world, the estimation problem its filters face, as :func:`coloc_env.bounds.pcrb` needs it.
+
+One module per world (``target`` for ``drift`` and ``target_cv``, ``circles``, ``gps_denied``,
+``nlos_orbit``, ``mrclam``); each docstring states the problem: the state, the prior
+J0 = P0^-1 (the filters' initial covariance), the motion as the filters know it (input
+noise as process noise), the readings as taken. Each module's ``problem(core, record)``
+returns a :class:`coloc_env.bounds.BoundProblem` from the world's drawn episode (its
+arrays, read, never changed) and the play's :class:`coloc_env.bounds.Record`.
+
+Which backends' messages define ``delivered`` (:func:`delivered_kind`):
+
+| kind        | backends                                   | delivered                                     |
+|-------------|--------------------------------------------|-----------------------------------------------|
+| readings    | ``kalman``, ``centralized_lmmse`` (packets  | own readings + each packet's reading, at its  |
+|             | of z_i(k) to the leader), ``afge``, ``dfir`` | step, from its arrival (lag-augmented)        |
+|             | (the neighbours' RSS/AOA packets)          |                                               |
+| nothing     | ``dead_reckoning``                         | = local                                       |
+| estimates   | every other backend                        | left out (see :mod:`coloc_env.bounds`)        |
+"""
+
+from __future__ import annotations
+
+import importlib
+
+READING_PACKETS = frozenset({"kalman", "centralized_lmmse", "afge", "dfir"})
+NOTHING_SENT = frozenset({"dead_reckoning"})
+MODULES = {"drift": "target", "target_cv": "target", "circles": "circles", "gps_denied": "gps_denied",
+           "nlos_orbit": "nlos_orbit", "mrclam": "mrclam"}
+
+
+def delivered_kind(backend_name: str) -> str:
+    """``"readings"``, ``"nothing"`` or ``"estimates"`` (the table above)."""
+    if backend_name in READING_PACKETS:
+        return "readings"
+    if backend_name in NOTHING_SENT:
+        return "nothing"
+    return "estimates"
+
+
+def estimates_reason(backend_name: str) -> str:
+    return (f"{backend_name}'s messages carry estimates (the sender's whole history), not readings: a per-reading "
+            "account of what arrived bounds no estimator that fuses them")
+
+
+def bound_problem(core, record):
+    """The :class:`~coloc_env.bounds.BoundProblem` of the core's world for the recorded play."""
+    name = core.composition.world.name
+    if name not in MODULES:
+        raise ValueError(f"no bound model for world {name!r}; worlds with one: {sorted(MODULES)}")
+    module = importlib.import_module(f"coloc_env.bound_models.{MODULES[name]}")
+    return module.problem(core, record)

@@ -1,0 +1,68 @@
+"""coloc_env.pcrb: equal to the Kalman covariance where the problem is linear-Gaussian, ordered by information,
+and below every backend's MSE over seeded episodes."""
+
+import numpy as np
+import pytest
+
+import coloc_env
+from coloc_env.bounds import pcrb
+
+
+def _posterior_traces(spec, seed, steps=None):
+    """(K, N) tr of the backend's posterior position covariance in the episode reset with ``seed`` (B = 1)."""
+    core = coloc_env.make_core(spec, batch=1)
+    core.reset([np.random.default_rng(seed)])
+    out = []
+    for _ in range(core.horizon if steps is None else steps):
+        core.advance(np.broadcast_to(core.action_vector("maximum"), (1, core.num_agents, len(core.action_vector(
+            "maximum")))).astype(float))
+        cov = core.backend.posterior_position_cov[0]
+        out.append(np.trace(cov, axis1=-2, axis2=-1))
+    return np.array(out)
+
+
+@pytest.mark.parametrize("world", ["target_cv", "drift"])
+def test_linear_gaussian_bound_equals_the_ideal_kalman_covariance(world):
+    spec = coloc_env.compose(world, "ideal", {"name": "kalman", "variant": "ideal"}, horizon=25)
+    kalman = _posterior_traces(spec, seed=7)
+    bound = pcrb(spec, episodes=3, seed=7)  # the problem is linear: every episode has the same information
+    np.testing.assert_allclose(bound["centralized"], kalman, rtol=1e-9, atol=0)
+    # the leader's delivered bound over an ideal network is the centralized one
+    np.testing.assert_allclose(bound["delivered"][:, 0], bound["centralized"][:, 0], rtol=1e-9)
+
+
+def test_delivered_bound_equals_the_informed_kalman_filter_over_bernoulli_delay():
+    spec = coloc_env.compose("target_cv", "bernoulli_delay", {"name": "kalman", "variant": "informed"}, horizon=40)
+    for seed in (3, 11):
+        informed = _posterior_traces(spec, seed=seed)[:, 0]
+        bound = pcrb(spec, episodes=1, seed=seed)
+        np.testing.assert_allclose(bound["delivered"][:, 0], informed, rtol=1e-9, atol=0)
+        # somewhere a packet was lost or late: the delivered bound is not the centralized one there
+        assert np.any(bound["delivered"][:, 0] > bound["centralized"][:, 0] * (1 + 1e-6))
+
+
+def test_silent_delivers_the_local_bound_and_more_information_gives_a_smaller_bound():
+    spec = coloc_env.compose("target_cv", "bernoulli_delay", "kalman", horizon=30)
+    bound = pcrb(spec, episodes=4, seed=0)
+    tol = 1e-9
+    assert np.all(bound["local"] >= bound["delivered"] * (1 - tol))
+    assert np.all(bound["delivered"] >= bound["centralized"] * (1 - tol))
+    silent = pcrb(spec, episodes=4, seed=0, policy="silent")
+    np.testing.assert_allclose(silent["delivered"], silent["local"], rtol=1e-12)
+
+
+def test_estimate_messages_leave_the_delivered_bound_out_and_say_why():
+    bound = pcrb(coloc_env.compose("target_cv", "ideal", "prediction_compensation", horizon=5), episodes=1)
+    assert "delivered" not in bound
+    assert "carry estimates" in bound["delivered_reason"]
+
+
+def test_bad_arguments_are_named():
+    with pytest.raises(ValueError, match=r"episodes must be an integer in \[1, 100000\]"):
+        pcrb("target_cv/ideal/kalman", episodes=0)
+    with pytest.raises(ValueError, match="policy must be one of"):
+        pcrb("target_cv/ideal/kalman", policy="loud")
+    with pytest.raises(ValueError, match="seed must be an integer >= 0"):
+        pcrb("target_cv/ideal/kalman", seed=-1)
+    with pytest.raises(ValueError, match="spec must be a Composition"):
+        pcrb("no_such_preset")
