@@ -20,6 +20,7 @@ from pettingzoo.utils.conversions import parallel_to_aec
 import coloc_env.backends as backends
 import coloc_env.networks as networks
 import coloc_env.worlds as worlds
+from coloc_env.bounds import pcrb
 from coloc_env.composition import Composition, compatibility, compose
 from coloc_env.env import CoLocParallelEnv
 from coloc_env.parts import BACKENDS as _BACKENDS
@@ -114,4 +115,4 @@ _register_presets()  # every preset as coloc/<preset>-v<N> in PettingZoo's regis
 
 __all__ = ["BACKENDS", "NETWORKS", "PRESETS", "SCENARIOS", "WORLDS", "CoLocParallelEnv", "Composition",
            "backends", "compatibility", "compose", "composition_named", "env", "is_composition_name", "make_core",
-           "networks", "parallel_env", "scenario_class", "vector_env", "worlds"]
+           "networks", "parallel_env", "pcrb", "scenario_class", "vector_env", "worlds"]

@@ -126,9 +126,11 @@ class Record:
         return out
 
 
-def _record_play(core, steps: int, policy, rng: np.random.Generator | None) -> Record:
-    """Step ``core`` (one copy, already reset) ``steps`` times under ``policy``, recording readings and
-    deliveries (the world's and the network's methods wrapped on the instances for the play, then restored)."""
+def _record_play(core, episode_rng: np.random.Generator, policy, rng: np.random.Generator | None) -> Record:
+    """Reset ``core`` (one copy) with ``episode_rng`` and step it to its horizon under ``policy``, recording
+    readings and deliveries (the world's and the network's methods wrapped on the instances for the play, then
+    restored; the reset is recorded too: a backend that receives before deciding reads step 0 there)."""
+    steps = int(core.horizon)
     record = Record(steps)
     record.readings = [None] * steps
     record.packets = [[] for _ in range(steps)]
@@ -161,10 +163,20 @@ def _record_play(core, steps: int, policy, rng: np.random.Generator | None) -> R
         return delay
 
     world.readings, network.packets, network.node_packets = readings, on_packets, on_node_packets
+    # what the world reads depends on the actions only, never on the backend's state: under a fixed policy a
+    # backend whose messages do not define the bound need not run (a callable policy reads its observations)
+    from coloc_env.bound_models import delivered_kind
+
+    idle = not callable(policy) and delivered_kind(core.composition.backend.name) != "readings"
+    if idle:
+        core.backend.step = lambda readings, decisions: None
     try:
+        core.reset([episode_rng])
         _play(core, steps, policy, rng)
     finally:
         del world.readings, network.packets, network.node_packets
+        if idle:
+            del core.backend.step
     return record
 
 
@@ -276,15 +288,13 @@ def pcrb(spec_or_name, episodes: int = 16, seed: int = 0, policy="always",
     if not 0.0 <= float(regularization) <= 1e-3:
         raise ValueError(f"regularization must be in [0, 1e-3], got {regularization!r}")
     spec = _resolve(spec_or_name)
-    name = spec.preset if spec.preset is not None else spec
     rng = np.random.default_rng(int(seed)) if policy == "random" else None
     problems = []
     for e in range(int(episodes)):
         # one copy per episode: the episode env.reset(seed=seed + e) plays, whatever a backend's batching
-        core = coloc_env.make_core(name, batch=1, **config)
-        core.reset([np.random.default_rng(int(seed) + e)])
-        steps = int(core.horizon)
-        record = _record_play(core, steps, policy, rng)
+        core = coloc_env.make_core(spec, batch=1, **config)
+        record = _record_play(core, np.random.default_rng(int(seed) + e), policy, rng)
+        steps = record.steps
         problems.append(bound_problem(core, record))
     problem = _merge(problems)
     K, N = steps, core.num_agents

@@ -41,8 +41,10 @@ def test_delivered_bound_equals_the_informed_kalman_filter_over_bernoulli_delay(
         assert np.any(bound["delivered"][:, 0] > bound["centralized"][:, 0] * (1 + 1e-6))
 
 
-def test_silent_delivers_the_local_bound_and_more_information_gives_a_smaller_bound():
-    spec = coloc_env.compose("target_cv", "bernoulli_delay", "kalman", horizon=30)
+@pytest.mark.parametrize("name", ["target_cv/bernoulli_delay/kalman", "drift/random_delay/centralized_lmmse",
+                                  "nlos_orbit/random_delay/dfir", "gps_denied/relay/dead_reckoning"])
+def test_silent_delivers_the_local_bound_and_more_information_gives_a_smaller_bound(name):
+    spec = coloc_env.composition_named(name, horizon=30)
     bound = pcrb(spec, episodes=4, seed=0)
     tol = 1e-9
     assert np.all(bound["local"] >= bound["delivered"] * (1 - tol))
@@ -66,3 +68,28 @@ def test_bad_arguments_are_named():
         pcrb("target_cv/ideal/kalman", seed=-1)
     with pytest.raises(ValueError, match="spec must be a Composition"):
         pcrb("no_such_preset")
+
+
+GENERATIVE = [r for r in coloc_env.compatibility() if r["ok"] and r["world"] != "mrclam"]  # mrclam: recorded data
+
+
+@pytest.mark.parametrize("row", GENERATIVE, ids=lambda r: f"{r['world']}/{r['network']}/{r['backend']}")
+def test_every_backend_mse_is_above_the_centralized_bound(row):
+    """Over 4 seeded episodes of 14 steps (steps >= 10 averaged), policy always: MSE >= pcrb_centralized - 3 SE."""
+    spec = coloc_env.compose(row["world"], row["network"], row["backend"], horizon=14)
+    episodes, seed = 4, 100
+    per_episode = []
+    for e in range(episodes):
+        core = coloc_env.make_core(spec, batch=1)
+        core.reset([np.random.default_rng(seed + e)])
+        action = np.asarray(core.action_vector("maximum"), float)
+        errors = []
+        for k in range(core.horizon):
+            core.advance(np.broadcast_to(action, (1, core.num_agents, action.size)).copy())
+            if k >= 10:
+                errors.append(core.info()["position_error"][0] ** 2)
+        per_episode.append(np.mean(errors))
+    per_episode = np.array(per_episode)
+    bound = pcrb(spec, episodes=episodes, seed=seed)["centralized"][10:].mean()
+    se = per_episode.std(ddof=1) / np.sqrt(episodes)
+    assert per_episode.mean() >= bound - 3 * se, (per_episode.mean(), bound, se)
