@@ -195,7 +195,7 @@ def _block_actions(core, which: str, rng: np.random.Generator | None) -> np.ndar
 
 def _play(core, steps: int, policy, rng) -> None:
     if callable(policy):
-        names = core.agent_names()
+        names = list(core.agent_names)
         for _ in range(steps):
             obs = core.observation()
             rows = []
