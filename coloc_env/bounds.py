@@ -271,7 +271,8 @@ def pcrb(spec_or_name, episodes: int = 16, seed: int = 0, policy="always",
     | spec_or_name    | a Composition, a preset name or ``WORLD/NETWORK/BACKEND``                    |
     | episodes        | 1..100000 (E; episode e is reset with seed ``seed + e``)                    |
     | seed            | an integer >= 0                                                            |
-    | policy          | ``"always"``, ``"silent"``, ``"random"`` or a callable act(observations)     |
+    | policy          | ``"always"``, ``"silent"``, ``"random"``, a callable act(observations), or a  |
+    |                 | sequence of E callables (episode e plays the e-th: seeded per-episode policies) |
     | regularization  | [0, 1e-3]: relative ridge on a per-episode singular Q (estimators.bounds)   |
     | config          | a preset's flat config keywords (``data=`` for mrclam_relay)                |
     """
@@ -282,7 +283,10 @@ def pcrb(spec_or_name, episodes: int = 16, seed: int = 0, policy="always",
         raise ValueError(f"episodes must be an integer in [1, 100000], got {episodes!r}")
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ValueError(f"seed must be an integer >= 0, got {seed!r}")
-    if not callable(policy) and policy not in POLICIES:
+    if isinstance(policy, (list, tuple)):
+        if len(policy) != episodes or not all(callable(p) for p in policy):
+            raise ValueError(f"policy as a sequence must hold one callable per episode ({episodes}), got {policy!r}")
+    elif not callable(policy) and policy not in POLICIES:
         raise ValueError(f"policy must be one of {list(POLICIES)} or a callable act(observations) -> actions, "
                          f"got {policy!r}")
     if not 0.0 <= float(regularization) <= 1e-3:
@@ -293,7 +297,8 @@ def pcrb(spec_or_name, episodes: int = 16, seed: int = 0, policy="always",
     for e in range(int(episodes)):
         # one copy per episode: the episode env.reset(seed=seed + e) plays, whatever a backend's batching
         core = coloc_env.make_core(spec, batch=1, **config)
-        record = _record_play(core, np.random.default_rng(int(seed) + e), policy, rng)
+        played = policy[e] if isinstance(policy, (list, tuple)) else policy
+        record = _record_play(core, np.random.default_rng(int(seed) + e), played, rng)
         steps = record.steps
         problems.append(bound_problem(core, record))
     problem = _merge(problems)

@@ -56,9 +56,18 @@ Metrics of each (backend, value) cell, over the E episodes
 |                     | half-width of its 95 % Student-t interval                                         |
 | messages_per_step   | mean of ``infos[agent]["messages_sent"]`` over episodes, steps and agents         |
 | floats_per_step     | the same for ``floats_sent``                                                      |
+| rmse                | sqrt of the mean over episodes, steps and agents of position_error^2 (m)         |
+| pcrb_centralized,   | sqrt of the mean over steps and agents of ``coloc_env.pcrb``'s bound of that name |
+| pcrb_local,         | on the cell's episodes and policy (m); null where the bound is not defined        |
+| pcrb_delivered      | (delivered: where the backend's messages carry readings; docs/bounds.md)          |
+| efficiency          | rmse / pcrb_centralized (>= 1 up to Monte Carlo noise)                            |
 | nees                | mean over episodes, steps and agents of e^T P^-1 e (e: estimate - truth, P:       |
 |                     | ``backend.posterior_position_cov``, 2 x 2; about 2 for a consistent filter);      |
 |                     | null where the backend has no covariance                                          |
+| nees_band           | [lo, hi]: the chi^2(2 E) / E 95 % band of a NEES averaged over the E episodes at  |
+|                     | one step (null without a covariance)                                              |
+| nees_in_band        | the share of (step, agent) whose NEES averaged over the episodes lies in it (a   |
+|                     | consistent filter: about 0.95)                                                    |
 | per_episode_error   | the E episode means behind ``position_error`` (m), in seed order                  |
 
 ``paired[b][value]`` for every backend b after the first (the reference):
@@ -73,10 +82,10 @@ Outputs in ``OUT/study/<name>/`` (each written atomically, :mod:`train.io`)
 |----------------------|-------------------------------------------------------------------------------|
 | metrics.json         | ``{"world", "network", "reference", "backends": {b: {value: cell}}, "paired",  |
 |                      | "config": {seed, episodes, policy, sweep, horizon, batched, compositions}}``  |
-| report.md            | one markdown table per metric (backends x values), the paired table, the      |
-|                      | command line                                                                  |
+| report.md            | one markdown table per metric (backends x values; RMSE with efficiency, the   |
+|                      | three bounds, NEES with its share in band), the paired table, the command line|
 | position_error.png   | error vs the swept value, one line per backend with its 95 % band; without a  |
-|                      | sweep a bar chart with 95 % error bars                                        |
+|                      | sweep a bar chart with 95 % error bars; sqrt(pcrb_centralized) dashed         |
 
 ``metrics.json`` depends only on the inputs that change numbers (not on
 ``--out``, ``--executor`` or ``--address``): the same command reproduces it
@@ -227,21 +236,29 @@ def _nees(error: np.ndarray, cov: np.ndarray) -> np.ndarray:
 
 
 def _episode_summary(errors: list, messages: list, floats: list, nees: list | None) -> tuple:
-    """One episode's (mean error, mean messages, mean floats, mean NEES or nan) from per-step (N,) rows."""
-    return (float(np.mean(np.array(errors, dtype=float))), float(np.mean(np.array(messages, dtype=float))),
+    """One episode's (mean error, mean messages, mean floats, mean NEES or nan, mean squared error, per-step NEES
+    (K, N) or None) from per-step (N,) rows."""
+    errors = np.array(errors, dtype=float)
+    steps = None if nees is None else np.array(nees, dtype=float)
+    return (float(np.mean(errors)), float(np.mean(np.array(messages, dtype=float))),
             float(np.mean(np.array(floats, dtype=float))),
-            float("nan") if nees is None else float(np.mean(np.array(nees, dtype=float))))
+            float("nan") if nees is None else float(np.mean(steps)), float(np.mean(errors**2)), steps)
 
 
 def run_cell(spec, policy: str, episodes: int, seed: int, batched: bool = False,
              progress: Callable[[], None] | None = None) -> dict[str, np.ndarray]:
     """E episodes of ``spec``; episode e is ``env.reset(seed=seed + e)`` with ``make_policy(policy, env,
-    seed=seed + e)``. Returns per-episode arrays ``error``, ``messages``, ``floats`` and ``nees`` (nan
-    without a covariance). ``progress()`` is called once per episode (per cell if batched)."""
+    seed=seed + e)``. Returns per-episode arrays ``error``, ``messages``, ``floats``, ``nees`` (nan
+    without a covariance) and ``squared_error`` (the mean of position_error^2), and ``nees_steps`` (E, K, N)
+    the NEES of every step and agent (None without a covariance). ``progress()`` is called once per
+    episode (per cell if batched)."""
     run = _run_batched if batched else _run_env
     rows = run(spec, policy, episodes, seed, progress)
-    error, messages, floats, nees = (np.array(column, dtype=float) for column in zip(*rows, strict=True))
-    return {"error": error, "messages": messages, "floats": floats, "nees": nees}
+    columns = list(zip(*rows, strict=True))
+    error, messages, floats, nees, squared = (np.array(column, dtype=float) for column in columns[:5])
+    steps = None if columns[5][0] is None else np.stack(columns[5])
+    return {"error": error, "messages": messages, "floats": floats, "nees": nees, "squared_error": squared,
+            "nees_steps": steps}
 
 
 def _run_env(spec, policy_name, episodes, seed, progress):
@@ -327,14 +344,68 @@ def verdict(mean: float, half: float) -> str:
     return "no difference"
 
 
-def cell_metrics(result: dict[str, np.ndarray]) -> dict[str, Any]:
+NEES_DOF = 2  # the position block: 2 DOF
+
+
+def nees_band(episodes: int, dof: int = NEES_DOF) -> tuple[float, float]:
+    """The 95 % band of a NEES averaged over ``episodes`` independent episodes at one step: chi^2(E d) / E quantiles
+    (Bar-Shalom, Li, Kirubarajan, Sec. 5.4.2). The per-step average is tested against it, not the mean over steps
+    (the steps of an episode are correlated, which would make the band of that mean meaningless)."""
+    from scipy import stats
+
+    return (float(stats.chi2.ppf(0.025, episodes * dof) / episodes),
+            float(stats.chi2.ppf(0.975, episodes * dof) / episodes))
+
+
+def nees_metrics(steps: np.ndarray | None) -> dict[str, Any]:
+    """``nees_band`` [lo, hi] and ``nees_in_band`` (the share of (step, agent) whose NEES averaged over the E
+    episodes lies in it) from the per-step NEES (E, K, N); None without a covariance."""
+    if steps is None:
+        return {"nees_band": None, "nees_in_band": None}
+    low, high = nees_band(steps.shape[0])
+    per_step = steps.mean(axis=0)
+    return {"nees_band": [low, high], "nees_in_band": float(np.mean((per_step >= low) & (per_step <= high)))}
+
+
+def bound_metrics(bounds: dict | None, rmse: float) -> dict[str, Any]:
+    """sqrt of each PCRB's mean over steps and agents (m) and efficiency = RMSE / sqrt(pcrb_centralized)."""
+    if bounds is None:
+        return {"pcrb_centralized": None, "pcrb_local": None, "pcrb_delivered": None, "efficiency": None}
+    out = {f"pcrb_{key}": (float(np.sqrt(np.mean(bounds[key]))) if key in bounds else None)
+           for key in ("centralized", "local", "delivered")}
+    out["efficiency"] = float(rmse / out["pcrb_centralized"]) if out["pcrb_centralized"] > 0 else None
+    return out
+
+
+def cell_metrics(result: dict[str, np.ndarray], bounds: dict | None = None) -> dict[str, Any]:
     mean, half = mean_ci95(result["error"])
     nees = result["nees"]
+    rmse = float(np.sqrt(np.mean(result["squared_error"])))
     return {"position_error": {"mean": mean, "ci95": half},
+            "rmse": rmse,
+            **bound_metrics(bounds, rmse),
             "messages_per_step": float(result["messages"].mean()),
             "floats_per_step": float(result["floats"].mean()),
             "nees": float(nees.mean()) if not np.any(np.isnan(nees)) else None,
+            **nees_metrics(result.get("nees_steps")),
             "per_episode_error": [float(x) for x in result["error"]]}
+
+
+def cell_bounds(spec, policy: str, episodes: int, seed: int) -> dict:
+    """``coloc_env.pcrb`` of one cell on its episodes: the named policy where the bound's core plays it
+    identically (always, silent), else the study's own per-episode policies (``make_policy(policy, env,
+    seed=seed + e)``) as callables."""
+    import coloc_env
+
+    if policy in ("always", "silent"):
+        return coloc_env.pcrb(spec, episodes=episodes, seed=seed, policy=policy)
+    import agents
+
+    acts = []
+    for e in range(episodes):
+        env = coloc_env.parallel_env(spec)
+        acts.append(agents.make_policy(policy, env, seed=seed + e).act)
+    return coloc_env.pcrb(spec, episodes=episodes, seed=seed, policy=acts)
 
 
 def paired_metrics(results: dict, backends: list[str], keys: list[str]) -> dict[str, dict]:
@@ -384,6 +455,10 @@ def _table(title: str, backends, keys, cell: Callable[[str, str], str], header: 
     return [*lines, "", header, ""] if header else [*lines, ""]
 
 
+def _bound_text(value) -> str:
+    return "-" if value is None else f"{value:.4g}"
+
+
 def report(metrics: dict, command: str) -> str:
     backends = list(metrics["backends"])
     keys = list(metrics["backends"][backends[0]])
@@ -398,12 +473,28 @@ def report(metrics: dict, command: str) -> str:
     lines += _table("Position error (m), mean ± 95 % interval over episodes", backends, keys,
                     lambda b, k: f"{cells[b][k]['position_error']['mean']:.4g} ± "
                                  f"{cells[b][k]['position_error']['ci95']:.2g}", "")
+    lines += _table("RMSE (m) and efficiency = RMSE / sqrt(pcrb_centralized)", backends, keys,
+                    lambda b, k: f"{cells[b][k]['rmse']:.4g}" + ("" if cells[b][k]["efficiency"] is None
+                                                                 else f" ({cells[b][k]['efficiency']:.3g})"),
+                    "")
+    lines += _table("Posterior Cramér-Rao bounds, sqrt of the mean over steps and agents (m): centralized / "
+                    "delivered / local (- where not defined)" + (" [model-based]" if config.get("pcrb_model_based")
+                                                                 else ""), backends, keys,
+                    lambda b, k: " / ".join(_bound_text(cells[b][k][f"pcrb_{n}"])
+                                            for n in ("centralized", "delivered", "local")),
+                    "The centralized bound holds every reading fused centrally; delivered what the network carried to "
+                    "each agent (where its messages are readings); local each agent's own readings only "
+                    "(coloc_env.pcrb, docs/bounds.md).")
     lines += _table("Messages per agent per step", backends, keys,
                     lambda b, k: f"{cells[b][k]['messages_per_step']:.4g}", "")
     lines += _table("Floats per agent per step", backends, keys,
                     lambda b, k: f"{cells[b][k]['floats_per_step']:.4g}", "")
-    lines += _table("NEES (mean of e^T P^-1 e, 2 for a consistent 2-D estimate; - without a covariance)",
-                    backends, keys, lambda b, k: "-" if cells[b][k]["nees"] is None else f"{cells[b][k]['nees']:.3g}",
+    band = next((cells[b][k]["nees_band"] for b in backends for k in keys if cells[b][k]["nees_band"]), None)
+    lines += _table("NEES (mean of e^T P^-1 e, 2 for a consistent 2-D estimate; - without a covariance) and the "
+                    "share of (step, agent) whose NEES averaged over the episodes lies in the chi^2 95 % band"
+                    + ("" if band is None else f" [{band[0]:.3g}, {band[1]:.3g}]"),
+                    backends, keys, lambda b, k: "-" if cells[b][k]["nees"] is None
+                    else f"{cells[b][k]['nees']:.3g} ({100 * cells[b][k]['nees_in_band']:.0f} % in band)",
                     "")
     if len(backends) > 1:
         paired = metrics["paired"]
@@ -429,10 +520,18 @@ def figure(metrics: dict):
     fig, ax = plt.subplots(figsize=(5.6, 3.8))
     means = {b: np.array([metrics["backends"][b][k]["position_error"]["mean"] for k in keys]) for b in backends}
     halves = {b: np.array([metrics["backends"][b][k]["position_error"]["ci95"] for k in keys]) for b in backends}
+    bound = {b: np.array([np.nan if metrics["backends"][b][k].get("pcrb_centralized") is None
+                          else metrics["backends"][b][k]["pcrb_centralized"] for k in keys], float) for b in backends}
     if sweep is None:
         x = np.arange(len(backends))
         ax.bar(x, [means[b][0] for b in backends], yerr=[halves[b][0] for b in backends], capsize=4,
                color=[f"C{i}" for i in range(len(backends))])
+        for i, b in enumerate(backends):
+            if np.isfinite(bound[b][0]):
+                ax.hlines(bound[b][0], i - 0.4, i + 0.4, colors="k", linestyles="--",
+                          label="sqrt(pcrb_centralized)" if i == 0 else None)
+        if any(np.isfinite(bound[b][0]) for b in backends):
+            ax.legend()
         ax.set_xticks(x, backends, rotation=20)
         ax.set_xlabel("backend")
     else:
@@ -442,11 +541,13 @@ def figure(metrics: dict):
         for i, b in enumerate(backends):
             ax.plot(x, means[b], marker="o", color=f"C{i}", label=b)
             ax.fill_between(x, means[b] - halves[b], means[b] + halves[b], color=f"C{i}", alpha=0.2)
+            if np.isfinite(bound[b]).any():
+                ax.plot(x, bound[b], linestyle="--", color=f"C{i}", label=f"{b}: sqrt(pcrb_centralized)")
         if not numeric:
             ax.set_xticks(x, keys)
         ax.set_xlabel(f"{sweep['part']}.{sweep['field']}")
         ax.legend()
-    ax.set_ylabel("position error (m), 95 % interval")
+    ax.set_ylabel("position error (m), 95 % interval; dashed: bound")
     config = metrics["config"]
     ax.set_title(f"{metrics['world']} / {metrics['network']}: {config['policy']}, {config['episodes']} episodes")
     ax.grid(alpha=0.3)
@@ -530,7 +631,11 @@ def run_study(world: str, network: str, backends: str | Sequence[str], sweep: st
             if progress:
                 progress(total, total)
 
-        # 3. metrics, report, figure
+        # 3. the bounds of each cell on its episodes (coloc_env.pcrb), then metrics, report, figure
+        from coloc_env.bound_models import MODULES
+
+        bounds = {cell: cell_bounds(cells[cell], policy, episodes, seed) if world in MODULES else None
+                  for cell in order}
         spec0 = cells[order[0]]
         sweep_config = None if parsed is None else {"part": parsed[0], "field": parsed[1], "values": parsed[3],
                                                     "keys": parsed[2]}
@@ -538,11 +643,12 @@ def run_study(world: str, network: str, backends: str | Sequence[str], sweep: st
             "world": world,
             "network": network,
             "reference": backends[0],
-            "backends": {b: {k: cell_metrics(results[b, k]) for k in keys} for b in backends},
+            "backends": {b: {k: cell_metrics(results[b, k], bounds[b, k]) for k in keys} for b in backends},
             "paired": paired_metrics(results, backends, keys),
             "config": {"seed": seed, "episodes": episodes, "episode_seeds": f"{seed} + e, e = 0..{episodes - 1}",
                        "policy": policy, "sweep": sweep_config, "horizon": horizon,
                        "episode_steps": spec0.episode_steps, "batched": bool(batched),
+                       "pcrb_model_based": None if bounds[order[0]] is None else bounds[order[0]]["model_based"],
                        "compositions": {b: {k: {part: getattr(cells[b, k], part).as_dict() for part in PARTS}
                                             for k in keys} for b in backends}},
         }

@@ -18,7 +18,8 @@ from train.study import run_study
 SMALL = ["--world", "circles", "--network", "relay", "--backends", "ukf_dcl,dead_reckoning",
          "--sweep", "network.loss_at_zero=0,0.5", "--episodes", "3", "--horizon", "12"]
 NAME = "circles_relay_network.loss_at_zero"
-CELL_KEYS = {"position_error", "messages_per_step", "floats_per_step", "nees", "per_episode_error"}
+CELL_KEYS = {"position_error", "messages_per_step", "floats_per_step", "nees", "per_episode_error", "rmse",
+             "pcrb_centralized", "pcrb_local", "pcrb_delivered", "efficiency", "nees_band", "nees_in_band"}
 
 
 @pytest.fixture(scope="module")
@@ -224,8 +225,10 @@ def test_verdicts_and_nees():
     expected = [e @ np.linalg.inv(p) @ e for e, p in zip(error, cov, strict=True)]
     np.testing.assert_allclose(study._nees(error, cov), expected, rtol=1e-12)
     no_cov = {"error": np.array([1.0, 2.0]), "messages": np.zeros(2), "floats": np.zeros(2),
-              "nees": np.full(2, np.nan)}
-    assert study.cell_metrics(no_cov)["nees"] is None
+              "nees": np.full(2, np.nan), "squared_error": np.array([1.0, 4.0]), "nees_steps": None}
+    row = study.cell_metrics(no_cov)
+    assert row["nees"] is None and row["nees_band"] is None and row["pcrb_centralized"] is None
+    assert row["rmse"] == pytest.approx(np.sqrt(2.5), rel=1e-15)
 
 
 def test_help_documents_every_option(capsys):
@@ -286,3 +289,26 @@ def test_result_files_get_the_users_permissions(tmp_path):
     mask = os.umask(0)
     os.umask(mask)
     assert (path.stat().st_mode & 0o777) == (0o666 & ~mask)
+
+
+def test_study_rows_carry_the_bounds_efficiency_and_the_nees_band(tmp_path):
+    metrics, folder = run_study("drift", "bernoulli_delay", "kalman,centralized_lmmse,prediction_compensation",
+                                episodes=12, seed=3, horizon=20, out=str(tmp_path))
+    bounds = coloc_env.pcrb(coloc_env.compose("drift", "bernoulli_delay", "kalman", horizon=20), episodes=12, seed=3)
+    for backend, cells in metrics["backends"].items():
+        cell = cells["default"]
+        assert cell["pcrb_centralized"] == pytest.approx(np.sqrt(bounds["centralized"].mean()), rel=1e-12)
+        assert cell["pcrb_local"] == pytest.approx(np.sqrt(bounds["local"].mean()), rel=1e-12)
+        assert cell["efficiency"] == pytest.approx(cell["rmse"] / cell["pcrb_centralized"], rel=1e-12)
+        assert cell["efficiency"] > 1.0  # no estimator beats the bound on these 12 episodes
+        if backend == "prediction_compensation":  # its messages are estimates: no delivered bound
+            assert cell["pcrb_delivered"] is None
+        else:
+            assert cell["pcrb_local"] >= cell["pcrb_delivered"] >= cell["pcrb_centralized"]
+        low, high = cell["nees_band"]
+        assert low < 2 < high
+    # the kalman backend (naive by default) and centralized_lmmse have matched models: most per-step NEES in band
+    assert metrics["backends"]["centralized_lmmse"]["default"]["nees_in_band"] >= 0.8
+    report = (tmp_path / "study" / "drift_bernoulli_delay" / "report.md").read_text()
+    assert "## RMSE (m) and efficiency" in report and "## Posterior Cramér-Rao bounds" in report
+    assert "% in band" in report
