@@ -163,20 +163,29 @@ def _record_play(core, episode_rng: np.random.Generator, policy, rng: np.random.
         return delay
 
     world.readings, network.packets, network.node_packets = readings, on_packets, on_node_packets
-    # what the world reads depends on the actions only, never on the backend's state: under a fixed policy a
-    # backend whose messages do not define the bound need not run (a callable policy reads its observations)
-    from coloc_env.bound_models import delivered_kind
+    # what the world reads depends on the actions only, never on the backend's state: under a policy that reads no
+    # observation (a name, or a callable marked ``blind``), a backend whose messages do not define the bound need
+    # not run, nor one whose packets the world's own nodes send (the bound model's stand-in asks the network)
+    from coloc_env.bound_models import delivered_kind, stand_in
 
-    idle = not callable(policy) and delivered_kind(core.composition.backend.name) != "readings"
+    blind = not callable(policy) or bool(getattr(policy, "blind", False))
+    kind = delivered_kind(core.composition.backend.name)
+    substitute = stand_in(core) if kind == "readings" else None
+    from coloc_env.scenarios.composed import ComposedScenario
+
+    own_step = type(core).advance is not ComposedScenario.advance  # a preset that reads the backend's step
+    idle = blind and not own_step and (kind != "readings" or substitute is not None)
     if idle:
-        core.backend.step = lambda readings, decisions: None
+        core.backend.step = lambda readings, decisions: None if core.receives_ahead or substitute is None \
+            else substitute(readings)
+        core.backend.receive = lambda readings, idx: None if substitute is None else substitute(readings)
     try:
         core.reset([episode_rng])
         _play(core, steps, policy, rng)
     finally:
         del world.readings, network.packets, network.node_packets
         if idle:
-            del core.backend.step
+            del core.backend.step, core.backend.receive
     return record
 
 

@@ -94,6 +94,96 @@ def all_rows(scenario: str) -> list[str]:
     return [*realizable, *EXTRA_ROWS.get(scenario, ()), *agents.bound_policies(scenario), *reference_rows(scenario)]
 
 
+# --- bounds and consistency of a row -----------------------------------------------------------------------
+NEES_DOF = 2  # the position block
+
+
+def _trace_step(trace: dict, actions: np.ndarray, info: dict, cov) -> None:
+    """One step of every copy: actions (B, N, ...), squared errors (B, N) of the 2-D position, NEES (B, N) or None.
+
+    The 2-D position: the first two components of estimated_position - true_position, the plane the bound's and
+    the backends' position covariance describe (a preset reporting a 3-D target position, lossy_fusion and
+    bandwidth_fusion, is reduced to its x, y)."""
+    trace.setdefault("actions", []).append(np.array(actions, float))
+    error = (np.asarray(info["estimated_position"], float) - np.asarray(info["true_position"], float))[..., :2]
+    trace.setdefault("squared", []).append(np.sum(error**2, axis=-1))
+    if cov is None:
+        trace["nees"] = None
+    elif trace.get("nees", []) is not None:
+        solved = np.einsum("...ij,...j->...i", np.linalg.pinv(np.asarray(cov, float)), error)
+        trace.setdefault("nees", []).append(np.einsum("...i,...i->...", error, solved))
+
+
+def _merge_trace(into: dict, part: dict) -> None:
+    """Append a chunk's (or an episode's) trace along the episode axis (steps stacked first)."""
+    stacked = {key: (None if value is None else np.stack(value, axis=1)) for key, value in part.items()}
+    for key, value in stacked.items():
+        if value is None or into.get(key, 0) is None:
+            into[key] = None
+        else:
+            into.setdefault(key, []).append(value)
+
+
+class _Replay:
+    """Episode e's recorded actions, step after step, as a policy ``coloc_env.pcrb`` can play (it reads no
+    observation: ``blind``)."""
+
+    blind = True
+
+    def __init__(self, names, steps: np.ndarray):
+        self.names, self.steps, self.k = list(names), steps, 0
+
+    def __call__(self, observations):
+        actions = self.steps[self.k]
+        self.k += 1
+        return {name: actions[i] for i, name in enumerate(self.names)}
+
+
+def attach_bounds(result: dict, scenario: str, seed_base: int, trace: dict, bounds: bool = True,
+                  **env_config) -> dict:
+    """The row plus ``rmse`` (m, sqrt of the mean squared 2-D position error, :func:`_trace_step`), ``nees`` with
+    ``nees_band`` (the chi^2(2E)/E 95 % band of a per-step NEES averaged over the E episodes) and ``nees_in_band``
+    (the share of (step, agent) in it), and, with ``bounds``, ``coloc_env.pcrb`` on the very episodes and actions
+    played: ``pcrb_centralized``, ``pcrb_local``, ``pcrb_delivered`` (sqrt of the mean over steps and agents, m;
+    None where not defined), ``efficiency`` = rmse / pcrb_centralized and ``pcrb_model_based``."""
+    from scipy import stats
+
+    import coloc_env
+    from coloc_env.bound_models import MODULES
+
+    out = dict(result)
+    chunks = trace.get("squared")
+    if not chunks:
+        return out
+    squared = np.concatenate(chunks, axis=0)  # (E, K, N)
+    rmse = float(np.sqrt(squared.mean()))
+    out["rmse"] = rmse
+    nees = trace.get("nees")
+    E = squared.shape[0]
+    if nees is None:
+        out.update(nees=None, nees_band=None, nees_in_band=None)
+    else:
+        per_step = np.concatenate(nees, axis=0)  # (E, K, N)
+        low, high = (float(stats.chi2.ppf(q, E * NEES_DOF) / E) for q in (0.025, 0.975))
+        mean_step = per_step.mean(axis=0)
+        out.update(nees=float(per_step.mean()), nees_band=[low, high],
+                   nees_in_band=float(np.mean((mean_step >= low) & (mean_step <= high))))
+    out.update(pcrb_centralized=None, pcrb_local=None, pcrb_delivered=None, efficiency=None, pcrb_model_based=None)
+    spec = (coloc_env.composition_named(scenario) if coloc_env.is_composition_name(scenario)
+            else coloc_env.PRESETS.get(scenario))
+    if not bounds or spec is None or spec.world.name not in MODULES:
+        return out
+    actions = np.concatenate(trace["actions"], axis=0)  # (E, K, N, ...)
+    names = coloc_env.make_core(scenario, batch=1, **env_config).agent_names
+    replays = [_Replay(names, actions[e]) for e in range(E)]
+    bound = coloc_env.pcrb(spec, episodes=E, seed=seed_base, policy=replays, **env_config)
+    for key in ("centralized", "local", "delivered"):
+        out[f"pcrb_{key}"] = float(np.sqrt(np.mean(bound[key]))) if key in bound else None
+    out["efficiency"] = rmse / out["pcrb_centralized"] if out["pcrb_centralized"] else None
+    out["pcrb_model_based"] = bool(bound["model_based"])
+    return out
+
+
 def check_not_evaluation_seeds(seed_base: int, episodes: int, what: str) -> None:
     """Refuse a tuning run whose seeds seed_base .. seed_base + episodes - 1 meet the evaluation seeds."""
     if seed_base < EVAL_SEED_BASE + SEED_RANGE and seed_base + episodes > EVAL_SEED_BASE:
@@ -135,7 +225,7 @@ def summarize(scenario, policy_name: str, costs, comms, seed_base: int, initial_
 
 
 def evaluate_policy(scenario: str, policy_name: str, episodes: int, seed_base: int = EVAL_SEED_BASE,
-                    progress=None, stochastic: bool = False) -> dict:
+                    progress=None, stochastic: bool = False, bounds: bool = True) -> dict:
     """A trained model (``.zip``) on the batched core, a reference filter on the same episodes, any other
     policy through the PettingZoo env.
 
@@ -143,6 +233,7 @@ def evaluate_policy(scenario: str, policy_name: str, episodes: int, seed_base: i
     copy for copy; a test checks the costs agree); the batched one runs every
     episode in one call per step. ``stochastic``: a model samples its actions
     (torch seeded with ``seed_base``) and is recorded as ``PATH.zip (stochastic)``.
+    Every policy row gets the columns of :func:`attach_bounds` (``bounds=False``: RMSE and NEES only).
     """
     if policy_name in REFERENCE_FILTERS.get(scenario, {}):
         result = run_reference_filter(scenario, policy_name, episodes, seed_base)
@@ -150,24 +241,27 @@ def evaluate_policy(scenario: str, policy_name: str, episodes: int, seed_base: i
             for _ in range(episodes):
                 progress()
         return result
+    trace: dict = {}
     if not policy_name.endswith(".zip"):
-        result = run_policy_batched(scenario, policy_name, episodes, seed_base)
+        result = run_policy_batched(scenario, policy_name, episodes, seed_base, trace=trace)
         if result is None:
-            return run_episodes(scenario, policy_name, episodes, seed_base, progress)
-        if progress:
+            trace = {}
+            result = run_episodes(scenario, policy_name, episodes, seed_base, progress, trace=trace)
+        elif progress:
             for _ in range(episodes):
                 progress()
-        return result
+        return attach_bounds(result, scenario, seed_base, trace, bounds)
     import agents
     import coloc_env
 
     if episodes < 2:
         raise ValueError(f"episodes must be >= 2 for a confidence interval, got {episodes}")
     policy = agents.make_policy(policy_name, coloc_env.parallel_env(scenario))  # checks scenario and spaces
-    result = run_model_batched(policy.model, scenario, episodes, seed_base, deterministic=not stochastic)
+    result = run_model_batched(policy.model, scenario, episodes, seed_base, deterministic=not stochastic, trace=trace)
     if progress:
         for _ in range(episodes):
             progress()
+    result = attach_bounds(result, scenario, seed_base, trace, bounds)
     return dict(result, policy=policy_name + (" (stochastic)" if stochastic else ""))
 
 
@@ -203,7 +297,7 @@ def reference_filter_costs(scenario: str, filter_name: str, episodes: int, seed_
 
 
 def run_episodes(scenario: str, policy_name: str, episodes: int, seed_base: int = EVAL_SEED_BASE,
-                 progress=None, **env_config) -> dict:
+                 progress=None, trace: dict | None = None, **env_config) -> dict:
     """Any policy by name through the PettingZoo env, one episode per seed ``seed_base + e``."""
     import agents
     import coloc_env
@@ -218,30 +312,46 @@ def run_episodes(scenario: str, policy_name: str, episodes: int, seed_base: int 
         observations, _ = env.reset(seed=seed_base + e)
         policy.start_episode(seed_base + e)
         errors, weights, comm = [], [], 0.0
+        episode_trace = {} if trace is not None else None
         while env.agents:
-            observations, _, _, _, infos = env.step(policy.act(observations))
+            chosen = policy.act(observations)
+            observations, _, _, _, infos = env.step(chosen)
+            if episode_trace is not None:
+                order = env.possible_agents
+                info = {key: np.array([[infos[a][key] for a in order]], float)
+                        for key in ("position_error", "estimated_position", "true_position")}
+                _trace_step(episode_trace, np.array([[np.asarray(chosen[a], float) for a in order]]), info,
+                            env.scenario.backend.posterior_position_cov)
             errors.append([float(infos[a][error_key]) for a in env.possible_agents])
             if weight_key:
                 weights.append([float(infos[a][weight_key]) for a in env.possible_agents])
             comm += sum(float(info.get("communication", 0.0)) for info in infos.values())
         costs.append(float(env.scenario.episode_error(np.array(errors), np.array(weights) if weight_key else None)))
         comms.append(comm / len(errors))
+        if episode_trace is not None:
+            _merge_trace(trace, episode_trace)
         if progress:
             progress()
     return summarize(scenario, policy_name, costs, comms, seed_base, env.scenario.initial_cost())
 
 
-def _run_core(scenario: str, episodes: int, seed_base: int, choose, env_config: dict) -> tuple:
+def _run_core(scenario: str, episodes: int, seed_base: int, choose, env_config: dict,
+              trace: dict | None = None) -> tuple:
     """Steps ``episodes`` copies of the batched core (copy e seeded ``seed_base + e``) with
-    ``choose(core) -> actions (episodes, N, *action_shape)``; returns (costs, comms per step, initial cost)."""
+    ``choose(core) -> actions (episodes, N, *action_shape)``; returns (costs, comms per step, initial cost).
+    ``trace`` (a dict) receives what :func:`attach_bounds` needs, per step (lists of (B, ...) arrays: callers
+    :func:`_merge_trace` them into episode-first arrays): the actions, squared position errors and NEES."""
     import coloc_env
 
     core = coloc_env.make_core(scenario, batch=episodes, **env_config)
     core.reset([np.random.default_rng(seed_base + e) for e in range(episodes)])
     errors, weights, comm = [], [], np.zeros(episodes)
     while not core.done().all():
-        core.step(choose(core))
+        actions = choose(core)
+        core.step(actions)
         info = core.info()
+        if trace is not None:
+            _trace_step(trace, np.asarray(actions, float), info, core.backend.posterior_position_cov)
         errors.append(info[core.metric_error_key])
         if core.metric_weight_key:
             weights.append(info[core.metric_weight_key])
@@ -270,7 +380,7 @@ class _CoreView:
 
 
 def run_policy_batched(scenario: str, policy_name: str, episodes: int, seed_base: int = EVAL_SEED_BASE,
-                       **env_config) -> dict | None:
+                       trace: dict | None = None, **env_config) -> dict | None:
     """A named policy on copies of the batched core, every episode of a chunk in one call per step; None
     where the policy does not batch (``Policy.batching`` is None: :func:`run_episodes` plays it).
 
@@ -314,14 +424,17 @@ def run_policy_batched(scenario: str, policy_name: str, episodes: int, seed_base
                     actions.append(np.stack([np.asarray(chosen[a]).astype(float) for a in order]))
                 return np.stack(actions)
 
-        cost, comm, initial = _run_core(scenario, count, seed_base + start, choose, env_config)
+        chunk = {} if trace is not None else None
+        cost, comm, initial = _run_core(scenario, count, seed_base + start, choose, env_config, chunk)
+        if chunk is not None:
+            _merge_trace(trace, chunk)
         costs.append(cost)
         comms.append(comm)
     return summarize(scenario, policy_name, np.concatenate(costs), np.concatenate(comms), seed_base, initial)
 
 
 def run_model_batched(model, scenario: str, episodes: int, seed_base: int, deterministic: bool = True,
-                      **env_config) -> dict:
+                      trace: dict | None = None, **env_config) -> dict:
     """An SB3 model on ``episodes`` copies of the batched core at once (copy e seeded ``seed_base + e``).
 
     Steps the scenario core directly rather than the VecEnv, whose auto-reset
@@ -357,7 +470,10 @@ def run_model_batched(model, scenario: str, episodes: int, seed_base: int, deter
             memory["lstm"] = carried
         return np.asarray(actions, dtype=float).reshape(episodes, core.num_agents, *core.action_space().shape)
 
-    cost, comm, initial = _run_core(scenario, episodes, seed_base, choose, env_config)
+    chunk = {} if trace is not None else None
+    cost, comm, initial = _run_core(scenario, episodes, seed_base, choose, env_config, chunk)
+    if chunk is not None:
+        _merge_trace(trace, chunk)
     return summarize(scenario, "model", cost, comm, seed_base, initial)
 
 

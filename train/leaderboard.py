@@ -451,6 +451,30 @@ def _table(scenario: str, entries: list[dict], baseline: dict | None, show_initi
     return lines
 
 
+def _bounds_table(entries: list[dict]) -> list[str]:
+    """RMSE of the 2-D position, the posterior Cramér-Rao bounds and NEES of the rows that have them
+    (``train.evaluate.attach_bounds``)."""
+    entries = [r for r in entries if r.get("rmse") is not None]
+    if not entries:
+        return []
+
+    def number(value, digits=4):
+        return "-" if value is None else f"{value:.{digits}g}"
+
+    model_based = any(r.get("pcrb_model_based") for r in entries)
+    lines = ["Estimation bounds (posterior Cramér-Rao, `coloc_env.pcrb` on the same episodes and actions"
+             + ("; model-based: recorded data" if model_based else "") + ") and consistency:", "",
+             "| row | RMSE [m] | sqrt PCRB centralized / delivered / local [m] | efficiency RMSE / sqrt PCRB_c | "
+             "NEES (2 if consistent) | per-step NEES in its chi^2 95 % band |", "|---|---|---|---|---|---|"]
+    for r in entries:
+        band = r.get("nees_band")
+        inside = "-" if band is None else f"{100 * r['nees_in_band']:.0f} % in [{band[0]:.3g}, {band[1]:.3g}]"
+        bounds = " / ".join(number(r.get(f"pcrb_{k}")) for k in ("centralized", "delivered", "local"))
+        lines.append(f"| {r['policy']} | {number(r['rmse'])} | {bounds} | {number(r.get('efficiency'), 3)} | "
+                     f"{number(r.get('nees'), 3)} | {inside} |")
+    return [*lines, ""]
+
+
 def markdown(out: str) -> str:
     lines = ["# Leaderboard", "",
              "Each scenario's own episode metric (lower is better, named per table) on the evaluation seeds "
@@ -470,6 +494,7 @@ def markdown(out: str) -> str:
         lines += [f"## {key} (`{scenario}`)", "", f"Episode metric: {name} [{unit}].", ""]
         lines += _table(scenario, rows(table), baseline, show_initial)
         lines.append("")
+        lines += _bounds_table(rows(table))
         bounds = bound_rows(table)
         if bounds:
             lines += ["Bounds (not realizable: hindsight, the truth or information the agents lack; never a "

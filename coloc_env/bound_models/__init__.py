@@ -42,6 +42,17 @@ def estimates_reason(backend_name: str) -> str:
             "account of what arrived bounds no estimator that fuses them")
 
 
+def stand_in(core):
+    """The world's stand-in for a backend whose deliveries define ``delivered`` when the world itself sends the
+    packets (``nlos_orbit``'s neighbours): ``f(readings)`` asks the network for their delivery as the backend would,
+    so the backend need not run; None where the backend's own messages are the packets."""
+    name = core.composition.world.name
+    if name not in MODULES:
+        return None
+    module = importlib.import_module(f"coloc_env.bound_models.{MODULES[name]}")
+    return getattr(module, "stand_in", lambda core: None)(core)
+
+
 def bound_problem(core, record):
     """The :class:`~coloc_env.bounds.BoundProblem` of the core's world for the recorded play."""
     name = core.composition.world.name

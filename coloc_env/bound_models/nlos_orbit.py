@@ -53,6 +53,18 @@ def reading_information(world, K: int) -> np.ndarray:
     return info
 
 
+def stand_in(core):
+    """The neighbours' packets of k to their target, asked of the network as ``afge`` / ``dfir`` ask it (every
+    neighbour inside the RSA sends; :meth:`coloc_env.networks.base.Network.node_packets`, slot 0: counter-based
+    draws, so the same delays whoever asks)."""
+    world, network = core.world, core.network
+
+    def deliver(readings):
+        network.node_packets(np.asarray(readings.extra["measured"], bool), world.neighbour_distances(), 0.0, slot=0)
+
+    return deliver
+
+
 def problem(core, record) -> BoundProblem:
     world = core.world
     K, N = record.steps, world.num_agents

@@ -1,0 +1,29 @@
+"""coloc evaluate's bound and consistency columns (train.evaluate.attach_bounds)."""
+
+import numpy as np
+import pytest
+
+import coloc_env
+from train.evaluate import EVAL_SEED_BASE, evaluate_policy
+
+
+def test_replayed_actions_give_the_bound_of_the_named_policy():
+    name = "target_cv/bernoulli_delay/centralized_lmmse"
+    row = evaluate_policy(name, "always", 4)
+    bound = coloc_env.pcrb(coloc_env.composition_named(name), episodes=4, seed=EVAL_SEED_BASE, policy="always")
+    for key in ("centralized", "local", "delivered"):
+        assert row[f"pcrb_{key}"] == pytest.approx(np.sqrt(bound[key].mean()), rel=1e-12)
+    assert row["efficiency"] == pytest.approx(row["rmse"] / row["pcrb_centralized"], rel=1e-12)
+    assert row["pcrb_local"] >= row["pcrb_delivered"] >= row["pcrb_centralized"]
+    assert row["efficiency"] > 1.0
+
+
+@pytest.mark.parametrize("scenario", ["bandwidth_fusion", "gps_denied_nbp"])
+def test_preset_rows_carry_rmse_bounds_and_the_nees_band(scenario):
+    row = evaluate_policy(scenario, "paper", 2)
+    assert row["rmse"] > row["pcrb_centralized"] > 0
+    low, high = row["nees_band"]
+    assert low < 2 < high and 0 <= row["nees_in_band"] <= 1
+    assert row["pcrb_model_based"] is False
+    assert row["pcrb_local"] > row["pcrb_centralized"]
+    assert row["pcrb_delivered"] is None  # both presets' messages carry estimates
