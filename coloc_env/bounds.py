@@ -45,7 +45,8 @@ blocks, so a preset's own codec is bypassed: its world and seeds are the preset'
 them) is called per copy and stepped through the scenario's own codec.
 
 ``mrclam`` (recorded data) has no generative model: its bound is model-based (the
-world's calibrated noise on the recorded trajectory) and says so (``"model_based"``).
+world's calibrated noise model along each recorded window's Vicon trajectory, one recursion
+per window, then their mean) and says so (``"model_based"``).
 """
 
 from __future__ import annotations
@@ -89,6 +90,9 @@ class BoundProblem:
     delivered_agents: list[np.ndarray] | None = None
     model_based: bool = False
     delivered_reason: str = ""
+    # each episode its own problem (a recorded window, conditioned on its trajectory): run per episode, then the
+    # mean of the episodes' bounds, instead of one recursion on averaged D-terms
+    per_episode: bool = False
 
 
 def position_traces(P: np.ndarray, positions: np.ndarray) -> np.ndarray:
@@ -310,8 +314,18 @@ def pcrb(spec_or_name, episodes: int = 16, seed: int = 0, policy="always",
         record = _record_play(core, np.random.default_rng(int(seed) + e), played, rng)
         steps = record.steps
         problems.append(bound_problem(core, record))
-    problem = _merge(problems)
     K, N = steps, core.num_agents
+    if problems[0].per_episode:
+        outs = [_bounds(p, K, N, regularization) for p in problems]
+        out = dict(outs[0])
+        for key in ("centralized", "local", "delivered"):
+            if key in out:
+                out[key] = np.mean([o[key] for o in outs], axis=0)
+        return out
+    return _bounds(_merge(problems), K, N, regularization)
+
+
+def _bounds(problem: BoundProblem, K: int, N: int, regularization: float) -> dict:
     out = {"centralized": problem.centralized.run(regularization), "model_based": bool(problem.model_based)}
     out["local"] = _assemble(problem.local, problem.local_agents, K, N, regularization)
     if problem.delivered is not None:

@@ -115,3 +115,26 @@ def test_a_callable_policy_plays_the_same_episodes_as_the_named_one():
     random = pcrb(spec, episodes=2, seed=5, policy="random")
     assert random["delivered"].shape == (15, 2)
     assert np.all(random["delivered"][:, 0] >= named["delivered"][:, 0] * (1 - 1e-9))  # some packets unsent
+
+
+def test_the_nlos_stand_in_delivers_what_the_backend_receives():
+    # pcrb idles afge under a named policy and asks the network for the neighbours' packets itself; a policy that
+    # reads observations runs the backend: the same deliveries either way
+    spec = coloc_env.compose("nlos_orbit", "random_delay", "afge", horizon=30)
+    names = coloc_env.make_core(spec, batch=1).agent_names
+    action = coloc_env.make_core(spec, batch=1).action_vector("maximum")
+    idle = pcrb(spec, episodes=2, seed=4)
+    running = pcrb(spec, episodes=2, seed=4, policy=lambda observations: {n: action for n in names})
+    np.testing.assert_array_equal(idle["delivered"], running["delivered"])
+    assert np.any(idle["delivered"] > idle["centralized"] * (1 + 1e-6))  # some packets late or lost
+
+
+def test_the_recorded_world_gets_a_model_based_bound(mrclam_dataset6):
+    spec = coloc_env.compose({"name": "mrclam", "horizon": 60, "data": mrclam_dataset6}, "relay", "dead_reckoning")
+    bound = pcrb(spec, episodes=2, seed=0)
+    assert bound["model_based"] is True
+    assert np.all(bound["local"] >= bound["centralized"] * (1 - 1e-9))
+    np.testing.assert_allclose(bound["delivered"], bound["local"], rtol=0)  # dead reckoning receives nothing
+    # one window alone: the covariance-form recursion along its Vicon trajectory; two windows: the mean of theirs
+    one = [pcrb(spec, episodes=1, seed=s)["centralized"] for s in (0, 1)]
+    np.testing.assert_allclose(bound["centralized"], np.mean(one, axis=0), rtol=1e-12)
