@@ -24,6 +24,8 @@ all its agents; agent-steps = env-steps x N):
 * peers            for relay_ukf, filterpy's ``UnscentedKalmanFilter`` doing one
   full-chain range update one copy at a time (:data:`PEERS`), beside our
   ``dcl_update`` doing the same update for the B copies at once;
+* ``pcrb, one episode``  ``coloc_env.pcrb`` of one episode (its play, backend idle where it
+  may be, and the recursion), in env-steps per second, beside the backend's step;
 * ``vmas``          VMAS's batched ``simple_spread`` with 4 agents on the CPU at
   the same B, when ``vmas`` is installed (``pip install 'coloc[bench]'``).
 
@@ -63,6 +65,7 @@ import numpy as np
 from train.io import save_figure, write_json
 
 BATCHES = (1, 64, 1024)
+PCRB_ROW = "pcrb, one episode"  # the bound's computation (its own play of the episode and its recursion)
 
 
 def _rate(fn: Callable[[], None], min_seconds: float) -> float:
@@ -507,6 +510,9 @@ def bench_scenario(name: str, min_seconds: float, batches=BATCHES) -> list[dict]
             label, factory, ours, our_factory = PEERS[name]
             add(ours, batch, _rate(our_factory(batch), min_seconds))
             add(label, batch, _rate(factory(batch), min_seconds))
+    # the posterior Cramér-Rao bound of one episode (coloc_env.pcrb: the play and the recursion), per env-step
+    steps = coloc_env.make_core(name, batch=1).horizon
+    add(PCRB_ROW, 1, steps * _rate(lambda: coloc_env.pcrb(name, episodes=1, seed=0), min_seconds))
     if name in EXTRA_BENCHES:
         rows += EXTRA_BENCHES[name](min_seconds)
     return rows
