@@ -11,9 +11,15 @@ Estimation problem (the one the ``ukf_ccl`` / ``ukf_dcl`` / ``dead_reckoning`` f
 |             | heading integrated from the measured turn rate as inputs, w ~ N(0, Q_i(k)) the         |
 |             | filters' :class:`estimators.models.OdometryDisplacement` noise (speed noise along the  |
 |             | track, the heading variance k dt^2 sigma_omega^2 across it; none with              |
-|             | ``heading_noise`` off). Q_i(k) depends on the drawn readings, so the D-terms average     |
-|             | Q^-1 over the episodes; at k = 0 (heading known) Q is rank 1 and is regularized        |
-|             | (:mod:`estimators.bounds`)                                                             |
+|             | ``heading_noise`` off: Q rank 1). F = I; Q_i(k) depends only on the inputs             |
+| episodes    | one recursion per episode (covariance form, exact for the singular Q), then the mean   |
+|             | of the episodes' bounds. What differs between the episodes is what the estimator      |
+|             | observes (its odometry, which range was taken to whom); the truth (the circles) is the |
+|             | same in every episode. So each episode's bound is the PCRB conditioned on observed      |
+|             | quantities, a valid bound on that episode's conditional MSE, and their mean bounds the |
+|             | MSE (tighter than averaging the D-terms first: 6.3 vs 5.4 m^2 for the local bound at k |
+|             | = 199, 4 episodes; with ``heading_noise`` off the averaged rank-1 Q of headings that   |
+|             | differ would leave almost no process noise, 0.05 m^2)                                  |
 | readings    | the range each step's measuring platform took to the partner its sensing chose (as    |
 |             | recorded: [[B, -B], [-B, B]], B = u u^T / range_noise_var at the true positions);      |
 |             | the anchors' fixes, I / fix_noise_std^2, every step                                     |
@@ -64,7 +70,7 @@ def problem(core, record) -> BoundProblem:
     centralized = Recursion(P0, info, None, Q, positions)
     local = [Recursion(P0[:2, :2], own[:, i], None, q[:, i], np.array([[0, 1]])) for i in range(N)]
     agents = [np.array([i]) for i in range(N)]
-    result = BoundProblem(centralized, local, agents)
+    result = BoundProblem(centralized, local, agents, per_episode=True)
     if delivered_kind(core.composition.backend.name) == "nothing":
         result.delivered, result.delivered_agents = local, agents
     else:
