@@ -42,7 +42,17 @@ minimum with the default sensing and backend decisions
 blocks, so a preset's own codec is bypassed: its world and seeds are the preset's);
 ``"random"`` draws every block uniformly from a generator seeded with ``seed``; a callable
 ``act(observations) -> actions`` (dicts over the agents, as the PettingZoo env passes
-them) is called per copy and stepped through the scenario's own codec.
+them) is stepped through the scenario's own codec, and a sequence of E callables plays one
+per episode (``coloc evaluate`` replays the actions its rows played that way). Under a
+policy that reads no observation (a name, or a callable with ``blind = True``) a backend
+whose messages do not define the bound is not run (the world's readings never depend on
+it), unless the preset's own step reads the backend's result (``gps_denied_nbp``); the
+``nlos_orbit`` neighbours' packets are then asked of the network by the bound model's
+stand-in (the same counter-based draws as the backend's call: a test holds them equal).
+
+Where each episode is a problem of its own (``circles``: what differs between episodes is
+observed by the estimator; ``mrclam``: recorded windows), the bound model asks for one
+recursion per episode and the mean of their bounds (``BoundProblem.per_episode``).
 
 ``mrclam`` (recorded data) has no generative model: its bound is model-based (the
 world's calibrated noise model along each recorded window's Vicon trajectory, one recursion
