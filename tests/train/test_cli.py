@@ -100,7 +100,7 @@ def test_bench_quick_runs_and_writes_json(tmp_path):
     rows = read_json(str(tmp_path / "bench" / "bench.json"))["rows"]
     ours = [r for r in rows if r["scenario"] == "bandwidth_fusion"]
     assert {r["what"] for r in ours} == {"parallel_env loop", "supersuit concat_vec_envs_v1", "vector_env",
-                                         "estimator step"}
+                                         "estimator step", "pcrb, one episode"}
     assert {r["batch"] for r in ours if r["what"] == "vector_env"} == {1, 64, 1024}
     assert {r["batch"] for r in ours if r["what"] == "estimator step"} == {1, 64, 1024}
     assert all("env_time_over_estimator" in r for r in ours if r["what"] == "vector_env")
