@@ -27,3 +27,14 @@ def test_preset_rows_carry_rmse_bounds_and_the_nees_band(scenario):
     assert row["pcrb_model_based"] is False
     assert row["pcrb_local"] > row["pcrb_centralized"]
     assert row["pcrb_delivered"] is None  # both presets' messages carry estimates
+
+
+def test_the_leaderboard_shows_the_bounds_table(tmp_path):
+    from train.leaderboard import record
+
+    row = evaluate_policy("bandwidth_fusion", "paper", 2)
+    record(row, str(tmp_path), "zhao2020", draw=False)
+    text = (tmp_path / "leaderboard.md").read_text()
+    assert "Estimation bounds (posterior Cramér-Rao" in text
+    line = next(line for line in text.splitlines() if line.startswith("| paper |") and "%" in line)
+    assert f"{row['rmse']:.4g}" in line and f"{row['efficiency']:.3g}" in line
