@@ -387,6 +387,8 @@ def cmd_study(args) -> int:
             line = (f"  {backend:<16} {key:>10}: error {cell['position_error']['mean']:.4g} "
                     f"+- {cell['position_error']['ci95']:.2g} m, {cell['messages_per_step']:.3g} messages and "
                     f"{cell['floats_per_step']:.3g} floats per agent-step")
+            if cell.get("efficiency") is not None:  # RMSE over sqrt(pcrb_centralized): docs/bounds.md
+                line += f"; RMSE {cell['rmse']:.3g} m = {cell['efficiency']:.3g} x the bound"
             if backend != reference:
                 pair = metrics["paired"][backend][key]
                 line += f"; vs {reference} {pair['mean']:+.3g} +- {pair['ci95']:.2g} m ({pair['verdict']})"
