@@ -15,6 +15,9 @@ Which backends' messages define ``delivered`` (:func:`delivered_kind`):
 |             | of z_i(k) to the leader), ``afge``, ``dfir`` | step, from its arrival (lag-augmented)        |
 |             | (the neighbours' RSS/AOA packets)          |                                               |
 | nothing     | ``dead_reckoning``                         | = local                                       |
+
+``kalman`` and ``centralized_lmmse`` fuse at the leader and every agent reports the leader's estimate: their
+delivered bound is the leader's, for every agent (:data:`SHARED_AT_LEADER`).
 | estimates   | every other backend                        | left out (see :mod:`coloc_env.bounds`)        |
 """
 
@@ -23,6 +26,9 @@ from __future__ import annotations
 import importlib
 
 READING_PACKETS = frozenset({"kalman", "centralized_lmmse", "afge", "dfir"})
+# backends whose one estimate is the leader's (agent 0's), reported by every agent: their delivered bound is the
+# leader's for every agent (the followers' own information is not what their reported estimate uses)
+SHARED_AT_LEADER = frozenset({"kalman", "centralized_lmmse"})
 NOTHING_SENT = frozenset({"dead_reckoning"})
 MODULES = {"drift": "target", "target_cv": "target", "circles": "circles", "gps_denied": "gps_denied",
            "nlos_orbit": "nlos_orbit", "mrclam": "mrclam"}

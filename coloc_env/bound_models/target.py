@@ -14,7 +14,8 @@ Estimation problem (every agent estimates one shared state x, n = 6 or the drift
 | local       | agent i's own z_i only                                                                 |
 | delivered   | (``kalman``, ``centralized_lmmse``: followers' packets of z_i(k) to the leader) the   |
 |             | receiver's own z plus each packet's z_t(k) from the step it arrived, as a reading of   |
-|             | x(k) (a lag-augmented state); a follower receives nothing (delivered = local)          |
+|             | x(k) (a lag-augmented state); every agent reports the leader's estimate, so the       |
+|             | leader's delivered bound is every agent's                                              |
 | position    | the world's ``position_index`` components (the ``position_error`` coordinates), the  |
 |             | same bound for every agent                                                             |
 
@@ -27,7 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from coloc_env.bound_models import delivered_kind, estimates_reason
+from coloc_env.bound_models import SHARED_AT_LEADER, delivered_kind, estimates_reason
 from coloc_env.bounds import BoundProblem, Recursion, delivered_recursion
 from estimators.bounds import linear_information
 
@@ -64,6 +65,8 @@ def problem(core, record) -> BoundProblem:
             at_s = arrival[..., s].copy()
             at_s[..., s] = 0  # its own reading, at once
             result.delivered.append(delivered_recursion(P0, F, Q, sender_info, at_s, lags, one))
+        if core.composition.backend.name in SHARED_AT_LEADER:  # every agent reports the leader's estimate
+            result.delivered, result.delivered_agents = result.delivered[:1], [np.arange(N)]
     else:
         result.delivered_reason = estimates_reason(core.composition.backend.name)
     return result
