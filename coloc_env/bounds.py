@@ -4,14 +4,15 @@
 >>> bounds = coloc_env.pcrb("target_cv/bernoulli_delay/kalman", episodes=8, seed=0)
 >>> bounds["centralized"].shape          # (K, N), m^2
 
-:func:`pcrb` builds the composition's batched core with E copies, resets copy e with
-seed ``seed + e`` (the episode an evaluation's ``env.reset(seed=seed + e)`` plays),
-steps it under the policy, and records what the world read (the ranges taken, the
-fixes that existed) and what the network delivered (each packet's delay). The world's
-bound model (:mod:`coloc_env.bound_models`, one module per world, each stating its
-estimation problem) turns that record into the per-step Fisher information, transition
-Jacobians and process noises; :func:`estimators.bounds.filtering_bound` runs one
-recursion on the D-terms averaged over the E episodes (Tichavský, Muravchik and
+:func:`pcrb` builds one copy of the composition's core per episode, resets episode e with
+seed ``seed + e`` (the episode an evaluation's ``env.reset(seed=seed + e)`` plays; one copy
+each, so any backend's batching is beside the point), steps it under the policy, and
+records what the world read (the ranges taken, the fixes that existed) and what the
+network delivered (each packet's delay). The world's bound model
+(:mod:`coloc_env.bound_models`, one module per world, each stating its estimation
+problem) turns that record into the per-step Fisher information, transition Jacobians
+and process noises; :func:`estimators.bounds.filtering_bound` runs one recursion on the
+D-terms averaged over the E episodes (Tichavský, Muravchik and
 Nehorai 1998). Three bounds, each (K, N) in m^2 (agent n's trace of the bound's
 position block at step k, after the readings of k; a shared target's bound for every
 agent):
@@ -27,13 +28,16 @@ agent):
 |                | (a lag-augmented state [x(k), ..., x(k - D)], D the network's longest delay)   |
 
 ``delivered`` is defined where a packet carries its sender's reading of the step it is
-stamped with (the ``kalman`` and ``centralized_lmmse`` backends' packets of z_i(k), the
+stamped with (the ``kalman`` and ``centralized_lmmse`` backends' packets of z_i(k), whose
+leader's bound is every agent's since every agent reports the leader's estimate; the
 ``nlos_orbit`` neighbours' RSS/AOA packets to ``afge`` and ``dfir``), and for backends that
 send nothing (``dead_reckoning``: delivered = local). It is left out where a message
 carries an estimate (``prediction_compensation``, ``bandwidth_fusion``, ``dnbp``'s
-beliefs, ``ukf_dcl``'s relayed location information, ``ukf_ccl``, ``range_ls``): an
+beliefs, ``ukf_dcl``'s and ``ukf_se2``'s relayed location information, ``range_ls``): an
 estimate summarizes the sender's whole history, and what that is worth to the receiver
 depends on what the sender itself received, so a per-reading account would be no bound.
+(``ukf_ccl`` sends readings to its centre, but its per-slot broadcasts are not mapped to
+the readings they carry here yet: left out as well.)
 By construction local >= delivered >= centralized (each adds information to the one before).
 
 Policies: ``"always"`` and ``"silent"`` play every transport decision at its maximum /
