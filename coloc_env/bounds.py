@@ -30,15 +30,16 @@ agent):
 ``delivered`` is defined where a packet carries its sender's reading of the step it is
 stamped with (the ``kalman`` and ``centralized_lmmse`` backends' packets of z_i(k), whose
 leader's bound is every agent's since every agent reports the leader's estimate; the
-``nlos_orbit`` neighbours' RSS/AOA packets to ``afge`` and ``dfir``), and for backends that
+``nlos_orbit`` neighbours' RSS/AOA packets to ``afge`` and ``dfir``; ``ukf_ccl``'s ranges and
+fixes to its centre, agent 0, whose estimates every agent reads), and for backends that
 send nothing (``dead_reckoning``: delivered = local). It is left out where a message
 carries an estimate (``prediction_compensation``, ``bandwidth_fusion``, ``dnbp``'s
 beliefs, ``ukf_dcl``'s and ``ukf_se2``'s relayed location information, ``range_ls``): an
 estimate summarizes the sender's whole history, and what that is worth to the receiver
 depends on what the sender itself received, so a per-reading account would be no bound.
-(``ukf_ccl`` sends readings to its centre, but its per-slot broadcasts are not mapped to
-the readings they carry here yet: left out as well.)
-By construction local >= delivered >= centralized (each adds information to the one before).
+By construction local >= delivered >= centralized (each adds information to the one before),
+for the receiver's own columns; where the delivered bound is a fusing agent's (a shared estimate), another
+agent's local bound can be below it (its own fixes need not reach the centre).
 
 Policies: ``"always"`` and ``"silent"`` play every transport decision at its maximum /
 minimum with the default sensing and backend decisions
@@ -121,13 +122,15 @@ class Record:
 
     ``readings[k]`` the world's :class:`~coloc_env.worlds.base.Readings` of k (one copy); ``packets[k]`` the delay
     arrays (N, N) [t, s] of every ``Network.packets`` call stamped k; ``node_packets[k]`` the (N, J) delays of the
-    ``Network.node_packets`` calls stamped k.
+    ``Network.node_packets`` calls stamped k; ``broadcasts[k]`` each ``Network.broadcast`` call's delivered
+    matrix (N, N) [t, s] by its slot.
     """
 
     steps: int
     readings: list = field(default_factory=list)
     packets: list = field(default_factory=list)
     node_packets: list = field(default_factory=list)
+    broadcasts: list = field(default_factory=list)  # [k]: {slot: delivered (N, N) [t, s]} of Network.broadcast
 
     def first_arrival(self, kind: str = "packets") -> np.ndarray | None:
         """(K, S, R) int: the earliest delay of the packet stamped k from sender s at receiver r over every call of
@@ -153,8 +156,10 @@ def _record_play(core, episode_rng: np.random.Generator, policy, rng: np.random.
     record.readings = [None] * steps
     record.packets = [[] for _ in range(steps)]
     record.node_packets = [[] for _ in range(steps)]
+    record.broadcasts = [{} for _ in range(steps)]
     world, network = core.world, core.network
     world_readings, packets, node_packets = world.readings, network.packets, network.node_packets
+    broadcast = network.broadcast
 
     def stamp(k) -> int:
         return int(np.max(np.asarray(k)))
@@ -180,7 +185,15 @@ def _record_play(core, episode_rng: np.random.Generator, policy, rng: np.random.
             record.node_packets[k].append(np.array(delay[0]))
         return delay
 
+    def on_broadcast(senders, listening, floats, slot=0):
+        delivered = broadcast(senders, listening, floats, slot)
+        k = stamp(network._k)
+        if k < steps:
+            record.broadcasts[k][slot] = np.array(delivered[0])
+        return delivered
+
     world.readings, network.packets, network.node_packets = readings, on_packets, on_node_packets
+    network.broadcast = on_broadcast
     # what the world reads depends on the actions only, never on the backend's state: under a policy that reads no
     # observation (a name, or a callable marked ``blind``), a backend whose messages do not define the bound need
     # not run, nor one whose packets the world's own nodes send (the bound model's stand-in asks the network)
@@ -201,7 +214,7 @@ def _record_play(core, episode_rng: np.random.Generator, policy, rng: np.random.
         core.reset([episode_rng])
         _play(core, steps, policy, rng)
     finally:
-        del world.readings, network.packets, network.node_packets
+        del world.readings, network.packets, network.node_packets, network.broadcast
         if idle:
             del core.backend.step, core.backend.receive
     return record

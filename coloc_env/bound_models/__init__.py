@@ -13,11 +13,13 @@ Which backends' messages define ``delivered`` (:func:`delivered_kind`):
 |-------------|--------------------------------------------|-----------------------------------------------|
 | readings    | ``kalman``, ``centralized_lmmse`` (packets  | own readings + each packet's reading, at its  |
 |             | of z_i(k) to the leader), ``afge``, ``dfir`` | step, from its arrival (lag-augmented)        |
-|             | (the neighbours' RSS/AOA packets)          |                                               |
+|             | (the neighbours' RSS/AOA packets),          |                                               |
+|             | ``ukf_ccl`` (each range and fix sent to the | the centre's: every odometry (its model), the |
+|             | centre, agent 0)                            | readings that reached it (:func:`centre_received`) |
 | nothing     | ``dead_reckoning``                         | = local                                       |
 
-``kalman`` and ``centralized_lmmse`` fuse at the leader and every agent reports the leader's estimate: their
-delivered bound is the leader's, for every agent (:data:`SHARED_AT_LEADER`).
+``kalman``, ``centralized_lmmse`` and ``ukf_ccl`` fuse at the leader (the centre) and every agent reports its
+estimate: their delivered bound is the leader's, for every agent (:data:`SHARED_AT_LEADER`).
 | estimates   | every other backend                        | left out (see :mod:`coloc_env.bounds`)        |
 """
 
@@ -25,10 +27,11 @@ from __future__ import annotations
 
 import importlib
 
-READING_PACKETS = frozenset({"kalman", "centralized_lmmse", "afge", "dfir"})
+READING_PACKETS = frozenset({"kalman", "centralized_lmmse", "afge", "dfir", "ukf_ccl"})
 # backends whose one estimate is the leader's (agent 0's), reported by every agent: their delivered bound is the
 # leader's for every agent (the followers' own information is not what their reported estimate uses)
-SHARED_AT_LEADER = frozenset({"kalman", "centralized_lmmse"})
+SHARED_AT_LEADER = frozenset({"kalman", "centralized_lmmse", "ukf_ccl"})
+CENTRE = 0  # the fusion centre of the ``central`` message kind (coloc_env.networks.base.CENTRE)
 NOTHING_SENT = frozenset({"dead_reckoning"})
 MODULES = {"drift": "target", "target_cv": "target", "circles": "circles", "gps_denied": "gps_denied",
            "nlos_orbit": "nlos_orbit", "mrclam": "mrclam"}
@@ -46,6 +49,18 @@ def delivered_kind(backend_name: str) -> str:
 def estimates_reason(backend_name: str) -> str:
     return (f"{backend_name}'s messages carry estimates (the sender's whole history), not readings: a per-reading "
             "account of what arrived bounds no estimator that fuses them")
+
+
+def centre_received(record, k: int, pairs, fixes, N: int):
+    """``ukf_ccl``'s centre at step k: which of the step's range readings ``pairs`` [(m, n), ...] (in the order
+    the backend sends them: row-major over the valid pairs, its broadcast slot j the j-th) and which fixes of
+    ``fixes`` [i, ...] (slot N * N + i) reached agent 0; its own readings always. Returns (range flags, fix flags)."""
+    calls = record.broadcasts[k]
+
+    def reached(sender: int, slot: int) -> bool:
+        return sender == CENTRE or (slot in calls and bool(calls[slot][sender, CENTRE]))
+
+    return ([reached(m, j) for j, (m, _) in enumerate(pairs)], [reached(i, N * N + i) for i in fixes])
 
 
 def stand_in(core):

@@ -26,8 +26,10 @@ Estimation problem (the one the ``ukf_ccl`` / ``ukf_dcl`` / ``dead_reckoning`` f
 | centralized | all of them                                                                            |
 | local       | each platform's own odometry and (an anchor) its own fixes; a range to another        |
 |             | platform carries no information on its own without that platform's position           |
-| delivered   | ``dead_reckoning`` (sends nothing): = local; the other backends' messages carry        |
-|             | estimates or relayed location information (left out, :mod:`coloc_env.bounds`)         |
+| delivered   | ``dead_reckoning`` (sends nothing): = local; ``ukf_ccl``: the centre's (every          |
+|             | odometry, the ranges and fixes whose message reached agent 0), every platform's; the  |
+|             | other backends' messages carry estimates or relayed location information (left out,   |
+|             | :mod:`coloc_env.bounds`)                                                               |
 
 This is the filters' model, not the world's truth: the truth flies exact circles, and the heading
 error the filters integrate is correlated over time, which the per-step Q does not represent.
@@ -37,7 +39,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from coloc_env.bound_models import delivered_kind, estimates_reason
+from coloc_env.bound_models import centre_received, delivered_kind, estimates_reason
 from coloc_env.bounds import BoundProblem, Recursion
 from estimators.bounds import fix_information, pair_information, range_information
 
@@ -60,12 +62,23 @@ def problem(core, record) -> BoundProblem:
     info = np.zeros((K, n, n))
     for i in range(N):
         info[:, 2 * i:2 * i + 2, 2 * i:2 * i + 2] = own[:, i]
+    central = core.composition.backend.name == "ukf_ccl"  # the centre's information, for its delivered bound
+    centre = np.zeros((K, n, n)) if central else None
     for step in range(K):
         valid = record.readings[step].range_valid[0]
-        for m, j in zip(*np.nonzero(valid), strict=True):
+        pairs = list(zip(*np.nonzero(valid), strict=True))
+        if central:
+            fixes = np.flatnonzero(record.readings[step].fix_valid[0])
+            got_range, got_fix = centre_received(record, step, pairs, fixes, N)
+            for i, got in zip(fixes, got_fix, strict=True):
+                if got:
+                    centre[step, 2 * i:2 * i + 2, 2 * i:2 * i + 2] += own[step, i]
+        for r, (m, j) in enumerate(pairs):
             block = range_information(world.truth[step, m], world.truth[step, j], c.range_noise_var)
             idx = np.r_[2 * m:2 * m + 2, 2 * j:2 * j + 2]
             info[step][np.ix_(idx, idx)] += pair_information(block)
+            if central and got_range[r]:
+                centre[step][np.ix_(idx, idx)] += pair_information(block)
     positions = np.arange(n).reshape(N, 2)
     centralized = Recursion(P0, info, None, Q, positions)
     local = [Recursion(P0[:2, :2], own[:, i], None, q[:, i], np.array([[0, 1]])) for i in range(N)]
@@ -73,6 +86,8 @@ def problem(core, record) -> BoundProblem:
     result = BoundProblem(centralized, local, agents, per_episode=True)
     if delivered_kind(core.composition.backend.name) == "nothing":
         result.delivered, result.delivered_agents = local, agents
+    elif central:  # every platform reads its estimate at the centre
+        result.delivered, result.delivered_agents = [Recursion(P0, centre, None, Q, positions)], [np.arange(N)]
     else:
         result.delivered_reason = estimates_reason(core.composition.backend.name)
     return result

@@ -15,15 +15,16 @@ Estimation problem (the one the ``ukf_ccl`` / ``dnbp`` / ``range_ls`` / ``dead_r
 |             | the true positions)                                                                    |
 | centralized | all of them                                                                            |
 | local       | each UAV's own accelerometer and own fixes                                             |
-| delivered   | ``dead_reckoning``: = local; the other backends' messages carry beliefs or estimates   |
-|             | (left out, :mod:`coloc_env.bounds`)                                                    |
+| delivered   | ``dead_reckoning``: = local; ``ukf_ccl``: the centre's (every accelerometer, the      |
+|             | ranges and fixes whose message reached agent 0), every UAV's; the other backends'      |
+|             | messages carry beliefs or estimates (left out, :mod:`coloc_env.bounds`)                |
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from coloc_env.bound_models import delivered_kind, estimates_reason
+from coloc_env.bound_models import centre_received, delivered_kind, estimates_reason
 from coloc_env.bounds import BoundProblem, Recursion
 from estimators.bounds import fix_information, pair_information, range_information
 
@@ -44,12 +45,23 @@ def problem(core, record) -> BoundProblem:
     info = np.zeros((K, n, n))
     for i in range(N):
         info[:, 4 * i:4 * i + 4, 4 * i:4 * i + 4] = own[:, i]
+    central = core.composition.backend.name == "ukf_ccl"  # the centre's information, for its delivered bound
+    centre = np.zeros((K, n, n)) if central else None
     for step in range(K):
-        pairs = np.triu(world.adjacency[0, step], 1)  # one reading per unordered pair
+        pairs = list(zip(*np.nonzero(np.triu(world.adjacency[0, step], 1)), strict=True))  # one per unordered pair
         p = world.truth[0, step, :, :2]
-        for a, b in zip(*np.nonzero(pairs), strict=True):
+        if central:
+            fixes = np.flatnonzero(normal[step])
+            got_range, got_fix = centre_received(record, step, pairs, fixes, N)
+            for i, got in zip(fixes, got_fix, strict=True):
+                if got:
+                    centre[step, 4 * i:4 * i + 4, 4 * i:4 * i + 4] += own[step, i]
+        for r, (a, b) in enumerate(pairs):
             idx = np.r_[4 * a:4 * a + 2, 4 * b:4 * b + 2]
-            info[step][np.ix_(idx, idx)] += pair_information(range_information(p[a], p[b], c.range_std**2))
+            block = pair_information(range_information(p[a], p[b], c.range_std**2))
+            info[step][np.ix_(idx, idx)] += block
+            if central and got_range[r]:
+                centre[step][np.ix_(idx, idx)] += block
     steps = max(K - 1, 0)
     positions = np.array([[4 * i, 4 * i + 1] for i in range(N)])
     centralized = Recursion(P0, info, np.broadcast_to(F, (steps, n, n)), np.broadcast_to(Q, (steps, n, n)), positions)
@@ -59,6 +71,9 @@ def problem(core, record) -> BoundProblem:
     result = BoundProblem(centralized, local, agents)
     if delivered_kind(core.composition.backend.name) == "nothing":
         result.delivered, result.delivered_agents = local, agents
+    elif central:  # every UAV reads its estimate at the centre
+        result.delivered = [Recursion(P0, centre, centralized.F, centralized.Q, positions)]
+        result.delivered_agents = [np.arange(N)]
     else:
         result.delivered_reason = estimates_reason(core.composition.backend.name)
     return result
