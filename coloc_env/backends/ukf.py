@@ -46,6 +46,8 @@ Arguments (``coloc_env.backends.UkfCcl`` / ``UkfDcl``)
 |-------------|--------------|---------------------------------------------------|
 | ukf_lambda  | 0.0          | > -2N (the paper gives none; 0 = filterpy's)      |
 | truncation  | "consistent" | ukf_dcl only: "consistent", "paper"               |
+| motion      | "heading"    | "heading", "displacement": on odometry, the heading error in the state or not |
+|             |              | (:mod:`coloc_env.backends.heading`)               |
 """
 
 from __future__ import annotations
@@ -57,6 +59,7 @@ import numpy as np
 
 import estimators.ukf_relay as ukf
 from coloc_env.backends.base import Backend, measurement_list, position_blocks
+from coloc_env.backends.heading import MOTIONS, ukf_motion_model
 from coloc_env.networks.base import CENTRE
 from coloc_env.parts import BACKENDS, PartConfig, check_choice, check_range
 from estimators.kalman import joseph_update
@@ -81,9 +84,11 @@ class UkfCcl(PartConfig):
     requires = (frozenset({"range"}),)
     message_kind = "central"
     ukf_lambda: float = 0.0
+    motion: str = "heading"
 
     def check(self, prefix: str) -> None:
         check_range(f"{prefix}ukf_lambda", self.ukf_lambda, -2.0, 1e6, low_open=True)
+        check_choice(f"{prefix}motion", self.motion, MOTIONS)
 
     def build(self, world, network, batch: int) -> Backend:
         return JointUkfBackend(self, world, network, batch, distributed=False)
@@ -99,10 +104,12 @@ class UkfDcl(PartConfig):
     message_kind = "chain"
     ukf_lambda: float = 0.0
     truncation: str = "consistent"
+    motion: str = "heading"
 
     def check(self, prefix: str) -> None:
         check_range(f"{prefix}ukf_lambda", self.ukf_lambda, -2.0, 1e6, low_open=True)
         check_choice(f"{prefix}truncation", self.truncation, ("consistent", "paper"))
+        check_choice(f"{prefix}motion", self.motion, MOTIONS)
 
     def build(self, world, network, batch: int) -> Backend:
         return JointUkfBackend(self, world, network, batch, distributed=True)
@@ -113,7 +120,8 @@ class JointUkfBackend(Backend):
         super().__init__(config, world, network, batch)
         self.distributed = distributed
         N = self.num_agents
-        d = self.d = world.motion_model.state_dim
+        self.motion_model = ukf_motion_model(config.motion, world)
+        d = self.d = self.motion_model.state_dim
         if config.ukf_lambda <= -2 * N:
             raise ValueError(f"backend.ukf_lambda must be > -2N = {-2 * N}, got {config.ukf_lambda!r}")
         self.mean = np.zeros((self.batch, N, d))
@@ -125,6 +133,8 @@ class JointUkfBackend(Backend):
 
     def reset(self, rngs, idx) -> None:
         mean, cov = self.world.initial_belief()
+        if self.motion_model is not self.world.motion_model:  # the heading error joins each block
+            mean, cov = self.motion_model.augment(mean, cov)
         N, d = self.num_agents, self.d
         self.mean[idx] = mean[idx]
         joint = np.zeros((len(idx), d * N, d * N))
@@ -201,7 +211,7 @@ class JointUkfBackend(Backend):
                     self.mean[used], self.cov[used] = flat.reshape(len(used), N, d), cov
 
     def predict(self, inputs) -> None:
-        self.mean, self.cov = predict_joint(self.world.motion_model, self.mean, self.cov, inputs)
+        self.mean, self.cov = predict_joint(self.motion_model, self.mean, self.cov, inputs)
 
     def position(self) -> np.ndarray:
         return self.mean[..., :2]

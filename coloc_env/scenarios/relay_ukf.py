@@ -235,7 +235,8 @@ class RelayUKFConfig:
         network = Relay(comm_range=self.comm_range, max_hops=self.max_hops, loss_at_zero=self.loss_at_zero,
                         loss_length=self.loss_length, routing="per_holder", hop_cost=self.hop_cost,
                         hop_cost_per_m2=self.hop_cost_per_m2)
-        return world, network, UkfDcl(ukf_lambda=self.ukf_lambda, truncation=self.truncation)
+        return world, network, UkfDcl(ukf_lambda=self.ukf_lambda, truncation=self.truncation,
+                                       motion="displacement")  # wang2019: position-only state
 
     def validate(self) -> None:
         check_range("num_platforms", self.num_platforms, 2, 16, integer=True)

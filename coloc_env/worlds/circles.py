@@ -184,6 +184,11 @@ class CirclesWorld(World):
         """True distances between the platforms at k (B, N, N), from :attr:`distance_table`."""
         return self.distance_table[self.k]
 
+    def turn_rate_noise_var(self) -> float:
+        """sigma_omega^2 (rad^2/s^2) of the turn-rate readings as the backends assume it: 0 with
+        ``heading_noise=False`` (the model that omits the integrated heading's error)."""
+        return self.config.turn_rate_noise_std**2 if self.config.heading_noise else 0.0
+
     def initial_belief(self):
         B, N = self.batch, self.num_agents
         mean = np.broadcast_to(self.truth[0], (B, N, 2)).copy()

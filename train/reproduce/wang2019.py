@@ -72,7 +72,7 @@ def composition_parts(config: RelayUKFConfig) -> tuple:
     """
     world, links, dcl = config.parts()  # the relay_ukf preset's parts
     pairs = {"IL": (Ideal(), DeadReckoning()),
-             "CCL": (Ideal(), UkfCcl(ukf_lambda=config.ukf_lambda)),
+             "CCL": (Ideal(), UkfCcl(ukf_lambda=config.ukf_lambda, motion=dcl.motion)),
              "DCL": (links, dcl)}
     return world, pairs
 

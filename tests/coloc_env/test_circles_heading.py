@@ -1,0 +1,78 @@
+"""ukf_ccl / ukf_dcl on circles: the heading-error model is consistent at the world's defaults, the
+position-only one is not, and the heading model is no less accurate (paired seeded episodes)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import stats
+
+import coloc_env
+from coloc_env.scenarios.composed import ComposedScenario
+
+EPISODES, STEPS, SEED = 20, 400, 100
+TRANSIENT = 50  # the first steps after a start from known positions are conservative (NEES below the band)
+
+
+def run(backend: str, motion: str, episodes: int = EPISODES, steps: int = STEPS, **world):
+    """Per-step own-position NEES (K, E, N) and per-episode mean squared position error (E,), `always` policy."""
+    spec = coloc_env.compose(world={"name": "circles", **world}, network="ideal",
+                             backend={"name": backend, "motion": motion}, horizon=steps)
+    core = ComposedScenario(spec, batch=episodes)
+    core.reset([np.random.default_rng(SEED + e) for e in range(episodes)])
+    one = core.action_vector("maximum")
+    actions = np.broadcast_to(one, (episodes, core.num_agents, one.size))
+    nees, squared = [], []
+    for _ in range(steps):
+        core.step(actions)
+        info = core.info()
+        diff = info["estimated_position"] - info["true_position"]
+        cov = core.backend.posterior_position_cov
+        nees.append(np.einsum("kna,knab,knb->kn", diff, np.linalg.inv(cov), diff))
+        squared.append(np.sum(diff**2, axis=-1))
+    return np.array(nees), np.mean(squared, axis=(0, 2))
+
+
+def band_misses(nees: np.ndarray) -> tuple[int, int]:
+    """(misses, allowed): (step, agent) values after the transient whose E-episode mean NEES lies outside the
+    chi-square(2E)/E 95 % band, and the 99.9 % quantile of Binomial(count, 0.05), the misses chance allows."""
+    mean = nees[TRANSIENT:].mean(axis=1)
+    lo, hi = stats.chi2.ppf([0.025, 0.975], 2 * EPISODES) / EPISODES
+    return int(np.sum((mean < lo) | (mean > hi))), int(stats.binom.ppf(0.999, mean.size, 0.05))
+
+
+@pytest.fixture(scope="module")
+def ccl_runs():
+    return {motion: run("ukf_ccl", motion) for motion in ("heading", "displacement")}
+
+
+def test_heading_model_is_consistent_and_position_only_is_not(ccl_runs):
+    misses, allowed = band_misses(ccl_runs["heading"][0])
+    assert misses <= allowed
+    misses, allowed = band_misses(ccl_runs["displacement"][0])
+    assert misses > allowed
+    assert ccl_runs["displacement"][0].mean() > 2 * ccl_runs["heading"][0].mean()
+
+
+def test_heading_model_is_no_less_accurate(ccl_runs):
+    diff = ccl_runs["heading"][1] - ccl_runs["displacement"][1]
+    upper = diff.mean() + stats.t.ppf(0.975, len(diff) - 1) * diff.std(ddof=1) / np.sqrt(len(diff))
+    assert upper < 0.0
+
+
+def test_dcl_over_ideal_equals_ccl_with_the_heading_model():
+    """Complete chains: UKF-DCL on (x, y, e) blocks is UKF-CCL (the relay's d-dimensional blocks)."""
+    ccl = run("ukf_ccl", "heading", episodes=2, steps=100)[0]
+    dcl = run("ukf_dcl", "heading", episodes=2, steps=100)[0]
+    np.testing.assert_allclose(dcl, ccl, rtol=1e-7)
+
+
+def test_without_turn_rate_noise_both_motions_are_the_same_filter():
+    a = run("ukf_ccl", "heading", episodes=2, steps=100, heading_noise=False)
+    b = run("ukf_ccl", "displacement", episodes=2, steps=100, heading_noise=False)
+    np.testing.assert_array_equal(a[0], b[0])
+
+
+def test_bad_motion_is_refused():
+    with pytest.raises(ValueError, match="motion"):
+        coloc_env.compose(world="circles", network="ideal", backend={"name": "ukf_ccl", "motion": "unicycle"})
