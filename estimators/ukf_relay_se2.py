@@ -109,6 +109,7 @@ from estimators.ukf_relay import ukf_weights
 __all__ = [
     "FactoredCov",
     "ccl_update",
+    "ccl_update_copies",
     "correct_odometry",
     "dcl_update",
     "factor",
@@ -119,6 +120,7 @@ __all__ = [
     "dcl_update_batch",
     "dcl_update_rows",
     "time_update_batch",
+    "time_update_copies",
     "time_update_factored",
     "wrap",
 ]
@@ -318,6 +320,63 @@ def ccl_update(estimate, cov, measuring: int, z, R, measured: int | None = None,
     x_new[:, 2] = wrap(x_new[:, 2])
     P_new = P_r[np.ix_(inverse, inverse)]
     return x_new, 0.5 * (P_new + P_new.T), True
+
+
+def ccl_update_copies(estimate, cov, measuring: int, z, R, measured: int | None = None, landmark=None,
+                      lam: float = 0.0, gate: float | None = None):
+    """:func:`ccl_update` on G copies that share one observation (robot ``measuring``, its target, ``z``) but
+    not their state or noise: ``estimate`` (G, N, 3), ``cov`` (G, 3N, 3N), ``R`` (G, 2, 2).
+
+    The same equations copy by copy (stacked Cholesky factors, sigma points, moments); the gate decides
+    per copy. Returns ``(estimate, cov, applied (G,), nis (G,))``, nis = nu^T Pz^-1 nu of each copy.
+    """
+    x, P = np.asarray(estimate, float), np.asarray(cov, float)
+    G, N = x.shape[:2]
+    _check(N, measuring, measured, landmark)
+    L = 3 * N
+    observed = [measuring] if measured is None else [measuring, measured]
+    order = observed + [i for i in range(N) if i not in observed]
+    idx = (3 * np.asarray(order)[:, None] + np.arange(3)).ravel()
+    x_r, P_r = x.reshape(G, L)[:, idx], P[:, idx][:, :, idx]
+    w = ukf_weights(L, lam)
+    cols = np.sqrt(L + lam) * np.swapaxes(np.linalg.cholesky(P_r), -1, -2)
+    chi = np.concatenate([x_r[:, None], x_r[:, None] + cols, x_r[:, None] - cols], axis=1)  # (G, 2L + 1, L)
+    target = (chi[..., 3:5] if measured is not None
+              else np.broadcast_to(np.asarray(landmark, float), (*chi.shape[:2], 2)))
+    h = observe(chi[..., 0:3], target)
+    dev = h - h[:, :1]
+    dev[..., 1] = wrap(dev[..., 1])
+    mu = np.einsum("p,gpa->ga", w, dev)
+    dz = dev - mu[:, None]
+    Pz = np.einsum("p,gpa,gpb->gab", w, dz, dz) + np.asarray(R, float)
+    Pz = 0.5 * (Pz + np.swapaxes(Pz, -1, -2))
+    nu = np.asarray(z, float) - (h[:, 0] + mu)
+    nu[:, 1] = wrap(nu[:, 1])
+    Pz_inv = np.linalg.inv(Pz)
+    nis = np.einsum("ga,gab,gb->g", nu, Pz_inv, nu)
+    applied = np.ones(G, bool) if gate is None else nis <= gate
+    Pxz = np.einsum("p,gpl,gpa->gla", w, chi - x_r[:, None], dz)
+    K = (Pxz @ Pz_inv) * applied[:, None, None]
+    x_r = x_r + np.einsum("gla,ga->gl", K, nu)
+    KPxz = K @ np.swapaxes(Pxz, -1, -2)
+    P_r = P_r - KPxz - np.swapaxes(KPxz, -1, -2) + K @ Pz @ np.swapaxes(K, -1, -2)
+    inverse = np.argsort(idx)
+    x_new = x_r[:, inverse].reshape(G, N, 3)
+    x_new[..., 2] = wrap(x_new[..., 2])
+    P_new = P_r[:, inverse][:, :, inverse]
+    return x_new, 0.5 * (P_new + np.swapaxes(P_new, -1, -2)), applied, nis
+
+
+def time_update_copies(estimate, cov, odometry, dt: float, odometry_var):
+    """:func:`time_update` on G copies: ``estimate`` (G, N, 3), ``cov`` (G, 3N, 3N), ``odometry`` (N, 2) or
+    (G, N, 2), ``odometry_var`` (G, N, 2)."""
+    new, F, Gm = motion(estimate, np.broadcast_to(odometry, np.shape(estimate)[:-1] + (2,)), dt)
+    G, N = new.shape[:2]
+    blocks = np.asarray(cov, float).reshape(G, N, 3, N, 3)
+    blocks = np.einsum("giab,gibjc,gjdc->giajd", F, blocks, F)
+    blocks[:, np.arange(N), :, np.arange(N), :] += np.moveaxis(_noise(Gm, odometry_var), 0, 1)
+    P = blocks.reshape(G, 3 * N, 3 * N)
+    return new, 0.5 * (P + np.swapaxes(P, -1, -2))
 
 
 def dcl_update(estimate, fcov: FactoredCov, chain, z, R, measured_in_chain: bool = True, landmark=None,

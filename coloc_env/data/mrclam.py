@@ -626,16 +626,132 @@ def calibrate_noise(d: MrclamData, seconds: float = 60.0, gate: float = GATE_999
     }
 
 
+LIKELIHOOD_FACTORS = (4.0, 2.0, 2.0**0.5, 2.0**0.25)  # pattern-search step factors of fit_noise_scales
+LIKELIHOOD_MOVES = 6  # at most this many moves per step factor
+LIKELIHOOD_BOX = 1e3  # each scale stays within a factor of this of its start
+
+
+def _likelihood_costs(d: MrclamData, noise: dict, scales: np.ndarray, steps: int, initial_std: float,
+                      gate: float) -> np.ndarray:
+    """Negative composite log-likelihood (G,) of the Vicon pose errors of UKF-CCL over steps [0, ``steps``).
+
+    One filter per row of ``scales`` (G, 4) = (c_v, c_w, c_r, c_b), run as G stacked copies on the same
+    data: odometry variances c (a + b u'^2), R = diag(c_r (a_r + b_r z_r^2), c_b sigma_b^2), start at the
+    Vicon pose with std ``initial_std``; cost = sum over steps and robots of
+    log det P_ii + e_i^T P_ii^-1 e_i (e_i: robot i's pose error after the step's updates, heading wrapped).
+    """
+    import estimators.ukf_relay_se2 as se2
+
+    scales = np.asarray(scales, float)
+    G, N = len(scales), NUM_ROBOTS
+    white = NoiseModel.from_calibration({**noise, "odometry_inflation": [1.0, 1.0]}, "calibrated",
+                                        inflate_measurements=False)
+    u = white.odometry(d, np.arange(steps))
+    q = white.odometry_var(u)  # (K, N, 2): the white per-step variances, scaled per copy below
+    a_r, b_r = white.range_var
+    x = np.broadcast_to(d.groundtruth[0], (G, N, 3)).copy()
+    P = np.broadcast_to(np.eye(3 * N) * initial_std**2, (G, 3 * N, 3 * N)).copy()
+    cost = np.zeros(G)
+    rows = np.arange(N)
+    R = np.zeros((G, 2, 2))
+    for k in range(steps):
+        s = d.measurements_at(k)
+        for i in range(s.start, s.stop):
+            sub, r = int(d.meas_subject[i]), int(d.meas_robot[i])
+            z = np.array([d.meas_range[i], d.meas_bearing[i]])
+            R[:, 0, 0] = scales[:, 2] * (a_r + b_r * z[0] ** 2)
+            R[:, 1, 1] = scales[:, 3] * white.bearing_var
+            target = {"measured": sub - 1} if sub <= N else {"landmark": d.landmarks[sub - N - 1]}
+            x, P, _, _ = se2.ccl_update_copies(x, P, r, z, R, gate=gate, **target)
+        own = P.reshape(G, N, 3, N, 3)[:, rows, :, rows, :].swapaxes(0, 1)  # (G, N, 3, 3)
+        e = x - d.groundtruth[k]
+        e[..., 2] = se2.wrap(e[..., 2])
+        cost += np.sum(np.linalg.slogdet(own)[1] + np.einsum("gna,gnab,gnb->gn", e, np.linalg.inv(own), e), axis=1)
+        if k + 1 < steps:
+            x, P = se2.time_update_copies(x, P, u[k], d.dt, q[k][None] * scales[:, None, :2])
+    return cost
+
+
+def fit_noise_scales(d: MrclamData, noise: dict, steps: int, initial_std: float = 0.01,
+                     gate: float = GATE_999) -> dict:
+    """Maximum-likelihood scales of the white noise model on the calibration window (steps [0, ``steps``)).
+
+    The per-step shapes of ``noise`` (:func:`calibrate_noise`: corrected odometry, variances a + b u'^2,
+    sigma_r^2 = a_r + b_r r^2, sigma_b) describe one step's error; the errors are correlated over steps
+    and over a burst of sightings, which a filter with white noise cannot represent. The scales
+    (c_v, c_w, c_r, c_b) multiply the four variances so that the filter's covariance describes its error:
+    they minimize :func:`_likelihood_costs`, the composite negative log-likelihood of UKF-CCL's pose errors
+    against Vicon on the window (each step's error taken as N(0, P_ii), the time correlation of the errors
+    ignored: a composite likelihood, whose maximizer is consistent for the marginal model). Search: a
+    compass (pattern) search in log-scale from the moment rules' inflations (``odometry_inflation``,
+    ``measurement_inflation``): the centre c and c with one scale multiplied or divided by f, 9 filters
+    run at once (stacked copies); move to the best; for f in ``LIKELIHOOD_FACTORS`` (at most
+    ``LIKELIHOOD_MOVES`` moves per f). Returns ``likelihood_scale`` [c_v, c_w, c_r, c_b],
+    ``likelihood_cost`` (per step and robot), ``likelihood_start``, ``likelihood_passes``, ``likelihood_steps``
+    and ``likelihood_converged`` (the last factor's pass kept its centre: no compass neighbour is better).
+    Each scale stays within a factor ``LIKELIHOOD_BOX`` of its start: on a window too short to identify a
+    scale (30 s of dataset 6: the ranges add little to the bearings there) the likelihood keeps improving
+    slowly towards that scale's bound.
+    """
+    steps = max(2, min(int(steps), d.steps))
+    key = _fit_key(d, noise, steps, initial_std, gate)
+    if key in _FITS:
+        return dict(_FITS[key])
+    start = np.array([*noise["odometry_inflation"], *noise["measurement_inflation"]], float)
+    grid = np.concatenate([np.zeros((1, 4)), np.eye(4), -np.eye(4)])  # the centre and one move along each axis
+    centre = np.log(start)
+    low, high = centre - np.log(LIKELIHOOD_BOX), centre + np.log(LIKELIHOOD_BOX)
+    passes, best, settled = 0, None, False
+    for f in LIKELIHOOD_FACTORS:
+        settled = False
+        for _ in range(LIKELIHOOD_MOVES):
+            candidates = np.clip(centre + np.log(f) * grid, low, high)
+            cost = _likelihood_costs(d, noise, np.exp(candidates), steps, initial_std, gate)
+            passes += 1
+            j = int(np.argmin(cost))  # ties keep the centre (row 0)
+            best = float(cost[j])
+            if j == 0:
+                settled = True
+                break
+            centre = candidates[j]
+    fit = {"likelihood_scale": [float(c) for c in np.exp(centre)], "likelihood_cost": best / (steps * NUM_ROBOTS),
+           "likelihood_start": [float(c) for c in start], "likelihood_passes": passes,
+           "likelihood_steps": int(steps), "likelihood_converged": settled}
+    if len(_FITS) >= 8:
+        _FITS.clear()
+    _FITS[key] = dict(fit)
+    return fit
+
+
+_FITS: dict = {}  # fit_noise_scales' results by a digest of everything they depend on
+
+
+def _fit_key(d: MrclamData, noise: dict, steps: int, initial_std: float, gate: float) -> str:
+    """Digest of the window's data (steps [0, steps)), the noise shapes and the settings a fit depends on."""
+    import hashlib
+
+    h = hashlib.sha256()
+    sel = d.meas_step < steps
+    for array in (d.odometry[:steps], d.groundtruth[:steps], d.landmarks, d.meas_step[sel], d.meas_robot[sel],
+                  d.meas_subject[sel], d.meas_range[sel], d.meas_bearing[sel]):
+        h.update(np.ascontiguousarray(array).tobytes())
+    names = ("odometry_delay_steps", "odometry_scale", "odometry_var0", "odometry_var_gain", "odometry_inflation",
+             "range_var", "sigma_bearing_p68", "measurement_inflation")
+    h.update(repr(([noise[n] for n in names], d.dt, int(steps), float(initial_std), float(gate),
+                   LIKELIHOOD_FACTORS, LIKELIHOOD_MOVES, LIKELIHOOD_BOX)).encode())
+    return h.hexdigest()
+
+
 CALIBRATION_FRACTION = 0.1  # calibration window of the calibrated model: the first 10 % of the run ...
 CALIBRATION_MIN_S = 60.0  # ... and at least 60 s
 BASELINE_CALIBRATION_S = 60.0  # the baseline model (before issue 9): the first 60 s
-NOISE_MODELS = ("calibrated", "baseline")
+NOISE_MODELS = ("calibrated", "baseline", "likelihood")
 
 
 def calibration_seconds(d: MrclamData, kind: str = "calibrated") -> float:
     """Seconds at the start of ``d`` that :func:`calibrate_noise` fits model ``kind`` on.
 
-    ``"calibrated"``: max(``CALIBRATION_MIN_S``, ``CALIBRATION_FRACTION`` x the duration of
+    ``"calibrated"`` and ``"likelihood"``: max(``CALIBRATION_MIN_S``, ``CALIBRATION_FRACTION`` x the duration of
     ``d``) (75.6 s of dataset 6; 60 s for a run shorter than 600 s); ``"baseline"``:
     ``BASELINE_CALIBRATION_S``. No ground truth after the window enters a filter.
     """
@@ -680,6 +796,11 @@ class NoiseModel:
     b = 0, r = 1, a = (sigma_v^2, sigma_w^2), sigma_r^2 = ``sigma_range``^2 (b_r = 0) and
     sigma_b = ``sigma_bearing`` (1.4826 x MAD, raw commands, constant white noise; these
     special values make each formula return the baseline's numbers exactly).
+    ``kind="likelihood"``: the calibrated model's per-step shapes (delay, scale, a, b, a_r, b_r,
+    sigma_b) with the moment-rule inflations replaced by the maximum-likelihood scales of
+    :func:`fit_noise_scales` on the same window: r = (c_v, c_w), ``range_inflation`` = c_r,
+    ``bearing_var`` = c_b sigma_b^2. The consistent model (the one ``coloc reproduce mrclam``
+    evaluates); its fit runs UKF-CCL filters on the window (seconds, once per run and process).
     ``calibration`` keeps the :func:`calibrate_noise` dict it was built from.
     """
 
@@ -718,6 +839,14 @@ class NoiseModel:
         if kind == "baseline":
             return cls(kind, 0, (1.0, 1.0), (noise["sigma_v"] ** 2, noise["sigma_w"] ** 2), (0.0, 0.0), (1.0, 1.0),
                        (noise["sigma_range"] ** 2, 0.0), 1.0, noise["sigma_bearing"] ** 2, calibration=noise)
+        if kind == "likelihood":
+            if "likelihood_scale" not in noise:
+                raise ValueError("noise_model 'likelihood' needs the calibration's likelihood_scale "
+                                 "(fit_noise_scales; NoiseModel.calibrate(d, 'likelihood') fits it)")
+            c_v, c_w, c_r, c_b = noise["likelihood_scale"]
+            return cls(kind, int(noise["odometry_delay_steps"]), tuple(noise["odometry_scale"]),
+                       tuple(noise["odometry_var0"]), tuple(noise["odometry_var_gain"]), (c_v, c_w),
+                       tuple(noise["range_var"]), c_r, c_b * noise["sigma_bearing_p68"] ** 2, calibration=noise)
         r_r, r_b = noise["measurement_inflation"] if inflate_measurements else (1.0, 1.0)
         return cls(kind, int(noise["odometry_delay_steps"]), tuple(noise["odometry_scale"]),
                    tuple(noise["odometry_var0"]), tuple(noise["odometry_var_gain"]),
@@ -730,7 +859,10 @@ class NoiseModel:
         """Fit on the start of ``d`` (``seconds``, default :func:`calibration_seconds` of ``kind``) and build."""
         _check_kind(kind)
         seconds = calibration_seconds(d, kind) if seconds is None else seconds
-        return cls.from_calibration(calibrate_noise(d, seconds, gate=gate), kind)
+        noise = calibrate_noise(d, seconds, gate=gate)
+        if kind == "likelihood":
+            noise.update(fit_noise_scales(d, noise, int(round(noise["calibration_s"] / d.dt)), gate=gate))
+        return cls.from_calibration(noise, kind)
 
     def odometry(self, d: MrclamData, k) -> np.ndarray:
         """Corrected odometry u'[k] (..., N, 2) at absolute step(s) ``k`` (int or int array) of the run ``d``."""

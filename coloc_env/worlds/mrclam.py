@@ -81,7 +81,9 @@ Arguments (``coloc_env.worlds.Mrclam``)
 | dt                   | 0.1          | [0.01, 1] s: the slice length of the loader's grid                |
 | horizon              | 600          | 1..T-1-start steps (checked against the run at build time)        |
 | start                | None         | None = drawn per episode; 0..T-1-horizon = a fixed first step     |
-| noise_model          | "calibrated" | "calibrated", "baseline" (:class:`~coloc_env.data.mrclam.NoiseModel`) |
+| noise_model          | "calibrated" | "calibrated", "baseline", "likelihood"                            |
+|                      |              | (:class:`~coloc_env.data.mrclam.NoiseModel`; "likelihood" is the  |
+|                      |              | consistent one, its fit runs filters for seconds at build)        |
 | calibration_s        | None         | (0, 3600] s of the run's start the noise is fitted on; None = the model's rule |
 | initial_position_std | 0.01         | [1e-6, 1000] m (smaller: P(0) not numerically definite)           |
 | initial_heading_std  | 0.01         | [1e-6, 10] rad                                                    |
