@@ -5,8 +5,9 @@ the joint covariance array stands for the platforms' rows in the distributed
 filter). Time update: :func:`estimators.models.predict_joint` on the backend's
 motion model (:mod:`coloc_env.backends.heading`: on an odometry world with
 turn-rate noise, ``motion="heading"`` adds each platform's heading error to its
-block, (x, y, e); ``motion="displacement"`` is wang2019's position-only model). Measurement updates, in a fixed order (ranges in row-major order
-of (measuring, measured), then position fixes by agent):
+block, (x, y, e); ``motion="displacement"`` is wang2019's position-only model).
+Measurement updates, in a fixed order (ranges in row-major order of (measuring,
+measured), then position fixes by agent):
 
 * a range m -> n: **ukf_ccl** sends it from m to the fusion centre (agent 0,
   message kind ``central``); if it arrives, the centre applies the UKF-CCL
