@@ -1,4 +1,4 @@
-"""Leaderboards: one table per paper (``OUT/<key>/leaderboard.json`` + a PNG bar chart) and
+"""Leaderboards: one table per paper (``OUT/<key>/leaderboard.json`` + a PNG dot-and-interval chart) and
 ``OUT/leaderboard.md`` gathering every scenario evaluated so far.
 
 Each row is one policy (or reference filter) evaluated by ``coloc evaluate`` on the evaluation
@@ -103,7 +103,7 @@ def record(result: dict, out: str, key: str, draw: bool = True) -> str:
         table[result["policy"]] = result
         write_json(path, table)
         if draw:
-            bar_chart(table, os.path.join(out, key, "leaderboard.png"), key)
+            chart(table, os.path.join(out, key, "leaderboard.png"), key)
         write_text(os.path.join(out, "leaderboard.md"), markdown(out))
     return path
 
@@ -353,52 +353,199 @@ def target_verdict(scenario: str, table: dict) -> str | None:
 
 
 # --- output -------------------------------------------------------------------------------------------
-def bar_chart(table: dict, path: str, key: str) -> None:
-    """The leaderboard's bars with their 95 % intervals. Means spanning more than 10x (``random`` beside the
-    filters) go on a log axis when all are positive; otherwise the bars above 10x the median are left out and
-    named, with their values, in a note under the axes."""
+VERDICT_STYLE = {  # marker colour and legend text of a row by its paired verdict against the strongest baseline
+    "baseline": ("black", "s", "the strongest realizable baseline (the reference of the right panel)"),
+    "beats": ("tab:green", "o", "beats it: paired 95 % interval below 0"),
+    "worse": ("tab:red", "o", "worse: paired 95 % interval above 0"),
+    "open": ("tab:blue", "o", "not distinguishable: the paired 95 % interval holds 0"),
+    "equal": ("tab:purple", "D", "equal to rounding (the same decisions)"),
+    "unpaired": ("0.55", "o", "not paired with the baseline (other seeds or no per-episode costs)"),
+    "bound": ("0.45", "d", "bound: uses what the agents cannot have (not a result)"),
+}
+OFF_SCALE = 10.0  # a row whose mean exceeds this many times the median mean is drawn at the edge, its value written
+
+
+def _style(scenario: str, row: dict, baseline: dict | None) -> str:
+    if baseline is not None and row["policy"] == baseline["policy"]:
+        return "baseline"
+    if _is_bound(row["policy"]):
+        return "bound"
+    result = comparison(scenario, row, baseline)
+    if result is None:
+        return "unpaired"
+    if result.get("equal"):
+        return "equal"
+    return "beats" if result["high"] < 0 else "worse" if result["low"] > 0 else "open"
+
+
+def identical_rows(table: dict) -> list[tuple[str, str]]:
+    """Pairs of rows (earlier, later in :func:`rows` order) that played the same episodes to the last digit:
+    equal per-episode costs on the same seeds and equal communication. Their bars would say nothing the
+    other does not; the report says why they coincide (:data:`IDENTICAL_BECAUSE`)."""
+    entries = rows(table) + bound_rows(table)
+    same = []
+    for i, a in enumerate(entries):
+        for b in entries[i + 1:]:
+            ca, cb = _episodes(a), _episodes(b)
+            if ca is None or cb is None or len(ca) != len(cb) or a.get("seed_base") != b.get("seed_base"):
+                continue
+            if np.array_equal(np.asarray(ca, float), np.asarray(cb, float)) and \
+                    a["communication_per_step"] == b["communication_per_step"]:
+                same.append((a["policy"], b["policy"]))
+    return same
+
+
+# Why two rows of a preset coincide, where the code makes them the same policy on purpose.
+IDENTICAL_BECAUSE = {
+    ("bandwidth_fusion", frozenset({"always", "silent"})):
+        "with `exact_budget=True` (the paper's setting) every feasible selection takes exactly `budget` components "
+        "per receiver, so the selection with the fewest components (`silent`) and the one with the most (`always`) "
+        "are the same first selection in the budget's order, with the same weights P1: `silent` is the least the "
+        "budget allows, not nothing (agents/generic.py). Set `exact_budget=False` to let them differ.",
+}
+
+
+def identical_note(scenario: str, pair: tuple[str, str]) -> str:
+    """One sentence: the two rows coincide, and why where :data:`IDENTICAL_BECAUSE` knows."""
+    reason = IDENTICAL_BECAUSE.get((scenario, frozenset(pair)))
+    return (f"`{pair[0]}` and `{pair[1]}` are identical episode by episode (same cost, same communication)"
+            + (f": {reason}" if reason else "."))
+
+
+def chart(table: dict, path: str, key: str) -> None:
+    """Write :func:`leaderboard_figure` to ``path`` (atomically)."""
+    save_figure(path, leaderboard_figure(table, key))
+
+
+def _off_scale(values: np.ndarray, keep: np.ndarray) -> np.ndarray:
+    """Rows whose |value| exceeds :data:`OFF_SCALE` x the median |value| (never a row of ``keep``)."""
+    finite = np.abs(values[np.isfinite(values)])
+    if finite.size < 2:
+        return np.zeros(len(values), bool)
+    limit = OFF_SCALE * max(float(np.median(finite)), 1e-300)
+    return (np.abs(values) > limit) & ~keep
+
+
+def leaderboard_figure(table: dict, key: str):
+    """The leaderboard as a dot-and-interval figure on linear axes; returns the figure.
+
+    One row per policy, reference filter, trained summary and bound (at the bottom, grey diamonds). Left:
+    each row's mean episode error with its 95 % Student-t interval, the strongest baseline's mean as a
+    dashed line. Right: the paired difference (episode by episode) to the strongest realizable baseline
+    with its 95 % interval, zero marked; each dot's colour is the verdict, and the number, interval and
+    verdict are written beside it. A row whose mean is more than :data:`OFF_SCALE` x the median is drawn
+    as an arrow at the right edge of both panels with its value written, so that it does not flatten the
+    comparison of the others. Every marker is named in the legend under the panels.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
+
+    from train.evaluate import baselines
 
     scenario = next(iter(table.values()))["scenario"]
     name, unit = metric(scenario)
-    entries = [r for r in rows(table) if not _is_model(r["policy"])]
-    bounds = bound_rows(table)
-    shown = entries + bounds
-    means = np.array([r["mean_cost"] for r in shown], dtype=float)
-    finite = means[np.isfinite(means)]
-    positive = finite.size > 0 and bool(np.all(finite > 0))
-    wide = finite.size > 1 and (np.max(np.abs(finite)) > 10 * max(np.min(np.abs(finite)), 1e-300))
-    log = positive and wide
-    left_out = []
-    if wide and not log:
-        scale = 10 * max(float(np.median(np.abs(finite))), 1e-300)
-        left_out = [r for r in shown if abs(r["mean_cost"]) > scale]
-        shown = [r for r in shown if abs(r["mean_cost"]) <= scale]
-    fig, ax = plt.subplots(figsize=(max(5, 1.3 * len(shown)), 4.2), layout="constrained")
-    names = [r["policy"] for r in shown]
-    colours = ["tab:green" if n.startswith("trained") else "tab:gray" if _is_bound(n) else "tab:blue" for n in names]
-    heights = np.array([r["mean_cost"] for r in shown], dtype=float)
-    half = np.array([r["ci95"] for r in shown], dtype=float)
-    # on a log axis an interval reaching zero or below is drawn down to the axis' floor
-    lower = np.minimum(half, heights * 0.999) if log else half
-    ax.bar(range(len(shown)), heights, yerr=[lower, half], capsize=4, color=colours)
-    if log:
-        ax.set_yscale("log")
+    unit = unit.replace("^2", "\u00b2")
     baseline = strongest_baseline(scenario, table)
+    shown = [r for r in rows(table) if not _is_model(r["policy"])] + bound_rows(table)
+    count = len(shown)
+    y = np.arange(count)[::-1].astype(float)
+    means = np.array([r["mean_cost"] for r in shown], float)
+    half = np.array([r["ci95"] for r in shown], float)
+    is_base = np.array([baseline is not None and r["policy"] == baseline["policy"] for r in shown])
+    off = _off_scale(means, is_base)
+    styles = [_style(scenario, r, baseline) for r in shown]
+    diffs = [None if baseline is None else comparison(scenario, r, baseline) for r in shown]
+    paired_any = any(d is not None for d in diffs)
+
+    fig, axes = plt.subplots(1, 2 if paired_any else 1, figsize=(11.5 if paired_any else 7.5, 1.9 + 0.42 * count),
+                             sharey=True, layout="constrained", squeeze=False)
+    axes = axes[0]
+    ax = axes[0]
+
+    def draw(axis, values, low, high, column_off):
+        inside = ~column_off & np.isfinite(values)
+        lo = np.nanmin(np.where(inside, low, np.nan)) if inside.any() else 0.0
+        hi = np.nanmax(np.where(inside, high, np.nan)) if inside.any() else 1.0
+        pad = 0.08 * max(hi - lo, 1e-12 * max(abs(hi), 1.0), 1e-300)
+        if column_off.any():
+            pad *= 2.5  # room for the arrows and their values
+        axis.set_xlim(lo - pad, hi + pad)
+        edge = hi + pad
+        for i in range(count):
+            colour, marker, _ = VERDICT_STYLE[styles[i]]
+            if not np.isfinite(values[i]):
+                continue
+            if column_off[i]:
+                axis.plot([edge], [y[i]], marker=">", color=colour, ms=8, clip_on=False, zorder=4)
+                axis.annotate(f"{values[i]:.3g}", (edge, y[i]), xytext=(-10, 0), textcoords="offset points",
+                              ha="right", va="center", fontsize=7, color=colour)
+                continue
+            axis.plot([low[i], high[i]], [y[i], y[i]], color=colour, lw=1.8, solid_capstyle="butt", zorder=2)
+            axis.plot([values[i]], [y[i]], marker=marker, color=colour, ms=7,
+                      mfc="white" if styles[i] == "bound" else colour, zorder=3)
+        axis.grid(True, axis="x", color="0.9", lw=0.6)
+
+    draw(ax, means, means - half, means + half, off)
     if baseline is not None:
-        ax.axhline(baseline["mean_cost"], color="k", ls="--", lw=1, label=f"strongest baseline ({baseline['policy']})")
-        ax.legend(fontsize=8)
-    ax.set_xticks(range(len(shown)), names, rotation=20, ha="right", fontsize=8)
-    ax.set_ylabel(f"mean episode error [{unit}] (95 % CI){', log scale' if log else ''}")
-    ax.set_title(f"{key}: {name} on the evaluation seeds (grey: bounds)", fontsize=9)
-    if left_out:
-        note = "not shown (off scale, > 10x the median): " + ", ".join(
-            f"{r['policy']} {r['mean_cost']:.4g} {unit}" for r in left_out)
-        fig.text(0.01, 0.0, note, fontsize=7, ha="left", va="top", wrap=True)
-    save_figure(path, fig)
+        ax.axvline(baseline["mean_cost"], color="black", ls="--", lw=0.9, zorder=1)
+    ax.set_yticks(y, [r["policy"] for r in shown], fontsize=8)
+    ax.set_ylim(-0.7, count - 0.3)
+    ax.set_xlabel(f"mean episode error [{unit}]", fontsize=9)
+    ax.set_title(f"mean with 95 % interval ({shown[0]['episodes']} episodes)", fontsize=9)
+    handles = []
+    if paired_any:
+        right = axes[1]
+        d_mean = np.array([np.nan if d is None else d["mean"] for d in diffs], float)
+        d_low = np.array([np.nan if d is None else d["low"] for d in diffs], float)
+        d_high = np.array([np.nan if d is None else d["high"] for d in diffs], float)
+        d_mean[is_base], d_low[is_base], d_high[is_base] = 0.0, 0.0, 0.0
+        draw(right, d_mean, d_low, d_high, off)
+        right.axvline(0.0, color="black", ls="--", lw=1.0, zorder=2.5)
+        right.set_xlabel(f"paired difference to {baseline['policy']} [{unit}] (below 0: lower error)", fontsize=9)
+        right.set_title("paired difference with 95 % interval, same episodes", fontsize=9)
+        twin = right.twinx()
+        twin.set_ylim(right.get_ylim())
+        words = []
+        for i, d in enumerate(diffs):
+            if is_base[i]:
+                words.append("reference")
+            elif d is None:
+                words.append("not paired")
+            else:
+                text = d["verdict"].split(" (")[0]
+                if styles[i] == "bound" and text == "beats":
+                    text = "below (a bound, not a result)"
+                words.append(f"{d['mean']:+.3g} [{d['low']:+.3g}, {d['high']:+.3g}] {text}")
+        twin.set_yticks(y, words, fontsize=7)
+        twin.tick_params(axis="y", length=0)
+        twin.set_ylabel(f"paired difference [{unit}], 95 % interval, verdict", fontsize=8)
+        handles.append(Line2D([], [], color="black", ls="--", lw=0.9, label="0: equal to the baseline (right); "
+                              "the baseline's mean (left)"))
+    elif baseline is not None:
+        handles.append(Line2D([], [], color="black", ls="--", lw=0.9, label="the strongest baseline's mean"))
+    for style in dict.fromkeys(styles):
+        colour, marker, text = VERDICT_STYLE[style]
+        if style == "baseline":
+            candidates = [n for n in baselines(scenario) if n in table]
+            text = (f"the strongest realizable baseline, {baseline['policy']}"
+                    + (f" (best of {', '.join(candidates)})" if len(candidates) > 1 else "")
+                    + "; a row that is not a designated baseline may beat it")
+        handles.append(Line2D([], [], color=colour, marker=marker, lw=1.8, ms=7,
+                              mfc="white" if style == "bound" else colour, label=text))
+    if off.any():
+        handles.append(Line2D([], [], color="0.3", marker=">", ls="", ms=8,
+                              label=f"off scale (mean > {OFF_SCALE:g}x the median): value written beside the arrow"))
+    identical = identical_rows(table)
+    title = f"{key} ({scenario}): {name} [{unit}], lower is better"
+    if identical:
+        title += "\n" + "; ".join(f"{a} and {b} identical episode by episode (see leaderboard.md)"
+                                   for a, b in identical)
+    fig.suptitle(title, fontsize=9)
+    fig.legend(handles=handles, loc="outside lower center", ncol=2, fontsize=7.5, frameon=False)
+    return fig
 
 
 def _training_budget(table: dict) -> str | None:
@@ -501,6 +648,8 @@ def markdown(out: str) -> str:
                       "baseline):", ""]
             lines += _table(scenario, bounds, baseline, show_initial)
             lines.append("")
+        for pair in identical_rows(table):
+            lines += [identical_note(scenario, pair), ""]
         budget = _training_budget(table)
         if budget:
             lines += [budget, ""]

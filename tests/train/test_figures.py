@@ -11,10 +11,11 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
+from matplotlib.ticker import FixedLocator, FuncFormatter, NullFormatter  # noqa: E402
 
 from coloc_env.config import build_config  # noqa: E402
 from coloc_env.scenarios.nlos_horizon import NlosHorizonConfig  # noqa: E402
-from train import demo_summary  # noqa: E402
+from train import demo_summary, plotting  # noqa: E402
 from train.reproduce import gao2016, wan2014  # noqa: E402
 
 
@@ -99,37 +100,64 @@ def _row(policy, mean, ci=0.1):
             "seed_base": 0, "per_episode_cost": [mean] * 4, "paper_cost": mean, "communication_per_step": 1.0}
 
 
-def test_bar_chart_uses_a_log_axis_when_means_span_more_than_10x(monkeypatch):
+def test_leaderboard_is_linear_dots_and_intervals_with_an_outlier_at_the_edge(monkeypatch):
     from train import leaderboard
 
-    saved = _capture(monkeypatch, leaderboard)
-    table = {p: _row(p, v) for p, v in (("random", 500.0), ("paper", 2.0), ("oracle_static", 1.5))}
-    leaderboard.bar_chart(table, "x.png", "bandwidth_fusion")
-    ax = saved["fig"].axes[0]
-    assert ax.get_yscale() == "log"
-    assert "[m^2]" in ax.get_ylabel()
-    plt.close(saved["fig"])
+    table = {p: _row(p, v) for p, v in (("random", 500.0), ("paper", 2.0), ("oracle_static", 1.5),
+                                         ("always", 1.8))}
+    fig = leaderboard.leaderboard_figure(table, "zhao2020")
+    assert plotting.figure_problems(fig) == []
+    means, diffs = fig.axes[0], fig.axes[1]
+    for ax in (means, diffs):
+        assert ax.get_xscale() == "linear" and ax.get_yscale() == "linear"
+        assert ax.get_xlim()[1] < 100  # random (500) does not set the scale
+    assert "[m\u00b2]" in means.get_xlabel() and "oracle_static" in diffs.get_xlabel()
+    assert any(t.get_text() == "500" for t in means.texts), [t.get_text() for t in means.texts]
+    assert [t.get_text() for t in means.get_yticklabels()] == ["oracle_static", "always", "paper", "random"]
+    legend = fig.legends[0].get_texts()
+    assert any("off scale" in t.get_text() for t in legend)
+    assert any("strongest realizable baseline, oracle_static" in t.get_text() for t in legend)
+    plt.close(fig)
 
-    table = {p: _row(p, v) for p, v in (("random", 3.0), ("paper", 2.0), ("oracle_static", 1.5))}
-    leaderboard.bar_chart(table, "x.png", "bandwidth_fusion")
-    assert saved["fig"].axes[0].get_yscale() == "linear"
-    plt.close(saved["fig"])
 
-
-def test_bar_chart_leaves_out_outliers_with_a_note_when_a_mean_is_not_positive(monkeypatch):
+def test_leaderboard_says_why_identical_rows_coincide(tmp_path):
     from train import leaderboard
 
-    saved = _capture(monkeypatch, leaderboard)
-    table = {p: _row(p, v) for p, v in (("random", 500.0), ("paper", 2.0), ("oracle_static", 0.0),
-                                         ("always", 1.0))}
-    leaderboard.bar_chart(table, "x.png", "bandwidth_fusion")
-    ax = saved["fig"].axes[0]
-    assert ax.get_yscale() == "linear"
-    names = [t.get_text() for t in ax.get_xticklabels()]
-    assert "random" not in names and "paper" in names
-    notes = [t.get_text() for t in saved["fig"].texts]
-    assert any("random" in t and "500" in t for t in notes), notes
-    plt.close(saved["fig"])
+    for policy, mean in (("always", 2.0), ("silent", 2.0), ("oracle_static", 1.5)):
+        leaderboard.record(_row(policy, mean), str(tmp_path), "zhao2020", draw=False)
+    table = leaderboard.read_json(str(tmp_path / "zhao2020" / "leaderboard.json"))
+    assert leaderboard.identical_rows(table) == [("always", "silent")]
+    text = (tmp_path / "leaderboard.md").read_text()
+    assert "`always` and `silent` are identical episode by episode" in text and "exact_budget" in text
+    fig = leaderboard.leaderboard_figure(table, "zhao2020")
+    assert "always and silent identical" in fig._suptitle.get_text()
+    plt.close(fig)
+
+
+def test_figure_problems_finds_a_missing_unit_a_sparse_log_axis_and_a_legend_over_the_data():
+    fig, (a, b) = plt.subplots(1, 2)
+    a.plot(np.linspace(0, 1, 50), np.linspace(0, 1, 50), label="a line through the legend's corner")
+    a.legend(loc="upper left")
+    a.set_xlabel("time")  # no unit
+    b.plot([1, 2], [4.0, 9.0])
+    b.set_yscale("log")
+    b.set_ylim(4.0, 9.0)
+    b.yaxis.set_major_locator(FixedLocator([5.0]))  # one labelled tick inside
+    b.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    b.yaxis.set_minor_formatter(NullFormatter())
+    b.set_xlabel("x [m]")
+    b.set_ylabel("error [m]")
+    problems = plotting.figure_problems(fig)
+    assert any("'time' names no unit" in p for p in problems), problems
+    assert any("y axis without a label" in p for p in problems), problems
+    assert any("log y axis with" in p for p in problems), problems
+    assert any("legend covers" in p for p in problems), problems
+    plotting.plain_log_ticks(b)
+    a.set_xlabel("time [s]")
+    a.set_ylabel("error [m]")
+    plotting.legend_outside(a)
+    assert plotting.figure_problems(fig) == []
+    plt.close(fig)
 
 
 def test_demo_summary_on_an_empty_folder_says_what_is_missing(tmp_path):
