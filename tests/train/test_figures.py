@@ -24,32 +24,59 @@ def _overlap(a, b) -> bool:
 
 
 @pytest.fixture
-def fig6_metrics():
+def wan_metrics():
     rng = np.random.default_rng(0)
-    m = {"runs": 2}
+    T = 30
+
+    def point():
+        return {method: {"err_fault": float(rng.uniform(4, 9)), "err_fault_run_std": float(rng.uniform(0.5, 2)),
+                         "err_fault_t": list(rng.uniform(2, 12, T)), "err_fault_t_ci95": list(rng.uniform(0.5, 2, T))}
+                for method in ("dnbp", "ls", "dr")}
+
+    # errors between 4 and 9 m: less than a decade, where a log axis showed one or two labels
+    m = {"runs": 3, "default": point()}
     for key, (_field, values) in wan2014.SWEEPS.items():
-        # errors between 4 and 9 m: less than a decade, where matplotlib's default labels read "6x10^0"
-        m[key] = {f"{v:g}": {method: {"err_fault": float(rng.uniform(4, 9))} for method in ("dnbp", "ls", "dr")}
-                  for v in values}
+        m[key] = {f"{v:g}": point() for v in values}
     return m
 
 
-def test_wan2014_fig6_panels_do_not_overlap_and_log_ticks_are_plain(fig6_metrics):
-    fig = wan2014.fig6_sweeps(fig6_metrics)
+def test_wan2014_fig6_panels_do_not_overlap_and_carry_error_bars(wan_metrics):
+    fig = wan2014.fig6_sweeps(wan_metrics)
     fig.canvas.draw()
     renderer = fig.canvas.get_renderer()
     boxes = [ax.get_tightbbox(renderer) for ax in fig.axes]
     assert len(boxes) == 4
     for a, b in itertools.combinations(boxes, 2):
         assert not _overlap(a, b), (a, b)
-    for ax in fig.axes:
-        assert ax.get_yscale() == "log"
-        major = [t.get_text() for t in ax.get_yticklabels() if t.get_text()]
-        minor = [t.get_text() for t in ax.get_yticklabels(minor=True) if t.get_text()]
-        assert len(major) >= 2, major  # the axis is still labelled
-        assert not minor, minor
-        assert all("times" not in s and "^" not in s for s in major), major
-        assert all(float(s) > 0 for s in major)
+    assert plotting.figure_problems(fig) == []
+    from scipy import stats
+
+    t = stats.t.ppf(0.975, wan_metrics["runs"] - 1)
+    for ax, (key, _, _) in zip(fig.axes, wan2014.FIG6_PANELS, strict=True):
+        assert ax.get_yscale() == "linear" and ax.get_ylim()[0] == 0
+        assert len(ax.containers) == 3  # one errorbar container per method
+        _, _, (bars,) = ax.containers[0]  # dNBP: its 95 % t-interval from the run-to-run spread
+        half = [0.5 * (seg[1, 1] - seg[0, 1]) for seg in bars.get_segments()]
+        runs = wan_metrics["runs"]
+        expected = [t * p["dnbp"]["err_fault_run_std"] / np.sqrt(runs) for p in wan_metrics[key].values()]
+        np.testing.assert_allclose(half, expected, rtol=1e-9)
+    plt.close(fig)
+
+
+def test_wan2014_figures_follow_the_conventions(wan_metrics):
+    from coloc_env.scenarios.gps_denied_nbp import GpsDeniedNbpConfig
+
+    config = build_config(GpsDeniedNbpConfig, {})
+    history = [np.random.default_rng(n).normal(200, 50, (6, 40, 2)) for n in range(3)]
+    case = {"spread_after_iteration": [[10.0] * 6] * 3, "error_after_iteration": [[5.0] * 6] * 3}
+    for fig in (wan2014.fig4_case_study(case, history), wan2014.fig5_error_vs_time(wan_metrics, config),
+                wan2014.tradeoff(wan_metrics)):
+        assert plotting.figure_problems(fig) == []
+        plt.close(fig)
+    fig = wan2014.tradeoff(wan_metrics)
+    (ax,) = fig.axes
+    assert "particles" in ax.get_xlabel() and "time" not in ax.get_xlabel()
+    assert [float(t) for t in ax.get_xticks()] == [50.0, 100.0, 200.0, 300.0]
     plt.close(fig)
 
 

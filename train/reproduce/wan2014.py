@@ -8,7 +8,8 @@ Writes ``OUT/wan2014/metrics.json`` (docs/wan2014.md §7):
   ``dr``) ``err_fault``, ``err_all``, ``err_normal`` (pooled means over
   runs, steps and UAVs), ``fail_rate`` (fault errors > 20 m),
   ``err_fault_run_std`` (std over runs of each run's pooled fault error) and
-  ``err_fault_t`` (Fig. 5); plus ``msgs_per_step``, ``broadcasts_per_step``,
+  ``err_fault_t`` (Fig. 5) with ``err_fault_t_ci95`` (per step, the 95 % t half-width over the runs of
+  each run's mean over its fault UAVs; None where fewer than two runs have one); plus ``msgs_per_step``, ``broadcasts_per_step``,
   ``time_per_step_s`` and ``time_per_fault_uav_step_s`` of dNBP;
 * ``sweep_normal_ratio`` (fixed proportion, Fig. 6(a)), ``sweep_comm_range``
   (6(b)), ``sweep_gps_std`` (6(c)), ``sweep_range_std`` (6(d)),
@@ -55,6 +56,7 @@ from coloc_env.world.broadcast_medium import BroadcastMedium
 from coloc_env.worlds import GpsDenied
 from train.executor import map_tasks
 from train.io import save_figure, write_json, write_text
+from train.plotting import legend_outside, t_interval
 from train.reproduce.common import claims_section, pyplot
 
 KEY = "wan2014"
@@ -107,6 +109,13 @@ def summarize(errors: np.ndarray, fault: np.ndarray) -> dict:
     per_run = [float(errors[r][fault[r]].mean()) for r in range(len(errors)) if fault[r].any()]
     counts = fault.sum(axis=(0, 2))
     curve = np.where(counts > 0, np.sum(errors * fault, axis=(0, 2)) / np.maximum(counts, 1), np.nan)
+    # per run and step: the mean over that run's fault UAVs (nan where it has none), for the curve's interval
+    run_counts = fault.sum(axis=2)
+    run_curve = np.where(run_counts > 0, np.sum(errors * fault, axis=2) / np.maximum(run_counts, 1), np.nan)
+    half = []
+    for column in run_curve.T:
+        values = column[np.isfinite(column)]
+        half.append(t_interval(float(np.std(values, ddof=1)), len(values)) if len(values) > 1 else np.nan)
     return {
         "err_fault": pooled(fault),
         "err_all": float(errors.mean()),
@@ -114,6 +123,7 @@ def summarize(errors: np.ndarray, fault: np.ndarray) -> dict:
         "fail_rate": float((errors[fault] > FAIL_THRESHOLD).mean()) if fault.any() else None,
         "err_fault_run_std": float(np.std(per_run, ddof=1)) if len(per_run) > 1 else None,
         "err_fault_t": [None if np.isnan(v) else float(v) for v in curve],
+        "err_fault_t_ci95": [None if not np.isfinite(v) else float(v) for v in half],
     }
 
 
@@ -440,93 +450,157 @@ def _claims(m: dict) -> list[dict]:
 
 
 def _figures(folder: str, m: dict, history: list[np.ndarray], config: GpsDeniedNbpConfig) -> None:
-    plt = pyplot()
+    pyplot()  # the Agg backend: PNG files only
 
-    # Fig. 4: beliefs of the fault UAVs after each iteration of the case study
-    cs = m["case_study"]
-    fig, axes = plt.subplots(len(history), 3, figsize=(11, 3.4 * len(history)), squeeze=False)
+    save_figure(os.path.join(folder, "fig4_case_study.png"), fig4_case_study(m["case_study"], history))
+    save_figure(os.path.join(folder, "fig5_error_vs_time.png"), fig5_error_vs_time(m, config))
+    save_figure(os.path.join(folder, "fig6_sweeps.png"), fig6_sweeps(m))
+    save_figure(os.path.join(folder, "tradeoff.png"), tradeoff(m))
+
+
+METHOD_LABELS = (("dnbp", "dNBP"), ("ls", "LS [7]"), ("dr", "DR (no cooperation)"))
+
+
+def fig4_case_study(cs: dict, history: list[np.ndarray]):
+    """Fig. 4: each fault UAV's belief particles after each iteration of the case study; returns the figure.
+
+    Rows: iterations; columns: UAV4-6. Shared metre axes (labelled on the outer panels), the panel's own
+    UAV's true position marked apart from the other fault UAVs, one legend under the panels."""
+    import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
+
+    rows = len(history)
+    fig, axes = plt.subplots(rows, 3, figsize=(10.5, 2.6 * rows + 1.0), squeeze=False, sharex=True, sharey=True,
+                             layout="constrained")
     for n, pos in enumerate(history):
         for col, i in enumerate((3, 4, 5)):
             ax = axes[n, col]
-            ax.scatter(pos[i, :, 0], pos[i, :, 1], s=3, alpha=0.4, color="tab:red", label="belief particles")
-            ax.scatter(CASE_POSITIONS[:3, 0], CASE_POSITIONS[:3, 1], marker="^", color="tab:blue", s=50,
-                       label="normal UAVs 1-3")
-            ax.scatter(CASE_POSITIONS[3:, 0], CASE_POSITIONS[3:, 1], marker="*", color="k", s=60,
-                       label="fault UAVs 4-6 (truth)")
+            ax.scatter(pos[i, :, 0], pos[i, :, 1], s=3, alpha=0.4, color="tab:red", lw=0)
+            ax.scatter(CASE_POSITIONS[:3, 0], CASE_POSITIONS[:3, 1], marker="^", color="tab:blue", s=50)
+            others = [j for j in (3, 4, 5) if j != i]
+            ax.scatter(CASE_POSITIONS[others, 0], CASE_POSITIONS[others, 1], marker="*", color="0.55", s=60)
+            ax.scatter([CASE_POSITIONS[i, 0]], [CASE_POSITIONS[i, 1]], marker="*", color="black", s=150,
+                       edgecolor="white", lw=0.5, zorder=5)
             ax.set_xlim(-250, 750)
             ax.set_ylim(-250, 500)
             ax.set_aspect("equal")
-            ax.set_title(f"UAV{i + 1}, after iteration {n}: spread {cs['spread_after_iteration'][n][i]:.1f} m",
-                         fontsize=9)
-    axes[0, 0].legend(fontsize=7, loc="lower left")
-    fig.suptitle("Fig. 4: case study (cold start): ring -> bimodal -> unimodal beliefs", fontsize=11)
-    save_figure(os.path.join(folder, "fig4_case_study.png"), fig)
+            ax.grid(True, color="0.92", lw=0.6)
+            ax.set_title(f"UAV{i + 1} after iteration {n}: spread {cs['spread_after_iteration'][n][i]:.1f} m, "
+                         f"error {cs['error_after_iteration'][n][i]:.1f} m", fontsize=8)
+            if n == rows - 1:
+                ax.set_xlabel("x [m]")
+            if col == 0:
+                ax.set_ylabel("y [m]")
+    handles = [Line2D([], [], ls="", marker=".", color="tab:red", alpha=0.6, ms=6,
+                      label="the panel UAV's belief particles"),
+               Line2D([], [], ls="", marker="*", color="black", ms=12, label="the panel UAV's true position"),
+               Line2D([], [], ls="", marker="*", color="0.55", ms=8, label="the other fault UAVs (truth)"),
+               Line2D([], [], ls="", marker="^", color="tab:blue", ms=8, label="normal UAVs 1-3 (GPS)")]
+    fig.legend(handles=handles, loc="outside lower center", ncol=4, fontsize=8, frameon=False)
+    fig.suptitle("Fig. 4: case study from a cold start; spread = RMS distance of the particles from their mean",
+                 fontsize=10)
+    return fig
+
+
+def fig5_error_vs_time(m: dict, config: GpsDeniedNbpConfig):
+    """Fig. 5: mean fault-UAV error over time of each method with its 95 % interval over the runs (per-run means of
+    the step's fault UAVs; bars on every tenth of the horizon, staggered by method and drawn 0.12 step apart)."""
+    import matplotlib.pyplot as plt
 
     d = m["default"]
-    fig, ax = plt.subplots(figsize=(7, 4))
-    for method, label in (("dnbp", "dNBP"), ("ls", "LS [7]"), ("dr", "dead reckoning")):
-        curve = [np.nan if v is None else v for v in d[method]["err_fault_t"]]
-        ax.plot(np.arange(len(curve)), curve, label=label)
-    ax.set_xlabel("time step tau")
+    fig, ax = plt.subplots(figsize=(8, 4), layout="constrained")
+    T = len(d["dnbp"]["err_fault_t"])
+    every = max(1, T // 10)
+    for j, (method, label) in enumerate(METHOD_LABELS):
+        curve = np.array([np.nan if v is None else v for v in d[method]["err_fault_t"]], float)
+        steps = np.arange(len(curve))
+        half = d[method].get("err_fault_t_ci95")
+        half = np.full(len(curve), np.nan) if half is None else np.array([np.nan if v is None else v for v in half],
+                                                                         float)
+        # bars on every `every`-th step, each method on its own steps, so that bands do not blur into each other
+        ax.errorbar(steps + 0.12 * (j - 1), curve, yerr=np.where(np.isfinite(half), half, 0.0),
+                    errorevery=(j % every, every), capsize=2.5, elinewidth=0.9,
+                    label=f"{label}: mean over {m['runs']} runs, 95 % interval")
+    ax.set_ylim(bottom=0)
+    ax.set_xlabel(f"time step \u03c4 [step of {config.dt:g} s]")
     ax.set_ylabel("mean fault-UAV position error [m]")
     ax.set_title(f"Fig. 5: mean estimate error vs time ({m['runs']} runs)", fontsize=10)
-    ax.legend()
-    save_figure(os.path.join(folder, "fig5_error_vs_time.png"), fig)
-
-    save_figure(os.path.join(folder, "fig6_sweeps.png"), fig6_sweeps(m))
-
-    fig, ax = plt.subplots(figsize=(6, 4))
-    mp = m["sweep_particles"]
-    times = [1e3 * p["time_per_fault_uav_step_s"] for p in mp.values()]
-    errors = [_err(p) for p in mp.values()]
-    ax.plot(times, errors, "o-")
-    for k, t, e in zip(mp, times, errors, strict=True):
-        ax.annotate(f"M = {k}", (t, e), textcoords="offset points", xytext=(5, 5), fontsize=8)
-    ax.set_xlabel("time per fault-UAV step [ms] (batched numpy)")
-    ax.set_ylabel("mean fault-UAV error [m]")
-    ax.set_title("Table 1: accuracy vs cost (dNBP)", fontsize=10)
-    save_figure(os.path.join(folder, "tradeoff.png"), fig)
+    ax.grid(True, color="0.92", lw=0.6)
+    legend_outside(ax)
+    return fig
 
 
-FIG6_PANELS = (("sweep_normal_ratio", "proportion of normal UAVs (fixed)", "(a)"),
-               ("sweep_comm_range", "communication range R [m]", "(b)"),
-               ("sweep_gps_std", "GPS noise std [m]", "(c)"),
-               ("sweep_range_std", "range noise std [m]", "(d)"))
-
-
-def plain_log_ticks(ax) -> None:
-    """Label a log y axis with plain numbers (2, 5, 10, 20, ...) on its major ticks only, never "6x10^0"."""
-    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
-
-    low, high = ax.get_ylim()
-    subs = (1.0, 2.0, 5.0)
-    if np.isfinite(low) and np.isfinite(high) and low > 0:
-        inside = [t for t in LogLocator(base=10, subs=subs).tick_values(low, high) if low <= t <= high]
-        if len(inside) < 2:  # less than a third of a decade: label every integer multiple
-            subs = tuple(float(k) for k in range(1, 10))
-    ax.yaxis.set_major_locator(LogLocator(base=10, subs=subs))
-    ax.yaxis.set_major_formatter(FuncFormatter(lambda value, _pos: f"{value:g}"))
-    ax.yaxis.set_minor_formatter(NullFormatter())
+def _run_interval(point: dict, method: str, runs: int) -> float:
+    """95 % t half-width of the fault error from the run-to-run spread (``err_fault_run_std``), nan if unknown."""
+    return t_interval(point[method].get("err_fault_run_std"), runs)
 
 
 def fig6_sweeps(m: dict):
-    """Fig. 6: mean fault-UAV error of dNBP, LS and DR over the four sweeps (log error axis); returns the figure."""
+    """Fig. 6: mean fault-UAV error of dNBP, LS and DR over the four sweeps, linear error axis from 0, each
+    point with its 95 % interval from the run-to-run spread (the methods drawn 1.2 % of the sweep's range
+    apart so that their bars do not hide each other); returns the figure."""
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(2, 2, figsize=(10, 7.5), layout="constrained")
+    fig, axes = plt.subplots(2, 2, figsize=(11, 7.5), layout="constrained")
     fig.get_layout_engine().set(h_pad=0.1, w_pad=0.1, hspace=0.06, wspace=0.06)
+    runs = m["runs"]
     for ax, (key, xlabel, tag) in zip(axes.ravel(), FIG6_PANELS, strict=True):
-        xs = [float(k) for k in m[key]]
-        for method, label in (("dnbp", "dNBP"), ("ls", "LS [7]"), ("dr", "DR")):
-            ax.plot(xs, [_err(p, method) for p in m[key].values()], "o-", label=label)
+        xs = np.array([float(k) for k in m[key]])
+        dodge = 0.012 * (xs.max() - xs.min())  # the three methods' bars side by side, not on top of each other
+        for j, (method, label) in enumerate(METHOD_LABELS):
+            ys = np.array([_err(p, method) for p in m[key].values()], float)
+            half = np.array([_run_interval(p, method, runs) for p in m[key].values()], float)
+            ax.errorbar(xs + (j - 1) * dodge, ys, yerr=np.where(np.isfinite(half), half, 0.0), fmt="o-", capsize=3,
+                        ms=5, label=label)
+        ax.set_xticks(xs)
         ax.set_xlabel(xlabel)
         ax.set_ylabel("mean fault-UAV error [m]")
-        ax.set_yscale("log")
-        plain_log_ticks(ax)
+        ax.set_ylim(bottom=0)
+        ax.grid(True, color="0.92", lw=0.6)
         ax.set_title(f"Fig. 6{tag}", fontsize=10)
-        ax.legend(fontsize=8)
-    fig.suptitle(f"Fig. 6: error vs the sweep parameters ({m['runs']} runs per point)", fontsize=11)
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncol=3, fontsize=8, frameon=False,
+               title=f"mean over {runs} runs per point; bars: 95 % t-interval from the run-to-run spread",
+               title_fontsize=8)
+    fig.suptitle("Fig. 6: error vs the sweep parameters", fontsize=11)
     return fig
+
+
+def tradeoff(m: dict):
+    """Accuracy against the particle count M (Table 1), a deterministic measure of dNBP's cost (its messages carry
+    M particles and its update is O(M^2) per neighbour); LS and DR at the default point, which use no particles,
+    as bands. Measured times are in the report, not here: they move with the machine's load."""
+    import matplotlib.pyplot as plt
+
+    runs = m["runs"]
+    mp = m["sweep_particles"]
+    counts = np.array([float(k) for k in mp])
+    errors = np.array([_err(p) for p in mp.values()], float)
+    half = np.array([_run_interval(p, "dnbp", runs) for p in mp.values()], float)
+    fig, ax = plt.subplots(figsize=(7.5, 4), layout="constrained")
+    ax.errorbar(counts, errors, yerr=np.where(np.isfinite(half), half, 0.0), fmt="o-", capsize=3,
+                label="dNBP: mean with 95 % interval over the runs")
+    d = m["default"]
+    for method, label, colour in (("ls", "LS [7]", "tab:orange"), ("dr", "DR (no cooperation)", "tab:green")):
+        level, spread = _err(d, method), _run_interval(d, method, runs)
+        ax.axhline(level, color=colour, ls="--", lw=1, label=f"{label} at the default point (uses no particles)")
+        if np.isfinite(spread):
+            ax.axhspan(level - spread, level + spread, color=colour, alpha=0.12, lw=0,
+                       label=f"{label}: 95 % interval")
+    ax.set_xticks(counts)
+    ax.set_ylim(bottom=0)
+    ax.set_xlabel("particles per belief M [count]")
+    ax.set_ylabel("mean fault-UAV error [m]")
+    ax.set_title(f"Table 1: dNBP's accuracy vs its particle count ({runs} runs per point)", fontsize=10)
+    ax.grid(True, color="0.92", lw=0.6)
+    legend_outside(ax, "below")
+    return fig
+
+
+FIG6_PANELS = (("sweep_normal_ratio", "proportion of normal UAVs (fixed) [-]", "(a)"),
+               ("sweep_comm_range", "communication range R [m]", "(b)"),
+               ("sweep_gps_std", "GPS noise std [m]", "(c)"),
+               ("sweep_range_std", "range noise std [m]", "(d)"))
 
 
 def _report(m: dict, claims: list[dict], config: GpsDeniedNbpConfig) -> str:
