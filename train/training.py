@@ -9,8 +9,8 @@ Writes ``OUT/SCENARIO/seedS/``: ``model.zip`` (+ ``model.json``: scenario,
 config, spaces, which checkpoint it is), the best checkpoint on the validation seeds (its
 point of the learning curve has the lowest validation cost; the last weights where there is no
 curve), ``best.zip`` and ``last.zip`` (the final weights), ``checkpoint.zip`` (replaced atomically as training goes),
-``curve.json`` and ``learning_curve.png`` (validation error vs timesteps, the
-paper policy's level as a line).
+``curve.json`` and ``learning_curve.png`` (validation error in the scenario's metric and unit vs
+timesteps, each point with its 95 % interval, the paper policy's level and interval as a line and band).
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ from __future__ import annotations
 import json
 import os
 import sys
+import textwrap
 
 import numpy as np
 
@@ -173,21 +174,23 @@ def write_learning_curve(folder: str, scenario: str, curve: list, title: str, ep
         "points": [{"timesteps": t, "mean_cost": c, "ci95": h} for t, c, h in curve],
         reference: {"mean_cost": paper["mean_cost"], "ci95": paper["ci95"]},
     })
-    fig, ax = plt.subplots(figsize=(7.5, 4.5), layout="constrained")
+    name, unit = metric(scenario)
+    unit = unit.replace("^2", "\u00b2")
+    fig, ax = plt.subplots(figsize=(7.5, 4.8), layout="constrained")
     steps, costs, half = (np.array(v, dtype=float) for v in zip(*curve, strict=True))
     n = episodes
-    ax.plot(steps, costs, "o-", color="tab:blue", label=f"trained policy (deterministic): mean over {n} "
-                                                        "validation episodes")
-    ax.fill_between(steps, costs - half, costs + half, color="tab:blue", alpha=0.2,
-                    label=f"trained policy: 95 % interval over {n} validation episodes")
+    # a few validation points: each its own 95 % interval (an error bar), not a band interpolated between them
+    ax.errorbar(steps, costs, yerr=half, fmt="o-", color="tab:blue", capsize=4, ms=6,
+                label=f"trained policy (deterministic): mean and 95 % interval over {n} validation episodes")
     p_mean, p_half = float(paper["mean_cost"]), float(paper["ci95"])
-    ax.axhline(p_mean, color="k", ls="--", label=f"{reference} policy on the same {n} episodes: {p_mean:.4g}")
+    ax.axhline(p_mean, color="k", ls="--", label=f"{reference} policy on the same {n} episodes: {p_mean:.4g} {unit}")
     ax.axhspan(p_mean - p_half, p_mean + p_half, color="0.5", alpha=0.15,
-               label=f"{reference} policy: 95 % interval over {n} validation episodes (±{p_half:.2g})")
-    ax.set_xlabel("timesteps (agent transitions)")
-    ax.set_ylabel("episode estimation error (scenario metric)")
+               label=f"{reference} policy: 95 % interval over {n} validation episodes (\u00b1{p_half:.2g} {unit})")
+    ax.set_xlabel("training timesteps [agent transitions]")
+    ax.set_ylabel("\n".join(textwrap.wrap(f"validation error: {name} [{unit}]", 48)), fontsize=9)
     ax.set_title(title, fontsize=10)
-    ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2)
+    ax.grid(True, color="0.92", lw=0.6)
+    ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=1, frameon=False)
     save_figure(os.path.join(folder, "learning_curve.png"), fig)
 
 

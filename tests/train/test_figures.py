@@ -119,6 +119,10 @@ def test_learning_curve_bands_are_labelled(monkeypatch, tmp_path):
     assert len(interval) == 2, labels  # the trained policy's band and the paper policy's
     assert any(s.startswith("paper policy") and "3" in s for s in labels), labels
     assert os.path.isfile(tmp_path / "curve.json")
+    ax = saved["fig"].axes[0]
+    assert "J_K" in ax.get_ylabel() and ax.get_ylabel().endswith("[m\u00b2]"), ax.get_ylabel()
+    assert len(ax.containers) == 1  # the points carry error bars
+    assert plotting.figure_problems(saved["fig"]) == []
     plt.close(saved["fig"])
 
 

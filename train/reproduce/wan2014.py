@@ -9,8 +9,8 @@ Writes ``OUT/wan2014/metrics.json`` (docs/wan2014.md §7):
   runs, steps and UAVs), ``fail_rate`` (fault errors > 20 m),
   ``err_fault_run_std`` (std over runs of each run's pooled fault error) and
   ``err_fault_t`` (Fig. 5) with ``err_fault_t_ci95`` (per step, the 95 % t half-width over the runs of
-  each run's mean over its fault UAVs; None where fewer than two runs have one); plus ``msgs_per_step``, ``broadcasts_per_step``,
-  ``time_per_step_s`` and ``time_per_fault_uav_step_s`` of dNBP;
+  each run's mean over its fault UAVs; None where fewer than two runs have one); plus ``msgs_per_step``,
+  ``broadcasts_per_step``, ``time_per_step_s`` and ``time_per_fault_uav_step_s`` of dNBP;
 * ``sweep_normal_ratio`` (fixed proportion, Fig. 6(a)), ``sweep_comm_range``
   (6(b)), ``sweep_gps_std`` (6(c)), ``sweep_range_std`` (6(d)),
   ``sweep_particles`` (Table 1): the same object per point;
