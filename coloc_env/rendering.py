@@ -18,7 +18,10 @@ layout, so that presets and compositions look alike:
   narrowed) to the panel's shape, so a long thin scene is not squashed into
   a strip. Where the scene has particles and one cloud is too small to see,
   an inset in the map's emptiest corner shows that agent's particles and
-  ellipse at true scale;
+  ellipse at true scale. Where the agents are so far apart that the ellipses
+  would need a ``RELATIVE_VIEW_MAGNIFICATION`` enlargement or more (metre
+  errors kilometres apart), the map shows each estimate minus its truth
+  instead: every truth at (0, 0), the ellipses at true scale;
 * the network (middle): one node per participant, labelled beside it with
   its full name, coloured as on the map (white: a node that is not an
   agent; a red ring: a node with a status such as a GPS fault), and the
@@ -67,6 +70,9 @@ LEGEND_ROWS = 30  # legend entries that fit one column of a 600-pixel frame
 PANELS_FRACTION = 0.74  # of the figure's width, left of the legend
 INSET_SIZE = 0.36  # the particle inset's side, as a fraction of the map's
 FONT_SIZE = 10
+# Ellipses that would need this enlargement or more (the largest 2-sigma semi-axis under 0.1 % of the map) are
+# drawn in error coordinates instead (:func:`_draw_relative_map`): agents kilometres apart with metre errors.
+RELATIVE_VIEW_MAGNIFICATION = 50.0
 
 
 @dataclass
@@ -268,6 +274,13 @@ def _draw_map(ax, scene: Scene, agent_names, handles: list, agent_handles: list)
         low, high = np.array([x0 - span_now, y0 - span_now]), np.array([x1 + span_now, y1 + span_now])
         x0, x1, y0, y1 = _map_limits(scene, drawn + [np.clip(e, low, high) for e in ellipses])
 
+    relative = estimates is not None and scene.covariances is not None and sensors is None and \
+        (len(estimates) == len(truth) or len(truth) == 1) and magnification >= RELATIVE_VIEW_MAGNIFICATION and \
+        (scene.particles is None or not np.size(scene.particles))
+    if relative:
+        _draw_relative_map(ax, scene, truth, estimates, _estimate_labels(scene, agent_names, len(estimates)),
+                           handles, agent_handles)
+        return
     if scene.trails is not None and np.size(scene.trails):
         for trail in np.asarray(scene.trails, float):
             ax.plot(trail[:, 0], trail[:, 1], color="0.65", lw=1.2, zorder=1)
@@ -332,6 +345,48 @@ def _draw_map(ax, scene: Scene, agent_names, handles: list, agent_handles: list)
     ax.set_xlabel("x [m]", fontsize=FONT_SIZE)
     ax.set_ylabel("y [m]", fontsize=FONT_SIZE)
     ax.set_title("estimates", fontsize=FONT_SIZE + 1)
+    ax.grid(True, color="0.92", lw=0.6, zorder=0)
+
+
+def _draw_relative_map(ax, scene: Scene, truth: np.ndarray, estimates: np.ndarray, labels: list[str],
+                       handles: list, agent_handles: list) -> None:
+    """The map in error coordinates: each estimate minus its truth, every truth at (0, 0), the 2-sigma
+    ellipses at true scale, equal metres on both axes. Drawn instead of the positions when the agents are
+    so far apart that the errors and ellipses would be invisible (:data:`RELATIVE_VIEW_MAGNIFICATION`)."""
+    from matplotlib.lines import Line2D
+    from matplotlib.ticker import MaxNLocator
+
+    own = truth if len(truth) == len(estimates) else np.repeat(truth[:1], len(estimates), axis=0)
+    offsets = estimates - own
+    ellipses = [_ellipse_points(offsets[i], np.asarray(scene.covariances[i], float)) for i in range(len(offsets))]
+    ax.axhline(0.0, color="0.8", lw=0.8, zorder=1)
+    ax.axvline(0.0, color="0.8", lw=0.8, zorder=1)
+    ax.scatter([0.0], [0.0], marker="o", s=110, facecolor="none", edgecolor="black", lw=1.4, zorder=5)
+    for i, offset in enumerate(offsets):
+        colour = _agent_colour(i)
+        ax.plot([0.0, offset[0]], [0.0, offset[1]], color=colour, lw=0.9, zorder=4)
+        ax.plot(ellipses[i][:, 0], ellipses[i][:, 1], color=colour, lw=1.3, zorder=4)
+        ax.scatter([offset[0]], [offset[1]], s=34, color=colour, edgecolor="white", lw=0.6, zorder=6)
+        agent_handles.append(Line2D([], [], ls="", marker="o", ms=6, color=colour, label=labels[i]))
+    what = "true position (each at 0, 0)" if len(truth) == len(estimates) else "target (truth, at 0, 0)"
+    handles.append(Line2D([], [], ls="", marker="o", ms=9, mfc="none", mec="black", mew=1.4, label=what))
+    handles.append(Line2D([], [], color="0.3", lw=0.9, label="error (truth to estimate)"))
+    handles.append(Line2D([], [], color="0.3", lw=1.3, label="2\u03c3 ellipse (true scale)"))
+    points = np.vstack([np.zeros((1, 2)), offsets, *ellipses])
+    points = points[np.all(np.isfinite(points), axis=1)]
+    reach = max(float(np.abs(points).max()) * (1.0 + MAP_MARGIN), 1e-3)
+    x0, x1, y0, y1 = fit_aspect((-reach, reach, -reach, reach), _panel_shape(ax))
+    ax.set_xlim(x0, x1)
+    ax.set_ylim(y0, y1)
+    ax.set_aspect("equal", adjustable="box")
+    for axis in (ax.xaxis, ax.yaxis):
+        axis.set_major_locator(MaxNLocator(nbins=5))
+    ax.tick_params(labelsize=FONT_SIZE - 1)
+    ax.set_xlabel("estimate \u2212 truth, x [m]", fontsize=FONT_SIZE)
+    ax.set_ylabel("estimate \u2212 truth, y [m]", fontsize=FONT_SIZE)
+    apart = float(np.ptp(np.vstack([truth, estimates]), axis=0).max())
+    ax.set_title(f"estimate errors (agents up to {apart / 1000.0:.3g} km apart)" if apart >= 1000.0 else
+                 f"estimate errors (agents up to {apart:.3g} m apart)", fontsize=FONT_SIZE)
     ax.grid(True, color="0.92", lw=0.6, zorder=0)
 
 

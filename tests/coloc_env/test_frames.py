@@ -14,6 +14,7 @@ import pytest
 import coloc_env
 from coloc_env.rendering import (
     ELLIPSE_MIN_FRACTION,
+    RELATIVE_VIEW_MAGNIFICATION,
     Link,
     Renderer,
     Scene,
@@ -138,11 +139,36 @@ def test_magnified_legend_entry_names_the_factor():
 
     figure = Figure(figsize=(9.6, 6.0), dpi=100)
     FigureCanvasAgg(figure)
-    draw_scene(_scene(covariance_std=0.5), figure, agent_names=["a_0", "a_1"])
+    draw_scene(_scene(covariance_std=2.0), figure, agent_names=["a_0", "a_1"])
     texts = [t.get_text() for legend in figure.legends for t in legend.get_texts()]
-    factor = ellipse_magnification(_scene(0.5).covariances, 1020.0)
+    factor = ellipse_magnification(_scene(2.0).covariances, 1020.0)
+    assert 1.0 < factor < RELATIVE_VIEW_MAGNIFICATION
     assert f"2\u03c3 ellipse \u00d7{factor:g} (enlarged)" in texts
     assert texts[:3] == ["estimate of (dot colour):", "a_0", "a_1"]
+
+
+def test_agents_far_apart_with_tiny_errors_are_drawn_as_errors_at_true_scale():
+    """Metre errors on a kilometre map (an enlargement of 50x or more): the map shows estimate - truth, the truths
+    at (0, 0), the ellipses unmagnified, and the view is metres wide, not the kilometres between the agents."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    from coloc_env.rendering import ELLIPSE_SIGMA, draw_scene
+
+    scene = _scene(covariance_std=0.5)
+    assert ellipse_magnification(scene.covariances, 1020.0) >= RELATIVE_VIEW_MAGNIFICATION
+    figure = Figure(figsize=(9.6, 6.0), dpi=100)
+    FigureCanvasAgg(figure)
+    draw_scene(scene, figure, agent_names=["a_0", "a_1"])
+    ax = figure.axes[0]
+    assert "estimate \u2212 truth" in ax.get_xlabel() and ax.get_xlabel().endswith("[m]")
+    x0, x1 = ax.get_xlim()
+    y0, y1 = ax.get_ylim()
+    reach = 1.0 + ELLIPSE_SIGMA * 0.5  # the 1 m errors and their 2-sigma ellipses
+    assert x0 < -reach and x1 > reach and y0 < -ELLIPSE_SIGMA * 0.5 and y1 > ELLIPSE_SIGMA * 0.5
+    assert max(x1 - x0, y1 - y0) < 10.0
+    texts = [t.get_text() for legend in figure.legends for t in legend.get_texts()]
+    assert "2\u03c3 ellipse (true scale)" in texts and "true position (each at 0, 0)" in texts
 
 
 def test_separated_nodes_keep_a_minimum_distance_and_leave_spread_nodes_alone():
