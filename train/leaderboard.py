@@ -514,13 +514,15 @@ def leaderboard_figure(table: dict, key: str):
                 words.append("reference")
             elif d is None:
                 words.append("not paired")
+            elif d.get("equal"):
+                words.append("0 (equal to rounding)")
             else:
                 text = d["verdict"].split(" (")[0]
                 if styles[i] == "bound" and text == "beats":
                     text = "below (a bound, not a result)"
                 words.append(f"{d['mean']:+.3g} [{d['low']:+.3g}, {d['high']:+.3g}] {text}")
         twin.set_yticks(y, words, fontsize=7)
-        twin.tick_params(axis="y", length=0)
+        twin.tick_params(axis="y", length=0, pad=10)  # clear of the off-scale arrows at the edge
         twin.set_ylabel(f"paired difference [{unit}], 95 % interval, verdict", fontsize=8)
         handles.append(Line2D([], [], color="black", ls="--", lw=0.9, label="0: equal to the baseline (right); "
                               "the baseline's mean (left)"))
