@@ -13,6 +13,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 from matplotlib.ticker import FixedLocator, FuncFormatter, NullFormatter  # noqa: E402
 
+import coloc_env  # noqa: E402
 from coloc_env.config import build_config  # noqa: E402
 from coloc_env.scenarios.nlos_horizon import NlosHorizonConfig  # noqa: E402
 from train import demo_summary, plotting  # noqa: E402
@@ -257,3 +258,25 @@ def test_gao2016_fig6_log_ticks_are_plain():
     assert len(major) >= 2 and all("times" not in s for s in major), major
     assert not [t.get_text() for t in ax.get_yticklabels(minor=True) if t.get_text()]
     plt.close(fig)
+
+
+@pytest.mark.parametrize("name", [s for s in coloc_env.SCENARIOS if s != "mrclam_relay"])
+def test_every_preset_frame_follows_the_figure_conventions(name):
+    """One frame of each simulated preset (MRCLAM needs data; tests/coloc_env/test_frames.py draws it): metre
+    axes labelled with their unit and the legend clear of every panel's data."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    import agents
+    from coloc_env.rendering import draw_scene
+
+    env = coloc_env.parallel_env(name)
+    observations, _ = env.reset(seed=0)
+    policy = agents.make_policy("paper", env)
+    for _ in range(4):
+        observations, *_ = env.step(policy.act(observations))
+    figure = Figure(figsize=(9.6, 6.0), dpi=100)
+    FigureCanvasAgg(figure)
+    draw_scene(env.unwrapped.scenario.scene(0), figure, env.possible_agents)
+    assert plotting.figure_problems(figure) == []
+    env.close()
