@@ -22,7 +22,8 @@ README = os.path.join(REPO_ROOT, "README.md")
 DOCS = os.path.join(REPO_ROOT, "docs")
 MAKEFILE = os.path.join(REPO_ROOT, "Makefile")
 PYPROJECT = os.path.join(REPO_ROOT, "pyproject.toml")
-DOC_PAGES = ("architecture.md", "presets.md", "wan2014.md", "gao2016.md", "compositions.md")
+DOC_PAGES = ("getting-started.md", "architecture.md", "presets.md", "wan2014.md", "gao2016.md", "compositions.md",
+             "learning.md", "bounds.md", "cli.md")
 
 # [text](target) outside code; an image ![alt](target) has the same target syntax
 LINK = re.compile(r"\[[^\]]*\]\(([^)\s]+)(?:\s+\"[^\"]*\")?\)")
@@ -144,6 +145,38 @@ def test_makefile_installs_the_readme_torch(override):
         assert words[words.index("--index-url") + 1] == index
     else:
         assert "--index-url" not in words and "--extra-index-url" not in words
+
+
+README_MAX_LINES = 160
+# a commit hash: 7 to 40 hex digits with at least one letter and one digit (so no plain number matches)
+COMMIT_HASH = re.compile(r"\b(?=[0-9a-f]*[a-f])(?=[0-9a-f]*[0-9])[0-9a-f]{7,40}\b")
+DATE = re.compile(r"\b(?:19|20)\d\d-\d\d-\d\d\b|\b(?:January|February|March|April|May|June|July|August|September|"
+                  r"October|November|December) (?:\d{1,2}, )?(?:19|20)\d\d\b")
+
+
+def test_readme_is_short():
+    lines = read(README).splitlines()
+    assert len(lines) <= README_MAX_LINES, (
+        f"README.md has {len(lines)} lines; keep it to {README_MAX_LINES} (details go to docs/)")
+
+
+@pytest.mark.parametrize("path", [README, *(os.path.join(DOCS, page) for page in ("learning.md", "cli.md"))],
+                         ids=lambda p: os.path.relpath(p, REPO_ROOT))
+def test_current_results_carry_no_history(path):
+    """The README and the pages of current results hold current numbers with their commands: no commit hashes,
+    no dates of runs, no session talk (the dated runs are in docs/learning_history.md)."""
+    for number, line in enumerate(read(path).splitlines(), 1):
+        where = f"{os.path.relpath(path, REPO_ROOT)}:{number}"
+        assert not COMMIT_HASH.search(line), f"{where} names a commit: {COMMIT_HASH.search(line).group()!r}"
+        assert not DATE.search(line), f"{where} dates a run: {DATE.search(line).group()!r}"
+        assert not re.search(r"\bsessions?\b", line, re.IGNORECASE), f"{where} mentions a session: {line.strip()!r}"
+
+
+def test_history_checks_catch_what_they_are_for():
+    assert COMMIT_HASH.search("timed at f0a75bd") and COMMIT_HASH.search("against 6f148d7,")
+    assert not COMMIT_HASH.search("1000000 episodes, 3e-13 m, cu128, 1,217 passed, facade")
+    assert DATE.search("(2026-12-03, f0a75bd)") and DATE.search("on December 3, 2026")
+    assert not DATE.search("seeds 10^6 + e, 2,048 transitions, k = 0..99")
 
 
 def test_readme_ppo_snippet_states_its_rollout_size():

@@ -53,4 +53,4 @@ HYPERPARAMS = {
 }
 
 NUM_COPIES = 4
-TIMESTEPS = 300_000  # the README's budget: `coloc train gps_denied_nbp` at its defaults reproduces the table
+TIMESTEPS = 300_000  # docs/learning.md's budget: `coloc train gps_denied_nbp` at its defaults reproduces the table

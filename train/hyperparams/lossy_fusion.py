@@ -28,4 +28,4 @@ HYPERPARAMS = {
 }
 
 NUM_COPIES = 16
-TIMESTEPS = 1_200_000  # the README's budget: `coloc train lossy_fusion` at its defaults reproduces the table
+TIMESTEPS = 1_200_000  # docs/learning.md's budget: `coloc train lossy_fusion` at its defaults reproduces the table

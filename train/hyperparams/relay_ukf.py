@@ -31,7 +31,7 @@
   next hop to itself or beyond ``comm_range``, and a ranging partner beyond
   ``sensing_range``, are masked (``RelayUKFScenario.action_mask``), so the
   policy never spends samples on choices that do what "stop" does. The run of
-  2026-11-23 (plain PPO, before the core) is the README's older table.
+  2026-11-23 (plain PPO, before the core) is in docs/learning_history.md.
 * The critic sees what the actor sees (``CRITIC`` left at "decentralized"). Measured on 2026-12-03 with
   ``CRITIC = "centralized"`` (the critic also reads ``state()``: every agent's observation, who measured,
   the chain's holders), seeds 0..2, 600k steps each, otherwise these settings: the best validation errors
@@ -62,4 +62,4 @@ HYPERPARAMS = {
 
 ALGORITHM = "maskable_ppo"
 NUM_COPIES = 4
-TIMESTEPS = 600_000  # the README's budget: `coloc train relay_ukf` at its defaults reproduces the table
+TIMESTEPS = 600_000  # docs/learning.md's budget: `coloc train relay_ukf` at its defaults reproduces the table
