@@ -28,6 +28,15 @@ def test_reproduce_zhao2020_writes_metrics_report_and_figures(tmp_path):
         assert (folder / name).stat().st_size > 1000
     report = (folder / "report.md").read_text()
     assert "P1 (uniform) is best" in report and "| T1P1 |" in report
+    # the drift world's bound is exact (linear-Gaussian) and every pair reads no more than every node's
+    # measurements: each pair's mean squared x, y error is at or above pcrb_centralized up to 3 standard errors of
+    # its mean over the runs (a correct bound is crossed with probability about 0.1 %)
+    block = metrics["pcrb"]
+    assert block["local"] > block["centralized"] > 0 and block["delivered"] is None
+    assert sorted(block["rows"]) == sorted(pairs)
+    for pair, row in block["rows"].items():
+        assert row["mse"] >= block["centralized"] ** 2 - 3 * row["mse_se"], pair
+    assert "## Cramér–Rao bound" in report
 
 
 def test_train_then_evaluate_a_saved_model(tmp_path, capsys):

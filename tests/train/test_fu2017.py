@@ -74,10 +74,35 @@ def test_reproduce_fu2017_writes_metrics_report_and_figures(tmp_path, capsys):
         assert (folder / name).stat().st_size > 1000
     report = (folder / "report.md").read_text()
     assert "| the centralized algorithm beats the general Kalman filter (Fig. 3) | L2 |" in report
+    assert_bound_rows(m["pcrb"])
+    ideal = m["pcrb"]["L4"]["rows"]["ideal_kf"]
+    assert "## Cramér–Rao bound" in report and f"| L4 | ideal_kf | {ideal['rmse']:.3g} |" in report
     assert f"{m['mse']['L4']['distributed']:.2f}" in report
     assert "| L2 | `distributed_forward` | " in report
     printed = capsys.readouterr().out
     assert "L2.centralized_beats_naive" in printed and "L4.naive_diverges" in printed
+
+
+def assert_bound_rows(bounds):
+    """The pcrb block per setting: local >= delivered >= centralized; every filter's mean squared 2-D error at or
+    above the centralized bound, and every filter but the ideal KF (the only one that reads every follower's
+    measurement on time) at or above the delivered one, each up to 3 standard errors of the mean over the runs
+    (a bound on the expected MSE: a correct one is crossed by the run mean with probability about 0.1 %); the
+    ideal KF attains the centralized bound (its covariance is the bound) within 3 standard errors both ways."""
+    assert sorted(bounds) == ["L2", "L4"]
+    for setting, block in bounds.items():
+        assert block["local"] >= block["delivered"] >= block["centralized"] > 0, setting
+        assert sorted(block["rows"]) == sorted(FILTERS)
+        for name, row in block["rows"].items():
+            assert row["mse"] >= block["centralized"] ** 2 - 3 * row["mse_se"], (setting, name)
+            assert row["efficiency"] == pytest.approx(row["rmse"] / block["centralized"], rel=1e-12)
+            if name != "ideal_kf":
+                assert row["mse"] >= block["delivered"] ** 2 - 3 * row["mse_se"], (setting, name)
+        ideal = block["rows"]["ideal_kf"]
+        assert abs(ideal["mse"] - block["centralized"] ** 2) <= 3 * ideal["mse_se"], setting
+    # more followers, more information: a tighter centralized bound; the leader's own is the same
+    assert bounds["L4"]["centralized"] < bounds["L2"]["centralized"]
+    assert bounds["L4"]["local"] == pytest.approx(bounds["L2"]["local"], rel=1e-12)
 
 
 def test_reproduce_is_deterministic_and_blocks_do_not_depend_on_the_run_count():

@@ -44,6 +44,16 @@ def test_reproduce_writes_the_spec_metrics_report_and_figures(tmp_path):
         assert (folder / name).stat().st_size > 1000
     report = (folder / "report.md").read_text()
     assert "| Fig. 6(b): for R > 500 m LS is slightly better than dNBP |" in report
+    # the bound model of gps_denied is the world's own and every method reads no more than it: each method's mean
+    # squared error is at or above pcrb_centralized up to 3 standard errors of its mean over the runs (a correct
+    # bound is crossed with probability about 0.1 %)
+    block = on_disk["pcrb"]
+    assert block["local"] > block["centralized"] > 0 and block["episodes"] == 2
+    assert sorted(block["rows"]) == ["dnbp", "dr", "ls"]
+    for name, row in block["rows"].items():
+        assert row["mse"] >= block["centralized"] ** 2 - 3 * row["mse_se"], name
+    assert "_mse_runs" not in on_disk["default"]
+    assert "## Cramér–Rao bound" in report and "| default point | dnbp |" in report
 
 
 def test_evaluate_point_is_reproducible_and_baselines_are_ordered():

@@ -14,7 +14,10 @@ Writes ``OUT/wan2014/metrics.json`` (docs/wan2014.md §7):
 * ``sweep_normal_ratio`` (fixed proportion, Fig. 6(a)), ``sweep_comm_range``
   (6(b)), ``sweep_gps_std`` (6(c)), ``sweep_range_std`` (6(d)),
   ``sweep_particles`` (Table 1): the same object per point;
-* ``case_study`` (Fig. 4) and ``claims``.
+* ``case_study`` (Fig. 4) and ``claims``;
+* ``pcrb``: the posterior Cramér–Rao bound of the ``gps_denied_nbp`` preset at the default point
+  (:func:`bound_block`, :mod:`train.reproduce.bound_rows`) beside the RMSE of dNBP, LS and DR over
+  every run, step and UAV, and their efficiency.
 
 Seeding (common random numbers, docs/wan2014.md §7): run r draws its world from
 ``default_rng([seed, r])`` and its dNBP randomness from
@@ -44,6 +47,7 @@ import time
 
 import numpy as np
 
+import coloc_env
 import estimators.dnbp as dn
 import estimators.range_ls as rl
 from coloc_env.backends import Dnbp, RangeLs
@@ -57,6 +61,7 @@ from coloc_env.worlds import GpsDenied
 from train.executor import map_tasks
 from train.io import save_figure, write_json, write_text
 from train.plotting import legend_outside, t_interval
+from train.reproduce.bound_rows import pcrb_block, report_section
 from train.reproduce.common import claims_section, pyplot
 
 KEY = "wan2014"
@@ -67,6 +72,7 @@ QUICK_RUNS = 2
 QUICK_HORIZON = 10
 FAIL_THRESHOLD = 20.0  # metres: an unresolved flip / ring ambiguity (docs/wan2014.md §7)
 ESTIMATOR_SEED_OFFSET = 100_000
+BOUND_EPISODES = 4  # seeded episodes of the bound (at most the runs): its play runs dNBP, which the preset's step reads
 # A case-study belief counts as unimodal and located when its spread and its error are below this: on the
 # case-study graph a two-mode belief has a spread of ~70 m and a ring ~190 m, while a located belief is
 # limited by the ring bandwidth pi d / M (~8 m at M = 100) and the anchors' GPS noise.
@@ -286,6 +292,8 @@ def evaluate_point(overrides: dict, base: dict, runs: int, seed: int) -> dict:
         "broadcasts_per_step": out["broadcasts"] / steps,
         "time_per_step_s": elapsed / steps,
         "time_per_fault_uav_step_s": elapsed / max(int(fault.sum()), 1),
+        # each run's mean squared error over its steps and UAVs, for the bound's rows (popped before metrics.json)
+        "_mse_runs": {name: (out["errors"][name] ** 2).mean(axis=(1, 2)) for name in METHODS},
     }
 
 
@@ -346,6 +354,7 @@ def run(out: str, runs: int = RUNS, seed: int = 0, quick: bool = False, executor
     names = list(points)
     results = map_tasks(evaluate_point, [(points[n], base, runs, seed) for n in names], executor, address)
     by_name = dict(zip(names, results, strict=True))
+    mse_runs = {name: point.pop("_mse_runs") for name, point in by_name.items()}
     if progress:
         progress(f"{len(names)} configurations x {runs} runs done")
 
@@ -363,6 +372,9 @@ def run(out: str, runs: int = RUNS, seed: int = 0, quick: bool = False, executor
     for sweep, (_field, values) in SWEEPS.items():
         metrics[sweep] = {_point_key(v): by_name.get(f"{sweep}/{_point_key(v)}", by_name["default"]) for v in values}
     metrics["case_study"] = case
+    metrics["pcrb"] = bound_block(base, mse_runs["default"], seed, min(runs, BOUND_EPISODES))
+    if progress:
+        progress("Cramér–Rao bound done")
     claims = _claims(metrics)
     metrics["claims"] = {c["id"]: c["holds"] for c in claims}  # every claim of the report's table
     metrics["wall_time_s"] = time.perf_counter() - started
@@ -371,6 +383,23 @@ def run(out: str, runs: int = RUNS, seed: int = 0, quick: bool = False, executor
     _figures(folder, metrics, history, config)
     write_text(os.path.join(folder, "report.md"), _report(metrics, claims, config))
     return metrics
+
+
+def bound_block(base: dict, mse_runs: dict, seed: int, episodes: int) -> dict:
+    """The ``pcrb`` block: :func:`coloc_env.pcrb` of the ``gps_denied_nbp`` preset with the default point's
+    configuration ``base`` (every UAV broadcasting: ``always``), beside each method's RMSE over every run,
+    step (k = 0..T-1, after its update) and UAV (``mse_runs`` {method: per-run mean squared error}).
+
+    The bound depends on the episode (which UAVs ranged, which GPS fixes existed): it is the bound over
+    ``episodes`` seeded episodes of the preset (episode e reset with seed + e), not over the runs (seeded
+    ``[seed, r]``). The ``gps_denied`` bound model is the world's own (accelerometer readings as input, every
+    fix and range as taken) and each method uses no more than these readings, so every efficiency is >= 1 up
+    to Monte Carlo noise.
+    """
+    bounds = coloc_env.pcrb("gps_denied_nbp", episodes=episodes, seed=seed, policy="always", **base)
+    note = (f"wan2014: the bound over {episodes} seeded episodes of the gps_denied_nbp preset at the default point "
+            "(not the runs' episodes); every UAV, fault or not, k = 0..T-1")
+    return pcrb_block(bounds, mse_runs, episodes, seed, False, note)
 
 
 def _err(point, method="dnbp"):
@@ -654,4 +683,13 @@ def _report(m: dict, claims: list[dict], config: GpsDeniedNbpConfig) -> str:
         "* Known weakness (docs/wan2014.md §11): a fault UAV with one or two neighbours can lock onto the wrong mode "
         "(flip or ring ambiguity); the fail rate counts those steps.",
     ]
+    block = m["pcrb"]
+    rows = block["rows"]
+    lines += report_section(
+        {"default point": block},
+        f"dNBP is {rows['dnbp']['efficiency']:.2f}x the centralized bound and "
+        f"{rows['dnbp']['rmse'] / block['local']:.2f}x the local one (each UAV with its own accelerometer and fixes), "
+        f"LS {rows['ls']['efficiency']:.2f}x and DR {rows['dr']['efficiency']:.2f}x: "
+        + ("the ranges carry information that the cooperative estimators leave unused."
+           if rows["dnbp"]["efficiency"] > 2 else "dNBP uses most of what the ranges carry."))
     return "\n".join(lines) + "\n"
