@@ -457,7 +457,7 @@ def _report(metrics, claims, quick) -> str:
     block = metrics["pcrb"]
     t1p1 = block["rows"]["T1P1"]
     lines += report_section(
-        {"T1P1..T3P1": block},
+        {"x, y; k = 1..K": block},
         f"The paper's fusion with its printed tables is {t1p1['efficiency']:.2f}x the centralized bound "
         f"({block['centralized']:.3f} m) at T1P1, and its RMSE {t1p1['rmse']:.3f} m "
         + ("is above" if t1p1["rmse"] > block["local"] else "is below")
