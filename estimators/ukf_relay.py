@@ -112,6 +112,9 @@ import numpy as np
 __all__ = [
     "ccl_update",
     "dcl_update",
+    "fix_updates",
+    "range_terms",
+    "range_updates",
     "process_noise",
     "range_of",
     "reorder_first",
@@ -226,9 +229,204 @@ def _flatten_batch(*arrays, core_ndims):
     return batch, flat
 
 
+# --- the look-up form of one range update: O(L d + L^2) per reading ------------------------------------------
+
+
+def _mn_index(measuring: np.ndarray, measured: np.ndarray, d: int) -> np.ndarray:
+    """(B, 2d) state indices of the blocks of m and n, m's first (the first 2d coordinates of eq. 17's order)."""
+    return np.concatenate([d * measuring[:, None] + np.arange(d), d * measured[:, None] + np.arange(d)], axis=1)
+
+
+def range_terms(x: np.ndarray, P: np.ndarray, measuring: np.ndarray, measured: np.ndarray, lam: float,
+                range_var: float):
+    """(Pxz (B, L), Pz (B,), zbar (B,)) of one range m -> n per copy, from P's 2d rows of m and n only.
+
+    ``x`` (B, N, d) with the position first in each block, ``P`` (B, L, L), L = d N. With m and n ordered
+    first (eq. 17) the lower Cholesky factor A of P has zeros in the m and n rows beyond column 2d, so
+    the sigma points p > 2d all give h(xbar) and their deviations cancel in Pxz (this is what makes the
+    distributed chain exact). What remains is
+
+        A_mn = chol(P_(mn)),  the 4d + 1 distinct points x_(mn) +- sqrt(L + lambda) A_mn[:, q], q < 2d,
+        zbar = (w_0 + 2 (L - 2d) w_p) h(xbar) + w_p sum_q (h(xi_q^+) + h(xi_q^-)),
+        Pz   = (w_0 + 2 (L - 2d) w_p) (h(xbar) - zbar)^2 + w_p sum_q ((dz_q^+)^2 + (dz_q^-)^2) + R,
+        Pxz  = A[:, :2d] g = P[:, mn] A_mn^-T g,   g_q = sqrt(L + lambda) w_p (dz_q^+ - dz_q^-),
+
+    the first 2d columns of the full factor being P[:, mn] A_mn^-T (the look-up Cholesky of eqs. 15-16
+    applied to every platform at once). The numbers are those of the 2L + 1 point UT of
+    :func:`ccl_update` (``method="sigma"``) in exact arithmetic (tests: 1e-9). Cost per reading: a
+    2d x 2d Cholesky, 4d + 1 range evaluations and one (L x 2d) product, O(L d); no L x L factor.
+    """
+    B, N, d = x.shape
+    idx = _mn_index(np.asarray(measuring, int), np.asarray(measured, int), d)
+    band = P[np.arange(B)[:, None], idx]  # (B, 2d, L): P's rows of m and n (= its columns: P is symmetric)
+    flat = x.reshape(B, -1)
+    return _terms_of_band(band, idx, np.take_along_axis(flat, idx[:, [0, 1, d, d + 1]], axis=1), d,
+                          _UkfConstants(d * N, d, lam), range_var)
+
+
+class _UkfConstants:
+    """The weights of the 2L + 1 point UT as the look-up form uses them."""
+
+    def __init__(self, L: int, d: int, lam: float):
+        w = ukf_weights(L, lam)
+        self.scale, self.wp = np.sqrt(L + lam), w[1]
+        self.w_mean = w[0] + 2 * (L - 2 * d) * w[1]  # the weight of h(xbar): the mean and every point beyond 2d
+        self.signs = np.array([1.0, -1.0])[:, None]
+
+
+def _terms_of_band(band: np.ndarray, idx: np.ndarray, positions: np.ndarray, d: int, c: _UkfConstants,
+                   range_var: float):
+    """:func:`range_terms` from the rows ``band`` (B, 2d, L) of P at ``idx`` (B, 2d) and the positions
+    [x_m; x_n] (B, 4)."""
+    P_mn = np.take_along_axis(band, idx[:, None, :], axis=2)
+    A = _cholesky(P_mn, "the joint covariance")
+    base = positions[:, :2] - positions[:, 2:]  # (B, 2)
+    spread = c.scale * (A[:, 0:2, :] - A[:, d:d + 2, :])  # (B, 2, 2d): the range's share of each sigma column
+    z0 = np.sqrt(np.sum(base**2, axis=-1))
+    z_pm = np.sqrt(np.sum((base[:, :, None, None] + c.signs * spread[:, :, None, :]) ** 2, axis=1))  # (B, 2, 2d)
+    z_bar = c.w_mean * z0 + c.wp * z_pm.sum(axis=(1, 2))
+    dz = z_pm - z_bar[:, None, None]
+    Pz = c.w_mean * (z0 - z_bar) ** 2 + c.wp * np.sum(dz**2, axis=(1, 2)) + range_var
+    g = c.scale * c.wp * (dz[:, 0] - dz[:, 1])
+    v = np.linalg.solve(np.swapaxes(A, -1, -2), g[:, :, None])  # A_mn^-T g
+    Pxz = np.matmul(np.swapaxes(band, -1, -2), v)[..., 0]
+    return Pxz, Pz, z_bar
+
+
+def range_updates(estimate: np.ndarray, cov: np.ndarray, measuring: np.ndarray, measured: np.ndarray,
+                  z: np.ndarray, active: np.ndarray, range_var: float, lam: float = 0.0,
+                  reached: np.ndarray | None = None, truncation: str = "consistent", block: int = 16) -> None:
+    """J range readings per copy applied in order (sequential UKF updates), in place on (B, ...) arrays.
+
+    ``estimate`` (B, N, d), ``cov`` (B, L, L), both C-contiguous; ``measuring``, ``measured``, ``z``,
+    ``active`` (B, J): reading j of copy b is m -> n with value z, applied where ``active`` (an inactive
+    one is skipped: its gain is 0, any m and n). ``reached`` (B, J, N) bool: the platforms a reading's
+    update reaches (all by default: UKF-CCL); the others keep their estimate, and their
+    cross-covariances with the reached become those of the gain [K_R; 0] (``truncation="consistent"``)
+    or stay unchanged (``"paper"``). Reading j equals :func:`ccl_update` / :func:`dcl_update` of the
+    state after readings < j (tests: 1e-9).
+
+    Each reading changes P by a rank-2 term, P - K Pxz^T - Pxz K^T + K Pz K^T = P - (K C^T + C K^T)
+    with C = Pxz - Pz K / 2, and reads only the 2d rows of m and n. The terms are kept aside, P =
+    P_0 - U V^T (U = [K_1 C_1 ...], V = [C_1 K_1 ...]), and folded into P every ``block`` readings
+    with one matrix product. Cost per reading: :func:`range_terms` on the rows P_0[mn] - U[mn] V^T
+    (O(L d block)), no L x L work; per ``block`` readings one (L x 2 block) x (2 block x L) product;
+    in all O(J L^2 + J L d block) per step, never an L x L factor or 2L + 1 sigma points.
+    """
+    if truncation not in ("consistent", "paper"):
+        raise ValueError(f"truncation must be 'consistent' or 'paper', got {truncation!r}")
+    B, N, d = estimate.shape
+    L = d * N
+    measuring, measured = np.asarray(measuring, int), np.asarray(measured, int)
+    active = np.asarray(active, bool)
+    J = measuring.shape[1]
+    if np.any(active & (measuring == measured)):
+        raise ValueError("measuring and measured platforms must differ")
+    if not active.any():
+        return
+    c = _UkfConstants(L, d, lam)
+    idx_all = np.concatenate([d * np.where(active, measuring, 0)[..., None] + np.arange(d),
+                              d * np.where(active, measured, 1)[..., None] + np.arange(d)], axis=-1)  # (B, J, 2d)
+    x = estimate.reshape(B, L)  # a view: the updates land in ``estimate``
+    rows = np.arange(B)[:, None]
+    innovations = np.nan_to_num(np.asarray(z, float))
+    U, V = np.zeros((B, 2 * block, L)), np.zeros((B, 2 * block, L))  # P = P_0 - U^T V (rows: K_1, C_1, ...)
+    scratch = np.empty((B, L, L))
+    used = 0
+
+    def fold() -> None:
+        np.matmul(np.swapaxes(U[:, :used], -1, -2), V[:, :used], out=scratch)
+        cov.__isub__(scratch)
+
+    for j in range(J):
+        on = active[:, j]
+        if not on.any():
+            continue
+        idx = idx_all[:, j]
+        band = cov[rows, idx]
+        if used:
+            band -= np.matmul(np.swapaxes(np.take_along_axis(U[:, :used], idx[:, None, :], axis=2), -1, -2),
+                              V[:, :used])
+        Pxz, Pz, z_bar = _terms_of_band(band, idx, np.take_along_axis(x, idx[:, [0, 1, d, d + 1]], axis=1), d, c,
+                                        range_var)
+        keep = on[:, None] if reached is None else np.repeat(on[:, None] & reached[:, j], d, axis=1)
+        gain = Pxz * (keep / Pz[:, None])
+        x += gain * np.where(on, innovations[:, j] - z_bar, 0.0)[:, None]
+        C = Pxz - 0.5 * Pz[:, None] * gain
+        if reached is not None and truncation == "paper":
+            C *= keep
+        U[:, used], U[:, used + 1], V[:, used], V[:, used + 1] = gain, C, C, gain
+        used += 2
+        if used == 2 * block:
+            fold()
+            used = 0
+    if used:
+        fold()
+    _symmetrize_in_place(cov, scratch)
+
+
+def _apply_gain(x: np.ndarray, P: np.ndarray, gain: np.ndarray, Pxz: np.ndarray, S: np.ndarray,
+                innovation: np.ndarray, keep: np.ndarray | None, scratch: np.ndarray) -> None:
+    """x += K innovation and P <- P - K Pxz^T - Pxz K^T + K S K^T in place, as -(K C^T + C K^T).
+
+    ``gain`` K (B, L, k), ``Pxz`` (B, L, k), S (B, k, k), ``innovation`` (B, k); C = Pxz - K S / 2, so that
+    K C^T + C K^T = K Pxz^T + Pxz K^T - K S K^T. ``keep`` (B, L) masks K (rows outside keep their
+    estimate). ``scratch`` (B, L, L) holds the one (B, L, 2k) x (B, 2k, L) product [K C] [C K]^T. Not
+    symmetrized: callers symmetrize once after their updates.
+    """
+    if keep is not None:
+        gain = gain * keep[..., None]
+    x += np.matmul(gain, innovation[..., None])[..., 0].reshape(x.shape)
+    C = Pxz - 0.5 * np.matmul(gain, S)
+    np.matmul(np.concatenate([gain, C], axis=-1), np.swapaxes(np.concatenate([C, gain], axis=-1), -1, -2),
+              out=scratch)
+    P -= scratch
+
+
+def fix_updates(estimate: np.ndarray, cov: np.ndarray, fix: np.ndarray, active: np.ndarray, R: np.ndarray,
+                reached: np.ndarray | None = None) -> None:
+    """Position fixes z_i = p_i + v, v ~ N(0, R), agent by agent, in place (linear, Joseph-equivalent).
+
+    ``fix`` (B, N, 2), ``active`` (B, N), ``R`` (2, 2); ``reached`` (B, N, N) [b, i]: the platforms fix
+    i's update reaches (all by default). With H selecting agent i's position, S = P_ii + R,
+    K = P[:, i] S^-1 masked to the reached rows, and the Joseph form
+    (I - K H) P (I - K H)^T + K R K^T = P - K P[i, :] - P[:, i] K^T + K S K^T, computed as a rank-4
+    update: O(L) per fix for the gain, O(L^2) for the covariance, never an L x L product
+    (:func:`estimators.kalman.joseph_update` forms (I - K H) P (I - K H)^T: O(L^3); tests: 1e-9).
+    """
+    B, N, d = estimate.shape
+    L = d * N
+    scratch = np.empty((B, L, L))
+    R = np.asarray(R, float)
+    rows = np.arange(B)
+    for i in range(N):
+        on = np.asarray(active[:, i], bool)
+        if not on.any():
+            continue
+        band = cov[:, d * i:d * i + 2, :]  # (B, 2, L) = P[i-position rows]
+        S = band[:, :, d * i:d * i + 2] + R
+        S = 0.5 * (S + np.swapaxes(S, -1, -2))
+        Pxz = np.swapaxes(band, -1, -2)  # (B, L, 2)
+        gain = np.swapaxes(np.linalg.solve(S, band), -1, -2)  # P[:, i] S^-1 (S symmetric)
+        keep = on[:, None] if reached is None else np.repeat(on[:, None] & reached[:, i], d, axis=1)
+        innovation = np.where(on[:, None], np.nan_to_num(fix[rows, i]) - estimate[rows, i, :2], 0.0)
+        _apply_gain(estimate, cov, gain, Pxz.copy(), S, innovation, keep, scratch)
+    _symmetrize_in_place(cov, scratch)
+
+
+def _symmetrize_in_place(P: np.ndarray, scratch: np.ndarray) -> None:
+    np.add(P, np.swapaxes(P, -1, -2), out=scratch)
+    np.multiply(scratch, 0.5, out=P)
+
+
 def ccl_update(estimate: np.ndarray, cov: np.ndarray, measuring, measured, z, range_var: float,
-               lam: float = 0.0, reached: np.ndarray | None = None):
-    """UKF-CCL observation update (eqs. 5-12, 17) with the generic 2L + 1 sigma points.
+               lam: float = 0.0, reached: np.ndarray | None = None, method: str = "lookup"):
+    """UKF-CCL observation update (eqs. 5-12, 17).
+
+    ``method="lookup"`` (default) forms only what the range reads (:func:`range_terms`: the 2d x 2d
+    Cholesky of P_(mn), O(L^2) per reading); ``method="sigma"`` builds the generic 2L + 1 sigma
+    points from the full L x L Cholesky factor (O(L^3) per reading), as printed. They agree to
+    rounding (tests: 1e-9).
 
     ``reached`` (..., N) bool (optional): platforms whose estimate updates; the
     others keep theirs (gain 0) and the covariance is that of the gain
@@ -236,8 +434,11 @@ def ccl_update(estimate: np.ndarray, cov: np.ndarray, measuring, measured, z, ra
     with the sign corrected) when every platform is reached. Returns new
     ``(estimate, cov)``.
     """
+    if method not in ("lookup", "sigma"):
+        raise ValueError(f"method must be 'lookup' or 'sigma', got {method!r}")
     N, d = np.shape(estimate)[-2:]
     L = d * N
+    all_reached = reached is None
     if reached is None:
         reached = np.ones((*np.shape(measuring), N), dtype=bool)
     batch, (x, P, m, n, zz, reach) = _flatten_batch(
@@ -245,6 +446,11 @@ def ccl_update(estimate: np.ndarray, cov: np.ndarray, measuring, measured, z, ra
     m, n = m.astype(int), n.astype(int)
     if np.any(m == n):
         raise ValueError("measuring and measured platforms must differ")
+    if method == "lookup":
+        x, P = x.astype(float).copy(), P.astype(float).copy()
+        range_updates(x, P, m[:, None], n[:, None], zz[:, None], np.ones((len(x), 1), bool), range_var, lam,
+                      None if all_reached else reach[:, None].astype(bool))
+        return x.reshape(*batch, N, d), P.reshape(*batch, L, L)
     order = reorder_first(N, m, n)
     idx = _block_index(order, d)  # (B, L)
     x_r = np.take_along_axis(x.reshape(-1, L), idx, axis=-1)
@@ -279,7 +485,7 @@ def _add_blocks(P: np.ndarray, rows: np.ndarray, cols: np.ndarray, values: np.nd
 
 
 def dcl_update(estimate: np.ndarray, cov: np.ndarray, chain: np.ndarray, chain_length, z, range_var: float,
-               lam: float = 0.0, truncation: str = "consistent"):
+               lam: float = 0.0, truncation: str = "consistent", method: str | None = None):
     """UKF-DCL observation update along the relay chain (Sec. 3, Algorithms 1-2).
 
     ``chain[..., 0]`` measures ``chain[..., 1]``; the location information
@@ -291,12 +497,26 @@ def dcl_update(estimate: np.ndarray, cov: np.ndarray, chain: np.ndarray, chain_l
     c_i writes P_{c_i c_j} for its up-neighbours and the symmetric block
     P_{c_j c_i} (the paper's "obtained by transposition").
 
-    Copies are vectorized per chain position (copies whose chain is still
-    going), so the loop runs over at most N positions, never over copies.
-    Returns new ``(estimate, cov)``.
+    ``method="chain"`` runs the chain hop by hop (Algorithms 1-2): each
+    receiver forms its row block A_i by look-up Cholesky, so a covariance that
+    lost positive definiteness fails at the first Schur complement that is not
+    (what ``truncation="paper"`` needs to be caught). Copies are vectorized per
+    chain position, so the loop runs over at most N positions, never over
+    copies: O(N) Cholesky factors and triangular solves of growing size per
+    reading. ``method="lookup"`` computes the same numbers in closed form: g
+    vanishes beyond the first 2d columns, so receiver c_i's update weight is
+    Pxz^i = A_i[:, :2d] g = P_{c_i,(mn)} A_mn^-T g, and the chain's update is
+    :func:`ccl_update` with ``reached`` the chain's platforms (consistent rule)
+    or with the cross-covariances to the unreached left alone (paper rule);
+    O(L^2) per reading (:func:`range_updates`; tests: 1e-9 against the chain).
+    The default is ``"lookup"`` for ``truncation="consistent"`` and ``"chain"``
+    for ``"paper"``. Returns new ``(estimate, cov)``.
     """
     if truncation not in ("consistent", "paper"):
         raise ValueError(f"truncation must be 'consistent' or 'paper', got {truncation!r}")
+    method = method or ("lookup" if truncation == "consistent" else "chain")
+    if method not in ("lookup", "chain"):
+        raise ValueError(f"method must be 'lookup' or 'chain', got {method!r}")
     N, d = np.shape(estimate)[-2:]
     L = d * N
     batch, (x, P, chain, length, zz) = _flatten_batch(
@@ -315,6 +535,10 @@ def dcl_update(estimate: np.ndarray, cov: np.ndarray, chain: np.ndarray, chain_l
     reached_mask[hop_copy, valid[hop_copy, hop_position]] = True
     if np.any(reached_mask.sum(axis=1) != length):
         raise ValueError("a chain must not revisit a platform")
+    if method == "lookup":
+        range_updates(x, P, chain[:, :1], chain[:, 1:2], zz[:, None], np.ones((B, 1), bool), range_var, lam,
+                      reached_mask[:, None], truncation)
+        return x.reshape(*batch, N, d), P.reshape(*batch, L, L)
 
     scale = np.sqrt(L + lam)
     w = ukf_weights(L, lam)

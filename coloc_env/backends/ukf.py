@@ -65,7 +65,6 @@ from coloc_env.backends.base import Backend, measurement_list, position_blocks
 from coloc_env.backends.heading import MOTIONS, ukf_motion_model
 from coloc_env.networks.base import CENTRE
 from coloc_env.parts import BACKENDS, PartConfig, check_choice, check_range
-from estimators.kalman import joseph_update
 from estimators.models import predict_joint
 
 
@@ -146,72 +145,78 @@ class JointUkfBackend(Backend):
         self.cov[idx] = joint
         self.posterior_position[idx] = mean[idx, :, :2]
 
-    def _to_centre(self, senders: np.ndarray, floats: float, slot: int) -> np.ndarray:
-        """(B,) bool: the message of ``senders`` (B,) reached the centre (the centre's own is local)."""
-        B, N = self.batch, self.num_agents
-        rows = np.arange(B)
-        remote = senders >= 0
-        one_hot = np.zeros((B, N), dtype=bool)
-        one_hot[rows[remote], senders[remote]] = True
-        listening = np.zeros((B, N, N), dtype=bool)
-        listening[:, :, CENTRE] = True
-        delivered = self.network.broadcast(one_hot & (np.arange(N) != CENTRE), listening, floats, slot)
-        return remote & ((senders == CENTRE) | delivered[rows, np.maximum(senders, 0), CENTRE])
-
     def update(self, readings, decisions) -> None:
-        B, N = self.batch, self.num_agents
+        """This step's readings in the fixed order: ranges (row-major (m, n)), then fixes by agent.
+
+        Every message of the step goes to the network in one call per kind (the chains and deliveries of
+        one step do not depend on each other: :meth:`Network.relay_each` / :meth:`Network.messages_to` with
+        one slot per reading), then the updates run in order: J sequential range updates
+        (:func:`estimators.ukf_relay.range_updates`, O(L^2) each) and one linear update per fixed agent
+        (:func:`estimators.ukf_relay.fix_updates`, O(L^2) each). With ``truncation="paper"`` each range
+        runs the chain hop by hop (:func:`estimators.ukf_relay.dcl_update` with ``method="chain"``), which
+        detects the loss of positive definiteness that rule causes.
+        """
+        B, N, d = self.batch, self.num_agents, self.d
         rows = np.arange(B)
         lam = self.config.ukf_lambda
         valid = np.asarray(readings.range_valid, bool)
         if self.one_per_pair:
             valid = valid & np.triu(np.ones((N, N), dtype=bool), 1)
         count, m, n = measurement_list(valid)
-        d = self.d
-        for j in range(m.shape[1]):
-            has = count > j
-            mj, nj = np.where(has, m[:, j], -1), n[:, j]
-            z = readings.range[rows, np.maximum(mj, 0), nj]
+        J = m.shape[1]
+        has = np.arange(J) < count[:, None]
+        z = readings.range[rows[:, None], m, n]
+        R_range = self.world.range_noise_var()
+        if J:
             if self.distributed:
-                chain = self.network.relay(mj, np.where(has, nj, -1), lambda h: dcl_floats(h, d), slot=j)
-                used = np.flatnonzero(has & (chain.length >= 2))
-                if len(used):
-                    try:
-                        self.mean[used], self.cov[used] = ukf.dcl_update(
-                            self.mean[used], self.cov[used], chain.chain[used], chain.length[used], z[used],
-                            self.world.range_noise_var(), lam, self.config.truncation)
-                    except np.linalg.LinAlgError as exc:
-                        if self.config.truncation != "paper":
-                            raise
-                        raise ukf.paper_rule_failure(exc, int(self.world.k.max())) from exc
-            else:
-                used = np.flatnonzero(self._to_centre(mj, 1.0, slot=j))
-                if len(used):
-                    self.mean[used], self.cov[used] = ukf.ccl_update(
-                        self.mean[used], self.cov[used], mj[used], nj[used], z[used],
-                        self.world.range_noise_var(), lam)
-        if readings.fix_valid.any():
-            R = self.world.fix_noise_var() * np.eye(2)
-            for i in range(N):
-                has = readings.fix_valid[:, i]
-                if not has.any():
-                    continue
-                source = np.where(has, i, -1)
-                if self.distributed:
-                    chain = self.network.relay(source, np.full(B, -1), lambda h: dcl_floats(h, d), slot=N * N + i)
-                    reached = np.zeros((B, N), dtype=bool)
-                    valid_c, valid_p = np.nonzero(chain.chain >= 0)
-                    reached[valid_c, chain.chain[valid_c, valid_p]] = True
-                    used = np.flatnonzero(has)
-                    keep = np.repeat(reached[used], d, axis=-1)
+                chains = self.network.relay_each(np.where(has, m, -1), np.where(has, n, -1),
+                                                 lambda h: dcl_floats(h, d), np.arange(J))
+                used = has & (chains.length >= 2)
+                if self.config.truncation == "paper":
+                    self._chain_updates(chains, used, z, R_range, lam)
                 else:
-                    used = np.flatnonzero(self._to_centre(source, 2.0, slot=N * N + i))
-                    keep = None
-                if len(used):
-                    H = np.zeros((2, d * N))
-                    H[:, d * i:d * i + 2] = np.eye(2)
-                    flat, cov = joseph_update(self.mean[used].reshape(len(used), d * N), self.cov[used], H,
-                                              readings.fix[used, i], R, keep)
-                    self.mean[used], self.cov[used] = flat.reshape(len(used), N, d), cov
+                    reached = np.zeros((B, J, N), dtype=bool)
+                    b, j, p = np.nonzero(chains.chain >= 0)
+                    reached[b, j, chains.chain[b, j, p]] = True
+                    ukf.range_updates(self.mean, self.cov, m, n, z, used, R_range, lam, reached)
+            else:
+                used = self._to_centre(np.where(has, m, -1), 1.0, np.arange(J))
+                ukf.range_updates(self.mean, self.cov, m, n, z, used, R_range, lam)
+        fix_valid = np.asarray(readings.fix_valid, bool)
+        if fix_valid.any():
+            agents = np.flatnonzero(fix_valid.any(axis=0))  # the agents with a fix in some copy, in order
+            sources = np.where(fix_valid[:, agents], agents, -1)
+            active = np.zeros((B, N), dtype=bool)
+            if self.distributed:
+                chains = self.network.relay_each(sources, np.full_like(sources, -1), lambda h: dcl_floats(h, d),
+                                                 N * N + agents)
+                reached = np.zeros((B, N, N), dtype=bool)  # [b, i]: the platforms fix i's update reaches
+                b, j, p = np.nonzero(chains.chain >= 0)
+                reached[b, agents[j], chains.chain[b, j, p]] = True
+                active[:, agents] = fix_valid[:, agents]
+            else:
+                reached = None
+                active[:, agents] = self._to_centre(sources, 2.0, N * N + agents)
+            ukf.fix_updates(self.mean, self.cov, readings.fix, active, self.world.fix_noise_var() * np.eye(2),
+                            reached)
+
+    def _to_centre(self, senders: np.ndarray, floats: float, slots: np.ndarray) -> np.ndarray:
+        """(B, J) bool: message j of ``senders`` (B, J) reached the centre (the centre's own is local)."""
+        delivered = self.network.messages_to(senders, CENTRE, floats, slots)
+        return (senders >= 0) & ((senders == CENTRE) | delivered)
+
+    def _chain_updates(self, chains, used, z, range_var, lam) -> None:
+        """The paper's truncation rule: each range's chain hop by hop (it raises when P lost definiteness)."""
+        for j in range(used.shape[1]):
+            idx = np.flatnonzero(used[:, j])
+            if not len(idx):
+                continue
+            try:
+                self.mean[idx], self.cov[idx] = ukf.dcl_update(
+                    self.mean[idx], self.cov[idx], chains.chain[idx, j], chains.length[idx, j], z[idx, j],
+                    range_var, lam, "paper")
+            except np.linalg.LinAlgError as exc:
+                raise ukf.paper_rule_failure(exc, int(self.world.k.max())) from exc
 
     def predict(self, inputs) -> None:
         self.mean, self.cov = predict_joint(self.motion_model, self.mean, self.cov, inputs)

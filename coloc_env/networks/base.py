@@ -251,23 +251,33 @@ class Network:
         step's packet stream. A network may hand back values it drew ahead (they depend on the counters only)."""
         return self.packet_delays(distance, uniforms(self.keys, (self._k, 2, slot), (self.num_agents, self.num_agents)))
 
-    def relay(self, source: np.ndarray, first: np.ndarray, floats_per_hop, slot: int = 0) -> RelayChain:
+    def relay(self, source: np.ndarray, first: np.ndarray, floats_per_hop, slot=0) -> RelayChain:
         """Relay chains source -> first -> ... (B,), following the holders' choices (or nearest first).
 
         ``first`` < 0: the first hop follows the source's choice too.
         Stop reasons are those of :data:`coloc_env.world.relay.STOP_REASONS`. ``floats_per_hop(h)``
         is the payload of hop h (0-based). A copy with ``source < 0`` has no chain. ``slot`` names the
-        chain within the step (see :meth:`broadcast`).
+        chain within the step (see :meth:`broadcast`). ``source`` and ``first`` (B, J) with ``slot``
+        (J,) resolve J chains per copy in one call (chain j in slot[j]; the chains of one step do not
+        depend on each other): the same chains and accounting as J calls in that order, returned with
+        a leading (B, J) shape; ``last_chain`` is then chain J - 1's, as after the J calls.
         """
         B, N = self.batch, self.num_agents
-        source, first = (np.broadcast_to(np.asarray(x, int), (B,)) for x in (source, first))
-        chain = np.full((B, N), -1)
-        length = np.zeros(B, dtype=int)
-        hop_distance = np.full((B, max(N - 1, 1)), np.nan)
-        stop = np.full(B, -1)
-        rows = np.flatnonzero(source >= 0)  # the copies with a chain; the others keep the empty one
+        many = np.ndim(source) == 2
+        source, first = (np.asarray(x, int) for x in (source, first))
+        J = source.shape[1] if many else 1
+        source, first = (np.broadcast_to(x if many else np.broadcast_to(x, (B,))[:, None], (B, J)).reshape(-1)
+                         for x in (source, first))
+        slots = np.tile(np.broadcast_to(np.asarray(slot, int), (J,)), B)
+        copy_of = np.repeat(np.arange(B), J)
+        chain = np.full((B * J, N), -1)
+        length = np.zeros(B * J, dtype=int)
+        hop_distance = np.full((B * J, max(N - 1, 1)), np.nan)
+        stop = np.full(B * J, -1)
+        rows = np.flatnonzero(source >= 0)  # the chains that exist; the others keep the empty one
         n = len(rows)
         if n:
+            copies = copy_of[rows]
             distance = self.distances()
             choice = self.next_hop_choice()
             # the link rules are elementwise: copies that share one distance matrix share their results
@@ -280,8 +290,8 @@ class Network:
             # a lossless network needs no draws (u < 0 never holds): the same chains, without the hashing
             u = None
             if lossy:
-                k = self._k if np.ndim(self._k) == 0 else self._k[rows]
-                u = uniforms(self.keys[rows], (k, 1, slot), (N,))
+                k = self._k if np.ndim(self._k) == 0 else self._k[copies]
+                u = uniforms(self.keys[copies], (k, 1, slots[rows] if many else int(np.ravel(slot)[0])), (N,))
             local = np.arange(n)
             holder = source[rows]
             links = np.full((n, N), -1)  # this chain's platforms, in order (the rows of ``chain``)
@@ -298,9 +308,9 @@ class Network:
                 if hop >= limit:  # stop reason 1: the hop budget is spent
                     code[going] = 1
                     break
-                row_distance = distance[rows, holder]
+                row_distance = distance[copies, holder]
                 nearest = np.argmin(np.where(reached, np.inf, row_distance), axis=-1)
-                target = nearest if choice is None else choice[rows, holder]
+                target = nearest if choice is None else choice[copies, holder]
                 if choice is not None:
                     target = np.where(target == N + 1, nearest, target)
                 if hop == 0:  # a range's chain goes to the measured platform first; a fix's follows the choice
@@ -309,8 +319,9 @@ class Network:
                 safe = np.where(valid, target, 0)
                 # the first of the stop reasons 2..5 that holds: no platform named, already reached, out of
                 # range, lost
-                failed = np.where(u[:, hop] < loss[rows, holder, safe], 5, 0) if u is not None else np.zeros(n, int)
-                failed = np.where(~usable[rows, holder, safe], 4, failed)
+                failed = np.where(u[:, hop] < loss[copies, holder, safe], 5, 0) if u is not None \
+                    else np.zeros(n, int)
+                failed = np.where(~usable[copies, holder, safe], 4, failed)
                 failed = np.where(reached[local, safe], 3, failed)
                 failed = np.where(valid, failed, 2)
                 ok = going & (failed == 0)
@@ -325,15 +336,65 @@ class Network:
                     break
             code[size == N] = 0
             chain[rows], length[rows], hop_distance[rows], stop[rows] = links, size, hops, code
-            # the accounting, at each delivered hop's holder (a chain holds a platform once: one addition each)
+            # the accounting, at each delivered hop's holder, chain by chain in order (np.add.at: a platform
+            # holds several of the copy's chains)
             sent = links[:, 1:] >= 0
             c, h = np.nonzero(sent)
             holders = links[c, h]
-            self.messages_sent[rows[c], holders] += 1
-            self.floats_sent[rows[c], holders] += np.array([floats_per_hop(j) for j in range(N - 1)], float)[h]
-            self.delivered[rows[c], holders, links[c, h + 1]] = True
-        self.last_chain = RelayChain(chain=chain, length=length, hop_distance=hop_distance, stop=stop)
-        return self.last_chain
+            np.add.at(self.messages_sent, (copies[c], holders), 1)
+            np.add.at(self.floats_sent, (copies[c], holders),
+                      np.array([floats_per_hop(j) for j in range(N - 1)], float)[h])
+            self.delivered[copies[c], holders, links[c, h + 1]] = True
+        shape = (B, J) if many else (B,)
+        result = RelayChain(chain=chain.reshape(*shape, N), length=length.reshape(shape),
+                            hop_distance=hop_distance.reshape(*shape, -1), stop=stop.reshape(shape))
+        self.last_chain = RelayChain(chain=result.chain[:, -1].copy(), length=result.length[:, -1].copy(),
+                                     hop_distance=result.hop_distance[:, -1].copy(), stop=result.stop[:, -1].copy()
+                                     ) if many else result
+        return result
+
+    def relay_each(self, source: np.ndarray, first: np.ndarray, floats_per_hop, slots) -> RelayChain:
+        """J chains per copy, ``source`` and ``first`` (B, J), chain j in ``slots[j]``: the result of J
+        :meth:`relay` calls in that order, stacked to (B, J, ...). One call when the network keeps the base
+        class's relay (its chains do not depend on each other); J calls where a subclass adds to it."""
+        if type(self).relay is Network.relay:
+            return self.relay(source, first, floats_per_hop, slot=np.asarray(slots, int))
+        parts = [self.relay(source[:, j], first[:, j], floats_per_hop, slot=int(slot)) for j, slot in enumerate(slots)]
+        return RelayChain(*(np.stack([getattr(p, name) for p in parts], axis=1)
+                            for name in ("chain", "length", "hop_distance", "stop")))
+
+    def messages_to(self, senders: np.ndarray, receiver: int, floats: float, slots) -> np.ndarray:
+        """J one-off messages per copy to one ``receiver`` (a fusion centre): ``senders`` (B, J) (-1: none), message
+        j in ``slots[j]``. Returns delivered (B, J) bool.
+
+        The same outcome, draws and accounting as J :meth:`broadcast` calls in that order, call j with sender
+        ``senders[:, j]`` alone and only ``receiver`` listening (a sender's message to itself is not sent);
+        one call for the step instead of J.
+        """
+        senders = np.asarray(senders, int)
+        B, J = senders.shape
+        N = self.num_agents
+        slots = np.broadcast_to(np.asarray(slots, int), (J,))
+        rows = np.arange(B)[:, None]
+        sender = np.maximum(senders, 0)
+        distance = self.distances()[rows, sender, receiver]  # (B, J)
+        want = (senders >= 0) & (senders != receiver) & self.usable(distance)
+        if not want.any():
+            return want
+        for value in np.unique(slots):  # the transmit decision read at each message's slot
+            at = slots == value
+            want[:, at] &= self.transmits(int(value))[rows, sender[:, at]]
+        loss = self.loss_probability(distance)
+        if not (loss <= 0.0).all():
+            u = np.empty((B, J))
+            for j, value in enumerate(slots):
+                u[:, j] = uniforms(self.keys, (self._k, 0, int(value)), (N, N))[rows[:, 0], sender[:, j], receiver]
+            want &= u >= loss
+        b, j = np.nonzero(want)
+        np.add.at(self.messages_sent, (b, sender[b, j]), 1)
+        np.add.at(self.floats_sent, (b, sender[b, j]), floats)
+        self.delivered[b, sender[b, j], receiver] = True
+        return want
 
     def observation_features(self) -> np.ndarray:
         """(B, N, f) the link state each agent senses; none by default."""
