@@ -145,6 +145,13 @@ def build_parser() -> argparse.ArgumentParser:
     be.add_argument("--rounds", type=_positive, default=None,
                     help="with --against: alternating rounds per scenario, each row keeping its best rate (default "
                          "2; more on a machine whose speed wanders)")
+    be.add_argument("--scaling", action="store_true",
+                    help="env-steps/s against the number of agents N in 5..80 for every backend on gps_denied, at a "
+                         "fixed area and a fixed density, B = 8 and 64, with each row's growth exponent "
+                         "(OUT/bench/scaling.json, scaling.png); with --against REF side by side")
+    be.add_argument("--cap", type=float, default=None, metavar="SECONDS",
+                    help="with --scaling: time cap per row and tree (default 120, 60 with --quick); the sizes "
+                         "not reached print 'over cap'")
 
     _add_study_parser(sub)
 
@@ -354,6 +361,20 @@ def cmd_bench(args) -> int:
         raise ValueError(f"--rounds {args.rounds} needs --against REF (the rounds alternate the two trees)")
     if args.rounds is not None and args.rounds > 20:
         raise ValueError(f"--rounds must be in 1..20, got {args.rounds}")
+    if args.cap is not None and not args.scaling:
+        raise ValueError(f"--cap {args.cap} needs --scaling (it caps each row of the scaling table)")
+    if args.scaling:
+        from train.bench import run_scaling
+
+        if args.scenarios:
+            raise ValueError("--scenarios does not apply to --scaling (its rows are the backends on gps_denied)")
+        if args.rounds is not None:
+            raise ValueError("--rounds does not apply to --scaling (each row is measured once per tree)")
+        if args.cap is not None and not 1.0 <= args.cap <= 86400.0:
+            raise ValueError(f"--cap must be in [1, 86400] seconds, got {args.cap}")
+        with _open(args, os.path.join(args.out, "bench")):
+            run_scaling(args.out, quick=args.quick, against=args.against, cap=args.cap)
+        return 0
     scenarios = args.scenarios or _runnable_scenarios(_console())
     with _open(args, os.path.join(args.out, "bench")):
         if args.against:

@@ -33,13 +33,19 @@ class RangeNetwork:
 
     @staticmethod
     def distances(positions: np.ndarray) -> np.ndarray:
-        """True pairwise distances (..., N, N) of positions (..., N, 2)."""
-        diff = positions[..., :, None, :] - positions[..., None, :, :]
-        return np.sqrt(np.sum(diff**2, axis=-1))
+        """True pairwise distances (..., N, N) of positions (..., N, 2): sqrt(dx^2 + dy^2), the same float
+        operations as the sum of squares over the last axis, on (..., N, N) planes (no (..., N, N, 2) array)."""
+        x, y = positions[..., 0], positions[..., 1]
+        dx = x[..., :, None] - x[..., None, :]
+        dy = y[..., :, None] - y[..., None, :]
+        dx *= dx
+        dy *= dy
+        dx += dy
+        return np.sqrt(dx, out=dx)
 
-    def adjacency(self, positions: np.ndarray) -> np.ndarray:
-        """Bool (..., N, N): within range, no self-loops."""
-        d = self.distances(positions)
+    def adjacency(self, positions: np.ndarray, distances: np.ndarray | None = None) -> np.ndarray:
+        """Bool (..., N, N): within range, no self-loops (``distances`` if already computed)."""
+        d = self.distances(positions) if distances is None else distances
         n = d.shape[-1]
         return (d <= self.comm_range) & ~np.eye(n, dtype=bool)
 
@@ -53,5 +59,6 @@ class RangeNetwork:
 
     def measure(self, positions: np.ndarray, noise: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(adjacency, ranges): ranges (..., N, N) are true + noise on edges, 0 elsewhere."""
-        adjacency = self.adjacency(positions)
-        return adjacency, np.where(adjacency, self.distances(positions) + noise, 0.0)
+        distances = self.distances(positions)
+        adjacency = self.adjacency(positions, distances)
+        return adjacency, np.where(adjacency, distances + noise, 0.0)

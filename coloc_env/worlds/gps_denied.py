@@ -2,7 +2,7 @@
 
 The world of the ``gps_denied_nbp`` scenario, drawn the same way
 (:func:`coloc_env.scenarios.gps_denied_nbp.sample_episode`'s blocks, in its
-order, from the world's generator): N UAVs start uniformly in ``[0, area]^2``
+order, from the world's generator): N UAVs start uniformly in ``[0, side]^2``
 at the nominal velocity plus a spread and fly the constant-velocity model
 driven by a random acceleration (:class:`~coloc_env.world.cv_uav.ConstantVelocityUAVs`);
 each reads a noisy accelerometer. Each GPS receiver switches between normal
@@ -12,6 +12,14 @@ one reading per unordered pair seen by both ends
 (:class:`~coloc_env.world.range_network.RangeNetwork`). The agents start from
 the scenario's warm-start knowledge: the last fix before the loss and a noisy
 velocity.
+
+Swarm size. With ``density`` None the start square has side ``area`` whatever
+N is (wan2014's setting): doubling N doubles every UAV's neighbours within
+``comm_range`` and quadruples the range readings (about 0.58 N^2 / 2 pairs at
+the defaults). With ``density`` (UAVs per km^2) the side is
+sqrt(N / density) km: the square grows with sqrt(N), every UAV keeps about
+the same number of neighbours, and the readings grow like N (``density=40``
+is the default square at N = 10).
 
 | quantity       | value                                                                              |
 |----------------|------------------------------------------------------------------------------------|
@@ -26,10 +34,11 @@ Arguments (``coloc_env.worlds.GpsDenied``; defaults = ``gps_denied_nbp``'s)
 
 | field              | default   | allowed                                      |
 |--------------------|-----------|----------------------------------------------|
-| num_agents         | 10        | 2..64                                        |
+| num_agents         | 10        | 2..128                                       |
 | horizon            | 30        | 1..10000 steps (the composition's default)   |
 | dt                 | 1.0       | (0, 1000] s                                  |
-| area               | 500       | (0, 1e7] m                                   |
+| area               | 500       | (0, 1e7] m: the side of the start square     |
+| density            | None      | None (side ``area``) or [1e-3, 1e6] UAVs/km^2 (side sqrt(N / density) km) |
 | nominal_velocity   | (20, 0)   | (2,) m/s                                     |
 | velocity_spread    | 2.0       | [0, 1e4] m/s                                 |
 | accel_std          | 0.5       | [0, 1000] m/s^2 true acceleration            |
@@ -81,6 +90,14 @@ class GpsDenied(PartConfig):
     p_normal_to_fault: float = 0.02
     p_fault_to_normal: float = 0.02
     num_normal: int | None = None
+    density: float | None = None
+
+    @property
+    def side(self) -> float:
+        """The side of the start square in metres: ``area``, or sqrt(N / density) km at a fixed density."""
+        if self.density is None:
+            return float(self.area)
+        return 1000.0 * float(np.sqrt(self.num_agents / self.density))
 
     @property
     def motion(self) -> ConstantVelocityUAVs:
@@ -95,7 +112,7 @@ class GpsDenied(PartConfig):
         return RangeNetwork(self.comm_range, self.range_std)
 
     def check(self, prefix: str) -> None:
-        check_range(f"{prefix}num_agents", self.num_agents, 2, 64, integer=True)
+        check_range(f"{prefix}num_agents", self.num_agents, 2, 128, integer=True)
         check_range(f"{prefix}horizon", self.horizon, 1, 10_000, integer=True)
         check_range(f"{prefix}dt", self.dt, 0.0, 1e3, low_open=True)
         check_range(f"{prefix}area", self.area, 0.0, 1e7, low_open=True)
@@ -108,6 +125,8 @@ class GpsDenied(PartConfig):
         check_range(f"{prefix}comm_range", self.comm_range, 0.0, 1e7, low_open=True)
         check_range(f"{prefix}p_normal_to_fault", self.p_normal_to_fault, 0.0, 1.0)
         check_range(f"{prefix}p_fault_to_normal", self.p_fault_to_normal, 0.0, 1.0)
+        if self.density is not None:
+            check_range(f"{prefix}density", self.density, 1e-3, 1e6)
         if self.num_normal is not None:
             check_range(f"{prefix}num_normal", self.num_normal, 0, self.num_agents, integer=True)
 
@@ -143,8 +162,9 @@ class GpsDeniedWorld(World):
         c = self.config
         N, T = c.num_agents, self.horizon
         motion, gps, ranging = c.motion, c.gps, c.ranging
+        side = c.side
         for b, rng in zip(idx, rngs, strict=True):
-            position = c.area * rng.random((N, 2))
+            position = side * rng.random((N, 2))
             velocity = np.asarray(c.nominal_velocity, float) + c.velocity_spread * rng.standard_normal((N, 2))
             if c.num_normal is None:
                 normal = gps.sample_states(rng, T, N)
@@ -189,7 +209,7 @@ class GpsDeniedWorld(World):
     def region(self):
         c = self.config
         travel = float(np.linalg.norm(c.nominal_velocity)) * self.dt * self.horizon
-        return (0.0, float(c.area)), (0.0, float(c.area) + travel)
+        return (0.0, c.side), (0.0, c.side + travel)
 
     def extent(self) -> float:
         return float(np.abs(self.truth[..., :2]).max()) + 50.0
