@@ -24,7 +24,9 @@ with covariance sigma_d^2 (J^T J)^-1; otherwise the output is the dead-
 reckoning estimate. No fault-to-fault cooperation.
 
 Arrays carry a leading batch axis B and the UAV axis N; everything is
-vectorized (anchors padded to N with a mask). Covariance updates use the
+vectorized: each fault UAV's normal neighbours are gathered into a list
+padded to the largest neighbour count K of the step (a mask marks the
+padding), so a Gauss-Newton iteration costs O(J K) for J fault UAVs. Covariance updates use the
 Joseph form and are symmetrized.
 """
 
@@ -201,9 +203,13 @@ def update(params: LsParams, state: KalmanState, gps_normal: np.ndarray, gps_fix
     candidates = ~gps_normal & (anchors_ok.sum(axis=-1) >= params.min_anchors)
     if params.cooperative and candidates.any():
         b_idx, s_idx = np.nonzero(candidates)
-        anchors = posterior.mean[b_idx, :, :2]
+        # each fault UAV's normal neighbours, in index order, padded to the most any of them has (K <= N):
+        # the Gauss-Newton work follows the neighbour count, not the swarm size
         mask = anchors_ok[b_idx, s_idx]
-        d = ranges[b_idx, s_idx]
+        order = np.argsort(~mask, axis=1, kind="stable")[:, :int(mask.sum(axis=1).max())]
+        anchors = posterior.mean[b_idx[:, None], order, :2]
+        d = np.take_along_axis(ranges[b_idx, s_idx], order, axis=1)
+        mask = np.take_along_axis(mask, order, axis=1)
         p_pred = state.mean[b_idx, s_idx, :2]
         C_pp = state.cov[b_idx, s_idx, :2, :2]
         p, JtJ, rms = gauss_newton(p_pred, anchors, d, mask, params.max_iterations, params.tolerance)

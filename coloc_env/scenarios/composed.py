@@ -465,7 +465,8 @@ class ComposedScenario(Scenario):
             log_trace = np.clip(np.log(np.maximum(np.trace(cov, axis1=-2, axis2=-1), 1e-300)),
                                 -LOG_TRACE_BOUND, LOG_TRACE_BOUND)
         p = self.world.positions()
-        distance = np.linalg.norm(p[:, :, None, :] - p[:, None, :, :], axis=-1) / DISTANCE_SCALE
+        dx, dy = p[:, :, None, 0] - p[:, None, :, 0], p[:, :, None, 1] - p[:, None, :, 1]
+        distance = np.sqrt(dx * dx + dy * dy) / DISTANCE_SCALE  # the norm over (x, y), on (B, N, N) planes
         frac = np.broadcast_to((self.k / self.horizon)[:, None], (B, N))
         obs = np.concatenate([identity, log_trace[..., None], self._received.astype(float), distance, frac[..., None],
                               self.world.observation_features(), self.backend.observation_features()], axis=-1)

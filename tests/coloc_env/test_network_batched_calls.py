@@ -1,0 +1,70 @@
+"""A step's J relay chains or centre messages resolved in one network call equal J calls in order: the same chains,
+deliveries, loss draws and accounting, bit for bit (a lossy network, so the draws matter)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from coloc_env.networks.base import RelayChain
+from coloc_env.networks.broadcast import Broadcast
+from coloc_env.networks.ideal import Ideal
+
+
+def started(config, kind, B=4, N=7, seed=0):
+    rng = np.random.default_rng(seed)
+    net = config.build(N, B, kind)
+    net.reset([np.random.default_rng([seed, b]) for b in range(B)], np.arange(B))
+    decisions = rng.integers(0, 2, size=(B, N, len(net.transport_blocks())))
+    net.begin(rng.integers(0, 20, size=B), rng.uniform(0.0, 400.0, size=(B, N, 2)), decisions)
+    return net, rng
+
+
+def snapshot(net):
+    return net.messages_sent.copy(), net.floats_sent.copy(), net.delivered.copy()
+
+
+@pytest.mark.parametrize("config", [Broadcast(comm_range=250.0, loss=0.3), Ideal()])
+def test_relay_over_J_sources_equals_J_relay_calls(config):
+    B, N, J = 4, 7, 9
+    one, rng = started(config, "chain", B, N)
+    many, _ = started(config, "chain", B, N)
+    source = np.where(rng.random((B, J)) < 0.8, rng.integers(0, N, (B, J)), -1)
+    first = np.where(rng.random((B, J)) < 0.7, (source + rng.integers(1, N, (B, J))) % N, -1)
+    slots = 3 + np.arange(J)
+
+    def floats(hop):
+        return 10.5 + 3 * hop
+
+    calls = [one.relay(source[:, j], first[:, j], floats, slot=int(slots[j])) for j in range(J)]
+    batched = many.relay_each(source, first, floats, slots)
+    assert batched.chain.shape == (B, J, N)
+    for name in ("chain", "length", "hop_distance", "stop"):
+        np.testing.assert_array_equal(getattr(batched, name), np.stack([getattr(c, name) for c in calls], axis=1))
+    for a, b in zip(snapshot(one), snapshot(many), strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert isinstance(many.last_chain, RelayChain)
+    np.testing.assert_array_equal(many.last_chain.chain, calls[-1].chain)
+    assert (batched.length[source < 0] == 0).all() and (batched.length[source >= 0] >= 1).all()
+
+
+@pytest.mark.parametrize("config", [Broadcast(comm_range=250.0, loss=0.3), Ideal()])
+def test_messages_to_the_centre_equal_one_broadcast_per_message(config):
+    B, N, J = 5, 6, 11
+    one, rng = started(config, "central", B, N, seed=1)
+    many, _ = started(config, "central", B, N, seed=1)
+    senders = np.where(rng.random((B, J)) < 0.8, rng.integers(0, N, (B, J)), -1)
+    slots = np.arange(J)
+    expected = np.zeros((B, J), bool)
+    rows = np.arange(B)
+    for j in range(J):
+        one_hot = np.zeros((B, N), bool)
+        one_hot[rows[senders[:, j] >= 0], senders[senders[:, j] >= 0, j]] = True
+        listening = np.zeros((B, N, N), bool)
+        listening[:, :, 0] = True
+        delivered = one.broadcast(one_hot, listening, 2.0, slot=int(slots[j]))
+        expected[:, j] = (senders[:, j] >= 0) & delivered[rows, np.maximum(senders[:, j], 0), 0]
+    np.testing.assert_array_equal(many.messages_to(senders, 0, 2.0, slots), expected)
+    for a, b in zip(snapshot(one), snapshot(many), strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert 0 < expected.sum() < (senders > 0).sum() or isinstance(config, Ideal)
