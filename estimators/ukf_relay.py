@@ -67,6 +67,17 @@ with g = sqrt(L + lambda) w_p (dzeta_q)_{q<=4}) and carry in the message. It
 is exact for the UT with m, n ordered first, and equals the CCL update with
 the same gain (:func:`ccl_update` with ``reached``).
 
+Cost. The range reads only the blocks of m and n, so the update needs only
+the first 2d columns of the factor, P[:, mn] A_mn^-T (:func:`range_terms`):
+a 2d x 2d Cholesky, 4d + 1 range evaluations and O(L d) work per reading,
+then a rank-2 change of P (O(L^2)); :func:`range_updates` applies a step's J
+readings in order with the rank-2 terms kept aside and folded into P every
+16 readings (O(J L^2) per step, against O(J L^3) for a full factor per
+reading), and :func:`fix_updates` the position fixes as rank-4 changes. The
+printed forms stay available and give the same numbers to rounding:
+``ccl_update(method="sigma")`` (the 2L + 1 sigma points from the L x L
+factor) and ``dcl_update(method="chain")`` (hop by hop).
+
 Array conventions (a leading batch shape ``...`` is allowed everywhere):
 
 * ``estimate``   ``(..., N, 2)``   positions x_i

@@ -63,7 +63,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from train.io import save_figure, write_json
+from train.io import save_figure, write_json, write_text
 
 BATCHES = (1, 64, 1024)
 PCRB_ROW = "pcrb, one episode"  # the bound's computation (its own play of the episode and its recursion)
@@ -869,9 +869,9 @@ def _scaling_source() -> str:
 
 
 def scaling_row(tree: str, backend: str, network: str, layout: str, batch: int, sizes, min_seconds: float,
-                cap: float) -> dict[int, dict]:
+                cap: float, single_thread: bool = False) -> dict[int, dict]:
     """{N: cell} of one row measured in a subprocess with ``tree`` first on sys.path, killed after ``cap``
-    seconds; a size with no cell is over the cap."""
+    seconds; a size with no cell is over the cap. ``single_thread``: BLAS, numba and dNBP's pool on one thread."""
     with tempfile.TemporaryDirectory(prefix="coloc-scaling-") as scratch:
         out = os.path.join(scratch, "cells.jsonl")
         spec = {"source": _scaling_source(), "backend": backend, "network": network, "batch": int(batch),
@@ -879,6 +879,9 @@ def scaling_row(tree: str, backend: str, network: str, layout: str, batch: int, 
                 "min_seconds": float(min_seconds), "out": out}
         env = dict(os.environ, PYTHONPATH=os.pathsep.join([tree, os.environ.get("PYTHONPATH", "")]).rstrip(os.pathsep),
                    MPLBACKEND="Agg")
+        if single_thread:
+            env.update({name: "1" for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
+                                               "NUMBA_NUM_THREADS", "COLOC_THREADS")})
         error = None
         try:
             done = subprocess.run([sys.executable, "-c", _SCALING_DRIVER, json.dumps(spec)], cwd=tree, env=env,
@@ -923,14 +926,18 @@ def _scaling_entry(cells: dict[int, dict], sizes) -> dict:
 
 def run_scaling(out: str, quick: bool = False, against: str | None = None, cap: float | None = None,
                 sizes=None, batches=None, compositions=None, layouts=SCALING_LAYOUTS,
-                min_seconds: float | None = None) -> list[dict]:
+                min_seconds: float | None = None, reference_tree: str | None = None,
+                workers: int = 1) -> list[dict]:
     """``coloc bench --scaling``: env-steps/s against N (:data:`SCALING_SIZES`) for every row of
     :func:`scaling_compositions` x layout x B (:data:`SCALING_BATCHES`), each row in its own subprocess stopped
     after ``cap`` seconds (the sizes left print "over cap"), with the growth exponent of each row (the log-log
     slope of time per step against N) and the growth of the time per step from N = 20 to 40. With ``against``
     REF, each row is measured for the current tree and for commit REF (exported by ``git archive``) one after
-    the other, alternating which goes first, and each cell gets the ratio current / REF.
-    Writes ``OUT/bench/scaling.json`` and the log-log figure ``OUT/bench/scaling.png`` (atomic)."""
+    the other, alternating which goes first, and each cell gets the ratio current / REF. ``reference_tree``: a
+    folder holding REF's files instead of a git ref (``against`` then only labels it). ``workers`` > 1 runs that
+    many rows at once, each process on one thread (BLAS, numba and dNBP's pool), for a machine with that many
+    idle cores; the current and REF runs of a row then run side by side.
+    Writes ``OUT/bench/scaling.json``, ``scaling.md`` and the log-log figure ``OUT/bench/scaling.png`` (atomic)."""
     from rich.console import Console
     from rich.table import Table
 
@@ -943,28 +950,44 @@ def run_scaling(out: str, quick: bool = False, against: str | None = None, cap: 
     root = repository_root() if against else os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     rows: list[dict] = []
     commit = None
+    against = against or (os.path.basename(os.path.normpath(reference_tree)) if reference_tree else None)
     with contextlib.ExitStack() as stack:
         trees = [("current", root)]
-        if against:
+        if reference_tree:
+            trees.append((against, os.path.abspath(reference_tree)))
+        elif against:
             folder = stack.enter_context(tempfile.TemporaryDirectory(prefix="coloc-against-"))
             commit = export_commit(against, folder, root)
             trees.append((against, folder))
         status = stack.enter_context(console.status("benchmarking"))
-        turn = 0
+        jobs = []  # (row, key, tree) in the alternating order
         for layout in layouts:
             for backend, network in pairs:
                 for batch in batches:
                     row = {"layout": layout, "backend": backend, "network": network, "batch": batch}
-                    order = trees if turn % 2 == 0 else trees[::-1]
-                    turn += 1
-                    for label, tree in order:
-                        status.update(f"{layout}: {backend} over {network}, B = {batch} ({label})")
-                        cells = scaling_row(tree, backend, network, layout, batch, sizes, min_seconds, cap)
-                        row["current" if label == "current" else "reference"] = _scaling_entry(cells, sizes)
-                    if against:
-                        cur, ref = row["current"]["env_steps_per_s"], row["reference"]["env_steps_per_s"]
-                        row["ratio"] = [c / r if c and r else None for c, r in zip(cur, ref, strict=True)]
+                    order = trees if len(rows) % 2 == 0 else trees[::-1]
+                    jobs += [(row, "current" if label == "current" else "reference", tree) for label, tree in order]
                     rows.append(row)
+
+        def measure(job) -> None:
+            row, key, tree = job
+            status.update(f"{row['layout']}: {row['backend']} over {row['network']}, B = {row['batch']} ({key})")
+            cells = scaling_row(tree, row["backend"], row["network"], row["layout"], row["batch"], sizes,
+                                min_seconds, cap, single_thread=workers > 1)
+            row[key] = _scaling_entry(cells, sizes)
+
+        if workers > 1:
+            from concurrent.futures import ThreadPoolExecutor
+
+            with ThreadPoolExecutor(workers) as pool:
+                list(pool.map(measure, jobs))
+        else:
+            for job in jobs:
+                measure(job)
+        for row in rows:
+            if against:
+                cur, ref = row["current"]["env_steps_per_s"], row["reference"]["env_steps_per_s"]
+                row["ratio"] = [c / r if c and r else None for c, r in zip(cur, ref, strict=True)]
     table = Table(title="coloc bench --scaling: env-steps/s against N (gps_denied, random actions)"
                   + (f", ratio = current / {against}" if against else ""))
     for column in ("layout", "backend", "network", "B", "tree", *[f"N={n}" for n in sizes], "slope", "t40/t20"):
@@ -987,12 +1010,38 @@ def run_scaling(out: str, quick: bool = False, against: str | None = None, cap: 
                           *[fmt(r, "{:.2f}x") for r in row["ratio"]], "", "")
     console.print(table)
     folder = os.path.join(out, "bench")
+    write_text(os.path.join(folder, "scaling.md"), scaling_markdown(rows, sizes, against))
     write_json(os.path.join(folder, "scaling.json"),
                {"sizes": list(sizes), "batches": list(batches), "layouts": list(layouts), "cap_s": cap,
                 "min_seconds": min_seconds, "density_per_km2": SCALING_DENSITY, "reference": against,
                 "reference_commit": commit, "quick": quick, "cpu_count": os.cpu_count(), "rows": rows})
     _scaling_figure(rows, sizes, against, os.path.join(folder, "scaling.png"))
     return rows
+
+
+def scaling_markdown(rows: list[dict], sizes, against: str | None = None) -> str:
+    """The scaling table as Markdown: per row the current rates (env-steps/s), "over cap" or "refused" where
+    none, the growth exponent and the time growth from N = 20 to 40; with ``against``, REF's row and the
+    ratios current / REF below it."""
+    def rate(value, state):
+        return state if value is None else f"{value:,.1f}" if value < 100 else f"{value:,.0f}"
+
+    def fmt(value, form):
+        return "-" if value is None else form.format(value)
+
+    head = ["layout", "backend", "network", "B", "tree", *[f"N = {n}" for n in sizes], "slope", "t(40) / t(20)"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "|".join(["---"] * 5 + ["---:"] * (len(sizes) + 2)) + "|"]
+    for row in rows:
+        entries = [("current", row["current"])] + ([(against, row["reference"])] if against else [])
+        for label, entry in entries:
+            cells = [rate(v, s) for v, s in zip(entry["env_steps_per_s"], entry["status"], strict=True)]
+            lines.append("| " + " | ".join([row["layout"], f"`{row['backend']}`", row["network"], str(row["batch"]),
+                                            str(label), *cells, fmt(entry["exponent"], "{:.2f}"),
+                                            fmt(entry["time_growth_20_to_40"], "{:.1f}x")]) + " |")
+        if against:
+            lines.append("| " + " | ".join([row["layout"], f"`{row['backend']}`", row["network"], str(row["batch"]),
+                                            "ratio", *[fmt(r, "{:.2f}x") for r in row["ratio"]], "", ""]) + " |")
+    return "\n".join(lines) + "\n"
 
 
 def _scaling_figure(rows: list[dict], sizes, against: str | None, path: str) -> None:

@@ -18,6 +18,10 @@ def test_the_quick_table_has_one_row_per_composition_and_batch(tmp_path):
     with open(os.path.join(tmp_path, "bench", "scaling.json")) as f:
         saved = json.load(f)
     assert os.path.getsize(os.path.join(tmp_path, "bench", "scaling.png")) > 0
+    with open(os.path.join(tmp_path, "bench", "scaling.md")) as f:
+        table = f.read().splitlines()
+    assert table[0].startswith("| layout | backend |") and len(table) == 2 + len(rows)
+    assert table[2].split(" | ")[7] == "refused"
     assert saved["sizes"] == [5, 6, 200] and saved["layouts"] == ["fixed density"]
     assert len(saved["rows"]) == len(rows) == len(pairs) * len(saved["batches"])
     for row in saved["rows"]:
