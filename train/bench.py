@@ -947,7 +947,8 @@ def run_scaling(out: str, quick: bool = False, against: str | None = None, cap: 
     min_seconds = float(min_seconds if min_seconds is not None else SCALING_QUICK["min_seconds"] if quick else 1.0)
     pairs = list(compositions or scaling_compositions())
     console = Console()
-    root = repository_root() if against else os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    root = repository_root() if against and not reference_tree else \
+        os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     rows: list[dict] = []
     commit = None
     against = against or (os.path.basename(os.path.normpath(reference_tree)) if reference_tree else None)
