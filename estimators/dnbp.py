@@ -1688,18 +1688,25 @@ def step(model: DnbpModel, state: DnbpState, gps_normal: np.ndarray, gps_fix: np
 
     def update(b_idx: np.ndarray, rows: np.ndarray) -> None:
         draws = _draw_per_copy(rngs, b_idx, B, draw_belief, model)
+        # each receiver's present slots, in slot order, padded to the most any of these receivers holds: the
+        # belief update reads only present slots, in order, so the gathered copy is O(rows x messages held), not
+        # O(rows x N) (the same bits)
         present = have[rows]
+        held = max(1, int(present.sum(axis=1).max()))
+        order = np.argsort(~present, axis=1, kind="stable")[:, :held]
+        gather = (rows[:, None], order)
+        present = np.take_along_axis(present, order, axis=1)
         if kernels is None:
             new, _ = belief_update(model, prior_rows[rows], prior_bandwidth_rows[rows], prior_uniform_rows[rows],
-                                   centres[rows], log_weights[rows], bandwidth[rows], present, draws)
+                                   centres[gather], log_weights[gather], bandwidth[gather], present, draws)
         else:  # belief_update's fused path, its checks included
             K_r = present.sum(axis=1)
             total = -(-model.oversampling * M // (K_r + 1)) * (K_r + 1)
             if total.max() > model.proposal_capacity:
                 raise ValueError(f"too many incoming messages for the proposal capacity {model.proposal_capacity}")
             new, _ = _belief_update_fused(kernels, model, prior_rows[rows], prior_bandwidth_rows[rows],
-                                          prior_uniform_rows[rows], centres[rows], log_weights[rows],
-                                          bandwidth[rows], present, draws, K_r, total, int(total.max()))
+                                          prior_uniform_rows[rows], centres[gather], log_weights[gather],
+                                          bandwidth[gather], present, draws, K_r, total, int(total.max()))
         belief_rows[rows] = new
 
     # 1. normal UAVs: prior x GPS, fixed for the step in the modified schedule
