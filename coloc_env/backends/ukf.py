@@ -185,6 +185,8 @@ class JointUkfBackend(Backend):
                 used = has & (chains.length >= 2)
                 if self.config.truncation == "paper":
                     self._chain_updates(chains, used, z, R_range, lam)
+                elif np.all(chains.length[used] == N):  # every chain reached everyone: UKF-CCL's update
+                    ukf.range_updates(self.mean, self.cov, m, n, z, used, R_range, lam)
                 else:
                     reached = np.zeros((B, J, N), dtype=bool)
                     b, j, p = np.nonzero(chains.chain >= 0)

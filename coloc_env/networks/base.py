@@ -296,20 +296,29 @@ class Network:
             holder = source[rows]
             links = np.full((n, N), -1)  # this chain's platforms, in order (the rows of ``chain``)
             links[:, 0] = holder
-            reached = np.zeros((n, N), dtype=bool)
-            reached[local, holder] = True
+            # +inf on the platforms a chain reached, 0 elsewhere: distance + penalty is the distance to the
+            # unreached (the same argmin as masking with inf)
+            penalty = np.zeros((n, N))
+            penalty[local, holder] = np.inf
             size = np.ones(n, dtype=int)
             hops = np.full((n, max(N - 1, 1)), np.nan)
             code = np.zeros(n, dtype=int)
             going = np.ones(n, dtype=bool)
             first = first[rows]
             limit = self.max_hops()
+            # each chain's rows of the (B, N, N) link arrays, gathered by one take per hop
+            flat_distance = distance[0] if shared else distance.reshape(B * N, N)
+            base = np.zeros(n, dtype=int) if shared else copies * N
+            all_usable = bool(np.all(usable))
+            flat_usable = usable[0] if shared else usable.reshape(B * N, N)
+            flat_loss = loss[0] if shared else loss.reshape(B * N, N)
             for hop in range(N - 1):
                 if hop >= limit:  # stop reason 1: the hop budget is spent
                     code[going] = 1
                     break
-                row_distance = distance[copies, holder]
-                nearest = np.argmin(np.where(reached, np.inf, row_distance), axis=-1)
+                at = base + holder
+                row_distance = np.take(flat_distance, at, axis=0)
+                nearest = np.argmin(row_distance + penalty, axis=-1)
                 target = nearest if choice is None else choice[copies, holder]
                 if choice is not None:
                     target = np.where(target == N + 1, nearest, target)
@@ -319,15 +328,15 @@ class Network:
                 safe = np.where(valid, target, 0)
                 # the first of the stop reasons 2..5 that holds: no platform named, already reached, out of
                 # range, lost
-                failed = np.where(u[:, hop] < loss[copies, holder, safe], 5, 0) if u is not None \
-                    else np.zeros(n, int)
-                failed = np.where(~usable[copies, holder, safe], 4, failed)
-                failed = np.where(reached[local, safe], 3, failed)
+                failed = np.where(u[:, hop] < flat_loss[at, safe], 5, 0) if u is not None else np.zeros(n, int)
+                if not all_usable:
+                    failed = np.where(~flat_usable[at, safe], 4, failed)
+                failed = np.where(penalty[local, safe] == np.inf, 3, failed)
                 failed = np.where(valid, failed, 2)
                 ok = going & (failed == 0)
                 code = np.where(going, failed, code)
                 links[:, hop + 1] = np.where(ok, target, -1)
-                reached[local, safe] |= ok
+                penalty[local[ok], safe[ok]] = np.inf
                 hops[:, hop] = np.where(ok, row_distance[local, safe], np.nan)
                 size += ok
                 holder = np.where(ok, target, holder)
@@ -336,14 +345,15 @@ class Network:
                     break
             code[size == N] = 0
             chain[rows], length[rows], hop_distance[rows], stop[rows] = links, size, hops, code
-            # the accounting, at each delivered hop's holder, chain by chain in order (np.add.at: a platform
-            # holds several of the copy's chains)
+            # the accounting, at each delivered hop's holder, chain by chain in order (one sum per (copy, holder):
+            # a platform holds several of the copy's chains)
             sent = links[:, 1:] >= 0
             c, h = np.nonzero(sent)
             holders = links[c, h]
-            np.add.at(self.messages_sent, (copies[c], holders), 1)
-            np.add.at(self.floats_sent, (copies[c], holders),
-                      np.array([floats_per_hop(j) for j in range(N - 1)], float)[h])
+            where = copies[c] * N + holders
+            self.messages_sent += np.bincount(where, minlength=B * N).reshape(B, N)
+            self.floats_sent += np.bincount(where, np.array([floats_per_hop(j) for j in range(N - 1)], float)[h],
+                                            minlength=B * N).reshape(B, N)
             self.delivered[copies[c], holders, links[c, h + 1]] = True
         shape = (B, J) if many else (B,)
         result = RelayChain(chain=chain.reshape(*shape, N), length=length.reshape(shape),
@@ -391,8 +401,9 @@ class Network:
                 u[:, j] = uniforms(self.keys, (self._k, 0, int(value)), (N, N))[rows[:, 0], sender[:, j], receiver]
             want &= u >= loss
         b, j = np.nonzero(want)
-        np.add.at(self.messages_sent, (b, sender[b, j]), 1)
-        np.add.at(self.floats_sent, (b, sender[b, j]), floats)
+        where = b * N + sender[b, j]
+        self.messages_sent += np.bincount(where, minlength=B * N).reshape(B, N)
+        self.floats_sent += floats * np.bincount(where, minlength=B * N).reshape(B, N)
         self.delivered[b, sender[b, j], receiver] = True
         return want
 
