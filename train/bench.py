@@ -946,7 +946,7 @@ def run_scaling(out: str, quick: bool = False, against: str | None = None, cap: 
     cap = float(cap if cap is not None else SCALING_QUICK["cap"] if quick else SCALING_CAP_S)
     min_seconds = float(min_seconds if min_seconds is not None else SCALING_QUICK["min_seconds"] if quick else 1.0)
     pairs = list(compositions or scaling_compositions())
-    console = Console()
+    console = Console(width=max(160, Console().width))  # the table is wide: never wrap its cells
     root = repository_root() if against and not reference_tree else \
         os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     rows: list[dict] = []
