@@ -296,10 +296,14 @@ class Network:
             holder = source[rows]
             links = np.full((n, N), -1)  # this chain's platforms, in order (the rows of ``chain``)
             links[:, 0] = holder
-            # +inf on the platforms a chain reached, 0 elsewhere: distance + penalty is the distance to the
-            # unreached (the same argmin as masking with inf)
-            penalty = np.zeros((n, N))
-            penalty[local, holder] = np.inf
+            # each holder's platforms ranked by distance (ties in index order: argmin's choice), and a penalty
+            # of N on the platforms a chain reached: argmin(rank + penalty) is the nearest unreached, as the
+            # argmin of the distances masked with inf, on small integers instead of floats
+            small = np.int16 if N < 2**14 else np.int64
+            ranked = np.argsort(np.argsort(distance[:1] if shared else distance, axis=-1, kind="stable"), axis=-1,
+                                kind="stable").astype(small)
+            penalty = np.zeros((n, N), dtype=small)
+            penalty[local, holder] = N
             size = np.ones(n, dtype=int)
             hops = np.full((n, max(N - 1, 1)), np.nan)
             code = np.zeros(n, dtype=int)
@@ -308,6 +312,7 @@ class Network:
             limit = self.max_hops()
             # each chain's rows of the (B, N, N) link arrays, gathered by one take per hop
             flat_distance = distance[0] if shared else distance.reshape(B * N, N)
+            flat_rank = ranked.reshape(-1, N)
             base = np.zeros(n, dtype=int) if shared else copies * N
             all_usable = bool(np.all(usable))
             flat_usable = usable[0] if shared else usable.reshape(B * N, N)
@@ -317,8 +322,7 @@ class Network:
                     code[going] = 1
                     break
                 at = base + holder
-                row_distance = np.take(flat_distance, at, axis=0)
-                nearest = np.argmin(row_distance + penalty, axis=-1)
+                nearest = np.argmin(np.take(flat_rank, at, axis=0) + penalty, axis=-1)
                 target = nearest if choice is None else choice[copies, holder]
                 if choice is not None:
                     target = np.where(target == N + 1, nearest, target)
@@ -331,13 +335,13 @@ class Network:
                 failed = np.where(u[:, hop] < flat_loss[at, safe], 5, 0) if u is not None else np.zeros(n, int)
                 if not all_usable:
                     failed = np.where(~flat_usable[at, safe], 4, failed)
-                failed = np.where(penalty[local, safe] == np.inf, 3, failed)
+                failed = np.where(penalty[local, safe] == N, 3, failed)
                 failed = np.where(valid, failed, 2)
                 ok = going & (failed == 0)
                 code = np.where(going, failed, code)
                 links[:, hop + 1] = np.where(ok, target, -1)
-                penalty[local[ok], safe[ok]] = np.inf
-                hops[:, hop] = np.where(ok, row_distance[local, safe], np.nan)
+                penalty[local[ok], safe[ok]] = N
+                hops[:, hop] = np.where(ok, flat_distance[at, safe], np.nan)
                 size += ok
                 holder = np.where(ok, target, holder)
                 going = ok
