@@ -229,10 +229,10 @@ PEERS: dict[str, tuple[str, Callable[[int], Callable[[], None]], str, Callable[[
 # (updated in place; empty: a pure function, every argument recorded) and whether the function returns
 # new values of them (the backend assigns them into its arrays) or updates them in place.
 BACKEND_CALLS: dict[str, dict[tuple[str, str], tuple[tuple[str, ...], bool]]] = {
-    "relay_ukf": {("estimators.ukf_relay", "dcl_update"): ((), False),
-                  ("estimators.ukf_relay", "ccl_update"): ((), False),
-                  ("coloc_env.backends.ukf", "predict_joint"): ((), False),
-                  ("coloc_env.backends.ukf", "joseph_update"): ((), False)},
+    "relay_ukf": {("estimators.ukf_relay", "range_updates"): (("estimate", "cov"), False),
+                  ("estimators.ukf_relay", "fix_updates"): (("estimate", "cov"), False),
+                  ("estimators.ukf_relay", "dcl_update"): ((), False),
+                  ("coloc_env.backends.ukf", "predict_joint"): ((), False)},
     "mrclam_relay": {("estimators.ukf_relay_se2", "dcl_update_rows"): (("estimate", "P_ii", "phi", "sigma"), False),
                      ("estimators.ukf_relay_se2", "time_update_batch"): (("estimate", "P_ii", "phi"), True)},
     # The afge backend's estimator math. Every one returns new arrays and writes into none of its arguments, and

@@ -232,7 +232,8 @@ class JointUkfBackend(Backend):
                 raise ukf.paper_rule_failure(exc, int(self.world.k.max())) from exc
 
     def predict(self, inputs) -> None:
-        self.mean, self.cov = predict_joint(self.motion_model, self.mean, self.cov, inputs)
+        # into the same arrays: the updates work on them in place (and a recorded replay carries them)
+        self.mean[...], self.cov[...] = predict_joint(self.motion_model, self.mean, self.cov, inputs)
 
     def position(self) -> np.ndarray:
         return self.mean[..., :2]

@@ -267,7 +267,7 @@ def test_the_relay_ukf_estimator_row_makes_the_envs_own_estimator_calls(monkeypa
     from train import bench
 
     B, steps = 6, 24
-    targets = [("estimators.ukf_relay", "dcl_update"), ("coloc_env.backends.ukf", "predict_joint")]
+    targets = [("estimators.ukf_relay", "range_updates"), ("coloc_env.backends.ukf", "predict_joint")]
     _, tape = bench.record_backend_calls("relay_ukf", B, steps=steps)
     assert len(tape.steps) == steps
     replayed, env_calls = [], []
@@ -289,7 +289,7 @@ def test_the_relay_ukf_estimator_row_makes_the_envs_own_estimator_calls(monkeypa
             assert np.all(chain.length[measured] == N)  # ranged and relayed to every platform
     assert [(n, s) for n, s, _ in replayed] == [(n, s) for n, s, _ in env_calls]
     names = [n for n, _, _ in replayed]
-    assert names.count("predict_joint") == steps and names.count("dcl_update") > steps // 4
+    assert names.count("predict_joint") == steps and names.count("range_updates") > steps // 4
     assert np.array_equal(replayed[-1][2][0], venv.scenario.backend.mean)  # the last step's time update
     assert np.array_equal(replayed[-1][2][1], venv.scenario.backend.cov)
 
