@@ -26,6 +26,12 @@ linear model (x -> A x, P -> A P A^T + Q, the known input b by the change of
 variables of :mod:`coloc_env.backends.fusion`); the measurement update is
 :func:`estimators.lossy_fusion.kalman_update` (Joseph form).
 
+The covariance of ``naive``, ``leader_only`` and ``ideal`` does not depend on the data (the same H
+and R every slot, whatever arrived): it is the Riccati recursion from the prior, a function of k
+alone. Those variants compute P(k|k-1), the gain and P(k|k) once per k and share them among the
+copies at that k (the values per copy are those of the per-copy computation); ``informed``'s
+covariance depends on which packets arrived and stays per copy.
+
 | quantity        | value                                                                  |
 |-----------------|------------------------------------------------------------------------|
 | estimand        | target (the leader's estimate, reported by every agent: shared)        |
@@ -107,6 +113,9 @@ class KalmanBackend(TargetBackend):
             self.full_cov = np.broadcast_to(self._P0, (B, n, n)).copy()
         self.estimate[:] = self._x0
         self.cov[:] = self._P0
+        # data-independent variants: P(k|k-1) and P(k|k) per k (1, n, n), shared by the copies at k
+        self._priors = [np.asarray(self._P0, float)[None]]
+        self._posteriors: list = []
 
     def reset(self, rngs, idx) -> None:
         n = self.n
@@ -129,18 +138,16 @@ class KalmanBackend(TargetBackend):
         n = self.n
         if self.variant == "leader_only":
             self.links.outcomes(0.0, transmit=False)
-            self.mean, self.full_cov = lf.kalman_update(self.mean, self.full_cov, z[:, 0], self.H_stack, self.R_stack)
+            self._shared_update(z[:, 0])
         elif self.variant == "ideal":
             self.links.outcomes(float(self.C.shape[0]))  # sent and counted; the oracle ignores the delivery
-            self.mean, self.full_cov = lf.kalman_update(self.mean, self.full_cov, z.reshape(B, -1), self.H_stack,
-                                                        self.R_stack)
+            self._shared_update(z.reshape(B, -1))
         else:
             outcome = self.links.outcomes(float(self.C.shape[0]))
             self.held = lf.deliver(z, self.previous, self.held, outcome)
             self.previous = z
             if self.variant == "naive":
-                self.mean, self.full_cov = lf.kalman_update(self.mean, self.full_cov, self.held.reshape(B, -1),
-                                                            self.H_stack, self.R_stack)
+                self._shared_update(self.held.reshape(B, -1))
             else:
                 self.mean, self.full_cov, self.used_before = lf.informed_update(
                     self.model, self.mean, self.full_cov, self.used_before, self.held, outcome, self.mats)
@@ -155,7 +162,27 @@ class KalmanBackend(TargetBackend):
             self.mean, self.full_cov = self.mean @ F.T, symmetrize(F @ self.full_cov @ F.T + Qa)
         else:
             self.mean = self.mean @ self.A.T
-            self.full_cov = symmetrize(self.A @ self.full_cov @ self.A.T + self.Q)
+            for k, rows in self._groups():
+                if len(self._priors) == k + 1:
+                    self._priors.append(symmetrize(self.A @ self._posteriors[k] @ self.A.T + self.Q))
+                self.full_cov[rows] = self._priors[k + 1]
+
+    def _groups(self):
+        """(k, rows): the copies at each step k (every copy: a slice, no index arrays)."""
+        k = np.asarray(self.world.k)
+        if np.all(k == k[0]):
+            return [(int(k[0]), slice(None))]
+        return [(int(step), np.flatnonzero(k == step)) for step in np.unique(k)]
+
+    def _shared_update(self, z: np.ndarray) -> None:
+        """:func:`estimators.lossy_fusion.kalman_update` of every copy with z (B, p), the covariance of the
+        copies at the same k computed once (a (1, n, n) stack, the batched path's values per copy)."""
+        for k, rows in self._groups():
+            mean, post = lf.kalman_update(self.mean[rows], self._priors[k], z[rows], self.H_stack, self.R_stack)
+            if len(self._posteriors) == k:
+                self._posteriors.append(post)
+            self.mean[rows] = mean
+            self.full_cov[rows] = post
 
 
 __all__ = ["Kalman", "VARIANTS"]
