@@ -37,6 +37,7 @@ CASES = {
     "dnbp": ({"name": "gps_denied", "num_agents": 4}, {"name": "broadcast", "comm_range": 300.0}),
     "afge": ("nlos_orbit", "random_delay"),
     "dfir": ("nlos_orbit", "random_delay"),
+    "delay_kalman": ("nlos_orbit", "random_delay"),
     "ukf_se2": ({"name": "mrclam", "data": DATASET6}, "relay"),
 }
 BACKEND_OPTIONS = {"dnbp": {"num_particles": 16, "num_iterations": 2, "initial_threshold": 2}}

@@ -11,10 +11,10 @@ import_parts(__name__, __path__, ("fusion", "kalman", "ukf", "ukf_se2", "particl
 from coloc_env.backends.dead_reckoning import DeadReckoning  # noqa: E402
 from coloc_env.backends.fusion import BandwidthFusion, CentralizedLmmse, PredictionCompensation  # noqa: E402
 from coloc_env.backends.kalman import Kalman  # noqa: E402
-from coloc_env.backends.nlos import Afge, Dfir  # noqa: E402
+from coloc_env.backends.nlos import Afge, DelayKalman, Dfir  # noqa: E402
 from coloc_env.backends.particles import Dnbp, RangeLs  # noqa: E402
 from coloc_env.backends.ukf import UkfCcl, UkfDcl  # noqa: E402
 from coloc_env.backends.ukf_se2 import UkfSe2  # noqa: E402
 
-__all__ = ["BACKENDS", "Afge", "BandwidthFusion", "CentralizedLmmse", "DeadReckoning", "Dfir", "Dnbp", "Kalman",
-           "PredictionCompensation", "RangeLs", "UkfCcl", "UkfDcl", "UkfSe2"]
+__all__ = ["BACKENDS", "Afge", "BandwidthFusion", "CentralizedLmmse", "DeadReckoning", "DelayKalman", "Dfir", "Dnbp",
+           "Kalman", "PredictionCompensation", "RangeLs", "UkfCcl", "UkfDcl", "UkfSe2"]

@@ -1,4 +1,4 @@
-"""Backends ``afge`` and ``dfir`` (gao2016): finite-horizon estimation from neighbours' delayed RSS/AOA packets.
+"""Backends ``afge``, ``dfir`` and ``delay_kalman`` (gao2016): estimation from neighbours' delayed RSS/AOA packets.
 
 Both adapt :mod:`estimators.afge` (no second copy of its math): each agent is a target that
 fuses the packets of its J world neighbours (:mod:`coloc_env.worlds.nlos_orbit`'s readings).
@@ -77,6 +77,16 @@ Arguments (``coloc_env.backends.Afge``; defaults = ``nlos_horizon``'s, spec §9)
 | window_centre  | 12           | N_c(0) in [N_min, N_max]                          |
 | likelihood     | "predictive" | "predictive", "paper", "smoothed"                 |
 | smoothing      | 0.5          | lam in (0, 1)                                     |
+
+Every backend here also keeps ``constant_x`` (B, N, S, 4): the output dfir with horizon N would give, for
+every N = 1..S of its stack (the horizon's estimate, else the prediction of that output at k - 1), so
+one run gives the whole constant-horizon curve.
+
+``delay_kalman`` is the Kalman baseline on the same fused packets: one horizon that never drops a stamp,
+started from the world's prior (:func:`estimators.afge.prior_stack`), the last D stamps re-filtered from
+the posterior at k - D as packets arrive (:func:`estimators.afge.run_kalman`'s filter); its sigma_a is the
+world's ``accel_sigma``. Decisions, observation and payload as ``dfir``; its fields are ``dfir``'s
+without ``horizon``.
 
 Arguments (``coloc_env.backends.Dfir``)
 
@@ -192,6 +202,8 @@ class PacketFirBackend(Backend):
     """Buffer, fusion and DFIR stack of :mod:`estimators.afge` for B copies x N targets; ``_choose`` picks N."""
 
     receives_before_deciding = True
+    finite_horizons = True  # the stack of finite horizons (False: one growing horizon from the prior, a Kalman filter)
+    min_stamps = 2  # a horizon with fewer observed stamps has no estimate
 
     def __init__(self, config, world, network, batch: int, stack_size: int):
         super().__init__(config, world, network, batch)
@@ -221,6 +233,8 @@ class PacketFirBackend(Backend):
         self.pred_x, self.out_x = np.zeros((B, N, 4)), np.zeros((B, N, 4))
         self.pred_P = np.broadcast_to(np.eye(4), (B, N, 4, 4)).copy()
         self.out_P = self.pred_P.copy()
+        # constant-horizon outputs: what dfir with horizon N would output, for every N = 1..S of the stack
+        self.constant_x, self.constant_pred = np.zeros((B, N, self.S, 4)), np.zeros((B, N, self.S, 4))
         self.slots = np.broadcast_to(np.arange(J), (B, N, J)).copy()
         self.mask = np.ones((B, N, J), bool)  # the keep mask of the last update (the pending filter's)
         self._taken = np.zeros(B, bool)  # stamp k's packets are in the buffer
@@ -248,6 +262,7 @@ class PacketFirBackend(Backend):
         self.prev_x[idx], self.prev_P[idx], self.prev_valid[idx] = 0.0, np.eye(4), False
         self.pred_x[idx], self.pred_P[idx] = mean[idx], cov[idx]
         self.out_x[idx], self.out_P[idx] = mean[idx], cov[idx]
+        self.constant_x[idx] = self.constant_pred[idx] = mean[idx][:, :, None, :]
         self.delays[idx] = NEVER
         self.last_delays[idx] = -1
         self.mask[idx] = True
@@ -315,7 +330,8 @@ class PacketFirBackend(Backend):
                                             mask[:, :, None, :], c.n_strongest, c.mode_info, c.weighting,
                                             c.min_packets, fixes=fixes)
         k = np.asarray(self.world.k)[:, None]
-        final, x, P, valid = af.buffer_estimates(self.motion, self.final, k, Y, y, gamma)
+        final, x, P, valid = af.buffer_estimates(self.motion, self.final, k, Y, y, gamma, shift=self.finite_horizons,
+                                                 min_stamps=self.min_stamps)
         fresh = gamma[..., -1]
         z, R = af.fused_fix(Y[..., -1, :, :], y[..., -1, :], fresh)
         return {"mask": mask.copy(), "lags": lags, "fixes": fixes, "final": final, "x": x, "P": P, "valid": valid,
@@ -345,6 +361,7 @@ class PacketFirBackend(Backend):
         valid_w, x_w, P_w = t["valid"][at], t["x"][at], t["P"][at]
         self.out_x = np.where(valid_w[..., None], x_w, self.pred_x)
         self.out_P = np.where(valid_w[..., None, None], P_w, self.pred_P)
+        self.constant_x = np.where(t["valid"][..., None], t["x"], self.constant_pred)
         self.horizon_used, self.valid_used = np.asarray(window, np.int64), valid_w
         lags = t["lags"]
         arrived = (self.delays == lags[..., None]) & (lags[..., None] >= 0)
@@ -386,6 +403,7 @@ class PacketFirBackend(Backend):
         A = self.motion.transition
         self.pred_x = self.out_x @ A.T
         self.pred_P = A @ self.out_P @ A.T + self.motion.process_cov
+        self.constant_pred = self.constant_x @ A.T
 
     def position(self) -> np.ndarray:
         return self.out_x[..., :2]
@@ -528,3 +546,40 @@ class DfirBackend(PacketFirBackend):
 
     def _make_features(self, t, nis) -> np.ndarray:
         return np.concatenate([self._per_lag(t["lags"]), self.valid_used[..., None].astype(float)], axis=-1)
+
+
+@BACKENDS.register
+@dataclass(frozen=True)
+class DelayKalman(_PacketFirConfig):
+    name = "delay_kalman"
+    n_strongest: int = 4
+    min_packets: int = 1
+    weighting: str = "distance"
+    mode_info: str = "known"
+
+    def check(self, prefix: str) -> None:
+        self.check_packets(prefix)
+
+    def build(self, world, network, batch: int) -> Backend:
+        return DelayKalmanBackend(self, world, network, batch)
+
+
+class DelayKalmanBackend(DfirBackend):
+    """gao2016's Kalman baseline: the stack of one horizon that never drops a stamp, started from the
+    world's prior (:func:`estimators.afge.prior_stack`; ``shift=False``: :func:`estimators.afge.run_kalman`)."""
+
+    finite_horizons = False
+    min_stamps = 0
+
+    def __init__(self, config: DelayKalman, world, network, batch):
+        PacketFirBackend.__init__(self, config, world, network, batch, 1)
+
+    def reset(self, rngs, idx) -> None:
+        super().reset(rngs, idx)
+        idx = np.asarray(idx)
+        mean, _ = self.world.initial_belief()
+        prior = af.prior_stack(mean[idx], self.world.prior_cov)
+        self.final.info[idx], self.final.vector[idx], self.final.stamps[idx] = prior.info, prior.vector, prior.stamps
+
+    def _choose(self, decisions, t: dict) -> np.ndarray:
+        return np.ones((self.batch, self.num_agents), np.int64)

@@ -1,8 +1,12 @@
 """``coloc reproduce gao2016`` end to end on a small number of runs."""
 
+import functools
 import json
 
+from coloc_env.config import build_config
+from coloc_env.scenarios.nlos_horizon import NlosHorizonConfig
 from train.cli import main
+from train.reproduce import gao2016
 
 SPEC_KEYS = {
     "dfir_rmse_by_horizon", "dfir_best_horizon", "dfir_best_rmse", "afge_rmse", "afge_paper_likelihood_rmse",
@@ -14,7 +18,11 @@ SPEC_KEYS = {
 }
 
 
-def test_reproduce_gao2016_writes_the_spec_metrics_report_and_figures(tmp_path, capsys):
+def test_reproduce_gao2016_writes_the_spec_metrics_report_and_figures(tmp_path, capsys, monkeypatch):
+    # the CLI end to end on 300-step episodes (one turn, 200..260): every estimator is a composition stepped
+    # 1000 times per run at the paper's length, minutes for this test
+    short = build_config(NlosHorizonConfig, {"horizon": 300})
+    monkeypatch.setattr(gao2016, "run", functools.partial(gao2016.run, config=short))
     assert main(["reproduce", "gao2016", "--runs", "2", "--out", str(tmp_path)]) == 0
     folder = tmp_path / "gao2016"
     metrics = json.loads((folder / "metrics.json").read_text())
@@ -23,7 +31,7 @@ def test_reproduce_gao2016_writes_the_spec_metrics_report_and_figures(tmp_path, 
     curve = metrics["dfir_rmse_by_horizon"]
     assert metrics["dfir_best_rmse"] == min(curve.values()) == curve[str(metrics["dfir_best_horizon"])]
     assert metrics["afge_beats_best_constant"] == (metrics["afge_rmse"] < metrics["dfir_best_rmse"])
-    assert (metrics["runs"], metrics["seed"], metrics["steps"], metrics["warmup"]) == (2, 2016, 1000, 50)
+    assert (metrics["runs"], metrics["seed"], metrics["steps"], metrics["warmup"]) == (2, 2016, 300, 50)
     sweep = metrics["sweep"]
     no_delay, heavy = [1.0, 0.0, 0.0, 0.0], [0.3, 0.25, 0.2, 0.15]
     assert [(s["p_nlos"], s["delay_probs"], s["mode_info"]) for s in sweep] == [

@@ -1,4 +1,4 @@
-"""The Monte Carlo loops of wang2019, wan2014, zhao2020 and fu2017 drive the composable backends and still
+"""The Monte Carlo loops of wang2019, wan2014, zhao2020, fu2017 and gao2016 drive the composable backends and still
 compute what the validated estimator code computes on the same draws.
 
 The references here are the estimators' own functions, run on the episodes the scenarios draw from the
@@ -9,6 +9,9 @@ same generators (``relay_ukf``'s draws and relay rules, :class:`coloc_env.world.
 link outcomes with ``estimators.lossy_fusion``'s filters), so a change in the backends, the worlds or the
 seeding that moved a reproduction's numbers fails here.
 """
+
+import dataclasses
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -21,9 +24,10 @@ from coloc_env.config import build_config
 from coloc_env.scenarios.bandwidth_fusion import BandwidthFusionConfig, draw_episode, paper_selection, paper_weights
 from coloc_env.scenarios.gps_denied_nbp import GpsDeniedNbpConfig, sample_episode
 from coloc_env.scenarios.lossy_fusion import LossyFusionConfig
+from coloc_env.scenarios.nlos_horizon import NlosHorizonConfig
 from coloc_env.scenarios.relay_ukf import RelayUKFConfig
 from coloc_env.world.unicycle import UnicycleMotion
-from train.reproduce import fu2017, wan2014, wang2019, zhao2020
+from train.reproduce import fu2017, gao2016, wan2014, wang2019, zhao2020
 
 
 def _reference_wang2019(config, copies, policy_rng):
@@ -208,3 +212,61 @@ def test_fu2017_compositions_give_the_estimator_filters_numbers_on_the_same_draw
     assert np.all(block["delivered"] > 0.1)
     assert block["errors"]["ideal_kf"].mean() < block["errors"]["informed_kf"].mean() < block["errors"][
         "naive_kf"].mean()
+
+
+def _reference_gao2016(config, index, generators, mode_info="known", lag0=False, accel_sigma=None):
+    """DFIR of every horizon, AFGE with each likelihood and the delay-aware KF by :mod:`estimators.afge`'s
+    episode functions (``run_fixed_mask``, ``run_kalman``) on the fused packets of the episodes the
+    ``nlos_horizon`` scenario of sweep setting ``index`` draws from ``generators``, with its network's delays
+    (``lag0``: every late packet dropped): squared errors of target 0."""
+    import estimators.afge as af
+    from coloc_env.scenarios.nlos_horizon import NlosHorizonScenario, fused_by_stamp_and_lag
+    from coloc_env.world.random_delay import NEVER
+
+    cfg = dataclasses.replace(gao2016._setting_config(config, index), mode_info=mode_info)
+    core = NlosHorizonScenario(cfg, batch=len(generators))
+    core.reset(generators)
+    world, delays = core.world, core.packet_delays()
+    keep = (delays == 0) if lag0 else (delays >= 0)
+    delays = np.where(keep, delays, NEVER).astype(np.int16)
+    parts = [fused_by_stamp_and_lag(cfg, SimpleNamespace(rss=world.rss[b], aoa=world.aoa[b], nav=world.nav[b],
+                                                         modes=world.modes[b], delays=delays[b]))
+             for b in range(len(generators))]
+    K = cfg.horizon
+    Y, y, g = (np.concatenate([p[n] for p in parts])[:, :K] for n in range(3))
+    truth = np.moveaxis(world.truth[:, :K, :, :2], 1, 2).reshape(-1, K, 2)
+    prior = world.prior.reshape(-1, 4)
+    out = af.run_fixed_mask(cfg.motion, Y, y, g, truth, prior, cfg.ahg, max(gao2016.HORIZONS),
+                            ("predictive", "paper", "smoothed"))
+    accel_var = None if accel_sigma is None else accel_sigma**2
+    out["kf"] = af.run_kalman(cfg.motion, Y, y, g, truth, prior, cfg.prior_cov, accel_var=accel_var)
+    return out
+
+
+def test_gao2016_compositions_give_the_estimator_functions_numbers_on_the_same_draws():
+    config = dataclasses.replace(build_config(NlosHorizonConfig, {"horizon": 60}), num_uavs=1)
+    seed, runs = 2016, (0, 1)
+    block = gao2016.monte_carlo_block(config, seed, runs)
+
+    def close(got, want, what):
+        np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-9, err_msg=what)
+
+    for label, index, mode_info, lag0 in gao2016.VARIANTS:
+        generators = [np.random.default_rng([seed + index, r]) for r in runs]
+        ref = _reference_gao2016(config, index, generators, mode_info, lag0)
+        close(block["afge"][label], ref["afge_predictive"], label)
+        close(block["dfir"][label], ref["dfir"], label)
+        close(block["kf"][label], ref["kf"], label)
+        if label in block["afge_smoothed"]:
+            close(block["afge_smoothed"][label], ref["afge_smoothed"], label)
+        if label == "known":
+            close(block["afge_paper"][label], ref["afge_paper"], label)
+            np.testing.assert_array_equal(block["afge_horizon"], ref["afge_predictive_horizon"])
+        if label in block["kf_matched"]:
+            generators = [np.random.default_rng([seed + index, r]) for r in runs]
+            matched = _reference_gao2016(config, index, generators, mode_info, lag0, gao2016.MATCHED_ACCEL_SIGMA)
+            close(block["kf_matched"][label], matched["kf"], label)
+    assert set(block["kf_matched"]) == {"known", "blind"}
+    # the runs are real and paired: AFGE beats the constant horizon 2 and knowing the modes helps it
+    assert block["afge"]["known"].mean() < block["dfir"]["known"][..., 1].mean()
+    assert block["afge"]["known"].mean() < block["afge"]["blind"].mean()

@@ -7,13 +7,26 @@
 | ``ci95``          | the half-width of the normal 95 % interval of a mean over runs (1.96 SE)       |
 | ``claims_section``| the report's ``## Claims`` section (claim, our number, criterion, holds)       |
 | ``pyplot``        | ``matplotlib.pyplot`` on the non-interactive Agg backend (PNG files only)       |
+| ``PresetComposition`` | a batched core whose copies draw their episodes by the presets' rule         |
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from coloc_env.scenarios.binding import PresetScenario
+from coloc_env.scenarios.composed import ComposedScenario
 from train.io import claims_table
+
+
+class PresetComposition(ComposedScenario):
+    """A composition whose copies draw their episodes by the presets' rule
+    (:meth:`~coloc_env.scenarios.binding.PresetScenario.part_generators`: the world from the episode's
+    generator itself, the network and the backend from its first and second child): reset with
+    ``default_rng(s)``, a backend on a preset's world and network sees the episode ``env.reset(seed=s)``
+    of that preset draws, whichever backend it is."""
+
+    part_generators = PresetScenario.part_generators
 
 
 def block_sizes(runs: int, block: int) -> list[int]:
@@ -51,4 +64,4 @@ def pyplot():
     return plt
 
 
-__all__ = ["block_sizes", "ci95", "claims_section", "mean_se", "pyplot"]
+__all__ = ["PresetComposition", "block_sizes", "ci95", "claims_section", "mean_se", "pyplot"]

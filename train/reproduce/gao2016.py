@@ -4,11 +4,18 @@ The paper's formulas and most numbers were lost; the contract is the reconstruct
 ``docs/gao2016.md``, and the claims checked are its §11 (qualitative: the
 absolute numbers of the paper are not comparable). One target per run, as in the paper.
 
-Monte Carlo: ``runs`` runs of every setting; run r of sweep setting i draws its world from
+Monte Carlo through the composable core: every estimator is a backend (``afge`` with each likelihood,
+whose ``constant_x`` gives dfir's output for every constant horizon N = 1..30 of its stack, and
+``delay_kalman``, the Kalman baseline) on the setting's ``nlos_orbit`` world and ``random_delay``
+network (:func:`drive`: one batched core per estimator, stepped over the runs with every packet kept).
+Run r of sweep setting i resets every composition of that setting with
 ``np.random.default_rng([SEED_BASE + seed + i, r])`` (docs/gao2016.md §9: seed 2016, +i for the i-th
-setting; ``--seed S`` shifts the base), and every estimator of a setting runs on the same
-draws, so comparisons are paired per run. Runs go in blocks of :data:`BLOCK` through
-:func:`train.executor.map_tasks` (the blocks are fixed, so any executor gives the same bits).
+setting; ``--seed S`` shifts the base), so every estimator of a setting sees the same truth, readings
+and delays and comparisons are paired per run. "On-time packets only" is the same network with a
+buffer of length 0 (a late packet is lost; the same uniforms decide which are on time); the Kalman
+filter matched to the turns is ``delay_kalman`` on the world with ``accel_sigma`` 1 m/s^2 (the truth
+does not depend on it). Runs go in blocks of :data:`BLOCK` through :func:`train.executor.map_tasks`
+(the blocks are fixed, so any executor gives the same bits).
 
 Writes ``OUT/gao2016/metrics.json`` with exactly the keys of docs/gao2016.md §12, ``report.md`` (each
 claim, our numbers, holds or not, decided on the paired per-run interval) and the figures
@@ -18,7 +25,7 @@ claim, our numbers, holds or not, decided on the paired per-run interval) and th
 
 ``paper_policy_costs(seeds)`` gives this reproduction's per-episode number for AFGE, the env's
 ``paper`` policy, on the episodes ``env.reset(seed=s)`` draws for each s in ``seeds`` (the
-scenario's own sampler), through the same estimator code as the Monte Carlo above; a test checks
+scenario's own sampler), through the same compositions as the Monte Carlo above; a test checks
 that it equals what ``coloc evaluate`` reports for the ``paper`` policy on the same seeds.
 """
 
@@ -29,18 +36,11 @@ import os
 
 import numpy as np
 
-import estimators.afge as af
 from coloc_env.config import build_config
-from coloc_env.scenarios.nlos_horizon import (
-    NlosHorizonConfig,
-    draw_episode,
-    drawn_episodes,
-    fused_by_stamp_and_lag,
-    in_turn,
-)
-from coloc_env.world.random_delay import NEVER
+from coloc_env.scenarios.nlos_horizon import NlosHorizonConfig, in_turn
 from train.executor import map_tasks
 from train.io import claims_table, save_figure, write_json, write_text
+from train.reproduce.common import PresetComposition
 
 KEY = "gao2016"
 RUNS = 40
@@ -74,89 +74,111 @@ def _setting_config(config: NlosHorizonConfig, index: int) -> NlosHorizonConfig:
     return dataclasses.replace(config, **SETTINGS[index][1])
 
 
-def episode_inputs(config: NlosHorizonConfig, episodes: list, lag0: bool = False) -> list[tuple]:
-    """The estimators' inputs of each episode, every packet kept: (fused observations by stamp and
-    lag, true positions (T, K+1, 2), priors (T, 4)), targets first; ``lag0``: late packets dropped."""
-    parts = []
-    for ep in episodes:
-        if lag0:  # no reorganisation: a late packet is dropped
-            ep = dataclasses.replace(ep, delays=np.where(ep.delays == 0, ep.delays, NEVER).astype(np.int16))
-        parts.append((fused_by_stamp_and_lag(config, ep), np.moveaxis(ep.truth[:, :, :2], 0, 1), ep.prior))
-    return parts
-
-
-def stack_inputs(parts: list[tuple], K: int) -> tuple:
-    """:func:`episode_inputs` of several episodes as arrays over (episode, target), the first K stamps."""
-    Y = np.concatenate([p[0][0] for p in parts])[:, :K]
-    y = np.concatenate([p[0][1] for p in parts])[:, :K]
-    g = np.concatenate([p[0][2] for p in parts])[:, :K]
-    truth = np.concatenate([p[1] for p in parts])[:, :K]
-    prior = np.concatenate([p[2] for p in parts])
-    return Y, y, g, truth, prior
-
-
 def paper_policy_costs(seeds, config: NlosHorizonConfig | None = None) -> np.ndarray:
     """Per-episode time-averaged squared error of AFGE (the env's ``paper`` policy: AHG with
     ``config.likelihood``, every neighbour kept) over k >= min(50, K - 1), mean over the targets,
-    on the episodes the env draws for ``seeds``.
+    on the episodes the env draws for ``seeds``: ``config``'s composition (``nlos_orbit``, ``random_delay``,
+    ``afge``) driven by :func:`drive`, copy e reset with ``default_rng(seeds[e])`` as ``env.reset(seed=s)``
+    resets the env."""
+    import coloc_env
 
-    Episode e is what ``env.reset(seed=seeds[e])`` draws (:func:`coloc_env.scenarios.nlos_horizon.drawn_episodes`:
-    the world's :func:`draw_episode` of ``default_rng(seeds[e])`` with ``config.num_uavs`` targets, the
-    packet delays of the env's network); AFGE runs by this reproduction's own path
-    (:func:`episode_inputs`, :func:`estimators.afge.run_fixed_mask`) with the env's stack of
-    ``window_max`` horizons.
-    """
     config = config or build_config(NlosHorizonConfig, {})
-    episodes = drawn_episodes(config, seeds)
-    K, T = config.horizon, config.num_uavs
-    Y, y, g, truth, prior = stack_inputs(episode_inputs(config, episodes), K)
-    out = af.run_fixed_mask(config.motion, Y, y, g, truth, prior, config.ahg, config.window_max,
-                            (config.likelihood,))
-    errors = out[f"afge_{config.likelihood}"].reshape(len(episodes), T, K)
-    return errors[..., min(WARMUP, K - 1):].mean(axis=(1, 2))
+    world, network, afge = config.parts()
+    res = drive(coloc_env.compose(world=world, network=network, backend=afge),
+                [np.random.default_rng(int(s)) for s in seeds])
+    K = config.horizon
+    return res["error"][:, min(WARMUP, K - 1):].mean(axis=(1, 2))
+
+
+def _compose(config: NlosHorizonConfig, index: int, backend, lag0: bool = False, accel_sigma: float | None = None):
+    """The composition of sweep setting ``index``: the setting's ``nlos_orbit`` world (``accel_sigma``: the
+    sigma_a the backends assume, the truth unchanged) and ``random_delay`` network (``lag0``: a buffer of
+    length 0, so a late packet is lost: the same uniforms, on time exactly where the full network is) with
+    ``backend``, a part config."""
+    import coloc_env
+
+    world, network, _ = _setting_config(config, index).parts()
+    if accel_sigma is not None:
+        world = dataclasses.replace(world, accel_sigma=float(accel_sigma))
+    if lag0:
+        network = dataclasses.replace(network, delay_probs=tuple(network.delay_probs[:1]), buffer_length=0)
+    return coloc_env.compose(world=world, network=network, backend=backend)
+
+
+def drive(spec, generators: list, constant: bool = False) -> dict:
+    """``spec`` stepped batched over the runs, copy r reset with ``generators[r]`` by the presets' rule
+    (:class:`~train.reproduce.common.PresetComposition`: with the ``nlos_horizon`` preset's parts, the
+    episode and the delays ``env.reset`` draws from that generator), every packet kept (the
+    ``always`` action: AHG picks AFGE's horizon); per step and target: ``error`` (R, K, N) squared
+    position error, ``horizon`` (R, K, N) the horizon output (0: none had an estimate), ``received``
+    (R, K, N) packets arriving at k, ``fused_lag0`` (R, K, N) stamp k fused at lag 0, ``fused_final``
+    (R, K - D, N) stamp k - D fused at lag D, and with ``constant`` ``constant`` (R, K, N, S): the squared
+    error of dfir with each horizon N = 1..S (:attr:`coloc_env.backends.nlos.PacketFirBackend.constant_x`)."""
+    scenario = PresetComposition(spec, batch=len(generators))
+    scenario.reset(list(generators))
+    backend, K = scenario.backend, scenario.horizon
+    action = scenario.action_vector("maximum")
+    actions = np.array(np.broadcast_to(action, (len(generators), scenario.num_agents, len(action))))
+    keys = ("error", "horizon", "received", "fused_lag0", "fused_final") + (("constant",) if constant else ())
+    out = {key: [] for key in keys}
+    n_min = backend.config.min_packets
+    for k in range(K):
+        scenario.step(actions)
+        truth = scenario._truth
+        out["error"].append(np.sum((backend.posterior_position - truth) ** 2, axis=-1))
+        out["horizon"].append(np.where(backend.valid_used, backend.horizon_used, 0))
+        out["received"].append(backend.packets_arrived)
+        out["fused_lag0"].append(backend.used[:, :, -1].sum(axis=-1) >= n_min)
+        if k >= backend.D:
+            out["fused_final"].append(backend.used[:, :, 0].sum(axis=-1) >= n_min)
+        if constant:
+            out["constant"].append(np.sum((backend.constant_x[..., :2] - truth[:, :, None]) ** 2, axis=-1))
+    return {key: np.stack(values, axis=1) for key, values in out.items()}
 
 
 def monte_carlo_block(config: NlosHorizonConfig, seed: int, run_indices: tuple) -> dict:
-    """Every estimator on runs ``run_indices`` of every setting; per-run and per-step results."""
-    R = len(run_indices)
-    episodes = {i: [draw_episode(_setting_config(config, i), np.random.default_rng([seed + i, r]), targets=1)
-                    for r in run_indices] for i in range(len(SETTINGS))}
-    parts = []
-    for _label, i, mode_info, lag0 in VARIANTS:
-        cfg = dataclasses.replace(_setting_config(config, i), mode_info=mode_info)
-        parts += episode_inputs(cfg, episodes[i], lag0)
-    K = config.horizon
-    Y, y, g, truth_p, prior_m = stack_inputs(parts, K)
-    motion = config.motion
-    out = af.run_fixed_mask(motion, Y, y, g, truth_p, prior_m, config.ahg, max(HORIZONS),
-                            ("predictive", "paper", "smoothed"))
-    kf = af.run_kalman(motion, Y, y, g, truth_p, prior_m, config.prior_cov)
-    known, blind = slice(0, R), slice(2 * R, 3 * R)
-    rows = np.r_[known, blind]
-    kf_matched = af.run_kalman(motion, Y[rows], y[rows], g[rows], truth_p[rows], prior_m[rows], config.prior_cov,
-                               accel_var=MATCHED_ACCEL_SIGMA**2)
+    """Every estimator on runs ``run_indices`` of every setting; per-run and per-step results. Run r of
+    setting i is every composition of that setting reset with ``default_rng([seed + i, r])``: the same
+    truth, readings and delays for every estimator (paired)."""
+    from coloc_env.backends.nlos import DelayKalman
 
-    def split(arr):  # (V * R, ...) -> {label: (R, ...)}
-        return {label: arr[v * R:(v + 1) * R] for v, (label, *_) in enumerate(VARIANTS)}
+    def generators(i):
+        return [np.random.default_rng([seed + i, r]) for r in run_indices]
 
-    received = []
-    for ep in episodes[0]:
-        d = ep.delays[:K + 1, 0]
-        s = np.broadcast_to(np.arange(K + 1)[:, None], d.shape)
-        ok = d <= config.buffer_length
-        received.append(np.bincount((s + d)[ok], minlength=K + config.buffer_length + 2)[:K])
+    _, _, afge = config.parts()
+    afge = dataclasses.replace(afge, window_max=max(HORIZONS))
+    sweep_labels = {"known", *(f"sweep{i}" for i in range(1, len(SETTINGS))),
+                    *(f"sweep{i}_{mode}" for i in DELAY_SETTINGS for mode in UNKNOWN_MODES)}
+    runs = {name: {} for name in ("afge", "afge_paper", "afge_smoothed", "kf", "kf_matched")}
+    dfir, first = {}, None
+
+    def run(spec, i, constant=False):  # target 0 (the reproduction flies one)
+        return {key: value[:, :, 0] for key, value in drive(spec, generators(i), constant).items()}
+
+    for label, i, mode_info, lag0 in VARIANTS:
+        predictive = dataclasses.replace(afge, mode_info=mode_info, likelihood="predictive")
+        res = run(_compose(config, i, predictive, lag0), i, constant=True)
+        first = first or res
+        runs["afge"][label], dfir[label] = res["error"], res["constant"]
+        if label == "known":
+            runs["afge_horizon"] = res["horizon"]
+            paper = dataclasses.replace(predictive, likelihood="paper")
+            runs["afge_paper"][label] = run(_compose(config, i, paper), i)["error"]
+        if label in sweep_labels:
+            smoothed = dataclasses.replace(predictive, likelihood="smoothed")
+            runs["afge_smoothed"][label] = run(_compose(config, i, smoothed, lag0), i)["error"]
+        kalman = DelayKalman(n_strongest=afge.n_strongest, min_packets=afge.min_packets, weighting=afge.weighting,
+                             mode_info=mode_info)
+        runs["kf"][label] = run(_compose(config, i, kalman, lag0), i)["error"]
+        if label in ("known", "blind"):
+            runs["kf_matched"][label] = run(_compose(config, i, kalman, lag0, MATCHED_ACCEL_SIGMA), i)["error"]
     return {
         "runs": list(run_indices),
-        "dfir": split(out["dfir"]),  # (R, K, S) squared errors
-        "afge": split(out["afge_predictive"]),
-        "afge_paper": split(out["afge_paper"]),
-        "afge_smoothed": split(out["afge_smoothed"]),
-        "afge_horizon": split(out["afge_predictive_horizon"])["known"],
-        "kf": split(kf),
-        "kf_matched": {"known": kf_matched[:R], "blind": kf_matched[R:]},
-        "received": np.array(received),
-        "gamma_lag0": g[known, :, 0].mean(axis=1),
-        "gamma_final": g[known, :, -1].mean(axis=1),
+        "dfir": dfir,  # (R, K, S) squared errors
+        **{name: runs[name] for name in ("afge", "afge_paper", "afge_smoothed", "afge_horizon", "kf", "kf_matched")},
+        "received": first["received"],
+        "gamma_lag0": first["fused_lag0"].mean(axis=1),
+        "gamma_final": first["fused_final"].mean(axis=1),
     }
 
 
