@@ -267,6 +267,11 @@ def test_gao2016_compositions_give_the_estimator_functions_numbers_on_the_same_d
             matched = _reference_gao2016(config, index, generators, mode_info, lag0, gao2016.MATCHED_ACCEL_SIGMA)
             close(block["kf_matched"][label], matched["kf"], label)
     assert set(block["kf_matched"]) == {"known", "blind"}
+    # a run's numbers do not depend on the block it runs in (the executor's tasks)
+    alone = gao2016.monte_carlo_block(config, seed, runs[1:])
+    for name in ("afge", "dfir", "kf", "afge_smoothed"):
+        for label, values in alone[name].items():
+            np.testing.assert_array_equal(values, block[name][label][1:], err_msg=f"{name} {label}")
     # the runs are real and paired: AFGE beats the constant horizon 2 and knowing the modes helps it
     assert block["afge"]["known"].mean() < block["dfir"]["known"][..., 1].mean()
     assert block["afge"]["known"].mean() < block["afge"]["blind"].mean()
