@@ -13,7 +13,8 @@ Which backends' messages define ``delivered`` (:func:`delivered_kind`):
 |-------------|--------------------------------------------|-----------------------------------------------|
 | readings    | ``kalman``, ``centralized_lmmse`` (packets  | own readings + each packet's reading, at its  |
 |             | of z_i(k) to the leader), ``afge``, ``dfir`` | step, from its arrival (lag-augmented)        |
-|             | (the neighbours' RSS/AOA packets),          |                                               |
+|             | , ``delay_kalman`` (the neighbours' RSS/AOA |                                               |
+|             | packets),                                   |                                               |
 |             | ``ukf_ccl`` (each range and fix sent to the | the centre's: every odometry (its model), the |
 |             | centre, agent 0)                            | readings that reached it (:func:`centre_received`) |
 | nothing     | ``dead_reckoning``                         | = local                                       |
@@ -27,7 +28,7 @@ from __future__ import annotations
 
 import importlib
 
-READING_PACKETS = frozenset({"kalman", "centralized_lmmse", "afge", "dfir", "ukf_ccl"})
+READING_PACKETS = frozenset({"kalman", "centralized_lmmse", "afge", "dfir", "delay_kalman", "ukf_ccl"})
 # backends whose one estimate is the leader's (agent 0's), reported by every agent: their delivered bound is the
 # leader's for every agent (the followers' own information is not what their reported estimate uses)
 SHARED_AT_LEADER = frozenset({"kalman", "centralized_lmmse", "ukf_ccl"})
