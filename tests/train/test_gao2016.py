@@ -19,9 +19,9 @@ SPEC_KEYS = {
 
 
 def test_reproduce_gao2016_writes_the_spec_metrics_report_and_figures(tmp_path, capsys, monkeypatch):
-    # the CLI end to end on 300-step episodes (one turn, 200..260): every estimator is a composition stepped
-    # 1000 times per run at the paper's length, minutes for this test
-    short = build_config(NlosHorizonConfig, {"horizon": 300})
+    # the CLI end to end on 150-step episodes with one turn (80..110): every estimator is a composition
+    # stepped 1000 times per run at the paper's length, a minute for this test
+    short = build_config(NlosHorizonConfig, {"horizon": 150, "turn_windows": ((80, 110),), "turn_rates_deg": (3.0,)})
     monkeypatch.setattr(gao2016, "run", functools.partial(gao2016.run, config=short))
     assert main(["reproduce", "gao2016", "--runs", "2", "--out", str(tmp_path)]) == 0
     folder = tmp_path / "gao2016"
@@ -31,7 +31,7 @@ def test_reproduce_gao2016_writes_the_spec_metrics_report_and_figures(tmp_path, 
     curve = metrics["dfir_rmse_by_horizon"]
     assert metrics["dfir_best_rmse"] == min(curve.values()) == curve[str(metrics["dfir_best_horizon"])]
     assert metrics["afge_beats_best_constant"] == (metrics["afge_rmse"] < metrics["dfir_best_rmse"])
-    assert (metrics["runs"], metrics["seed"], metrics["steps"], metrics["warmup"]) == (2, 2016, 300, 50)
+    assert (metrics["runs"], metrics["seed"], metrics["steps"], metrics["warmup"]) == (2, 2016, 150, 50)
     sweep = metrics["sweep"]
     no_delay, heavy = [1.0, 0.0, 0.0, 0.0], [0.3, 0.25, 0.2, 0.15]
     assert [(s["p_nlos"], s["delay_probs"], s["mode_info"]) for s in sweep] == [
