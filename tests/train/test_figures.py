@@ -280,3 +280,46 @@ def test_every_preset_frame_follows_the_figure_conventions(name):
     draw_scene(env.unwrapped.scenario.scene(0), figure, env.possible_agents)
     assert plotting.figure_problems(figure) == []
     env.close()
+
+
+def _fu2017_data(runs=5, K=30, seed=3):
+    from train.reproduce import fu2017
+
+    rng = np.random.default_rng(seed)
+    names = (*fu2017.lf.FILTERS, *fu2017.DIAGNOSTICS)
+    data = {}
+    for key in ("L2", "L4"):
+        errors = {f: rng.gamma(2.0, 5.0 * (1 + i), (runs, K)) for i, f in enumerate(names)}
+        errors["centralized_paper_gain"] = errors["centralized"] * 1.001  # on the LMMSE curve
+        data[key] = {"errors": errors, "own": {f: np.full(K, 10.0 * (1 + i)) for i, f in enumerate(names)}}
+    return data
+
+
+def test_fu2017_curves_follow_the_conventions_with_bands_and_every_line_in_the_legend():
+    from matplotlib.collections import PolyCollection
+
+    from train.reproduce import fu2017
+
+    data = _fu2017_data()
+    for filters, title, own in fu2017.FIGURES.values():
+        fig = fu2017.curves_figure(data, filters, title, 1.0, own)
+        assert plotting.figure_problems(fig) == [], title
+        left = fig.axes[0]
+        bands = [c for c in left.collections if isinstance(c, PolyCollection)]
+        assert len(bands) == len(filters)  # every mean with its 95 % band
+        texts = [t.get_text() for t in fig.axes[-1].get_legend().get_texts()]
+        assert len(texts) == len(filters) + 1 + own  # the filters, the band, the dashed own covariances
+        assert any("95 %" in t for t in texts)
+        if own:
+            assert any("own" in t and "covariance" in t for t in texts)
+        if "centralized_paper_gain" in filters:
+            assert any("on the LMMSE curve" in t for t in texts)
+        plt.close(fig)
+    # the band is the Student-t interval of the mean over the runs at each slot
+    fig = fu2017.curves_figure(data, ("ideal_kf",), "t", 1.0)
+    err = data["L2"]["errors"]["ideal_kf"]
+    (band,) = [c for c in fig.axes[0].collections if isinstance(c, PolyCollection)]
+    top = band.get_paths()[0].vertices[:, 1].max()
+    half = plotting.t975(err.shape[0] - 1) * err.std(axis=0, ddof=1) / np.sqrt(err.shape[0])
+    np.testing.assert_allclose(top, (err.mean(axis=0) + half).max(), rtol=1e-9)
+    plt.close(fig)

@@ -335,50 +335,94 @@ def run(out: str, runs: int = RUNS, seed: int = 0, quick: bool = False, executor
 
     folder = os.path.join(out, KEY)
     write_json(os.path.join(folder, "metrics.json"), metrics)
-    _figures(folder, data, K)
+    _figures(folder, data, config.period)
     write_text(os.path.join(folder, "report.md"), _report(metrics, config, quick))
     if progress:
         progress("figures and report written")
     return metrics
 
 
-def _figures(folder: str, data: dict, K: int) -> None:
+# line styles that keep curves apart where their values coincide: (A) with the paper's gain (21) lies on (A)
+# with the LMMSE gain (same colour family), so it is a thin line with open markers over a thick one
+STYLES = {"centralized": {"lw": 2.6, "alpha": 0.75},
+          "centralized_paper_gain": {"lw": 1.0, "marker": "o", "markevery": 8, "ms": 4.5, "mfc": "none"}}
+COLOURS = {**dict(zip(lf.FILTERS, ["tab:red", "tab:blue", "tab:cyan", "tab:orange", "tab:green", "tab:purple", "k"],
+                      strict=True)),
+           **dict(zip(DIAGNOSTICS, ["tab:brown", "tab:pink", "tab:olive", "tab:gray"], strict=True))}
+FIGURES = {  # file -> (filters, title, with the filters' own covariance)
+    "fig3_centralized_vs_naive.png": (("centralized", "centralized_paper_gain", "naive_kf"),
+                                      "Fig. 3: centralized algorithm vs general Kalman filter", False),
+    "fig4_distributed_vs_naive.png": (("distributed", "naive_kf"),
+                                      "Fig. 4: distributed algorithm vs general Kalman filter", False),
+    "fig5_centralized_vs_distributed.png": (("centralized", "distributed", "leader_only_kf"),
+                                            "Fig. 5: centralized vs distributed (leader alone for reference)", False),
+    "all_filters.png": (lf.FILTERS, "every filter on the same runs", False),
+    "readings.png": ((*READINGS, "leader_only_kf", "centralized", "informed_kf"),
+                     "(B) under each reading of (29), against the leader alone, (A) and the informed KF", False),
+    "consistency.png": (("centralized", "centralized_paper_gain", "distributed", "naive_kf", "leader_only_kf",
+                         "ideal_kf"), "consistency: measured MSE (solid) vs the filter's own covariance (dashed)",
+                        True),
+}
+
+
+def curves_figure(data: dict, filters, title: str, period: float = 1.0, own: bool = False):
+    """Position MSE against time, one panel per setting of ``data`` (``{setting: {"errors": {f: (runs, K)},
+    "own": {f: (K,) or (runs, K)}}}``): per filter the mean over the runs at each slot with its 95 %
+    Student-t band from the run-to-run spread, and with ``own`` the trace of the filter's own
+    covariance (dashed, mean over runs). The legend, right of the panels, names every line, the band
+    and the dashed curves, and says where two filters' curves coincide within the band."""
     plt = pyplot()
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
 
-    ks = np.arange(K)
-    colours = dict(zip(lf.FILTERS, ["tab:red", "tab:blue", "tab:cyan", "tab:orange", "tab:green", "tab:purple",
-                                    "k"], strict=True))
-    colours.update(zip(DIAGNOSTICS, ["tab:brown", "tab:pink", "tab:olive", "tab:gray"], strict=True))
+    from train.plotting import label, legend_outside, plain_log_ticks, t975
+
     labels = {**LABELS, **DIAGNOSTIC_LABELS}
+    fig, axes = plt.subplots(1, len(data), figsize=(4.6 * len(data) + 3.2, 4), sharey=True, squeeze=False)
+    axes = axes[0]
+    stats = {}
+    for ax, (key, d) in zip(axes, data.items(), strict=True):
+        runs = d["errors"][filters[0]].shape[0]
+        for f in filters:
+            err = np.asarray(d["errors"][f], float)
+            mean = err.mean(axis=0)
+            half = t975(runs - 1) * err.std(axis=0, ddof=1) / np.sqrt(runs)
+            stats[key, f] = (mean, half)
+            ks = np.arange(err.shape[1]) * period
+            ax.plot(ks, mean, color=COLOURS[f], **STYLES.get(f, {"lw": 1.3}))
+            ax.fill_between(ks, np.maximum(mean - half, 1e-3 * mean), mean + half, color=COLOURS[f], alpha=0.18,
+                            lw=0)
+            if own:
+                claimed = np.asarray(d["own"][f], float)
+                claimed = claimed if claimed.ndim == 1 else claimed.mean(axis=0)
+                ax.plot(ks, claimed, "--", color=COLOURS[f], lw=1.1)
+        ax.set_yscale("log")
+        ax.set_title(f"{key}: {runs} runs", fontsize=10)
+        ax.set_xlabel(label("time kT", "s") + f", T = {period:g} s")
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel(label("position MSE", "m²"))
+    plain_log_ticks(axes[0])
 
-    def curves(filters, title, name, own=False):
-        fig, axes = plt.subplots(1, len(data), figsize=(6 * len(data), 4), sharey=True)
-        for ax, (key, d) in zip(np.atleast_1d(axes), data.items(), strict=True):
-            for f in filters:
-                ax.semilogy(ks, d["errors"][f].mean(axis=0), color=colours[f], label=labels[f])
-                if own:
-                    claimed = d["own"][f] if d["own"][f].ndim == 1 else d["own"][f].mean(axis=0)
-                    ax.semilogy(ks, claimed, "--", color=colours[f], lw=1)
-            ax.set_title(f"{key}: {d['errors']['ideal_kf'].shape[0]} runs" + (" (dashed: own covariance)"
-                                                                               if own else ""), fontsize=10)
-            ax.set_xlabel("k [s]")
-            ax.grid(alpha=0.3)
-        np.atleast_1d(axes)[0].set_ylabel("position MSE [m^2]")
-        np.atleast_1d(axes)[0].legend(fontsize=8)
-        fig.suptitle(title, fontsize=11)
-        save_figure(os.path.join(folder, name), fig)
+    handles = []
+    for f in filters:
+        text = labels[f]
+        if f == "centralized_paper_gain" and "centralized" in filters and all(
+                np.all(np.abs(stats[key, f][0] - stats[key, "centralized"][0]) <= stats[key, "centralized"][1])
+                for key in data):
+            text += ":\n  on the LMMSE curve, within its 95 % band"
+        handles.append(Line2D([], [], color=COLOURS[f], label=text, **STYLES.get(f, {"lw": 1.3})))
+    handles.append(Patch(color="0.6", alpha=0.4, label="band: 95 % interval of the mean over the runs"))
+    if own:
+        handles.append(Line2D([], [], color="0.3", ls="--", lw=1.1,
+                              label="dashed: trace of the filter's own\n  covariance P(k|k), colour of its filter"))
+    legend_outside(axes[-1], handles=handles)
+    fig.suptitle(title, fontsize=11)
+    return fig
 
-    curves(("centralized", "centralized_paper_gain", "naive_kf"),
-           "Fig. 3: centralized algorithm vs general Kalman filter", "fig3_centralized_vs_naive.png")
-    curves(("distributed", "naive_kf"), "Fig. 4: distributed algorithm vs general Kalman filter",
-           "fig4_distributed_vs_naive.png")
-    curves(("centralized", "distributed", "leader_only_kf"), "Fig. 5: centralized vs distributed (leader alone "
-           "for reference)", "fig5_centralized_vs_distributed.png")
-    curves(lf.FILTERS, "every filter on the same runs", "all_filters.png")
-    curves((*READINGS, "leader_only_kf", "centralized", "informed_kf"), "(B) under each reading of (29), against "
-           "the leader alone, (A) and the informed KF", "readings.png")
-    curves(("centralized", "centralized_paper_gain", "distributed", "naive_kf", "leader_only_kf", "ideal_kf"),
-           "consistency: measured MSE (solid) vs the filter's own covariance (dashed)", "consistency.png", own=True)
+
+def _figures(folder: str, data: dict, period: float) -> None:
+    for name, (filters, title, own) in FIGURES.items():
+        save_figure(os.path.join(folder, name), curves_figure(data, filters, title, period, own))
 
 
 def _fmt(value: float, se: float | None = None) -> str:
