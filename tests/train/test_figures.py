@@ -323,3 +323,63 @@ def test_fu2017_curves_follow_the_conventions_with_bands_and_every_line_in_the_l
     half = plotting.t975(err.shape[0] - 1) * err.std(axis=0, ddof=1) / np.sqrt(err.shape[0])
     np.testing.assert_allclose(top, (err.mean(axis=0) + half).max(), rtol=1e-9)
     plt.close(fig)
+
+
+def test_plain_log_ticks_labels_a_range_of_many_decades_without_moving_its_limits():
+    fig, ax = plt.subplots()
+    ax.semilogy(np.arange(51), np.logspace(0, 9, 51))
+    ax.set_xlabel("k [step]")
+    ax.set_ylabel("J [m²]")
+    before = ax.get_ylim()
+    plotting.plain_log_ticks(ax)
+    assert ax.get_ylim() == before  # not widened: matplotlib drops sub-decade ticks there, the decades remain
+    assert plotting.figure_problems(fig) == []
+    plt.close(fig)
+
+
+def test_zhao2020_figures_follow_the_conventions():
+    from train.reproduce import zhao2020
+
+    rng = np.random.default_rng(4)
+    K, N = 20, 4
+    truth = np.cumsum(rng.normal(0.5, 0.2, (K + 1, 3)), axis=0)
+    estimate = truth[:, None, :] + rng.normal(0, 0.3, (K + 1, N, 3))
+    estimate[:, :, 1] = estimate[:, :1, 1]  # every node the same on y
+    fig = zhao2020.trajectory_error_figure(truth, estimate)
+    assert plotting.figure_problems(fig) == []
+    x, y, z = fig.axes
+    np.testing.assert_allclose(x.get_lines()[1].get_ydata(), estimate[:, 0, 0] - truth[:, 0], rtol=1e-12)
+    assert "identical" in y.get_title() and "identical" not in z.get_title()
+    plt.close(fig)
+
+    pairs = ("T1P1", "T2P1", "T3P1")
+    exact = {p: rng.uniform(0.5, 1.0, K + 1) for p in pairs}
+    bound = {p: np.exp(np.linspace(0, 12, K + 1)) for p in pairs}  # the bound grows over many decades
+    mc = {p: {"mean_curve": exact[p] * 1.01, "cumulative_sd": np.linspace(0.1, 2, K + 1), "runs": 50}
+          for p in pairs}
+    fig = zhao2020.cost_figure(exact, bound, mc, pairs, ("T1", "T2", "T3"), "t")
+    assert plotting.figure_problems(fig) == []
+    assert len(fig.axes[0].containers) == 3  # the Monte Carlo means carry error bars
+    plt.close(fig)
+
+    curves = {"paper T1P1": exact["T1P1"], "greedy (P1)": exact["T2P1"]}
+    fig = zhao2020.policies_figure(curves, "oracle_static", exact["T3P1"])
+    assert plotting.figure_problems(fig) == []
+    (ax,) = fig.axes
+    assert not any(len(set(line.get_ydata())) == 1 and len(line.get_ydata()) > 1 for line in ax.get_lines())
+    star = [line for line in ax.get_lines() if line.get_marker() == "*"]
+    assert len(star) == 1 and list(star[0].get_xdata()) == [K]  # J_K of the oracle at k = K, not a line
+    assert star[0].get_ydata()[0] == pytest.approx(exact["T3P1"].sum(), rel=1e-12)
+    plt.close(fig)
+
+
+def test_zhao2020_oracle_static_curve_sums_to_its_searched_cost():
+    from agents.bandwidth_fusion import oracle_static_search
+    from coloc_env.scenarios.bandwidth_fusion import BandwidthFusionConfig, BandwidthFusionScenario
+    from train.reproduce import zhao2020
+
+    config = build_config(BandwidthFusionConfig, {"horizon": 10})
+    best = oracle_static_search(BandwidthFusionScenario(config, batch=1))[0]
+    curve = zhao2020.oracle_static_curve(best, config)
+    assert curve.shape == (11,)
+    assert curve.sum() == pytest.approx(best.cost, rel=1e-9)

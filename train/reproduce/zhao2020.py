@@ -109,11 +109,14 @@ def monte_carlo_block(pair: str, runs: int, seed: int, config: BandwidthFusionCo
     """``runs`` realizations of one (T, P) pair (:func:`run_pair`) on the episodes of
     :func:`episode_generators`."""
     sim = run_pair(pair, config, episode_generators(seed, runs))
+    cumulative = np.cumsum(sim["squared_error"].sum(axis=2), axis=0)  # (K+1, runs): J_k of each realization
     return {
         "pair": pair,
         "per_run_cost": sim["squared_error"].sum(axis=(0, 2)),  # J_50 of each realization
         "per_run_mse_xy": sim["squared_error_xy"][1:].mean(axis=(0, 2)),  # k = 1..K, the env's steps
         "mean_curve": sim["squared_error"].sum(axis=2).mean(axis=1),  # (K+1,) sum over nodes
+        "cumulative_sd": cumulative.std(axis=1, ddof=1) if runs > 1 else np.full(len(cumulative), np.nan),
+        "runs": runs,
         "example_truth": sim["example_truth"],
         "example_estimate": sim["example_estimate"],
     }
@@ -347,57 +350,122 @@ def _bound_growth_example(config) -> str:
             f"weight {1 - unselected[i, c]:.2f}, so that entry of M grows like {2 * unselected[i, c]:.2f}^k")
 
 
-def _figures(folder, exact_curves, bound_curves, mc, greedy_curve, best, config) -> None:
+def trajectory_error_figure(truth: np.ndarray, estimate: np.ndarray, pair: str = "T1P1"):
+    """Fig. 2 as the error it shows: each node's fused estimate minus the truth, per axis, over one run
+    (``truth`` (K+1, n), ``estimate`` (K+1, N, n)); drawn against the truth itself the four estimates hide
+    under the truth's line."""
     plt = pyplot()
+    from train.plotting import label, legend_outside
 
-    K = config.horizon
-    ks = np.arange(K + 1)
-    truth, est = mc["T1P1"]["example_truth"], mc["T1P1"]["example_estimate"]
-    fig, axes = plt.subplots(3, 1, figsize=(7, 8), sharex=True)
+    ks = np.arange(len(truth))
+    n = truth.shape[-1]
+    fig, axes = plt.subplots(n, 1, figsize=(7.5, 2.3 * n + 0.6), sharex=True, squeeze=False)
+    axes = axes[:, 0]
+    markers = "os^vDP"
     for c, ax in enumerate(axes):
-        ax.plot(ks, truth[:, c], "k-", lw=2, label="truth")
-        for i in range(est.shape[1]):
-            ax.plot(ks, est[:, i, c], "--", lw=1, label=f"uav_{i}")
-        ax.set_ylabel(f"{'xyz'[c]} [m]")
-    axes[0].legend(ncol=5, fontsize=8)
-    axes[0].set_title("Fig. 2: three-axis trajectories, truth vs fused estimates (T1, P1; one run)")
-    axes[-1].set_xlabel("k")
-    save_figure(os.path.join(folder, "fig2_trajectories.png"), fig)
+        ax.axhline(0.0, color="k", lw=1.0, label="truth (zero error)")
+        for i in range(estimate.shape[1]):
+            ax.plot(ks, estimate[:, i, c] - truth[:, c], lw=1.0, marker=markers[i % len(markers)], ms=3,
+                    markevery=5, label=f"uav_{i}")
+        ax.set_ylabel(label(f"{'xyz'[c] if c < 3 else c} estimate - truth", "m"))
+        ax.grid(alpha=0.3)
+        error = estimate[:, :, c] - truth[:, None, c]
+        if np.ptp(error, axis=1).max() <= 1e-9 * max(1.0, float(np.abs(error).max())):
+            ax.set_title(f"every node's estimate identical on {'xyz'[c] if c < 3 else c}: one line", fontsize=9)
+    legend_outside(axes[0], title="fused estimate of")
+    fig.subplots_adjust(top=0.92)
+    fig.suptitle(f"Fig. 2: error of each node's fused estimate per axis ({pair[:2]}, {pair[2:]}; one run)",
+                 fontsize=10, y=0.965)
+    axes[-1].set_xlabel(label("time step k", "step"))
+    return fig
 
-    def cost_figure(pairs, labels, title, name):
-        fig, (ax, axb) = plt.subplots(1, 2, figsize=(11, 4))
-        for pair, label in zip(pairs, labels, strict=True):
-            line, = ax.plot(ks, np.cumsum(exact_curves[pair]), label=f"{label} exact")
-            ax.plot(ks[::5], np.cumsum(mc[pair]["mean_curve"])[::5], "o", color=line.get_color(), ms=4,
-                    label=f"{label} Monte Carlo")
-            axb.semilogy(ks, np.cumsum(bound_curves[pair]), color=line.get_color(), label=f"{label} bound")
-            axb.semilogy(ks, np.cumsum(exact_curves[pair]), "--", color=line.get_color())
-        ax.set_xlabel("k")
-        ax.set_ylabel("J_k = sum_{t<=k} sum_i E||e_i(t)||^2 [m^2]")
-        ax.set_title(title, fontsize=10)
-        ax.legend(fontsize=8)
-        axb.set_xlabel("k")
-        axb.set_ylabel("J_k (log)")
-        axb.set_title("bound Jbar_k of eq. (16) (solid) vs exact J_k (dashed)", fontsize=10)
-        axb.legend(fontsize=8)
-        save_figure(os.path.join(folder, name), fig)
 
-    cost_figure(("T1P1", "T2P1", "T3P1"), ("T1", "T2", "T3"),
-                "Fig. 3: component selection vs cost (weights P1)", "fig3_selection.png")
-    cost_figure(("T1P1", "T1P2", "T1P3"), ("P1", "P2", "P3"),
-                "Fig. 4: weights vs cost (selection T1)", "fig4_weights.png")
+def cost_figure(exact_curves: dict, bound_curves: dict, mc: dict, pairs, labels, title: str):
+    """Cumulative cost J_k against k for ``pairs``: exact (line) with the Monte Carlo mean and its 95 % interval
+    (every 5th step), and on the right the bound Jbar_k of eq. (16) (solid) against the exact J_k (dashed)."""
+    plt = pyplot()
+    from matplotlib.lines import Line2D
 
-    fig, ax = plt.subplots(figsize=(7, 4))
-    for pair in ("T1P1", "T1P2"):
-        ax.plot(ks, np.cumsum(exact_curves[pair]), label=f"paper {pair}")
-    ax.plot(ks, np.cumsum(greedy_curve), label="greedy (P1)")
-    scenario_best = f"oracle_static ({best.weights}), J_50 = {best.cost:.2f}"
-    ax.axhline(best.cost, color="k", ls=":", label=scenario_best)
-    ax.set_xlabel("k")
-    ax.set_ylabel("exact J_k [m^2]")
+    from train.plotting import label, legend_outside, plain_log_ticks, t975
+
+    fig, (ax, axb) = plt.subplots(1, 2, figsize=(13, 4.2))
+    for index, (pair, name) in enumerate(zip(pairs, labels, strict=True)):
+        colour = f"C{index}"
+        ks = np.arange(len(exact_curves[pair]))
+        ax.plot(ks, np.cumsum(exact_curves[pair]), color=colour, label=f"{name} exact")
+        runs = mc[pair].get("runs", 0)
+        half = t975(runs - 1) * np.asarray(mc[pair].get("cumulative_sd", np.full(len(ks), np.nan))) / np.sqrt(
+            max(runs, 1))
+        every = slice(None, None, 5)
+        ax.errorbar(ks[every], np.cumsum(mc[pair]["mean_curve"])[every], yerr=half[every], fmt="o", ms=4,
+                    color=colour, capsize=2, label=f"{name} Monte Carlo, {runs} runs (95 %)")
+        axb.plot(ks, np.cumsum(bound_curves[pair]), color=colour, label=f"{name} bound")
+        axb.plot(ks, np.cumsum(exact_curves[pair]), "--", color=colour)
+    ax.set_xlabel(label("time step k", "step"))
+    ax.set_ylabel(label("J_k = sum_{t<=k} sum_i E||e_i(t)||²", "m²"))
+    ax.set_title(title, fontsize=10)
+    ax.grid(alpha=0.3)
+    legend_outside(ax, "below")
+    axb.set_yscale("log")
+    axb.set_xlabel(label("time step k", "step"))
+    axb.set_ylabel(label("J_k, log scale", "m²"))
+    axb.set_title("bound Jbar_k of eq. (16) (solid) vs exact J_k (dashed)", fontsize=10)
+    axb.grid(alpha=0.3)
+    plain_log_ticks(axb)
+    handles, texts = axb.get_legend_handles_labels()
+    handles.append(Line2D([], [], color="0.3", ls="--"))
+    texts.append("exact J_k (dashed)")
+    legend_outside(axb, handles=handles, labels=texts)
+    fig.subplots_adjust(wspace=0.3)
+    return fig
+
+
+def policies_figure(curves: dict, oracle_name: str, oracle_curve: np.ndarray):
+    """Exact J_k against k for the paper's tables and the greedy selection (``curves``: name -> per-step
+    sum_i tr Sigma_i(k)), and the searched static selection ``oracle_name`` as its own J_k curve with its
+    J_K marked at k = K."""
+    plt = pyplot()
+    from train.plotting import label, legend_outside
+
+    fig, ax = plt.subplots(figsize=(9, 4))
+    for name, curve in curves.items():
+        ax.plot(np.arange(len(curve)), np.cumsum(curve), label=name)
+    ks = np.arange(len(oracle_curve))
+    total = np.cumsum(oracle_curve)
+    ax.plot(ks, total, color="k", ls=":", lw=1.6, label=oracle_name)
+    ax.plot([ks[-1]], [total[-1]], "k*", ms=10, label=f"oracle_static J_{ks[-1]} = {total[-1]:.2f} m²")
+    ax.set_xlabel(label("time step k", "step"))
+    ax.set_ylabel(label("exact J_k", "m²"))
     ax.set_title("paper tables vs searched and greedy selections", fontsize=10)
-    ax.legend(fontsize=8)
-    save_figure(os.path.join(folder, "policies.png"), fig)
+    ax.grid(alpha=0.3)
+    legend_outside(ax)
+    return fig
+
+
+def oracle_static_curve(best, config: BandwidthFusionConfig) -> np.ndarray:
+    """Per-step sum_i tr Sigma_i(k), k = 0..K, of the searched static selection ``best`` (an
+    :class:`agents.bandwidth_fusion.SearchResult`): its cumulative sum ends at ``best.cost``."""
+    scenario = BandwidthFusionScenario(config, batch=1)
+    full = scenario.links.full_selection(best.selection)
+    exact, _ = bf.expected_cost(scenario.model, np.asarray(config.initial_cov, float), full,
+                                paper_weights(best.weights), scenario.horizon)
+    return exact.sum(axis=-1)
+
+
+def _figures(folder, exact_curves, bound_curves, mc, greedy_curve, best, config) -> None:
+    truth, est = mc["T1P1"]["example_truth"], mc["T1P1"]["example_estimate"]
+    save_figure(os.path.join(folder, "fig2_trajectories.png"), trajectory_error_figure(truth, est, "T1P1"))
+    save_figure(os.path.join(folder, "fig3_selection.png"),
+                cost_figure(exact_curves, bound_curves, mc, ("T1P1", "T2P1", "T3P1"), ("T1", "T2", "T3"),
+                            "Fig. 3: component selection vs cost (weights P1)"))
+    save_figure(os.path.join(folder, "fig4_weights.png"),
+                cost_figure(exact_curves, bound_curves, mc, ("T1P1", "T1P2", "T1P3"), ("P1", "P2", "P3"),
+                            "Fig. 4: weights vs cost (selection T1)"))
+    curves = {f"paper {pair}": exact_curves[pair] for pair in ("T1P1", "T1P2")}
+    curves["greedy (P1)"] = greedy_curve
+    save_figure(os.path.join(folder, "policies.png"),
+                policies_figure(curves, f"oracle_static (searched from {best.start}, weights {best.weights})",
+                                oracle_static_curve(best, config)))
 
 
 def _report(metrics, claims, quick) -> str:
