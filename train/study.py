@@ -84,9 +84,11 @@ Outputs in ``OUT/study/<name>/`` (each written atomically, :mod:`train.io`)
 |                      | "config": {seed, episodes, policy, sweep, horizon, batched, compositions}}``  |
 | report.md            | one markdown table per metric (backends x values; RMSE with efficiency, the   |
 |                      | three bounds, NEES with its share in band), the paired table, the command line|
-| position_error.png   | error vs the swept value, one line per backend with its 95 % band; without a  |
-|                      | sweep a bar chart with 95 % error bars; the RMSE (x) beside its bound          |
-|                      | sqrt(pcrb_centralized) (dashed), which compares with the RMSE, not the mean   |
+| position_error.png   | error vs the swept value (or per backend without a sweep): each mean as a dot |
+|                      | with its 95 % interval, the RMSE (x) beside its bound sqrt(pcrb_centralized)  |
+|                      | (dashed), which compares with the RMSE, not the mean; with two or more        |
+|                      | backends a second panel with the paired difference to the first and its 95 % |
+|                      | interval                                                                      |
 
 ``metrics.json`` depends only on the inputs that change numbers (not on
 ``--out``, ``--executor`` or ``--address``): the same command reproduces it
@@ -507,53 +509,156 @@ def report(metrics: dict, command: str) -> str:
     return "\n".join(lines)
 
 
+_UNIT_TOKEN = re.compile(r"(?<![\w^/])(m\^2/s\^4|m/s\^2|m\^2|m/s|rad/s|deg/s|dBm|dB|Hz|rad|deg|metres|steps?|hops?|s|m)"
+                         r"(?![\w^/])")
+_RANGE = re.compile(r"^\s*[\[(]\s*([-+0-9.e]+)\s*,\s*([-+0-9.e]+)\s*[\])]")
+_INTEGERS = re.compile(r"^\s*-?\d+\s*\.\.\s*\w+")
+
+
+def field_unit(kind: str, name: str, field: str) -> str:
+    """The unit of part field ``field`` of the registered ``kind`` part ``name`` (``"network"``, ``"relay"``,
+    ``"loss_at_zero"``), read from the "allowed" column of the part's documented table: the first unit
+    written there (m, s, m/s, rad, dB, steps, ...), ``"-"`` for a range inside [0, 1] without one (a
+    probability or a fraction), ``"count"`` for an integer range ``a..b``; ``"as documented"`` where the
+    table says none of these."""
+    import sys
+
+    import coloc_env.parts as parts
+
+    registry = getattr(parts, kind.upper() + "S", None)
+    try:
+        cls = registry._class(name)
+    except (AttributeError, KeyError, ValueError):
+        return "as documented"
+    doc = (sys.modules[cls.__module__].__doc__ or "") + (cls.__doc__ or "")
+    cell = r"`{0,2}" + re.escape(field) + r"`{0,2}"
+    row = re.search(r"^\s*\|\s*" + cell + r"\s*\|[^|]*\|([^|]*)\|", doc, re.M)
+    if row is None:
+        return "as documented"
+    allowed = row.group(1)
+    token = _UNIT_TOKEN.search(allowed)
+    if token:
+        unit = token.group(1)
+        return {"metres": "m", "steps": "step", "hops": "hop"}.get(unit, unit)
+    bounds = _RANGE.match(allowed)
+    if bounds:
+        try:
+            low, high = float(bounds.group(1)), float(bounds.group(2))
+        except ValueError:
+            low, high = math.nan, math.nan
+        if 0.0 <= low and high <= 1.0:
+            return "-"
+    if _INTEGERS.match(allowed):
+        return "count"
+    return "as documented"
+
+
 def figure(metrics: dict):
-    """Error vs the swept value (one line per backend, 95 % band), or a bar chart without a sweep."""
+    """Position error against the swept value (or per backend without a sweep): each backend's mean with its
+    95 % interval as a dot with an error bar (dodged sideways so that backends with equal values stay
+    apart), its RMSE (x) and the bound sqrt(pcrb_centralized) (dashed; one black line where it is the
+    same for every backend); with two or more backends a second panel with the paired difference to the
+    first backend (``paired``) and its 95 % interval. The legend sits right of the panels."""
     import matplotlib
 
     if not os.environ.get("MPLBACKEND"):
         matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
+
+    from train.plotting import label, legend_outside
 
     backends = list(metrics["backends"])
     keys = list(metrics["backends"][backends[0]])
     sweep = metrics["config"]["sweep"]
-    fig, ax = plt.subplots(figsize=(5.6, 3.8))
-    means = {b: np.array([metrics["backends"][b][k]["position_error"]["mean"] for k in keys]) for b in backends}
-    halves = {b: np.array([metrics["backends"][b][k]["position_error"]["ci95"] for k in keys]) for b in backends}
-    rmse = {b: np.array([metrics["backends"][b][k]["rmse"] for k in keys], float) for b in backends}
-    bound = {b: np.array([np.nan if metrics["backends"][b][k].get("pcrb_centralized") is None
-                          else metrics["backends"][b][k]["pcrb_centralized"] for k in keys], float) for b in backends}
+    reference = metrics.get("reference", backends[0])
+    paired = metrics.get("paired") or {}
+    cells = metrics["backends"]
+
+    def number(value):
+        return math.nan if value is None or isinstance(value, str) else float(value)
+
+    means = {b: np.array([number(cells[b][k]["position_error"]["mean"]) for k in keys]) for b in backends}
+    halves = {b: np.array([number(cells[b][k]["position_error"]["ci95"]) for k in keys]) for b in backends}
+    rmse = {b: np.array([number(cells[b][k].get("rmse")) for k in keys]) for b in backends}
+    bound = {b: np.array([number(cells[b][k].get("pcrb_centralized")) for k in keys]) for b in backends}
+    with_diff = len(backends) > 1 and bool(paired)
+    fig, axes = plt.subplots(1, 2 if with_diff else 1, figsize=(10.5 if with_diff else 6.0, 3.9), squeeze=False)
+    ax = axes[0, 0]
     if sweep is None:
-        x = np.arange(len(backends))
-        ax.bar(x, [means[b][0] for b in backends], yerr=[halves[b][0] for b in backends], capsize=4,
-               color=[f"C{i}" for i in range(len(backends))])
-        for i, b in enumerate(backends):
-            ax.plot([i], [rmse[b][0]], marker="x", color="k", linestyle="none", label="RMSE" if i == 0 else None)
-            if np.isfinite(bound[b][0]):
-                ax.hlines(bound[b][0], i - 0.4, i + 0.4, colors="k", linestyles="--",
-                          label="sqrt(pcrb_centralized)" if i == 0 else None)
-        ax.legend()
-        ax.set_xticks(x, backends, rotation=20)
-        ax.set_xlabel("backend")
+        x = np.arange(len(backends), dtype=float)
+        positions = {b: x[i:i + 1] for i, b in enumerate(backends)}
+        dodge = {b: 0.0 for b in backends}
     else:
         values = sweep["values"]
         numeric = all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in values)
-        x = np.array(values, dtype=float) if numeric else np.arange(len(keys))
-        for i, b in enumerate(backends):
-            ax.plot(x, means[b], marker="o", color=f"C{i}", label=b)
-            ax.fill_between(x, means[b] - halves[b], means[b] + halves[b], color=f"C{i}", alpha=0.2)
-            ax.plot(x, rmse[b], marker="x", linestyle=":", color=f"C{i}", label=f"{b}: RMSE")
-            if np.isfinite(bound[b]).any():
-                ax.plot(x, bound[b], linestyle="--", color=f"C{i}", label=f"{b}: sqrt(pcrb_centralized)")
+        x = np.array(values, dtype=float) if numeric else np.arange(len(keys), dtype=float)
+        span = float(np.ptp(x)) if len(x) > 1 and np.ptp(x) > 0 else 1.0
+        step = 0.04 * span if numeric else 0.12
+        dodge = {b: (i - (len(backends) - 1) / 2) * step for i, b in enumerate(backends)}
+        positions = {b: x + dodge[b] for b in backends}
+    colours = {b: f"C{i}" for i, b in enumerate(backends)}
+    handles = []
+    cut = slice(None) if sweep is not None else slice(0, 1)  # without a sweep: the one "default" cell
+    for b in backends:
+        handles.append(ax.errorbar(positions[b], means[b][cut], yerr=halves[b][cut], fmt="o", ms=5, capsize=3,
+                                   color=colours[b], label=b))
+        ax.plot(positions[b], rmse[b][cut], "x", color=colours[b], ms=7)
+    finite = [b for b in backends if np.isfinite(bound[b]).any()]
+    same_bound = bool(finite) and len(finite) == len(backends) and all(
+        np.allclose(bound[b], bound[finite[0]], rtol=1e-9, atol=0, equal_nan=True) for b in finite)
+    if sweep is None:
+        for b in finite:
+            i = backends.index(b)
+            ax.hlines(bound[b][0], i - 0.35, i + 0.35, colors="k" if same_bound else colours[b], linestyles="--")
+    elif same_bound:
+        ax.plot(x, bound[finite[0]], "k--", lw=1.2)
+    else:
+        for b in finite:
+            ax.plot(x, bound[b], "--", color=colours[b], lw=1.2)
+    handles.append(Line2D([], [], color="0.3", marker="x", ls="", ms=7, label="x: RMSE, colour of its backend"))
+    if finite:
+        text = ("bound sqrt(pcrb_centralized),\nthe same for every backend" if same_bound else
+                "dashed: bound sqrt(pcrb_centralized),\ncolour of its backend")
+        handles.append(Line2D([], [], color="k" if same_bound else "0.3", ls="--", label=text))
+    handles.append(Line2D([], [], color="0.3", marker="o", ls="", label="dot: mean with its 95 % interval"))
+    ax.set_ylabel(label("position error", "m"))
+    ax.grid(alpha=0.3)
+    if sweep is None:
+        ax.set_xticks(x, backends, rotation=20)
+        ax.set_xlabel("backend")
+        ax.set_xlim(-0.6, len(backends) - 0.4)
+    else:
         if not numeric:
             ax.set_xticks(x, keys)
-        ax.set_xlabel(f"{sweep['part']}.{sweep['field']}")
-        ax.legend(fontsize=7)
-    ax.set_ylabel("error (m): mean ± 95 %, RMSE (x), bound (--)")
+        name = metrics["config"]["compositions"][backends[0]][keys[0]][sweep["part"]]["name"]
+        xlabel = label(f"{sweep['part']}.{sweep['field']}", field_unit(sweep["part"], name, sweep["field"]))
+        ax.set_xlabel(xlabel)
     config = metrics["config"]
-    ax.set_title(f"{metrics['world']} / {metrics['network']}: {config['policy']}, {config['episodes']} episodes")
-    ax.grid(alpha=0.3)
+    ax.set_title(f"{metrics['world']} / {metrics['network']}: {config['policy']}, {config['episodes']} episodes",
+                 fontsize=10)
+    target = ax
+    if with_diff:
+        dx = axes[0, 1]
+        dx.axhline(0.0, color="k", lw=0.8)
+        for b in backends[1:]:
+            diff = np.array([number(paired[b][k]["mean"]) for k in keys])
+            half = np.array([number(paired[b][k]["ci95"]) for k in keys])
+            dx.errorbar(positions[b], diff[cut], yerr=half[cut], fmt="o", ms=5, capsize=3, color=colours[b])
+        dx.set_ylabel(label(f"error - error of {reference}", "m"))
+        dx.set_title(f"paired on the same episodes, against {reference}", fontsize=10)
+        dx.grid(alpha=0.3)
+        dx.set_xlim(ax.get_xlim())
+        if sweep is None:
+            dx.set_xticks(x, backends, rotation=20)
+            dx.set_xlabel("backend")
+        else:
+            if not numeric:
+                dx.set_xticks(x, keys)
+            dx.set_xlabel(xlabel)
+        target = dx
+    legend_outside(target, handles=handles)
+    fig.tight_layout()
     return fig
 
 

@@ -383,3 +383,54 @@ def test_zhao2020_oracle_static_curve_sums_to_its_searched_cost():
     curve = zhao2020.oracle_static_curve(best, config)
     assert curve.shape == (11,)
     assert curve.sum() == pytest.approx(best.cost, rel=1e-9)
+
+
+def _study_metrics(sweep=True):
+    rng = np.random.default_rng(5)
+    backends = ("ukf_ccl", "ukf_dcl", "dead_reckoning")
+    keys = ["0", "0.3", "0.6"] if sweep else ["default"]
+
+    def cell(mean):
+        return {"position_error": {"mean": mean, "ci95": 0.1}, "rmse": mean * 1.2, "pcrb_centralized": 0.9}
+
+    same = {k: float(rng.uniform(0.7, 0.9)) for k in keys}
+    cells = {"ukf_ccl": {k: cell(same[k]) for k in keys}, "ukf_dcl": {k: cell(same[k]) for k in keys},
+             "dead_reckoning": {k: cell(3.4) for k in keys}}  # ukf_ccl and ukf_dcl equal: the dodge keeps them apart
+    paired = {b: {k: {"mean": cells[b][k]["position_error"]["mean"] - same[k], "ci95": 0.05, "verdict": "x"}
+                  for k in keys} for b in backends[1:]}
+    compositions = {b: {k: {"world": {"name": "circles"}, "network": {"name": "relay"}, "backend": {"name": b}}
+                        for k in keys} for b in backends}
+    config = {"policy": "always", "episodes": 4, "compositions": compositions,
+              "sweep": {"part": "network", "field": "loss_at_zero", "values": [0, 0.3, 0.6], "keys": keys}
+              if sweep else None}
+    return {"world": "circles", "network": "relay", "reference": "ukf_ccl", "backends": cells, "paired": paired,
+            "config": config}
+
+
+@pytest.mark.parametrize("sweep", [True, False])
+def test_study_figure_is_dots_with_intervals_a_paired_panel_and_a_legend_off_the_data(sweep):
+    from train import study
+
+    fig = study.figure(_study_metrics(sweep))
+    assert plotting.figure_problems(fig) == []
+    errors, diffs = fig.axes
+    assert len(errors.containers) == 3 and len(diffs.containers) == 2  # every mean with its error bar
+    assert errors.get_legend() is None and diffs.get_legend() is not None
+    assert any("pcrb_centralized" in t.get_text() for t in diffs.get_legend().get_texts())
+    assert "[m]" in errors.get_ylabel() and "ukf_ccl" in diffs.get_ylabel()
+    if sweep:
+        assert errors.get_xlabel() == "network.loss_at_zero [-]"
+        ccl, dcl = (c.lines[0].get_xdata() for c in errors.containers[:2])
+        assert np.all(np.asarray(dcl) > np.asarray(ccl))  # equal values drawn side by side, not on top
+    plt.close(fig)
+
+
+def test_study_sweep_axis_unit_comes_from_the_parts_table():
+    from train.study import field_unit
+
+    assert field_unit("network", "relay", "loss_at_zero") == "-"
+    assert field_unit("network", "relay", "comm_range") == "m"
+    assert field_unit("world", "circles", "speed") == "m/s"
+    assert field_unit("world", "circles", "horizon") == "step"
+    assert field_unit("backend", "dnbp", "num_particles") == "count"
+    assert field_unit("network", "no_such_network", "x") == "as documented"
