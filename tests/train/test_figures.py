@@ -434,3 +434,54 @@ def test_study_sweep_axis_unit_comes_from_the_parts_table():
     assert field_unit("world", "circles", "horizon") == "step"
     assert field_unit("backend", "dnbp", "num_particles") == "count"
     assert field_unit("network", "no_such_network", "x") == "as documented"
+
+
+def _wang_summary(runs=4, K=30, N=4, seed=6):
+    from train.reproduce import wang2019
+
+    rng = np.random.default_rng(seed)
+    summary = {}
+    for name in ("default", "paper_literal"):
+        for p in wang2019.PROBABILITIES:
+            per_run = np.stack([rng.uniform(3.5, 4.5, runs), rng.uniform(1.0, 3.0, runs), rng.uniform(1.0, 3.0, runs)])
+            curves = rng.uniform(0.5, 5.0, (3, K, N))
+            curves[2] = curves[1] + 1e-13
+            chains = np.full((K, N), -1)
+            chains[::3] = [rng.permutation(N) for _ in range(len(chains[::3]))]
+            summary[name, p] = {"per_run": per_run, "curves": curves, "curves_sd": np.full((3, K, N), 0.5),
+                                "chains": chains, "tracks": rng.normal(0, 50, (2, K, N, 2))}
+    return summary
+
+
+def test_wang2019_figures_follow_the_conventions():
+    from train.reproduce import wang2019
+
+    summary = _wang_summary()
+    main = summary["default", 0.5]
+    truncation = {"max_hops": 1,
+                  "paper": {"min_eigenvalue_per_step": [1e-2, 1e-3, -1e-2], "cholesky_failed_at_step": 4},
+                  "consistent": {"min_eigenvalue_per_step": [1e-2] * 6, "cholesky_failed_at_step": None}}
+    figures = [wang2019.trajectories_figure(np.random.default_rng(0).normal(0, 50, (30, 4, 2)), main["tracks"], 0.5),
+               wang2019.platform_errors_figure(main, 4, 0.5, 0.5), wang2019.error_vs_p_figure(summary),
+               wang2019.topology_figure(main["chains"], 0.5, 0.05), wang2019.truncated_chain_figure(truncation, 0.5)]
+    for fig in figures:
+        assert plotting.figure_problems(fig) == [], fig.axes[0].get_title()
+        plt.close(fig)
+
+
+def test_wang2019_fig7_carries_interval_bars_over_the_runs_and_names_the_coinciding_curves():
+    from train.reproduce import wang2019
+
+    summary = _wang_summary()
+    fig = wang2019.error_vs_p_figure(summary)
+    (ax,) = fig.axes
+    assert len(ax.containers) == 3
+    _, _, (bars,) = ax.containers[0]  # UKF-CCL with the heading term: t-interval of the mean over the runs
+    half = [0.5 * (seg[1, 1] - seg[0, 1]) for seg in bars.get_segments()]
+    runs = [summary["default", p]["per_run"][1] for p in wang2019.PROBABILITIES]
+    expected = [plotting.t975(len(v) - 1) * v.std(ddof=1) / np.sqrt(len(v)) for v in runs]
+    np.testing.assert_allclose(half, expected, rtol=1e-9)
+    texts = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert any("of the heading-term curve" in t for t in texts), texts
+    assert ax.get_xlabel().endswith("[-]")
+    plt.close(fig)

@@ -182,6 +182,7 @@ def simulate_runs(config: RelayUKFConfig, copies: list, policy_rng: np.random.Ge
         "per_run": errors.mean(axis=(1, 3)),  # (3, runs): time- and platform-averaged
         "per_run_squared": (errors**2).mean(axis=(1, 3)),  # (3, runs): each run's mean squared error
         "curves": errors.mean(axis=2),  # (3, K, N): mean over this block's runs
+        "curves_sq": (errors**2).mean(axis=2),  # (3, K, N): mean square over this block's runs (for the spread)
         "runs": runs,
         "max_diff": max_diff,
         "nees": float(nees[1:].mean()),  # k = 0 is the known start
@@ -385,6 +386,9 @@ def _merge(blocks: list[dict]) -> dict:
     per_run = np.concatenate([b["per_run"] for b in blocks], axis=1)  # (3, runs)
     weights = np.array([b["runs"] for b in blocks], float)
     curves = np.einsum("b,bekn->ekn", weights / weights.sum(), np.stack([b["curves"] for b in blocks]))
+    squares = np.einsum("b,bekn->ekn", weights / weights.sum(), np.stack([b["curves_sq"] for b in blocks]))
+    runs = int(weights.sum())
+    spread = np.sqrt(np.maximum(squares - curves**2, 0.0) * runs / max(runs - 1, 1))  # sample sd over the runs
     half = 1.96 * per_run.std(axis=1, ddof=1) / np.sqrt(per_run.shape[1])
     return {
         "per_run": per_run,
@@ -392,6 +396,7 @@ def _merge(blocks: list[dict]) -> dict:
         "mean": {e: float(per_run[i].mean()) for i, e in enumerate(ESTIMATORS)},
         "ci95": {e: float(half[i]) for i, e in enumerate(ESTIMATORS)},
         "curves": curves,
+        "curves_sd": spread,
         "max_diff": max(b["max_diff"] for b in blocks),
         "nees": float(np.average([b["nees"] for b in blocks], weights=weights)),
         "chains": blocks[0]["chains"],
@@ -474,58 +479,112 @@ def _claims(metrics: dict, summary: dict) -> list[dict]:
     return claims
 
 
-def _figures(folder: str, summary: dict, truncation: dict, config: RelayUKFConfig) -> None:
+def trajectories_figure(truth: np.ndarray, tracks: np.ndarray, p: float):
+    """Fig. 5: each platform's true track with the IL and UKF-DCL estimates of one run (``truth`` (K, N, 2),
+    ``tracks`` (2, K, N, 2): IL, DCL), the start marked; the legend right of the map."""
     plt = pyplot()
+    from train.plotting import label, legend_outside
 
-    from coloc_env.rendering import AGENT_COLOURS
-
-    truth = Rig(config, 1, names=("IL",)).world.truth
-    K, N, dt = config.horizon, config.num_platforms, config.dt
-    p0 = config.measurement_probability
-    main = summary.get(("default", p0), summary[("default", 0.5)])
-    times = np.arange(K) * dt
-
-    fig, ax = plt.subplots(figsize=(6.5, 6.5))
-    il, dcl = main["tracks"]
-    for i in range(N):
+    fig, ax = plt.subplots(figsize=(8.2, 6.2))
+    il, dcl = tracks
+    for i in range(truth.shape[1]):
         ax.plot(truth[:, i, 0], truth[:, i, 1], "k-", lw=1.5, label="truth" if i == 0 else None)
-        ax.plot(il[:, i, 0], il[:, i, 1], "r-", lw=0.8, label="IL" if i == 0 else None)
+        ax.plot(il[:, i, 0], il[:, i, 1], "r-", lw=0.8, label="IL (independent)" if i == 0 else None)
         ax.plot(dcl[:, i, 0], dcl[:, i, 1], "g-", lw=0.8, label="UKF-DCL" if i == 0 else None)
-        ax.plot(*truth[0, i], "ko", ms=5)
+        ax.plot(*truth[0, i], "ko", ms=5, label="start" if i == 0 else None)
         ax.annotate(f"A{i + 1}", truth[0, i], textcoords="offset points", xytext=(6, 6))
     ax.set_aspect("equal")
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
-    ax.set_title(f"Fig. 5: trajectories (one run, p = {p0})", fontsize=10)
-    ax.legend(fontsize=8)
-    save_figure(os.path.join(folder, "fig5_trajectories.png"), fig)
+    ax.set_xlabel(label("x", "m"))
+    ax.set_ylabel(label("y", "m"))
+    ax.set_title(f"Fig. 5: trajectories (one run, p = {p})", fontsize=10)
+    legend_outside(ax)
+    return fig
 
-    fig, axes = plt.subplots(2, (N + 1) // 2, figsize=(11, 6.5), sharex=True, squeeze=False)
+
+def platform_errors_figure(main: dict, runs: int, dt: float, p: float):
+    """Fig. 6: each platform's distance error against time, mean over the runs with its 95 % band (the
+    run-to-run spread, ``main["curves_sd"]``), for IL, UKF-CCL and UKF-DCL; the legend under the panels
+    says how far apart CCL and DCL are."""
+    plt = pyplot()
+    from matplotlib.patches import Patch
+
+    from train.plotting import label, t975
+
+    curves, spread = main["curves"], main["curves_sd"]
+    K, N = curves.shape[1], curves.shape[2]
+    times = np.arange(K) * dt
+    fig, axes = plt.subplots(2, (N + 1) // 2, figsize=(11, 6.8), sharex=True, squeeze=False)
+    styles = (("r-", 1.0, 1.0, "IL (independent)"), ("b-", 2.4, 0.5, "UKF-CCL"), ("g--", 1.0, 1.0, "UKF-DCL"))
+    half = t975(runs - 1) * spread / np.sqrt(runs)
     for i, ax in enumerate(axes.ravel()[:N]):
-        ax.plot(times, main["curves"][0, :, i], "r-", lw=1, label="IL")
-        ax.plot(times, main["curves"][1, :, i], "b-", lw=2, alpha=0.5, label="UKF-CCL")
-        ax.plot(times, main["curves"][2, :, i], "g--", lw=1, label="UKF-DCL")
+        for e, (style, lw, alpha, name) in enumerate(styles):
+            ax.plot(times, curves[e, :, i], style, lw=lw, alpha=alpha, label=name)
+            if e < 2:  # DCL's band is CCL's
+                ax.fill_between(times, curves[e, :, i] - half[e, :, i], curves[e, :, i] + half[e, :, i],
+                                color=style[0], alpha=0.15, lw=0)
         ax.set_title(f"A{i + 1}", fontsize=9)
-        ax.set_ylabel("distance error [m]")
+        ax.set_ylabel(label("distance error", "m"))
+        ax.grid(alpha=0.3)
+    for ax in axes.ravel()[N:]:
+        ax.set_visible(False)
     for ax in axes[-1]:
-        ax.set_xlabel("time [s]")
-    axes[0, 0].legend(fontsize=8)
-    fig.suptitle(f"Fig. 6: distance error per platform, mean over runs (p = {p0})", fontsize=10)
-    save_figure(os.path.join(folder, "fig6_platform_errors.png"), fig)
+        ax.set_xlabel(label("time", "s"))
+    handles, texts = axes[0, 0].get_legend_handles_labels()
+    gap = float(np.abs(curves[1] - curves[2]).max())
+    texts[2] += f" (on UKF-CCL: mean curves {gap:.1e} m apart at most)"
+    handles.append(Patch(color="0.5", alpha=0.3))
+    texts.append(f"band: 95 % interval of the mean over {runs} runs")
+    fig.legend(handles, texts, loc="upper center", bbox_to_anchor=(0.5, 0.0), ncol=2, fontsize=8, frameon=False)
+    fig.suptitle(f"Fig. 6: distance error per platform, mean over runs (p = {p})", fontsize=10)
+    fig.tight_layout()
+    return fig
 
-    fig, ax = plt.subplots(figsize=(6.5, 4))
-    for name, style, label in (("default", "-", "Q with heading term"), ("paper_literal", ":", "paper's Q")):
-        ccl = [summary[(name, p)]["mean"]["CCL"] for p in PROBABILITIES]
-        ax.plot(PROBABILITIES, ccl, "o" + style, label=f"UKF-CCL, {label}")
-    il_p = [summary[("default", p)]["mean"]["IL"] for p in PROBABILITIES]
-    ax.plot(PROBABILITIES, il_p, "rs-", label="IL")
-    ax.set_xlabel("probability p of a relative measurement per step")
-    ax.set_ylabel("mean distance error [m]")
-    ax.set_title("Fig. 7: average error vs measurement probability", fontsize=10)
-    ax.legend(fontsize=8)
-    save_figure(os.path.join(folder, "fig7_error_vs_p.png"), fig)
 
-    chains = summary[("default", PROBABILITIES[0])]["chains"]
+def error_vs_p_figure(summary: dict):
+    """Fig. 7: the mean distance error against p with 95 % t-interval bars over the runs, for UKF-CCL with the
+    heading term in Q (filled) and the paper's literal Q (open markers, dashed), and IL; the legend says how
+    close the two UKF-CCL curves are, since at this scale they coincide."""
+    plt = pyplot()
+    from train.plotting import label, legend_outside, t975
+
+    def stats(name, row):
+        per_run = [np.asarray(summary[(name, p)]["per_run"][row], float) for p in PROBABILITIES]
+        mean = np.array([v.mean() for v in per_run])
+        half = np.array([t975(len(v) - 1) * v.std(ddof=1) / np.sqrt(len(v)) for v in per_run])
+        return mean, half, len(per_run[0])
+
+    fig, ax = plt.subplots(figsize=(8.6, 4))
+    ccl = ESTIMATORS.index("CCL")
+    heading, heading_half, runs = stats("default", ccl)
+    literal, literal_half, _ = stats("paper_literal", ccl)
+    il, il_half, _ = stats("default", ESTIMATORS.index("IL"))
+    x = np.array(PROBABILITIES)
+    gap = float(np.abs(heading - literal).max())
+    ax.errorbar(x, heading, yerr=heading_half, fmt="o-", color="tab:blue", capsize=3, ms=6,
+                label="UKF-CCL, Q with heading term")
+    ax.errorbar(x * 1.03, literal, yerr=literal_half, fmt="s--", color="tab:orange", mfc="none", capsize=3, ms=7,
+                label=f"UKF-CCL, paper's Q (drawn 3 % right):\nwithin {gap:.3f} m of the heading-term curve")
+    ax.errorbar(x, il, yerr=il_half, fmt="rs-", capsize=3, label="IL (independent)")
+    ax.set_xscale("log")
+    from train.plotting import plain_log_ticks
+
+    plain_log_ticks(ax, "x")
+    ax.set_xlabel(label("probability p of a relative measurement per step", "-"))
+    ax.set_ylabel(label("mean distance error", "m"))
+    ax.set_title(f"Fig. 7: average error vs measurement probability; bars: 95 % over {runs} runs", fontsize=10)
+    ax.grid(alpha=0.3)
+    legend_outside(ax)
+    return fig
+
+
+def topology_figure(chains: np.ndarray, dt: float, p: float):
+    """Fig. 8: the relay chain of each measurement of one run (``chains`` (K, N): platform at each place of
+    the chain, -1 where none), coloured by the place in the chain."""
+    plt = pyplot()
+    from coloc_env.rendering import AGENT_COLOURS
+    from train.plotting import label
+
+    N = chains.shape[1]
     fig, ax = plt.subplots(figsize=(11, 3.5))
     for k in np.flatnonzero(chains[:, 0] >= 0):
         hops = chains[k][chains[k] >= 0]
@@ -533,27 +592,54 @@ def _figures(folder: str, summary: dict, truncation: dict, config: RelayUKFConfi
         for place, platform in enumerate(hops):
             ax.plot(k * dt, platform + 1, "o", ms=6 if place == 0 else 4,
                     color=AGENT_COLOURS[place % len(AGENT_COLOURS)])
-    handles = [plt.Line2D([], [], marker="o", ls="", color=AGENT_COLOURS[p], label=lab)
-               for p, lab in enumerate(["m (measuring)", "n (measured)", "3rd", "4th"][:N])]
-    ax.legend(handles=handles, fontsize=8, ncol=N, loc="upper center", bbox_to_anchor=(0.5, -0.2))
+    handles = [plt.Line2D([], [], marker="o", ls="", color=AGENT_COLOURS[i], label=lab)
+               for i, lab in enumerate(["m (measuring)", "n (measured)", "3rd", "4th", *[
+                   f"{j}th" for j in range(5, N + 1)]][:N])]
+    handles.append(plt.Line2D([], [], color="0.7", lw=0.8, label="one chain"))
+    ax.legend(handles=handles, fontsize=8, ncol=N + 1, loc="upper center", bbox_to_anchor=(0.5, -0.2),
+              frameon=False)
     ax.set_yticks(range(1, N + 1), [f"A{i}" for i in range(1, N + 1)])
-    ax.set_xlabel("time [s]")
-    ax.set_title(f"Fig. 8: relay chain of each measurement (one run, p = {PROBABILITIES[0]}): "
-                 "colour = place in the chain", fontsize=10)
-    save_figure(os.path.join(folder, "fig8_topology.png"), fig)
+    ax.set_ylabel("platform")
+    ax.set_xlabel(label("time", "s"))
+    ax.set_title(f"Fig. 8: relay chain of each measurement (one run, p = {p}): colour = place in the chain",
+                 fontsize=10)
+    return fig
 
-    fig, ax = plt.subplots(figsize=(7, 4))
+
+def truncated_chain_figure(truncation: dict, dt: float):
+    """The smallest eigenvalue of P per step on truncated chains, for the paper's rule and the consistent one."""
+    plt = pyplot()
+    from train.plotting import label, legend_outside
+
+    fig, ax = plt.subplots(figsize=(8.4, 4))
     for rule in ("paper", "consistent"):
         values = np.array(truncation[rule]["min_eigenvalue_per_step"])
-        ax.plot(np.arange(1, len(values) + 1) * dt, values, label=f"{rule} rule")
+        failed = truncation[rule].get("cholesky_failed_at_step")
+        ax.plot(np.arange(1, len(values) + 1) * dt, values,
+                label=f"{rule} rule" + ("" if failed is None else f" (Cholesky fails at step {failed}: ends)"))
     ax.axhline(0.0, color="k", lw=0.8)
     ax.set_yscale("symlog", linthresh=1e-4)
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("smallest eigenvalue of P")
+    ax.set_xlabel(label("time", "s"))
+    ax.set_ylabel(label("smallest eigenvalue of P (positions)", "m²"))
     ax.set_title(f"truncated chains (hop budget {truncation['max_hops']}): unreached cross-covariances",
                  fontsize=10)
-    ax.legend(fontsize=8)
-    save_figure(os.path.join(folder, "truncated_chain.png"), fig)
+    ax.grid(alpha=0.3)
+    legend_outside(ax)
+    return fig
+
+
+def _figures(folder: str, summary: dict, truncation: dict, config: RelayUKFConfig) -> None:
+    truth = Rig(config, 1, names=("IL",)).world.truth
+    p0 = config.measurement_probability
+    main = summary.get(("default", p0), summary[("default", 0.5)])
+    runs = main["per_run"].shape[1]
+    dt = config.dt
+    save_figure(os.path.join(folder, "fig5_trajectories.png"), trajectories_figure(truth, main["tracks"], p0))
+    save_figure(os.path.join(folder, "fig6_platform_errors.png"), platform_errors_figure(main, runs, dt, p0))
+    save_figure(os.path.join(folder, "fig7_error_vs_p.png"), error_vs_p_figure(summary))
+    save_figure(os.path.join(folder, "fig8_topology.png"),
+                topology_figure(summary[("default", PROBABILITIES[0])]["chains"], dt, PROBABILITIES[0]))
+    save_figure(os.path.join(folder, "truncated_chain.png"), truncated_chain_figure(truncation, dt))
 
 
 def _report(metrics: dict, claims: list[dict], quick: bool) -> str:
