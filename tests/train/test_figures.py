@@ -313,7 +313,8 @@ def test_fu2017_curves_follow_the_conventions_with_bands_and_every_line_in_the_l
         if own:
             assert any("own" in t and "covariance" in t for t in texts)
         if "centralized_paper_gain" in filters:
-            assert any("on the LMMSE curve" in t for t in texts)
+            assert any(t.startswith(fu2017.LABELS["centralized_paper_gain"]) and "on the curve of (A) centralized, "
+                       "LMMSE gain" in t for t in texts), texts
         plt.close(fig)
     # the band is the Student-t interval of the mean over the runs at each slot
     fig = fu2017.curves_figure(data, ("ideal_kf",), "t", 1.0)

@@ -404,12 +404,12 @@ def curves_figure(data: dict, filters, title: str, period: float = 1.0, own: boo
     plain_log_ticks(axes[0])
 
     handles = []
-    for f in filters:
+    for index, f in enumerate(filters):
         text = labels[f]
-        if f == "centralized_paper_gain" and "centralized" in filters and all(
-                np.all(np.abs(stats[key, f][0] - stats[key, "centralized"][0]) <= stats[key, "centralized"][1])
-                for key in data):
-            text += ":\n  on the LMMSE curve, within its 95 % band"
+        for g in filters[:index]:  # a curve that lies on an earlier one (within its band at every slot) says so
+            if all(np.all(np.abs(stats[key, f][0] - stats[key, g][0]) <= stats[key, g][1]) for key in data):
+                text += f":\n  on the curve of {labels[g]},\n  within its 95 % band at every slot"
+                break
         handles.append(Line2D([], [], color=COLOURS[f], label=text, **STYLES.get(f, {"lw": 1.3})))
     handles.append(Patch(color="0.6", alpha=0.4, label="band: 95 % interval of the mean over the runs"))
     if own:
