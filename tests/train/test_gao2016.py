@@ -3,6 +3,8 @@
 import functools
 import json
 
+import pytest
+
 from coloc_env.config import build_config
 from coloc_env.scenarios.nlos_horizon import NlosHorizonConfig
 from train.cli import main
@@ -26,7 +28,7 @@ def test_reproduce_gao2016_writes_the_spec_metrics_report_and_figures(tmp_path, 
     assert main(["reproduce", "gao2016", "--runs", "2", "--out", str(tmp_path)]) == 0
     folder = tmp_path / "gao2016"
     metrics = json.loads((folder / "metrics.json").read_text())
-    assert set(metrics) == SPEC_KEYS
+    assert set(metrics) == SPEC_KEYS | {"pcrb"}
     assert sorted(map(int, metrics["dfir_rmse_by_horizon"])) == list(range(2, 31))
     curve = metrics["dfir_rmse_by_horizon"]
     assert metrics["dfir_best_rmse"] == min(curve.values()) == curve[str(metrics["dfir_best_horizon"])]
@@ -49,3 +51,14 @@ def test_reproduce_gao2016_writes_the_spec_metrics_report_and_figures(tmp_path, 
     assert "lower time-averaged RMSE than DFIR with the best constant horizon" in report
     assert f"{metrics['afge_rmse']:.3f}" in report
     assert "afge_beats_best_constant" in capsys.readouterr().out
+    # the bound beside the default setting's estimators: over 2 seeded episodes (episodes <= runs), k >= 50;
+    # every row's mean squared error is at least the centralized bound up to 3 standard errors over the runs
+    block = metrics["pcrb"]
+    assert (block["episodes"], block["seed"], block["same_episodes"]) == (2, 2016, False)
+    assert set(block["rows"]) == {name for name, _, _ in gao2016.BOUND_ROWS} | {"dfir_best"}
+    assert block["rows"]["afge"]["rmse"] ** 2 == pytest.approx(metrics["afge_rmse"] ** 2, rel=1e-12)
+    assert block["rows"]["dfir_best"]["rmse"] == pytest.approx(metrics["dfir_best_rmse"], rel=1e-12)
+    assert 0 < block["centralized"] <= block["delivered"] <= block["local"]
+    for name, row in block["rows"].items():
+        assert row["mse"] >= block["centralized"] ** 2 - 3 * row["mse_se"], name
+    assert "## Cramér–Rao bound" in report and "LOS/NLOS mode of every link known" in report
