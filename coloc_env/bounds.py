@@ -55,9 +55,14 @@ it), unless the preset's own step reads the backend's result (``gps_denied_nbp``
 ``nlos_orbit`` neighbours' packets are then asked of the network by the bound model's
 stand-in (the same counter-based draws as the backend's call: a test holds them equal).
 
-Where each episode is a problem of its own (``circles``: what differs between episodes is
-observed by the estimator; ``mrclam``: recorded windows), the bound model asks for one
-recursion per episode and the mean of their bounds (``BoundProblem.per_episode``).
+Where each episode is a problem of its own (``mrclam``: recorded windows, each conditioned on
+its trajectory), the bound model asks for one recursion per episode and the mean of their
+bounds (``BoundProblem.per_episode``). A mean of per-episode bounds is a bound on the averaged
+MSE only where what differs between the episodes is known to the estimator *and* independent of
+the noises it faces (then each is the bound conditioned on it, E[J(U)^-1] >= (E J(U))^-1); where
+the Jacobians are evaluated at a truth that differs through noise the estimator does not observe,
+or the readings taken depend on earlier readings (a policy that chooses from its estimates), it
+is not, and the averaged D-terms are.
 
 ``mrclam`` (recorded data) has no generative model: its bound is model-based (the
 world's calibrated noise model along each recorded window's Vicon trajectory, one recursion

@@ -1,28 +1,48 @@
-"""Bound model of the ``circles`` world (wang2019): positions driven by odometry, ranges and anchor fixes.
+"""Bound model of the ``circles`` world (wang2019): unicycles on known-start circles, odometry, ranges, fixes.
 
-Estimation problem (the one the ``ukf_ccl`` / ``ukf_dcl`` / ``dead_reckoning`` filters face):
+The world's generative model (:mod:`coloc_env.worlds.circles`): the truth is deterministic, the same
+in every episode: each platform flies its circle, p(k+1) = p(k) + dt V t(phi(k)), phi(k+1) =
+phi(k) + dt omega (t(a) = [cos a; sin a]), from a start pose the estimators are given exactly
+(``initial_belief``'s mean is the true position; the integrated heading starts at the true phi(0)).
+What is random: the odometry noises (V_m(k) = V + n_v(k), omega_m(k) = omega + n_omega(k), white), the
+range noise, the fix noise, and which platform ranges at which step (the schedule; whom it ranges with
+is its sensing action). The estimators do not know that the tracks are circles: they take the odometry
+as the motion's inputs. The estimation problem is therefore the one whose unknowns are the start pose
+and the per-step speeds V(k) and turn rates omega(k), each known only through its reading
+(information 1 / sigma_v^2, 1 / sigma_omega^2; no other prior), and whose positions p(k) follow from
+them. Linearized at the world's truth (the only trajectory the world flies) this is the linear-Gaussian
+state-space model, per platform, of the state s = (x, y, phi):
+
+    s(k+1) = s(k) + [dt V t(phi(k)); dt omega] + w(k),     F_k = [[I_2, dt V n(phi(k))], [0, 1]],
+    Q_k = blockdiag(dt^2 sigma_v^2 t t^T, dt^2 sigma_omega^2)   (t = t(phi(k)), n = [-sin phi; cos phi]),
+
+(dp(k+1)/dV(k) = dt t, dp(k+1)/dphi(k) = dt V n), the heading's error a random walk shared by every
+later displacement: the time correlation that a per-step position noise cannot carry. F, Q and the
+readings' Jacobians (u u^T at the true positions) are the truth's, identical in every episode; the
+covariance-form recursion is then the Cramér–Rao bound of the start pose and the inputs (TMN's
+recursion with F and Q fixed, exact for the singular Q and prior here), evaluated at the truth. It is
+the model :class:`estimators.heading_models.OdometryHeadingError` filters (the heading error e =
+phi_m - phi is -dphi), without that filter's departures (its prior variance of e, its Jacobians at
+the estimate).
 
 | item        | value                                                                                  |
 |-------------|----------------------------------------------------------------------------------------|
-| state       | every platform's position p_i (2 N); the bound is reported per platform                |
-| prior       | J0 = P0^-1, P0 = initial_position_std^2 I: the filters start at the exact truth with   |
-|             | that covariance, and so does the bound                                                 |
-| motion      | p_i(k+1) = p_i(k) + dt V_m [cos phi_m, sin phi_m] + w, the measured speed and the      |
-|             | heading integrated from the measured turn rate as inputs, w ~ N(0, Q_i(k)) the         |
-|             | filters' :class:`estimators.models.OdometryDisplacement` noise (speed noise along the  |
-|             | track, the heading variance k dt^2 sigma_omega^2 across it; none with              |
-|             | ``heading_noise`` off: Q rank 1). F = I; Q_i(k) depends only on the inputs             |
-| episodes    | one recursion per episode (covariance form, exact for the singular Q), then the mean   |
-|             | of the episodes' bounds. What differs between the episodes is what the estimator      |
-|             | observes (its odometry, which range was taken to whom); the truth (the circles) is the |
-|             | same in every episode. So each episode's bound is the PCRB conditioned on observed      |
-|             | quantities, a valid bound on that episode's conditional MSE, and their mean bounds the |
-|             | MSE (tighter than averaging the D-terms first: 6.3 vs 5.4 m^2 for the local bound at k |
-|             | = 199, 4 episodes; with ``heading_noise`` off the averaged rank-1 Q of headings that   |
-|             | differ would leave almost no process noise, 0.05 m^2)                                  |
+| state       | every platform's (x, y, phi) (3 N); with ``turn_rate_noise_std`` = 0 the heading is    |
+|             | exact and the state is the positions (2 N): the same bound (a test holds them equal)  |
+| prior       | P0 = 0: the start pose is given exactly (the filters' ``initial_position_std`` is     |
+|             | their stated uncertainty, not the error of their start; a bound from it would credit  |
+|             | the estimator with less than it has)                                                   |
+| motion      | F_k, Q_k above at the true headings and speed; the world's turn-rate noise whatever   |
+|             | ``heading_noise`` (which changes only the model the backends assume) says             |
 | readings    | the range each step's measuring platform took to the partner its sensing chose (as    |
 |             | recorded: [[B, -B], [-B, B]], B = u u^T / range_noise_var at the true positions);      |
 |             | the anchors' fixes, I / fix_noise_std^2, every step                                     |
+| episodes    | the D-terms averaged over the episodes, one recursion (:mod:`coloc_env.bounds`): F and |
+|             | Q are common, so that is the reading information averaged per step. A mean of per-     |
+|             | episode bounds would be a valid, tighter bound only while what differs between        |
+|             | episodes (the schedule, the partners, the deliveries) is independent of the noises;   |
+|             | a policy that chooses its partners from its estimates (``coloc evaluate`` replays      |
+|             | such actions) breaks that, the averaged information does not need it                   |
 | centralized | all of them                                                                            |
 | local       | each platform's own odometry and (an anchor) its own fixes; a range to another        |
 |             | platform carries no information on its own without that platform's position           |
@@ -31,8 +51,10 @@ Estimation problem (the one the ``ukf_ccl`` / ``ukf_dcl`` / ``dead_reckoning`` f
 |             | other backends' messages carry estimates or relayed location information (left out,   |
 |             | :mod:`coloc_env.bounds`)                                                               |
 
-This is the filters' model, not the world's truth: the truth flies exact circles, and the heading
-error the filters integrate is correlated over time, which the per-step Q does not represent.
+It bounds estimators that use the odometry as inputs and do not know the circles (one that
+knew the tracks would need no readings at all); it is a Cramér–Rao bound at the truth, so it holds for
+estimators unbiased to first order, which the filters here are (their errors are metres on tracks of
+tens of metres).
 """
 
 from __future__ import annotations
@@ -44,24 +66,53 @@ from coloc_env.bounds import BoundProblem, Recursion
 from estimators.bounds import fix_information, pair_information, range_information
 
 
-def problem(core, record) -> BoundProblem:
+def motion(world, steps: int, heading_state: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Per-platform F and Q (steps - 1, N, d, d) of the transitions k -> k + 1 at the truth (module docstring);
+    d = 3 with the heading in the state, 2 without (then the heading must be exact: no turn-rate noise)."""
+    c = world.config
+    N, dt = world.num_agents, c.dt
+    phi = np.asarray(world.true_heading[:steps - 1], float)  # (K-1, N): the heading each step moves along
+    speed = np.asarray(world._speed, float)[None, :]
+    along = np.stack([np.cos(phi), np.sin(phi)], axis=-1)
+    normal = np.stack([-np.sin(phi), np.cos(phi)], axis=-1)
+    d = 3 if heading_state else 2
+    F = np.broadcast_to(np.eye(d), (steps - 1, N, d, d)).copy()
+    Q = np.zeros((steps - 1, N, d, d))
+    Q[..., :2, :2] = dt**2 * c.speed_noise_std**2 * along[..., :, None] * along[..., None, :]
+    if heading_state:
+        F[..., :2, 2] = dt * speed[..., None] * normal
+        Q[..., 2, 2] = dt**2 * c.turn_rate_noise_std**2
+    return F, Q
+
+
+def _block_diagonal(blocks: np.ndarray) -> np.ndarray:
+    """(..., N, d, d) -> (..., N d, N d)."""
+    *lead, N, d, _ = blocks.shape
+    out = np.zeros((*lead, N * d, N * d))
+    for i in range(N):
+        out[..., d * i:d * i + d, d * i:d * i + d] = blocks[..., i, :, :]
+    return out
+
+
+def problem(core, record, heading_state: bool | None = None) -> BoundProblem:
+    """The bound problem of one recorded episode; ``heading_state`` None: the heading in the state where the
+    world's turn-rate noise is not zero (False with noise is refused: the bound would miss the heading's error)."""
     world = core.world
     c = world.config
     K, N = record.steps, world.num_agents
-    n = 2 * N
-    P0 = c.initial_position_std**2 * np.eye(n)
-    k = np.arange(K - 1)
-    inputs = np.stack([world.measured_speed[0, :K - 1], world.measured_heading[0, :K - 1],
-                       np.broadcast_to(world.heading_variance(k)[:, None], (K - 1, N))], axis=-1)  # (K-1, N, 3)
-    q = world.motion_model.covar(np.zeros((K - 1, N, 2)), inputs)  # (K-1, N, 2, 2)
-    Q = np.zeros((K - 1, n, n))
-    for i in range(N):
-        Q[:, 2 * i:2 * i + 2, 2 * i:2 * i + 2] = q[:, i]
-    own = np.zeros((K, N, 2, 2))
-    own[:, :c.num_anchors] = fix_information(c.fix_noise_std**2)
-    info = np.zeros((K, n, n))
-    for i in range(N):
-        info[:, 2 * i:2 * i + 2, 2 * i:2 * i + 2] = own[:, i]
+    noisy = c.turn_rate_noise_std > 0
+    if heading_state is None:
+        heading_state = noisy
+    if noisy and not heading_state:
+        raise ValueError("heading_state=False needs turn_rate_noise_std = 0 (the heading is then exact)")
+    d = 3 if heading_state else 2
+    n = d * N
+    f, q = motion(world, K, heading_state)
+    F, Q = _block_diagonal(f), _block_diagonal(q)
+    P0 = np.zeros((n, n))
+    own = np.zeros((K, N, d, d))
+    own[:, :c.num_anchors, :2, :2] = fix_information(c.fix_noise_std**2)
+    info = _block_diagonal(own)
     central = core.composition.backend.name == "ukf_ccl"  # the centre's information, for its delivered bound
     centre = np.zeros((K, n, n)) if central else None
     for step in range(K):
@@ -72,22 +123,23 @@ def problem(core, record) -> BoundProblem:
             got_range, got_fix = centre_received(record, step, pairs, fixes, N)
             for i, got in zip(fixes, got_fix, strict=True):
                 if got:
-                    centre[step, 2 * i:2 * i + 2, 2 * i:2 * i + 2] += own[step, i]
+                    centre[step, d * i:d * i + d, d * i:d * i + d] += own[step, i]
         for r, (m, j) in enumerate(pairs):
-            block = range_information(world.truth[step, m], world.truth[step, j], c.range_noise_var)
-            idx = np.r_[2 * m:2 * m + 2, 2 * j:2 * j + 2]
-            info[step][np.ix_(idx, idx)] += pair_information(block)
+            block = pair_information(range_information(world.truth[step, m], world.truth[step, j],
+                                                       c.range_noise_var))
+            idx = np.r_[d * m:d * m + 2, d * j:d * j + 2]
+            info[step][np.ix_(idx, idx)] += block
             if central and got_range[r]:
-                centre[step][np.ix_(idx, idx)] += pair_information(block)
-    positions = np.arange(n).reshape(N, 2)
-    centralized = Recursion(P0, info, None, Q, positions)
-    local = [Recursion(P0[:2, :2], own[:, i], None, q[:, i], np.array([[0, 1]])) for i in range(N)]
+                centre[step][np.ix_(idx, idx)] += block
+    positions = d * np.arange(N)[:, None] + np.arange(2)[None, :]
+    centralized = Recursion(P0, info, F, Q, positions)
+    local = [Recursion(np.zeros((d, d)), own[:, i], f[:, i], q[:, i], np.array([[0, 1]])) for i in range(N)]
     agents = [np.array([i]) for i in range(N)]
-    result = BoundProblem(centralized, local, agents, per_episode=True)
+    result = BoundProblem(centralized, local, agents)
     if delivered_kind(core.composition.backend.name) == "nothing":
         result.delivered, result.delivered_agents = local, agents
     elif central:  # every platform reads its estimate at the centre
-        result.delivered, result.delivered_agents = [Recursion(P0, centre, None, Q, positions)], [np.arange(N)]
+        result.delivered, result.delivered_agents = [Recursion(P0, centre, F, Q, positions)], [np.arange(N)]
     else:
         result.delivered_reason = estimates_reason(core.composition.backend.name)
     return result
