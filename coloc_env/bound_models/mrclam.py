@@ -1,8 +1,10 @@
 """Bound model of the ``mrclam`` world (recorded UTIAS MRCLAM data): **model-based**.
 
 Recorded data have no generative model, so there is no expectation over trajectories to take: the
-bound here is the PCRB of the *model* the filters assume (the world's calibrated noise model), evaluated
-along the recorded Vicon trajectory with the readings the robots actually took. It says what an
+bound here is the PCRB of the *model* the filters assume (the world's noise model, whichever its
+``noise_model`` selects: the odometry variances and R are read from the readings' ``inputs`` and
+``obs_cov``, the very numbers the backends read), evaluated along the recorded Vicon trajectory with the
+readings the robots actually took. It says what an
 estimator matched to that model could reach on these steps, not what any estimator must exceed on the
 data (the data's errors need not follow the model), so it is labelled ``model_based`` and left out of
 the "MSE >= bound" check.
