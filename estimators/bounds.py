@@ -11,9 +11,10 @@ v ~ N(0, R_k), the information matrix J_k of x(k) obeys (TMN eq. 21 with eqs. 34
 F_k = df_k/dx, H = dh_{k+1}/dx at the true state, and any estimator's error covariance
 satisfies E[(xhat - x)(xhat - x)^T] >= J_k^-1. The expectations run over the
 trajectories and readings: here they are Monte Carlo means over E episodes, taken
-*per step* before the one recursion (a mean of per-episode bounds would bound no
-averaged MSE). Where the model lets Q_k depend on the episode (drawn inputs), D12
-reads -E[F_k^T Q_k^-1] and D22 -E[Q_k^-1] + ..., the same derivation with the
+*per step* before the one recursion (a mean of per-episode bounds bounds the averaged
+MSE only where what differs between the episodes is known to the estimator and
+independent of its noises: the bound conditioned on it). Where the model lets Q_k
+depend on the episode (drawn inputs), D12 reads -E[F_k^T Q_k^-1] and D22 -E[Q_k^-1] + ..., the same derivation with the
 expectation taken over the pair.
 
 Forms used (all exact rewrites of the recursion above, chosen by the arguments):
