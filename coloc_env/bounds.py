@@ -128,7 +128,7 @@ class Record:
     ``readings[k]`` the world's :class:`~coloc_env.worlds.base.Readings` of k (one copy); ``packets[k]`` the delay
     arrays (N, N) [t, s] of every ``Network.packets`` call stamped k; ``node_packets[k]`` the (N, J) delays of the
     ``Network.node_packets`` calls stamped k; ``broadcasts[k]`` each ``Network.broadcast`` call's delivered
-    matrix (N, N) [t, s] by its slot.
+    matrix (N, N) [t, s] by its slot (a ``Network.messages_to`` call's message j as the broadcast of its slot).
     """
 
     steps: int
@@ -164,7 +164,7 @@ def _record_play(core, episode_rng: np.random.Generator, policy, rng: np.random.
     record.broadcasts = [{} for _ in range(steps)]
     world, network = core.world, core.network
     world_readings, packets, node_packets = world.readings, network.packets, network.node_packets
-    broadcast = network.broadcast
+    broadcast, messages_to = network.broadcast, network.messages_to
 
     def stamp(k) -> int:
         return int(np.max(np.asarray(k)))
@@ -197,8 +197,21 @@ def _record_play(core, episode_rng: np.random.Generator, policy, rng: np.random.
             record.broadcasts[k][slot] = np.array(delivered[0])
         return delivered
 
+    def on_messages_to(senders, receiver, floats, slots):
+        # J one-off messages to one receiver, each the broadcast call of its slot (Network.messages_to): recorded
+        # as that call's delivered matrix, [sender, receiver] the outcome
+        delivered = messages_to(senders, receiver, floats, slots)
+        k = stamp(network._k)
+        if k < steps:
+            senders0 = np.asarray(senders, int)[0]
+            for j, slot in enumerate(np.broadcast_to(np.asarray(slots, int), senders0.shape)):
+                matrix = record.broadcasts[k].setdefault(int(slot), np.zeros((core.num_agents,) * 2, bool))
+                if senders0[j] >= 0:
+                    matrix[senders0[j], receiver] |= bool(delivered[0, j])
+        return delivered
+
     world.readings, network.packets, network.node_packets = readings, on_packets, on_node_packets
-    network.broadcast = on_broadcast
+    network.broadcast, network.messages_to = on_broadcast, on_messages_to
     # what the world reads depends on the actions only, never on the backend's state: under a policy that reads no
     # observation (a name, or a callable marked ``blind``), a backend whose messages do not define the bound need
     # not run, nor one whose packets the world's own nodes send (the bound model's stand-in asks the network)
@@ -219,7 +232,7 @@ def _record_play(core, episode_rng: np.random.Generator, policy, rng: np.random.
         core.reset([episode_rng])
         _play(core, steps, policy, rng)
     finally:
-        del world.readings, network.packets, network.node_packets, network.broadcast
+        del world.readings, network.packets, network.node_packets, network.broadcast, network.messages_to
         if idle:
             del core.backend.step, core.backend.receive
     return record
