@@ -152,21 +152,29 @@ MIN_STD = 1e-3
 
 
 def check_range(name: str, value: Any, low: float, high: float, integer: bool = False,
-                low_open: bool = False) -> None:
-    """``low <= value <= high`` (``low < value`` if ``low_open``), or ``ValueError`` naming ``name``.
+                low_open: bool = False, high_open: bool = False, low_label: str | None = None,
+                high_label: str | None = None) -> None:
+    """``low <= value <= high`` (``low < value`` if ``low_open``, ``value < high`` if ``high_open``), or
+    ``ValueError`` naming ``name`` and the range in interval notation (``(0.0, 1.0]``).
 
     The value must be a real number (an integer if ``integer``): a string (even "1.0"), a boolean,
-    None or a complex number is refused, never coerced. ``low`` and ``high`` are in the field's own
-    unit (a ``*_deg`` field is checked in degrees)."""
-    bracket = "(" if low_open else "["
+    None or a complex number is refused, never coerced. NaN is always refused; ``inf`` only where the
+    closed range includes it (``high=inf``, ``high_open`` False: an unlimited distance). ``low`` and
+    ``high`` are in the field's own unit (a ``*_deg`` field is checked in degrees). ``low_label`` /
+    ``high_label`` name a bound another field sets (``high_label="num_agents"`` reads ``[0, num_agents =
+    3]``), so that the message names the field whose value moved it."""
+    lo = f"{low_label} = {low}" if low_label else f"{low}"
+    hi = f"{high_label} = {high}" if high_label else f"{high}"
+    interval = f"{'(' if low_open else '['}{lo}, {hi}{')' if high_open else ']'}"
     if integer and not is_integer(value):
-        raise ValueError(f"{name} must be an integer in {bracket}{low}, {high}], got {value!r}")
+        raise ValueError(f"{name} must be an integer in {interval}, got {value!r}")
     if not is_real(value):
-        raise ValueError(f"{name} must be a number in {bracket}{low}, {high}], got {value!r}")
+        raise ValueError(f"{name} must be a number in {interval}, got {value!r}")
     v = float(value)
     below = v <= low if low_open else v < low
-    if not np.isfinite(v) or below or v > high:
-        raise ValueError(f"{name} must be in {bracket}{low}, {high}], got {value!r}")
+    above = v >= high if high_open else v > high
+    if np.isnan(v) or below or above:
+        raise ValueError(f"{name} must be in {interval}, got {value!r}")
 
 
 def check_step_windows(name: str, value: Any, windows: np.ndarray, high: int = 10_000_000) -> None:

@@ -289,9 +289,9 @@ def test_derived_values_come_after_validation():
 
 
 def test_a_degree_field_reports_its_range_in_degrees():
-    with pytest.raises(ValueError, match=r"sigma_theta_deg must be in \(0.0, 180.0\], got 200"):
+    with pytest.raises(ValueError, match=r"sigma_theta_deg must be in \[1e-06, 180.0\], got 200"):
         coloc_env.parallel_env("nlos_horizon", sigma_theta_deg=200)
-    with pytest.raises(ValueError, match=r"sigma_theta_deg must be in \(0.0, 180.0\], got 200"):
+    with pytest.raises(ValueError, match=r"sigma_theta_deg must be in \[1e-06, 180.0\], got 200"):
         coloc_env.compose(world={"name": "nlos_orbit", "sigma_theta_deg": 200}, network="random_delay",
                           backend="afge")
 

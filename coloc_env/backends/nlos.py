@@ -162,7 +162,7 @@ class Afge(_PacketFirConfig):
         p = prefix
         self.check_packets(p)
         check_range(f"{p}window_max", self.window_max, 2, 1000, integer=True)
-        check_range(f"{p}window_min", self.window_min, 2, self.window_max, integer=True)
+        check_range(f"{p}window_min", self.window_min, 2, self.window_max, integer=True, high_label=f"{p}window_max")
         check_range(f"{p}window_step", self.window_step, 1, 1000, integer=True)
         check_range(f"{p}group_size", self.group_size, 1, 999, integer=True)
         if self.group_size % 2 != 1:
@@ -172,9 +172,7 @@ class Afge(_PacketFirConfig):
                              f"{(self.group_size - 1) * self.window_step}, got {self.window_max - self.window_min}")
         check_range(f"{p}window_centre", self.window_centre, self.window_min, self.window_max, integer=True)
         check_choice(f"{p}likelihood", self.likelihood, af.LIKELIHOODS)
-        check_range(f"{p}smoothing", self.smoothing, 0.0, 1.0, low_open=True)
-        if self.smoothing >= 1.0:
-            raise ValueError(f"{p}smoothing must be in (0, 1), got {self.smoothing}")
+        check_range(f"{p}smoothing", self.smoothing, 0.0, 1.0, low_open=True, high_open=True)
 
     def build(self, world, network, batch: int) -> Backend:
         return AfgeBackend(self, world, network, batch)

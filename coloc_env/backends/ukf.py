@@ -58,7 +58,7 @@ Arguments (``coloc_env.backends.UkfCcl`` / ``UkfDcl``)
 
 | field       | default      | allowed                                           |
 |-------------|--------------|---------------------------------------------------|
-| ukf_lambda  | 0.0          | > -2N (the paper gives none; 0 = filterpy's)      |
+| ukf_lambda  | 0.0          | (-2N, 1e6], N the agents, checked at build (0 = filterpy's) |
 | truncation  | "consistent" | ukf_dcl only: "consistent", "paper"               |
 | motion      | "heading"    | "heading", "displacement": on odometry, the heading error in the state or not |
 |             |              | (:mod:`coloc_env.backends.heading`)               |
@@ -100,7 +100,7 @@ class UkfCcl(PartConfig):
     motion: str = "heading"
 
     def check(self, prefix: str) -> None:
-        check_range(f"{prefix}ukf_lambda", self.ukf_lambda, -2.0, 1e6, low_open=True)
+        check_range(f"{prefix}ukf_lambda", self.ukf_lambda, -np.inf, 1e6, low_open=True)  # > -2N: at build
         check_choice(f"{prefix}motion", self.motion, MOTIONS)
 
     def build(self, world, network, batch: int) -> Backend:
@@ -120,7 +120,7 @@ class UkfDcl(PartConfig):
     motion: str = "heading"
 
     def check(self, prefix: str) -> None:
-        check_range(f"{prefix}ukf_lambda", self.ukf_lambda, -2.0, 1e6, low_open=True)
+        check_range(f"{prefix}ukf_lambda", self.ukf_lambda, -np.inf, 1e6, low_open=True)  # > -2N: at build
         check_choice(f"{prefix}truncation", self.truncation, ("consistent", "paper"))
         check_choice(f"{prefix}motion", self.motion, MOTIONS)
 
@@ -136,7 +136,8 @@ class JointUkfBackend(Backend):
         self.motion_model = ukf_motion_model(config.motion, world)
         d = self.d = self.motion_model.state_dim
         if config.ukf_lambda <= -2 * N:
-            raise ValueError(f"backend.ukf_lambda must be > -2N = {-2 * N}, got {config.ukf_lambda!r}")
+            raise ValueError(f"backend.ukf_lambda must be in (-2N, 1e6] = ({-2 * N}, 1e6] with N = {N} agents, "
+                             f"got {config.ukf_lambda!r}")
         self.mean = np.zeros((self.batch, N, d))
         self.cov = np.zeros((self.batch, d * N, d * N))
         if distributed and config.truncation == "paper":

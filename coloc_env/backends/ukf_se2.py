@@ -68,7 +68,7 @@ Arguments (``coloc_env.backends.UkfSe2``)
 | field            | default  | allowed                                                                  |
 |------------------|----------|--------------------------------------------------------------------------|
 | ukf_lambda       | 0.0      | (-15, 1e6] and > -3N at build (the UT's lambda; 0 = filterpy's)          |
-| gate             | 13.8155  | > 0 (chi-square(2) 99.9 %, ``coloc reproduce mrclam``); None = apply all |
+| gate             | 13.8155  | (0, 1e12] (chi-square(2) 99.9 %, ``coloc reproduce mrclam``); None = apply all |
 | landmark_updates | "local"  | "local": a landmark sighting updates on [m] alone (the ``mrclam_relay``  |
 |                  |          | scenario's rule, no messages); "relay": along the network's chain from m |
 |                  |          | (``coloc reproduce mrclam``'s DCL; a complete chain is UKF-CCL)          |

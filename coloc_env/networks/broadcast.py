@@ -11,7 +11,7 @@ Arguments (``coloc_env.networks.Broadcast``)
 
 | field        | default | allowed                                   |
 |--------------|---------|-------------------------------------------|
-| comm_range   | 200     | > 0 m (wan2014's communication radius)    |
+| comm_range   | 200     | (0, inf] m (wan2014's communication radius) |
 | loss         | 0.0     | [0, 1] loss probability per message       |
 """
 

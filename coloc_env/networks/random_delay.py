@@ -34,7 +34,7 @@ Arguments (``coloc_env.networks.RandomDelay``; defaults = ``nlos_horizon``'s)
 |-------------------|-----------------------|--------------------------------------------------|
 | delay_probs       | (0.6, 0.2, 0.1, 0.05) | buffer_length + 1 entries in [0, 1], sum <= 1    |
 | buffer_length     | 3                     | D, 0..1000 steps                                 |
-| comm_range        | inf                   | > 0 m (gao2016 has none: the RSA is the world's) |
+| comm_range        | inf                   | (0, inf] m (gao2016 has none: the RSA is the world's) |
 | transmit_decision | False                 | True: agent senders get a ``transmit`` block     |
 """
 

@@ -35,10 +35,10 @@ Arguments (``coloc_env.networks.Relay``)
 
 | field           | default      | allowed                                                     |
 |-----------------|--------------|-------------------------------------------------------------|
-| comm_range      | inf          | > 0 m                                                       |
-| max_hops        | None         | >= 1 hops per chain, None = no limit                        |
+| comm_range      | inf          | (0, inf] m                                                  |
+| max_hops        | None         | 1..N-1 hops per chain (N the world's agents, checked at build), None = no limit |
 | loss_at_zero    | 0.1          | [0, 1]                                                      |
-| loss_length     | inf          | > 0 m                                                       |
+| loss_length     | inf          | (0, inf] m                                                  |
 | routing         | "per_holder" | "per_holder", "per_source" (see Routing)                    |
 | hop_cost        | 0.0          | [0, 1e12] per delivered hop (the reward's unit)             |
 | hop_cost_per_m2 | 0.0          | [0, 1e12] per delivered hop and squared metre of its length |

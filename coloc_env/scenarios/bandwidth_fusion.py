@@ -123,7 +123,7 @@ Arguments (fields of :class:`BandwidthFusionConfig`, defaults = the paper)
 | horizon             | 50                       | 1..100000                                 |
 | reward              | "error"                  | "error", "trace"                          |
 | component_cost      | 0.0                      | [0, 1e12], per received component per step|
-| weight_logit_scale  | 4.0                      | > 0                                       |
+| weight_logit_scale  | 4.0                      | (0, 1000]                                 |
 """
 
 from __future__ import annotations

@@ -106,24 +106,24 @@ Arguments (fields of :class:`GpsDeniedNbpConfig`, defaults = spec §1)
 |--------------------|-------------|---------------------------|----------------------------------------------|
 | num_uavs           | 10          | 2..64                     | N [chosen]                                   |
 | horizon            | 30          | 1..10000                  | T [chosen] (50 allowed)                      |
-| dt                 | 1.0         | > 0                       | Delta t [chosen]                             |
-| area               | 500         | > 0                       | initial positions ~ U([0, area]^2) [chosen]  |
+| dt                 | 1.0         | (0, 1000]                 | Delta t [chosen]                             |
+| area               | 500         | (0, 1e7]                  | initial positions ~ U([0, area]^2) [chosen]  |
 | nominal_velocity   | (20, 0)     | (2,)                      | v_nom [chosen]                               |
-| velocity_spread    | 2.0         | >= 0                      | sigma_v0 [chosen]                            |
-| accel_std          | 0.5         | >= 0                      | sigma_a,true [chosen]                        |
+| velocity_spread    | 2.0         | [0, 1e4]                  | sigma_v0 [chosen]                            |
+| accel_std          | 0.5         | [0, 1000]                 | sigma_a,true [chosen]                        |
 | accel_noise_std    | 0.3         | [0.001, 1000]             | sigma_acc [chosen]                           |
 | gps_std            | 3.0         | [0.001, 10000]            | sigma_gps [chosen]                           |
 | range_std          | 2.0         | [0.001, 10000]            | sigma_d [chosen]                             |
-| comm_range         | 300         | > 0                       | R [chosen]; interesting band 200-350 [paper] |
+| comm_range         | 300         | (0, 1e7]                  | R [chosen]; interesting band 200-350 [paper] |
 | p_normal_to_fault  | 0.02        | [0, 1]                    | p_nf [chosen]                                |
 | p_fault_to_normal  | 0.02        | [0, 1]                    | p_fn [chosen]                                |
 | num_normal         | None        | None or 0..N              | fixed-proportion mode of Fig. 6(a) [paper]   |
 | num_particles      | 100         | 2..5000                   | M [chosen]                                   |
 | num_iterations     | 5           | 1..20                     | n_iter [chosen]; case study needs 3 [paper]  |
 | oversampling       | 2           | 1..16                     | k_is [chosen]                                |
-| defensive_weight   | 0.01        | [0, 1)                    | eps_def [chosen]                             |
+| defensive_weight   | 0.01        | [0, 0.999]                | eps_def [chosen]                             |
 | init               | "warm"      | "warm", "cold"            | tau = 0 knowledge [chosen]                   |
-| box_margin         | 150         | >= 0                      | cold box [-m, area+m]^2 [chosen]             |
+| box_margin         | 150         | [0, 1e7]                  | cold box [-m, area+m]^2 [chosen]             |
 | min_bandwidth      | 0.5         | [0.001, 10000]            | floor of h_ts [chosen]                       |
 | initial_threshold  | 3           | 1..N                      | theta_0 [paper]                              |
 | schedule           | "modified"  | "modified", "parallel"    | Sec. 3.4 [paper]; parallel = ablation        |
@@ -215,7 +215,7 @@ class GpsDeniedNbpConfig:
         for part in (self.motion, self.gps, self.network):  # the fields above are checked under their own names
             part.validate()
         if self.num_normal is not None:
-            check_range("num_normal", self.num_normal, 0, self.num_uavs, integer=True)
+            check_range("num_normal", self.num_normal, 0, self.num_uavs, integer=True, high_label="num_uavs")
         check_range("num_particles", self.num_particles, 2, 5000, integer=True)
         check_range("num_iterations", self.num_iterations, 1, 20, integer=True)
         check_range("oversampling", self.oversampling, 1, 16, integer=True)
@@ -223,7 +223,8 @@ class GpsDeniedNbpConfig:
         check_choice("init", self.init, ("warm", "cold"))
         check_range("box_margin", self.box_margin, 0.0, 1e7)
         check_range("min_bandwidth", self.min_bandwidth, MIN_STD, 1e4)
-        check_range("initial_threshold", self.initial_threshold, 1, self.num_uavs, integer=True)
+        check_range("initial_threshold", self.initial_threshold, 1, self.num_uavs, integer=True,
+                    high_label="num_uavs")
         check_choice("schedule", self.schedule, ("modified", "parallel"))
         check_choice("kernel", self.kernel, dn.KERNELS)
         check_range("truncation", self.truncation, *dn.TRUNCATION_RANGE)

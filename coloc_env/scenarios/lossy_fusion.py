@@ -114,7 +114,7 @@ Arguments (fields of :class:`LossyFusionConfig`, defaults = the paper)
 |----------------------|----------------------------------|------------------------------------------|
 | num_uavs             | 2                                | 2..16 (L, leader included)               |
 | period               | 1.0                              | > 0 (T, seconds)                         |
-| accel_noise          | 5.0                              | >= 0 (q, m^2/s^4 per axis)               |
+| accel_noise          | 5.0                              | [0, 1e12] (q, m^2/s^4 per axis)          |
 | measurement_noise    | 10.0                             | [1e-6, 1e12] (r, m^2 per axis)           |
 | initial_state        | (100, 10, 100, 10, 100, 0)       | (6,) in [-1e6, 1e6]: X0, x(0) ~ N(X0, P0)|
 | initial_cov          | diag(100, 5, 100, 5, 100, 5)     | (6, 6) positive definite (the observation|

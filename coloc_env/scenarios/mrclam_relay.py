@@ -145,15 +145,15 @@ Arguments (fields of :class:`MrclamRelayConfig`)
 |                      |                | baseline: 60 s)                                              |
 | initial_position_std | 0.01           | [1e-6, 1e3] m (smaller: P(0) not numerically definite)       |
 | initial_heading_std  | 0.01           | [1e-6, 10] rad                                               |
-| gate                 | 13.8155        | > 0 (chi-square(2) 99.9 %, as ``coloc reproduce mrclam``);   |
+| gate                 | 13.8155        | (0, 1e12] (chi-square(2) 99.9 %, as ``coloc reproduce mrclam``); |
 |                      |                | None = apply every observation                               |
-| comm_range           | inf            | > 0 m                                                        |
+| comm_range           | inf            | (0, inf] m                                                   |
 | max_hops             | None           | 1..N-1 hops per chain, None = no limit                       |
 | loss_at_zero         | 0.0            | [0, 1]                                                       |
-| loss_length          | inf            | > 0 m (p_loss(d) = 1 - (1 - loss_at_zero) e^(-d/loss_length))|
-| hop_cost             | 0.0            | >= 0 per delivered hop                                       |
-| hop_cost_per_m2      | 0.0            | >= 0 per hop and squared metre                               |
-| ukf_lambda           | 0.0            | > -3N                                                        |
+| loss_length          | inf            | (0, inf] m (p_loss(d) = 1 - (1 - loss_at_zero) e^(-d/loss_length)) |
+| hop_cost             | 0.0            | [0, 1e12] per delivered hop                                  |
+| hop_cost_per_m2      | 0.0            | [0, 1e12] per hop and squared metre                          |
+| ukf_lambda           | 0.0            | (-3N, 1e6]                                                   |
 | reward               | "error"        | "error", "trace"                                             |
 
 The preset is the composition ``mrclam`` / ``relay`` (``routing="per_source"``) /
@@ -311,7 +311,7 @@ class MrclamRelayConfig:
         if self.gate is not None:
             check_range("gate", self.gate, 0.0, 1e12, low_open=True)
         self.links.validate(N)
-        check_range("ukf_lambda", self.ukf_lambda, -3.0 * N, 1e6, low_open=True)
+        check_range("ukf_lambda", self.ukf_lambda, -3.0 * N, 1e6, low_open=True, low_label="-3N")
         check_choice("reward", self.reward, ("error", "trace"))
         steps = self.tables().data.steps
         if self.window_steps > steps - 1:

@@ -108,28 +108,28 @@ Arguments (fields of :class:`NlosHorizonConfig`, defaults = spec §9)
 | horizon             | 1000                         | 1..100000 steps (1000 s flight [paper])           |
 | period              | 1.0                          | [1e-3, 1e4], T (s) [chosen]                       |
 | accel_sigma         | 0.3                          | [1e-6, 1e3], sigma_a of the estimator's Q [chosen]|
-| speed               | 20.0                         | >= 0 m/s [chosen]                                 |
+| speed               | 20.0                         | [0, 1e4] m/s [chosen]                             |
 | turn_rates_deg      | (3, -3, 3, -6)               | deg/s per turn, in [-1e4, 1e4] [chosen]           |
 | turn_windows        | (200,260) (500,560) (700,730) (850,880) | [start, end) integer steps, <= 1e7 [chosen] |
-| target_spacing      | 3000.0                       | >= 0 m: uav_i starts at (0, i * spacing) [chosen] |
-| schedule_shift      | 40                           | >= 0 steps: uav_i's turns start i * shift later   |
+| target_spacing      | 3000.0                       | [0, 1e7] m: uav_i starts at (0, i * spacing) [chosen] |
+| schedule_shift      | 40                           | 0..100000 steps: uav_i's turns start i * shift later |
 | orbit_radius        | (150, 900)                   | rho0 ~ U(.) m [chosen]                            |
-| orbit_wobble        | 200.0                        | a ~ U(0, .) m [chosen]                            |
+| orbit_wobble        | 200.0                        | [0, 1e6] m: a ~ U(0, .) [chosen]                  |
 | orbit_wobble_rate   | (0.002, 0.01)                | w ~ U(.) rad/s [chosen]                           |
-| orbit_bearing_rate  | 0.01                         | om ~ U(-., .) rad/s [chosen]                      |
+| orbit_bearing_rate  | 0.01                         | [0, 10] rad/s: om ~ U(-., .) [chosen]             |
 | r_inf, r_sup        | 30, 1000                     | 0 < r_inf < r_sup (m) [chosen]                    |
-| sigma_nav           | 2.0                          | > 0 m per axis [chosen]                           |
+| sigma_nav           | 2.0                          | (0, 1e4] m per axis [chosen]                      |
 | tx_power_dbm        | 20.0                         | P_T in [-200, 200] dBm [chosen]                   |
 | frequency_hz        | 2.4e9                        | f in [1, 1e13] Hz [chosen]                        |
 | d0                  | 1.0                          | [1e-3, 1e6] m [chosen]                            |
 | path_loss_exponent  | 2.2                          | n in [0.5, 10] (smaller: the RSS-inverted range   |
 |                     |                              | overflows) [chosen]                               |
-| sigma_db            | 2.0                          | > 0 dB, LOS [chosen]                              |
-| sigma_theta_deg     | 0.1                          | > 0 deg, LOS [paper]                              |
-| nlos_bias_db        | 6.0                          | mu_db [chosen]                                    |
-| nlos_sigma_db       | 4.0                          | >= 0 [chosen]                                     |
-| nlos_bias_deg       | 1.0                          | mu_theta [chosen]                                 |
-| nlos_sigma_deg      | 1.0                          | >= 0 [chosen]                                     |
+| sigma_db            | 2.0                          | (0, 100] dB, LOS [chosen]                         |
+| sigma_theta_deg     | 0.1                          | [1e-6, 180] deg, LOS [paper]                      |
+| nlos_bias_db        | 6.0                          | [-100, 100] dB, mu_db [chosen]                    |
+| nlos_sigma_db       | 4.0                          | [0, 100] dB [chosen]                              |
+| nlos_bias_deg       | 1.0                          | [-180, 180] deg, mu_theta [chosen]                |
+| nlos_sigma_deg      | 1.0                          | [0, 180] deg [chosen]                             |
 | p_nlos              | 0.3                          | pi in [0, 1] [chosen]                             |
 | p10                 | 0.1                          | [0, 1], pi p10 <= 1 - pi [chosen]                 |
 | buffer_length       | 3                            | D, 0..1000 [chosen]                               |
@@ -139,7 +139,7 @@ Arguments (fields of :class:`NlosHorizonConfig`, defaults = spec §9)
 | weighting           | "distance"                   | "distance" (Def. 6), "information"                |
 | mode_info           | "known"                      | "known", "mean", "blind"                          |
 | window_min          | 4                            | N_min: 2..N_max and >= D + 1 [reconstructed]      |
-| window_max          | 30                           | N_max [chosen]                                    |
+| window_max          | 30                           | N_max: 2..1000 [chosen]                           |
 | window_step         | 2                            | dN >= 1; N_max - N_min >= (M - 1) dN              |
 | group_size          | 5                            | M, odd >= 1                                       |
 | window_centre       | 12                           | N_c(0) in [N_min, N_max] (paper's best N)         |
@@ -316,7 +316,7 @@ class NlosHorizonConfig:
         check_range("d0", self.d0, 1e-3, 1e6)
         check_range("path_loss_exponent", self.path_loss_exponent, 0.5, 10.0)
         check_range("sigma_db", self.sigma_db, 0.0, 100.0, low_open=True)
-        check_range("sigma_theta_deg", self.sigma_theta_deg, 0.0, 180.0, low_open=True)
+        check_range("sigma_theta_deg", self.sigma_theta_deg, 1e-6, 180.0)
         check_range("nlos_bias_db", self.nlos_bias_db, -100.0, 100.0)
         check_range("nlos_sigma_db", self.nlos_sigma_db, 0.0, 100.0)
         check_range("nlos_bias_deg", self.nlos_bias_deg, -180.0, 180.0)
@@ -334,7 +334,7 @@ class NlosHorizonConfig:
         check_choice("weighting", self.weighting, af.WEIGHTINGS)
         check_choice("mode_info", self.mode_info, af.MODE_INFOS)
         check_range("window_max", self.window_max, 2, 1000, integer=True)
-        check_range("window_min", self.window_min, 2, self.window_max, integer=True)
+        check_range("window_min", self.window_min, 2, self.window_max, integer=True, high_label="window_max")
         if self.window_min < self.buffer_length + 1:
             raise ValueError(f"window_min must be >= buffer_length + 1 = {self.buffer_length + 1} (the group "
                              f"reflects the possible delay, spec §7), got {self.window_min}")
@@ -347,9 +347,7 @@ class NlosHorizonConfig:
                              f"{(self.group_size - 1) * self.window_step}, got {self.window_max - self.window_min}")
         check_range("window_centre", self.window_centre, self.window_min, self.window_max, integer=True)
         check_choice("likelihood", self.likelihood, af.LIKELIHOODS)
-        check_range("smoothing", self.smoothing, 0.0, 1.0, low_open=True)
-        if self.smoothing >= 1.0:
-            raise ValueError(f"smoothing must be in (0, 1), got {self.smoothing}")
+        check_range("smoothing", self.smoothing, 0.0, 1.0, low_open=True, high_open=True)
         std = as_array("prior_std", self.prior_std, shape=(4,))
         if np.any(std <= 0):
             raise ValueError(f"prior_std must be > 0 (P0 positive definite), got {self.prior_std}")

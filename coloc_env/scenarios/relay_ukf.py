@@ -114,26 +114,26 @@ Arguments (fields of :class:`RelayUKFConfig`, defaults = the paper's Sec. 4 / Ta
 | centres                 | None         | (N, 2) metres; None = the layout above                    |
 | start_angles            | None         | (N,) rad; None = 2 pi i / N                               |
 | directions              | None         | (N,) of +1 (ccw) / -1 (cw); None = platform 1 clockwise   |
-| speed                   | 1.0          | > 0 m/s                                                   |
+| speed                   | 1.0          | (0, 1e4] m/s                                              |
 | turn_rate               | 0.015        | [1e-6, pi/dt] rad/s (smaller: a circle too large to be    |
 |                         |              | finite)                                                   |
 | dt                      | 0.5          | [1e-6, 3600] s                                            |
 | horizon                 | 800          | 1..1000000 steps                                          |
-| speed_noise_std         | 0.5          | >= 0 m/s                                                  |
-| turn_rate_noise_std     | 1e-3         | >= 0 rad/s                                                |
-| range_noise_var         | 1.0          | > 0 m^2                                                   |
+| speed_noise_std         | 0.5          | [0, 1000] m/s                                             |
+| turn_rate_noise_std     | 1e-3         | [0, 10] rad/s                                             |
+| range_noise_var         | 1.0          | (0, 1e6] m^2                                              |
 | measurement_probability | 0.5          | [0, 1]                                                    |
-| sensing_range           | inf          | > 0 m                                                     |
-| comm_range              | inf          | > 0 m                                                     |
+| sensing_range           | inf          | (0, inf] m                                                |
+| comm_range              | inf          | (0, inf] m                                                |
 | max_hops                | None         | 1..N-1 hops per measurement, None = no limit              |
 | loss_at_zero            | 0.0          | [0, 1]                                                    |
-| loss_length             | inf          | > 0 m (p_loss(d) = 1 - (1 - loss_at_zero) e^(-d/loss_length)) |
-| hop_cost                | 0.0          | >= 0 per delivered hop                                    |
-| hop_cost_per_m2         | 0.0          | >= 0 per hop and squared metre                            |
+| loss_length             | inf          | (0, inf] m (p_loss(d) = 1 - (1 - loss_at_zero) e^(-d/loss_length)) |
+| hop_cost                | 0.0          | [0, 1e12] per delivered hop                               |
+| hop_cost_per_m2         | 0.0          | [0, 1e12] per hop and squared metre                       |
 | initial_position_std    | 0.1          | [1e-6, 1e6] m: P(0) = std^2 I (a Cholesky needs P > 0; the paper's |
 |                         |              | start is known, and the estimates start at the truth)      |
 | heading_noise           | True         | False: the paper's literal Q (speed noise only)           |
-| ukf_lambda              | 0.0          | > -2N (the paper gives no value)                          |
+| ukf_lambda              | 0.0          | (-2N, 1e6] (the paper gives no value)                     |
 | truncation              | "consistent" | "paper": leave P_RU unchanged on a truncated chain        |
 | reward                  | "error"      | "error", "trace"                                          |
 
@@ -248,7 +248,7 @@ class RelayUKFConfig:
                 as_array(name, value, shape=shape)
         check_range("dt", self.dt, 1e-6, 3600.0)
         check_range("speed", self.speed, 0.0, 1e4, low_open=True)
-        check_range("turn_rate", self.turn_rate, 1e-6, np.pi / self.dt)
+        check_range("turn_rate", self.turn_rate, 1e-6, np.pi / self.dt, high_label="pi/dt")
         self.tracks.validate()
         check_range("horizon", self.horizon, 1, 1_000_000, integer=True)
         self.odometry.validate()
@@ -259,7 +259,7 @@ class RelayUKFConfig:
         check_range("initial_position_std", self.initial_position_std, 1e-6, 1e6)
         if not isinstance(self.heading_noise, (bool, np.bool_)):
             raise ValueError(f"heading_noise must be True or False, got {self.heading_noise!r}")
-        check_range("ukf_lambda", self.ukf_lambda, -2.0 * N, 1e6, low_open=True)
+        check_range("ukf_lambda", self.ukf_lambda, -2.0 * N, 1e6, low_open=True, low_label="-2 num_platforms")
         check_choice("truncation", self.truncation, ("consistent", "paper"))
         check_choice("reward", self.reward, ("error", "trace"))
 

@@ -31,10 +31,9 @@ from coloc_env.config import check_range
 
 
 def check_distance(name: str, value, allow_inf: bool = True) -> None:
-    """A positive distance in metres, ``inf`` meaning unlimited; else ``ValueError`` naming ``name``."""
-    if allow_inf and isinstance(value, (int, float, np.floating)) and value == np.inf:
-        return
-    check_range(name, value, 0.0, 1e12, low_open=True)
+    """A positive distance in metres, (0, inf] (``inf`` meaning unlimited; (0, 1e12] without ``allow_inf``);
+    else ``ValueError`` naming ``name``."""
+    check_range(name, value, 0.0, np.inf if allow_inf else 1e12, low_open=True)
 
 
 STOP_REASONS = ("complete", "hop_budget", "stopped", "revisit", "out_of_range", "lost")

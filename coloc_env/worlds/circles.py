@@ -35,7 +35,7 @@ Arguments (``coloc_env.worlds.Circles``)
 | turn_rate_noise_std     | 1e-3    | [0, 10] rad/s                                     |
 | range_noise_var         | 1.0     | (0, 1e6] m^2                                      |
 | measurement_probability | 0.5     | [0, 1]                                            |
-| sensing_range           | inf     | > 0 m                                             |
+| sensing_range           | inf     | (0, inf] m                                        |
 | num_anchors             | 3       | 0..num_agents                                     |
 | fix_noise_std           | 1.0     | (0, 1e4] m                                        |
 | initial_position_std    | 0.1     | [1e-6, 1e6] m: the prior the agents start with    |
@@ -97,7 +97,7 @@ class Circles(PartConfig):
         check_range(f"{prefix}num_agents", self.num_agents, 2, 16, integer=True)
         check_range(f"{prefix}dt", self.dt, 1e-6, 3600.0)
         check_range(f"{prefix}speed", self.speed, 0.0, 1e4, low_open=True)
-        check_range(f"{prefix}turn_rate", self.turn_rate, 1e-6, np.pi / self.dt)
+        check_range(f"{prefix}turn_rate", self.turn_rate, 1e-6, np.pi / self.dt, high_label=f"pi/{prefix}dt")
         N = self.num_agents
         for name in ("centres", "start_angles", "directions"):
             value = getattr(self, name)
@@ -109,7 +109,8 @@ class Circles(PartConfig):
         check_range(f"{prefix}range_noise_var", self.range_noise_var, 0.0, 1e6, low_open=True)
         check_range(f"{prefix}measurement_probability", self.measurement_probability, 0.0, 1.0)
         check_distance(f"{prefix}sensing_range", self.sensing_range)
-        check_range(f"{prefix}num_anchors", self.num_anchors, 0, self.num_agents, integer=True)
+        check_range(f"{prefix}num_anchors", self.num_anchors, 0, self.num_agents, integer=True,
+                    high_label=f"{prefix}num_agents")
         check_range(f"{prefix}fix_noise_std", self.fix_noise_std, 0.0, 1e4, low_open=True)
         check_range(f"{prefix}initial_position_std", self.initial_position_std, 1e-6, 1e6)
         check_flag(f"{prefix}heading_noise", self.heading_noise)

@@ -128,7 +128,8 @@ class GpsDenied(PartConfig):
         if self.density is not None:
             check_range(f"{prefix}density", self.density, 1e-3, 1e6)
         if self.num_normal is not None:
-            check_range(f"{prefix}num_normal", self.num_normal, 0, self.num_agents, integer=True)
+            check_range(f"{prefix}num_normal", self.num_normal, 0, self.num_agents, integer=True,
+                        high_label=f"{prefix}num_agents")
 
     def build(self, batch: int, horizon: int) -> GpsDeniedWorld:
         return GpsDeniedWorld(self, batch, horizon)

@@ -70,7 +70,7 @@ Arguments (``coloc_env.worlds.NlosOrbit``; defaults = ``nlos_horizon``'s, spec Â
 | path_loss_exponent  | 2.2                          | [0.5, 10] (smaller: the RSS-inverted range       |
 |                     |                              | overflows)                                       |
 | sigma_db            | 2.0                          | (0, 100] dB, LOS                                 |
-| sigma_theta_deg     | 0.1                          | (0, 180] deg, LOS                                |
+| sigma_theta_deg     | 0.1                          | [1e-6, 180] deg, LOS                             |
 | nlos_bias_db        | 6.0                          | [-100, 100] dB                                   |
 | nlos_sigma_db       | 4.0                          | [0, 100] dB                                      |
 | nlos_bias_deg       | 1.0                          | [-180, 180] deg                                  |
@@ -193,7 +193,7 @@ class NlosOrbit(PartConfig):
         check_range(f"{p}d0", self.d0, 1e-3, 1e6)
         check_range(f"{p}path_loss_exponent", self.path_loss_exponent, 0.5, 10.0)
         check_range(f"{p}sigma_db", self.sigma_db, 0.0, 100.0, low_open=True)
-        check_range(f"{p}sigma_theta_deg", self.sigma_theta_deg, 0.0, 180.0, low_open=True)
+        check_range(f"{p}sigma_theta_deg", self.sigma_theta_deg, 1e-6, 180.0)
         check_range(f"{p}nlos_bias_db", self.nlos_bias_db, -100.0, 100.0)
         check_range(f"{p}nlos_sigma_db", self.nlos_sigma_db, 0.0, 100.0)
         check_range(f"{p}nlos_bias_deg", self.nlos_bias_deg, -180.0, 180.0)
