@@ -80,7 +80,7 @@ def documented(cls: type) -> dict[str, str]:
     found: dict[str, str] = {}
     tables = argument_tables(doc)
     named = [t for t in tables if re.search(rf"\b{cls.__name__}\b", t[0])]
-    for heading, rows in named or [t for t in tables if not re.search(r"``coloc_env\.\w+\.\w+``", t[0])]:
+    for _heading, rows in named or [t for t in tables if not re.search(r"``coloc_env\.\w+\.\w+``", t[0])]:
         for part, fields in rows.items():
             if part and part != own_name:
                 continue
