@@ -120,6 +120,18 @@ def as_array(name: str, value: Any, shape: tuple[int, ...] | None = None, ndim: 
     return arr
 
 
+def check_entries(name: str, arr: np.ndarray, low: float, high: float, low_open: bool = False) -> None:
+    """Every entry of the finite array ``arr`` in ``[low, high]`` (``(low, high]`` if ``low_open``), or
+    ``ValueError`` naming ``name``, the interval and the first entry outside it."""
+    arr = np.asarray(arr, float)
+    below = arr <= low if low_open else arr < low
+    bad = below | (arr > high) | ~np.isfinite(arr)
+    if np.any(bad):
+        interval = f"{'(' if low_open else '['}{low:g}, {high:g}]"
+        raise ValueError(f"{name} entries must be in {interval}, got {arr[bad].reshape(-1)[0]!r} "
+                         f"at index {tuple(int(i) for i in np.argwhere(bad)[0])}")
+
+
 def check_stable(name: str, matrix: np.ndarray, max_radius: float = 1.001) -> None:
     """A transition matrix whose spectral radius is at most ``max_radius`` (a state and covariance that
     stay finite over 1e5 steps), or ``ValueError`` naming ``name``."""
@@ -145,6 +157,9 @@ def check_psd(name: str, value: Any, n: int | None = None, strict: bool = False,
         raise ValueError(f"{name} must be {kind} (smallest eigenvalue {smallest:.3g})")
     return arr
 
+
+# The largest entries of nlos_orbit's (low, high) pairs: orbit radii (m) and wobble rates (rad/s).
+ORBIT_LIMITS = {"orbit_radius": 1e7, "orbit_wobble_rate": 10.0}
 
 # The smallest standard deviation (m, m/s^2) or kernel bandwidth (m) a particle filter's config may set: it
 # divides by them squared, and a subnormal sigma squares to 0 (numba raises ZeroDivisionError there).

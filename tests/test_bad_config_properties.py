@@ -296,6 +296,30 @@ def test_a_degree_field_reports_its_range_in_degrees():
                           backend="afge")
 
 
+@pytest.mark.parametrize("name, field, value", [
+    ("relay_ukf", "centres", ((1e308, 0.0), (100.0, 0.0), (0.0, 100.0), (100.0, 100.0))),
+    ("relay_ukf", "start_angles", (0.0, 1.0, 2.0, -1e300)),
+    ("gps_denied_nbp", "nominal_velocity", (20.0, 1e308)),
+    ("nlos_horizon", "prior_std", (50.0, 50.0, 1e308, 5.0)),
+    ("nlos_horizon", "orbit_radius", (150.0, 1e308)),
+    ("nlos_horizon", "orbit_wobble_rate", (-1.0, 0.01)),
+])
+def test_a_huge_entry_of_an_array_field_is_refused_naming_the_field(name, field, value):
+    with pytest.raises(ValueError, match=rf"^{field} entries must be in \[|^{field} entries must be in \("):
+        coloc_env.parallel_env(name, **{field: value})
+
+
+@pytest.mark.parametrize("world, field, value", [
+    ("circles", "centres", ((0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (1.0, 1.0), (2.0, 2.0), (3.0, -1e7))),
+    ("gps_denied", "nominal_velocity", (-1e5, 0.0)),
+    ("nlos_orbit", "prior_std", (50.0, 0.0, 5.0, 5.0)),
+    ("nlos_orbit", "turn_rates_deg", (3.0, -3.0, 3.0, 1e5)),
+])
+def test_a_part_refuses_an_entry_outside_its_range(world, field, value):
+    with pytest.raises(ValueError, match=rf"^world.{field} entries must be in "):
+        coloc_env.compose(world={"name": world, field: value}, network="ideal", backend="dead_reckoning")
+
+
 def count_all() -> tuple[int, list[str]]:
     """Every fixed case of every target: (cases tried, defects)."""
     tried, defects = 0, []

@@ -25,6 +25,7 @@ import pytest
 
 import coloc_env
 from coloc_env.parts import BACKENDS, NETWORKS, WORLDS
+from coloc_env.worlds.circles import default_layout
 from tests.test_bad_config_properties import (
     CHEAP_PART,
     CHEAP_PRESET,
@@ -148,6 +149,8 @@ def evaluate(expr: str | None, names: dict) -> float | None:
     return float(value)
 
 
+LAYOUT = ("centres", "start_angles", "directions")
+
 # --- the targets -------------------------------------------------------------------------------------------
 
 HAVE = {"mrclam": HAVE_MRCLAM}
@@ -253,6 +256,8 @@ def cases(target):
                     probes.append((high, not interval.high_open))
         if interval.entries:
             default = getattr(cls(), f.name)
+            if default is None and f.name in LAYOUT:  # the circles layout of the config's N
+                default = default_layout(int(names["N"]))[LAYOUT.index(f.name)]
             if default is None:
                 continue
             base = np.asarray(default, float)
@@ -269,7 +274,7 @@ def _with_entry(base: np.ndarray, value: float) -> np.ndarray:
 
 # A cell that states a rule between this field and another one's (a documented endpoint may be refused for the
 # other field's default value, with this field named).
-SECOND_RULE = r"at most|with the world|and [<>]=|checked at build|sum <=|<= 1 - "
+SECOND_RULE = r"at most|with the world|and [<>]=|checked at build|sum <=|<= 1 - |low <= high"
 
 
 def coupled(message: str, field: str, target) -> bool:

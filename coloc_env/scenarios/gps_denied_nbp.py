@@ -108,7 +108,7 @@ Arguments (fields of :class:`GpsDeniedNbpConfig`, defaults = spec §1)
 | horizon            | 30          | 1..10000                  | T [chosen] (50 allowed)                      |
 | dt                 | 1.0         | (0, 1000]                 | Delta t [chosen]                             |
 | area               | 500         | (0, 1e7]                  | initial positions ~ U([0, area]^2) [chosen]  |
-| nominal_velocity   | (20, 0)     | (2,)                      | v_nom [chosen]                               |
+| nominal_velocity   | (20, 0)     | (2,) entries in [-1e4, 1e4] | v_nom [chosen]                               |
 | velocity_spread    | 2.0         | [0, 1e4]                  | sigma_v0 [chosen]                            |
 | accel_std          | 0.5         | [0, 1000]                 | sigma_a,true [chosen]                        |
 | accel_noise_std    | 0.3         | [0.001, 1000]             | sigma_acc [chosen]                           |
@@ -144,7 +144,7 @@ import numpy as np
 
 import estimators.dnbp as dn
 from coloc_env.backends.particles import Dnbp
-from coloc_env.config import MIN_STD, as_array, check_choice, check_range
+from coloc_env.config import MIN_STD, as_array, check_choice, check_entries, check_range
 from coloc_env.networks.broadcast import Broadcast
 from coloc_env.rendering import Link, Scene
 from coloc_env.scenarios.binding import PresetScenario
@@ -204,7 +204,7 @@ class GpsDeniedNbpConfig:
         check_range("num_uavs", self.num_uavs, 2, 64, integer=True)
         check_range("horizon", self.horizon, 1, 10_000, integer=True)
         check_range("area", self.area, 0.0, 1e7, low_open=True)
-        as_array("nominal_velocity", self.nominal_velocity, shape=(2,))
+        check_entries("nominal_velocity", as_array("nominal_velocity", self.nominal_velocity, shape=(2,)), -1e4, 1e4)
         check_range("velocity_spread", self.velocity_spread, 0.0, 1e4)
         check_range("dt", self.dt, 0.0, 1e3, low_open=True)
         check_range("accel_std", self.accel_std, 0.0, 1e3)

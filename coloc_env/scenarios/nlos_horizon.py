@@ -109,13 +109,15 @@ Arguments (fields of :class:`NlosHorizonConfig`, defaults = spec §9)
 | period              | 1.0                          | [1e-3, 1e4], T (s) [chosen]                       |
 | accel_sigma         | 0.3                          | [1e-6, 1e3], sigma_a of the estimator's Q [chosen]|
 | speed               | 20.0                         | [0, 1e4] m/s [chosen]                             |
-| turn_rates_deg      | (3, -3, 3, -6)               | deg/s per turn, in [-1e4, 1e4] [chosen]           |
+| turn_rates_deg      | (3, -3, 3, -6)               | deg/s per turn, entries in [-1e4, 1e4] [chosen]   |
 | turn_windows        | (200,260) (500,560) (700,730) (850,880) | [start, end) integer steps, <= 1e7 [chosen] |
 | target_spacing      | 3000.0                       | [0, 1e7] m: uav_i starts at (0, i * spacing) [chosen] |
 | schedule_shift      | 40                           | 0..100000 steps: uav_i's turns start i * shift later |
-| orbit_radius        | (150, 900)                   | rho0 ~ U(.) m [chosen]                            |
+| orbit_radius        | (150, 900)                   | (low, high) m, entries in [0, 1e7], low <= high: |
+|                     |                              | rho0 ~ U(.) [chosen]                              |
 | orbit_wobble        | 200.0                        | [0, 1e6] m: a ~ U(0, .) [chosen]                  |
-| orbit_wobble_rate   | (0.002, 0.01)                | w ~ U(.) rad/s [chosen]                           |
+| orbit_wobble_rate   | (0.002, 0.01)                | (low, high) rad/s, entries in [0, 10], low <= high: |
+|                     |                              | w ~ U(.) [chosen]                                 |
 | orbit_bearing_rate  | 0.01                         | [0, 10] rad/s: om ~ U(-., .) [chosen]             |
 | r_inf, r_sup        | 30, 1000                     | 0 < r_inf < r_sup (m) [chosen]                    |
 | sigma_nav           | 2.0                          | (0, 1e4] m per axis [chosen]                      |
@@ -145,7 +147,8 @@ Arguments (fields of :class:`NlosHorizonConfig`, defaults = spec §9)
 | window_centre       | 12                           | N_c(0) in [N_min, N_max] (paper's best N)         |
 | likelihood          | "predictive"                 | AHG cost for ``paper``: predictive, paper, smoothed |
 | smoothing           | 0.5                          | lam in (0, 1) [chosen]                            |
-| prior_std           | (50, 50, 5, 5)               | > 0; x_hat before any estimate = truth + N(0, P0) |
+| prior_std           | (50, 50, 5, 5)               | (4,) entries in (0, 1e6]: x_hat before any       |
+|                     |                              | estimate = truth + N(0, P0)                       |
 | reward              | "error"                      | "error", "trace"                                  |
 | packet_cost         | 0.0                          | [0, 1e12] per packet used                         |
 
@@ -162,7 +165,7 @@ import gymnasium
 import numpy as np
 
 import estimators.afge as af
-from coloc_env.config import as_array, check_choice, check_range, check_step_windows
+from coloc_env.config import ORBIT_LIMITS, as_array, check_choice, check_entries, check_range, check_step_windows
 from coloc_env.rendering import Link, Scene
 from coloc_env.scenarios.binding import PresetScenario
 from coloc_env.world.flight import OrbitingNeighbours, OrbitParameters, TurnSchedulePath
@@ -302,7 +305,8 @@ class NlosHorizonConfig:
         check_range("num_neighbours", self.num_neighbours, 1, 32, integer=True)
         for name in ("orbit_radius", "orbit_wobble_rate"):
             pair = as_array(name, getattr(self, name), shape=(2,))
-            if pair[0] < 0 or pair[1] < pair[0]:
+            check_entries(name, pair, 0.0, ORBIT_LIMITS[name])
+            if pair[1] < pair[0]:
                 raise ValueError(f"{name} must be (low, high) with 0 <= low <= high, got {getattr(self, name)}")
         check_range("orbit_wobble", self.orbit_wobble, 0.0, 1e6)
         check_range("orbit_bearing_rate", self.orbit_bearing_rate, 0.0, 10.0)
@@ -348,9 +352,7 @@ class NlosHorizonConfig:
         check_range("window_centre", self.window_centre, self.window_min, self.window_max, integer=True)
         check_choice("likelihood", self.likelihood, af.LIKELIHOODS)
         check_range("smoothing", self.smoothing, 0.0, 1.0, low_open=True, high_open=True)
-        std = as_array("prior_std", self.prior_std, shape=(4,))
-        if np.any(std <= 0):
-            raise ValueError(f"prior_std must be > 0 (P0 positive definite), got {self.prior_std}")
+        check_entries("prior_std", as_array("prior_std", self.prior_std, shape=(4,)), 0.0, 1e6, low_open=True)
         check_choice("reward", self.reward, ("error", "trace"))
         check_range("packet_cost", self.packet_cost, 0.0, 1e12)
 

@@ -111,8 +111,8 @@ Arguments (fields of :class:`RelayUKFConfig`, defaults = the paper's Sec. 4 / Ta
 | field                   | default      | allowed                                                   |
 |-------------------------|--------------|-----------------------------------------------------------|
 | num_platforms           | 4            | 2..16                                                     |
-| centres                 | None         | (N, 2) metres; None = the layout above                    |
-| start_angles            | None         | (N,) rad; None = 2 pi i / N                               |
+| centres                 | None         | (N, 2) metres, entries in [-1e6, 1e6]; None = the layout above |
+| start_angles            | None         | (N,) rad, entries in [-1e6, 1e6]; None = 2 pi i / N       |
 | directions              | None         | (N,) of +1 (ccw) / -1 (cw); None = platform 1 clockwise   |
 | speed                   | 1.0          | (0, 1e4] m/s                                              |
 | turn_rate               | 0.015        | [1e-6, pi/dt] rad/s (smaller: a circle too large to be    |
@@ -163,7 +163,7 @@ import numpy as np
 
 import estimators.ukf_relay as ukf
 from coloc_env.backends.ukf import UkfDcl
-from coloc_env.config import as_array, check_choice, check_range
+from coloc_env.config import as_array, check_choice, check_entries, check_range
 from coloc_env.networks.relay import Relay
 from coloc_env.rendering import Link, Scene
 from coloc_env.scenarios.binding import PresetScenario
@@ -245,7 +245,7 @@ class RelayUKFConfig:
             value = getattr(self, name)
             if value is not None:
                 shape = (N, 2) if name == "centres" else (N,)
-                as_array(name, value, shape=shape)
+                check_entries(name, as_array(name, value, shape=shape), -1e6, 1e6)
         check_range("dt", self.dt, 1e-6, 3600.0)
         check_range("speed", self.speed, 0.0, 1e4, low_open=True)
         check_range("turn_rate", self.turn_rate, 1e-6, np.pi / self.dt, high_label="pi/dt")

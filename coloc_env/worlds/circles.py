@@ -23,8 +23,8 @@ Arguments (``coloc_env.worlds.Circles``)
 | field                   | default | allowed                                           |
 |-------------------------|---------|---------------------------------------------------|
 | num_agents              | 6       | 2..16                                             |
-| centres                 | None    | (N, 2) metres; None = :func:`default_layout`      |
-| start_angles            | None    | (N,) rad; None = 2 pi i / N                       |
+| centres                 | None    | (N, 2) metres, entries in [-1e6, 1e6]; None = :func:`default_layout` |
+| start_angles            | None    | (N,) rad, entries in [-1e6, 1e6]; None = 2 pi i / N |
 | directions              | None    | (N,) of +1 (ccw) / -1 (cw); None = platform 1 cw  |
 | speed                   | 1.0     | (0, 1e4] m/s                                      |
 | turn_rate               | 0.015   | [1e-6, pi/dt] rad/s (smaller: a circle too large  |
@@ -48,7 +48,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from coloc_env.config import as_array
+from coloc_env.config import as_array, check_entries
 from coloc_env.parts import WORLDS, Block, PartConfig, check_flag, check_range
 from coloc_env.world.odometry import OdometrySensor, RangeSensor
 from coloc_env.world.relay import check_distance
@@ -102,7 +102,8 @@ class Circles(PartConfig):
         for name in ("centres", "start_angles", "directions"):
             value = getattr(self, name)
             if value is not None:
-                as_array(f"{prefix}{name}", value, shape=(N, 2) if name == "centres" else (N,))
+                arr = as_array(f"{prefix}{name}", value, shape=(N, 2) if name == "centres" else (N,))
+                check_entries(f"{prefix}{name}", arr, -1e6, 1e6)
         self.tracks.validate(prefix)
         check_range(f"{prefix}horizon", self.horizon, 1, 1_000_000, integer=True)
         OdometrySensor(self.speed_noise_std, self.turn_rate_noise_std).validate(prefix)

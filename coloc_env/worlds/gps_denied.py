@@ -39,7 +39,7 @@ Arguments (``coloc_env.worlds.GpsDenied``; defaults = ``gps_denied_nbp``'s)
 | dt                 | 1.0       | (0, 1000] s                                  |
 | area               | 500       | (0, 1e7] m: the side of the start square     |
 | density            | None      | None (side ``area``) or [1e-3, 1e6] UAVs/km^2 (side sqrt(N / density) km) |
-| nominal_velocity   | (20, 0)   | (2,) m/s                                     |
+| nominal_velocity   | (20, 0)   | (2,) m/s, entries in [-1e4, 1e4]             |
 | velocity_spread    | 2.0       | [0, 1e4] m/s                                 |
 | accel_std          | 0.5       | [0, 1000] m/s^2 true acceleration            |
 | accel_noise_std    | 0.3       | [0.001, 1000] m/s^2 accelerometer noise    |
@@ -57,7 +57,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from coloc_env.config import MIN_STD, as_array
+from coloc_env.config import MIN_STD, as_array, check_entries
 from coloc_env.parts import WORLDS, PartConfig, check_range
 from coloc_env.world.cv_uav import ConstantVelocityUAVs
 from coloc_env.world.gps_markov import MarkovGPS
@@ -116,7 +116,8 @@ class GpsDenied(PartConfig):
         check_range(f"{prefix}horizon", self.horizon, 1, 10_000, integer=True)
         check_range(f"{prefix}dt", self.dt, 0.0, 1e3, low_open=True)
         check_range(f"{prefix}area", self.area, 0.0, 1e7, low_open=True)
-        as_array(f"{prefix}nominal_velocity", self.nominal_velocity, shape=(2,))
+        check_entries(f"{prefix}nominal_velocity", as_array(f"{prefix}nominal_velocity", self.nominal_velocity,
+                                                             shape=(2,)), -1e4, 1e4)
         check_range(f"{prefix}velocity_spread", self.velocity_spread, 0.0, 1e4)
         check_range(f"{prefix}accel_std", self.accel_std, 0.0, 1e3)
         check_range(f"{prefix}accel_noise_std", self.accel_noise_std, MIN_STD, 1e3)

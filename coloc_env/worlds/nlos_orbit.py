@@ -53,14 +53,14 @@ Arguments (``coloc_env.worlds.NlosOrbit``; defaults = ``nlos_horizon``'s, spec Â
 | period              | 1.0                          | [1e-3, 1e4] s, T                                 |
 | accel_sigma         | 0.3                          | [1e-6, 1000] m/s^2: sigma_a of the model the backends assume |
 | speed               | 20.0                         | [0, 1e4] m/s                                     |
-| turn_rates_deg      | (3, -3, 3, -6)               | deg/s per turn, finite                           |
+| turn_rates_deg      | (3, -3, 3, -6)               | deg/s per turn, entries in [-1e4, 1e4]           |
 | turn_windows        | (200,260) (500,560) (700,730) (850,880) | one [start, end) per turn: integer    |
 |                     |                              | steps, 0 <= start < end <= 1e7                   |
 | target_spacing      | 3000.0                       | [0, 1e7] m                                       |
 | schedule_shift      | 40                           | 0..100000 steps                                  |
-| orbit_radius        | (150, 900)                   | (low, high), 0 <= low <= high, m                 |
+| orbit_radius        | (150, 900)                   | (low, high), entries in [0, 1e7], low <= high, m |
 | orbit_wobble        | 200.0                        | [0, 1e6] m                                       |
-| orbit_wobble_rate   | (0.002, 0.01)                | (low, high), 0 <= low <= high, rad/s             |
+| orbit_wobble_rate   | (0.002, 0.01)                | (low, high), entries in [0, 10], low <= high, rad/s |
 | orbit_bearing_rate  | 0.01                         | [0, 10] rad/s                                    |
 | r_inf, r_sup        | 30, 1000                     | 0 < r_inf < r_sup <= 1e9 m (RSA)                 |
 | sigma_nav           | 2.0                          | (0, 1e4] m per axis                              |
@@ -77,7 +77,7 @@ Arguments (``coloc_env.worlds.NlosOrbit``; defaults = ``nlos_horizon``'s, spec Â
 | nlos_sigma_deg      | 1.0                          | [0, 180] deg                                     |
 | p_nlos              | 0.3                          | [0, 1], pi                                       |
 | p10                 | 0.1                          | [0, 1], pi p10 <= 1 - pi                         |
-| prior_std           | (50, 50, 5, 5)               | (4,) each > 0                                    |
+| prior_std           | (50, 50, 5, 5)               | (4,) entries in (0, 1e6]                         |
 | sensors             | ("rss", "aoa")               | a non-empty subset of ("rss", "aoa")             |
 | report_mode         | True                         | the LOS/NLOS flag travels with each packet (mode_info "known") |
 """
@@ -88,7 +88,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from coloc_env.config import as_array, check_step_windows
+from coloc_env.config import ORBIT_LIMITS, as_array, check_entries, check_step_windows
 from coloc_env.parts import WORLDS, PartConfig, check_flag, check_range
 from coloc_env.scenarios.nlos_horizon import NlosHorizonConfig, draw_episode_parts, target_paths
 from coloc_env.world.flight import OrbitParameters
@@ -172,7 +172,7 @@ class NlosOrbit(PartConfig):
         check_range(f"{p}period", self.period, 1e-3, 1e4)
         check_range(f"{p}accel_sigma", self.accel_sigma, 1e-6, 1e3)
         check_range(f"{p}speed", self.speed, 0.0, 1e4)
-        rates = as_array(f"{p}turn_rates_deg", self.turn_rates_deg, ndim=1)
+        rates = as_array(f"{p}turn_rates_deg", self.turn_rates_deg, ndim=1, bound=1e4)
         windows = as_array(f"{p}turn_windows", self.turn_windows)
         if windows.shape != (len(rates), 2):
             raise ValueError(f"{p}turn_windows must have shape ({len(rates)}, 2), one [start, end) per turn rate, "
@@ -182,7 +182,8 @@ class NlosOrbit(PartConfig):
         check_range(f"{p}schedule_shift", self.schedule_shift, 0, 100_000, integer=True)
         for name in ("orbit_radius", "orbit_wobble_rate"):
             pair = as_array(f"{p}{name}", getattr(self, name), shape=(2,))
-            if pair[0] < 0 or pair[1] < pair[0]:
+            check_entries(f"{p}{name}", pair, 0.0, ORBIT_LIMITS[name])
+            if pair[1] < pair[0]:
                 raise ValueError(f"{p}{name} must be (low, high) with 0 <= low <= high, got {getattr(self, name)}")
         check_range(f"{p}orbit_wobble", self.orbit_wobble, 0.0, 1e6)
         check_range(f"{p}orbit_bearing_rate", self.orbit_bearing_rate, 0.0, 10.0)
@@ -199,9 +200,7 @@ class NlosOrbit(PartConfig):
         check_range(f"{p}nlos_bias_deg", self.nlos_bias_deg, -180.0, 180.0)
         check_range(f"{p}nlos_sigma_deg", self.nlos_sigma_deg, 0.0, 180.0)
         LosNlosChain(self.p_nlos, self.p10).validate(f"{p}p_nlos", f"{p}p10")
-        std = as_array(f"{p}prior_std", self.prior_std, shape=(4,))
-        if np.any(std <= 0):
-            raise ValueError(f"{p}prior_std must be > 0 (P0 positive definite), got {self.prior_std}")
+        check_entries(f"{p}prior_std", as_array(f"{p}prior_std", self.prior_std, shape=(4,)), 0.0, 1e6, low_open=True)
         sensors = tuple(self.sensors) if isinstance(self.sensors, (tuple, list)) else None
         if not sensors or any(s not in SENSORS for s in sensors) or len(set(sensors)) != len(sensors):
             raise ValueError(f"{p}sensors must be a non-empty subset of {SENSORS} without repeats, "
