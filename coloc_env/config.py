@@ -200,7 +200,10 @@ def check_step_windows(name: str, value: Any, windows: np.ndarray, high: int = 1
 
 
 def check_choice(name: str, value: Any, choices: tuple) -> None:
-    """``value`` is one of ``choices`` (and of the same type: ``True`` is not ``1``), or ``ValueError``."""
+    """``value`` is one of ``choices`` (and of the same type: ``True`` is not ``1``; numpy's ``np.True_`` is
+    ``True``), or ``ValueError``."""
+    if isinstance(value, np.bool_):
+        value = bool(value)
     try:
         ok = any((isinstance(value, str) if isinstance(c, str) else type(value) is type(c)) and value == c
                  for c in choices)

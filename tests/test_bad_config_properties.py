@@ -320,6 +320,49 @@ def test_a_part_refuses_an_entry_outside_its_range(world, field, value):
         coloc_env.compose(world={"name": world, field: value}, network="ideal", backend="dead_reckoning")
 
 
+def test_a_part_given_as_a_dict_refuses_a_scalar_where_an_array_belongs():
+    with pytest.raises(ValueError, match=r"^network.delay_probs must be a 1-d array"):
+        coloc_env.compose(world="nlos_orbit", network={"name": "random_delay", "delay_probs": 1},
+                          backend="dead_reckoning")
+
+
+def _validated(target, field, value):
+    """The config of ``target`` with ``field=value``, validated (no env built: no data read)."""
+    from coloc_env.config import build_config
+    from coloc_env.parts import make_config
+    cls = config_class(target)
+    if target[0] == "preset":
+        return build_config(cls, {**{k: v for k, v in CHEAP_PRESET.get(target[1], {}).items() if k == "data"},
+                                  field: value})
+    return make_config(cls, {field: value}, target[0])
+
+
+BOOL_FIELDS = [(t, name) for t in TARGETS for name, kind, _, _ in fields_of(config_class(t)) if kind == "bool"]
+
+
+@pytest.mark.parametrize("target, field", BOOL_FIELDS, ids=lambda v: "/".join(v) if isinstance(v, tuple) else v)
+@pytest.mark.parametrize("value", [np.bool_(True), np.bool_(False)])
+def test_every_boolean_field_takes_numpy_booleans(target, field, value):
+    config = _validated(target, field, value)
+    assert bool(getattr(config, field)) is bool(value)
+
+
+def test_an_error_names_the_field_the_user_wrote():
+    with pytest.raises(ValueError, match=r"^measurement_noise must be \(m, m\) with m = 1, the rows of measurement"):
+        coloc_env.parallel_env("bandwidth_fusion", measurement=((1.0, 0.0, 0.0),))
+    with pytest.raises(ValueError, match=r"world.measurement_noise .* the rows of world.measurement"):
+        coloc_env.compose(world={"name": "drift", "measurement": ((1.0, 0.0, 0.0),)}, network="ideal",
+                          backend="kalman")
+    with pytest.raises(ValueError, match=r"^turn_windows must have shape \(3, 2\), one \[start, end\) per entry of "
+                                         r"turn_rates_deg"):
+        coloc_env.parallel_env("nlos_horizon", turn_rates_deg=(1.0, 2.0, 3.0))
+    with pytest.raises(ValueError, match=r"^world.turn_windows .* per entry of world.turn_rates_deg"):
+        coloc_env.compose(world={"name": "nlos_orbit", "turn_rates_deg": (1.0, 2.0, 3.0)}, network="ideal",
+                          backend="dead_reckoning")
+    with pytest.raises(ValueError, match=r"turn_rate must be in \[1e-06, pi/dt = "):
+        coloc_env.parallel_env("relay_ukf", dt=3600.0)
+
+
 def count_all() -> tuple[int, list[str]]:
     """Every fixed case of every target: (cases tried, defects)."""
     tried, defects = 0, []

@@ -44,6 +44,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from coloc_env.config import as_array
 from coloc_env.networks.base import Network
 from coloc_env.parts import NETWORKS, Block, PartConfig, check_flag
 from coloc_env.world.random_delay import BoundedRandomDelay
@@ -67,6 +68,7 @@ class RandomDelay(PartConfig):
         return BoundedRandomDelay(tuple(self.delay_probs), self.buffer_length)
 
     def check(self, prefix: str) -> None:
+        as_array(f"{prefix}delay_probs", self.delay_probs, ndim=1)  # before ``delay`` iterates over it
         self.delay.validate(f"{prefix}delay_probs", f"{prefix}buffer_length")
         check_distance(f"{prefix}comm_range", self.comm_range)
         check_flag(f"{prefix}transmit_decision", self.transmit_decision)

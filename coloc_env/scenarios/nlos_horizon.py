@@ -296,7 +296,8 @@ class NlosHorizonConfig:
         rates = as_array("turn_rates_deg", self.turn_rates_deg, ndim=1, bound=1e4)
         windows = as_array("turn_windows", self.turn_windows)
         if windows.shape != (len(rates), 2):
-            raise ValueError(f"turn_windows must have shape ({len(rates)}, 2), one [start, end) per turn rate, "
+            raise ValueError(f"turn_windows must have shape ({len(rates)}, 2), one [start, end) per entry of "
+                             f"turn_rates_deg (a rate per turn), "
                              f"got {windows.shape}")
         check_step_windows("turn_windows", self.turn_windows, windows)
         self.path.validate()

@@ -66,7 +66,7 @@ class BandwidthBudget:
         neighbours = self.num_nodes - 1
         high = neighbours * self.max_per_link if self.exact_budget else np.inf
         check_range(f"{prefix}budget", self.budget, neighbours * self.min_per_link, high, integer=True)
-        if not isinstance(self.exact_budget, bool):
+        if not isinstance(self.exact_budget, (bool, np.bool_)):
             raise ValueError(f"{prefix}exact_budget must be True or False, got {self.exact_budget!r}")
 
     @cached_property

@@ -176,6 +176,9 @@ def check_linear_world(prefix: str, config, strict_prior: bool = False) -> tuple
     agents = getattr(config, "num_agents", getattr(config, "num_uavs", None))
     if V.ndim not in (2, 3) or (V.ndim == 3 and V.shape[0] != agents):
         raise ValueError(f"{prefix}measurement_noise must be (m, m) or ({agents}, m, m), got {V.shape}")
+    if V.shape[-2:] != (C.shape[0],) * 2:  # m is set by measurement: a mismatch names both fields
+        raise ValueError(f"{prefix}measurement_noise must be (m, m) with m = {C.shape[0]}, the rows of "
+                         f"{prefix}measurement (shape {C.shape}), got shape {V.shape}")
     for j, Vj in enumerate(V if V.ndim == 3 else V[None]):
         check_psd(f"{prefix}measurement_noise" + (f"[{j}]" if V.ndim == 3 else ""), Vj, C.shape[0], strict=True)
     as_array(f"{prefix}initial_state", config.initial_state, shape=(n,), bound=VALUE_BOUND)

@@ -175,7 +175,8 @@ class NlosOrbit(PartConfig):
         rates = as_array(f"{p}turn_rates_deg", self.turn_rates_deg, ndim=1, bound=1e4)
         windows = as_array(f"{p}turn_windows", self.turn_windows)
         if windows.shape != (len(rates), 2):
-            raise ValueError(f"{p}turn_windows must have shape ({len(rates)}, 2), one [start, end) per turn rate, "
+            raise ValueError(f"{p}turn_windows must have shape ({len(rates)}, 2), one [start, end) per entry of "
+                             f"{p}turn_rates_deg (a rate per turn), "
                              f"got {windows.shape}")
         check_step_windows(f"{p}turn_windows", self.turn_windows, windows)
         check_range(f"{p}target_spacing", self.target_spacing, 0.0, 1e7)
