@@ -92,7 +92,12 @@ class ConstantPolicy(_EpisodePolicy):
         super().__init__(env)
         c = self.scenario.config
         if window is None and tables is not None:  # ``constant:12``
+            if not (isinstance(tables, str) and tables.strip().isdigit()):
+                raise ValueError(f"constant's window (constant:N) must be an integer in [{c.window_min}, "
+                                 f"{c.window_max}], got {tables!r}")
             window = int(tables)
+        if window is not None and not isinstance(window, (int, np.integer)) or isinstance(window, bool):
+            raise ValueError(f"window must be an integer in [{c.window_min}, {c.window_max}], got {window!r}")
         self.window = c.window_centre if window is None else int(window)
         if not c.window_min <= self.window <= c.window_max:
             raise ValueError(f"window must be in [{c.window_min}, {c.window_max}], got {window}")

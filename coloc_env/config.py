@@ -158,6 +158,30 @@ def check_psd(name: str, value: Any, n: int | None = None, strict: bool = False,
     return arr
 
 
+# Seeds: non-negative integers (numpy's SeedSequence takes no negative entropy); the upper end keeps
+# ``seed + b`` of every vector copy an int64 (what a results file and SB3 store).
+SEED_MAX = 2**63 - 1
+# The most copies one vector env holds (each copy holds its episode's draws).
+MAX_NUM_ENVS = 100_000
+
+
+def check_seed(name: str, seed: Any, copies: int = 1) -> int | None:
+    """None, or a seed: an integer in [0, SEED_MAX - copies + 1] (so that ``seed + b`` for the ``copies``
+    copies is one too); a string, a float (even 1.0), a boolean or NaN is a ``ValueError`` naming ``name``."""
+    if seed is None:
+        return None
+    high = SEED_MAX - copies + 1
+    if not is_integer(seed) or not 0 <= int(seed) <= high:
+        raise ValueError(f"{name} must be None or an integer in [0, {high}], got {seed!r}")
+    return int(seed)
+
+
+def check_count(name: str, value: Any, low: int, high: int) -> int:
+    """An integer count in [low, high], or ``ValueError`` naming ``name``."""
+    check_range(name, value, low, high, integer=True)
+    return int(value)
+
+
 # The largest entries of nlos_orbit's (low, high) pairs: orbit radii (m) and wobble rates (rad/s).
 ORBIT_LIMITS = {"orbit_radius": 1e7, "orbit_wobble_rate": 10.0}
 

@@ -16,7 +16,7 @@ import gymnasium
 import numpy as np
 from pettingzoo import ParallelEnv
 
-from coloc_env.config import build_config, check_range
+from coloc_env.config import build_config, check_range, check_seed
 from coloc_env.rendering import Renderer
 from coloc_env.scenarios.base import Scenario
 
@@ -149,9 +149,12 @@ class CoLocParallelEnv(ParallelEnv):
 
         For wrappers that call ``reset()`` without a seed (SuperSuit under SB3).
         """
-        self._rng = np.random.default_rng(seed)
+        self._rng = np.random.default_rng(check_seed("seed", seed))
 
     def reset(self, seed=None, options=None):
+        """A new episode; ``seed``: None (continue the generator) or an integer in [0, 2**63 - 1], else a
+        ``ValueError`` (a string, a float, a boolean or NaN is never coerced)."""
+        seed = check_seed("seed", seed)
         if seed is not None or self._rng is None:
             self._rng = np.random.default_rng(seed)
         self.scenario.reset([self._rng])

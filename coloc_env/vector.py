@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
 
+from coloc_env.config import MAX_NUM_ENVS, check_count, check_seed
 from coloc_env.env import build_scenario
 from coloc_env.rendering import Renderer
 from coloc_env.scenarios.base import Scenario
@@ -43,8 +44,8 @@ class CoLocVecEnv(VecEnv):
 
     def __init__(self, scenario_cls: type[Scenario], num_envs: int, seed: int | None = None,
                  render_mode: str | None = None, *, composition=None, max_cycles: int | None = None, **config):
-        if not isinstance(num_envs, (int, np.integer)) or isinstance(num_envs, bool) or num_envs < 1:
-            raise ValueError(f"num_envs must be a positive integer (copies of the scenario), got {num_envs!r}")
+        check_count("num_envs", num_envs, 1, MAX_NUM_ENVS)
+        check_seed("seed", seed, int(num_envs))
         self.scenario = build_scenario(scenario_cls, int(num_envs), composition, max_cycles, **config)
         self.num_copies = int(num_envs)
         self.num_agents = self.scenario.num_agents
@@ -66,7 +67,8 @@ class CoLocVecEnv(VecEnv):
         if seed is None:
             self._copy_seeds = None
             return [None] * self.num_copies
-        self._copy_seeds = [int(seed) + b for b in range(self.num_copies)]
+        seed = check_seed("seed", seed, self.num_copies)
+        self._copy_seeds = [seed + b for b in range(self.num_copies)]
         return list(self._copy_seeds)
 
     def reset(self) -> np.ndarray:
