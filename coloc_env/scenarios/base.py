@@ -139,9 +139,25 @@ class Scenario(abc.ABC):
         return np.asarray(errors, float).sum(axis=(-2, -1))
 
     # --- helpers for subclasses ----------------------------------------------
+    def refuse_action(self, bad: np.ndarray, values: np.ndarray, rule: str, labels=()) -> None:
+        """Raise the ValueError of the first True entry of ``bad`` (B, N, k): ``"{label} of {agent} must be
+        {rule}, got {value}"`` (``", copy b"`` after the agent where B > 1); ``labels[i]`` names entry i of
+        an agent's flat action (default ``action[i]``). The one message every action check uses."""
+        flat_bad = np.asarray(bad).reshape(self.batch, self.num_agents, -1)
+        flat_values = np.asarray(values, float).reshape(self.batch, self.num_agents, -1)
+        copy, agent, i = (int(v) for v in np.argwhere(flat_bad)[0])
+        label = labels[i] if i < len(labels) else f"action[{i}]"
+        where = self.agent_names[agent] + (f", copy {copy}" if self.batch > 1 else "")
+        raise ValueError(f"{label} of {where} must be {rule}, got {flat_values[copy, agent, i]:g}")
+
     def check_actions(self, actions) -> np.ndarray:
-        """Actions as a float array (B, N, *shape); a NaN/inf, a wrong shape, a string or a complex number is
-        a ValueError."""
+        """Actions as a float array (B, N, *shape); a NaN/inf (naming the agent), a wrong shape, a string or a
+        complex number is a ValueError.
+
+        The rule for values, the same in every scenario and composition: entries of a continuous (``Box``)
+        block are clipped to their bounds; entries of a discrete block outside its choices (or, in a
+        ``MultiDiscrete``, not integers) and non-finite values anywhere are refused with a ValueError
+        naming the agent (:meth:`refuse_action`)."""
         space = self.action_space()
         raw = np.asarray(actions)
         if raw.dtype.kind not in "biuf":  # strings (even "1"), complex numbers, None, objects: refused
@@ -151,10 +167,7 @@ class Scenario(abc.ABC):
         if arr.shape != expected:
             raise ValueError(f"actions must have shape {expected} (batch, agents, *action_shape), got {arr.shape}")
         if not np.isfinite(arr).all():
-            bad = np.argwhere(~np.isfinite(arr.reshape(self.batch, self.num_agents, -1)).all(axis=-1))
-            raise ValueError(
-                f"actions must be finite; non-finite action for (copy, agent) {bad[0].tolist()}"
-            )
+            self.refuse_action(~np.isfinite(arr), arr, "finite")
         return arr
 
     def check_discrete_actions(self, actions, labels=()) -> np.ndarray:
@@ -169,18 +182,8 @@ class Scenario(abc.ABC):
                 (raw >= 0) & (raw < nvec)).all():
             return raw.astype(np.int64)
         arr = self.check_actions(actions)
-        flat = arr.reshape(*arr.shape[:2], -1)
-
-        def refuse(bad: np.ndarray, rule: str):
-            copy, agent, i = (int(v) for v in np.argwhere(bad.reshape(flat.shape))[0])
-            label = labels[i] if i < len(labels) else f"action[{i}]"
-            where = self.agent_names[agent] + (f", copy {copy}" if self.batch > 1 else "")
-            raise ValueError(f"{label} must be {rule.format(nvec.reshape(-1)[i] - 1)}, "
-                             f"got {flat[copy, agent, i]:g} ({where})")
-
-        if np.any(arr != np.round(arr)):
-            refuse(arr != np.round(arr), "integers in [0, {}]")
-        outside = (arr < 0) | (arr >= nvec)
-        if np.any(outside):
-            refuse(outside, "integers in [0, {}]")
+        bad = (arr != np.round(arr)) | (arr < 0) | (arr >= nvec)
+        if np.any(bad):
+            i = int(np.argwhere(bad.reshape(self.batch, self.num_agents, -1))[0][2])
+            self.refuse_action(bad, arr, f"an integer in [0, {nvec.reshape(-1)[i] - 1}]", labels)
         return arr.astype(np.int64)

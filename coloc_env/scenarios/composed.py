@@ -41,9 +41,12 @@ Two estimands (the world's ``estimand``, which the backend must share):
 Action (per agent, the blocks in order world, network, backend)
 ---------------------------------------------------------------
 ``MultiDiscrete(choices of every entry)`` when every block is discrete, else a
-``Box`` whose discrete entries decode by rounding. A value outside its block's
-range, a non-integer in a MultiDiscrete, NaN or inf is a ``ValueError`` naming
-the block.
+``Box`` whose discrete entries decode by rounding. The values follow one rule in
+every scenario (:meth:`~coloc_env.scenarios.base.Scenario.check_actions`): a
+continuous block's entries are clipped to its bounds; a discrete block's entry
+outside its choices (after rounding in a ``Box``; a non-integer in a
+``MultiDiscrete``) and a NaN or inf anywhere are a ``ValueError`` naming the
+block and the agent.
 
 Action masks (MultiDiscrete actions; ``infos[agent]["action_mask"]``, ``vector_env(...).action_masks()``)
 ---------------------------------------------------------------------------------------------------------
@@ -358,24 +361,23 @@ class ComposedScenario(Scenario):
         flat = arr.reshape(self.batch, self.num_agents, -1)
         if not self.blocks:  # nothing to decide: the action space is a placeholder MultiDiscrete([1])
             if np.any(flat != 0):
-                raise ValueError("this composition has no decisions; its only action is 0")
+                self.refuse_action(flat != 0, flat, "0 (this composition has no decisions)", ["action"])
             return flat[..., :0]
         out = []
+        integral = isinstance(self._action_space, gymnasium.spaces.MultiDiscrete)
         for blk, part, values in zip(self.blocks, self.block_parts, np.split(flat, self._splits, axis=-1),
                                      strict=True):
-            label = f"{part} block {blk.name!r} ({blk.meaning})"
+            label = [f"{part} block {blk.name!r} ({blk.meaning})"] * blk.size
             if blk.discrete:
-                integral = isinstance(self._action_space, gymnasium.spaces.MultiDiscrete)
                 if integral and np.any(values != np.round(values)):
-                    raise ValueError(f"{label} must be integers, got {values[values != np.round(values)][0]:g}")
+                    self.refuse_action(values != np.round(values), values, f"an integer in [0, {blk.choices - 1}]",
+                                       label)
                 values = np.round(values)
                 bad = (values < 0) | (values > blk.choices - 1)
                 if np.any(bad):
-                    raise ValueError(f"{label} must be integers in [0, {blk.choices - 1}], got {values[bad][0]:g}")
-            else:
-                bad = (values < blk.low) | (values > blk.high)
-                if np.any(bad):
-                    raise ValueError(f"{label} must be in [{blk.low}, {blk.high}], got {values[bad][0]:g}")
+                    self.refuse_action(bad, values, f"an integer in [0, {blk.choices - 1}]", label)
+            else:  # a continuous block: clipped to its bounds (the rule of every Box action)
+                values = np.clip(values, blk.low, blk.high)
             out.append(values)
         return np.concatenate(out, axis=-1) if out else flat[..., :0]
 

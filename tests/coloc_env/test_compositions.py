@@ -133,7 +133,8 @@ def test_a_bad_action_names_its_block():
     env.reset(seed=0)
     N = len(env.possible_agents)
     actions = {a: np.array([0, N + 2]) for a in env.possible_agents}
-    with pytest.raises(ValueError, match=r"network block 'next_hop'.* must be integers in \[0, 7\], got 8"):
+    with pytest.raises(ValueError, match=r"network block 'next_hop'.* of platform_0 must be an integer in \[0, 7\], "
+                                         r"got 8"):
         env.step(actions)
 
 

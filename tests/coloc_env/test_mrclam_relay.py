@@ -115,7 +115,7 @@ def test_a_folder_that_is_not_a_dataset_names_data(tmp_path):
         coloc_env.parallel_env(NAME, data=str(tmp_path))
 
 
-@pytest.mark.parametrize("bad, match", [(np.nan, "finite"), (1.5, "integers"), (5, r"action\[0\]"),
+@pytest.mark.parametrize("bad, match", [(np.nan, "finite"), (1.5, "of robot_2 must be an integer"), (5, r"action\[0\]"),
                                         (-1, r"action\[0\]")])
 def test_bad_action_is_refused(bad, match):
     env = make()

@@ -90,8 +90,9 @@ def test_bad_config_names_the_field(kwargs, field):
         coloc_env.parallel_env(NAME, **kwargs)
 
 
-@pytest.mark.parametrize("bad, match", [(np.nan, "finite"), (np.inf, "finite"), (1.5, "integers"),
-                                        (7, r"action\[0\]"), (-1, r"action\[0\]")])
+@pytest.mark.parametrize("bad, match", [(np.nan, "of platform_2 must be finite"), (np.inf, "finite"),
+                                        (1.5, "of platform_2 must be an integer"), (7, r"action\[0\]"),
+                                        (-1, r"action\[0\]")])
 def test_bad_action_is_refused(bad, match):
     env = coloc_env.parallel_env(NAME, **SHORT)
     env.reset(seed=0)
