@@ -23,7 +23,7 @@ import os
 
 from agents import bandwidth_fusion, generic, gps_denied_nbp, lossy_fusion, mrclam_relay, nlos_horizon, relay_ukf
 from agents.base import FixedActionPolicy, Policy, RandomPolicy
-from coloc_env.config import check_seed
+from coloc_env.config import BadInput, check_seed
 
 SCENARIO_POLICIES = {"bandwidth_fusion": {**bandwidth_fusion.POLICIES, **generic.PRESET_FIXED["bandwidth_fusion"]},
                      "lossy_fusion": lossy_fusion.POLICIES, "relay_ukf": relay_ukf.POLICIES,
@@ -90,12 +90,12 @@ def make_policy(name: str, env, seed: int | None = None, **kwargs) -> Policy:
     does not take or cannot read, a seed that is not None or an integer in [0, 2**63 - 1], or an ``env``
     that is not a coloc env is a ``ValueError`` saying which."""
     if not isinstance(name, (str, os.PathLike)):
-        raise ValueError(f"policy name must be a string (a policy's name or a path to a .zip), got {name!r}")
+        raise BadInput(f"policy name must be a string (a policy's name or a path to a .zip), got {name!r}")
     name = os.fspath(name)
     check_seed("seed", seed)
     scenario = getattr(getattr(getattr(env, "unwrapped", None), "scenario", None), "name", None)
     if not isinstance(scenario, str):
-        raise ValueError(f"env must be a coloc env (coloc_env.parallel_env(...) or env(...)), got {env!r}")
+        raise BadInput(f"env must be a coloc env (coloc_env.parallel_env(...) or env(...)), got {env!r}")
     if name.endswith(".zip"):
         from agents.sb3 import SB3Policy
 
@@ -104,15 +104,15 @@ def make_policy(name: str, env, seed: int | None = None, **kwargs) -> Policy:
         return RandomPolicy(env, seed=seed)
     base, colon, variant = name.partition(":")
     if colon and not variant.strip():
-        raise ValueError(f"policy {name!r}: the variant after ':' is empty")
+        raise BadInput(f"policy {name!r}: the variant after ':' is empty")
     base = ALIASES.get(scenario, {}).get(base, base)
     table = {**SCENARIO_POLICIES.get(scenario, generic.POLICIES), **BOUND_POLICIES.get(scenario, {})}
     if base not in table:
-        raise ValueError(f"unknown policy {name!r} for {scenario}; available: {available_policies(scenario)}, "
+        raise BadInput(f"unknown policy {name!r} for {scenario}; available: {available_policies(scenario)}, "
                          f"bounds: {bound_policies(scenario)} or a .zip")
     if variant:
         if "tables" not in inspect.signature(table[base]).parameters:
-            raise ValueError(f"policy {base!r} of {scenario} takes no variant, got {name!r}")
+            raise BadInput(f"policy {base!r} of {scenario} takes no variant, got {name!r}")
         kwargs["tables"] = variant
     if "seed" in inspect.signature(table[base]).parameters:  # stochastic scenario policies take their own seed
         kwargs.setdefault("seed", seed)

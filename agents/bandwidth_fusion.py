@@ -22,6 +22,7 @@ import numpy as np
 
 import estimators.bandwidth_fusion as bf
 from agents.base import FixedActionPolicy, Policy
+from coloc_env.config import BadInput
 from coloc_env.scenarios.bandwidth_fusion import paper_selection, paper_weights
 
 
@@ -38,7 +39,7 @@ def parse_tables(spec: str | None) -> tuple[str, str]:
         return "T1", "P1"
     spec = spec.upper()
     if len(spec) != 4 or spec[0] != "T" or spec[2] != "P":
-        raise ValueError(f"paper tables must look like 'T1P1' (T1..T3, P1..P3), got {spec!r}")
+        raise BadInput(f"paper tables must look like 'T1P1' (T1..T3, P1..P3), got {spec!r}")
     return spec[:2], spec[2:]
 
 

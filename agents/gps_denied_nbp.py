@@ -20,6 +20,7 @@ import math
 import numpy as np
 
 from agents.base import FixedActionPolicy, Policy
+from coloc_env.config import BadInput
 
 SPREAD_ENTRY = 4  # observation index of log(1 + spread of the own prior), metres
 GPS_ENTRY = 0  # observation index of the own GPS status (1 normal, 0 fault)
@@ -83,7 +84,7 @@ class ThresholdPolicy(Policy):
             try:
                 spread = float(tables)
             except ValueError:
-                raise ValueError(f"threshold spread must be a number of metres > 0, got {tables!r}") from None
+                raise BadInput(f"threshold spread must be a number of metres > 0, got {tables!r}") from None
         spread = THRESHOLD_SPREAD if spread is None else spread
         if isinstance(spread, bool) or not isinstance(spread, (int, float)) or not spread > 0:
             raise ValueError(f"threshold spread must be a number of metres > 0, got {spread!r}")

@@ -24,6 +24,7 @@ import numpy as np
 
 import estimators.afge as af
 from agents.base import Policy
+from coloc_env.config import BadInput
 
 
 def _scenario(env):
@@ -65,7 +66,7 @@ class PaperPolicy(_EpisodePolicy):
         # ``paper:smoothed`` (make_policy's variant syntax) arrives as ``tables``
         self.likelihood = likelihood or tables or self.params.likelihood
         if self.likelihood not in af.LIKELIHOODS:
-            raise ValueError(f"likelihood must be one of {af.LIKELIHOODS}, got {self.likelihood!r}")
+            raise BadInput(f"likelihood must be one of {af.LIKELIHOODS}, got {self.likelihood!r}")
 
     def batch_actions(self):
         sc = self.scenario
@@ -93,14 +94,14 @@ class ConstantPolicy(_EpisodePolicy):
         c = self.scenario.config
         if window is None and tables is not None:  # ``constant:12``
             if not (isinstance(tables, str) and tables.strip().isdigit()):
-                raise ValueError(f"constant's window (constant:N) must be an integer in [{c.window_min}, "
+                raise BadInput(f"constant's window (constant:N) must be an integer in [{c.window_min}, "
                                  f"{c.window_max}], got {tables!r}")
             window = int(tables)
         if window is not None and not isinstance(window, (int, np.integer)) or isinstance(window, bool):
-            raise ValueError(f"window must be an integer in [{c.window_min}, {c.window_max}], got {window!r}")
+            raise BadInput(f"window must be an integer in [{c.window_min}, {c.window_max}], got {window!r}")
         self.window = c.window_centre if window is None else int(window)
         if not c.window_min <= self.window <= c.window_max:
-            raise ValueError(f"window must be in [{c.window_min}, {c.window_max}], got {window}")
+            raise BadInput(f"window must be in [{c.window_min}, {c.window_max}], got {window}")
 
     def batch_actions(self):
         sc = self.scenario

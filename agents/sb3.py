@@ -21,6 +21,7 @@ import zlib
 import numpy as np
 
 from agents.base import Policy
+from coloc_env.config import BadInput
 
 # the members stable-baselines3's save_to_zip_file writes and load_from_zip_file needs
 REQUIRED_MEMBERS = ("data", "policy.pth")
@@ -38,7 +39,7 @@ def check_model_zip(path: str) -> None:
             missing = [m for m in REQUIRED_MEMBERS if m not in names]
             if missing:
                 shown = ", ".join(names[:5]) + (f", ... ({len(names)} members)" if len(names) > 5 else "")
-                raise ValueError(f"model {path!r} is not a complete stable-baselines3 model (truncated, or not "
+                raise BadInput(f"model {path!r} is not a complete stable-baselines3 model (truncated, or not "
                                  f"saved by coloc train): the zip has no {' or '.join(missing)} (it holds {shown})")
             damaged = None
             for name in names:  # read every member: a CRC mismatch or a broken deflate stream is damage
@@ -50,11 +51,11 @@ def check_model_zip(path: str) -> None:
                     damaged = f"{name!r} ({exc})"
                     break
     except zipfile.BadZipFile as exc:
-        raise ValueError(f"model {path!r} is not a readable zip (truncated or not a model.zip): {exc}") from exc
+        raise BadInput(f"model {path!r} is not a readable zip (truncated or not a model.zip): {exc}") from exc
     except (OSError, EOFError) as exc:
-        raise ValueError(f"model {path!r} cannot be read: {exc}") from exc
+        raise BadInput(f"model {path!r} cannot be read: {exc}") from exc
     if damaged is not None:
-        raise ValueError(f"model {path!r} is damaged: member {damaged} cannot be read back")
+        raise BadInput(f"model {path!r} is damaged: member {damaged} cannot be read back")
 
 
 def read_metadata(meta_file: str) -> dict:
@@ -63,12 +64,12 @@ def read_metadata(meta_file: str) -> dict:
         with open(meta_file, encoding="utf-8") as fh:
             meta = json.load(fh)
     except json.JSONDecodeError as exc:
-        raise ValueError(f"model metadata {meta_file!r} is not valid JSON (truncated?): {exc.msg} at line "
+        raise BadInput(f"model metadata {meta_file!r} is not valid JSON (truncated?): {exc.msg} at line "
                          f"{exc.lineno} column {exc.colno}") from exc
     except (OSError, UnicodeDecodeError) as exc:
-        raise ValueError(f"model metadata {meta_file!r} cannot be read: {exc}") from exc
+        raise BadInput(f"model metadata {meta_file!r} cannot be read: {exc}") from exc
     if not isinstance(meta, dict):
-        raise ValueError(f"model metadata {meta_file!r} must hold a JSON object, got {type(meta).__name__}")
+        raise BadInput(f"model metadata {meta_file!r} must hold a JSON object, got {type(meta).__name__}")
     return meta
 
 
@@ -86,7 +87,7 @@ def check_spaces(path: str, env, model) -> None:
     for kind, ours, theirs in (("observation", observation_space, model.observation_space),
                                ("action", env.action_space(agent), model.action_space)):
         if ours != theirs or ours.dtype != theirs.dtype:
-            raise ValueError(f"model {path!r} has {kind} space {theirs!r}, the env has {ours!r}")
+            raise BadInput(f"model {path!r} has {kind} space {theirs!r}, the env has {ours!r}")
 
 
 def is_maskable(model) -> bool:
@@ -117,7 +118,7 @@ def algorithm_class(name: str):
         from stable_baselines3 import PPO
 
         return PPO
-    raise ValueError(f"algorithm must be one of {list(ALGORITHMS)}, got {name!r}")
+    raise BadInput(f"algorithm must be one of {list(ALGORITHMS)}, got {name!r}")
 
 
 def model_class(path: str, meta: dict | None = None):
@@ -133,7 +134,7 @@ def model_class(path: str, meta: dict | None = None):
     try:
         return algorithm_class(name)
     except ValueError as exc:
-        raise ValueError(f"model {path!r}: {exc}") from exc
+        raise BadInput(f"model {path!r}: {exc}") from exc
 
 
 class SB3Policy(Policy):
@@ -149,20 +150,22 @@ class SB3Policy(Policy):
     def __init__(self, env, path: str, deterministic: bool = True):
         super().__init__(env)
         if not os.path.isfile(path):
-            raise ValueError(f"policy model {path!r} does not exist")
+            raise BadInput(f"policy model {path!r} does not exist")
         meta_file = metadata_path(path)
         scenario_name = env.unwrapped.scenario.name
         meta = None
         if os.path.isfile(meta_file):
             meta = read_metadata(meta_file)
             if meta.get("scenario") != scenario_name:
-                raise ValueError(f"model {path!r} was trained on {meta.get('scenario')!r}, not {scenario_name!r}")
+                raise BadInput(f"model {path!r} was trained on {meta.get('scenario')!r}, not {scenario_name!r}")
         check_model_zip(path)
         try:
             self.model = model_class(path, meta).load(path, device="cpu")
         except Exception as exc:  # SB3 reports a damaged model with assorted exceptions that name no file
-            raise ValueError(f"model {path!r} cannot be loaded by stable-baselines3: "
-                             f"{type(exc).__name__}: {exc}") from exc
+            # torch's message runs over many lines of advice: its first line says what failed
+            first = next((line.strip() for line in str(exc).splitlines() if line.strip()), "")
+            raise BadInput(f"model {path!r} cannot be loaded by stable-baselines3: "
+                           f"{type(exc).__name__}: {first}") from exc
         check_spaces(path, env, self.model)
         self.deterministic = deterministic
         self.masked = is_maskable(self.model)

@@ -28,7 +28,7 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
-from coloc_env.config import check_choice, check_range
+from coloc_env.config import BadInput, check_choice, check_range
 from coloc_env.parts import BACKENDS, NETWORKS, WORLDS, PartConfig
 
 COMPOSITION_OPTIONS = ("reward", "communication_cost", "horizon")
@@ -56,7 +56,7 @@ class Composition:
             check_range("horizon", self.horizon, 1, 1_000_000, integer=True)
         reason = incompatibility(self.world, self.network, self.backend)
         if reason:
-            raise ValueError(reason)
+            raise BadInput(reason)
 
     @property
     def name(self) -> str:
@@ -76,7 +76,7 @@ def compose(world: Any, network: Any, backend: Any, **options) -> Composition:
     """A :class:`Composition` of the three parts; ``options`` are composition-level fields only."""
     unknown = sorted(set(options) - set(COMPOSITION_OPTIONS))
     if unknown:
-        raise ValueError(f"unknown composition option(s) {unknown}; allowed: {list(COMPOSITION_OPTIONS)} "
+        raise BadInput(f"unknown composition option(s) {unknown}; allowed: {list(COMPOSITION_OPTIONS)} "
                          "(a part's own field goes into that part: {'name': ..., field: value})")
     spec = Composition(world=WORLDS.resolve(world), network=NETWORKS.resolve(network),
                        backend=BACKENDS.resolve(backend), **options)

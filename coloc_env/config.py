@@ -17,12 +17,22 @@ import numpy as np
 C = TypeVar("C")
 
 
+class BadInput(ValueError):
+    """A value the user gave is refused by a check: a config field, a part, a seed, a count, a flag, a file.
+
+    Every check of this package raises it (it is a ``ValueError``, so ``except ValueError`` still catches
+    it), and a config's ``validate()`` turns any ``ValueError`` it raises into one
+    (:func:`validate_fields`). The command line exits 2 for it and treats any other exception as an
+    internal error (exit 1 with a request to report it): a ``ValueError`` from numpy or from an
+    estimator's numerics is a bug, not bad input."""
+
+
 def build_config(config_cls: type[C], kwargs: dict[str, Any]) -> C:
     """Instantiate ``config_cls(**kwargs)`` after rejecting unknown keys, then validate it."""
     names = {f.name for f in dataclasses.fields(config_cls)}
     unknown = sorted(set(kwargs) - names)
     if unknown:
-        raise ValueError(
+        raise BadInput(
             f"unknown config key(s) {unknown} for {config_cls.__name__}; allowed keys: {sorted(names)}"
         )
     config = config_cls(**kwargs)
@@ -82,18 +92,23 @@ def field_type_problem(config: Any, prefix: str = "") -> str:
 
 def validate_fields(config: Any, prefix: str = "", validate=None) -> None:
     """``config.validate()`` (or ``validate()``), turning any error that a wrongly typed field caused
-    (a ``TypeError`` in a derived value, numpy's "could not convert") into a ``ValueError`` naming the
-    field. A ``ValueError`` that already names that field is kept as it is (it states the range)."""
+    (a ``TypeError`` in a derived value, numpy's "could not convert") into a :class:`BadInput` naming the
+    field. A ``ValueError`` that already names that field keeps its message (it states the range); any
+    ``ValueError`` of ``validate()`` leaves as a :class:`BadInput`."""
     try:
         (validate or config.validate)()
     except Exception as exc:
         problem = field_type_problem(config, prefix)
         if not problem:
+            if isinstance(exc, ValueError) and not isinstance(exc, BadInput):
+                raise BadInput(str(exc)) from exc  # whatever validate() refuses is the input's fault
             raise
         field = problem.split(" must ", 1)[0]
         if isinstance(exc, ValueError) and field in str(exc):
+            if not isinstance(exc, BadInput):
+                raise BadInput(str(exc)) from exc
             raise
-        raise ValueError(problem) from exc
+        raise BadInput(problem) from exc
 
 
 def as_array(name: str, value: Any, shape: tuple[int, ...] | None = None, ndim: int | None = None,
@@ -108,15 +123,15 @@ def as_array(name: str, value: Any, shape: tuple[int, ...] | None = None, ndim: 
             raise TypeError(f"dtype {raw.dtype}")
         arr = raw.astype(float)
     except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} must be an array of real numbers, got {value!r}") from exc
+        raise BadInput(f"{name} must be an array of real numbers, got {value!r}") from exc
     if shape is not None and arr.shape != tuple(shape):
-        raise ValueError(f"{name} must have shape {tuple(shape)}, got {arr.shape}")
+        raise BadInput(f"{name} must have shape {tuple(shape)}, got {arr.shape}")
     if ndim is not None and arr.ndim != ndim:
-        raise ValueError(f"{name} must be a {ndim}-d array, got shape {arr.shape}")
+        raise BadInput(f"{name} must be a {ndim}-d array, got shape {arr.shape}")
     if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} must be finite, got {value!r}")
+        raise BadInput(f"{name} must be finite, got {value!r}")
     if bound is not None and arr.size and np.abs(arr).max() > bound:
-        raise ValueError(f"{name} entries must be in [-{bound:g}, {bound:g}], got {np.abs(arr).max():g}")
+        raise BadInput(f"{name} entries must be in [-{bound:g}, {bound:g}], got {np.abs(arr).max():g}")
     return arr
 
 
@@ -128,7 +143,7 @@ def check_entries(name: str, arr: np.ndarray, low: float, high: float, low_open:
     bad = below | (arr > high) | ~np.isfinite(arr)
     if np.any(bad):
         interval = f"{'(' if low_open else '['}{low:g}, {high:g}]"
-        raise ValueError(f"{name} entries must be in {interval}, got {arr[bad].reshape(-1)[0]!r} "
+        raise BadInput(f"{name} entries must be in {interval}, got {arr[bad].reshape(-1)[0]!r} "
                          f"at index {tuple(int(i) for i in np.argwhere(bad)[0])}")
 
 
@@ -137,7 +152,7 @@ def check_stable(name: str, matrix: np.ndarray, max_radius: float = 1.001) -> No
     stay finite over 1e5 steps), or ``ValueError`` naming ``name``."""
     radius = float(np.abs(np.linalg.eigvals(matrix)).max())
     if radius > max_radius:
-        raise ValueError(f"{name} must have spectral radius <= {max_radius:g} (the state and covariance stay "
+        raise BadInput(f"{name} must have spectral radius <= {max_radius:g} (the state and covariance stay "
                          f"finite over the horizon), got {radius:.6g}")
 
 
@@ -148,13 +163,13 @@ def check_psd(name: str, value: Any, n: int | None = None, strict: bool = False,
     arr = as_array(name, value, ndim=2, bound=bound)
     if arr.shape[0] != arr.shape[1] or (n is not None and arr.shape[0] != n):
         expected = f"({n}, {n})" if n is not None else "square"
-        raise ValueError(f"{name} must be a {expected} covariance matrix, got shape {arr.shape}")
+        raise BadInput(f"{name} must be a {expected} covariance matrix, got shape {arr.shape}")
     if not np.allclose(arr, arr.T, atol=1e-12, rtol=1e-9):
-        raise ValueError(f"{name} must be symmetric")
+        raise BadInput(f"{name} must be symmetric")
     smallest = np.linalg.eigvalsh(arr).min()
     if smallest < (1e-12 if strict else -1e-12):
         kind = "positive definite" if strict else "positive semi-definite"
-        raise ValueError(f"{name} must be {kind} (smallest eigenvalue {smallest:.3g})")
+        raise BadInput(f"{name} must be {kind} (smallest eigenvalue {smallest:.3g})")
     return arr
 
 
@@ -172,7 +187,7 @@ def check_seed(name: str, seed: Any, copies: int = 1) -> int | None:
         return None
     high = SEED_MAX - copies + 1
     if not is_integer(seed) or not 0 <= int(seed) <= high:
-        raise ValueError(f"{name} must be None or an integer in [0, {high}], got {seed!r}")
+        raise BadInput(f"{name} must be None or an integer in [0, {high}], got {seed!r}")
     return int(seed)
 
 
@@ -206,21 +221,21 @@ def check_range(name: str, value: Any, low: float, high: float, integer: bool = 
     hi = f"{high_label} = {high}" if high_label else f"{high}"
     interval = f"{'(' if low_open else '['}{lo}, {hi}{')' if high_open else ']'}"
     if integer and not is_integer(value):
-        raise ValueError(f"{name} must be an integer in {interval}, got {value!r}")
+        raise BadInput(f"{name} must be an integer in {interval}, got {value!r}")
     if not is_real(value):
-        raise ValueError(f"{name} must be a number in {interval}, got {value!r}")
+        raise BadInput(f"{name} must be a number in {interval}, got {value!r}")
     v = float(value)
     below = v <= low if low_open else v < low
     above = v >= high if high_open else v > high
     if np.isnan(v) or below or above:
-        raise ValueError(f"{name} must be in {interval}, got {value!r}")
+        raise BadInput(f"{name} must be in {interval}, got {value!r}")
 
 
 def check_step_windows(name: str, value: Any, windows: np.ndarray, high: int = 10_000_000) -> None:
     """[start, end) windows of integer steps: ``0 <= start < end <= high``, or ``ValueError`` naming ``name``."""
     kind = np.asarray(value).dtype.kind
     if kind not in "iu" or np.any(windows < 0) or np.any(windows > high) or np.any(windows[..., 1] <= windows[..., 0]):
-        raise ValueError(f"{name} must be [start, end) integer steps with 0 <= start < end <= {high}, got {value!r}")
+        raise BadInput(f"{name} must be [start, end) integer steps with 0 <= start < end <= {high}, got {value!r}")
 
 
 def check_choice(name: str, value: Any, choices: tuple) -> None:
@@ -234,4 +249,4 @@ def check_choice(name: str, value: Any, choices: tuple) -> None:
     except Exception:  # noqa: BLE001 - an array compared with a choice
         ok = False
     if not ok:
-        raise ValueError(f"{name} must be one of {choices}, got {value!r}")
+        raise BadInput(f"{name} must be one of {choices}, got {value!r}")

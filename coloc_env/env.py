@@ -16,7 +16,7 @@ import gymnasium
 import numpy as np
 from pettingzoo import ParallelEnv
 
-from coloc_env.config import build_config, check_range, check_seed
+from coloc_env.config import BadInput, build_config, check_range, check_seed
 from coloc_env.rendering import Renderer
 from coloc_env.scenarios.base import Scenario
 
@@ -44,10 +44,10 @@ def with_max_cycles(scenario_cls: type[Scenario], composition, config: dict, max
         try:
             return composition.replace(horizon=int(max_cycles)), config
         except ValueError as exc:
-            raise ValueError(f"max_cycles sets the composition's horizon: {exc}") from exc
+            raise BadInput(f"max_cycles sets the composition's horizon: {exc}") from exc
     field = episode_length_field(scenario_cls)
     if field in config and config[field] != max_cycles:
-        raise ValueError(f"max_cycles={max_cycles!r} and {field}={config[field]!r} both set the episode length "
+        raise BadInput(f"max_cycles={max_cycles!r} and {field}={config[field]!r} both set the episode length "
                          f"of {scenario_cls.name}; give one of them")
     return composition, {**config, field: int(max_cycles)}
 
@@ -57,15 +57,26 @@ def build_scenario(scenario_cls: type[Scenario], batch: int, composition=None, m
     """``scenario_cls`` over ``batch`` copies from its flat config or a composition (and ``max_cycles``)."""
     composition, config = with_max_cycles(scenario_cls, composition, config, max_cycles)
     if composition is not None:  # a composition's scenario validates its own config
-        return scenario_cls(composition, batch=batch)
+        return _built(scenario_cls, composition, batch)
     field = episode_length_field(scenario_cls)
     try:
         built = build_config(scenario_cls.Config, config)
     except ValueError as exc:
         if max_cycles is not None and str(exc).startswith(field):
-            raise ValueError(f"max_cycles sets {field} of {scenario_cls.name}: {exc}") from exc
+            raise BadInput(f"max_cycles sets {field} of {scenario_cls.name}: {exc}") from exc
         raise
-    return scenario_cls(built, batch=batch)
+    return _built(scenario_cls, built, batch)
+
+
+def _built(scenario_cls: type[Scenario], config, batch: int) -> Scenario:
+    """``scenario_cls(config, batch)``; a ``ValueError`` while building (a part's build-time check: a range
+    that depends on another part, a data file) is the config's fault: a :class:`BadInput`."""
+    try:
+        return scenario_cls(config, batch=batch)
+    except BadInput:
+        raise
+    except ValueError as exc:
+        raise BadInput(str(exc)) from exc
 
 
 class MaskableMultiDiscrete(gymnasium.spaces.MultiDiscrete):

@@ -21,7 +21,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from coloc_env.config import check_choice, check_range, validate_fields
+from coloc_env.config import BadInput, check_choice, check_range, validate_fields
 
 
 @dataclass(frozen=True)
@@ -74,7 +74,7 @@ def make_config(cls: type, fields: dict[str, Any], kind: str) -> PartConfig:
     allowed = {f.name for f in dataclasses.fields(cls)}
     unknown = sorted(set(fields) - allowed)
     if unknown:
-        raise ValueError(f"unknown {kind} field(s) {unknown} for {kind} {cls.name!r}; allowed: {sorted(allowed)}")
+        raise BadInput(f"unknown {kind} field(s) {unknown} for {kind} {cls.name!r}; allowed: {sorted(allowed)}")
     config = cls(**fields)
     config.validate()
     return config
@@ -101,17 +101,17 @@ class Registry(dict):
         if isinstance(part, dict):
             fields = dict(part)
             if "name" not in fields:
-                raise ValueError(f"a {self.kind} given as a dict needs a 'name' key, one of {sorted(self)}")
+                raise BadInput(f"a {self.kind} given as a dict needs a 'name' key, one of {sorted(self)}")
             return make_config(self._class(fields.pop("name")), fields, self.kind)
         if isinstance(part, PartConfig) and getattr(part, "kind", None) == self.kind:
             part.validate()
             return part
-        raise ValueError(f"{self.kind} must be a name (one of {sorted(self)}), a {self.kind} config or a dict, "
+        raise BadInput(f"{self.kind} must be a name (one of {sorted(self)}), a {self.kind} config or a dict, "
                          f"got {part!r}")
 
     def _class(self, name: Any) -> type:
         if not isinstance(name, str) or name not in self:
-            raise ValueError(f"unknown {self.kind} {name!r}; available: {sorted(self)}")
+            raise BadInput(f"unknown {self.kind} {name!r}; available: {sorted(self)}")
         return self[name]
 
 
@@ -122,7 +122,7 @@ BACKENDS = Registry("backend")
 
 def check_flag(name: str, value: Any) -> None:
     if not isinstance(value, (bool, np.bool_)):
-        raise ValueError(f"{name} must be True or False, got {value!r}")
+        raise BadInput(f"{name} must be True or False, got {value!r}")
 
 
 __all__ = ["BACKENDS", "NETWORKS", "WORLDS", "Block", "PartConfig", "Registry", "check_choice", "check_flag",

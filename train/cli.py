@@ -20,29 +20,63 @@ COMMUNICATION_UNITS = {"bandwidth_fusion": "components received", "lossy_fusion"
                        "nlos_horizon": "packets", "relay_ukf": "relays", "gps_denied_nbp": "broadcasts",
                        "mrclam_relay": "messages delivered"}
 INTERRUPTED = 130  # the shell's exit status of a process ended by SIGINT (128 + 2)
+INTERNAL_ERROR = 1  # a failure that is not the input's: a one-line report and a request to report it
+BAD_INPUT = 2  # argparse's status for a bad flag; the same for every refused input
+
+# The ranges of the counts and seeds the flags take (each flag's help states its own).
+MAX_RUNS = 100_000  # --runs, --episodes
+MAX_TIMESTEPS = 10**10  # --timesteps
+MAX_SEED = 10**9  # --seed, and each seed of --seeds
+MAX_SEEDS = 1_000  # seeds in one --seeds A..B
+MAX_CURVE_POINTS = 1_000
+MAX_HORIZON = 1_000_000
+
+
+def _integer(text: str) -> int | None:
+    """``text`` as an integer (decimal digits, an optional sign), None for anything else (1.5, 1e3, abc)."""
+    text = text.strip()
+    body = text[1:] if text[:1] in "+-" else text
+    return int(text) if body.isdigit() and len(body) <= 40 else None
+
+
+def _count(low: int, high: int):
+    """An argparse type: an integer in [low, high], refused in one line naming the range."""
+    def parse(text: str) -> int:
+        value = _integer(text)
+        if value is None or not low <= value <= high:
+            raise argparse.ArgumentTypeError(f"must be an integer in [{low}, {high}], got {text!r}")
+        return value
+    parse.__name__ = f"integer in [{low}, {high}]"
+    return parse
+
+
+_positive = _count(1, MAX_RUNS)
+_seed = _count(0, MAX_SEED)
+
+
+def _out_folder(text: str) -> str:
+    """An argparse type: a non-empty path (an empty --out would write into the current folder)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError(f"must be a non-empty folder path, got {text!r}")
+    return text
 
 
 def _seed_range(text: str) -> list[int]:
-    """``A..B`` (both included) or one seed ``S``; any other form is refused naming the ``A..B`` form."""
+    """``A..B`` (both included) or one seed ``S``, each in [0, MAX_SEED] and at most MAX_SEEDS of them; any other
+    form is refused naming the ``A..B`` form."""
     start, dots, stop = text.partition("..")
-    try:
-        seeds = list(range(int(start), int(stop) + 1)) if dots else [int(text)]
-    except ValueError:
+    bounds = [_integer(start), _integer(stop)] if dots else [_integer(text)] * 2
+    if None in bounds:
         raise argparse.ArgumentTypeError(f"expected A..B (e.g. 0..2, both included) or one integer S, "
-                                         f"got {text!r}") from None
-    if not seeds:
+                                         f"got {text!r}")
+    first, last = bounds
+    if first > last:
         raise argparse.ArgumentTypeError(f"A..B needs A <= B, got {text!r}")
-    return seeds
-
-
-def _positive(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text!r}")
-    return value
+    if first < 0 or last > MAX_SEED:
+        raise argparse.ArgumentTypeError(f"seeds must be in [0, {MAX_SEED}], got {text!r}")
+    if last - first + 1 > MAX_SEEDS:
+        raise argparse.ArgumentTypeError(f"at most {MAX_SEEDS} seeds in one A..B, got {last - first + 1} ({text!r})")
+    return list(range(first, last + 1))
 
 
 class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter):
@@ -96,9 +130,10 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument("paper", choices=[*PAPERS, "all", "mrclam"],
                      help="a paper, all of them, or mrclam (real UTIAS MRCLAM data; needs --data, not part of all)")
     rep.add_argument("--runs", type=_positive, default=None,
-                     help="Monte Carlo runs (default: the paper module's RUNS, or QUICK_RUNS with --quick)")
-    rep.add_argument("--seed", type=int, default=0, help="seed of the first Monte Carlo run")
-    rep.add_argument("--out", default="results", help="writes OUT/PAPER/")
+                     help=f"Monte Carlo runs, 1..{MAX_RUNS} (default: the paper module's RUNS, or QUICK_RUNS with "
+                          "--quick)")
+    rep.add_argument("--seed", type=_seed, default=0, help=f"seed of the first Monte Carlo run, 0..{MAX_SEED}")
+    rep.add_argument("--out", type=_out_folder, default="results", help="writes OUT/PAPER/")
     rep.add_argument("--quick", action="store_true", help="fewer Monte Carlo runs")
     rep.add_argument("--executor", choices=["local", "ray"], default="local", help="where the runs execute")
     rep.add_argument("--address", default=None, help="Ray cluster address (default: a local Ray)")
@@ -108,20 +143,22 @@ def build_parser() -> argparse.ArgumentParser:
     tr = sub.add_parser("train", help="train a shared PPO policy with stable-baselines3",
                         formatter_class=_HelpFormatter)
     tr.add_argument("scenario", help=scenarios)
-    tr.add_argument("--timesteps", type=_positive, default=None,
-                    help="PPO timesteps (agent transitions) (default: the scenario's TIMESTEPS in "
+    tr.add_argument("--timesteps", type=_count(1, MAX_TIMESTEPS), default=None,
+                    help=f"PPO timesteps (agent transitions), 1..{MAX_TIMESTEPS} (default: the scenario's TIMESTEPS in "
                          "train/hyperparams/<scenario>.py, 200000 where it sets none)")
     group = tr.add_mutually_exclusive_group()
-    group.add_argument("--seed", type=int, default=None, help="one training seed S (default: 0)")
+    group.add_argument("--seed", type=_seed, default=None, help="one training seed S (default: 0)")
     group.add_argument("--seeds", type=_seed_range, default=None, metavar="A..B",
-                       help="training seeds A to B, both included (e.g. 0..2: seeds 0, 1 and 2)")
+                       help=f"training seeds A to B, both included (e.g. 0..2: seeds 0, 1 and 2; at most "
+                            f"{MAX_SEEDS})")
     tr.add_argument("--vec", choices=["native", "supersuit"], default="native",
                     help="native: coloc_env.vector_env (one batched numpy call); supersuit: SuperSuit's concat")
-    tr.add_argument("--out", default="results/train", help="writes OUT/SCENARIO/seedS/")
+    tr.add_argument("--out", type=_out_folder, default="results/train", help="writes OUT/SCENARIO/seedS/")
     tr.add_argument("--executor", choices=["local", "ray"], default="local", help="where the seeds train")
     tr.add_argument("--address", default=None, help="Ray cluster address (default: a local Ray)")
     tr.add_argument("--tensorboard", action="store_true", help="also write TensorBoard logs (OUT/.../tb)")
-    tr.add_argument("--curve-points", type=int, default=10, help="validation points of the learning curve (0: none)")
+    tr.add_argument("--curve-points", type=_count(0, MAX_CURVE_POINTS), default=10,
+                    help=f"validation points of the learning curve, 0..{MAX_CURVE_POINTS} (0: none)")
 
     ev = sub.add_parser("evaluate", help="evaluate a policy over seeded episodes", formatter_class=_HelpFormatter,
                         epilog=_policies_epilog())
@@ -130,19 +167,21 @@ def build_parser() -> argparse.ArgumentParser:
                     help="a policy name of the scenario (listed below), PATH.zip, or all (every realizable policy, "
                          "the bounds, the reference filters and the trained models under --models)")
     ev.add_argument("--models", default="results/train", help="where --policy all looks for SCENARIO/seed*/model.zip")
-    ev.add_argument("--episodes", type=_positive, default=100, help="seeded evaluation episodes per policy")
+    ev.add_argument("--episodes", type=_count(2, MAX_RUNS), default=100,
+                    help=f"seeded evaluation episodes per policy, 2..{MAX_RUNS} (a confidence interval needs 2)")
     ev.add_argument("--stochastic", action="store_true",
                     help="trained models sample their actions (seeded) instead of taking the most likely")
-    ev.add_argument("--out", default="results", help="records into OUT/PAPER/leaderboard.json and OUT/leaderboard.md")
+    ev.add_argument("--out", type=_out_folder, default="results",
+                    help="records into OUT/PAPER/leaderboard.json and OUT/leaderboard.md")
 
     be = sub.add_parser("bench", help="throughput of estimators and envs", formatter_class=_HelpFormatter)
     be.add_argument("--quick", action="store_true", help="shorter timing windows (noisier rates)")
-    be.add_argument("--out", default="results", help="writes OUT/bench/")
+    be.add_argument("--out", type=_out_folder, default="results", help="writes OUT/bench/")
     be.add_argument("--scenarios", nargs="+", default=None, help=f"only these scenarios (default: all); {scenarios}")
     be.add_argument("--against", metavar="REF", default=None,
                     help="also measure git commit REF (e.g. HEAD~3, a tag) side by side in the same run and print "
                          "both rates and the ratio current / REF (OUT/bench/against.json)")
-    be.add_argument("--rounds", type=_positive, default=None,
+    be.add_argument("--rounds", type=_count(1, 20), default=None,
                     help="with --against: alternating rounds per scenario, each row keeping its best rate (default "
                          "2; more on a machine whose speed wanders)")
     be.add_argument("--scaling", action="store_true",
@@ -201,9 +240,10 @@ def _add_study_parser(sub) -> None:
     st.add_argument("--policy", choices=["always", "silent", "random", "paper"], default="always",
                     help="always: every transport decision at its maximum; silent: nothing sent; random: "
                          "uniform, seeded S + e; paper: where the composition has one")
-    st.add_argument("--episodes", type=_positive, default=30, help="episodes per (backend, value), >= 2")
-    st.add_argument("--seed", type=int, default=0, help="S: episode e is seeded S + e")
-    st.add_argument("--horizon", type=_positive, default=None,
+    st.add_argument("--episodes", type=_count(2, MAX_RUNS), default=30,
+                    help=f"episodes per (backend, value), 2..{MAX_RUNS}")
+    st.add_argument("--seed", type=_seed, default=0, help=f"S: episode e is seeded S + e, 0..{MAX_SEED}")
+    st.add_argument("--horizon", type=_count(1, MAX_HORIZON), default=None,
                     help="steps per episode (compose(horizon=...); default: the world's)")
     st.add_argument("--batched", action="store_true",
                     help="run each cell's episodes as one batched core (always/silent/random only): faster, "
@@ -211,7 +251,7 @@ def _add_study_parser(sub) -> None:
     st.add_argument("--executor", choices=["local", "ray"], default="local",
                     help="ray: each (backend, value) cell is one Ray task, with the same numbers as local")
     st.add_argument("--address", default=None, help="Ray cluster address (default: a local Ray)")
-    st.add_argument("--out", default="results", help="writes OUT/study/NAME/")
+    st.add_argument("--out", type=_out_folder, default="results", help="writes OUT/study/NAME/")
     st.add_argument("--name", default=None,
                     help="NAME (default: WORLD_NETWORK, plus _PART.FIELD with a sweep, e.g. "
                          "circles_relay_network.loss_at_zero)")
@@ -260,13 +300,25 @@ def cmd_reproduce(args) -> int:
     return 0
 
 
-def cmd_train(args) -> int:
+def _check_scenario(name: str) -> None:
+    """``name`` is a preset or a composition's name, else a :class:`~coloc_env.config.BadInput` (exit 2)."""
     import coloc_env
+    from coloc_env.config import BadInput
+
+    try:
+        coloc_env.scenario_class(name)
+    except BadInput:
+        raise
+    except ValueError as exc:
+        raise BadInput(str(exc)) from exc
+
+
+def cmd_train(args) -> int:
     from train.executor import map_tasks
     from train.io import check_output_folder
     from train.training import train
 
-    coloc_env.scenario_class(args.scenario)
+    _check_scenario(args.scenario)
     seeds = args.seeds or [0 if args.seed is None else args.seed]
     folders = [os.path.join(args.out, args.scenario, f"seed{s}") for s in seeds]
     for folder in folders:
@@ -324,7 +376,6 @@ def _evaluation_line(scenario: str, policy: str, result: dict, episodes: int, pa
 def cmd_evaluate(args) -> int:
     from rich.progress import Progress
 
-    import coloc_env
     from train.evaluate import evaluate_policy
     from train.io import check_output_folder
     from train.leaderboard import record
@@ -333,7 +384,7 @@ def cmd_evaluate(args) -> int:
     check_output_folder(args.out)
     scenarios = _runnable_scenarios(console) if args.scenario == "all" else [args.scenario]
     for scenario in scenarios:
-        coloc_env.scenario_class(scenario)
+        _check_scenario(scenario)
         check_output_folder(os.path.join(args.out, _result_key(scenario)))
         for policy in _policies_for(scenario, args.policy, args.models):
             with Progress(console=console, transient=True) as bar:
@@ -346,32 +397,51 @@ def cmd_evaluate(args) -> int:
     return 0
 
 
+def _check_commit(ref: str) -> str:
+    """The commit ``ref`` names in this repository, else a one-line :class:`~coloc_env.config.BadInput`."""
+    import subprocess
+
+    from coloc_env.config import BadInput
+    from train.bench import repository_root
+
+    try:
+        root = repository_root()
+    except Exception as exc:  # noqa: BLE001 - not in a git clone: say so in one line
+        raise BadInput(f"--against {ref!r} needs a git clone of coloc: {exc}") from exc
+    done = subprocess.run(["git", "-C", root, "rev-parse", "--verify", "--quiet", f"{ref}^{{commit}}"],
+                          capture_output=True, text=True)
+    if done.returncode != 0 or not done.stdout.strip():
+        raise BadInput(f"--against {ref!r}: no such commit in {root} (a commit, tag or branch git knows)")
+    return done.stdout.strip()
+
+
 def cmd_bench(args) -> int:
     import coloc_env
+    from coloc_env.config import BadInput
     from train.bench import run, run_against
     from train.io import check_output_folder
 
     check_output_folder(os.path.join(args.out, "bench"))
     for name in args.scenarios or []:
         if coloc_env.is_composition_name(name):  # its rows replay the paper policy's actions and raw backend step
-            raise ValueError(f"coloc bench measures the presets ({', '.join(coloc_env.SCENARIOS)}), not a "
-                             f"composition such as {name!r}")
-        coloc_env.scenario_class(name)
+            raise BadInput(f"coloc bench measures the presets ({', '.join(coloc_env.SCENARIOS)}), not a "
+                           f"composition such as {name!r}")
+        _check_scenario(name)
     if args.rounds is not None and not args.against:
-        raise ValueError(f"--rounds {args.rounds} needs --against REF (the rounds alternate the two trees)")
-    if args.rounds is not None and args.rounds > 20:
-        raise ValueError(f"--rounds must be in 1..20, got {args.rounds}")
+        raise BadInput(f"--rounds {args.rounds} needs --against REF (the rounds alternate the two trees)")
     if args.cap is not None and not args.scaling:
-        raise ValueError(f"--cap {args.cap} needs --scaling (it caps each row of the scaling table)")
+        raise BadInput(f"--cap {args.cap} needs --scaling (it caps each row of the scaling table)")
+    if args.against:
+        _check_commit(args.against)
     if args.scaling:
         from train.bench import run_scaling
 
         if args.scenarios:
-            raise ValueError("--scenarios does not apply to --scaling (its rows are the backends on gps_denied)")
+            raise BadInput("--scenarios does not apply to --scaling (its rows are the backends on gps_denied)")
         if args.rounds is not None:
-            raise ValueError("--rounds does not apply to --scaling (each row is measured once per tree)")
+            raise BadInput("--rounds does not apply to --scaling (each row is measured once per tree)")
         if args.cap is not None and not 1.0 <= args.cap <= 86400.0:
-            raise ValueError(f"--cap must be in [1, 86400] seconds, got {args.cap}")
+            raise BadInput(f"--cap must be in [1, 86400] seconds, got {args.cap}")
         with _open(args, os.path.join(args.out, "bench")):
             run_scaling(args.out, quick=args.quick, against=args.against, cap=args.cap)
         return 0
@@ -468,27 +538,102 @@ def _wide_output_when_not_a_terminal():
             os.environ.pop("COLUMNS", None)
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Run one command. Bad input (a ValueError, e.g. an unusable ``--out``): one line on stderr, exit 2, checked
-    before any computing. Ctrl-C: one line naming the folders left marked ``INCOMPLETE``, exit 130."""
-    argv = sys.argv[1:] if argv is None else list(argv)
-    args = build_parser().parse_args(argv)
-    args.argv, args.open_folders = argv, []
-    handlers = {"reproduce": cmd_reproduce, "train": cmd_train, "evaluate": cmd_evaluate, "bench": cmd_bench,
-                "study": cmd_study, "list": cmd_list}
-    try:
-        with _wide_output_when_not_a_terminal():
-            return handlers[args.command](args)
-    except ValueError as exc:
-        print(f"coloc {args.command}: error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        from train.io import INCOMPLETE
+# Where a plain ValueError (not a BadInput) still means bad input: raised by the command line's own layer, the
+# policy loader or a data loader, each of which checks what the user named (a flag, a policy, a model or
+# data file). Anywhere else (numpy, an estimator, a backend's step) it is an internal error.
+INPUT_LAYERS = ("train", "agents", os.path.join("coloc_env", "data"))
+PACKAGE_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
-        marked = [f for f in args.open_folders if os.path.exists(os.path.join(f, INCOMPLETE))]
-        where = f"; {', '.join(marked)} marked {INCOMPLETE}" if marked else "; nothing was left half written"
-        print(f"coloc {args.command}: interrupted{where}", file=sys.stderr)
-        return INTERRUPTED
+
+def is_bad_input(exc: BaseException) -> bool:
+    """A refusal of the user's input (exit 2), as opposed to an internal error (exit 1): a
+    :class:`~coloc_env.config.BadInput` (every check raises one), or a ``ValueError`` raised by code of
+    :data:`INPUT_LAYERS` itself (its innermost frame)."""
+    from coloc_env.config import BadInput
+
+    if isinstance(exc, BadInput):
+        return True
+    if type(exc) is not ValueError or exc.__traceback__ is None:
+        return False
+    tb = exc.__traceback__
+    while tb.tb_next is not None:
+        tb = tb.tb_next
+    path = os.path.abspath(tb.tb_frame.f_code.co_filename)
+    relative = os.path.relpath(path, PACKAGE_ROOT)
+    return not relative.startswith("..") and relative.startswith(tuple(layer + os.sep for layer in INPUT_LAYERS))
+
+
+def _internal_error(command: str, exc: BaseException) -> str:
+    """One line for an internal error: what failed and where, and that it is worth a report (no traceback;
+    ``COLOC_TRACEBACK=1`` prints it)."""
+    tb = exc.__traceback__
+    where = ""
+    while tb is not None:
+        where = f" at {os.path.relpath(tb.tb_frame.f_code.co_filename, PACKAGE_ROOT)}:{tb.tb_lineno}"
+        tb = tb.tb_next
+    message = " ".join(str(exc).split()) or "(no message)"
+    return (f"coloc {command}: internal error: {type(exc).__name__}: {message}{where}. This is a bug in coloc, "
+            "not in your input: please report it with the command line (COLOC_TRACEBACK=1 shows the traceback)")
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run one command and return its exit status.
+
+    | status | when                                                                                   |
+    |--------|----------------------------------------------------------------------------------------|
+    | 0      | done                                                                                   |
+    | 1      | an internal error (:func:`is_bad_input` is False): one line naming it, no traceback    |
+    | 2      | bad input (a flag, a config value, a policy, a file; :func:`is_bad_input`): one line,   |
+    |        | checked before any computing                                                           |
+    | 130    | Ctrl-C: one line naming the folders left marked ``INCOMPLETE``                         |
+
+    Called as the ``coloc`` script (``argv`` None), a second Ctrl-C after the message is ignored, so the
+    process always ends with its line and its status.
+    """
+    as_script = argv is None
+    argv = sys.argv[1:] if argv is None else list(argv)
+    command = next((a for a in argv if not a.startswith("-")), "")
+    try:
+        args = build_parser().parse_args(argv)
+        args.argv, args.open_folders = argv, []
+        command = args.command
+        handlers = {"reproduce": cmd_reproduce, "train": cmd_train, "evaluate": cmd_evaluate, "bench": cmd_bench,
+                    "study": cmd_study, "list": cmd_list}
+        try:
+            with _wide_output_when_not_a_terminal():
+                return handlers[args.command](args)
+        except Exception as exc:  # noqa: BLE001 - every failure ends in one line and a status
+            if os.environ.get("COLOC_TRACEBACK"):
+                import traceback
+
+                traceback.print_exception(exc, file=sys.stderr)
+            if is_bad_input(exc):
+                print(f"coloc {args.command}: error: {' '.join(str(exc).split())}", file=sys.stderr)
+                return BAD_INPUT
+            print(_internal_error(args.command, exc), file=sys.stderr)
+            return INTERNAL_ERROR
+    except KeyboardInterrupt:
+        return _interrupted(command, locals().get("args"), as_script)
+    finally:
+        if as_script:  # the status is decided: a Ctrl-C from here to the exit would end it without a line
+            import signal
+
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _interrupted(command: str, args, as_script: bool) -> int:
+    """The line of an interrupt (the folders left marked) and status 130; a script ignores a further Ctrl-C."""
+    import signal
+
+    if as_script:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    from train.io import INCOMPLETE
+
+    folders = getattr(args, "open_folders", [])
+    marked = [f for f in folders if os.path.exists(os.path.join(f, INCOMPLETE))]
+    where = f"; {', '.join(marked)} marked {INCOMPLETE}" if marked else "; nothing was left half written"
+    print(f"coloc {command or 'command'}: interrupted{where}", file=sys.stderr)
+    return INTERRUPTED
 
 
 if __name__ == "__main__":

@@ -18,6 +18,8 @@ from typing import Any
 
 import numpy as np
 
+from coloc_env.config import BadInput
+
 
 def _atomic(path: str, write) -> None:
     directory = os.path.dirname(os.path.abspath(path))
@@ -110,20 +112,20 @@ def check_output_folder(folder: str | os.PathLike) -> str:
     read-only mounts, ``/proc``). Returns the path as text; ValueError naming it otherwise.
     """
     if not isinstance(folder, (str, os.PathLike)) or not os.fspath(folder):
-        raise ValueError(f"output folder must be a non-empty path, got {folder!r}")
+        raise BadInput(f"output folder must be a non-empty path, got {folder!r}")
     folder = os.fspath(folder)
     existing = _nearest_existing(folder)
     if not os.path.isdir(existing):
         if existing == os.path.abspath(folder):
-            raise ValueError(f"output folder {folder!r} is an existing file, not a folder")
-        raise ValueError(f"output folder {folder!r} cannot be created: {existing!r} is a file, not a folder")
+            raise BadInput(f"output folder {folder!r} is an existing file, not a folder")
+        raise BadInput(f"output folder {folder!r} cannot be created: {existing!r} is a file, not a folder")
     try:
         fd, probe = tempfile.mkstemp(dir=existing, prefix=".probe-")
         os.close(fd)
         os.unlink(probe)
     except OSError as exc:
         where = "" if existing == os.path.abspath(folder) else f" (nothing can be created in {existing!r})"
-        raise ValueError(f"output folder {folder!r} is not writable{where}: {exc.strerror or exc}") from exc
+        raise BadInput(f"output folder {folder!r} is not writable{where}: {exc.strerror or exc}") from exc
     return folder
 
 
