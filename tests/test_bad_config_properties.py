@@ -6,11 +6,14 @@ draws a field and a value of the field's kind:
 
 * *always bad* (NaN, strings incl. numeric strings, booleans, None, complex, wrong shapes, a wrong
   choice): a ``ValueError`` whose message names the field;
+* *one entry* of an array field set to NaN, ±inf or ±1e308 (the others kept): a ``ValueError`` naming
+  the field, or (±1e308 where the documented interval of the entries allows it) a finite short episode;
 * *maybe bad* (±inf, ±1e308, tiny positives, 0, negatives, 1e16, scaled arrays, zero matrices):
   either that ``ValueError``, or the value is inside the documented range and a short seeded
   episode gives finite observations and rewards (nothing else may be raised).
 
-The default profile draws a few examples per target (the whole module runs in seconds); set
+The default profile draws a few examples per target, derandomized (the same examples on every run, so
+``make test`` is deterministic; the whole module runs in seconds); set
 ``HYPOTHESIS_PROFILE=slow`` for many more. ``python -m tests.test_bad_config_properties`` runs the
 fixed lists exhaustively and prints the number of cases tried and defects found.
 """
@@ -32,7 +35,7 @@ import coloc_env
 from coloc_env.parts import BACKENDS, NETWORKS, WORLDS
 from tests.conftest import MRCLAM_DATASET6
 
-settings.register_profile("default_bad_input", max_examples=12, deadline=None,
+settings.register_profile("default_bad_input", max_examples=12, deadline=None, derandomize=True,
                           suppress_health_check=list(HealthCheck))
 settings.register_profile("slow", max_examples=400, deadline=None, suppress_health_check=list(HealthCheck))
 PROFILE = "slow" if os.environ.get("HYPOTHESIS_PROFILE") == "slow" else "default_bad_input"
@@ -233,6 +236,29 @@ def targets() -> list[tuple[str, str]]:
     return [("preset", n) for n in presets()] + parts()
 
 
+def entry_cases(default) -> st.SearchStrategy | None:
+    """(one entry of ``default`` set to a hostile value, must_refuse): NaN and ±inf must be refused; ±1e308
+    may be allowed by a field's interval (then the episode must stay finite)."""
+    if default is None:
+        return None
+    try:
+        arr = np.asarray(default, dtype=float)
+    except (TypeError, ValueError):
+        return None
+    if arr.ndim == 0 or arr.size == 0:
+        return None
+
+    def put(index_value):
+        index, (value, must) = index_value
+        out = arr.copy().reshape(-1)
+        out[index % out.size] = value
+        return out.reshape(arr.shape), must
+
+    hostile = st.sampled_from([(math.nan, True), (math.inf, True), (-math.inf, True), (1e308, False),
+                               (-1e308, False)])
+    return st.tuples(st.integers(0, arr.size - 1), hostile).map(put)
+
+
 def case_strategy(target, slow: bool):
     """(field, value, must_refuse) for one target."""
     fields = fields_of(config_class(target))
@@ -243,6 +269,9 @@ def case_strategy(target, slow: bool):
         bad = always_bad(kind, optional, default)
         maybe = maybe_bad(kind, optional, default)
         strategies = [st.tuples(st.just(name), st.sampled_from(bad), st.just(True))]
+        entries = entry_cases(default) if kind == "array" else None
+        if entries is not None:
+            strategies.append(entries.map(lambda case, name=name: (name, *case)))
         if maybe:
             strategies.append(st.tuples(st.just(name), st.sampled_from(maybe), st.just(False)))
         if slow and kind == "float":
@@ -375,6 +404,18 @@ def count_all() -> tuple[int, list[str]]:
                     defect = classify(target, name, value, must)
                     if defect:
                         defects.append(" ".join(f"{'/'.join(target)}.{name}={value!r}: {defect}".split())[:300])
+            if kind == "array" and entry_cases(default) is not None:
+                arr = np.asarray(default, dtype=float)
+                for index in range(arr.size):
+                    for hostile, must in ((math.nan, True), (math.inf, True), (1e308, False), (-1e308, False)):
+                        value = arr.copy().reshape(-1)
+                        value[index] = hostile
+                        value = value.reshape(arr.shape)
+                        tried += 1
+                        defect = classify(target, name, value, must)
+                        if defect:
+                            defects.append(" ".join(f"{'/'.join(target)}.{name}[{index}]={hostile!r}: "
+                                                    f"{defect}".split())[:300])
     return tried, defects
 
 

@@ -36,7 +36,7 @@ def _integer(text: str) -> int | None:
     """``text`` as an integer (decimal digits, an optional sign), None for anything else (1.5, 1e3, abc)."""
     text = text.strip()
     body = text[1:] if text[:1] in "+-" else text
-    return int(text) if body.isdigit() and len(body) <= 40 else None
+    return int(text) if body.isascii() and body.isdigit() and len(body) <= 40 else None
 
 
 def _count(low: int, high: int):
