@@ -5,7 +5,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-$(shell cat pyproject.toml | cksum | cut -d' ' -f1)
 
-.PHONY: demo test install clean test-clients rllib-example docs
+.PHONY: demo test install clean test-clients rllib-example docs stress
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -48,6 +48,15 @@ test: $(STAMP)
 # end-of-life notice (printed on every build; it says nothing about this site).
 docs: $(STAMP)
 	NO_MKDOCS_2_WARNING=1 $(PY) -m mkdocs build --strict --quiet
+
+# Numerical health at every documented extreme (tests/test_covariance_health.py): each numeric field of each preset
+# and part at its documented minimum and maximum, one at a time, plus all noise fields at their maximum together,
+# 1000 steps each (or the episode) from seeds 0 and 1 with random actions. `make test` runs the same cases with
+# 50 steps; STRESS_STEPS sets another length.
+STRESS_STEPS ?= 1000
+stress: $(STAMP)
+	COLOC_STRESS=1 COLOC_STRESS_STEPS=$(STRESS_STEPS) MPLBACKEND=Agg $(PY) -m pytest -q -n 2 tests/test_covariance_health.py \
+		-k extreme --durations=20
 
 # The client checks alone (they are part of `make test` too): PettingZoo's module convention, TorchRL's
 # check_env_specs on every preset and some compositions, and the SB3 / TorchRL examples of docs/clients.
