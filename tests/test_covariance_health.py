@@ -237,10 +237,6 @@ KNOWN_DEFECTS = {
     "preset/nlos_horizon:noise=max": "AFGE's buffer_estimates divides by zero with every noise at its maximum",
     "preset/nlos_horizon:sigma_db=max": "AFGE's buffer_estimates divides by zero (1000 steps: make stress)",
     "preset/nlos_horizon:nlos_sigma_db=max": "AFGE's buffer_estimates divides by zero (1000 steps: make stress)",
-    "world/drift:num_agents=max": "the kalman backend's batched reset (B > 1) mixes the copy and agent axes",
-    "world/drift:formation_radius=min": "the kalman backend's batched reset (B > 1) mixes the copy and agent axes",
-    "world/drift:formation_radius=max": "the kalman backend's batched reset (B > 1) mixes the copy and agent axes",
-    "world/target_cv:num_agents=max": "the kalman backend's batched reset (B > 1) mixes the copy and agent axes",
 }
 
 

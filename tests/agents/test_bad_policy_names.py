@@ -3,21 +3,20 @@ an AttributeError or int()'s message)."""
 
 from __future__ import annotations
 
+import os
+
 import pytest
 
 import agents
 import coloc_env
+from tests.conftest import MRCLAM_DATASET6, MRCLAM_SKIP_REASON
 
 
 @pytest.mark.parametrize("scenario", ["relay_ukf", "gps_denied_nbp", "lossy_fusion", "mrclam_relay"])
 def test_a_variant_of_a_policy_that_takes_none_is_refused(scenario):
     if scenario == "mrclam_relay":
-        pytest.importorskip("tests.conftest")
-        import os
-
-        from tests.conftest import MRCLAM_DATASET6
         if not os.path.isdir(MRCLAM_DATASET6):
-            pytest.skip("no MRCLAM data")
+            pytest.skip(MRCLAM_SKIP_REASON)
         env = coloc_env.parallel_env(scenario, data=MRCLAM_DATASET6)
     else:
         env = coloc_env.parallel_env(scenario)
