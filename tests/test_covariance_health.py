@@ -231,15 +231,6 @@ def _stress_venv(target, fields: dict, companions: dict | None = None):
     return coloc_env.vector_env(coloc_env.compose(**specs), num_envs=2, seed=0)
 
 
-# Extremes that fail today, each with the defect in words (xfail, not strict: a fix makes them pass).
-KNOWN_DEFECTS = {
-    "preset/nlos_horizon:period=max": "AFGE's posterior position covariance goes indefinite (step ~14)",
-    "preset/nlos_horizon:noise=max": "AFGE's buffer_estimates divides by zero with every noise at its maximum",
-    "preset/nlos_horizon:sigma_db=max": "AFGE's buffer_estimates divides by zero (1000 steps: make stress)",
-    "preset/nlos_horizon:nlos_sigma_db=max": "AFGE's buffer_estimates divides by zero (1000 steps: make stress)",
-}
-
-
 def _stress_cases():
     cases = []
     for target in _stress_targets():
@@ -248,8 +239,6 @@ def _stress_cases():
             case_id = f"{'/'.join(target)}:{label}"
             marks = [] if STRESS or (field, end) not in COSTLY else [pytest.mark.skip(
                 reason=f"{field} at its {end}: `make stress` only (COLOC_STRESS=1)")]
-            if case_id in KNOWN_DEFECTS:
-                marks.append(pytest.mark.xfail(reason=KNOWN_DEFECTS[case_id], strict=False))
             cases.append(pytest.param(target, field, value, end, id=case_id, marks=marks))
     return cases
 
