@@ -136,6 +136,8 @@ COMPANIONS = {
     ("nlos_horizon", "num_neighbours", "min"): {"n_strongest": 1, "min_packets": 1},
     ("nlos_horizon", "p_nlos", "max"): {"p10": 0.0},
     ("nlos_horizon", "buffer_length", "min"): {"delay_probs": (0.9,)},
+    ("nlos_horizon", "buffer_length", "max"): {"delay_probs": (0.9,) + (0.0,) * 998 + (0.1,), "window_min": 1000,
+                                               "window_max": 1000, "group_size": 1, "window_centre": 1000},
     ("nlos_horizon", "window_min", "min"): {"buffer_length": 1, "delay_probs": (0.7, 0.2)},
     ("nlos_horizon", "window_min", "max"): {"group_size": 1, "window_centre": 30},
     ("nlos_horizon", "window_max", "min"): {"window_min": 2, "buffer_length": 1, "delay_probs": (0.7, 0.2),

@@ -134,7 +134,7 @@ Arguments (fields of :class:`NlosHorizonConfig`, defaults = spec §9)
 | nlos_sigma_deg      | 1.0                          | [0, 180] deg [chosen]                             |
 | p_nlos              | 0.3                          | pi in [0, 1] [chosen]                             |
 | p10                 | 0.1                          | [0, 1], pi p10 <= 1 - pi [chosen]                 |
-| buffer_length       | 3                            | D, 0..1000 [chosen]                               |
+| buffer_length       | 3                            | D, 0..999 (N_min >= D + 1, N_max <= 1000) [chosen] |
 | delay_probs         | (0.6, 0.2, 0.1, 0.05)        | D + 1 entries in [0, 1], sum <= 1 [chosen]        |
 | n_strongest         | 4                            | 1..J [chosen] ("only the strongest" [paper])      |
 | min_packets         | 1                            | n_min, 1..J [chosen]                              |
@@ -330,7 +330,8 @@ class NlosHorizonConfig:
         check_range("p10", self.p10, 0.0, 1.0)
         RssAoaSensor(self.signal).validate()
         self.chain.validate()
-        check_range("buffer_length", self.buffer_length, 0, 1000, integer=True)
+        # window_min >= D + 1 and window_max <= 1000: D = 1000 leaves no horizon
+        check_range("buffer_length", self.buffer_length, 0, 999, integer=True)
         as_array("delay_probs", self.delay_probs, ndim=1)
         self.delay.validate()
         J = self.num_neighbours
