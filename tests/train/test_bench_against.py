@@ -121,9 +121,7 @@ def test_bench_rounds_reach_run_against_and_bad_values_are_refused(tmp_path, mon
     assert seen["ref"] == "HEAD" and seen["rounds"] == 3
     assert main(["bench", "--scenarios", "lossy_fusion", "--rounds", "3", "--out", str(tmp_path)]) == 2
     assert "--rounds 3 needs --against REF" in capsys.readouterr().err
-    assert main(["bench", "--against", "HEAD", "--rounds", "21", "--out", str(tmp_path)]) == 2
-    assert "--rounds must be in 1..20, got 21" in capsys.readouterr().err
-    for bad in ("0", "-1", "1e308", "two", "True", ""):
+    for bad in ("21", "0", "-1", "1e308", "two", "True", ""):
         with pytest.raises(SystemExit):
-            main(["bench", "--against", "HEAD", "--rounds", bad, "--out", str(tmp_path)])
-        assert "--rounds: must be a positive integer" in capsys.readouterr().err
+            main(["bench", "--against", "HEAD", f"--rounds={bad}", "--out", str(tmp_path)])
+        assert f"--rounds: must be an integer in [1, 20], got {bad!r}" in capsys.readouterr().err
