@@ -594,7 +594,11 @@ def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     command = next((a for a in argv if not a.startswith("-")), "")
     try:
-        args = build_parser().parse_args(argv)
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        for name, value in vars(args).items():  # argparse reads --flag=-- as an empty list, never typed
+            if isinstance(value, list) and not value:
+                parser.error(f"argument --{name.replace('_', '-')}: expected a value, got '--'")
         args.argv, args.open_folders = argv, []
         command = args.command
         handlers = {"reproduce": cmd_reproduce, "train": cmd_train, "evaluate": cmd_evaluate, "bench": cmd_bench,

@@ -8,7 +8,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from train.cli import MAX_CURVE_POINTS, MAX_HORIZON, MAX_RUNS, MAX_SEED, MAX_TIMESTEPS, build_parser
+from train.cli import MAX_CURVE_POINTS, MAX_HORIZON, MAX_RUNS, MAX_SEED, MAX_TIMESTEPS, build_parser, main
 
 settings.register_profile("cli_counts", max_examples=60, deadline=None, derandomize=True,
                           suppress_health_check=list(HealthCheck))
@@ -33,7 +33,7 @@ def values(low: int, high: int):
     near = st.integers(low - 3, low + 3) | st.integers(high - 3, high + 3)
     far = st.integers(-10**40, 10**40) | st.integers(high, 10**40)
     as_text = (near | far).map(str)
-    not_integers = st.sampled_from(["", " ", "1.5", "1e3", "0x10", "abc", "1_000", "٣", "+-1", "nan", "inf"])
+    not_integers = st.sampled_from(["", " ", "1.5", "1e3", "0x10", "abc", "--", "1_000", "٣", "+-1", "nan", "inf"])
     return as_text | not_integers | st.text(max_size=4)
 
 
@@ -51,9 +51,11 @@ def test_a_count_flag_takes_exactly_its_range(prefix, flag, attribute, low, high
             assert getattr(parser.parse_args([*prefix, f"{flag}={text}"]), attribute) == int(stripped)
             return
         with pytest.raises(SystemExit) as exit_info:
-            parser.parse_args([*prefix, f"{flag}={text}"])
+            main([*prefix, f"{flag}={text}"])
         assert exit_info.value.code == 2
         err = capsys.readouterr().err
-        assert f"argument {flag}: must be an integer in [{low}, {high}], got {text!r}" in err, err
+        expected = ("expected a value, got '--'" if text == "--"
+                    else f"must be an integer in [{low}, {high}], got {text!r}")
+        assert f"argument {flag}: {expected}" in err, err
 
     check()
