@@ -88,7 +88,7 @@ the posterior at k - D as packets arrive (:func:`estimators.afge.run_kalman`'s f
 world's ``accel_sigma``. Decisions, observation and payload as ``dfir``; its fields are ``dfir``'s
 without ``horizon``.
 
-Arguments (``coloc_env.backends.Dfir``)
+Arguments (``coloc_env.backends.Dfir``; ``DelayKalman``: the same rows but ``horizon``)
 
 | field          | default      | allowed                                           |
 |----------------|--------------|---------------------------------------------------|
