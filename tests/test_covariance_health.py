@@ -155,6 +155,8 @@ COMPANIONS = {
     ("afge", "window_max", "min"): {"backend": {"window_min": 2, "group_size": 1, "window_centre": 2}},
     ("dfir", "n_strongest", "max"): {"world": {"num_neighbours": 32}},
     ("dfir", "min_packets", "max"): {"world": {"num_neighbours": 32}},
+    ("delay_kalman", "n_strongest", "max"): {"world": {"num_neighbours": 32}},
+    ("delay_kalman", "min_packets", "max"): {"world": {"num_neighbours": 32}},
 }
 NOT_VARIED = {"horizon", "window_steps", "data"}
 NOISE = re.compile(r"noise|(^|_)std$|^sigma|_sigma|_var$|_sigma_")
