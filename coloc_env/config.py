@@ -143,7 +143,7 @@ def check_entries(name: str, arr: np.ndarray, low: float, high: float, low_open:
     bad = below | (arr > high) | ~np.isfinite(arr)
     if np.any(bad):
         interval = f"{'(' if low_open else '['}{low:g}, {high:g}]"
-        raise BadInput(f"{name} entries must be in {interval}, got {arr[bad].reshape(-1)[0]!r} "
+        raise BadInput(f"{name} entries must be in {interval}, got {float(arr[bad].reshape(-1)[0])!r} "
                          f"at index {tuple(int(i) for i in np.argwhere(bad)[0])}")
 
 
