@@ -40,6 +40,12 @@ Arguments (``coloc_env.worlds.Circles``)
 | fix_noise_std           | 1.0     | (0, 1e4] m                                        |
 | initial_position_std    | 0.1     | [1e-6, 1e6] m: the prior the agents start with    |
 | heading_noise           | True    | False: the model the backends assume omits the integrated-heading term of Q |
+
+Estimation problem (what ``coloc_env.pcrb`` bounds; details in ``coloc_env.bound_models.circles``): the
+state is every platform's (x, y, heading); the prior is exact (the filters start at the true pose); the
+motion is driven by the odometry readings, their speed and turn-rate noise entering as process noise, so
+the heading error is a random walk shared by every later step; the readings are the ranges each step's
+measuring platform took and the anchors' fixes.
 """
 
 from __future__ import annotations
