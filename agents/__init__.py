@@ -6,12 +6,12 @@
 
 Three lists per scenario:
 
-* :func:`available_policies`: the realizable policies, those that use only what the agents
+* ``available_policies``: the realizable policies, those that use only what the agents
   can have (``random``, ``always`` and ``silent`` included);
-* :func:`bound_policies`: the ``bound_*`` policies, which use what the agents cannot have
+* ``bound_policies``: the ``bound_*`` policies, which use what the agents cannot have
   (hindsight on the episode, the truth, packet ages without time stamps); leaderboards show
   them apart, as bounds, and never judge a target against them;
-* :func:`strongest_baselines`: the realizable policies a learned policy with the same
+* ``strongest_baselines``: the realizable policies a learned policy with the same
   information must beat (a leaderboard picks the best of them on the paired episodes;
   ``train.evaluate.baselines`` adds the reference filters that are not env policies).
 """
@@ -55,7 +55,7 @@ def available_policies(scenario: str) -> list[str]:
 
 
 def duplicates(scenario: str) -> dict[str, str]:
-    """Names that build the same policy as an earlier name of :func:`available_policies` (``always`` is
+    """Names that build the same policy as an earlier name of ``available_policies`` (``always`` is
     ``paper`` where the paper already sends everything): name -> the earlier name. Evaluating them again
     would repeat the same episodes."""
     table = SCENARIO_POLICIES.get(scenario, generic.POLICIES)

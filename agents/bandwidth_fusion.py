@@ -105,7 +105,7 @@ class GreedyPolicy(Policy):
 
 @dataclass
 class SearchResult:
-    """Outcome of :func:`coordinate_descent` from one start."""
+    """Outcome of ``coordinate_descent`` from one start."""
 
     start: str
     weights: str
@@ -120,7 +120,7 @@ def coordinate_descent(model, links, initial_cov, weights, start, horizon, max_s
     """Coordinate descent over receivers on the exact J_K for a fixed (static) selection.
 
     Each sweep visits the receivers in order; receiver i's feasible options
-    are scored in one batched :func:`estimators.bandwidth_fusion.expected_cost`
+    are scored in one batched ``estimators.bandwidth_fusion.expected_cost``
     call with the others fixed, and i moves only on a strict improvement.
     Stops after a sweep with no move. Returns (relative selection, J, sweeps,
     evaluations, cost after each sweep).
@@ -172,7 +172,7 @@ def oracle_static_search(scenario) -> list[SearchResult]:
 
 
 class OracleStaticPolicy(FixedActionPolicy):
-    """The best static selection (and weight table) found by :func:`oracle_static_search` (privileged)."""
+    """The best static selection (and weight table) found by ``oracle_static_search`` (privileged)."""
 
     def __init__(self, env):
         scenario = _scenario(env)

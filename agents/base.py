@@ -32,7 +32,7 @@ class Policy:
                observations (so state is replaced, as ``start_episode`` replaces the
                generator, never mutated in place)
     core       the scenario core it was built on, every copy at once: built on a view of the
-               batched core, :meth:`batch_actions` returns every copy's actions
+               batched core, ``batch_actions`` returns every copy's actions
     None       the env (or its core at batch 1) in ways that do not batch: the env loop only
     ========== ===========================================================================
     """
@@ -47,7 +47,7 @@ class Policy:
 
     def start_episode(self, seed: int) -> None:
         """Called by an evaluation before the episode ``env.reset(seed=seed)`` plays. A stochastic
-        policy restarts its generator there (:func:`episode_generator`), so that episode e's actions
+        policy restarts its generator there (``episode_generator``), so that episode e's actions
         depend on its seed alone, whether the episodes run one after another or side by side."""
 
     def batch_actions(self) -> np.ndarray:  # pragma: no cover - interface of batching = "core"
@@ -57,7 +57,7 @@ class Policy:
 
 class RandomPolicy(Policy):
     """Uniform samples of each agent's action space, from its own generator (``seed``; an evaluation
-    restarts it for each episode: :meth:`Policy.start_episode`)."""
+    restarts it for each episode: ``Policy.start_episode``)."""
 
     batching = "per_copy"
 

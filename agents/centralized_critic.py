@@ -3,10 +3,10 @@
 The training recipe ``CRITIC = "centralized"`` of a settings module in ``train/hyperparams``. Every agent's
 observation is extended with its copy's ``state()`` (the global state the scenario documents under
 "``state()`` (centralized critic)"): the sub-env sees ``[own observation | state]``. The policy network
-(:class:`CentralizedCriticPolicy`) gives the actor only the first ``local_dim`` entries, its own observation,
+(``CentralizedCriticPolicy``) gives the actor only the first ``local_dim`` entries, its own observation,
 and the critic all of them. So the value baseline may use what no agent knows (every agent's view, the link
 outcomes, ...) while the actions depend on the agent's own observation alone, and the trained policy runs
-decentralized: :func:`extend_observation` feeds the state in at evaluation too, and a test holds the actions
+decentralized: ``extend_observation`` feeds the state in at evaluation too, and a test holds the actions
 unchanged whatever the state part holds.
 
 Why it can help: the reward of every coloc scenario is a team error that depends on all agents' choices and on

@@ -1,12 +1,12 @@
 """Policies that work on any composition: ``always``, ``silent`` and ``greedy`` (``random`` is
-:class:`agents.base.RandomPolicy`).
+``agents.base.RandomPolicy``).
 
 ``always`` plays every transport decision at its maximum (the full relay chain
 nearest first, a broadcast at every opportunity, every packet transmitted);
 ``silent`` sends nothing; both keep the world's and the backend's default
 decisions (the paper's weights, horizon, the nearest ranging partner). They
-read only the composition's action blocks (:meth:`ComposedScenario.action_vector`).
-``greedy`` (:class:`GreedyPolicy`) looks one step ahead with the backend's own
+read only the composition's action blocks (``ComposedScenario.action_vector``).
+``greedy`` (``GreedyPolicy``) looks one step ahead with the backend's own
 covariance, where the backend has one.
 """
 
@@ -129,7 +129,7 @@ class GreedyPolicy(Policy):
 
 
 def greedy(env) -> GreedyPolicy:
-    """One-step look-ahead of the backend's own covariance plus the communication cost (see :class:`GreedyPolicy`)."""
+    """One-step look-ahead of the backend's own covariance plus the communication cost (see ``GreedyPolicy``)."""
     return GreedyPolicy(env)
 
 

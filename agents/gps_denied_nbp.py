@@ -4,7 +4,7 @@
   broadcasts whenever the schedule allows it (all action bits set).
 * ``silent``: nobody ever broadcasts; every fault UAV is reduced to dead
   reckoning on its own prior (the "never send" reference of spec §9).
-* ``threshold:S`` (``threshold`` = :data:`THRESHOLD_SPREAD` metres): a GPS-normal UAV broadcasts
+* ``threshold:S`` (``threshold`` = ``THRESHOLD_SPREAD`` metres): a GPS-normal UAV broadcasts
   whenever the schedule allows (its fix is what the fault UAVs localize against); a fault UAV
   broadcasts only while the spread of its own prior, sqrt(tr Cov) of its particle positions
   (observation entry 4 = log(1 + spread)), is at most S metres. Why this direction: a broadcast

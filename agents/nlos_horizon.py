@@ -11,7 +11,7 @@
   the future and the truth) and keeps, per agent, the N in [N_min, N_max] with the lowest
   summed squared error; every neighbour kept. A bound, not a baseline: no agent can do this.
 * ``constant:N``: horizon N every step (default N_c(0) = 12), all kept.
-* ``best_constant``: ``constant:N`` at :data:`BEST_CONSTANT_WINDOW`, the one horizon for all
+* ``best_constant``: ``constant:N`` at ``BEST_CONSTANT_WINDOW``, the one horizon for all
   agents with the lowest mean cost on the VALIDATION seeds 2 * 10^6 + e (never the
   evaluation seeds 10^6 + e); the strongest realizable baseline of this scenario.
 * ``always``: every packet kept at the AHG's N_c(0) (= ``constant``); ``silent``: no
@@ -36,7 +36,7 @@ def _scenario(env):
 
 class _EpisodePolicy(Policy):
     """Restarts its own state when the scenario starts a new episode. Each policy computes every copy of
-    the scenario it reads at once (:meth:`batch_actions`); ``act`` hands out copy 0's actions."""
+    the scenario it reads at once (``batch_actions``); ``act`` hands out copy 0's actions."""
 
     batching = "core"
 
@@ -134,7 +134,7 @@ BEST_CONSTANT_WINDOW = 6
 
 
 class BestConstantPolicy(ConstantPolicy):
-    """The constant horizon :data:`BEST_CONSTANT_WINDOW` chosen on validation seeds, all neighbours kept."""
+    """The constant horizon ``BEST_CONSTANT_WINDOW`` chosen on validation seeds, all neighbours kept."""
 
     def __init__(self, env):
         super().__init__(env, window=BEST_CONSTANT_WINDOW)

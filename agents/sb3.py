@@ -5,7 +5,7 @@ scenario and its config; loading it for another scenario, or for spaces that
 differ from the ones it was trained on, is a ``ValueError``.
 
 Damaged files are ``ValueError`` s naming the file and what is wrong with it
-(:func:`check_model_zip`, :func:`read_metadata`): a truncated or non-zip
+(``check_model_zip``, ``read_metadata``): a truncated or non-zip
 ``model.zip``, one without SB3's ``data`` or ``policy.pth`` members, a
 ``model.json`` that is truncated, not JSON, or not an object. Without these
 checks SB3 fails with an ``AssertionError`` or a ``KeyError`` that names no file.
@@ -105,7 +105,7 @@ ALGORITHMS = ("ppo", "maskable_ppo", "recurrent_ppo")
 
 
 def algorithm_class(name: str):
-    """The class of a training algorithm's name in :data:`ALGORITHMS`."""
+    """The class of a training algorithm's name in ``ALGORITHMS``."""
     if name == "maskable_ppo":
         from sb3_contrib import MaskablePPO
 

@@ -51,7 +51,7 @@ def composition_named(name: str, **options) -> Composition:
 
 
 def scenario_class(name: str):
-    """The :class:`~coloc_env.scenarios.base.Scenario` subclass registered as ``name``; for a composition's name
+    """The ``coloc_env.scenarios.base.Scenario`` subclass registered as ``name``; for a composition's name
     ``WORLD/NETWORK/BACKEND`` the composed core's class, once the parts are known to compose."""
     if is_composition_name(name):
         composition_named(name)
@@ -63,8 +63,8 @@ def scenario_class(name: str):
 
 
 def make_core(name, batch: int = 1, **config):
-    """The batched core (:class:`~coloc_env.scenarios.base.Scenario`) of ``batch`` copies of a preset name, a
-    composition's name or a Composition, as :func:`parallel_env` and :func:`vector_env` build it."""
+    """The batched core (``coloc_env.scenarios.base.Scenario``) of ``batch`` copies of a preset name, a
+    composition's name or a Composition, as ``parallel_env`` and ``vector_env`` build it."""
     from coloc_env.env import build_scenario
 
     cls, spec, config = _spec(name, config)
@@ -97,7 +97,7 @@ def parallel_env(name, render_mode: str | None = None, max_cycles: int | None = 
 
 
 def vector_env(name, num_envs: int = 1, seed: int | None = None, max_cycles: int | None = None, **config):
-    """An SB3 ``VecEnv`` of ``num_envs`` copies x N agents in one batched core (see :mod:`coloc_env.vector`)."""
+    """An SB3 ``VecEnv`` of ``num_envs`` copies x N agents in one batched core (see ``coloc_env.vector``)."""
     from coloc_env.vector import CoLocVecEnv
 
     cls, spec, config = _spec(name, config)
@@ -105,7 +105,7 @@ def vector_env(name, num_envs: int = 1, seed: int | None = None, max_cycles: int
 
 
 def env(name, render_mode: str | None = None, max_cycles: int | None = None, **config):
-    """The AEC view of :func:`parallel_env` (``pettingzoo.utils.parallel_to_aec``)."""
+    """The AEC view of ``parallel_env`` (``pettingzoo.utils.parallel_to_aec``)."""
     return parallel_to_aec(parallel_env(name, render_mode=render_mode, max_cycles=max_cycles, **config))
 
 

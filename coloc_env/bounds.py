@@ -4,14 +4,14 @@
 >>> bounds = coloc_env.pcrb("target_cv/bernoulli_delay/kalman", episodes=8, seed=0)
 >>> bounds["centralized"].shape          # (K, N), m^2
 
-:func:`pcrb` builds one copy of the composition's core per episode, resets episode e with
+``pcrb`` builds one copy of the composition's core per episode, resets episode e with
 seed ``seed + e`` (the episode an evaluation's ``env.reset(seed=seed + e)`` plays; one copy
 each, so any backend's batching is beside the point), steps it under the policy, and
 records what the world read (the ranges taken, the fixes that existed) and what the
 network delivered (each packet's delay). The world's bound model
-(:mod:`coloc_env.bound_models`, one module per world, each stating its estimation
+(``coloc_env.bound_models``, one module per world, each stating its estimation
 problem) turns that record into the per-step Fisher information, transition Jacobians
-and process noises; :func:`estimators.bounds.filtering_bound` runs one recursion on the
+and process noises; ``estimators.bounds.filtering_bound`` runs one recursion on the
 D-terms averaged over the E episodes (Tichavský, Muravchik and
 Nehorai 1998). Three bounds, each (K, N) in m^2 (agent n's trace of the bound's
 position block at step k, after the readings of k; a shared target's bound for every
@@ -43,7 +43,7 @@ agent's local bound can be below it (its own fixes need not reach the centre).
 
 Policies: ``"always"`` and ``"silent"`` play every transport decision at its maximum /
 minimum with the default sensing and backend decisions
-(:meth:`~coloc_env.scenarios.composed.ComposedScenario.action_vector`, in the parts'
+(``coloc_env.scenarios.composed.ComposedScenario.action_vector``, in the parts'
 blocks, so a preset's own codec is bypassed: its world and seeds are the preset's);
 ``"random"`` draws every block uniformly from a generator seeded with ``seed``; a callable
 ``act(observations) -> actions`` (dicts over the agents, as the PettingZoo env passes
@@ -125,7 +125,7 @@ def position_traces(P: np.ndarray, positions: np.ndarray) -> np.ndarray:
 class Record:
     """What one episode's play read and carried, by step (lists of length K).
 
-    ``readings[k]`` the world's :class:`~coloc_env.worlds.base.Readings` of k (one copy); ``packets[k]`` the delay
+    ``readings[k]`` the world's ``coloc_env.worlds.base.Readings`` of k (one copy); ``packets[k]`` the delay
     arrays (N, N) [t, s] of every ``Network.packets`` call stamped k; ``node_packets[k]`` the (N, J) delays of the
     ``Network.node_packets`` calls stamped k; ``broadcasts[k]`` each ``Network.broadcast`` call's delivered
     matrix (N, N) [t, s] by its slot (a ``Network.messages_to`` call's message j as the broadcast of its slot).

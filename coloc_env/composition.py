@@ -15,11 +15,11 @@ value}``. The other keywords are composition-level:
 | communication_cost  | 0.0       | >= 0, subtracted per message the agent sent this step                |
 | horizon             | None      | steps per episode; None = the world's                                |
 
-A :class:`Composition` is frozen and picklable (it travels to Ray workers)
+A ``Composition`` is frozen and picklable (it travels to Ray workers)
 and builds nothing until an env is made. A preset (``PRESETS[name]``) is a
 Composition that also names the scenario binding whose action codec and
-observation it carries (:attr:`Composition.preset`) and its flat config
-(:attr:`Composition.preset_config`).
+observation it carries (``Composition.preset``) and its flat config
+(``Composition.preset_config``).
 """
 
 from __future__ import annotations
@@ -73,7 +73,7 @@ class Composition:
 
 
 def compose(world: Any, network: Any, backend: Any, **options) -> Composition:
-    """A :class:`Composition` of the three parts; ``options`` are composition-level fields only."""
+    """A ``Composition`` of the three parts; ``options`` are composition-level fields only."""
     unknown = sorted(set(options) - set(COMPOSITION_OPTIONS))
     if unknown:
         raise BadInput(f"unknown composition option(s) {unknown}; allowed: {list(COMPOSITION_OPTIONS)} "

@@ -2,7 +2,7 @@
 
 Each config is a frozen dataclass whose defaults are a paper's setting and
 whose ``validate()`` raises ``ValueError`` naming the field and the allowed
-range. :func:`build_config` turns keyword arguments into such a config and
+range. ``build_config`` turns keyword arguments into such a config and
 refuses unknown keys, so a typo never passes silently.
 """
 
@@ -22,7 +22,7 @@ class BadInput(ValueError):
 
     Every check of this package raises it (it is a ``ValueError``, so ``except ValueError`` still catches
     it), and a config's ``validate()`` turns any ``ValueError`` it raises into one
-    (:func:`validate_fields`). The command line exits 2 for it and treats any other exception as an
+    (``validate_fields``). The command line exits 2 for it and treats any other exception as an
     internal error (exit 1 with a request to report it): a ``ValueError`` from numpy or from an
     estimator's numerics is a bug, not bad input."""
 
@@ -92,9 +92,9 @@ def field_type_problem(config: Any, prefix: str = "") -> str:
 
 def validate_fields(config: Any, prefix: str = "", validate=None) -> None:
     """``config.validate()`` (or ``validate()``), turning any error that a wrongly typed field caused
-    (a ``TypeError`` in a derived value, numpy's "could not convert") into a :class:`BadInput` naming the
+    (a ``TypeError`` in a derived value, numpy's "could not convert") into a ``BadInput`` naming the
     field. A ``ValueError`` that already names that field keeps its message (it states the range); any
-    ``ValueError`` of ``validate()`` leaves as a :class:`BadInput`."""
+    ``ValueError`` of ``validate()`` leaves as a ``BadInput``."""
     try:
         (validate or config.validate)()
     except Exception as exc:

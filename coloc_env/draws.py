@@ -38,14 +38,14 @@ def _mix_in_place(z: np.ndarray) -> np.ndarray:
 
 
 def _mix_int(z: int) -> int:
-    """The finalizer of :func:`_mix_in_place` on one Python int, modulo 2^64 as uint64 arithmetic wraps."""
+    """The finalizer of ``_mix_in_place`` on one Python int, modulo 2^64 as uint64 arithmetic wraps."""
     z = ((z ^ (z >> 30)) * _M1_INT) & _MASK
     z = ((z ^ (z >> 27)) * _M2_INT) & _MASK
     return z ^ (z >> 31)
 
 
 def _counter_chain(keys: np.ndarray, counters: tuple) -> np.ndarray:
-    """keys (B,) mixed with every counter in turn: the per-copy part of :func:`uniforms`."""
+    """keys (B,) mixed with every counter in turn: the per-copy part of ``uniforms``."""
     B = keys.shape[0]
     values = [np.asarray(counter, dtype=np.int64).reshape(-1) for counter in counters]
     if B <= _SMALL_BATCH and all(len(c) in (1, B) for c in values):

@@ -4,7 +4,7 @@
 ``max_cycles_test`` and the SISL/butterfly environments use it): every env
 here accepts it and writes it into the field that sets the episode length,
 the preset's ``horizon`` (``window_steps`` for mrclam_relay, the replayed
-window) or a composition's ``horizon`` (:func:`with_max_cycles`).
+window) or a composition's ``horizon`` (``with_max_cycles``).
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ def episode_length_field(scenario_cls: type[Scenario]) -> str:
 def with_max_cycles(scenario_cls: type[Scenario], composition, config: dict, max_cycles: int | None):
     """``(composition, config)`` with the episode length set to ``max_cycles`` (None: unchanged).
 
-    A preset's flat config gets its episode-length field (:func:`episode_length_field`); a
+    A preset's flat config gets its episode-length field (``episode_length_field``); a
     composition gets ``Composition.replace(horizon=max_cycles)``. Giving both ``max_cycles`` and that
     field with different values is a ValueError, so neither silently wins.
     """
@@ -70,7 +70,7 @@ def build_scenario(scenario_cls: type[Scenario], batch: int, composition=None, m
 
 def _built(scenario_cls: type[Scenario], config, batch: int) -> Scenario:
     """``scenario_cls(config, batch)``; a ``ValueError`` while building (a part's build-time check: a range
-    that depends on another part, a data file) is the config's fault: a :class:`BadInput`."""
+    that depends on another part, a data file) is the config's fault: a ``BadInput``."""
     try:
         return scenario_cls(config, batch=batch)
     except BadInput:
@@ -100,25 +100,25 @@ def info_action_mask(space, mask: np.ndarray) -> np.ndarray:
 
 
 def _info_mask_shape(space) -> tuple[int, int] | None:
-    """(k, n) for a ``MultiDiscrete`` of k equal sizes n, else None (flat): :func:`info_action_mask`'s layout."""
+    """(k, n) for a ``MultiDiscrete`` of k equal sizes n, else None (flat): ``info_action_mask``'s layout."""
     if isinstance(space, gymnasium.spaces.MultiDiscrete) and space.nvec.ndim == 1 and len(np.unique(space.nvec)) == 1:
         return len(space.nvec), int(space.nvec[0])
     return None
 
 
 class CoLocParallelEnv(ParallelEnv):
-    """PettingZoo ``ParallelEnv`` over one copy of a :class:`Scenario`.
+    """PettingZoo ``ParallelEnv`` over one copy of a ``Scenario``.
 
     ``reset(seed=s)`` gives the env ``np.random.default_rng(s)``; ``reset()``
     without a seed continues the same generator (DESIGN.md, Seeding).
     Episodes end by truncation at the scenario's horizon; ``max_cycles``
-    (PettingZoo's keyword) sets it (:func:`with_max_cycles`).
+    (PettingZoo's keyword) sets it (``with_max_cycles``).
 
     Where the action space is discrete (``Discrete`` / ``MultiDiscrete``), ``infos[agent]["action_mask"]``
-    (at reset and every step) is the scenario's :meth:`~coloc_env.scenarios.base.Scenario.action_mask`
+    (at reset and every step) is the scenario's ``coloc_env.scenarios.base.Scenario.action_mask``
     for that agent as ``np.int8``: 1 = valid now. ``Discrete(n)``: shape (n,). ``MultiDiscrete(nvec)``: the
     concatenation of one vector per dimension (sb3_contrib's layout), flat (sum(nvec),), or (k, n) where
-    all k sizes are n (:func:`info_action_mask`, TorchRL's shape); the env's ``MaskableMultiDiscrete``
+    all k sizes are n (``info_action_mask``, TorchRL's shape); the env's ``MaskableMultiDiscrete``
     takes it in ``action_space(agent).sample(mask)``, PettingZoo's idiom. Masked choices are never
     refused: by definition they do what a valid choice does (the scenario's table).
     """

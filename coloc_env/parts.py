@@ -57,7 +57,7 @@ class PartConfig:
 
     def validate(self) -> None:
         """``check`` with the kind as prefix; a wrongly typed field is a ``ValueError`` naming it even where
-        ``check`` computes a derived value first (:func:`coloc_env.config.validate_fields`)."""
+        ``check`` computes a derived value first (``coloc_env.config.validate_fields``)."""
         prefix = f"{self.kind}."
         validate_fields(self, prefix, lambda: self.check(prefix))
 

@@ -17,9 +17,9 @@ actions.
 
 How exactly the parts reproduce each preset (tests/coloc_env):
 
-* Every preset is a binding on the core (:mod:`coloc_env.scenarios.binding`): the scenario *is* the
+* Every preset is a binding on the core (``coloc_env.scenarios.binding``): the scenario *is* the
   composition of its parts with the paper's action codec, observation, reward and info;
-  ``PRESETS[name]`` is :meth:`~coloc_env.scenarios.binding.PresetScenario.compose` of the default
+  ``PRESETS[name]`` is ``coloc_env.scenarios.binding.PresetScenario.compose`` of the default
   config. relay_ukf: circles (no anchors) / relay (one next hop per holder) / ukf_dcl, team reward.
   gps_denied_nbp: gps_denied / broadcast (the ranging radius, no loss) / dnbp. lossy_fusion: target_cv /
   bernoulli_delay / prediction_compensation; its link outcomes are the network's draws

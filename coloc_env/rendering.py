@@ -1,6 +1,6 @@
 """One renderer for every scenario and composition.
 
-A scenario describes what to draw for one copy as a :class:`Scene`; the
+A scenario describes what to draw for one copy as a ``Scene``; the
 renderer turns it into an RGB array (``render_mode="rgb_array"``) or shows it
 in a matplotlib window (``render_mode="human"``). Every frame has the same
 layout, so that presets and compositions look alike:
@@ -40,7 +40,7 @@ The figure has exactly two axes (map and network; the inset is a child of
 the map); title, legend and notes are figure-level artists placed by
 matplotlib's constrained layout, so none overlaps a panel.
 
-Frames are 960 x 600 pixels by default (:class:`Renderer`), legible when
+Frames are 960 x 600 pixels by default (``Renderer``), legible when
 scaled to 720 pixels wide.
 """
 
@@ -71,7 +71,7 @@ PANELS_FRACTION = 0.74  # of the figure's width, left of the legend
 INSET_SIZE = 0.36  # the particle inset's side, as a fraction of the map's
 FONT_SIZE = 10
 # Ellipses that would need this enlargement or more (the largest 2-sigma semi-axis under 0.1 % of the map) are
-# drawn in error coordinates instead (:func:`_draw_relative_map`): agents kilometres apart with metre errors.
+# drawn in error coordinates instead (``_draw_relative_map``): agents kilometres apart with metre errors.
 RELATIVE_VIEW_MAGNIFICATION = 50.0
 
 
@@ -352,7 +352,7 @@ def _draw_relative_map(ax, scene: Scene, truth: np.ndarray, estimates: np.ndarra
                        handles: list, agent_handles: list) -> None:
     """The map in error coordinates: each estimate minus its truth, every truth at (0, 0), the 2-sigma
     ellipses at true scale, equal metres on both axes. Drawn instead of the positions when the agents are
-    so far apart that the errors and ellipses would be invisible (:data:`RELATIVE_VIEW_MAGNIFICATION`)."""
+    so far apart that the errors and ellipses would be invisible (``RELATIVE_VIEW_MAGNIFICATION``)."""
     from matplotlib.lines import Line2D
     from matplotlib.ticker import MaxNLocator
 
@@ -411,7 +411,7 @@ def belief_zoom(truth: np.ndarray, estimates: np.ndarray, particles: np.ndarray,
 
 def wants_belief_inset(scene: Scene, limits: tuple[float, float, float, float]) -> bool:
     """Whether the frame shows one particle cloud at true scale: the scene has particles and the cloud
-    of :func:`belief_zoom` is under a tenth of the map wide (invisible at the map's scale)."""
+    of ``belief_zoom`` is under a tenth of the map wide (invisible at the map's scale)."""
     if scene.estimates is None or scene.particles is None or not np.size(scene.particles):
         return False
     truth, estimates = np.atleast_2d(np.asarray(scene.truth, float)), np.atleast_2d(np.asarray(scene.estimates, float))
@@ -478,7 +478,7 @@ def _link_width(frac: float, crowded: bool) -> float:
 
 class _NetworkLabels:
     """The texts of the network panel, placed when the figure is drawn (after the layout: where they hit
-    nothing). An artist of the panel drawn before its texts (:meth:`draw`, lowest zorder) moves them."""
+    nothing). An artist of the panel drawn before its texts (``draw``, lowest zorder) moves them."""
 
     def __init__(self, net, centres: np.ndarray, names: list[str], node_radius_pt: float, node_font: float,
                  directed: bool):
@@ -625,7 +625,7 @@ def _text_size(text, renderer, pad: float) -> tuple[float, float]:
 
 def _draw_network(net, scene: Scene, agent_names, handles: list, colour_handles: list) -> _NetworkLabels:
     """The nodes and links of ``scene`` on the panel ``net``; returns the texts to place once the figure
-    is drawn (:class:`_NetworkLabels`)."""
+    is drawn (``_NetworkLabels``)."""
     import matplotlib as mpl
     from matplotlib.lines import Line2D
 

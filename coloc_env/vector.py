@@ -2,7 +2,7 @@
 
 Each agent of each copy is one sub-env (index ``b * N + i``), so SB3 trains
 one policy shared by all agents (parameter sharing). Every step is one call of
-the batched :class:`~coloc_env.scenarios.base.Scenario` core: no Python loop
+the batched ``coloc_env.scenarios.base.Scenario`` core: no Python loop
 over copies, except to build the info dicts of the copies whose episode just
 ended (SB3 needs one dict per sub-env).
 
@@ -13,13 +13,13 @@ later episodes continue its generator as ``reset()`` would. ``seed(s)``
 reset.
 
 Episodes end by truncation at the scenario's horizon (``max_cycles`` sets it, as
-in :class:`~coloc_env.env.CoLocParallelEnv`): finished copies are
+in ``coloc_env.env.CoLocParallelEnv``): finished copies are
 reset automatically, and their sub-envs' infos carry ``terminal_observation``
 and ``TimeLimit.truncated = True`` so that SB3 bootstraps the value of the
 last observation, and ``terminal_state`` (the copy's ``state()`` before the
 reset, for a centralized critic).
 
-Action masks (discrete actions): :meth:`CoLocVecEnv.action_masks` gives one row per sub-env,
+Action masks (discrete actions): ``CoLocVecEnv.action_masks`` gives one row per sub-env,
 what ``sb3_contrib.MaskablePPO`` reads before every step (``get_action_masks``).
 """
 
@@ -129,7 +129,7 @@ class CoLocVecEnv(VecEnv):
 
     def action_masks(self) -> np.ndarray:
         """(num_envs, sum(nvec)) bool: the valid choices of each sub-env's next action (sb3_contrib's
-        ``get_action_masks``, through :meth:`env_method`), ``Discrete(n)``: (num_envs, n). It reads the
+        ``get_action_masks``, through ``env_method``), ``Discrete(n)``: (num_envs, n). It reads the
         scenario's current state, so after an auto-reset in ``step_wait`` it is the new episode's. A
         ``Box`` action has nothing to mask: a ValueError."""
         mask = self.scenario.action_mask()

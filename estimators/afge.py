@@ -9,7 +9,7 @@ prose and standard results, **[chosen]** a value the paper had but we lost.
 
 Pipeline for one target (all functions take a leading batch shape ``...``):
 
-1. Packet -> position fix (spec §4, eqs. 4-6) [reconstructed], :func:`packet_fixes`.
+1. Packet -> position fix (spec §4, eqs. 4-6) [reconstructed], ``packet_fixes``.
    Neighbour j sends its own position estimate p_hat_j, the RSS and the AOA of the target.
    With the mode information m (the true NLOS flag / pi / 0 for ``mode_info`` =
    ``known`` / ``mean`` / ``blind``) the NLOS bias is removed and the variance moment-matched,
@@ -17,34 +17,34 @@ Pipeline for one target (all functions take a leading batch shape ``...``):
    ``r_hat = d0 10^((P_T - PL(d0) - RSS - m mu_db) / (10 n))``, ``th_hat = theta - m mu_theta``,
    ``z_j = p_hat_j + r_hat [cos th_hat, sin th_hat]``, ``sigma_r = kappa r_hat sqrt(var_db)``
    (``kappa = ln 10 / (10 n)``), ``R_j = J diag(sigma_r^2, var_theta) J^T + P_j``.
-2. Reorganisation by stamp (Step 1, Lemma 4) [paper/reconstructed], :func:`known_at_lag`:
+2. Reorganisation by stamp (Step 1, Lemma 4) [paper/reconstructed], ``known_at_lag``:
    at time k the packets of stamp s known are those with delay tau <= k - s; stamps older
    than k - D are final. A packet with tau > D never counts.
-3. Complementary fusion (Step 2, eqs. 21-27, Def. 6) [reconstructed], :func:`fuse_fixes`:
+3. Complementary fusion (Step 2, eqs. 21-27, Def. 6) [reconstructed], ``fuse_fixes``:
    among the known packets keep the ``n_strongest`` by RSS [paper: "only the strongest
    received signals are adopted"], weights ``w_j = r_hat_j / sum_l r_hat_l`` (``distance``,
    Def. 6) or ``w_j = 1`` (``information``), ``Y = sum_j w_j R_j^-1``, ``y = sum_j w_j R_j^-1 z_j``;
    the observation ``z(s) = Y^-1 y = H x(s) + v(s)``, ``R(s) = Y^-1``, ``H = [I_2, 0]``.
    ``gamma(s, l) = 1[#used >= n_min]`` (Remark 5); gamma = 0 -> Y = 0, y = 0.
-4. DFIR (Lemma 7, eqs. 33-46) [reconstructed]: :func:`dfir_batch` is the batch
+4. DFIR (Lemma 7, eqs. 33-46) [reconstructed]: ``dfir_batch`` is the batch
    unbiased minimum-variance FIR gain
    ``K = F W0 + C Xi^-1 (I - G W0)``, ``W0 = (G^T Xi^-1 G)^-1 G^T Xi^-1``, ``F = A^(N-1)``,
-   ``C = S Qw L^T``; :func:`stack_advance` is the equivalent recursive form, an information
+   ``C = S Qw L^T``; ``stack_advance`` is the equivalent recursive form, an information
    filter started with ZERO information at the horizon's first stamp, predict
    ``M = A^-T Y A^-1, Y <- (I + M Gam)^-1 M, y <- (I + M Gam)^-1 A^-T y`` (valid for singular
    Y), update ``Y += H^T Y(s) H, y += H^T y(s)``. Every horizon N = 1..N_max is one slot of a
    stack (shift in a zero filter, predict, update), so one stack gives all constant-N DFIRs.
    The estimate exists when at least two stamps with gamma = 1 lie in the horizon
    (``G`` observable for the CV model); otherwise the output is the prediction
-   ``A x_hat(k-1)`` (``valid = False``). Delays: :func:`buffer_step` keeps the stack at the
+   ``A x_hat(k-1)`` (``valid = False``). Delays: ``buffer_step`` keeps the stack at the
    last final stamp k - D and re-runs the last D stamps with the packets received so far.
 5. AHG policy and AFGE (Algorithm 10) [reconstructed, after horizon-group-shift FIR]:
-   :func:`ahg_group`, :func:`ahg_select` with the costs :func:`predictive_costs` (default),
-   :func:`in_sample_costs` (``likelihood="paper"``) and :func:`smooth_costs` (``"smoothed"``,
+   ``ahg_group``, ``ahg_select`` with the costs ``predictive_costs`` (default),
+   ``in_sample_costs`` (``likelihood="paper"``) and ``smooth_costs`` (``"smoothed"``,
    an extension, not in the paper).
 6. Baseline: the delay-aware Kalman filter on the same fused observations (spec §8) is the
    same information recursion without the shift, started from the prior at stamp 0
-   (``shift=False`` in :func:`buffer_step`; :func:`run_kalman`).
+   (``shift=False`` in ``buffer_step``; ``run_kalman``).
 
 State ``x = [p_x, p_y, v_x, v_y]`` (m, m/s), ``x(k+1) = A x(k) + B w(k)``, ``w ~ N(0, sigma_a^2 I_2)``,
 ``A = [[I, T I], [0, I]]``, ``B = [[T^2/2 I], [T I]]`` [reconstructed: the paper writes a 2-D
@@ -74,17 +74,17 @@ Departures
   guarded: a horizon with two observed stamps whose Y is nonetheless singular to rounding (one
   fix with 1e-20 of the other's information, as sigma_db = 100 dB produces) has no estimate
   (``valid = False``: the output is the prediction) instead of dividing by zero
-  (:func:`information_predict`, :func:`_spd_inverse4`). Information form rather than a
+  (``information_predict``, ``_spd_inverse4``). Information form rather than a
   covariance filter because a horizon starts with zero information; Joseph form rather than a
   square-root (QR) information filter because it keeps the 2x2 block closed forms and the
   compiled kernel's cost.
 * Speed: the recursion is written on the 2x2 blocks of the CV model and inverts only 2x2
   blocks in closed form (Woodbury in the predict, a Schur complement of the velocity block
   for Y^-1): numpy's stacked matmul/solve on 4x4 matrices is dominated by per-matrix
-  overhead. The reference batch form :func:`dfir_batch` uses
+  overhead. The reference batch form ``dfir_batch`` uses
   ``scipy.linalg.solve``; a test holds the two equal to 1e-9.
 * Speed (issue 18): where numba is installed, a time step's buffer re-run and estimates
-  (:func:`buffer_estimates`) and the packet selection and fusion (:func:`fuse_packets`) run
+  (``buffer_estimates``) and the packet selection and fusion (``fuse_packets``) run
   as compiled kernels, one (copy, target) element at a time with every horizon slot held in
   registers, the stack kept as a ring so the shift moves nothing. They evaluate the same
   formulas in the same order as the numpy form (including numpy's pairwise order for the
@@ -218,7 +218,7 @@ class SignalModel:
 class AHGParams:
     """Design parameters of the AHG policy (Algorithm 10) [chosen]: N_min, N_max, dN, M, N_c(0).
 
-    ``likelihood`` one of :data:`LIKELIHOODS`; ``smoothing`` lam of the smoothed variant.
+    ``likelihood`` one of ``LIKELIHOODS``; ``smoothing`` lam of the smoothed variant.
     """
 
     window_min: int = 4
@@ -285,7 +285,7 @@ def mode_weight(mode_info: str, modes: np.ndarray, p_nlos: float) -> np.ndarray:
 
 
 def _fixes_kernel_source(sender, rss, aoa, m, constants, z, R, r_hat):  # pragma: no cover - compiled by numba
-    """Per packet: :func:`packet_fixes` with the same operations in the same order, one pass over the
+    """Per packet: ``packet_fixes`` with the same operations in the same order, one pass over the
     packets instead of some twenty numpy temporaries of the buffer's size."""
     (sd2, nsd2, nbd2, st2, nst2, nbt2, nbias_db, nbias_theta, tx_less_ref, ten_n, d0, kappa, nav2) = constants
     for p in _prange(rss.shape[0]):
@@ -311,7 +311,7 @@ def packet_fixes(signal: SignalModel, sender_position, rss, aoa, m, compiled: bo
     ``sender_position`` (..., 2) p_hat_j, ``rss`` (...) dBm, ``aoa`` (...) rad (bearing of the
     target seen from j), ``m`` (...) mode weight. Returns ``z`` (..., 2), ``R`` (..., 2, 2),
     ``r_hat`` (...). ``compiled`` (default: where numba is installed) runs
-    :func:`_fixes_kernel_source`, equal to this numpy form (``compiled=False``, the reference) to
+    ``_fixes_kernel_source``, equal to this numpy form (``compiled=False``, the reference) to
     rounding: tests hold it to 1e-9.
     """
     kernels = _kernels("fixes", compiled)
@@ -418,15 +418,15 @@ def fuse_packets(signal: SignalModel, rss, aoa, nav, modes, delays, lags, keep, 
                  mode_info: str = "known", weighting: str = "distance", min_packets: int = 1,
                  fixes: tuple | None = None, compiled: bool | None = None):
     """Steps 1-2 for buffered stamps: the fused observation of each stamp from its packets
-    known now (spec §4-5) [paper/reconstructed]; :func:`known_at_lag`, :func:`select_strongest`,
-    :func:`mode_weight`, :func:`packet_fixes` and :func:`fuse_fixes` in that order.
+    known now (spec §4-5) [paper/reconstructed]; ``known_at_lag``, ``select_strongest``,
+    ``mode_weight``, ``packet_fixes`` and ``fuse_fixes`` in that order.
 
     Packets on the last axis J: ``rss``/``aoa``/``modes``/``delays`` (..., J), ``nav`` (..., J, 2)
     the senders' position estimates; ``lags`` (...) how long ago each stamp was (negative: not
     yet sent); ``keep`` (..., J) a selection mask applied before the ``n_strongest`` rule.
-    ``fixes``: :func:`packet_fixes` of these packets (z, R, r_hat) when the caller has them
+    ``fixes``: ``packet_fixes`` of these packets (z, R, r_hat) when the caller has them
     (a packet's fix depends neither on the lag nor on the mask). ``compiled`` (default: where
-    numba is installed) selects and sums in one pass per stamp (:func:`_fuse_kernel_source`;
+    numba is installed) selects and sums in one pass per stamp (``_fuse_kernel_source``;
     equal to the numpy path, ``compiled=False``, to rounding). Returns ``(Y, y, gamma, used)``.
     """
     if fixes is None:
@@ -483,8 +483,8 @@ def _numpy_sum(values):  # pragma: no cover - compiled by numba
 
 def _fuse_kernel_source(z, R, r_hat, rss, delays, lags, keep, n_strongest, distance, min_packets,
                         out_Y, out_y, out_gamma, out_used):  # pragma: no cover - compiled by numba
-    """Per stamp m: :func:`known_at_lag`, :func:`select_strongest` (rank by RSS, ties to the
-    lower index) and :func:`fuse_fixes` on the packets' fixes, without the (M, J, 2, 2)
+    """Per stamp m: ``known_at_lag``, ``select_strongest`` (rank by RSS, ties to the
+    lower index) and ``fuse_fixes`` on the packets' fixes, without the (M, J, 2, 2)
     temporaries of the numpy form."""
     M, J = rss.shape[0], rss.shape[1]
     for m in _prange(M):
@@ -737,7 +737,7 @@ def _spd_inverse4(Y: np.ndarray):
     2x2 blocks are positive definite. ``ok`` says they are, with a margin that rounding cannot
     cross: ``det Y22 > tol tr(Y22)^2`` and ``det Sc > tol tr(Sc) tr(Y11)`` (det / tr is the
     smallest eigenvalue to a factor of 2; Sc is a difference of matrices of the size of Y11, so its
-    rounding error is relative to Y11), tol = :data:`INVERTIBLE_TOL`. Where not ``ok`` the
+    rounding error is relative to Y11), tol = ``INVERTIBLE_TOL``. Where not ``ok`` the
     divisions are guarded (P is that of the identity) and the caller treats the slot as having no
     estimate: two observed stamps make Y invertible in exact arithmetic, but not in floating
     point when one stamp's fix carries almost no information (sigma_db = 100 dB gives ranges
@@ -764,7 +764,7 @@ def _spd_inverse4(Y: np.ndarray):
 
 def stack_estimates(stack: HorizonStack, min_stamps: int = 2):
     """x_hat_N = Y^-1 y, P_N = Y^-1 and validity per slot: at least ``min_stamps`` observed
-    stamps and Y numerically invertible (:func:`_spd_inverse4`); an invalid slot has no estimate
+    stamps and Y numerically invertible (``_spd_inverse4``); an invalid slot has no estimate
     (its x and P are placeholders: those of Y = I, y = 0)."""
     valid = stack.stamps >= min_stamps
     P, ok = _spd_inverse4(np.where(valid[..., None, None], stack.info, np.eye(4)))
@@ -824,30 +824,30 @@ _PARALLEL_ELEMENTS = 4096  # (copy, agent) elements from which threads pay for t
 
 
 def _kmul(a, b):
-    """a @ b on 2x2 blocks as 4-tuples (:func:`_mul`; jitted for the kernels)."""
+    """a @ b on 2x2 blocks as 4-tuples (``_mul``; jitted for the kernels)."""
     return (a[0] * b[0] + a[1] * b[2], a[0] * b[1] + a[1] * b[3], a[2] * b[0] + a[3] * b[2], a[2] * b[1] + a[3] * b[3])
 
 
 def _kmul_t(a, b):
-    """a @ b^T on 2x2 blocks as 4-tuples (:func:`_mul_t`; jitted for the kernels)."""
+    """a @ b^T on 2x2 blocks as 4-tuples (``_mul_t``; jitted for the kernels)."""
     return (a[0] * b[0] + a[1] * b[1], a[0] * b[2] + a[1] * b[3], a[2] * b[0] + a[3] * b[1], a[2] * b[2] + a[3] * b[3])
 
 
 def _add2(a, b):
-    """a + b on 4-tuples, in :func:`_lin`'s order."""
+    """a + b on 4-tuples, in ``_lin``'s order."""
     return (a[0] + b[0], a[1] + b[1], a[2] + b[2], a[3] + b[3])
 
 
 def _add3(a, b, c, d):
-    """a + b + c d on 4-tuples, in :func:`_lin`'s order."""
+    """a + b + c d on 4-tuples, in ``_lin``'s order."""
     return (a[0] + b[0] + c * d[0], a[1] + b[1] + c * d[1], a[2] + b[2] + c * d[2], a[3] + b[3] + c * d[3])
 
 
 def _buffer_kernel_source(final_info, final_vector, final_stamps, buffer_info, buffer_vector, buffer_success,
                           k, shift, inv_q, T, min_stamps, out_info, out_vector, out_stamps, out_x, out_P,
                           out_valid):  # pragma: no cover - compiled by numba; the numpy path is the reference
-    """Per element m: the D+1 :func:`stack_advance` calls of :func:`buffer_step`, then
-    :func:`stack_estimates`, with the same formulas in the same order on the 2x2 blocks.
+    """Per element m: the D+1 ``stack_advance`` calls of ``buffer_step``, then
+    ``stack_estimates``, with the same formulas in the same order on the 2x2 blocks.
 
     Every slot of the stack lives in 16 + 4 + 1 numbers that never leave the element's
     row, so the stack of all horizons is advanced without the (M, S, 4, 4) temporaries the
@@ -1015,8 +1015,8 @@ def _buffer_kernel_source(final_info, final_vector, final_stamps, buffer_info, b
 
 def _compiled(name: str):
     """[serial, parallel] numba forms of the kernel ``name`` (``"buffer"``:
-    :func:`_buffer_kernel_source`, ``"fuse"``: :func:`_fuse_kernel_source`, ``"costs"``:
-    :func:`_costs_kernel_source`, ``"fixes"``: :func:`_fixes_kernel_source`), compiled on first
+    ``_buffer_kernel_source``, ``"fuse"``: ``_fuse_kernel_source``, ``"costs"``:
+    ``_costs_kernel_source``, ``"fixes"``: ``_fixes_kernel_source``), compiled on first
     use and cached on disk, or ``None`` where numba is not installed."""
     global _KERNELS, _prange
     if _KERNELS is None:
@@ -1040,7 +1040,7 @@ def _compiled(name: str):
 
 
 def _kernels(name: str, compiled: bool | None):
-    """:func:`_compiled` ``name`` where ``compiled`` asks for it (None: where numba is installed), else None
+    """``_compiled`` ``name`` where ``compiled`` asks for it (None: where numba is installed), else None
     (the numpy reference path); ``compiled=True`` without numba is refused."""
     kernels = _compiled(name) if compiled in (None, True) else None
     if compiled and kernels is None:
@@ -1049,7 +1049,7 @@ def _kernels(name: str, compiled: bool | None):
 
 
 def _for_size(kernels, elements: int):
-    """The threaded form from :data:`_PARALLEL_ELEMENTS` elements on, the serial one below."""
+    """The threaded form from ``_PARALLEL_ELEMENTS`` elements on, the serial one below."""
     return kernels[1] if elements >= _PARALLEL_ELEMENTS else kernels[0]
 
 
@@ -1062,11 +1062,11 @@ def _flat(a, batch: tuple, tail: tuple, dtype) -> np.ndarray:
 
 def buffer_estimates(motion: MotionModel, final: HorizonStack, k, buffer_info, buffer_vector, buffer_success,
                      shift: bool = True, accel_var=None, min_stamps: int = 2, compiled: bool | None = None):
-    """:func:`buffer_step` then :func:`stack_estimates` of the current stack: (final, x, P, valid).
+    """``buffer_step`` then ``stack_estimates`` of the current stack: (final, x, P, valid).
 
     The scenario's and the backend's step at time k: the stack of every horizon is advanced
     once per buffered stamp and read once. ``compiled`` (default: where numba is installed)
-    runs :func:`_buffer_kernel_source`, the same arithmetic element by element (equal to the
+    runs ``_buffer_kernel_source``, the same arithmetic element by element (equal to the
     numpy path to rounding: tests hold it to 1e-9), instead of the numpy block form
     (``compiled=False``), which is the reference and the path without numba.
     """
@@ -1106,7 +1106,7 @@ def _quadratic2(e0, e1, S):
 
 
 def _costs_kernel_source(prev_x, prev_P, prev_valid, z, R, T, G, out):  # pragma: no cover - compiled by numba
-    """Per element m and horizon j: :func:`predictive_costs` with the same sums in the same order
+    """Per element m and horizon j: ``predictive_costs`` with the same sums in the same order
     (S's six terms left to right, as ``_lin`` adds them), on the rows of ``prev_P`` where they lie
     instead of the strided 2x2 views the numpy form multiplies 48 times over the batch."""
     M, S = prev_valid.shape
@@ -1140,9 +1140,9 @@ def predictive_costs(motion: MotionModel, prev_x, prev_P, prev_valid, z, R, comp
     ``prev_x`` (..., S, 4), ``prev_P`` (..., S, 4, 4), ``prev_valid`` (..., S), ``z`` (..., 2),
     ``R`` (..., 2, 2). Invalid -> +inf. ``fresh`` (...) gamma(k, 0): without a fresh observation
     there is nothing to score and the cost is +inf for every horizon (``z`` and ``R`` are then
-    :func:`fused_fix`'s placeholders 0 and I; scoring them, as a smoothed cost would, adds
+    ``fused_fix``'s placeholders 0 and I; scoring them, as a smoothed cost would, adds
     ``|p|^2 / S``-sized terms that favour the horizon with the largest S, the shortest). ``compiled``
-    (default: where numba is installed) runs :func:`_costs_kernel_source`, equal to this numpy form
+    (default: where numba is installed) runs ``_costs_kernel_source``, equal to this numpy form
     (``compiled=False``, the reference) to rounding: tests hold it to 1e-9.
     """
     costs = _predictive_costs(motion, prev_x, prev_P, prev_valid, z, R, compiled)
@@ -1175,7 +1175,7 @@ def _predictive_costs(motion: MotionModel, prev_x, prev_P, prev_valid, z, R, com
 
 def in_sample_costs(x, valid, z, R, fresh=None):
     """In-sample residual ``J = (z(k) - H x_N(k))^T R(k)^-1 (.)`` (``likelihood="paper"``) [reconstructed];
-    +inf where invalid, and for every horizon where ``fresh`` (...) is False (as :func:`predictive_costs`)."""
+    +inf where invalid, and for every horizon where ``fresh`` (...) is False (as ``predictive_costs``)."""
     e0, e1 = z[..., None, 0] - x[..., 0], z[..., None, 1] - x[..., 1]
     quad, _ = _quadratic2(e0, e1, tuple(r[..., None] for r in _blk(R, 0, 0)))
     if fresh is not None:
@@ -1188,7 +1188,7 @@ def smooth_costs(raw: np.ndarray, count: np.ndarray, costs: np.ndarray, lam: flo
     ``Jbar_N(k) = lam Jbar_N(k-1) + (1 - lam) J_N(k)`` where J_N(k) is finite, bias-corrected by
     ``1 - lam^count`` [chosen lam = 0.5]. Returns (raw, count, corrected costs; inf if count = 0).
 
-    J_N(k) must be +inf at a step without a fresh observation (:func:`predictive_costs` with
+    J_N(k) must be +inf at a step without a fresh observation (``predictive_costs`` with
     ``fresh``): the sum of one-step predictive log-likelihoods scores each reading once, and a
     step where no packet of stamp k arrived by time k has no reading to score. Scoring the
     placeholder fix there (z = 0, R = I) adds ``|p|^2 / S_N``, smallest for the horizon with the

@@ -54,9 +54,9 @@ Departures from the printed equations
   components it *sent*: the correct term is ``T_ji L_j v_j``. The noise w is
   multiplied by sum_j p_ij, which is 1 for valid weights; it is kept as the
   row sum so that the exact recursion stays exact for any weights.
-* The exact error covariance is not in the paper: :func:`error_transition`
+* The exact error covariance is not in the paper: ``error_transition``
   builds e(k+1) = F e(k) + G [w; v_1; ...; v_N] from the corrected (11) and
-  :func:`exact_covariance_step` propagates Sigma(k+1) = F Sigma F^T + G Q G^T,
+  ``exact_covariance_step`` propagates Sigma(k+1) = F Sigma F^T + G Q G^T,
   so that J_K is computed without Monte Carlo.
 
 The bound (19) is the paper's; it holds because for a convex combination

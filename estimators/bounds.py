@@ -44,14 +44,14 @@ true state; "u" is the unit vector from the second point to the first):
 
 | function                      | reading                                    | information                    |
 |-------------------------------|--------------------------------------------|--------------------------------|
-| :func:`linear_information`    | z = C x + v, v ~ N(0, R)                   | C^T R^-1 C                     |
-| :func:`fix_information`       | position fix, per-axis variance s2         | I / s2 on the position block   |
-| :func:`range_information`     | ||p_a - p_b|| + v, variance s2             | u u^T / s2 (a 2x2 block)       |
-| :func:`pair_information`      | a range between two agents                 | [[B, -B], [-B, B]] on (a, b)   |
+| ``linear_information``    | z = C x + v, v ~ N(0, R)                   | C^T R^-1 C                     |
+| ``fix_information``       | position fix, per-axis variance s2         | I / s2 on the position block   |
+| ``range_information``     | ||p_a - p_b|| + v, variance s2             | u u^T / s2 (a 2x2 block)       |
+| ``pair_information``      | a range between two agents                 | [[B, -B], [-B, B]] on (a, b)   |
 | (anchor range)                | to a known anchor: only the agent's block  | u u^T / s2                     |
-| :func:`bearing_information`   | atan2 of p - s from a known s, variance s2 | n n^T / (d^2 s2), n normal to u|
-| :func:`range_bearing_information` | SE(2) pose observing a point: [r, b]   | H^T R^-1 H, H = [H_pose, H_pt] |
-| :func:`rss_aoa_information`   | RSS (dBm) and AOA of p from a sender whose | H^T (R + s_nav2 H H^T)^-1 H    |
+| ``bearing_information``   | atan2 of p - s from a known s, variance s2 | n n^T / (d^2 s2), n normal to u|
+| ``range_bearing_information`` | SE(2) pose observing a point: [r, b]   | H^T R^-1 H, H = [H_pose, H_pt] |
+| ``rss_aoa_information``   | RSS (dBm) and AOA of p from a sender whose | H^T (R + s_nav2 H H^T)^-1 H    |
 |                               | own position is known to s_nav2 per axis   | (the sender's position a       |
 |                               | (gao2016); R per LOS/NLOS mode             | Gaussian nuisance, eliminated) |
 
@@ -213,7 +213,7 @@ def unit_vectors(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def range_information(a: np.ndarray, b: np.ndarray, variance) -> np.ndarray:
     """u u^T / variance (..., 2, 2) of a range ||a - b|| + v: the block on either end (a known anchor b: the
-    whole information of a; two agents: see :func:`pair_information`)."""
+    whole information of a; two agents: see ``pair_information``)."""
     u, _ = unit_vectors(a, b)
     return u[..., :, None] * u[..., None, :] / np.asarray(variance, float)[..., None, None]
 
@@ -235,7 +235,7 @@ def range_bearing_information(pose: np.ndarray, point: np.ndarray, R: np.ndarray
     """H^T R^-1 H (..., 5, 5) on [pose (x, y, theta); point (x, y)] of z = [||t - p||, atan2(t - p) - theta] + v.
 
     H_pose = [[-d^T / r, 0], [d_y / r^2, -d_x / r^2, -1]], H_point = [[d^T / r], [-d_y / r^2, d_x / r^2]]
-    with d = t - p (the Jacobian of :class:`estimators.se2_models.RangeBearingModel`). For a known
+    with d = t - p (the Jacobian of ``estimators.se2_models.RangeBearingModel``). For a known
     landmark keep the pose block [:3, :3]; for a robot observed, the full matrix on both states.
     """
     s, t = np.asarray(pose, float), np.asarray(point, float)

@@ -1,13 +1,13 @@
-"""Constant-velocity motion driven by an accelerometer (wan2014, eq. 1), in the shape of :mod:`estimators.models`.
+"""Constant-velocity motion driven by an accelerometer (wan2014, eq. 1), in the shape of ``estimators.models``.
 
 | model                           | kind       | state x                | input u                      | paper   |
 |---------------------------------|------------|------------------------|------------------------------|---------|
-| :class:`ConstantVelocityAccel`  | ``cv_accel`` | [px, py, vx, vy] (4) | accelerometer reading (2)    | wan2014 |
+| ``ConstantVelocityAccel``  | ``cv_accel`` | [px, py, vx, vy] (4) | accelerometer reading (2)    | wan2014 |
 
 x(k+1) = F x(k) + G a_hat(k) + w, F = [[I2, dt I2], [0, I2]], G = [[dt^2/2 I2], [dt I2]],
 w ~ N(0, Q), Q = accel_noise_var G G^T: an estimator that only knows the reading
-a_hat sees exactly this noise (:class:`coloc_env.world.cv_uav.ConstantVelocityUAVs`).
-The model is linear, so :func:`estimators.models.predict_joint` is exact on it.
+a_hat sees exactly this noise (``coloc_env.world.cv_uav.ConstantVelocityUAVs``).
+The model is linear, so ``estimators.models.predict_joint`` is exact on it.
 """
 
 from __future__ import annotations

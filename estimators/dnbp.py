@@ -29,21 +29,21 @@ particles in R^4; a message m_ts is a 2-D Gaussian mixture of M centres,
 log-weights and one isotropic bandwidth h_ts; a GPS fix is the one-component
 message {z_s, 1, sigma_gps} (stored as M identical components).
 
-* :func:`sample_messages` — Algorithm 1. Weights w_i ∝ 1/m_st(p_t^i) when
+* ``sample_messages`` — Algorithm 1. Weights w_i ∝ 1/m_st(p_t^i) when
   the reverse message exists on a fault<->fault link, else 1/M; stratified
   directions theta_i = 2 pi (pi_i + U_i)/M; centres
   c_i = p_t^i + (d_ts + nu_i)[cos theta_i, sin theta_i]; bandwidth
   h_ts = max(sqrt(h_rot(p_t, w)^2 + (pi d_ts / M)^2), 0.5 m) [chosen].
-* :func:`belief_update` — Algorithm 2, mixture importance sampling: proposal
+* ``belief_update`` — Algorithm 2, mixture importance sampling: proposal
   q = (rho + sum_u m_u)/(K+1) with ceil(k_is M/(K+1)) draws per component,
   weights pi/q in the log domain, systematic resampling to M, jitter
   N(0, h_rot^2 I2) (regularised resampling [chosen]) and velocity completion
   from the prior's conditional v | p [chosen].
-* :func:`predict` — Algorithm 3: x_i <- F x_i + G (a_hat + e_i),
+* ``predict`` — Algorithm 3: x_i <- F x_i + G (a_hat + e_i),
   e_i ~ N(0, sigma_acc^2 I2); the forward message rho is the position KDE
   (bandwidth h_rho = h_rot) mixed with a defensive uniform:
   rho = (1 - eps) KDE + eps U(box) [chosen].
-* :func:`step` — Algorithm 4, one time step with the message schedule of the
+* ``step`` — Algorithm 4, one time step with the message schedule of the
   paper's Sec. 3.4 (spec §5) or the parallel schedule for the ablation.
 
 Rule-of-thumb bandwidth [chosen form]: h_rot = sigma_hat ESS^(-1/6) with
@@ -58,7 +58,7 @@ one block per copy and purpose from that copy's own generator, so that copy b
 of a batch is bit-identical to the same copy run alone. Large kernel
 evaluations (proposals x mixture components) are chunked to bound memory.
 
-Speed. :func:`belief_update` (Algorithm 2, where nearly all the time goes)
+Speed. ``belief_update`` (Algorithm 2, where nearly all the time goes)
 runs as two fused numba kernels, one receiver per iteration: proposals and
 importance log-weights (``_belief_weights_source``: the prior's KDE and every
 present message evaluated at each proposal, no (R, S, C, M) temporaries, no
@@ -66,7 +66,7 @@ numpy call per step of the algorithm), then normalization, systematic
 resampling, jitter and velocity completion (``_belief_resample_source``).
 They reproduce the numpy path's arithmetic in its order: the same exponents,
 numpy's pairwise sum for the weight normalization, the flat-offset
-comparisons of :func:`_categorical` (by bisection or a merge instead of a
+comparisons of ``_categorical`` (by bisection or a merge instead of a
 scan: the same counts), so they make the same draws; the particles equal the
 numpy path's to ~1e-13 m (the einsum of h_rot sums in another order). A GPS
 fix (M identical components) is evaluated once per point and added M times
@@ -169,15 +169,15 @@ Departures from the spec
   overlap at all), its belief stays as it was; this did not occur at the
   spec's defaults, it protects against inconsistent inputs.
 * A UAV counts as broadcasting only when its broadcast reaches at least one
-  eligible receiver (:class:`coloc_env`'s medium counts the same way).
+  eligible receiver (``coloc_env``'s medium counts the same way).
   Delivery itself is the caller's network (the ``deliver`` argument of
-  :func:`step`); the estimator only decides who may send and who listens.
+  ``step``); the estimator only decides who may send and who listens.
 * In the parallel schedule the reverse-message correction is still applied
   to fault<->fault links only (spec §5 states it for every schedule).
 * Kernel sums: exponents below -600 are clipped before ``exp`` (libm is ~10x
   slower on underflowing results), so a mixture whose every component is
   more than ~35 bandwidths away counts as density 0 there. Importance weights
-  are first computed with the fast kernel of :func:`mixture_logpdf`; a
+  are first computed with the fast kernel of ``mixture_logpdf``; a
   receiver whose every weight vanishes is recomputed in the exact log domain.
   The compiled kernels also leave out of a sum the terms below e^-50 of its
   largest term (K of them change it by < K e^-50 ~ 1e-20, relative), except
@@ -223,7 +223,7 @@ __all__ = [
     "step",
 ]
 
-# deliver(senders (B, N), listening (B, N, N)) -> delivered (B, N, N): the caller's network (see :func:`step`)
+# deliver(senders (B, N), listening (B, N, N)) -> delivered (B, N, N): the caller's network (see ``step``)
 Deliver = Callable[[np.ndarray, np.ndarray], np.ndarray]
 Propagate = Callable[[np.ndarray, Sequence[np.random.Generator]], np.ndarray]
 
@@ -293,7 +293,7 @@ class DnbpModel:
 
     @property
     def motion(self) -> ConstantVelocityAccel:
-        """The constant-velocity model of Algorithm 3 (wan2014 eq. 1) in the shape of :mod:`estimators.cv_models`."""
+        """The constant-velocity model of Algorithm 3 (wan2014 eq. 1) in the shape of ``estimators.cv_models``."""
         return ConstantVelocityAccel(self.dt, self.accel_noise_std**2)
 
     @property
@@ -520,7 +520,7 @@ def mixture_logpdf(points: np.ndarray, centres: np.ndarray, log_weights: np.ndar
     coordinates) and summed in the linear domain. Every exponent is <= 0, so
     nothing overflows; a point farther than ~38 bandwidths from every
     component (density below ~K e^-600) counts as log 0 = -inf, which the
-    callers treat (see :func:`belief_update`).
+    callers treat (see ``belief_update``).
 
     ``compiled`` (fast kernel only): run it as one compiled pass per point
     (numba, threads over points), which forms the same exponents, takes the
@@ -692,7 +692,7 @@ def _numpy_sum(values, n):  # pragma: no cover - compiled by numba
 
 
 def _mixture_point(x, y, inv, cx, cy, centre_term, log_norm, buffer, identical):  # pragma: no cover - compiled
-    """The fast kernel of :func:`mixture_logpdf` at one point (x, y) of one mixture, ``mixture_rows``' arithmetic
+    """The fast kernel of ``mixture_logpdf`` at one point (x, y) of one mixture, ``mixture_rows``' arithmetic
     (the exponent s . c_k + point term + centre term, centre_term[k] = log w_k - 0.5 ||c_k||^2 inv) on the
     centres' coordinates cx, cy (K,): the exponents are formed once into ``buffer``, those above the cut packed
     to its front without branches, and only they reach exp (in the same order). ``identical``: every component
@@ -770,10 +770,10 @@ def _exp_small(x):  # pragma: no cover - compiled by numba (fastmath)
 
 def _mixture_point_truncated(x, y, inv, cx, cy, centre_term, log_norm, buffer, limit
                              ):  # pragma: no cover - compiled by numba (fastmath)
-    """The truncated kernel at one point: the exponents of :func:`_mixture_point`, then every term more than
+    """The truncated kernel at one point: the exponents of ``_mixture_point``, then every term more than
     ``limit`` (= r^2 / 2) below the largest left out (each is < e^(-r^2/2) of it: a component more than r
     bandwidths farther than the nearest one, for equal weights) and the others summed relative to the largest
-    by :func:`_exp_small`, in any order (fastmath: the loop vectorizes)."""
+    by ``_exp_small``, in any order (fastmath: the loop vectorizes)."""
     K = cx.shape[0]
     s0, s1 = x * inv, y * inv
     pt = -0.5 * (x * x + y * y) * inv
@@ -852,7 +852,7 @@ def _belief_weights_source(prior, prior_bandwidth, prior_uniform, centres, log_w
     """Algorithm 2's proposals and fast importance log-weights, one receiver r per iteration (``row0`` + r its row
     in the whole update, for the flat offsets: a slice of the receivers computes what the whole call computes).
 
-    proposals (R, C, 2) and log_w (R, C) are filled as :func:`belief_update`'s numpy path fills them: every
+    proposals (R, C, 2) and log_w (R, C) are filled as ``belief_update``'s numpy path fills them: every
     column's proposal (the invalid ones too, they are drawable by the clipped resampling index), the weights
     log pi - log q of the valid ones (-inf elsewhere, as in _importance_log_weights).
     """
@@ -1135,7 +1135,7 @@ def _belief_resample_source(prior, prior_bandwidth, prior_uniform, proposals, lo
 
 def _message_rows_source(points, distance, weights, permutation, offset, range_noise, range_std, centres, var,
                          square_sum):  # pragma: no cover - compiled by numba
-    """Algorithm 1 step 2 for E messages in :func:`sample_messages`' numpy arithmetic, each row from its own inputs:
+    """Algorithm 1 step 2 for E messages in ``sample_messages``' numpy arithmetic, each row from its own inputs:
     centres c_i = p_i + (d + sigma_d nu_i) [cos theta_i, sin theta_i], theta_i = 2 pi (pi_i + U_i) / M (cos and
     sin are libm's in both), and the sums of h_rot (rule_of_thumb_bandwidth) in einsum's orders: the weighted
     mean summed over i, the variance as sum_i w_i ((x_i - mx)^2 + (y_i - my)^2) (einsum's order for "p,pd->"),
@@ -1255,7 +1255,7 @@ def correction_weights(sender_points: np.ndarray, reverse_centres: np.ndarray, r
     """log w_i ∝ -log m_st(p_t^i), normalized (Alg. 1 step 1, Ihler's double-counting correction).
 
     ``truncation`` r > 0: m_st by the truncated kernel (the module's Kernels note) where numba is installed;
-    0 (default): the fast kernel of :func:`mixture_logpdf`."""
+    0 (default): the fast kernel of ``mixture_logpdf``."""
     kernels = _fused_kernels() if truncation > 0.0 else None
     if kernels is not None:
         centres = np.asarray(reverse_centres, float)
@@ -1301,9 +1301,9 @@ def belief_update(model: DnbpModel, prior: np.ndarray, prior_bandwidth: np.ndarr
 
     prior (R, M, 4), prior_bandwidth (R,), prior_uniform (R,); incoming
     messages padded to S slots: centres (R, S, K, 2), log_weights (R, S, K),
-    bandwidth (R, S), present (R, S). ``draws`` (see :func:`draw_belief`):
+    bandwidth (R, S), present (R, S). ``draws`` (see ``draw_belief``):
     ``pick`` (R, C) and ``box`` (R, C, 3) uniforms, ``noise`` (R, C, 2)
-    normals with C = :attr:`DnbpModel.proposal_capacity`, ``resample`` (R,),
+    normals with C = ``DnbpModel.proposal_capacity``, ``resample`` (R,),
     ``jitter`` (R, M, 2), ``velocity`` (R, M). Returns the new particles
     (R, M, 4) and a bool (R,) that is False where every weight underflowed
     (the prior is kept there). ``compiled`` (default): the fused numba kernels
@@ -1385,7 +1385,7 @@ def belief_update(model: DnbpModel, prior: np.ndarray, prior_bandwidth: np.ndarr
 
 def _belief_update_fused(kernels, model, prior, prior_bandwidth, prior_uniform, centres, log_weights, bandwidth,
                          present, draws, K_r, total, C):
-    """:func:`belief_update` by the two fused kernels (proposals and weights; resampling and completion), with
+    """``belief_update`` by the two fused kernels (proposals and weights; resampling and completion), with
     the exact log-domain recomputation of a receiver whose every fast weight vanished in between."""
     R, M = prior.shape[:2]
     elements = int(np.dot(total, K_r + 1)) * M
@@ -1653,7 +1653,7 @@ def step(model: DnbpModel, state: DnbpState, gps_normal: np.ndarray, gps_fix: np
     the particles of rho(tau+1) (B, N, M, d), position first (None: the
     constant-velocity model of ``model``, with ``accel``). Returns the state of
     tau + 1 (prior = rho(tau+1), belief/estimate of tau) and a
-    :class:`StepResult`.
+    ``StepResult``.
     """
     B, N, M = state.prior.shape[:3]
     n_iter = model.num_iterations

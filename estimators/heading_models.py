@@ -1,18 +1,18 @@
 """Odometry motion model with the heading error in the state (the time-correlated part of dead reckoning).
 
-Setting (wang2019's odometry, :class:`estimators.models.OdometryDisplacement`): a
+Setting (wang2019's odometry, ``estimators.models.OdometryDisplacement``): a
 platform measures its speed V_m = V + n_v and its turn rate omega_m = omega + n_omega
 (white, variances sigma_v^2, sigma_omega^2) and integrates the heading it moves along,
 phi_m(k+1) = phi_m(k) + dt omega_m(k), from a known phi(0). The heading error
 e(k) = phi_m(k) - phi(k) is then a random walk, e(k+1) = e(k) + dt n_omega(k), and
 every displacement dt V_m [cos phi_m; sin phi_m] carries the same slowly growing
 error. A position-only filter can give each step's displacement the right marginal
-variance (the ``heading_var`` term of :func:`estimators.ukf_relay.process_noise`) but
+variance (the ``heading_var`` term of ``estimators.ukf_relay.process_noise``) but
 treats successive steps as independent; the true errors of successive steps are
 correlated through e, so over K steps the lateral error grows like K^3 sigma_omega^2
 while the white model's grows like K^2, and the filter becomes overconfident.
 
-Model (:class:`OdometryHeadingError`): per platform the state is
+Model (``OdometryHeadingError``): per platform the state is
 s = (x, y, e), the position and the error of the integrated heading reading; the
 input is the same as the displacement model's, u = (V_m, phi_m, sigma_phi^2) (the
 last entry is not used: the model carries the heading error itself):
@@ -29,7 +29,7 @@ of each other and of e(k)). The Jacobian is
          [0, 0,  1]],
 
 so the cross-covariance of position and heading error (and, through
-:func:`estimators.models.predict_joint`, between platforms) evolves; the filter's
+``estimators.models.predict_joint``, between platforms) evolves; the filter's
 time update is the EKF one (exact to first order in e). Range and fix updates see
 the position, the first two entries of each block, unchanged.
 
@@ -40,7 +40,7 @@ position-only model, so one world's readings serve both.
 Departure: the integrated heading is exact at k = 0 (e(0) = 0 with variance 0), and a
 joint covariance with a zero block has no Cholesky factor for the sigma points; the
 initial variance of e is one step's increment, dt^2 sigma_omega^2
-(:meth:`OdometryHeadingError.initial_error_var`), which overstates the heading
+(``OdometryHeadingError.initial_error_var``), which overstates the heading
 error's variance at step k by that of one step ((k + 1) instead of k increments).
 """
 

@@ -7,7 +7,7 @@ Arrays carry leading batch axes (``...``). The Joseph form
 is the covariance of the estimator x+ = x + K (z - H x) for *any* gain K, so
 it stays the true covariance when part of the gain is forced to zero (rows of
 agents a relay chain did not reach: the consistent truncation of wang2019's
-chains, :mod:`estimators.ukf_relay`), and it keeps P symmetric positive
+chains, ``estimators.ukf_relay``), and it keeps P symmetric positive
 semi-definite in floating point.
 """
 

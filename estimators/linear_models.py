@@ -1,9 +1,9 @@
-"""Linear-Gaussian motion and measurement models (zhao2020, fu2017), in the shape of :mod:`estimators.models`.
+"""Linear-Gaussian motion and measurement models (zhao2020, fu2017), in the shape of ``estimators.models``.
 
 | model                      | kind                   | equation                                | paper eqs.         |
 |----------------------------|------------------------|-----------------------------------------|--------------------|
-| :class:`LinearGaussian`    | ``linear_gaussian``    | x(k+1) = A x(k) + b + w, w ~ N(0, Q)    | zh 1, 22; fu 1     |
-| :class:`LinearObservation` | ``linear_observation`` | z_j(k) = C x(k) + v_j, v_j ~ N(0, V_j)  | zh 2, 23; fu 2     |
+| ``LinearGaussian``    | ``linear_gaussian``    | x(k+1) = A x(k) + b + w, w ~ N(0, Q)    | zh 1, 22; fu 1     |
+| ``LinearObservation`` | ``linear_observation`` | z_j(k) = C x(k) + v_j, v_j ~ N(0, V_j)  | zh 2, 23; fu 2     |
 
 (zh = zhao2020, fu = fu2017.)
 zhao2020's drift has b = v dt (the known UAV velocity times the step); fu2017's

@@ -79,7 +79,7 @@ MMSE estimator, so it bounds (A) from below) and ``ideal_kf`` (every z_i(k) on
 time).
 
 Three readings of (B)'s compensation (29) (``distributed_step(..., reading=...)``,
-:data:`READINGS`), all with the weights w = (w0, w1, w2) of (29):
+``READINGS``), all with the weights w = (w0, w1, w2) of (29):
 
 * ``"current"`` (the default; the printed algorithm): the leader weighs the held
   packet's three entries [x(k'|k'), x(k'|k'-1), x(k'|k'-2)], formed at the
@@ -359,7 +359,7 @@ def kalman_filter(model: LossyModel, x0_mean, P0, measurements: np.ndarray, uavs
 
 
 def informed_matrices(model: LossyModel) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """F, Qa, H_now, H_before of the informed filter's state [x(k); x(k-1)] (see :func:`informed_filter`)."""
+    """F, Qa, H_now, H_before of the informed filter's state [x(k); x(k-1)] (see ``informed_filter``)."""
     n = model.state_dim
     H = np.asarray(model.measurement, float)
     Phi, Q = np.asarray(model.transition, float), np.asarray(model.process_noise, float)
@@ -395,8 +395,8 @@ def informed_filter(model: LossyModel, x0_mean, P0, y: np.ndarray, outcome: np.n
     State [x(k); x(k-1)]: an on-time y_i(k) = z_i(k) measures x(k), a late one
     y_i(k) = z_i(k-1) measures x(k-1) unless z_i(k-1) was already delivered on
     time at k-1 (a duplicate) or k = 0 (the known buffer). Returns estimates
-    (..., K, n) and covariances (..., K, n, n). One slot is :func:`informed_update`
-    (after the time update x -> F x, P -> F P F^T + Qa of :func:`informed_matrices`).
+    (..., K, n) and covariances (..., K, n, n). One slot is ``informed_update``
+    (after the time update x -> F x, P -> F P F^T + Qa of ``informed_matrices``).
     """
     n = model.state_dim
     y, outcome = np.asarray(y, float), np.asarray(outcome)
@@ -517,7 +517,7 @@ def centralized_step(model: LossyModel, state: CentralizedState, y: np.ndarray, 
     """One slot of (A): filter with y(k) (..., L, p), then predict k+1.
 
     ``moments="printed"`` substitutes the paper's printed second moments
-    (:func:`printed_link_moment` and alpha1 R alpha1 for E[xi1 R xi1], eqs. 12-14, 20) into the
+    (``printed_link_moment`` and alpha1 R alpha1 for E[xi1 R xi1], eqs. 12-14, 20) into the
     same recursion, to measure what they cost; its covariance is then no longer the true MSE.
     Returns (state for k+1, xhat(k|k) (..., n), P(k|k) of x (n, n)).
     """
@@ -671,7 +671,7 @@ def distributed_step(model: LossyModel, state: DistributedState, z: np.ndarray, 
     ``transmit`` (..., L-1) bool: whether each follower sends its packet this
     slot (default all; a packet not sent cannot arrive on time now nor late
     next slot). ``compensation`` (..., L-1, 3): weights (default eq. 29) on the
-    three estimates ``reading`` makes of the held packet (:data:`READINGS`,
+    three estimates ``reading`` makes of the held packet (``READINGS``,
     module docstring): ``"current"`` its entries [x(k'|k'), x(k'|k'-1),
     x(k'|k'-2)] as if current (the paper as printed); ``"forward"`` its
     filtered estimate predicted forward by 0, 1 and 2 slots (the age unknown:
@@ -749,7 +749,7 @@ def distributed_filter(model: LossyModel, x0_mean, P0, z: np.ndarray, outcome: n
                        forward_spread: bool = True):
     """(B) over an episode with the paper's weights: estimates (..., K, n), own covariances P0(k) (..., K, n, n).
 
-    ``reading``, ``forward_spread``: how the leader compensates a held packet (:func:`distributed_step`;
+    ``reading``, ``forward_spread``: how the leader compensates a held packet (``distributed_step``;
     ``"current"`` is the paper as printed).
     """
     z = np.asarray(z, float)
@@ -764,7 +764,7 @@ def distributed_filter(model: LossyModel, x0_mean, P0, z: np.ndarray, outcome: n
 
 
 def run_filters(model: LossyModel, x0_mean, P0, z: np.ndarray, outcome: np.ndarray, filters=FILTERS) -> dict:
-    """Every filter of :data:`FILTERS` on the same runs: name -> (estimates, own covariances)."""
+    """Every filter of ``FILTERS`` on the same runs: name -> (estimates, own covariances)."""
     unknown = sorted(set(filters) - set(FILTERS))
     if unknown:
         raise ValueError(f"unknown filters {unknown}; available: {list(FILTERS)}")

@@ -14,9 +14,9 @@ boundary where a paper states them.
 
 | model                         | kind                      | state x      | input u                     | paper  |
 |-------------------------------|---------------------------|--------------|-----------------------------|--------|
-| :class:`OdometryDisplacement` | ``odometry_displacement`` | position (2) | speed, heading, heading var | wang2019 |
+| ``OdometryDisplacement`` | ``odometry_displacement`` | position (2) | speed, heading, heading var | wang2019 |
 
-:func:`predict_joint` is the time update of a joint Gaussian over N agents
+``predict_joint`` is the time update of a joint Gaussian over N agents
 (the EKF form P <- F P F^T + Q, exact for the linear models); it is shared by
 every Kalman-type backend.
 """
@@ -37,7 +37,7 @@ class OdometryDisplacement:
 
     u = (V_m, phi_m, sigma_phi^2): the measured speed, the heading integrated
     from the measured turn rate and that heading's variance. Q = dt^2
-    speed_var u u^T + dt^2 V_m^2 sigma_phi^2 n n^T (:func:`estimators.ukf_relay.process_noise`:
+    speed_var u u^T + dt^2 V_m^2 sigma_phi^2 n n^T (``estimators.ukf_relay.process_noise``:
     the speed noise along the track, the heading's first-order effect across it).
     The Jacobian is the identity, so cross-covariances do not change.
     """

@@ -1,24 +1,24 @@
-"""Models of gao2016 (``nlos_orbit`` / ``afge`` / ``dfir``) in the shape of :mod:`estimators.models`.
+"""Models of gao2016 (``nlos_orbit`` / ``afge`` / ``dfir``) in the shape of ``estimators.models``.
 
 | model                               | kind             | state x              | input u | paper   |
 |-------------------------------------|------------------|----------------------|---------|---------|
-| :class:`ConstantVelocityWhiteAccel` | ``cv_white_accel`` | [px, py, vx, vy] (4) | none (0) | gao2016 |
-| :class:`RssAoaModel`                | ``rss_aoa``      | target position (2), seen from a sender | - | gao2016 |
+| ``ConstantVelocityWhiteAccel`` | ``cv_white_accel`` | [px, py, vx, vy] (4) | none (0) | gao2016 |
+| ``RssAoaModel``                | ``rss_aoa``      | target position (2), seen from a sender | - | gao2016 |
 
 Motion (spec §2) [reconstructed]: ``x(k+1) = A x(k) + B w(k)``, ``w ~ N(0, accel_var I_2)``,
 ``A = [[I, T I], [0, I]]``, ``B = [[T^2/2 I], [T I]]``; the matrices are those of
-:class:`estimators.afge.MotionModel` (this class wraps it; no second copy). Unlike
-:class:`estimators.cv_models.ConstantVelocityAccel` there is no accelerometer: the target's
+``estimators.afge.MotionModel`` (this class wraps it; no second copy). Unlike
+``estimators.cv_models.ConstantVelocityAccel`` there is no accelerometer: the target's
 acceleration is an unknown white input, so the model takes an empty input ``u`` (..., 0).
-Noise is a variance here (the library's convention); :attr:`ConstantVelocityWhiteAccel.afge`
+Noise is a variance here (the library's convention); ``ConstantVelocityWhiteAccel.afge``
 converts to the estimator's ``accel_sigma`` at the boundary.
 
 Measurement (spec §4) [reconstructed]: what neighbour j measures of the target, the RSS
 ``P_T - PL(d0) - 10 n log10(d / d0) - eps`` (dBm) and the AOA ``atan2(p - p_j) + n_theta``
 (rad), with ``(eps, n_theta) ~ N(0, diag(s_db^2, s_th^2))`` in LOS and
 ``N((mu_db, mu_th), diag(s_db^2 + s_b,db^2, s_th^2 + s_b,th^2))`` in NLOS, as
-:class:`coloc_env.world.radio.RssAoaSensor` draws them; the parameters are an
-:class:`estimators.afge.SignalModel`.
+``coloc_env.world.radio.RssAoaSensor`` draws them; the parameters are an
+``estimators.afge.SignalModel``.
 """
 
 from __future__ import annotations
@@ -47,7 +47,7 @@ class ConstantVelocityWhiteAccel:
 
     @cached_property
     def afge(self) -> MotionModel:
-        """The same model as :mod:`estimators.afge` takes it (``accel_sigma`` = sqrt(accel_var))."""
+        """The same model as ``estimators.afge`` takes it (``accel_sigma`` = sqrt(accel_var))."""
         return MotionModel(float(self.period), float(np.sqrt(self.accel_var)))
 
     @property

@@ -179,7 +179,7 @@ def step(params: LsParams, state: KalmanState, gps_normal: np.ndarray, gps_fix: 
 
     ``state`` holds the predictions of tau. Returns (state of tau + 1,
     estimates (B, N, 2), fixed (B, N) bool: fault UAVs whose fix passed the gate).
-    :func:`update` followed by :func:`predict` with the linear model (F, G, Q).
+    ``update`` followed by ``predict`` with the linear model (F, G, Q).
     """
     posterior, estimate, fixed = update(params, state, gps_normal, gps_fix, adjacency, ranges, gps_std, range_std)
     return predict(posterior, accel, F, G, Q), estimate, fixed
@@ -187,11 +187,11 @@ def step(params: LsParams, state: KalmanState, gps_normal: np.ndarray, gps_fix: 
 
 def update(params: LsParams, state: KalmanState, gps_normal: np.ndarray, gps_fix: np.ndarray, adjacency: np.ndarray,
            ranges: np.ndarray, gps_std: float, range_std: float) -> tuple[KalmanState, np.ndarray, np.ndarray]:
-    """The measurement half of :func:`step`: GPS updates, then the gated LS fixes of fault UAVs.
+    """The measurement half of ``step``: GPS updates, then the gated LS fixes of fault UAVs.
 
     ``state`` (any state dimension d >= 2, position first) holds the predictions of tau. Returns the
     posterior of tau, the estimates (B, N, 2) and ``fixed`` (B, N). The caller predicts with its own
-    motion model (:func:`predict` for the linear constant-velocity one).
+    motion model (``predict`` for the linear constant-velocity one).
     """
     gps_normal = np.asarray(gps_normal, bool)
     B, N = gps_normal.shape

@@ -1,20 +1,20 @@
-"""SE(2) odometry motion and range+bearing measurement models (MRCLAM robots), in the shape of :mod:`estimators.models`.
+"""SE(2) odometry motion and range+bearing measurement models (MRCLAM robots), in the shape of ``estimators.models``.
 
-The math is that of :mod:`estimators.ukf_relay_se2` (its module docstring
+The math is that of ``estimators.ukf_relay_se2`` (its module docstring
 states the equations); these objects call its functions, so the simulated
-truth, the dead-reckoning backend (:func:`estimators.models.predict_joint`)
+truth, the dead-reckoning backend (``estimators.models.predict_joint``)
 and the SE(2) UKF agree by construction.
 
 | model                      | kind                       | state x / reading z   | input u / target                 |
 |----------------------------|----------------------------|-----------------------|----------------------------------|
-| :class:`SE2Odometry`       | ``se2_odometry``           | x = [x, y, theta] (3) | [v, omega, var_v, var_omega] (4) |
-| :class:`RangeBearingModel` | ``landmark_range_bearing`` | z = [range, bearing]  | a landmark or a robot's position |
+| ``SE2Odometry``       | ``se2_odometry``           | x = [x, y, theta] (3) | [v, omega, var_v, var_omega] (4) |
+| ``RangeBearingModel`` | ``landmark_range_bearing`` | z = [range, bearing]  | a landmark or a robot's position |
 
 Both are MRCLAM's (Leung et al., IJRR 2011: the robots' odometry and camera).
 
 Noise is given as variances (the library's convention). The odometry
 variances travel in the input, one pair per robot and step, because the
-MRCLAM noise model is speed dependent (:func:`estimators.ukf_relay_se2.odometry_variance`:
+MRCLAM noise model is speed dependent (``estimators.ukf_relay_se2.odometry_variance``:
 sigma_c^2 = r_c (a_c + b_c u_c^2)); a constant-noise user passes the same pair every step.
 """
 
@@ -32,7 +32,7 @@ __all__ = ["RangeBearingModel", "SE2Odometry"]
 
 @dataclass(frozen=True)
 class SE2Odometry:
-    """Unicycle over one step dt driven by odometry (:func:`estimators.ukf_relay_se2.motion`):
+    """Unicycle over one step dt driven by odometry (``estimators.ukf_relay_se2.motion``):
 
         x(k+1) = x + dt v cos theta,  y(k+1) = y + dt v sin theta,  theta(k+1) = wrap(theta + dt omega),
 
@@ -41,7 +41,7 @@ class SE2Odometry:
     first-order image of the input noise, Q = G diag(sigma_v^2, sigma_omega^2) G^T with
     G = dt [[cos theta, 0], [sin theta, 0], [0, 1]]; the Jacobian is
     F = [[1, 0, -dt v sin theta], [0, 1, dt v cos theta], [0, 0, 1]]
-    (the EKF time update P <- F P F^T + Q of :func:`estimators.ukf_relay_se2.time_update`).
+    (the EKF time update P <- F P F^T + Q of ``estimators.ukf_relay_se2.time_update``).
     """
 
     dt: float
@@ -99,9 +99,9 @@ class SE2Odometry:
 class RangeBearingModel:
     """z = [||t - p||, wrap(atan2(t_y - y, t_x - x) - theta)] + v from pose (x, y, theta) to point t.
 
-    (:func:`estimators.ukf_relay_se2.observe`), v ~ N(0, R), R = diag(range_var + range_var_gain r^2,
+    (``estimators.ukf_relay_se2.observe``), v ~ N(0, R), R = diag(range_var + range_var_gain r^2,
     bearing_var) with r the measured range (the MRCLAM calibration's range-dependent sigma_r,
-    :meth:`coloc_env.data.mrclam.NoiseModel.measurement_cov`; gain 0 = constant noise). The target t is
+    ``coloc_env.data.mrclam.NoiseModel.measurement_cov``; gain 0 = constant noise). The target t is
     a known landmark or another robot's position.
     """
 

@@ -65,15 +65,15 @@ become the covariance of the gain [K_R; 0]:
 which m and n compute from their own blocks (P_zU = g^T A_mn^-1 [P_mU; P_nU]
 with g = sqrt(L + lambda) w_p (dzeta_q)_{q<=4}) and carry in the message. It
 is exact for the UT with m, n ordered first, and equals the CCL update with
-the same gain (:func:`ccl_update` with ``reached``).
+the same gain (``ccl_update`` with ``reached``).
 
 Cost. The range reads only the blocks of m and n, so the update needs only
-the first 2d columns of the factor, P[:, mn] A_mn^-T (:func:`range_terms`):
+the first 2d columns of the factor, P[:, mn] A_mn^-T (``range_terms``):
 a 2d x 2d Cholesky, 4d + 1 range evaluations and O(L d) work per reading,
-then a rank-2 change of P (O(L^2)); :func:`range_updates` applies a step's J
+then a rank-2 change of P (O(L^2)); ``range_updates`` applies a step's J
 readings in order with the rank-2 terms kept aside and folded into P every
 16 readings (O(J L^2) per step, against O(J L^3) for a full factor per
-reading), and :func:`fix_updates` the position fixes as rank-4 changes. The
+reading), and ``fix_updates`` the position fixes as rank-4 changes. The
 printed forms stay available and give the same numbers to rounding:
 ``ccl_update(method="sigma")`` (the 2L + 1 sigma points from the L x L
 factor) and ``dcl_update(method="chain")`` (hop by hop).
@@ -106,7 +106,7 @@ Departures from the printed equations
   ``initial_position_std``).
 * Truncated chains: the consistent cross-covariance update above instead of
   leaving P_RU unchanged (the paper's rule stays available).
-* Heading noise (optional, :func:`process_noise`): the paper's Q carries only
+* Heading noise (optional, ``process_noise``): the paper's Q carries only
   the speed noise, although the heading is integrated from a noisy turn rate.
   With ``heading_var`` > 0 the displacement's first-order sensitivity to the
   heading error adds dt^2 V_m^2 sigma_phi^2(k) n n^T, n = [-sin phi; cos phi],
@@ -264,7 +264,7 @@ def range_terms(x: np.ndarray, P: np.ndarray, measuring: np.ndarray, measured: n
 
     the first 2d columns of the full factor being P[:, mn] A_mn^-T (the look-up Cholesky of eqs. 15-16
     applied to every platform at once). The numbers are those of the 2L + 1 point UT of
-    :func:`ccl_update` (``method="sigma"``) in exact arithmetic (tests: 1e-9). Cost per reading: a
+    ``ccl_update`` (``method="sigma"``) in exact arithmetic (tests: 1e-9). Cost per reading: a
     2d x 2d Cholesky, 4d + 1 range evaluations and one (L x 2d) product, O(L d); no L x L factor.
     """
     B, N, d = x.shape
@@ -287,7 +287,7 @@ class _UkfConstants:
 
 def _terms_of_band(band: np.ndarray, idx: np.ndarray, positions: np.ndarray, d: int, c: _UkfConstants,
                    range_var: float):
-    """:func:`range_terms` from the rows ``band`` (B, 2d, L) of P at ``idx`` (B, 2d) and the positions
+    """``range_terms`` from the rows ``band`` (B, 2d, L) of P at ``idx`` (B, 2d) and the positions
     [x_m; x_n] (B, 4)."""
     P_mn = np.take_along_axis(band, idx[:, None, :], axis=2)
     A = _cholesky(P_mn, "the joint covariance")
@@ -314,13 +314,13 @@ def range_updates(estimate: np.ndarray, cov: np.ndarray, measuring: np.ndarray, 
     one is skipped: its gain is 0, any m and n). ``reached`` (B, J, N) bool: the platforms a reading's
     update reaches (all by default: UKF-CCL); the others keep their estimate, and their
     cross-covariances with the reached become those of the gain [K_R; 0] (``truncation="consistent"``)
-    or stay unchanged (``"paper"``). Reading j equals :func:`ccl_update` / :func:`dcl_update` of the
+    or stay unchanged (``"paper"``). Reading j equals ``ccl_update`` / ``dcl_update`` of the
     state after readings < j (tests: 1e-9).
 
     Each reading changes P by a rank-2 term, P - K Pxz^T - Pxz K^T + K Pz K^T = P - (K C^T + C K^T)
     with C = Pxz - Pz K / 2, and reads only the 2d rows of m and n. The terms are kept aside, P =
     P_0 - U V^T (U = [K_1 C_1 ...], V = [C_1 K_1 ...]), and folded into P every ``block`` readings
-    with one matrix product. Cost per reading: :func:`range_terms` on the rows P_0[mn] - U[mn] V^T
+    with one matrix product. Cost per reading: ``range_terms`` on the rows P_0[mn] - U[mn] V^T
     (O(L d block)), no L x L work; per ``block`` readings one (L x 2 block) x (2 block x L) product;
     in all O(J L^2 + J L d block) per step, never an L x L factor or 2L + 1 sigma points.
     """
@@ -403,7 +403,7 @@ def fix_updates(estimate: np.ndarray, cov: np.ndarray, fix: np.ndarray, active: 
     K = P[:, i] S^-1 masked to the reached rows, and the Joseph form
     (I - K H) P (I - K H)^T + K R K^T = P - K P[i, :] - P[:, i] K^T + K S K^T, computed as a rank-4
     update: O(L) per fix for the gain, O(L^2) for the covariance, never an L x L product
-    (:func:`estimators.kalman.joseph_update` forms (I - K H) P (I - K H)^T: O(L^3); tests: 1e-9).
+    (``estimators.kalman.joseph_update`` forms (I - K H) P (I - K H)^T: O(L^3); tests: 1e-9).
     """
     B, N, d = estimate.shape
     L = d * N
@@ -434,7 +434,7 @@ def ccl_update(estimate: np.ndarray, cov: np.ndarray, measuring, measured, z, ra
                lam: float = 0.0, reached: np.ndarray | None = None, method: str = "lookup"):
     """UKF-CCL observation update (eqs. 5-12, 17).
 
-    ``method="lookup"`` (default) forms only what the range reads (:func:`range_terms`: the 2d x 2d
+    ``method="lookup"`` (default) forms only what the range reads (``range_terms``: the 2d x 2d
     Cholesky of P_(mn), O(L^2) per reading); ``method="sigma"`` builds the generic 2L + 1 sigma
     points from the full L x L Cholesky factor (O(L^3) per reading), as printed. They agree to
     rounding (tests: 1e-9).
@@ -517,9 +517,9 @@ def dcl_update(estimate: np.ndarray, cov: np.ndarray, chain: np.ndarray, chain_l
     reading. ``method="lookup"`` computes the same numbers in closed form: g
     vanishes beyond the first 2d columns, so receiver c_i's update weight is
     Pxz^i = A_i[:, :2d] g = P_{c_i,(mn)} A_mn^-T g, and the chain's update is
-    :func:`ccl_update` with ``reached`` the chain's platforms (consistent rule)
+    ``ccl_update`` with ``reached`` the chain's platforms (consistent rule)
     or with the cross-covariances to the unreached left alone (paper rule);
-    O(L^2) per reading (:func:`range_updates`; tests: 1e-9 against the chain).
+    O(L^2) per reading (``range_updates``; tests: 1e-9 against the chain).
     The default is ``"lookup"`` for ``truncation="consistent"`` and ``"chain"``
     for ``"paper"``. Returns new ``(estimate, cov)``.
     """

@@ -3,7 +3,7 @@
 Base algorithm: Wang L., Cui J., Kong D., Zhao L., "A distributed cooperative
 localization algorithm for mobile multi-platforms oriented to unpredicted
 communication topology", Trans. Nanjing Univ. Aero. Astro. 36(2):224-231,
-2019 (eqs. 5-23; the position-only form is :mod:`estimators.ukf_relay`, whose
+2019 (eqs. 5-23; the position-only form is ``estimators.ukf_relay``, whose
 sigma-point and relay-chain conventions this module keeps: lower Cholesky,
 the measuring platforms ordered first (eq. 17), 2L + 1 points with
 w_0 = lambda/(L + lambda), w_p = 0.5/(L + lambda), the look-up Cholesky
@@ -19,7 +19,7 @@ s = [s_1; ...; s_N] in R^{3N}, covariance P (3N x 3N), L = 3N.
 
 Time update (unicycle, Euler over dt, odometry u_i = (v_i, w_i) with white
 noise of variances (sigma_v^2, sigma_w^2), the same for every robot or, for a
-speed-dependent model (:func:`odometry_variance`), one pair per robot):
+speed-dependent model (``odometry_variance``), one pair per robot):
 
     s_i <- s_i + dt [v_i cos theta_i; v_i sin theta_i; w_i],
     F_i = [[1, 0, -dt v_i sin theta_i], [0, 1, dt v_i cos theta_i], [0, 0, 1]],
@@ -40,7 +40,7 @@ Observation: robot m measures robot n (or a known landmark l),
     h = [ ||p_n - p_m|| ; wrap(atan2(y_n - y_m, x_n - x_m) - theta_m) ],  R = diag(sigma_r^2, sigma_b^2),
 
 a 2-vector instead of wang2019's scalar range. The UT is the one of
-:mod:`estimators.ukf_relay` on the joint state (L = 3N) with the observed
+``estimators.ukf_relay`` on the joint state (L = 3N) with the observed
 robots (m, n, or m alone for a landmark) ordered first. Bearings are
 averaged as offsets from h(xbar): d_p = wrap(h(chi_p) - h(xbar)),
 zbar = h(xbar) + sum_p w_p d_p, the deviations d_p - sum_q w_q d_q, and the
@@ -72,12 +72,12 @@ Outlier gate (both forms identically): an observation whose normalized
 innovation nu^T Pz^-1 nu exceeds ``gate`` is not applied (MRCLAM holds
 misread barcodes and occluded detections); ``gate=None`` applies all.
 
-Arrays: ``estimate`` (N, 3), ``cov`` (3N, 3N); :class:`FactoredCov` holds
+Arrays: ``estimate`` (N, 3), ``cov`` (3N, 3N); ``FactoredCov`` holds
 ``P_ii`` (N, 3, 3), ``phi`` (N, 3, 3), ``sigma`` (N, N, 3, 3) (sigma[i, i] unused).
-:func:`ccl_update`, :func:`dcl_update` and :func:`time_update` take one copy;
-the factored form also has a leading batch axis B: :func:`time_update_factored`
-/ :func:`time_update_batch` on (B, N, ...) and :func:`dcl_update_batch` /
-:func:`dcl_update_rows` on G copies at once (one chain length per call; in
+``ccl_update``, ``dcl_update`` and ``time_update`` take one copy;
+the factored form also has a leading batch axis B: ``time_update_factored``
+/ ``time_update_batch`` on (B, N, ...) and ``dcl_update_batch`` /
+``dcl_update_rows`` on G copies at once (one chain length per call; in
 place at chosen copies of (B, ...) arrays for the env backend).
 
 Batched form (the same equations, no loop over copies)
@@ -93,7 +93,7 @@ chain's 3k x 3k block, of which the pairs i > j are kept, and
 Phi_{c_i}^-1 K_i r_U for the unreached robots; r_U = (A_o^-T g)^T [Phi_o sigma_{o,U}];
 Phi_i^-1 [K_i, Pxz_i] by one LU solve per Phi_i; Pz^-1 (2 x 2) by its adjugate. Every sum is a stacked
 matrix product or a linalg gufunc, so copy b's result does not depend on the
-other copies of the call (bit for bit), and it equals :func:`dcl_update` to
+other copies of the call (bit for bit), and it equals ``dcl_update`` to
 rounding (tests: 1e-12).
 """
 
@@ -177,8 +177,8 @@ def odometry_variance(odometry, var0, var_gain=(0.0, 0.0), inflation=(1.0, 1.0))
 
     For (v, w): sigma_v^2 = r_v (a_v + b_v v^2), sigma_w^2 = r_w (a_w + b_w w^2); ``inflation``
     (r_v, r_w) >= 1 accounts for errors correlated over steps (see
-    :func:`coloc_env.data.mrclam.calibrate_noise`). The result is a valid ``odometry_var``
-    for :func:`time_update` / :func:`time_update_factored` when ``odometry`` is (N, 2).
+    ``coloc_env.data.mrclam.calibrate_noise``). The result is a valid ``odometry_var``
+    for ``time_update`` / ``time_update_factored`` when ``odometry`` is (N, 2).
     """
     u = np.asarray(odometry, float)
     a, b, r = (np.asarray(x, float) for x in (var0, var_gain, inflation))
@@ -236,7 +236,7 @@ def factor(cov: np.ndarray) -> FactoredCov:
 def time_update_factored(estimate, fcov: FactoredCov, odometry, dt: float, odometry_var):
     """Each robot alone: s_i <- f(s_i, u_i), P_ii <- F_i P_ii F_i^T + Q_i, Phi_i <- F_i Phi_i.
 
-    Leading batch axes are allowed (see :func:`time_update_batch`); sigma is copied unchanged."""
+    Leading batch axes are allowed (see ``time_update_batch``); sigma is copied unchanged."""
     new, P_ii, phi = time_update_batch(estimate, fcov.P_ii, fcov.phi, odometry, dt, odometry_var)
     return new, FactoredCov(P_ii, phi, fcov.sigma.copy())
 
@@ -324,7 +324,7 @@ def ccl_update(estimate, cov, measuring: int, z, R, measured: int | None = None,
 
 def ccl_update_copies(estimate, cov, measuring: int, z, R, measured: int | None = None, landmark=None,
                       lam: float = 0.0, gate: float | None = None):
-    """:func:`ccl_update` on G copies that share one observation (robot ``measuring``, its target, ``z``) but
+    """``ccl_update`` on G copies that share one observation (robot ``measuring``, its target, ``z``) but
     not their state or noise: ``estimate`` (G, N, 3), ``cov`` (G, 3N, 3N), ``R`` (G, 2, 2).
 
     The same equations copy by copy (stacked Cholesky factors, sigma points, moments); the gate decides
@@ -368,7 +368,7 @@ def ccl_update_copies(estimate, cov, measuring: int, z, R, measured: int | None 
 
 
 def time_update_copies(estimate, cov, odometry, dt: float, odometry_var):
-    """:func:`time_update` on G copies: ``estimate`` (G, N, 3), ``cov`` (G, 3N, 3N), ``odometry`` (N, 2) or
+    """``time_update`` on G copies: ``estimate`` (G, N, 3), ``cov`` (G, 3N, 3N), ``odometry`` (N, 2) or
     (G, N, 2), ``odometry_var`` (G, N, 2)."""
     new, F, Gm = motion(estimate, np.broadcast_to(odometry, np.shape(estimate)[:-1] + (2,)), dt)
     G, N = new.shape[:2]
@@ -476,13 +476,13 @@ def dcl_update(estimate, fcov: FactoredCov, chain, z, R, measured_in_chain: bool
 
 def dcl_update_batch(estimate, fcov: FactoredCov, chain, z, R, measured_in_chain: bool = True, landmark=None,
                      lam: float = 0.0, gate: float | None = None):
-    """:func:`dcl_update` of G copies at once: ``estimate`` (G, N, 3), ``fcov`` with a leading axis G
+    """``dcl_update`` of G copies at once: ``estimate`` (G, N, 3), ``fcov`` with a leading axis G
     (``P_ii``, ``phi`` (G, N, 3, 3), ``sigma`` (G, N, N, 3, 3)), ``chain`` (G, k) (one chain length for
     all copies, each row distinct robots), ``z`` (G, 2), ``R`` (G, 2, 2) or (2, 2), ``landmark`` (G, 2)
     or (2,). Returns ``(estimate, fcov, applied)``, new objects, ``applied`` (G,) bool.
 
     Copy g equals ``dcl_update`` of copy g alone (to rounding: the same equations in stacked-matrix form,
-    tests hold 1e-12); see :func:`dcl_update_rows`.
+    tests hold 1e-12); see ``dcl_update_rows``.
     """
     x = np.array(estimate, dtype=float)
     f = fcov.copy()
@@ -502,7 +502,7 @@ def _lower(k: int) -> tuple[np.ndarray, np.ndarray]:
 
 @functools.lru_cache(maxsize=64)
 def _weights(L: int, lam: float) -> np.ndarray:
-    """:func:`estimators.ukf_relay.ukf_weights` (read-only, cached)."""
+    """``estimators.ukf_relay.ukf_weights`` (read-only, cached)."""
     w = ukf_weights(L, lam)
     w.flags.writeable = False
     return w
@@ -539,7 +539,7 @@ def _cholesky_blocks(blocks: np.ndarray) -> np.ndarray:
 
 
 def _moments_batch(h: np.ndarray, h0: np.ndarray, w: np.ndarray, R: np.ndarray):
-    """:func:`_moments` per copy from the 2 x 3q points that move h: h (G, 6q, 2) (plus points, then minus),
+    """``_moments`` per copy from the 2 x 3q points that move h: h (G, 6q, 2) (plus points, then minus),
     h0 (G, 2). The centre and the other 2(L - 3q) points sit at h0 (deviation 0 from h0), so with
     d_p = wrap(h_p - h0) on the moving points, w_p = w[1] on each of them and 1 - 6q w_p on the rest:
 
@@ -566,7 +566,7 @@ def _ones(n: int) -> np.ndarray:
 
 def dcl_update_rows(estimate, P_ii, phi, sigma, rows, chain, z, R, measured_in_chain: bool = True,
                     landmark=None, lam: float = 0.0, gate: float | None = None) -> np.ndarray:
-    """UKF-DCL of :func:`dcl_update` on copies ``rows`` of batched arrays, in place.
+    """UKF-DCL of ``dcl_update`` on copies ``rows`` of batched arrays, in place.
 
     ``estimate`` (B, N, 3), ``P_ii``, ``phi`` (B, N, 3, 3), ``sigma`` (B, N, N, 3, 3) are updated at the
     distinct copies ``rows`` (G,); ``chain`` (G, k): copy rows[g]'s chain, one length k for all (group the
@@ -584,7 +584,7 @@ def dcl_update_rows(estimate, P_ii, phi, sigma, rows, chain, z, R, measured_in_c
       points), then, for the copies the gate passes, the whole 3k x 3k (its rows for c_q, ..., c_k-1);
     * sigma points of the observed robots x_o +- sqrt(L + lambda) A_o (columns p <= 3q), h on them and
       h0 = h(xbar) for the other 2(L - 3q) + 1 points, zbar, dz, Pz with bearings as offsets from h0
-      (:func:`_moments_batch`), nu = wrap(z - zbar), the gate nu^T Pz^-1 nu > ``gate``;
+      (``_moments_batch``), nu = wrap(z - zbar), the gate nu^T Pz^-1 nu > ``gate``;
     * g = sqrt(L + lambda) w_p (dz_p^+ - dz_p^-) (3q x 2); r_U = g^T A_o^-1 [Phi_o sigma_{o,U}] for the
       unreached robots U (truncated chains);
     * every receiver c_i: Pxz_{c_i} = A_{i, o} g (20), K_i = Pxz_{c_i} Pz^-1, s_{c_i} += K_i nu (21),
@@ -593,7 +593,7 @@ def dcl_update_rows(estimate, P_ii, phi, sigma, rows, chain, z, R, measured_in_c
       wrapped after.
 
     Sums run as stacked matrix products (matmul, the linalg gufuncs), so a copy's bits do not depend on the
-    other copies of the call; they match :func:`dcl_update` to rounding (tests: 1e-12).
+    other copies of the call; they match ``dcl_update`` to rounding (tests: 1e-12).
     """
     x = estimate
     rows = np.asarray(rows, dtype=int).reshape(-1)

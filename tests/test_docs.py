@@ -255,3 +255,18 @@ def test_navigation_leaves_out_pages_that_do_not_exist(tmp_path):
            {"Site": "https://example.org"}]
     assert mkdocs_hooks._existing(nav, str(tmp_path)) == [
         {"A": "a.md"}, "a.md", {"Section": [{"B": "api/b.md"}]}, {"Site": "https://example.org"}]
+
+
+SPHINX_ROLE = re.compile(r":(?:py:)?(?:func|class|meth|mod|data|attr|exc|obj|const|ref|doc):`")
+
+
+def test_docstrings_use_no_sphinx_roles():
+    """The API reference renders docstrings as Markdown, where a Sphinx role (:func:`x`) prints as it is
+    written: names are code spans (``x``) or Markdown cross-references ([`x`][full.path])."""
+    hits = []
+    for package in ("coloc_env", "estimators", "agents", "train"):
+        for path in sorted(glob.glob(os.path.join(REPO_ROOT, package, "**", "*.py"), recursive=True)):
+            for number, line in enumerate(read(path).splitlines(), start=1):
+                if SPHINX_ROLE.search(line):
+                    hits.append(f"{os.path.relpath(path, REPO_ROOT)}:{number}: {line.strip()[:80]}")
+    assert not hits, f"{len(hits)} Sphinx roles left, e.g.:\n" + "\n".join(hits[:10])

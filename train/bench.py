@@ -9,20 +9,20 @@ all its agents; agent-steps = env-steps x N):
   the episode of seed b, as in training);
 * ``vector_env, one episode``  the same with every copy playing episode 0, for
   the scenarios whose work per copy depends on the episode
-  (:data:`ONE_EPISODE_ROWS`: gps_denied_nbp), so that the rows at different B
+  (``ONE_EPISODE_ROWS``: gps_denied_nbp), so that the rows at different B
   time the same work per copy and show what batching itself buys;
 * ``estimator step``  the raw batched estimator step at the same B, where the
-  scenario registers one in :data:`ESTIMATOR_STEPS`; the table's ``env / est.``
+  scenario registers one in ``ESTIMATOR_STEPS``; the table's ``env / est.``
   column (``env_time_over_estimator`` in the JSON, on the vector_env row) is the
   env's time per step over it, so the env's overhead is read off directly.
   Every preset's row but gps_denied_nbp's replays the estimator calls its
   backend made in a recorded vector_env rollout at that B
-  (:data:`BACKEND_CALLS`, :func:`record_backend_calls`, :func:`replay_step`):
+  (``BACKEND_CALLS``, ``record_backend_calls``, ``replay_step``):
   the same functions on the same shapes and inputs as the env's step
   (relay_ukf, mrclam_relay, nlos_horizon, lossy_fusion, bandwidth_fusion).
   gps_denied_nbp's steps dNBP over its own sampled episode at the env's sizes;
 * peers            for relay_ukf, filterpy's ``UnscentedKalmanFilter`` doing one
-  full-chain range update one copy at a time (:data:`PEERS`), beside our
+  full-chain range update one copy at a time (``PEERS``), beside our
   ``dcl_update`` doing the same update for the B copies at once;
 * ``pcrb, one episode``  ``coloc_env.pcrb`` of one episode (its play, backend idle where it
   may be, and the recursion), in env-steps per second, beside the backend's step;
@@ -31,11 +31,11 @@ all its agents; agent-steps = env-steps x N):
 
 Every env is driven by its ``paper`` policy's actions, computed once and tiled,
 except where those change over an episode and use no measurement at reset
-(relay_ukf, mrclam_relay: :class:`ActionSource`).
+(relay_ukf, mrclam_relay: ``ActionSource``).
 Writes ``OUT/bench/bench.json`` (atomic) and ``OUT/bench/throughput.png``.
 No test asserts a speed: this is where speed is reported.
 
-``coloc bench --against REF`` (:func:`run_against`) measures the current
+``coloc bench --against REF`` (``run_against``) measures the current
 tree and a previous commit side by side in one run: REF is exported with
 ``git archive`` into a temporary folder, and per scenario the same rows are
 measured for the current tree and for REF, each in its own subprocess of the
@@ -107,7 +107,7 @@ def _gps_denied_nbp_inputs(stack: dict, k: int) -> tuple:
 
 
 def _gps_denied_nbp_estimator_step(batch: int, num_particles: int = 100) -> Callable[[], None]:
-    """One dNBP time step (:func:`estimators.dnbp.step`, paper schedule) for B copies, cycling the episode."""
+    """One dNBP time step (``estimators.dnbp.step``, paper schedule) for B copies, cycling the episode."""
     import estimators.dnbp as dn
 
     config, model, stack, state, rngs = _gps_denied_nbp_episode(batch, num_particles)
@@ -163,10 +163,10 @@ _ONE_EPISODE_PREAMBLE = "from __future__ import annotations\nimport gc\nimport t
 
 
 def one_episode_rate(coloc_env, name: str, batch: int, paper: np.ndarray, min_seconds: float) -> float:
-    """Steps per second (:func:`_rate`) of ``vector_env(name, num_envs=batch)`` with every copy seeded 0 (the same
+    """Steps per second (``_rate``) of ``vector_env(name, num_envs=batch)`` with every copy seeded 0 (the same
     episode in each copy) and the paper actions ``paper`` (N, ...) tiled: constant actions only (gps_denied_nbp's).
 
-    ``coloc bench --against`` also runs this source and :func:`_rate`'s in the reference tree's process, on that
+    ``coloc bench --against`` also runs this source and ``_rate``'s in the reference tree's process, on that
     tree's coloc_env, for a tree whose bench has no such row: they use only their arguments, numpy, gc and time.
     It sets the env's ``_copy_seeds``, from which every version of the batched VecEnv reseeds copy b at reset."""
     venv = coloc_env.vector_env(name, num_envs=batch, seed=0)
@@ -276,7 +276,7 @@ def _copied(value):
 
 
 class BackendTape:
-    """The calls a preset's backend made into its estimator functions (:data:`BACKEND_CALLS`) over the steps
+    """The calls a preset's backend made into its estimator functions (``BACKEND_CALLS``) over the steps
     of a vector_env rollout: ``steps[t]`` lists step t's calls in order, each ``(key, args, kwargs)`` with
     copies of the arguments as they were at the call, the state arguments left out; ``state`` holds a copy
     of each state array as the first call that passed it saw it (the state before the first step)."""
@@ -306,9 +306,9 @@ class BackendTape:
 
 def record_backend_calls(name: str, batch: int, steps: int | None = None, seed: int = 0,
                          source: ActionSource | None = None):
-    """Step a ``vector_env(name)`` of ``batch`` copies with the actions of its vector_env row (:class:`ActionSource`)
-    for ``steps`` steps (default :data:`REPLAY_SAMPLES` / B, at least 8, at most one episode), recording
-    its backend's estimator calls. Returns (the env, after those steps; the :class:`BackendTape`)."""
+    """Step a ``vector_env(name)`` of ``batch`` copies with the actions of its vector_env row (``ActionSource``)
+    for ``steps`` steps (default ``REPLAY_SAMPLES`` / B, at least 8, at most one episode), recording
+    its backend's estimator calls. Returns (the env, after those steps; the ``BackendTape``)."""
     import importlib
 
     import coloc_env
@@ -378,8 +378,8 @@ def replay_step(tape: BackendTape) -> Callable[[], None]:
 
 
 def _replayed_estimator_step(name: str) -> Callable[[int], Callable[[], None]]:
-    """The estimator row of a preset in :data:`BACKEND_CALLS`: its backend's estimator calls recorded from a
-    vector_env of B copies driven as its vector_env row is, replayed (:func:`replay_step`)."""
+    """The estimator row of a preset in ``BACKEND_CALLS``: its backend's estimator calls recorded from a
+    vector_env of B copies driven as its vector_env row is, replayed (``replay_step``)."""
 
     def factory(batch: int) -> Callable[[], None]:
         venv, tape = record_backend_calls(name, batch)
@@ -421,7 +421,7 @@ class ActionSource:
       world draws is ranged and its chain m -> m + 1 -> ... reaches all N platforms, the paper's complete
       chain (the paper's partner is random, the work the same);
     * ``mrclam_relay``: the paper policy's actions at each copy's data step (a table over the run's steps
-      made by :func:`agents.mrclam_relay.paper_actions` from the recorded flags its observation shows),
+      made by ``agents.mrclam_relay.paper_actions`` from the recorded flags its observation shows),
       looked up per step.
     """
 
@@ -820,7 +820,7 @@ def scaling_compositions() -> list[tuple[str, str]]:
 def scaling_rate(coloc_env, world: dict, network: str, backend: str, batch: int, min_seconds: float) -> float:
     """Env-steps per second (copies x steps) of ``vector_env(compose(world, network, backend), num_envs=batch,
     seed=0)`` under random actions (a pool of 16 drawn from the action space seeded 0, cycled), timed by
-    :func:`_rate` after one step. Uses only its arguments, numpy and :func:`_rate`: ``--against`` runs this
+    ``_rate`` after one step. Uses only its arguments, numpy and ``_rate``: ``--against`` runs this
     source in the reference tree's process."""
     spec = coloc_env.compose(world=world, network=network, backend=backend)
     venv = coloc_env.vector_env(spec, num_envs=batch, seed=0)
@@ -928,8 +928,8 @@ def run_scaling(out: str, quick: bool = False, against: str | None = None, cap: 
                 sizes=None, batches=None, compositions=None, layouts=SCALING_LAYOUTS,
                 min_seconds: float | None = None, reference_tree: str | None = None,
                 workers: int = 1) -> list[dict]:
-    """``coloc bench --scaling``: env-steps/s against N (:data:`SCALING_SIZES`) for every row of
-    :func:`scaling_compositions` x layout x B (:data:`SCALING_BATCHES`), each row in its own subprocess stopped
+    """``coloc bench --scaling``: env-steps/s against N (``SCALING_SIZES``) for every row of
+    ``scaling_compositions`` x layout x B (``SCALING_BATCHES``), each row in its own subprocess stopped
     after ``cap`` seconds (the sizes left print "over cap"), with the growth exponent of each row (the log-log
     slope of time per step against N) and the growth of the time per step from N = 20 to 40. With ``against``
     REF, each row is measured for the current tree and for commit REF (exported by ``git archive``) one after

@@ -301,7 +301,7 @@ def cmd_reproduce(args) -> int:
 
 
 def _check_scenario(name: str) -> None:
-    """``name`` is a preset or a composition's name, else a :class:`~coloc_env.config.BadInput` (exit 2)."""
+    """``name`` is a preset or a composition's name, else a ``coloc_env.config.BadInput`` (exit 2)."""
     import coloc_env
     from coloc_env.config import BadInput
 
@@ -398,7 +398,7 @@ def cmd_evaluate(args) -> int:
 
 
 def _check_commit(ref: str) -> str:
-    """The commit ``ref`` names in this repository, else a one-line :class:`~coloc_env.config.BadInput`."""
+    """The commit ``ref`` names in this repository, else a one-line ``coloc_env.config.BadInput``."""
     import subprocess
 
     from coloc_env.config import BadInput
@@ -547,8 +547,8 @@ PACKAGE_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 def is_bad_input(exc: BaseException) -> bool:
     """A refusal of the user's input (exit 2), as opposed to an internal error (exit 1): a
-    :class:`~coloc_env.config.BadInput` (every check raises one), or a ``ValueError`` raised by code of
-    :data:`INPUT_LAYERS` itself (its innermost frame)."""
+    ``coloc_env.config.BadInput`` (every check raises one), or a ``ValueError`` raised by code of
+    ``INPUT_LAYERS`` itself (its innermost frame)."""
     from coloc_env.config import BadInput
 
     if isinstance(exc, BadInput):
@@ -582,8 +582,8 @@ def main(argv: list[str] | None = None) -> int:
     | status | when                                                                                   |
     |--------|----------------------------------------------------------------------------------------|
     | 0      | done                                                                                   |
-    | 1      | an internal error (:func:`is_bad_input` is False): one line naming it, no traceback    |
-    | 2      | bad input (a flag, a config value, a policy, a file; :func:`is_bad_input`): one line,   |
+    | 1      | an internal error (``is_bad_input`` is False): one line naming it, no traceback    |
+    | 2      | bad input (a flag, a config value, a policy, a file; ``is_bad_input``): one line,   |
     |        | checked before any computing                                                           |
     | 130    | Ctrl-C: one line naming the folders left marked ``INCOMPLETE``                         |
 

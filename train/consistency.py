@@ -1,7 +1,7 @@
 """Consistency of the joint UKF's motion models on ``circles``: ``python -m train.consistency``.
 
 For each backend (``ukf_ccl``, ``ukf_dcl``) and motion model (``heading``: the heading error in the
-state, :class:`estimators.heading_models.OdometryHeadingError`; ``displacement``: wang2019's
+state, ``estimators.heading_models.OdometryHeadingError``; ``displacement``: wang2019's
 position-only model) it plays E seeded episodes (copy e reset with ``default_rng(seed + e)``, the
 ``always`` actions, the ``ideal`` network) and prints: the mean NEES of each agent's own position
 (expectation 2), the fraction of (step, agent) values whose E-episode mean lies in the chi-square(2E)/E
@@ -10,7 +10,7 @@ allows at 99.9 %, the position RMSE, and the paired difference of the per-episod
 (heading minus displacement) with its 95 % t-interval. ``--world`` takes ``FIELD=VALUE`` overrides of
 the ``circles`` world (e.g. ``turn_rate_noise_std=0``).
 
-Independent checks (:func:`band_checks`): per-step values of one set of episodes are correlated (a heading
+Independent checks (``band_checks``): per-step values of one set of episodes are correlated (a heading
 or dead-reckoning error is a random walk), so their misses are not Binomial. Check j instead looks at one
 step k_j = spacing (j + 1) and one agent (cycling) on its OWN E episodes (seeds seed + j E ..); no two
 checks share an episode, so for a consistent filter the number of checks whose mean NEES lies outside the

@@ -8,7 +8,7 @@ process prints one line as each stage starts and ends. Each stage also appends `
 (Unix seconds) to ``OUT/.demo_times``, which ``train.demo_summary`` reads, then prints the summary.
 
 The lanes are balanced by the stage times of a quiet 2-core machine (the training budgets of
-:data:`DEMO_RUNS` are reduced: one seed, a few rollouts; the full budgets are in docs/learning.md;
+``DEMO_RUNS`` are reduced: one seed, a few rollouts; the full budgets are in docs/learning.md;
 so are the evaluation episodes of the two slow scenarios). Stages of one lane run in order;
 a failed stage stops its lane (the other lane goes on), and the run ends with status 1 and the tail of
 the failed stage's log. ``coloc evaluate`` merges its rows under a lock (``train.leaderboard.record``),

@@ -11,7 +11,7 @@ Seeds (documented once, used everywhere):
 
 The three ranges are disjoint (each holds SEED_RANGE episodes), so no policy is
 evaluated on a training seed and nothing is tuned on the evaluation seeds
-(:func:`check_not_evaluation_seeds` refuses a tuning run that asks for them).
+(``check_not_evaluation_seeds`` refuses a tuning run that asks for them).
 Every policy of a scenario plays the same episodes: episode e is
 ``env.reset(seed=seed_base + e)`` for every policy, so two rows of a
 leaderboard pair episode by episode (``train.leaderboard.paired_difference``);
@@ -26,7 +26,7 @@ scenario counts it). ``paper_cost`` adds ``Scenario.initial_cost()``, the
 part of a paper's cost an episode does not contain (bandwidth_fusion's k = 0
 term).
 
-Reference filters (:data:`REFERENCE_FILTERS`) are rows that are not policies of
+Reference filters (``REFERENCE_FILTERS``) are rows that are not policies of
 the env: another estimator run on the very episodes the env draws for the same
 seeds (lossy_fusion's leader-alone Kalman filter and the paper's centralized
 filter (A), which the env's actions cannot express). A name starting with
@@ -84,7 +84,7 @@ EXTRA_ROWS = {"gps_denied_nbp": ("threshold:5",)}
 
 def all_rows(scenario: str) -> list[str]:
     """What ``coloc evaluate S --policy all`` runs besides trained models: the realizable policies (and
-    :data:`EXTRA_ROWS`), the bounds and the reference filters. A name that builds the same policy as an
+    ``EXTRA_ROWS``), the bounds and the reference filters. A name that builds the same policy as an
     earlier one (``agents.duplicates``: ``always`` = ``paper`` on relay_ukf) is left out; the leaderboard
     names it beside the row it equals."""
     import agents
@@ -141,7 +141,7 @@ class _Replay:
 
 def attach_bounds(result: dict, scenario: str, seed_base: int, trace: dict, bounds: bool = True,
                   **env_config) -> dict:
-    """The row plus ``rmse`` (m, sqrt of the mean squared 2-D position error, :func:`_trace_step`), ``nees`` with
+    """The row plus ``rmse`` (m, sqrt of the mean squared 2-D position error, ``_trace_step``), ``nees`` with
     ``nees_band`` (the chi^2(2E)/E 95 % band of a per-step NEES averaged over the E episodes) and ``nees_in_band``
     (the share of (step, agent) in it), and, with ``bounds``, ``coloc_env.pcrb`` on the very episodes and actions
     played: ``pcrb_centralized``, ``pcrb_local``, ``pcrb_delivered`` (sqrt of the mean over steps and agents, m;
@@ -233,7 +233,7 @@ def evaluate_policy(scenario: str, policy_name: str, episodes: int, seed_base: i
     copy for copy; a test checks the costs agree); the batched one runs every
     episode in one call per step. ``stochastic``: a model samples its actions
     (torch seeded with ``seed_base``) and is recorded as ``PATH.zip (stochastic)``.
-    Every policy row gets the columns of :func:`attach_bounds` (``bounds=False``: RMSE and NEES only).
+    Every policy row gets the columns of ``attach_bounds`` (``bounds=False``: RMSE and NEES only).
     """
     if policy_name in REFERENCE_FILTERS.get(scenario, {}):
         result = run_reference_filter(scenario, policy_name, episodes, seed_base)
@@ -267,7 +267,7 @@ def evaluate_policy(scenario: str, policy_name: str, episodes: int, seed_base: i
 
 def run_reference_filter(scenario: str, name: str, episodes: int, seed_base: int = EVAL_SEED_BASE,
                          **env_config) -> dict:
-    """A reference filter of :data:`REFERENCE_FILTERS` on the episodes the env draws for seeds seed_base + e.
+    """A reference filter of ``REFERENCE_FILTERS`` on the episodes the env draws for seeds seed_base + e.
 
     lossy_fusion's metric is the fused position MSE averaged over the slots (its ``episode_error``);
     communication is the packets the followers send per slot as the env counts them.
@@ -339,8 +339,8 @@ def _run_core(scenario: str, episodes: int, seed_base: int, choose, env_config: 
               trace: dict | None = None) -> tuple:
     """Steps ``episodes`` copies of the batched core (copy e seeded ``seed_base + e``) with
     ``choose(core) -> actions (episodes, N, *action_shape)``; returns (costs, comms per step, initial cost).
-    ``trace`` (a dict) receives what :func:`attach_bounds` needs, per step (lists of (B, ...) arrays: callers
-    :func:`_merge_trace` them into episode-first arrays): the actions, squared position errors and NEES."""
+    ``trace`` (a dict) receives what ``attach_bounds`` needs, per step (lists of (B, ...) arrays: callers
+    ``_merge_trace`` them into episode-first arrays): the actions, squared position errors and NEES."""
     import coloc_env
 
     core = coloc_env.make_core(scenario, batch=episodes, **env_config)
@@ -382,12 +382,12 @@ class _CoreView:
 def run_policy_batched(scenario: str, policy_name: str, episodes: int, seed_base: int = EVAL_SEED_BASE,
                        trace: dict | None = None, **env_config) -> dict | None:
     """A named policy on copies of the batched core, every episode of a chunk in one call per step; None
-    where the policy does not batch (``Policy.batching`` is None: :func:`run_episodes` plays it).
+    where the policy does not batch (``Policy.batching`` is None: ``run_episodes`` plays it).
 
-    Episode e is the copy seeded ``seed_base + e`` and plays what :func:`run_episodes` plays for it:
+    Episode e is the copy seeded ``seed_base + e`` and plays what ``run_episodes`` plays for it:
     a ``per_copy`` policy acts on copy e's observations alone (a shallow copy of the policy per episode,
     its generator restarted by ``start_episode(seed_base + e)``); a ``core`` policy is built on the
-    batched core (:class:`_CoreView`) and computes every copy at once. Tests hold the two paths equal.
+    batched core (``_CoreView``) and computes every copy at once. Tests hold the two paths equal.
     """
     import copy
 

@@ -1,7 +1,7 @@
 """Atomic writes: a result file is either the old one or the complete new one, never half.
 
 A result *folder* holds several files written one after the other, so it cannot be
-replaced atomically as a whole; :func:`result_folder` marks it instead: an
+replaced atomically as a whole; ``result_folder`` marks it instead: an
 ``INCOMPLETE`` file is written before the first result and removed after the last,
 so a folder interrupted half way (Ctrl-C, a crash) says so.
 """
@@ -71,7 +71,7 @@ def save_model(path: str, model) -> None:
 
 
 def copy_file(source: str, path: str) -> None:
-    """Copy ``source`` to ``path`` atomically (as :func:`save_model`)."""
+    """Copy ``source`` to ``path`` atomically (as ``save_model``)."""
     import shutil
 
     def write(fh) -> None:

@@ -4,12 +4,12 @@
 Each row is one policy (or reference filter) evaluated by ``coloc evaluate`` on the evaluation
 seeds 10^6 + e; every row of a scenario plays the same episodes, so rows compare *paired*:
 episode by episode, the difference d_e = cost_e(row) - cost_e(baseline), its mean and the 95 %
-Student-t interval  dbar +- t_{0.975, n-1} s_d / sqrt(n)  (:func:`paired_difference`). The
+Student-t interval  dbar +- t_{0.975, n-1} s_d / sqrt(n)  (``paired_difference``). The
 baseline is the scenario's strongest realizable one (``train.evaluate.baselines``: the best of
 them by mean on these episodes), never a bound and not merely the paper's choice. A row
 "beats" it only when that interval lies below zero; an interval that holds zero is "not
 distinguishable (n episodes)", with the number of episodes a difference of this size would
-need to resolve: the least n with t_{0.975, n-1} s_d / sqrt(n) < |dbar| (:func:`episodes_needed`).
+need to resolve: the least n with t_{0.975, n-1} s_d / sqrt(n) < |dbar| (``episodes_needed``).
 Rows named ``bound_*`` use what the agents cannot have and are shown apart as bounds.
 
 Trained models (policies given as a ``.zip`` path) are rows of their own, and are also
@@ -61,7 +61,7 @@ TARGETS = {
 }
 
 # A composition's (issue 15's cross-combination): the error-communication trade-off against always and silent.
-# "Lower error at equal messages" is judged against the time-sharing of the two (:func:`tradeoff_comparison`),
+# "Lower error at equal messages" is judged against the time-sharing of the two (``tradeoff_comparison``),
 # the only way always and silent reach a message rate between theirs.
 COMPOSITION_TARGET = ("beat always and silent on the error-communication trade-off: a lower error than the better "
                       "of them, its error (paired interval within 2 %) with 30 % fewer messages, or a lower error "
@@ -135,7 +135,7 @@ def episodes_needed(mean: float, sd: float, limit: int = 10**7) -> int | None:
 
 def paired_difference(costs, reference) -> dict:
     """Episode-by-episode differences ``costs - reference`` (same seeds): mean, 95 % t half-width, sd, n,
-    the interval's ends and the episodes a difference of this size needs (:func:`episodes_needed`)."""
+    the interval's ends and the episodes a difference of this size needs (``episodes_needed``)."""
     costs, reference = np.asarray(costs, float), np.asarray(reference, float)
     if costs.shape != reference.shape or costs.ndim != 1:
         raise ValueError(f"paired costs must be two 1-d arrays of one length, got {costs.shape} and {reference.shape}")
@@ -154,7 +154,7 @@ def paired_difference(costs, reference) -> dict:
 
 def verdict(diff: dict) -> str:
     """"beats" when the paired interval lies below zero (lower cost), "worse" above it, "equal to rounding" when
-    the whole interval is within :data:`ROUNDING` of zero, else "not distinguishable (n episodes)"."""
+    the whole interval is within ``ROUNDING`` of zero, else "not distinguishable (n episodes)"."""
     if diff.get("equal"):
         return "equal to rounding"
     if diff["high"] < 0:
@@ -224,7 +224,7 @@ def strongest_baseline(scenario: str, table: dict) -> dict | None:
 
 def rows(table: dict) -> list[dict]:
     """Named policies and reference filters, each trained model, then the trained summaries; best first
-    within each group. Bounds are not among them (:func:`bound_rows`)."""
+    within each group. Bounds are not among them (``bound_rows``)."""
     named = sorted((r for n, r in table.items() if not _is_model(n) and not _is_bound(n)),
                    key=lambda r: r["mean_cost"])
     models = sorted((r for n, r in table.items() if _is_model(n)), key=lambda r: r["mean_cost"])
@@ -294,7 +294,7 @@ def tradeoff_comparison(row: dict, always: dict, silent: dict) -> dict | None:
     ``silent``) and ``silent`` otherwise, so its expected messages per step p m_always + (1 - p) m_silent are m
     and its expected error in episode e is p cost_e(always) + (1 - p) cost_e(silent). Beating it is "a lower
     error at equal messages" on the line that joins the two baselines' (messages, error) points. Returns
-    :func:`paired_difference`'s dict with ``verdict`` and ``probability`` p; None where a row lacks paired
+    ``paired_difference``'s dict with ``verdict`` and ``probability`` p; None where a row lacks paired
     episodes or ``always`` sends no more than ``silent``.
     """
     a, s, c = _episodes(always), _episodes(silent), _episodes(row)
@@ -379,9 +379,9 @@ def _style(scenario: str, row: dict, baseline: dict | None) -> str:
 
 
 def identical_rows(table: dict) -> list[tuple[str, str]]:
-    """Pairs of rows (earlier, later in :func:`rows` order) that played the same episodes to the last digit:
+    """Pairs of rows (earlier, later in ``rows`` order) that played the same episodes to the last digit:
     equal per-episode costs on the same seeds and equal communication. Their bars would say nothing the
-    other does not; the report says why they coincide (:data:`IDENTICAL_BECAUSE`)."""
+    other does not; the report says why they coincide (``IDENTICAL_BECAUSE``)."""
     entries = rows(table) + bound_rows(table)
     same = []
     for i, a in enumerate(entries):
@@ -406,19 +406,19 @@ IDENTICAL_BECAUSE = {
 
 
 def identical_note(scenario: str, pair: tuple[str, str]) -> str:
-    """One sentence: the two rows coincide, and why where :data:`IDENTICAL_BECAUSE` knows."""
+    """One sentence: the two rows coincide, and why where ``IDENTICAL_BECAUSE`` knows."""
     reason = IDENTICAL_BECAUSE.get((scenario, frozenset(pair)))
     return (f"`{pair[0]}` and `{pair[1]}` are identical episode by episode (same cost, same communication)"
             + (f": {reason}" if reason else "."))
 
 
 def chart(table: dict, path: str, key: str) -> None:
-    """Write :func:`leaderboard_figure` to ``path`` (atomically)."""
+    """Write ``leaderboard_figure`` to ``path`` (atomically)."""
     save_figure(path, leaderboard_figure(table, key))
 
 
 def _off_scale(values: np.ndarray, keep: np.ndarray) -> np.ndarray:
-    """Rows whose |value| exceeds :data:`OFF_SCALE` x the median |value| (never a row of ``keep``)."""
+    """Rows whose |value| exceeds ``OFF_SCALE`` x the median |value| (never a row of ``keep``)."""
     finite = np.abs(values[np.isfinite(values)])
     if finite.size < 2:
         return np.zeros(len(values), bool)
@@ -433,7 +433,7 @@ def leaderboard_figure(table: dict, key: str):
     each row's mean episode error with its 95 % Student-t interval, the strongest baseline's mean as a
     dashed line. Right: the paired difference (episode by episode) to the strongest realizable baseline
     with its 95 % interval, zero marked; each dot's colour is the verdict, and the number, interval and
-    verdict are written beside it. A row whose mean is more than :data:`OFF_SCALE` x the median is drawn
+    verdict are written beside it. A row whose mean is more than ``OFF_SCALE`` x the median is drawn
     as an arrow at the right edge of both panels with its value written, so that it does not flatten the
     comparison of the others. Every marker is named in the legend under the panels.
     """

@@ -3,16 +3,16 @@
 Conventions (every figure ``coloc`` writes should follow them):
 
 * every numeric axis is labelled with its quantity and its unit in square brackets, ``"error [m]"``
-  (:func:`label`; a count is ``[count]``, a ratio without unit ``[-]``); a categorical axis (policy
+  (``label``; a count is ``[count]``, a ratio without unit ``[-]``); a categorical axis (policy
   names as tick labels) needs no unit;
-* a mean is drawn with its 95 % interval (error bar or band), never alone (:func:`t_interval`);
-* a legend sits outside the data (:func:`legend_outside`: right of the axes or below them) and names
+* a mean is drawn with its 95 % interval (error bar or band), never alone (``t_interval``);
+* a legend sits outside the data (``legend_outside``: right of the axes or below them) and names
   every line, marker and band drawn;
-* a log axis has at least three plain tick labels (:func:`plain_log_ticks`), never ``6x10^0``;
+* a log axis has at least three plain tick labels (``plain_log_ticks``), never ``6x10^0``;
 * nothing depends on wall time when a deterministic quantity (particles, messages, floats) measures
   the cost.
 
-:func:`figure_problems` checks the first, fourth and the legend rule on a drawn figure and returns
+``figure_problems`` checks the first, fourth and the legend rule on a drawn figure and returns
 what it finds in words (empty: none); the tests run it on the figures they build.
 """
 

@@ -31,7 +31,7 @@ Arguments (``coloc study --help`` says the same)
 |                 |              | resampling draw). Off: each episode steps ``coloc_env.parallel_env``     |
 |                 |              | itself, bit-identical to a user's own env loop                           |
 | ``--executor``  | ``local``    | local, or ray: each (backend, value) cell is one Ray task                |
-|                 |              | (:mod:`train.executor`), bit-identical to local                          |
+|                 |              | (``train.executor``), bit-identical to local                          |
 | ``--address``   | a local Ray  | Ray cluster address                                                      |
 | ``--out``       | ``results``  | the study goes to ``OUT/study/<name>/``                                  |
 | ``--name``      | see below    | ``<name>``; default ``{world}_{network}``, plus ``_{PART}.{FIELD}`` with |
@@ -42,7 +42,7 @@ folder probed for writing) before any episode runs; a bad one is a
 ``ValueError`` naming it, and nothing is written.
 
 From the first episode to the last file, the folder holds an ``INCOMPLETE``
-file (:func:`train.io.result_folder`): a study interrupted (Ctrl-C: ``coloc
+file (``train.io.result_folder``): a study interrupted (Ctrl-C: ``coloc
 study`` prints one line and exits 130) or failed half way leaves it there,
 beside the files written so far and those already in the folder (a folder
 that held nothing else is removed again); a study that completes removes it.
@@ -76,7 +76,7 @@ seeds, ``{"mean", "ci95", "verdict"}`` with verdict "lower" (the interval is
 below 0: b is more accurate), "higher", or "no difference" (the interval
 contains 0, or both ends lie within 1e-9 m of it: numerically equal backends).
 
-Outputs in ``OUT/study/<name>/`` (each written atomically, :mod:`train.io`)
+Outputs in ``OUT/study/<name>/`` (each written atomically, ``train.io``)
 --------------------------------------------------------------------------
 | file                 | contents                                                                      |
 |----------------------|-------------------------------------------------------------------------------|

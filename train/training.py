@@ -3,7 +3,7 @@
 Training seeds: seed S seeds torch and numpy (network, sampling) and copy c
 of the environment with S + c, c < NUM_COPIES. Learning curves evaluate on
 the validation seeds and ``coloc evaluate`` on the evaluation seeds of
-:mod:`train.evaluate`; neither range overlaps the training seeds.
+``train.evaluate``; neither range overlaps the training seeds.
 
 Writes ``OUT/SCENARIO/seedS/``: ``model.zip`` (+ ``model.json``: scenario,
 config, spaces, which checkpoint it is), the best checkpoint on the validation seeds (its
@@ -199,7 +199,7 @@ def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = 
     """Train and save ``out/<scenario>/seed<S>/model.zip`` (+ ``model.json``); returns the model path.
 
     ``timesteps`` None: the scenario's budget (``TIMESTEPS`` of ``train/hyperparams/<scenario>.py``,
-    :data:`DEFAULT_TIMESTEPS` where it sets none). ``curve_points`` validation points make the learning
+    ``DEFAULT_TIMESTEPS`` where it sets none). ``curve_points`` validation points make the learning
     curve (0: no curve, only checkpoints).
     """
     import torch

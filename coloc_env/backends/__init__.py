@@ -1,4 +1,4 @@
-"""Backends: one adapter per estimator of :mod:`estimators`. ``coloc_env.BACKENDS`` lists them.
+"""Backends: one adapter per estimator of ``estimators``. ``coloc_env.BACKENDS`` lists them.
 
 Every module of this package is imported (and so registers its backends) when the package loads.
 """

@@ -1,16 +1,16 @@
-"""The backend of a composition: one adapter per estimator of :mod:`estimators`.
+"""The backend of a composition: one adapter per estimator of ``estimators``.
 
-A backend's config class declares what it needs, so that :func:`coloc_env.compatibility`
+A backend's config class declares what it needs, so that ``coloc_env.compatibility``
 can say in words why a combination cannot run:
 
 | attribute          | meaning                                                                   |
 |--------------------|---------------------------------------------------------------------------|
 | estimand           | ``"self"`` (each agent's own position) or ``"target"`` (a shared state)   |
-| motion_kinds       | the :mod:`estimators.models` kinds it can run on                          |
+| motion_kinds       | the ``estimators.models`` kinds it can run on                          |
 | requires           | groups of measurement kinds; the world must offer one kind of each group  |
-| message_kind       | what it sends over the network (:mod:`coloc_env.networks.base`)            |
+| message_kind       | what it sends over the network (``coloc_env.networks.base``)            |
 
-At each step the composition hands it the world's :class:`~coloc_env.worlds.base.Readings`
+At each step the composition hands it the world's ``coloc_env.worlds.base.Readings``
 of time k and the decoded backend decisions; the backend updates (asking the
 network for every delivery), keeps the posterior of time k (what the infos
 report), then predicts to k + 1 with the readings' inputs.
@@ -31,8 +31,8 @@ class Backend:
     # Whether it reads ``Readings.fix`` / ``fix_valid`` (the world may skip computing fixes nobody reads).
     reads_fixes: ClassVar[bool] = True
     # Whether its decisions choose among what has arrived, so that the agents should see the readings of
-    # time k (and their delivery) before they decide: the core then calls :meth:`receive` ahead of the step
-    # where the composition allows it (:mod:`coloc_env.scenarios.composed`, "Receive, then decide").
+    # time k (and their delivery) before they decide: the core then calls ``receive`` ahead of the step
+    # where the composition allows it (``coloc_env.scenarios.composed``, "Receive, then decide").
     receives_before_deciding: ClassVar[bool] = False
 
     def __init__(self, config, world, network, batch: int):
@@ -63,7 +63,7 @@ class Backend:
 
     def receive(self, readings, idx: np.ndarray) -> None:  # pragma: no cover - interface
         """The readings of time k of the copies ``idx``, delivered through the network before the agents
-        decide (only for a backend with ``receives_before_deciding``); :meth:`update` then uses them."""
+        decide (only for a backend with ``receives_before_deciding``); ``update`` then uses them."""
         raise NotImplementedError
 
     def predict(self, inputs: np.ndarray) -> None:  # pragma: no cover - interface

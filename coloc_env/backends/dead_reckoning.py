@@ -2,7 +2,7 @@
 
 The reference every cooperative estimator must beat. Each agent keeps its
 own Gaussian, predicted through the world's motion model
-(:func:`estimators.models.predict_joint`, one agent at a time): the mean is the
+(``estimators.models.predict_joint``, one agent at a time): the mean is the
 noiseless model, the covariance grows by the model's process noise.
 
 | quantity     | value                                                 |

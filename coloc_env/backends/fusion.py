@@ -3,10 +3,10 @@
 Target backends: every agent holds an estimate of the world's shared state x
 (estimand ``target``), on a linear-Gaussian world (``drift``, ``target_cv``)
 whose agents each read z_j = C x + v_j. The math is the validated code of
-:mod:`estimators.bandwidth_fusion` and :mod:`estimators.lossy_fusion`; these
+``estimators.bandwidth_fusion`` and ``estimators.lossy_fusion``; these
 adapters only ask the network what arrived and translate it.
 
-**bandwidth_fusion** (zhao2020, eqs. 4-7, 18-19; :func:`estimators.bandwidth_fusion.step`).
+**bandwidth_fusion** (zhao2020, eqs. 4-7, 18-19; ``estimators.bandwidth_fusion.step``).
 Each agent forms its intermediate estimate lambda_j(k) (eq. 4) and sends
 each receiver i the components T_ji the network lets i take (``bandwidth``:
 the receivers' selections within their budgets; a network without
@@ -24,11 +24,11 @@ this step's decisions: a step's selection and weights show in the next
 step's estimate and reward (the ``bandwidth_fusion`` scenario instead
 reports xhat(k+1) after step k; the estimates are the same sequence). Its
 covariance is the exact Sigma_i of the stacked errors (the paper's (10),
-:func:`~estimators.bandwidth_fusion.exact_covariance_step`: the infos' ``trace``
+``estimators.bandwidth_fusion.exact_covariance_step``: the infos' ``trace``
 and ``reward="trace"``); the observation reads the bound M_i of eq. (19), which
 node i computes itself (the scenario's observation does the same).
 
-**centralized_lmmse** (fu2017 (A), Sec. 3.1; :func:`estimators.lossy_fusion.centralized_step`).
+**centralized_lmmse** (fu2017 (A), Sec. 3.1; ``estimators.lossy_fusion.centralized_step``).
 Agent 0 is the leader and fusion centre; each follower sends its z_i(k) as a
 packet to the leader every slot (if its transmit decision says so); the
 leader's buffer y_i(k) follows eq. (3): the fresh packet if it arrived on
@@ -39,12 +39,12 @@ network with no delay: alpha1 = P(delivered), alpha2 = 0). Every agent
 reports the leader's xhat(k|k) and P(k|k) (the estimate is shared: the team's).
 
 **prediction_compensation** (fu2017 (B), Sec. 3.2, eqs. 27-31;
-:func:`estimators.lossy_fusion.distributed_step`). Each follower runs its own
+``estimators.lossy_fusion.distributed_step``). Each follower runs its own
 Kalman filter and sends the leader the packet [x(k|k), x(k|k-1), x(k|k-2)]
 with covariances; the leader holds the last packet delivered (on time, late,
 or the one it held), compensates it with the weights (29), fuses by
 inverse-trace weights (30) and feeds back (31). ``reading`` says what the
-weights (29) act on (:data:`estimators.lossy_fusion.READINGS`, derived in that
+weights (29) act on (``estimators.lossy_fusion.READINGS``, derived in that
 module's docstring):
 
 | reading       | the three compensated estimates of a held packet              | the leader needs      |
@@ -68,7 +68,7 @@ A packet later than one slot (a network with delays of 2 or more) is
 discarded by both fu2017 backends: their model (eq. 3) has one-slot lateness
 only. A known input b (``drift``'s B) enters the fu2017 filters, written for
 b = 0, by the exact change of variables x = xt + c(k), c(k+1) = A c(k) + b
-(:meth:`estimators.linear_models.LinearGaussian.known_input`): they filter xt
+(``estimators.linear_models.LinearGaussian.known_input``): they filter xt
 from z - C c(k).
 
 **bandwidth_fusion**
@@ -129,11 +129,11 @@ Arguments
 | prediction_compensation  | forward_spread      | True       | True, False              |
 
 ``moments``: the second moments of the link terms in (A)'s recursion, as derived (the true MSE) or as
-the paper prints them (eqs. 12-14, 20; :func:`estimators.lossy_fusion.centralized_step`), to measure
+the paper prints them (eqs. 12-14, 20; ``estimators.lossy_fusion.centralized_step``), to measure
 what the printed ones cost; the filter's covariance is then no longer its MSE. ``forward_spread``
 (``reading="forward"`` only): the compensated covariance includes the spread of the three predictions
 (True, the derived one) or is (26)'s printed sum_a w_a P_a (False;
-:func:`estimators.lossy_fusion.distributed_step`).
+``estimators.lossy_fusion.distributed_step``).
 """
 
 from __future__ import annotations

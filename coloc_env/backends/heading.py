@@ -3,10 +3,10 @@
 ``motion="heading"`` (the default): on a world whose motion kind is
 ``odometry_displacement`` and whose turn-rate readings are noisy
 (``world.turn_rate_noise_var()`` > 0), the filter carries each platform's heading
-error in its state (:class:`estimators.heading_models.OdometryHeadingError`), so the
+error in its state (``estimators.heading_models.OdometryHeadingError``), so the
 time-correlated displacement errors of an integrated heading are modelled.
 ``motion="displacement"``: the world's position-only model
-(:class:`estimators.models.OdometryDisplacement`, wang2019's). Where the heading
+(``estimators.models.OdometryDisplacement``, wang2019's). Where the heading
 error is identically zero (no turn-rate noise, or a world that declares none, or
 the world's model deliberately omits it: ``circles`` with ``heading_noise=False``)
 both choices are the same filter and the position-only one runs. Other motion kinds

@@ -1,11 +1,11 @@
 """Backend ``kalman``: fu2017's Kalman baselines at the leader, as one backend with a ``variant``.
 
 Fu, Bi, Gao 2017 compare their estimators with Kalman filters run at the
-leader (agent 0) on what it receives (:mod:`estimators.lossy_fusion`, the
+leader (agent 0) on what it receives (``estimators.lossy_fusion``, the
 reproduction's ``naive_kf``, ``leader_only_kf``, ``informed_kf``,
 ``ideal_kf``). The followers send their z_i(k) to the leader as packets; the
 leader's buffer follows eq. (3) (fresh if on time, the previous slot's if it
-arrives late, else what it held; :class:`coloc_env.backends.fusion.LeaderLinks`).
+arrives late, else what it held; ``coloc_env.backends.fusion.LeaderLinks``).
 
 | variant       | what the leader's filter takes                                                  |
 |---------------|---------------------------------------------------------------------------------|
@@ -13,7 +13,7 @@ arrives late, else what it held; :class:`coloc_env.backends.fusion.LeaderLinks`)
 | ``leader_only`` | its own z_0(k) only; the followers send nothing                               |
 | ``informed``  | knows each packet's age: a Kalman filter on [x(k); x(k-1)] takes an on-time     |
 |               | packet as a measurement of x(k), a late one of x(k-1), skips lost slots and     |
-|               | duplicates (:func:`estimators.lossy_fusion.informed_update`): the MMSE estimator |
+|               | duplicates (``estimators.lossy_fusion.informed_update``): the MMSE estimator |
 |               | given y and the ages                                                            |
 | ``ideal``     | an oracle: every z_i(k) as if the network were ideal (packets are sent and       |
 |               | counted, their delivery ignored); the bound no real network reaches               |
@@ -23,8 +23,8 @@ seeded Monte Carlo runs, ideal <= informed <= naive in squared error (the
 informed filter is optimal for its information, which includes naive's;
 fu2017's Sec. 4 and this package's tests). The time update is the world's
 linear model (x -> A x, P -> A P A^T + Q, the known input b by the change of
-variables of :mod:`coloc_env.backends.fusion`); the measurement update is
-:func:`estimators.lossy_fusion.kalman_update` (Joseph form).
+variables of ``coloc_env.backends.fusion``); the measurement update is
+``estimators.lossy_fusion.kalman_update`` (Joseph form).
 
 The covariance of ``naive``, ``leader_only`` and ``ideal`` does not depend on the data (the same H
 and R every slot, whatever arrived): it is the Riccati recursion from the prior, a function of k
@@ -175,7 +175,7 @@ class KalmanBackend(TargetBackend):
         return [(int(step), np.flatnonzero(k == step)) for step in np.unique(k)]
 
     def _shared_update(self, z: np.ndarray) -> None:
-        """:func:`estimators.lossy_fusion.kalman_update` of every copy with z (B, p), the covariance of the
+        """``estimators.lossy_fusion.kalman_update`` of every copy with z (B, p), the covariance of the
         copies at the same k computed once (a (1, n, n) stack, the batched path's values per copy)."""
         for k, rows in self._groups():
             mean, post = lf.kalman_update(self.mean[rows], self._priors[k], z[rows], self.H_stack, self.R_stack)

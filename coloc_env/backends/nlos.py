@@ -1,25 +1,25 @@
 """Backends ``afge``, ``dfir`` and ``delay_kalman`` (gao2016): estimation from neighbours' delayed RSS/AOA packets.
 
-Both adapt :mod:`estimators.afge` (no second copy of its math): each agent is a target that
-fuses the packets of its J world neighbours (:mod:`coloc_env.worlds.nlos_orbit`'s readings).
+Both adapt ``estimators.afge`` (no second copy of its math): each agent is a target that
+fuses the packets of its J world neighbours (``coloc_env.worlds.nlos_orbit``'s readings).
 Both receive before they decide (``receives_before_deciding``): where the composition allows it
 (no sensing or transport decisions), steps 1-3 run with the last step's mask before the agent
-acts (:meth:`PacketFirBackend.receive`, the core's "receive, then decide"), so its observation
+acts (``PacketFirBackend.receive``, the core's "receive, then decide"), so its observation
 and the AHG costs describe the packets of stamp k, and step k re-filters only if the agent
 changes the mask. Per step k, for each agent:
 
 1. the packets stamped k (one per neighbour that measured the target) go to the network
-   (:meth:`coloc_env.networks.base.Network.node_packets`, slot 0), which returns each one's
+   (``coloc_env.networks.base.Network.node_packets``, slot 0), which returns each one's
    delay tau (or lost); the backend buffers stamps k-D..k (D = the network's
-   :meth:`~coloc_env.networks.base.Network.max_delay`), a packet becoming known at k when
-   tau <= k - s (Step 1, :func:`estimators.afge.known_at_lag`);
+   ``coloc_env.networks.base.Network.max_delay``), a packet becoming known at k when
+   tau <= k - s (Step 1, ``estimators.afge.known_at_lag``);
 2. the known packets of each buffered stamp are fused (Step 2, eqs. 21-27, Def. 6:
-   :func:`estimators.afge.fuse_packets`, the ``n_strongest`` by RSS among the kept ones);
+   ``estimators.afge.fuse_packets``, the ``n_strongest`` by RSS among the kept ones);
 3. the DFIR stack of every horizon N = 1..S (Lemma 7 in recursive form) is re-run from the
-   last final stamp k - D (:func:`estimators.afge.buffer_step`, :func:`~estimators.afge.stack_estimates`);
+   last final stamp k - D (``estimators.afge.buffer_step``, ``estimators.afge.stack_estimates``);
 4. the output x_hat(k) is the chosen horizon's estimate; without one (fewer than two
    observed stamps in it) the prediction A x_hat(k-1) (``afge``: horizon chosen by AHG,
-   Algorithm 10, :func:`estimators.afge.ahg_select`, or by the agent; ``dfir``: ``horizon``);
+   Algorithm 10, ``estimators.afge.ahg_select``, or by the agent; ``dfir``: ``horizon``);
 5. ``predict``: x_hat <- A x_hat, P <- A P A^T + Gam (spec §2), the fallback of step k + 1.
 
 With the ``always`` policy (horizon decision 0 = AHG, every neighbour kept) ``afge`` is the
@@ -83,8 +83,8 @@ every N = 1..S of its stack (the horizon's estimate, else the prediction of that
 one run gives the whole constant-horizon curve.
 
 ``delay_kalman`` is the Kalman baseline on the same fused packets: one horizon that never drops a stamp,
-started from the world's prior (:func:`estimators.afge.prior_stack`), the last D stamps re-filtered from
-the posterior at k - D as packets arrive (:func:`estimators.afge.run_kalman`'s filter); its sigma_a is the
+started from the world's prior (``estimators.afge.prior_stack``), the last D stamps re-filtered from
+the posterior at k - D as packets arrive (``estimators.afge.run_kalman``'s filter); its sigma_a is the
 world's ``accel_sigma``. Decisions, observation and payload as ``dfir``; its fields are ``dfir``'s
 without ``horizon``.
 
@@ -197,7 +197,7 @@ class Dfir(_PacketFirConfig):
 
 
 class PacketFirBackend(Backend):
-    """Buffer, fusion and DFIR stack of :mod:`estimators.afge` for B copies x N targets; ``_choose`` picks N."""
+    """Buffer, fusion and DFIR stack of ``estimators.afge`` for B copies x N targets; ``_choose`` picks N."""
 
     receives_before_deciding = True
     finite_horizons = True  # the stack of finite horizons (False: one growing horizon from the prior, a Kalman filter)
@@ -283,7 +283,7 @@ class PacketFirBackend(Backend):
     # --- step -----------------------------------------------------------------------------
     def receive(self, readings, idx) -> None:
         """Receive, then decide: stamp k's packets of the copies ``idx`` into the buffer, the buffer filtered
-        with the last mask (:attr:`pending`: what the agent knows before it acts; the costs of the horizons
+        with the last mask (``pending``: what the agent knows before it acts; the costs of the horizons
         come from it) and the observation of what arrived, RSS slots included."""
         self._take(readings, np.asarray(idx))
         self._prepare()
@@ -313,7 +313,7 @@ class PacketFirBackend(Backend):
         return np.broadcast_to(lags[:, None, :], (self.batch, self.num_agents, self.D + 1))
 
     def _prepare(self) -> None:
-        """:attr:`pending`: the buffer at k filtered with the last mask (recomputed whole: the copies that did
+        """``pending``: the buffer at k filtered with the last mask (recomputed whole: the copies that did
         not receive anew get the same values again)."""
         c = self.config
         fixes = af.packet_fixes(self.signal, self.nav, self.rss, self.aoa,
@@ -564,7 +564,7 @@ class DelayKalman(_PacketFirConfig):
 
 class DelayKalmanBackend(DfirBackend):
     """gao2016's Kalman baseline: the stack of one horizon that never drops a stamp, started from the
-    world's prior (:func:`estimators.afge.prior_stack`; ``shift=False``: :func:`estimators.afge.run_kalman`)."""
+    world's prior (``estimators.afge.prior_stack``; ``shift=False``: ``estimators.afge.run_kalman``)."""
 
     finite_horizons = False
     min_stamps = 0

@@ -1,16 +1,16 @@
 """Backends ``dnbp`` and ``range_ls`` (wan2014): dynamic NBP, and least squares against GPS-normal neighbours.
 
-**dnbp** adapts :func:`estimators.dnbp.step` (Algorithm 4, the paper's modified
+**dnbp** adapts ``estimators.dnbp.step`` (Algorithm 4, the paper's modified
 schedule by default): per step, GPS-normal UAVs fuse their fix, then
 ``num_iterations`` NBP iterations run, iteration n being one
-:meth:`~coloc_env.networks.base.Network.broadcast` round (``slot`` n) in which
+``coloc_env.networks.base.Network.broadcast`` round (``slot`` n) in which
 the UAVs the schedule allows broadcast their particle message to the fault
 UAVs that listen; a receiver listens only to a sender it has a range to (the
 message is built from that range). Then every belief is propagated to k + 1
 through the accelerometer reading. The particle randomness comes from the
 backend's own generator, one per copy.
 
-**range_ls** adapts :func:`estimators.range_ls.step` (ref. [7] of wan2014): a
+**range_ls** adapts ``estimators.range_ls.step`` (ref. [7] of wan2014): a
 Kalman filter per UAV on the constant-velocity model, updated with its GPS
 fix when normal; a fault UAV with at least ``min_anchors`` GPS-normal
 neighbours whose estimate it received computes a Gauss-Newton fix against
@@ -50,7 +50,7 @@ Arguments (``coloc_env.backends.Dnbp``; defaults = ``gps_denied_nbp``'s)
 | initial_threshold  | 3          | 1..64 (at most N)      |
 | schedule           | "modified" | "modified", "parallel" |
 | kernel             | "truncated"| "exact", "truncated": the belief update's mixture kernel |
-|                    |            | (:data:`estimators.dnbp.KERNELS`; truncated: approximate, ~2x      |
+|                    |            | (``estimators.dnbp.KERNELS``; truncated: approximate, ~2x      |
 |                    |            | faster, within 0.12 standard errors of exact on wan2014's points;  |
 |                    |            | the default since issue 18, "exact" before)                        |
 | truncation         | 6.0        | [1, 10] bandwidths: r of the truncated kernel (terms below         |
@@ -59,7 +59,7 @@ Arguments (``coloc_env.backends.Dnbp``; defaults = ``gps_denied_nbp``'s)
 The defensive box is the world's flight area, ``[-box_margin, area + box_margin + |v_nom| dt horizon]``
 per axis, as in the scenario. Warm start only: particles drawn around the world's initial belief.
 
-Arguments (``coloc_env.backends.RangeLs``; defaults = :class:`estimators.range_ls.LsParams`)
+Arguments (``coloc_env.backends.RangeLs``; defaults = ``estimators.range_ls.LsParams``)
 
 | field        | default | allowed          |
 |--------------|---------|------------------|

@@ -1,9 +1,9 @@
 """Backends ``ukf_ccl`` and ``ukf_dcl`` (wang2019): the joint UKF, centralized or over relay chains.
 
-Both keep the joint Gaussian of every agent's state (:mod:`estimators.ukf_relay`;
+Both keep the joint Gaussian of every agent's state (``estimators.ukf_relay``;
 the joint covariance array stands for the platforms' rows in the distributed
-filter). Time update: :func:`estimators.models.predict_joint` on the backend's
-motion model (:mod:`coloc_env.backends.heading`: on an odometry world with
+filter). Time update: ``estimators.models.predict_joint`` on the backend's
+motion model (``coloc_env.backends.heading``: on an odometry world with
 turn-rate noise, ``motion="heading"`` adds each platform's heading error to its
 block, (x, y, e); ``motion="displacement"`` is wang2019's position-only model).
 Measurement updates, in a fixed order (ranges in row-major order of (measuring,
@@ -17,7 +17,7 @@ measured), then position fixes by agent):
   estimates (``truncation``: the consistent cross-covariance rule by default,
   the paper's rule on request).
 * a position fix of agent i (an anchor, a normal GPS): a linear update of the
-  joint state (:func:`estimators.kalman.joseph_update`). ukf_ccl sends it to
+  joint state (``estimators.kalman.joseph_update``). ukf_ccl sends it to
   the centre; ukf_dcl relays its location information from i like a range's,
   and only the reached platforms update (the gain of the others is zero, the
   Joseph form keeps P the true covariance).
@@ -30,7 +30,7 @@ readings: the network resolves every chain or centre message of the step in
 one call (O(J N) array work, no per-reading Python call), then each reading
 costs a 2d x 2d Cholesky and O(L d) work plus its share of a rank-2 update of
 P folded every 16 readings (O(L^2)), each fix O(L^2): O(J L^2 + N L^2)
-(:func:`estimators.ukf_relay.range_updates`), never an L x L Cholesky per
+(``estimators.ukf_relay.range_updates``), never an L x L Cholesky per
 reading. ukf_dcl computes the chain's numbers in the same closed form, so over
 ``ideal`` it costs what ukf_ccl does; with ``truncation="paper"`` it runs each
 chain hop by hop (O(N) Schur complements per reading), which catches the loss
@@ -49,7 +49,7 @@ read their estimates at the centre (the return path is not charged).
 
 A ukf_dcl hop h carries S_m (10 floats) and the A_i row blocks and Pxz^i of
 the r = h + 1 platforms reached so far: 10 + 5 r + 2 r (r - 1) floats for
-position-only blocks (:func:`dcl_floats` for d-dimensional ones). In a world
+position-only blocks (``dcl_floats`` for d-dimensional ones). In a world
 whose range readings are symmetric (``gps_denied``: one measurement per edge,
 known to both ends) each pair is fused once, m < n.
 | decisions     | none                                                                   |
@@ -61,7 +61,7 @@ Arguments (``coloc_env.backends.UkfCcl`` / ``UkfDcl``)
 | ukf_lambda  | 0.0          | (-2N, 1e6], N the agents, checked at build (0 = filterpy's) |
 | truncation  | "consistent" | ukf_dcl only: "consistent", "paper"               |
 | motion      | "heading"    | "heading", "displacement": on odometry, the heading error in the state or not |
-|             |              | (:mod:`coloc_env.backends.heading`)               |
+|             |              | (``coloc_env.backends.heading``)               |
 """
 
 from __future__ import annotations
@@ -161,11 +161,11 @@ class JointUkfBackend(Backend):
         """This step's readings in the fixed order: ranges (row-major (m, n)), then fixes by agent.
 
         Every message of the step goes to the network in one call per kind (the chains and deliveries of
-        one step do not depend on each other: :meth:`Network.relay_each` / :meth:`Network.messages_to` with
+        one step do not depend on each other: ``Network.relay_each`` / ``Network.messages_to`` with
         one slot per reading), then the updates run in order: J sequential range updates
-        (:func:`estimators.ukf_relay.range_updates`, O(L^2) each) and one linear update per fixed agent
-        (:func:`estimators.ukf_relay.fix_updates`, O(L^2) each). With ``truncation="paper"`` each range
-        runs the chain hop by hop (:func:`estimators.ukf_relay.dcl_update` with ``method="chain"``), which
+        (``estimators.ukf_relay.range_updates``, O(L^2) each) and one linear update per fixed agent
+        (``estimators.ukf_relay.fix_updates``, O(L^2) each). With ``truncation="paper"`` each range
+        runs the chain hop by hop (``estimators.ukf_relay.dcl_update`` with ``method="chain"``), which
         detects the loss of positive definiteness that rule causes.
         """
         B, N, d = self.batch, self.num_agents, self.d

@@ -1,6 +1,6 @@
 """Backend ``ukf_se2``: UKF-DCL of wang2019 on planar robots with heading, range and bearing, and landmarks.
 
-Adapter over :mod:`estimators.ukf_relay_se2` (its docstring has the
+Adapter over ``estimators.ukf_relay_se2`` (its docstring has the
 equations: the SE(2) unicycle time update, the 2-vector range+bearing
 observation through the UT on the joint state L = 3N, the Roumeliotis-Bekey
 factored cross-covariances P_ij = Phi_i sigma_ij Phi_j^T, the look-up
@@ -9,23 +9,23 @@ does not reach, the chi-square outlier gate). Each copy keeps its robots'
 estimates (B, N, 3) and the factors P_ii, Phi_i, sigma_ij (B, ...). The updates are stacked over the
 copies: per observation slot, the copies whose observation of that slot is of one kind (landmark or robot)
 and whose delivered chain has one length are updated together
-(:func:`~estimators.ukf_relay_se2.dcl_update_rows`), and every copy predicts at once
-(:func:`~estimators.ukf_relay_se2.time_update_batch`); copy b equals the same copy run alone.
+(``estimators.ukf_relay_se2.dcl_update_rows``), and every copy predicts at once
+(``estimators.ukf_relay_se2.time_update_batch``); copy b equals the same copy run alone.
 
 Step k, in the world's file order (``Readings.extra["obs_*"]``, see
-:mod:`coloc_env.worlds.mrclam`):
+``coloc_env.worlds.mrclam``):
 
 * a landmark sighting by robot m: with ``landmark_updates="local"``, ``dcl_update`` on
   the chain [m] alone (the exact truncated-chain update: m and, through the cross
   terms, everyone's sigma rows change; no communication); with ``"relay"``, on the
-  chain m -> ... the network delivers (:meth:`~coloc_env.networks.base.Network.relay`
+  chain m -> ... the network delivers (``coloc_env.networks.base.Network.relay``
   with no measured robot, one slot per observation), so a chain that reaches everyone
   gives exactly UKF-CCL's update: its unscented transform runs on the whole joint
   state (L = 3N), where [m] alone runs it on m's three components (lambda = 0 spreads
   the sigma points by sqrt(L)): for the nonlinear range+bearing a different update once
   the robots' estimates are correlated (0.04 m apart within the first 60 s of dataset 6);
 * a robot m's range+bearing of robot n: a relay chain m -> n -> ... on the
-  network (message kind ``chain``, :meth:`coloc_env.networks.base.Network.relay`,
+  network (message kind ``chain``, ``coloc_env.networks.base.Network.relay``,
   one slot per observation); if n is reached, ``dcl_update`` along the chain
   actually delivered (a chain that reaches everyone gives exactly UKF-CCL);
   a chain that does not reach n applies nothing;
@@ -209,7 +209,7 @@ class UkfSe2Backend(Backend):
 
     def _dcl(self, copies, j, paths, lengths, extra, landmark: bool) -> np.ndarray:
         """UKF-DCL of observation slot j in the given copies, along their chains ``paths`` (n, N) of ``lengths``
-        (n,): one stacked update per chain length (:func:`estimators.ukf_relay_se2.dcl_update_rows`).
+        (n,): one stacked update per chain length (``estimators.ukf_relay_se2.dcl_update_rows``).
         Returns applied (n,) bool."""
         ok = np.zeros(len(copies), dtype=bool)
         if not len(copies):

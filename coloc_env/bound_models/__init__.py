@@ -1,13 +1,13 @@
-"""Bound models: for each world, the estimation problem its filters face, as :func:`coloc_env.bounds.pcrb` needs it.
+"""Bound models: for each world, the estimation problem its filters face, as ``coloc_env.bounds.pcrb`` needs it.
 
 One module per world (``target`` for ``drift`` and ``target_cv``, ``circles``, ``gps_denied``,
 ``nlos_orbit``, ``mrclam``); each docstring states the problem: the state, the prior
 J0 = P0^-1 (the filters' initial covariance), the motion as the filters know it (input
 noise as process noise), the readings as taken. Each module's ``problem(core, record)``
-returns a :class:`coloc_env.bounds.BoundProblem` from the world's drawn episode (its
-arrays, read, never changed) and the play's :class:`coloc_env.bounds.Record`.
+returns a ``coloc_env.bounds.BoundProblem`` from the world's drawn episode (its
+arrays, read, never changed) and the play's ``coloc_env.bounds.Record``.
 
-Which backends' messages define ``delivered`` (:func:`delivered_kind`):
+Which backends' messages define ``delivered`` (``delivered_kind``):
 
 | kind        | backends                                   | delivered                                     |
 |-------------|--------------------------------------------|-----------------------------------------------|
@@ -16,12 +16,12 @@ Which backends' messages define ``delivered`` (:func:`delivered_kind`):
 |             | , ``delay_kalman`` (the neighbours' RSS/AOA |                                               |
 |             | packets),                                   |                                               |
 |             | ``ukf_ccl`` (each range and fix sent to the | the centre's: every odometry (its model), the |
-|             | centre, agent 0)                            | readings that reached it (:func:`centre_received`) |
+|             | centre, agent 0)                            | readings that reached it (``centre_received``) |
 | nothing     | ``dead_reckoning``                         | = local                                       |
 
 ``kalman``, ``centralized_lmmse`` and ``ukf_ccl`` fuse at the leader (the centre) and every agent reports its
-estimate: their delivered bound is the leader's, for every agent (:data:`SHARED_AT_LEADER`).
-| estimates   | every other backend                        | left out (see :mod:`coloc_env.bounds`)        |
+estimate: their delivered bound is the leader's, for every agent (``SHARED_AT_LEADER``).
+| estimates   | every other backend                        | left out (see ``coloc_env.bounds``)        |
 """
 
 from __future__ import annotations
@@ -76,7 +76,7 @@ def stand_in(core):
 
 
 def bound_problem(core, record):
-    """The :class:`~coloc_env.bounds.BoundProblem` of the core's world for the recorded play."""
+    """The ``coloc_env.bounds.BoundProblem`` of the core's world for the recorded play."""
     name = core.composition.world.name
     if name not in MODULES:
         raise ValueError(f"no bound model for world {name!r}; worlds with one: {sorted(MODULES)}")

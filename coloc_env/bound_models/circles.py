@@ -1,6 +1,6 @@
 """Bound model of the ``circles`` world (wang2019): unicycles on known-start circles, odometry, ranges, fixes.
 
-The world's generative model (:mod:`coloc_env.worlds.circles`): the truth is deterministic, the same
+The world's generative model (``coloc_env.worlds.circles``): the truth is deterministic, the same
 in every episode: each platform flies its circle, p(k+1) = p(k) + dt V t(phi(k)), phi(k+1) =
 phi(k) + dt omega (t(a) = [cos a; sin a]), from a start pose the estimators are given exactly
 (``initial_belief``'s mean is the true position; the integrated heading starts at the true phi(0)).
@@ -21,7 +21,7 @@ later displacement: the time correlation that a per-step position noise cannot c
 readings' Jacobians (u u^T at the true positions) are the truth's, identical in every episode; the
 covariance-form recursion is then the Cramér–Rao bound of the start pose and the inputs (TMN's
 recursion with F and Q fixed, exact for the singular Q and prior here), evaluated at the truth. It is
-the model :class:`estimators.heading_models.OdometryHeadingError` filters (the heading error e =
+the model ``estimators.heading_models.OdometryHeadingError`` filters (the heading error e =
 phi_m - phi is -dphi), without that filter's departures (its prior variance of e, its Jacobians at
 the estimate).
 
@@ -37,7 +37,7 @@ the estimate).
 | readings    | the range each step's measuring platform took to the partner its sensing chose (as    |
 |             | recorded: [[B, -B], [-B, B]], B = u u^T / range_noise_var at the true positions);      |
 |             | the anchors' fixes, I / fix_noise_std^2, every step                                     |
-| episodes    | the D-terms averaged over the episodes, one recursion (:mod:`coloc_env.bounds`): F and |
+| episodes    | the D-terms averaged over the episodes, one recursion (``coloc_env.bounds``): F and |
 |             | Q are common, so that is the reading information averaged per step. A mean of per-     |
 |             | episode bounds would be a valid, tighter bound only while what differs between        |
 |             | episodes (the schedule, the partners, the deliveries) is independent of the noises;   |
@@ -49,7 +49,7 @@ the estimate).
 | delivered   | ``dead_reckoning`` (sends nothing): = local; ``ukf_ccl``: the centre's (every          |
 |             | odometry, the ranges and fixes whose message reached agent 0), every platform's; the  |
 |             | other backends' messages carry estimates or relayed location information (left out,   |
-|             | :mod:`coloc_env.bounds`)                                                               |
+|             | ``coloc_env.bounds``)                                                               |
 
 It bounds estimators that use the odometry as inputs and do not know the circles (one that
 knew the tracks would need no readings at all); it is a Cramér–Rao bound at the truth, so it holds for

@@ -17,7 +17,7 @@ Estimation problem (the one the ``ukf_ccl`` / ``dnbp`` / ``range_ls`` / ``dead_r
 | local       | each UAV's own accelerometer and own fixes                                             |
 | delivered   | ``dead_reckoning``: = local; ``ukf_ccl``: the centre's (every accelerometer, the      |
 |             | ranges and fixes whose message reached agent 0), every UAV's; the other backends'      |
-|             | messages carry beliefs or estimates (left out, :mod:`coloc_env.bounds`)                |
+|             | messages carry beliefs or estimates (left out, ``coloc_env.bounds``)                |
 """
 
 from __future__ import annotations

@@ -14,7 +14,7 @@ the "MSE >= bound" check.
 | state       | every robot's pose (x, y, theta) (3 N); the bound is reported on (x, y)                 |
 | prior       | J0 = P0^-1, P0 = diag(initial_position_std^2 (x2), initial_heading_std^2) per robot: the |
 |             | filters start at the Vicon pose with that covariance, and so does the bound            |
-| motion      | :class:`estimators.se2_models.SE2Odometry` on the world's corrected odometry inputs,    |
+| motion      | ``estimators.se2_models.SE2Odometry`` on the world's corrected odometry inputs,    |
 |             | F and Q = G diag(var_v, var_omega) G^T at the Vicon pose (Q has rank 2 of 3: the       |
 |             | covariance form, exact)                                                                |
 | episodes    | each window of the recording is its own problem, conditioned on its trajectory: one    |
@@ -28,7 +28,7 @@ the "MSE >= bound" check.
 | local       | each robot's own odometry and its own landmark sightings (the landmark pseudo-fixes    |
 |             | are these sightings again and are not counted twice)                                   |
 | delivered   | ``dead_reckoning``: = local; ``ukf_se2``'s relay chains carry location information     |
-|             | (left out, :mod:`coloc_env.bounds`)                                                    |
+|             | (left out, ``coloc_env.bounds``)                                                    |
 """
 
 from __future__ import annotations

@@ -6,14 +6,14 @@ Estimation problem (the one ``afge`` / ``dfir`` / ``dead_reckoning`` face; each 
 |-------------|----------------------------------------------------------------------------------------|
 | state       | every target's [p; v] (4 N), the targets independent of one another                    |
 | prior       | J0 = P0^-1, P0 = diag(prior_std^2) (the world's prior; its mean is drawn around truth)  |
-| motion      | the filters' :class:`estimators.nlos_models.ConstantVelocityWhiteAccel`: x(k+1) = F x + |
+| motion      | the filters' ``estimators.nlos_models.ConstantVelocityWhiteAccel``: x(k+1) = F x + |
 |             | w, w ~ N(0, Q), Q the white-acceleration noise of ``accel_sigma`` (no input)            |
 | readings    | each neighbour j inside target i's receive-search area at k: RSS (dBm) and AOA (rad)   |
 |             | (as ``sensors`` selects) of the target's true position seen from the neighbour's true  |
 |             | position, with the LOS/NLOS mode of that link *known* (its bias removed, its variance  |
 |             | used: a genie bound; an estimator that must infer the mode can only do worse); the    |
 |             | neighbour's position known to sigma_nav per axis through its navigation estimate,      |
-|             | eliminated as a Gaussian nuisance (:func:`estimators.bounds.rss_aoa_information`)      |
+|             | eliminated as a Gaussian nuisance (``estimators.bounds.rss_aoa_information``)      |
 | centralized | every reading measured, whether or not the network delivers it                         |
 | local       | none: a target has no sensor of its own (prior and motion only)                        |
 | delivered   | (``afge``, ``dfir``) the readings whose packet reached the target, each counted at the |
@@ -55,7 +55,7 @@ def reading_information(world, K: int) -> np.ndarray:
 
 def stand_in(core):
     """The neighbours' packets of k to their target, asked of the network as ``afge`` / ``dfir`` ask it (every
-    neighbour inside the RSA sends; :meth:`coloc_env.networks.base.Network.node_packets`, slot 0: counter-based
+    neighbour inside the RSA sends; ``coloc_env.networks.base.Network.node_packets``, slot 0: counter-based
     draws, so the same delays whoever asks)."""
     world, network = core.world, core.network
 

@@ -7,7 +7,7 @@ Estimation problem (every agent estimates one shared state x, n = 6 or the drift
 | state       | x(k) (target_cv: [x, vx, y, vy, z, vz]; drift: the drift state)                        |
 | prior       | J0 = P0^-1, P0 the world's ``initial_cov`` (every agent starts from it)                |
 | motion      | x(k+1) = A x(k) + b + w, w ~ N(0, Q) (target_cv: Q = q G G^T, rank 3 of 6: the        |
-|             | covariance form of :mod:`estimators.bounds` is exact for it); the known input b moves  |
+|             | covariance form of ``estimators.bounds`` is exact for it); the known input b moves  |
 |             | no information                                                                         |
 | readings    | agent i's z_i(k) = C x(k) + v_i, v_i ~ N(0, R_i), at every step: C^T R_i^-1 C         |
 | centralized | sum over the agents, every step                                                        |

@@ -15,7 +15,7 @@ One dataset folder holds, for robots K = 1..5, ``RobotK_Odometry.dat``
 (subject 1-20 -> barcode) and ``Landmark_Groundtruth.dat`` (subject 6-20,
 x, y, x std, y std). Lines starting with ``#`` are comments.
 
-Time alignment on a fixed step ``dt`` (:func:`load`):
+Time alignment on a fixed step ``dt`` (``load``):
 
 * The grid t_k = t_0 + k dt, k = 0..T-1, starts when every robot has both
   odometry and ground truth and ends before the first robot's stream stops.
@@ -30,10 +30,10 @@ Time alignment on a fixed step ``dt`` (:func:`load`):
   not in ``Barcodes.dat`` (a handful of misreads in the data) are dropped and
   counted in ``dropped_unknown_barcode``.
 
-Noise model (:func:`calibrate_noise`, :class:`NoiseModel`): the one model of the
+Noise model (``calibrate_noise``, ``NoiseModel``): the one model of the
 odometry and measurement noise that ``coloc reproduce mrclam`` and the
 ``mrclam_relay`` scenario both apply, fitted against Vicon on a calibration
-window at the start of the run (:func:`calibration_seconds`: the first
+window at the start of the run (``calibration_seconds``: the first
 ``CALIBRATION_FRACTION`` = 10 % of the run and at least ``CALIBRATION_MIN_S`` =
 60 s; the baseline model, 60 s). ``NoiseModel.calibrate(d)`` fits and builds it;
 per step it gives the corrected odometry of an absolute step, that
@@ -45,7 +45,7 @@ malformed line (wrong number of fields, a non-number, a non-finite value,
 bytes that are not text, time going backwards), an unknown or repeated
 subject or barcode in ``Barcodes.dat`` or ``Landmark_Groundtruth.dat``, and a
 physically impossible value raise ``ValueError`` naming the file and line.
-The physical bounds (:data:`PHYSICAL_BOUNDS`) come from the dataset paper
+The physical bounds (``PHYSICAL_BOUNDS``) come from the dataset paper
 (Leung et al. 2011: five iRobot Create robots in a 15 m x 8 m indoor
 workspace, Vicon ground truth): |v| <= ``MAX_SPEED`` = 0.5 m/s (the Create's
 top drive speed, 500 mm/s in its Open Interface), |w| <= ``MAX_TURN_RATE`` =
@@ -539,7 +539,7 @@ def calibrate_noise(d: MrclamData, seconds: float = 60.0, gate: float = GATE_999
     keys below model them, each from the window's data by the stated rule:
 
     * ``odometry_delay_steps`` n, ``odometry_scale`` (s_v, s_w): the robot moves as
-      u'[k] = s * u[k - n] (:func:`estimators.ukf_relay_se2.correct_odometry`);
+      u'[k] = s * u[k - n] (``estimators.ukf_relay_se2.correct_odometry``);
       n in 0..0.5 s minimizes the summed relative residual, s by least squares.
     * ``odometry_var0`` (a_v, a_w), ``odometry_var_gain`` (b_v, b_w): per-step
       variance of the corrected residual e = u' - u_vicon, E[e^2 | u'] = a + b u'^2
@@ -547,7 +547,7 @@ def calibrate_noise(d: MrclamData, seconds: float = 60.0, gate: float = GATE_999
     * ``correction_horizon_steps`` H: length-biased mean gap between a robot's
       observations; ``odometry_inflation`` (r_v, r_w) = max(1, E[(sum_H e)^2] /
       E[sum_H (a + b u'^2)]): the filter's per-step variance is
-      r (a + b u'^2) (:func:`estimators.ukf_relay_se2.odometry_variance`).
+      r (a + b u'^2) (``estimators.ukf_relay_se2.odometry_variance``).
     * ``range_var`` (a_r, b_r): sigma_r^2 = a_r + b_r r^2 from the 68.27th
       percentile of |range residual| in equal-count range bins;
       ``sigma_bearing_p68`` the 68.27th percentile of |bearing residual|.
@@ -676,11 +676,11 @@ def fit_noise_scales(d: MrclamData, noise: dict, steps: int, initial_std: float 
                      gate: float = GATE_999) -> dict:
     """Maximum-likelihood scales of the white noise model on the calibration window (steps [0, ``steps``)).
 
-    The per-step shapes of ``noise`` (:func:`calibrate_noise`: corrected odometry, variances a + b u'^2,
+    The per-step shapes of ``noise`` (``calibrate_noise``: corrected odometry, variances a + b u'^2,
     sigma_r^2 = a_r + b_r r^2, sigma_b) describe one step's error; the errors are correlated over steps
     and over a burst of sightings, which a filter with white noise cannot represent. The scales
     (c_v, c_w, c_r, c_b) multiply the four variances so that the filter's covariance describes its error:
-    they minimize :func:`_likelihood_costs`, the composite negative log-likelihood of UKF-CCL's pose errors
+    they minimize ``_likelihood_costs``, the composite negative log-likelihood of UKF-CCL's pose errors
     against Vicon on the window (each step's error taken as N(0, P_ii), the time correlation of the errors
     ignored: a composite likelihood, whose maximizer is consistent for the marginal model). Search: a
     compass (pattern) search in log-scale from the moment rules' inflations (``odometry_inflation``,
@@ -749,7 +749,7 @@ NOISE_MODELS = ("calibrated", "baseline", "likelihood")
 
 
 def calibration_seconds(d: MrclamData, kind: str = "calibrated") -> float:
-    """Seconds at the start of ``d`` that :func:`calibrate_noise` fits model ``kind`` on.
+    """Seconds at the start of ``d`` that ``calibrate_noise`` fits model ``kind`` on.
 
     ``"calibrated"`` and ``"likelihood"``: max(``CALIBRATION_MIN_S``, ``CALIBRATION_FRACTION`` x the duration of
     ``d``) (75.6 s of dataset 6; 60 s for a run shorter than 600 s); ``"baseline"``:
@@ -770,25 +770,25 @@ def _check_kind(kind) -> None:
 class NoiseModel:
     """The noise model the MRCLAM filters apply, per step: odometry u', its variances Q(u'), R(range).
 
-    One parametric family holds both models of :func:`calibrate_noise`'s output
+    One parametric family holds both models of ``calibrate_noise``'s output
     (``kind``), so the filters apply either through the same three methods:
 
-    * :meth:`odometry` ``(d, k)``: u'[k] = s * u[max(k - n, 0)] for absolute step(s) k
+    * ``odometry`` ``(d, k)``: u'[k] = s * u[max(k - n, 0)] for absolute step(s) k
       of the run ``d`` (n = ``odometry_delay_steps``, s = ``odometry_scale``; the rule of
-      :func:`estimators.ukf_relay_se2.correct_odometry`: the command logged at step k
+      ``estimators.ukf_relay_se2.correct_odometry``: the command logged at step k
       moves the robot from k + n on; before the run's first command it is held). A
       replay that starts at step s > 0 thus uses the commands logged before s, as the
       robots did; it never indexes before step 0.
-    * :meth:`odometry_var` ``(u')``: per robot and step, sigma_c^2 = r_c (a_c + b_c u'_c^2)
-      (:func:`estimators.ukf_relay_se2.odometry_variance`; a = ``odometry_var0``,
+    * ``odometry_var`` ``(u')``: per robot and step, sigma_c^2 = r_c (a_c + b_c u'_c^2)
+      (``estimators.ukf_relay_se2.odometry_variance``; a = ``odometry_var0``,
       b = ``odometry_var_gain``, r = ``odometry_inflation``): the ``odometry_var`` (N, 2) of
-      :func:`~estimators.ukf_relay_se2.time_update` / ``time_update_factored``.
-    * :meth:`measurement_cov` ``(range)``: R = diag(r_range (a_r + b_r z_r^2), sigma_b^2)
+      ``estimators.ukf_relay_se2.time_update`` / ``time_update_factored``.
+    * ``measurement_cov`` ``(range)``: R = diag(r_range (a_r + b_r z_r^2), sigma_b^2)
       from the MEASURED range z_r (the filter knows no other); ``bearing_var`` holds
       sigma_b^2 with its inflation applied.
 
-    ``kind="calibrated"`` (:meth:`from_calibration`): every parameter as fitted by the rules
-    documented in :func:`calibrate_noise` (delay and scale, speed-dependent variance,
+    ``kind="calibrated"`` (``from_calibration``): every parameter as fitted by the rules
+    documented in ``calibrate_noise`` (delay and scale, speed-dependent variance,
     inflation for errors correlated over the correction horizon, range-dependent
     sigma_r, 68.27th-percentile sigma_b, burst inflation of R; ``inflate_measurements=False``
     leaves the last out, the ablation of ``coloc reproduce mrclam``).
@@ -798,10 +798,10 @@ class NoiseModel:
     special values make each formula return the baseline's numbers exactly).
     ``kind="likelihood"``: the calibrated model's per-step shapes (delay, scale, a, b, a_r, b_r,
     sigma_b) with the moment-rule inflations replaced by the maximum-likelihood scales of
-    :func:`fit_noise_scales` on the same window: r = (c_v, c_w), ``range_inflation`` = c_r,
+    ``fit_noise_scales`` on the same window: r = (c_v, c_w), ``range_inflation`` = c_r,
     ``bearing_var`` = c_b sigma_b^2. The consistent model (the one ``coloc reproduce mrclam``
     evaluates); its fit runs UKF-CCL filters on the window (seconds, once per run and process).
-    ``calibration`` keeps the :func:`calibrate_noise` dict it was built from.
+    ``calibration`` keeps the ``calibrate_noise`` dict it was built from.
     """
 
     kind: str
@@ -834,7 +834,7 @@ class NoiseModel:
 
     @classmethod
     def from_calibration(cls, noise: dict, kind: str = "calibrated", inflate_measurements: bool = True) -> NoiseModel:
-        """The model ``kind`` from a :func:`calibrate_noise` dict (see the class docstring)."""
+        """The model ``kind`` from a ``calibrate_noise`` dict (see the class docstring)."""
         _check_kind(kind)
         if kind == "baseline":
             return cls(kind, 0, (1.0, 1.0), (noise["sigma_v"] ** 2, noise["sigma_w"] ** 2), (0.0, 0.0), (1.0, 1.0),
@@ -856,7 +856,7 @@ class NoiseModel:
     @classmethod
     def calibrate(cls, d: MrclamData, kind: str = "calibrated", seconds: float | None = None,
                   gate: float = GATE_999) -> NoiseModel:
-        """Fit on the start of ``d`` (``seconds``, default :func:`calibration_seconds` of ``kind``) and build."""
+        """Fit on the start of ``d`` (``seconds``, default ``calibration_seconds`` of ``kind``) and build."""
         _check_kind(kind)
         seconds = calibration_seconds(d, kind) if seconds is None else seconds
         noise = calibrate_noise(d, seconds, gate=gate)
@@ -910,7 +910,7 @@ def own_nav_update(d: MrclamData, model: NoiseModel, k: int, x: np.ndarray, P: n
     """The own-navigation filters' landmark updates of step k, in file order, in place on ``x`` (N, 3), ``P`` (N, 3, 3).
 
     Each robot r < ``robots`` updates its own UKF on (x, y, theta) with its own landmark sightings
-    (:func:`estimators.ukf_relay_se2.ccl_update` with N = 1, R from the measured range, the
+    (``estimators.ukf_relay_se2.ccl_update`` with N = 1, R from the measured range, the
     chi-square(2) 99.9 % gate); robot-robot lines are skipped. ``accepted`` (M,) bool, if given,
     records which lines the gate let in.
     """
@@ -969,7 +969,7 @@ def _load_cached(path: str, dt: float) -> MrclamData:
 
 
 def load_cached(data: str | os.PathLike | None = None, dt: float = 0.1) -> MrclamData:
-    """:func:`load` memoized per (real path, dt); the arrays are read-only (shared between callers)."""
+    """``load`` memoized per (real path, dt); the arrays are read-only (shared between callers)."""
     return _load_cached(os.path.realpath(resolve_data_path(data)), float(dt))
 
 

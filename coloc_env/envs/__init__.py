@@ -6,14 +6,14 @@
 Every module ``coloc_env.envs.<preset>`` has
 
 * ``parallel_env(max_cycles=None, render_mode=None, **config)``: the
-  :class:`~coloc_env.env.CoLocParallelEnv` (``config`` = the preset's flat
+  ``coloc_env.env.CoLocParallelEnv`` (``config`` = the preset's flat
   dataclass fields, as ``coloc_env.parallel_env(name, **config)``);
 * ``raw_env(...)``: its AEC view without wrappers;
 * ``env(...)``: the AEC view wrapped in PettingZoo's ``OrderEnforcingWrapper``;
 
 ``max_cycles`` is the episode length (PettingZoo's keyword, checked by
 ``pettingzoo.test.max_cycles_test``): the preset's ``horizon``, or
-``window_steps`` for ``mrclam_relay`` (:func:`coloc_env.env.with_max_cycles`).
+``window_steps`` for ``mrclam_relay`` (``coloc_env.env.with_max_cycles``).
 """
 
 from __future__ import annotations

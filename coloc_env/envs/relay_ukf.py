@@ -1,6 +1,6 @@
 """``relay_ukf`` as a PettingZoo environment module: ``parallel_env``, ``raw_env`` and ``env``.
 
-``max_cycles`` sets ``horizon``. See :mod:`coloc_env.envs`.
+``max_cycles`` sets ``horizon``. See ``coloc_env.envs``.
 """
 
 from coloc_env.envs import constructors

@@ -6,16 +6,16 @@ with ``min_per_link <= t_ji <= max_per_link`` and sum_j t_ji = ``budget``
 (``<=`` when ``exact_budget`` is False); the rest it fills with its own
 prediction (the backend's eq. 6). The network is fully connected and
 lossless (the paper's); the constraint is the receiver's bandwidth
-(:class:`coloc_env.world.links.BandwidthBudget`). n is the backend's message
+(``coloc_env.world.links.BandwidthBudget``). n is the backend's message
 size (the world's state dimension), known when the backend is built.
 
 A receiver's transport decision is one index into the feasible selections
-(:attr:`BandwidthBudget.feasible`, a fixed order; 108 of them in the paper's
+(``BandwidthBudget.feasible``, a fixed order; 108 of them in the paper's
 setting N = 4, n = 3, budget 5, 1..3 per link); neighbours are indexed
 relative to the receiver (neighbour k of agent i is agent (i + 1 + k) mod N).
 Up to 4,096 selections (``TABLE_LIMIT``) the index is decoded by a lookup in
-a table built once from :attr:`BandwidthBudget.feasible`; beyond, by
-:meth:`BandwidthBudget.selection_at` (unranking by the completion table), so
+a table built once from ``BandwidthBudget.feasible``; beyond, by
+``BandwidthBudget.selection_at`` (unranking by the completion table), so
 nothing is listed; the Discrete's size is capped at 100,000 (``MAX_SELECTIONS``).
 
 | quantity   | value                                                                                    |
@@ -142,7 +142,7 @@ class BandwidthNetwork(Network):
     def offer_selection(self, index: np.ndarray, selection: np.ndarray) -> None:
         """Hand over the selections (B, N, N-1, n) that the indices (B, N) stand for, from a caller that
         decoded both (the ``bandwidth_fusion`` preset decodes scores): beyond ``TABLE_LIMIT`` selections
-        :meth:`component_selection` takes them while the ``selection`` decisions are those indices, instead
+        ``component_selection`` takes them while the ``selection`` decisions are those indices, instead
         of unranking the indices again. ``selection`` must be ``links.selection_at(index)``; it is kept,
         not copied."""
         self._offered = (np.array(index, np.int64), selection)

@@ -6,12 +6,12 @@ A backend never decides delivery: it asks its network. Three message patterns
 | kind        | what moves                                                        | network call           |
 |-------------|-------------------------------------------------------------------|------------------------|
 | ``none``    | nothing (dead reckoning)                                          | -                      |
-| ``broadcast`` | one transmission per sender and round, heard by its neighbours (dNBP) | :meth:`Network.broadcast` |
-| ``chain``   | a measurement's location information relayed holder to holder (UKF-DCL) | :meth:`Network.relay`  |
+| ``broadcast`` | one transmission per sender and round, heard by its neighbours (dNBP) | ``Network.broadcast`` |
+| ``chain``   | a measurement's location information relayed holder to holder (UKF-DCL) | ``Network.relay``  |
 | ``central`` | each measurement sent to the fusion centre, agent 0 (UKF-CCL)     | ``broadcast`` to agent 0 |
-| ``packets`` | one stamped packet per sender and step, to the receivers it names; | :meth:`Network.packets`  |
+| ``packets`` | one stamped packet per sender and step, to the receivers it names; | ``Network.packets``  |
 |             | each arrives after a delay of 0..D steps or is lost (fu2017, gao2016) |                      |
-|             | from a world node (gao2016's orbiting neighbours, no agents) to an | :meth:`Network.node_packets` |
+|             | from a world node (gao2016's orbiting neighbours, no agents) to an | ``Network.node_packets`` |
 |             | agent: the same rule, J nodes per agent                           |                        |
 
 Every network accounts at the sender, in one unit for every backend: a
@@ -21,7 +21,7 @@ carried (the backend states its payload). ``messages_sent`` and
 ``floats_sent`` are per agent and step; world nodes are no agents, so their
 packets are counted per receiving agent in ``node_messages`` / ``node_floats``.
 
-Packet loss is drawn by :mod:`coloc_env.draws` from a key the network draws
+Packet loss is drawn by ``coloc_env.draws`` from a key the network draws
 from its own generator at reset: the value for (step, round, sender,
 receiver) does not depend on the batch, so a copy equals itself run alone.
 """
@@ -101,11 +101,11 @@ class Network:
 
     def packet_delays(self, distance: np.ndarray, u: np.ndarray) -> np.ndarray:
         """Delay in steps (int, 0 = on time) of packets over links at ``distance``, or -1 for a lost one,
-        given one uniform ``u`` per packet; by default lost with :meth:`loss_probability`, else on time."""
+        given one uniform ``u`` per packet; by default lost with ``loss_probability``, else on time."""
         return np.where(u < self.loss_probability(distance), -1, 0)
 
     def max_delay(self) -> int:
-        """The longest delay :meth:`packet_delays` can give (a receiver's buffer length D)."""
+        """The longest delay ``packet_delays`` can give (a receiver's buffer length D)."""
         return 0
 
     def max_hops(self) -> int:
@@ -188,7 +188,7 @@ class Network:
 
         Returns delay (B, N, N) int [t, s]: the packet of t reaches s after that many steps (0 = this
         step), or -1 (not sent, out of range, or lost); the receiver buffers what arrives late. The
-        loss and delay draws depend on (step, slot) only, as in :meth:`broadcast`; the transmit
+        loss and delay draws depend on (step, slot) only, as in ``broadcast``; the transmit
         decision is read at ``slot``. Unlike a broadcast, a packet counts as sent (one message per
         sender, ``floats`` floats: a number, or (B, N) per sender) when it is transmitted, whether it
         arrives or not: the radio spent the air time. ``floats`` (B, N, N) [t, s] makes every link its
@@ -221,10 +221,10 @@ class Network:
 
         Returns delay (B, N, J) int64: the packet of node j reaches agent i after that many steps (0 = this
         step), -1 if not sent, out of range (``usable``) or lost (``packet_delays`` of one counter-based
-        uniform per packet, hashing (step, :data:`NODE_STREAM`, slot, agent, node) with the network's key: a
+        uniform per packet, hashing (step, ``NODE_STREAM``, slot, agent, node) with the network's key: a
         stream of its own, so a copy equals itself run alone). Counts ``node_messages`` (packets sent to
         agent i) and ``node_floats`` when transmitted; a call with ``slot`` 0 (the step's first node round)
-        restarts the step's count, as :meth:`begin` does. ``ideal`` delivers every packet at once,
+        restarts the step's count, as ``begin`` does. ``ideal`` delivers every packet at once,
         ``relay`` loses it with p_loss(d), ``broadcast`` drops it beyond its range, ``random_delay`` delays it.
         """
         sending = np.asarray(sending, bool)
@@ -247,7 +247,7 @@ class Network:
 
     def _link_delays(self, distance: np.ndarray | None, slot: int) -> np.ndarray:
         """(B, N, N) [t, s] the delay of every link's packet at this step in ``slot`` (before the transmit
-        decision and range apply): :meth:`packet_delays` of the uniforms of counters (k, 2, slot), the
+        decision and range apply): ``packet_delays`` of the uniforms of counters (k, 2, slot), the
         step's packet stream. A network may hand back values it drew ahead (they depend on the counters only)."""
         return self.packet_delays(distance, uniforms(self.keys, (self._k, 2, slot), (self.num_agents, self.num_agents)))
 
@@ -255,9 +255,9 @@ class Network:
         """Relay chains source -> first -> ... (B,), following the holders' choices (or nearest first).
 
         ``first`` < 0: the first hop follows the source's choice too.
-        Stop reasons are those of :data:`coloc_env.world.relay.STOP_REASONS`. ``floats_per_hop(h)``
+        Stop reasons are those of ``coloc_env.world.relay.STOP_REASONS``. ``floats_per_hop(h)``
         is the payload of hop h (0-based). A copy with ``source < 0`` has no chain. ``slot`` names the
-        chain within the step (see :meth:`broadcast`). ``source`` and ``first`` (B, J) with ``slot``
+        chain within the step (see ``broadcast``). ``source`` and ``first`` (B, J) with ``slot``
         (J,) resolve J chains per copy in one call (chain j in slot[j]; the chains of one step do not
         depend on each other): the same chains and accounting as J calls in that order, returned with
         a leading (B, J) shape; ``last_chain`` is then chain J - 1's, as after the J calls.
@@ -369,7 +369,7 @@ class Network:
 
     def relay_each(self, source: np.ndarray, first: np.ndarray, floats_per_hop, slots) -> RelayChain:
         """J chains per copy, ``source`` and ``first`` (B, J), chain j in ``slots[j]``: the result of J
-        :meth:`relay` calls in that order, stacked to (B, J, ...). One call when the network keeps the base
+        ``relay`` calls in that order, stacked to (B, J, ...). One call when the network keeps the base
         class's relay (its chains do not depend on each other); J calls where a subclass adds to it."""
         if type(self).relay is Network.relay:
             return self.relay(source, first, floats_per_hop, slot=np.asarray(slots, int))
@@ -381,7 +381,7 @@ class Network:
         """J one-off messages per copy to one ``receiver`` (a fusion centre): ``senders`` (B, J) (-1: none), message
         j in ``slots[j]``. Returns delivered (B, J) bool.
 
-        The same outcome, draws and accounting as J :meth:`broadcast` calls in that order, call j with sender
+        The same outcome, draws and accounting as J ``broadcast`` calls in that order, call j with sender
         ``senders[:, j]`` alone and only ``receiver`` listening (a sender's message to itself is not sent);
         one call for the step instead of J.
         """

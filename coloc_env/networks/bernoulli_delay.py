@@ -5,7 +5,7 @@ xi2 z_i(k-1) + (1 - xi1 - xi2) y_i(k-1): one outcome per link and slot, on time
 (probability alpha1 = ``on_time_probability``), late (alpha2 =
 ``late_probability``: the previous slot's packet arrives now) or lost; the
 outcomes are i.i.d. over slots and links and exclusive (the paper's xi1, xi2;
-see :class:`coloc_env.world.delay_links.BernoulliDelayLink`).
+see ``coloc_env.world.delay_links.BernoulliDelayLink``).
 
 Reading built (the paper's per-slot outcome, exactly): the outcome of slot k
 on link t -> s is one uniform u_k (the base's counter-based draw of step k);
@@ -28,7 +28,7 @@ same either way. Per packet, P(delay 0) = alpha1, P(delay 1) =
 | always     | transmit every slot                                                                       |
 | silent     | transmit nothing                                                                          |
 | accounting | at the sender when transmitted, delivered or not (the base's ``packets``)                 |
-| statistics | :meth:`BernoulliDelayNetwork.slot_probabilities`: (alpha1, alpha2) per link, what fu2017's |
+| statistics | ``BernoulliDelayNetwork.slot_probabilities``: (alpha1, alpha2) per link, what fu2017's |
 |            | estimators assume                                                                          |
 
 Arguments (``coloc_env.networks.BernoulliDelay``; defaults = the paper's)
@@ -148,7 +148,7 @@ class BernoulliDelayNetwork(Network):
     def slot_outcomes(self, steps, slot: int = 0) -> np.ndarray:
         """(B, len(steps), N, N) [t, s] eq. (3)'s outcome code of link t -> s at each of ``steps``: 0 on time
         (u_k < alpha1), 1 late (alpha1 <= u_k < alpha1 + alpha2), 2 lost (the codes of
-        :mod:`estimators.lossy_fusion`), from the same counter-based uniforms :meth:`packets` draws; known
+        ``estimators.lossy_fusion``), from the same counter-based uniforms ``packets`` draws; known
         from reset, whatever the agents decide. A "late" code after an on-time packet delivers nothing new
         (see the module table)."""
         a1 = float(self.config.on_time_probability)

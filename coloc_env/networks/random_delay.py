@@ -3,17 +3,17 @@
 Each packet draws its own delay tau in {0..D}, P(tau = l) = q_l (``delay_probs``),
 independently of everything else; with probability 1 - sum q_l it is later than the
 receiver's buffer of length D (``buffer_length``) and counts as lost [paper]. The draw is
-the inverse CDF of one counter-based uniform u per packet (:mod:`coloc_env.draws`):
+the inverse CDF of one counter-based uniform u per packet (``coloc_env.draws``):
 ``tau = #{l : q_0 + ... + q_l <= u}``, lost when tau > D, the rule of
-:meth:`coloc_env.world.random_delay.BoundedRandomDelay.sample`. The receiver (the backend)
+``coloc_env.world.random_delay.BoundedRandomDelay.sample``. The receiver (the backend)
 buffers what arrives late; the network only says when.
 
 | quantity   | value                                                                                  |
 |------------|----------------------------------------------------------------------------------------|
 | carries    | ``packets`` only (a broadcast, chain or central message has no buffer; a "late = lost" |
 |            | reading of them would be a different network, so they are not offered)                 |
-| packets    | agent -> agent by :meth:`~coloc_env.networks.base.Network.packets`, world node -> agent by |
-|            | :meth:`~coloc_env.networks.base.Network.node_packets` (the delays of both overridden here) |
+| packets    | agent -> agent by ``coloc_env.networks.base.Network.packets``, world node -> agent by |
+|            | ``coloc_env.networks.base.Network.node_packets`` (the delays of both overridden here) |
 | delay      | 0..D steps with q_0..q_D; lost with 1 - sum q_l; a link beyond ``comm_range`` carries   |
 |            | nothing                                                                                |
 | decisions  | none by default (gao2016's senders always transmit); with ``transmit_decision`` a      |

@@ -1,7 +1,7 @@
 """Network ``relay`` (wang2019 links): serial relay hops with a hop budget, a range limit and distance loss.
 
 A hop of length d is lost with p_loss(d) = 1 - (1 - loss_at_zero) exp(-d / loss_length)
-(:class:`coloc_env.world.relay.RelayChainLinks`); a hop beyond ``comm_range`` is not possible.
+(``coloc_env.world.relay.RelayChainLinks``); a hop beyond ``comm_range`` is not possible.
 
 | quantity   | value                                                                                     |
 |------------|-------------------------------------------------------------------------------------------|
@@ -12,7 +12,7 @@ A hop of length d is lost with p_loss(d) = 1 - (1 - loss_at_zero) exp(-d / loss_
 |            | ``broadcast``: ``transmit`` ([2] * rounds)                                                |
 | always     | nearest-first relay, transmit in every round                                             |
 | silent     | stop at once (the measured platform alone), transmit nothing                             |
-| accounting | one message per delivered hop, at its holder (:mod:`coloc_env.networks.base`); the hop    |
+| accounting | one message per delivered hop, at its holder (``coloc_env.networks.base``); the hop    |
 |            | cost ``hop_cost + hop_cost_per_m2 d^2`` of every delivered hop at its holder, in         |
 |            | ``RelayNetwork.cost_sent`` (B, N), per step                                              |
 
@@ -27,7 +27,7 @@ Hop cost. The price of a hop's radio energy (free-space energy grows like
 d^2), in the unit of the reward it is charged to (the ``mrclam_relay`` and
 ``relay_ukf`` bindings subtract the team's total from every agent's reward,
 in metres). The network accounts it at the sender in ``cost_sent``; a
-composition's reward (:mod:`coloc_env.scenarios.composed`) subtracts only
+composition's reward (``coloc_env.scenarios.composed``) subtracts only
 ``communication_cost`` per message and does not read ``cost_sent``: the hop
 cost changes no estimate and no delivery, only what the accounting reports.
 
@@ -137,7 +137,7 @@ class RelayNetwork(Network):
         return self._decisions[:, :, 0]
 
     def relay(self, source, first, floats_per_hop, slot: int = 0):
-        """:meth:`Network.relay` with the routing entry of each copy's source, and the hop costs accounted."""
+        """``Network.relay`` with the routing entry of each copy's source, and the hop costs accounted."""
         self._source = np.maximum(np.asarray(source, int), 0)
         chain = super().relay(source, first, floats_per_hop, slot)
         if self.config.hop_cost == 0 and self.config.hop_cost_per_m2 == 0:

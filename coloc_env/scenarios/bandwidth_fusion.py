@@ -3,7 +3,7 @@
 Paper: Zhao, Liu, Zhao, Gao, "A distributed fusion estimator with bandwidth
 limitation for clustered UAVs' position and attitude estimation", Electronics
 Optics & Control 27(4), 2020 (seed ``001_c743ba0d1c0e3ecf.txt``); estimator in
-:mod:`estimators.bandwidth_fusion`.
+``estimators.bandwidth_fusion``.
 
 N UAVs (the fusion nodes) estimate one position x in R^3 that moves with a
 constant drift, x(k+1) = A x(k) + B + w(k), each from its own linear
@@ -16,9 +16,9 @@ with weights p_ij. The agents choose what the paper fixes by hand: the
 component selection T and the fusion weights p.
 
 The preset is the composition ``drift`` / ``bandwidth`` / ``bandwidth_fusion``
-(:meth:`BandwidthFusionConfig.parts`) with this action codec, observation,
+(``BandwidthFusionConfig.parts``) with this action codec, observation,
 reward and info. The world draws the episode (x(0), w, v_j) from the
-episode's generator itself, in the order of :func:`draw_episode`; the
+episode's generator itself, in the order of ``draw_episode``; the
 bandwidth network delivers every selected component on time and draws
 nothing. Timing: the backend reports xhat_i(k) at step k (the composition's
 pairing of J_K); the preset reports, after step k, the estimate xhat_i(k+1)
@@ -36,9 +36,9 @@ to the receiver (neighbour k of ``uav_i`` is ``uav_{(i+1+k) mod N}``).
 | ``[0, (N-1)*n)``        | score of (neighbour k, component c) at ``k*n + c``. Decoded to the      |
 |                         | feasible selection with the highest total score (argmax over the 108    |
 |                         | feasible selections of the paper's setting; ties go to the first in     |
-|                         | :attr:`BandwidthBudget.feasible` order). Every feasible selection is    |
+|                         | ``BandwidthBudget.feasible`` order). Every feasible selection is    |
 |                         | reachable: scores +1 selected / -1 not decode back to it exactly.       |
-|                         | Beyond 2,048 selections found by :meth:`BandwidthBudget.best_selection`,|
+|                         | Beyond 2,048 selections found by ``BandwidthBudget.best_selection``,|
 |                         | a dynamic programme over links (the same argmax, ties included, without |
 |                         | listing the ~7e11 selections of N = 16), so every N in 2..16 decodes    |
 |                         | the same way.                                                           |
@@ -101,7 +101,7 @@ Batching: every step of B copies is one set of numpy calls (stacked matmul
 and solve; a single network call for all links); the only per-copy loop is at
 reset, where each copy draws its whole episode's noise from its own generator.
 
-Arguments (fields of :class:`BandwidthFusionConfig`, defaults = the paper)
+Arguments (fields of ``BandwidthFusionConfig``, defaults = the paper)
 ------------------------------------------------------------------------
 | field               | default                  | allowed                                   |
 |---------------------|--------------------------|-------------------------------------------|
@@ -270,7 +270,7 @@ class BandwidthFusionConfig:
 
     def parts(self) -> tuple:
         """The (world, network, backend) configs this flat config stands for: ``drift`` with the same system
-        and prior, ``bandwidth`` with the same budget (:class:`ScoredBandwidth`), ``bandwidth_fusion``."""
+        and prior, ``bandwidth`` with the same budget (``ScoredBandwidth``), ``bandwidth_fusion``."""
         world = Drift(num_agents=self.num_uavs, transition=self.transition, drift=self.drift,
                       measurement=self.measurement, process_noise=self.process_noise,
                       measurement_noise=self.measurement_noise, initial_state=self.initial_state,
@@ -285,7 +285,7 @@ class ScoredBandwidth(Bandwidth):
     """The ``bandwidth`` network as the preset drives it: the same rules and delivery, but a budget is not
     refused beyond ``MAX_SELECTIONS`` feasible selections (the limit of a Discrete selection action). The
     preset's action is a score per (neighbour, component), decoded by the argmax over the feasible
-    selections (:meth:`BandwidthBudget.best_selection`); the network's selection index only carries the
+    selections (``BandwidthBudget.best_selection``); the network's selection index only carries the
     result (int64, exact for the ~7e11 selections of N = 16)."""
 
     def budget_for(self, num_agents: int, dim: int, prefix: str = "network.") -> BandwidthBudget:
@@ -314,11 +314,11 @@ def noise_factors(config: BandwidthFusionConfig) -> NoiseFactors:
 def draw_episode(config: BandwidthFusionConfig, rng: np.random.Generator,
                  factors: NoiseFactors | None = None) -> dict[str, np.ndarray]:
     """One episode's randomness, drawn from ``rng`` in the order ``reset`` draws it for a copy (the ``drift``
-    world draws it from the episode's generator itself: :meth:`BandwidthFusionScenario.part_generators`).
+    world draws it from the episode's generator itself: ``BandwidthFusionScenario.part_generators``).
 
     Returns ``initial_state`` x(0) ~ N(xhat(0), M(0)) (n,), ``process_noise`` w(0..K-1) (K, n)
     and ``measurement_noise`` v_j(0..K-1) of every node (K, N, m).
-    ``factors``: :func:`noise_factors` of ``config``, when the caller has them.
+    ``factors``: ``noise_factors`` of ``config``, when the caller has them.
     """
     factors = noise_factors(config) if factors is None else factors
     K, N, m = config.horizon, config.num_uavs, factors.measurement.shape[-1]
@@ -330,7 +330,7 @@ def draw_episode(config: BandwidthFusionConfig, rng: np.random.Generator,
 
 
 class BandwidthFusionScenario(PresetScenario):
-    """Batched core of ``bandwidth_fusion``: the binding of :class:`BandwidthFusionConfig` on the composable core
+    """Batched core of ``bandwidth_fusion``: the binding of ``BandwidthFusionConfig`` on the composable core
     (``drift`` / ``bandwidth`` / ``bandwidth_fusion``); the module docstring has the table."""
 
     name = "bandwidth_fusion"
@@ -368,7 +368,7 @@ class BandwidthFusionScenario(PresetScenario):
 
     @property
     def fusion(self) -> bf.FusionState:
-        """Every node's xhat_i, M_i and the exact joint error covariance (:class:`estimators.bandwidth_fusion`)."""
+        """Every node's xhat_i, M_i and the exact joint error covariance (``estimators.bandwidth_fusion``)."""
         return self.backend.fusion
 
     @property
@@ -482,7 +482,7 @@ class BandwidthFusionScenario(PresetScenario):
 
     def advance(self, decoded: np.ndarray, weights: np.ndarray | None = None) -> None:
         """One step of every copy under decoded decisions: the parts' blocks (B, N, 1 + N)
-        (:meth:`part_decisions`), or receiver-relative selections (B, N, N-1, n) with absolute weights
+        (``part_decisions``), or receiver-relative selections (B, N, N-1, n) with absolute weights
         (B, N, N) (the fusion weights are then the softmax of their logarithms: the same to rounding, exact
         for equal weights)."""
         if weights is not None:
@@ -500,7 +500,7 @@ class BandwidthFusionScenario(PresetScenario):
         self._reward = self.compute_reward()
 
     def compute_reward(self) -> np.ndarray:
-        """The reward table of the module docstring, after :meth:`advance`: xhat_i(k+1) against x(k+1)."""
+        """The reward table of the module docstring, after ``advance``: xhat_i(k+1) against x(k+1)."""
         if self.config.reward == "error":
             loss = self._squared_error()
         else:

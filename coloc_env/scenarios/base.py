@@ -157,7 +157,7 @@ class Scenario(abc.ABC):
         The rule for values, the same in every scenario and composition: entries of a continuous (``Box``)
         block are clipped to their bounds; entries of a discrete block outside its choices (or, in a
         ``MultiDiscrete``, not integers) and non-finite values anywhere are refused with a ValueError
-        naming the agent (:meth:`refuse_action`)."""
+        naming the agent (``refuse_action``)."""
         space = self.action_space()
         raw = np.asarray(actions)
         if raw.dtype.kind not in "biuf":  # strings (even "1"), complex numbers, None, objects: refused
@@ -171,7 +171,7 @@ class Scenario(abc.ABC):
         return arr
 
     def check_discrete_actions(self, actions, labels=()) -> np.ndarray:
-        """MultiDiscrete actions as int64 (B, N, k): finite (:meth:`check_actions`), integral and in
+        """MultiDiscrete actions as int64 (B, N, k): finite (``check_actions``), integral and in
         [0, nvec). A value out of range is a ValueError naming its index by ``labels[i]`` (what index
         i chooses; default ``action[i]``)."""
         nvec = np.asarray(self.action_space().nvec)

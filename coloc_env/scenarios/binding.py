@@ -1,7 +1,7 @@
 """A paper scenario as a binding on the composable core.
 
-A preset (``relay_ukf``, ...) is a :class:`~coloc_env.scenarios.composed.ComposedScenario`
-whose parts come from the preset's flat config (:meth:`PresetScenario.compose`).
+A preset (``relay_ukf``, ...) is a ``coloc_env.scenarios.composed.ComposedScenario``
+whose parts come from the preset's flat config (``PresetScenario.compose``).
 The core owns what every scenario shares: the guards, the batched step of world,
 network and backend, the episode generators, ``done``, and the info keys of the
 contract (``position_error`` in metres, ``messages_sent`` and ``floats_sent`` as the
@@ -39,8 +39,8 @@ class PresetScenario(ComposedScenario):
 
     @classmethod
     def compose(cls, config):
-        """The validated :class:`~coloc_env.composition.Composition` of the flat ``config``'s parts
-        (``config.parts()``), with the episode length and :meth:`composition_options`."""
+        """The validated ``coloc_env.composition.Composition`` of the flat ``config``'s parts
+        (``config.parts()``), with the episode length and ``composition_options``."""
         spec = Composition(*config.parts(), horizon=config.horizon, preset=cls.name,
                            **cls.composition_options(config))
         spec.validate()

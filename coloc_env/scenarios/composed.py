@@ -42,7 +42,7 @@ Action (per agent, the blocks in order world, network, backend)
 ---------------------------------------------------------------
 ``MultiDiscrete(choices of every entry)`` when every block is discrete, else a
 ``Box`` whose discrete entries decode by rounding. The values follow one rule in
-every scenario (:meth:`~coloc_env.scenarios.base.Scenario.check_actions`): a
+every scenario (``coloc_env.scenarios.base.Scenario.check_actions``): a
 continuous block's entries are clipped to its bounds; a discrete block's entry
 outside its choices (after rounding in a ``Box``; a non-integer in a
 ``MultiDiscrete``) and a NaN or inf anywhere are a ``ValueError`` naming the
@@ -50,7 +50,7 @@ block and the agent.
 
 Action masks (MultiDiscrete actions; ``infos[agent]["action_mask"]``, ``vector_env(...).action_masks()``)
 ---------------------------------------------------------------------------------------------------------
-:meth:`ComposedScenario.action_mask`: (B, N, sum(nvec)) bool, each entry's choices in order, True =
+``ComposedScenario.action_mask``: (B, N, sum(nvec)) bool, each entry's choices in order, True =
 valid for the next step. A masked choice is never refused; it is one that by the part's own rule does
 the same as the block's explicit "stop" / "none" choice, decided from the distances at the coming step
 (the observation's link-layer knowledge). Nothing the agent cannot observe masks a choice (who is
@@ -140,7 +140,7 @@ def _restore_network_record(network, record: dict) -> None:
 
 
 class ComposedScenario(Scenario):
-    """Batched core of a :class:`~coloc_env.composition.Composition`."""
+    """Batched core of a ``coloc_env.composition.Composition``."""
 
     name = "composed"
     paper = "-"
@@ -181,8 +181,8 @@ class ComposedScenario(Scenario):
 
     @classmethod
     def compose(cls, config):
-        """The :class:`~coloc_env.composition.Composition` this scenario steps: the config itself here; a
-        preset binding (:mod:`coloc_env.scenarios.binding`) builds it from its flat config."""
+        """The ``coloc_env.composition.Composition`` this scenario steps: the config itself here; a
+        preset binding (``coloc_env.scenarios.binding``) builds it from its flat config."""
         return config
 
     # --- description ------------------------------------------------------------
@@ -415,7 +415,7 @@ class ComposedScenario(Scenario):
                 self._receive_ahead(live)
 
     def compute_reward(self) -> np.ndarray:
-        """The reward table of the module docstring, after :meth:`advance`: (B, N)."""
+        """The reward table of the module docstring, after ``advance``: (B, N)."""
         if self.estimand == "target":
             loss = self.target_error()
             if self.composition.reward == "trace":

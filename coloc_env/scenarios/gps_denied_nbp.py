@@ -4,15 +4,15 @@ Paper: Wan, Zhong, Zhang, "Cooperative localization of multi-UAVs via dynamic
 nonparametric belief propagation under GPS signal loss condition", IJDSN 2014
 (seed ``003_44c6eab8acc44e0f.txt``). Its equations were lost in extraction;
 the contract is the reconstruction ``shared/specs/wan2014_dnbp.md`` (tags
-[paper] / [chosen] as there). Estimator: :mod:`estimators.dnbp`; baselines
-(LS of ref. [7], dead reckoning): :mod:`estimators.range_ls`.
+[paper] / [chosen] as there). Estimator: ``estimators.dnbp``; baselines
+(LS of ref. [7], dead reckoning): ``estimators.range_ls``.
 
 N UAVs fly at a common nominal velocity in 2-D (constant-velocity model driven
-by an accelerometer, :class:`~coloc_env.world.cv_uav.ConstantVelocityUAVs`);
+by an accelerometer, ``coloc_env.world.cv_uav.ConstantVelocityUAVs``);
 each GPS receiver switches between normal and fault by a Markov chain
-(:class:`~coloc_env.world.gps_markov.MarkovGPS`); UAVs within the range R
+(``coloc_env.world.gps_markov.MarkovGPS``); UAVs within the range R
 measure their distance and can talk
-(:class:`~coloc_env.world.range_network.RangeNetwork`). One env step is one
+(``coloc_env.world.range_network.RangeNetwork``). One env step is one
 time step tau: the UAVs run ``num_iterations`` NBP iterations over the
 broadcast medium with the paper's modified schedule (normal UAVs broadcast at
 iteration 0 to their fault neighbours; a fault UAV may broadcast to its fault
@@ -83,7 +83,7 @@ deliveries), ``floats_sent`` (3 M + 1 floats per message), ``messages_received``
 (directed: the messages this UAV took), ``neighbours``, ``step``. At reset the estimate
 is the tau = 0 prior mean.
 
-Composition: a binding (:mod:`coloc_env.scenarios.binding`) of world ``gps_denied``
+Composition: a binding (``coloc_env.scenarios.binding``) of world ``gps_denied``
 (the same flight, GPS chain and ranging), network ``broadcast`` (radius ``comm_range``,
 no loss) and backend ``dnbp`` (``init`` included); ``coloc_env.PRESETS["gps_denied_nbp"]``
 is that composition. The world draws from the episode's generator itself and the
@@ -93,14 +93,14 @@ the same numbers bit for bit.
 Batching and seeding: reset draws each copy's whole episode (truth,
 accelerometer, GPS chain and fixes, ranges, the warm-start knowledge) from the
 copy's generator in blocks, then spawns the copy's estimator generator from
-it; steps are one batched call of :func:`estimators.dnbp.step` (through the backend,
+it; steps are one batched call of ``estimators.dnbp.step`` (through the backend,
 each iteration's delivery asked of the network) over copies,
 particles and messages. What remains a loop over copies is the drawing of the
 particle filter's random numbers (resampling, proposals, message directions):
 each copy draws its block from its own estimator generator, so copy b of a
 batch is bit-identical to the same seed run alone.
 
-Arguments (fields of :class:`GpsDeniedNbpConfig`, defaults = spec §1)
+Arguments (fields of ``GpsDeniedNbpConfig``, defaults = spec §1)
 ------------------------------------------------------------------
 | field              | default     | allowed                   | tag / meaning                                |
 |--------------------|-------------|---------------------------|----------------------------------------------|

@@ -2,7 +2,7 @@
 
 Paper: Fu, Bi, Gao, "Multi-UAVs Cooperative Localization Algorithms with
 Communication Constraints", Hindawi, 2017 (seed ``000_de65bd0f0f4a0cb7.txt``);
-estimator in :mod:`estimators.lossy_fusion`.
+estimator in ``estimators.lossy_fusion``.
 
 L UAVs track one target moving with nearly constant velocity in 3-D (state
 [x, vx, y, vy, z, vz], T = 1 s, white acceleration of variance q per axis).
@@ -19,12 +19,12 @@ fuses its own estimate with the compensated ones by inverse-trace weights
 This is the paper's distributed algorithm (B). One env step is one slot.
 
 The preset is the composition ``target_cv`` / ``bernoulli_delay`` /
-``prediction_compensation`` (:meth:`LossyFusionConfig.parts`) with this
+``prediction_compensation`` (``LossyFusionConfig.parts``) with this
 action codec, observation and info. The world draws the episode (x(0), the
 accelerations, the measurement noise) from the episode's generator in the
-order of :meth:`LossyFusionConfig.sample_episodes`; the link outcomes are
+order of ``LossyFusionConfig.sample_episodes``; the link outcomes are
 the network's (its counter-based draws from its own generator, fixed at
-reset: :meth:`LossyFusionScenario.link_outcomes`), not the sampler's. One
+reset: ``LossyFusionScenario.link_outcomes``), not the sampler's. One
 reading differs from eq. (3) as printed and changes no estimate: a "late"
 outcome after an on-time packet delivers nothing (the packet it would
 re-deliver is the one already held; ``delivered`` then says lost, and the
@@ -108,7 +108,7 @@ the packet the leader holds from this follower; 0 for the leader),
 (what arrived: 0 on time, 1 late packet, 2 nothing), ``fusion_weight``
 (a_i), ``step``.
 
-Arguments (fields of :class:`LossyFusionConfig`, defaults = the paper)
+Arguments (fields of ``LossyFusionConfig``, defaults = the paper)
 ---------------------------------------------------------------------
 | field                | default                          | allowed                                  |
 |----------------------|----------------------------------|------------------------------------------|
@@ -223,7 +223,7 @@ class LossyFusionConfig:
     def sample_episodes(self, rng: np.random.Generator, size: tuple[int, ...] = ()) -> dict[str, np.ndarray]:
         """Whole episodes drawn from ``rng`` in blocks, in this order: x(0), accelerations, measurement
         noise, link outcomes (the env's world draws the same truth and measurements, but its network draws
-        the link outcomes: :meth:`LossyFusionScenario.link_outcomes`). Returns ``truth`` (*size, K, 6),
+        the link outcomes: ``LossyFusionScenario.link_outcomes``). Returns ``truth`` (*size, K, 6),
         ``z`` (*size, K, L, 3) and ``outcome`` (*size, K, L) (the leader's column always on time)."""
         K, L = self.horizon, self.num_uavs
         target, sensor = self.target, self.sensor
@@ -239,7 +239,7 @@ class LossyFusionConfig:
 
 
 class LossyFusionScenario(PresetScenario):
-    """Batched core of ``lossy_fusion``: the binding of :class:`LossyFusionConfig` on the composable core
+    """Batched core of ``lossy_fusion``: the binding of ``LossyFusionConfig`` on the composable core
     (``target_cv`` / ``bernoulli_delay`` / ``prediction_compensation``); the module docstring has the table."""
 
     name = "lossy_fusion"
@@ -264,7 +264,7 @@ class LossyFusionScenario(PresetScenario):
 
     @property
     def fusion(self) -> lf.DistributedState:
-        """The leader's and the followers' filter state (:class:`estimators.lossy_fusion.DistributedState`)."""
+        """The leader's and the followers' filter state (``estimators.lossy_fusion.DistributedState``)."""
         return self.backend.fusion
 
     @property
@@ -294,7 +294,7 @@ class LossyFusionScenario(PresetScenario):
     def link_outcomes(self) -> np.ndarray:
         """(B, K, L) each follower's link outcome to the leader at each slot (0 on time, 1 late, 2 lost; the
         leader's own column on time): the network's draws, fixed at reset (its
-        :meth:`~coloc_env.networks.bernoulli_delay.BernoulliDelayNetwork.slot_outcomes`)."""
+        ``coloc_env.networks.bernoulli_delay.BernoulliDelayNetwork.slot_outcomes``)."""
         return self._outcomes.copy()
 
     # --- description ------------------------------------------------------------

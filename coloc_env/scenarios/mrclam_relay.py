@@ -3,10 +3,10 @@
 Data: Leung K.Y.K., Halpern Y., Barfoot T.D., Liu H.H.T., "The UTIAS
 multi-robot cooperative localization and mapping dataset", IJRR
 30(8):969-974, 2011 (cite it with results on the data). Loader:
-:mod:`coloc_env.data.mrclam`; estimator: :mod:`estimators.ukf_relay_se2`
+``coloc_env.data.mrclam``; estimator: ``estimators.ukf_relay_se2``
 (UKF-DCL of wang2019 on planar robots with heading, range and bearing,
 Roumeliotis-Bekey factored cross-covariances); relay links:
-:mod:`coloc_env.world.relay` (the link model of ``relay_ukf``).
+``coloc_env.world.relay`` (the link model of ``relay_ukf``).
 
 The world is the recorded run: five robots in a 15 m x 8 m room, their
 odometry, their camera measurements (range, bearing) of each other and of 15
@@ -41,14 +41,14 @@ robot), not one next hop per agent as in ``relay_ukf`` (where only one
 platform measures per step). With a single next hop per agent, two chains
 passing the same holder could not both be complete.
 
-Noise: :class:`coloc_env.data.mrclam.NoiseModel`, the model (and the code
+Noise: ``coloc_env.data.mrclam.NoiseModel``, the model (and the code
 applying it) of ``coloc reproduce mrclam``, fitted by
-:func:`coloc_env.data.mrclam.calibrate_noise` against Vicon on the start of
+``coloc_env.data.mrclam.calibrate_noise`` against Vicon on the start of
 the whole run (computed once per data path, ``dt``, ``noise_model`` and
 ``calibration_s``, and cached; episodes may overlap the calibration window).
 
 * ``noise_model="calibrated"`` (default), fitted on the first
-  :func:`~coloc_env.data.mrclam.calibration_seconds` (10 % of the run, at
+  ``coloc_env.data.mrclam.calibration_seconds`` (10 % of the run, at
   least 60 s: 75.6 s of dataset 6): the robots move as the command logged
   n = ``odometry_delay_steps`` (2 at dt 0.1) earlier times a scale c; the
   step a -> a + 1 integrates u'[a] = c * u[max(a - n, 0)] with a the absolute
@@ -78,7 +78,7 @@ Action (per agent, ``MultiDiscrete([N] + [N + 1] * N)``, int64, N = 5, absolute 
 |            | The measuring robot always sends to the measured one first, so index 1 + i     |
 |            | of agent i is not used                                                         |
 
-``infos[agent]["action_mask"]`` (:meth:`MrclamRelayScenario.action_mask`): index 0 allows the robots
+``infos[agent]["action_mask"]`` (``MrclamRelayScenario.action_mask``): index 0 allows the robots
 it recorded and itself; index 1 + m masks itself, the source m and robots beyond ``comm_range`` (each
 does what N = stop does); nothing is masked on what a robot cannot observe.
 
@@ -125,12 +125,12 @@ model's odometry alone from the window start, m), ``measured`` (robots it record
 measurement reached the measured robot and passed the gate), ``landmarks``
 (landmark sightings applied to it), ``rejected`` (its observations refused by
 the gate), ``chain_length`` (robots its chain reached, 0 without a chain),
-``chain_stop`` (index into :data:`coloc_env.world.relay.STOP_REASONS`, -1
+``chain_stop`` (index into ``coloc_env.world.relay.STOP_REASONS``, -1
 without a chain), ``communication`` (hops it delivered this step over all
 chains; summed over agents = hops), ``hops`` and ``hop_cost`` (the team's,
 this step), ``step``.
 
-Arguments (fields of :class:`MrclamRelayConfig`)
+Arguments (fields of ``MrclamRelayConfig``)
 ------------------------------------------------
 | field                | default        | allowed                                                      |
 |----------------------|----------------|--------------------------------------------------------------|
@@ -157,7 +157,7 @@ Arguments (fields of :class:`MrclamRelayConfig`)
 | reward               | "error"        | "error", "trace"                                             |
 
 The preset is the composition ``mrclam`` / ``relay`` (``routing="per_source"``) /
-``ukf_se2`` (:meth:`MrclamRelayConfig.parts`) with this action codec (the
+``ukf_se2`` (``MrclamRelayConfig.parts``) with this action codec (the
 action vector passed verbatim), observation, team reward and info.
 
 Randomness: per episode, the offset s from the episode's generator (its
@@ -170,7 +170,7 @@ Batching: the state is held in arrays indexed by copy, and nothing loops over
 the copies: per observation slot the relay chains of every copy are resolved in
 one vectorized network call and the estimator updates the copies with one
 stacked UKF-DCL update per kind of observation and chain length
-(:func:`estimators.ukf_relay_se2.dcl_update_rows`); the time update, the
+(``estimators.ukf_relay_se2.dcl_update_rows``); the time update, the
 world's readings and the dead reckoning are one call for all copies.
 """
 
@@ -202,8 +202,8 @@ GATE = mrclam.GATE_999  # chi-square(2) 0.999 quantile, the gate of ``coloc repr
 class ReplayTables:
     """One dataset with what every episode needs, computed once per (path, dt, noise_model, calibration_s).
 
-    ``noise`` the :func:`~coloc_env.data.mrclam.calibrate_noise` dict, ``noise_model`` the
-    :class:`~coloc_env.data.mrclam.NoiseModel` built from it, ``measurement_cov`` (M, 2, 2) its R
+    ``noise`` the ``coloc_env.data.mrclam.calibrate_noise`` dict, ``noise_model`` the
+    ``coloc_env.data.mrclam.NoiseModel`` built from it, ``measurement_cov`` (M, 2, 2) its R
     of every measurement line (from the measured range); ``first_index`` (T, N, N): index into
     the measurement arrays of the first line (file order) in which robot i recorded robot j at
     step t, -1 if none; ``landmark_count`` (T, N).
@@ -333,7 +333,7 @@ class StepEvent:
 
 
 class MrclamRelayScenario(PresetScenario):
-    """Batched core of ``mrclam_relay``: the binding of :class:`MrclamRelayConfig` on the composable core
+    """Batched core of ``mrclam_relay``: the binding of ``MrclamRelayConfig`` on the composable core
     (``mrclam`` / ``relay`` with ``routing="per_source"`` / ``ukf_se2``); the module docstring has the tables."""
 
     name = "mrclam_relay"

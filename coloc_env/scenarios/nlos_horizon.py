@@ -3,7 +3,7 @@
 Paper: Gao et al., "Adaptive finite-horizon group estimator ... mixed LOS/NLOS environments"
 (seed ``004_4a0edde314525ef9.txt``); the formulas were lost in extraction, so the contract is
 the reconstruction ``../shared/specs/gao2016_afge.md`` (labels [paper], [reconstructed],
-[chosen] as there). Estimator: :mod:`estimators.afge`.
+[chosen] as there). Estimator: ``estimators.afge``.
 
 Every agent is a target UAV ``uav_i`` that cannot localise itself directly: it fuses the
 packets of its own J = 8 neighbours, each carrying the neighbour's navigation estimate
@@ -17,15 +17,15 @@ equals AFGE. Agents do not exchange estimates, so they are independent copies of
 paper's single objective UAV with different paths (see the Arguments).
 
 The preset is the composition ``nlos_orbit`` / ``random_delay`` / ``afge``
-(:meth:`NlosHorizonConfig.parts`) with this action codec, observation, reward and info. The
-world draws each episode from the episode's generator by :func:`draw_episode` (truth,
+(``NlosHorizonConfig.parts``) with this action codec, observation, reward and info. The
+world draws each episode from the episode's generator by ``draw_episode`` (truth,
 readings and prior as the hand-wired scenario drew them); the packet delays are the
 network's (its counter-based draws from its own child generator, Assumption 3's law:
-:meth:`NlosHorizonScenario.packet_delays`), not the delay block of that draw, which the
-world draws only to keep the stream. :func:`drawn_episodes` gives the reproduction the env's
+``NlosHorizonScenario.packet_delays``), not the delay block of that draw, which the
+world draws only to keep the stream. ``drawn_episodes`` gives the reproduction the env's
 episodes with the network's delays.
 
-Time line of one step (copy b, time k): receive, then decide (:mod:`coloc_env.scenarios.composed`).
+Time line of one step (copy b, time k): receive, then decide (``coloc_env.scenarios.composed``).
 Before the action the agent has received every packet that arrived up to k (the backend has
 filtered the buffer with the last mask), and its observation describes them; the action then
 picks the horizon whose estimate is output as x_hat(k) (reward for time k), the world moves to
@@ -50,7 +50,7 @@ A NaN/inf or a value outside the space is a ``ValueError``.
 
 Observation (per agent, ``Box(low, high, shape=(D + 1 + 3 J + 2 M + 3,), float32)``; 41 by default)
 ----------------------------------------------------------------------------------------------
-The ``afge`` backend's features (:mod:`coloc_env.backends.nlos`), then the step fraction.
+The ``afge`` backend's features (``coloc_env.backends.nlos``), then the step fraction.
 Since the binding every entry has a finite bound (the column; the RSS, innovation and trace
 entries are clipped to it: before, the space was unbounded and nothing was clipped).
 
@@ -99,7 +99,7 @@ all arrays (B, N, ...). The only loops are over the D + 1 buffer stamps (inside 
 estimator) and, at reset, over the copies being reset (each draws its whole episode from its
 own generator) and over time for the LOS/NLOS chains.
 
-Arguments (fields of :class:`NlosHorizonConfig`, defaults = spec §9)
+Arguments (fields of ``NlosHorizonConfig``, defaults = spec §9)
 --------------------------------------------------------------------
 | field               | default                      | allowed / source                                  |
 |---------------------|------------------------------|---------------------------------------------------|
@@ -398,8 +398,8 @@ def draw_episode(config: NlosHorizonConfig, rng: np.random.Generator, targets: i
 
 def draw_episode_parts(config: NlosHorizonConfig, rng: np.random.Generator, targets: int | None = None,
                        truth: np.ndarray | None = None) -> tuple[Episode, np.ndarray]:
-    """:func:`draw_episode` and the target-neighbour distances (K+1, T, J) it computed. ``truth``: the targets'
-    paths if the caller has them (:func:`target_paths` of the same config, targets and horizon: they draw
+    """``draw_episode`` and the target-neighbour distances (K+1, T, J) it computed. ``truth``: the targets'
+    paths if the caller has them (``target_paths`` of the same config, targets and horizon: they draw
     nothing, so a batch's reset computes them once)."""
     T = config.num_uavs if targets is None else targets
     K1, J = config.horizon + 1, config.num_neighbours
@@ -421,7 +421,7 @@ def fuse_buffer(config: NlosHorizonConfig, rss, aoa, nav, modes, delays, lags, k
 
     Packets on the last axis J: ``rss``/``aoa``/``modes``/``delays`` (..., J), ``nav``
     (..., J, 2); ``lags`` (...) how long ago each stamp was (negative: not yet sent);
-    ``keep`` (..., J) the agent's mask; ``fixes`` the packets' :func:`packet_fixes` if known.
+    ``keep`` (..., J) the agent's mask; ``fixes`` the packets' ``packet_fixes`` if known.
     Returns (Y, y, gamma, used).
     """
     return af.fuse_packets(config.signal, rss, aoa, nav, modes, delays, lags, keep, config.n_strongest,
@@ -430,7 +430,7 @@ def fuse_buffer(config: NlosHorizonConfig, rss, aoa, nav, modes, delays, lags, k
 
 def fused_by_stamp_and_lag(config: NlosHorizonConfig, episode: Episode):
     """All fused observations of an episode with every packet kept, by (stamp, lag):
-    arrays (K+1, T, D+1, ...) -> moved to (T, K+1, D+1, ...) for :func:`estimators.afge.run_fixed_mask`."""
+    arrays (K+1, T, D+1, ...) -> moved to (T, K+1, D+1, ...) for ``estimators.afge.run_fixed_mask``."""
     lags = np.broadcast_to(np.arange(config.buffer_length + 1), (*episode.rss.shape[:2], config.buffer_length + 1))
     Y, y, gamma, _ = fuse_buffer(config, episode.rss[:, :, None], episode.aoa[:, :, None], episode.nav[:, :, None],
                                  episode.modes[:, :, None], episode.delays[:, :, None], lags, np.ones(1, bool))
@@ -438,7 +438,7 @@ def fused_by_stamp_and_lag(config: NlosHorizonConfig, episode: Episode):
 
 
 class NlosHorizonScenario(PresetScenario):
-    """Batched core of ``nlos_horizon``: the binding of :class:`NlosHorizonConfig` on the composable core
+    """Batched core of ``nlos_horizon``: the binding of ``NlosHorizonConfig`` on the composable core
     (``nlos_orbit`` / ``random_delay`` / ``afge``, receiving before deciding); the module docstring has the
     tables."""
 
@@ -469,7 +469,7 @@ class NlosHorizonScenario(PresetScenario):
     @property
     def pending(self) -> dict:
         """The backend's buffer at the current time filtered with the last mask, before the agent acts
-        (:meth:`coloc_env.backends.nlos.PacketFirBackend.receive`): ``x``, ``P``, ``valid`` per horizon."""
+        (``coloc_env.backends.nlos.PacketFirBackend.receive``): ``x``, ``P``, ``valid`` per horizon."""
         return self.backend.pending
 
     def packet_delays(self) -> np.ndarray:
@@ -640,8 +640,8 @@ class NlosHorizonScenario(PresetScenario):
 
 
 def drawn_episodes(config: NlosHorizonConfig, seeds) -> list[Episode]:
-    """The episodes ``env.reset(seed=s)`` draws for each of ``seeds``, as :class:`Episode` (the layout of
-    :func:`draw_episode`), with the delays of the env's network (:meth:`NlosHorizonScenario.packet_delays`;
+    """The episodes ``env.reset(seed=s)`` draws for each of ``seeds``, as ``Episode`` (the layout of
+    ``draw_episode``), with the delays of the env's network (``NlosHorizonScenario.packet_delays``;
     ``NEVER`` where no packet was sent or it was lost). Filters run on these are paired with the env's
     policies episode by episode."""
     seeds = list(seeds)

@@ -3,7 +3,7 @@
 Paper: Wang, Cui, Kong, Zhao, "A distributed cooperative localization
 algorithm for mobile multi-platforms oriented to unpredicted communication
 topology", Trans. Nanjing Univ. Aero. Astro. 36(2), 2019 (seed
-``002_1a9a5ea84f86e0cc.txt``); estimator in :mod:`estimators.ukf_relay`.
+``002_1a9a5ea84f86e0cc.txt``); estimator in ``estimators.ukf_relay``.
 
 N platforms fly circles (Sec. 4: A1, A3, A4 counter-clockwise, A2 clockwise;
 1 m/s, 0.015 rad/s, so radius ~66.7 m) and localize by dead reckoning from
@@ -46,7 +46,7 @@ happens and who measures is drawn by the env: a policy cannot measure more
 often than ``measurement_probability``.
 
 Action mask (``infos[agent]["action_mask"]``, ``vector_env(...).action_masks()``; (2N + 1,): index 0's
-N choices, then index 1's N + 1; :meth:`RelayUKFScenario.action_mask`): nothing is refused, so a mask
+N choices, then index 1's N + 1; ``RelayUKFScenario.action_mask``): nothing is refused, so a mask
 only drops a choice that does by definition what an explicit one does, from the distances at this
 step (observation ``[N+1, 2N+1)``):
 
@@ -85,7 +85,7 @@ Reward (team: the decisions of one agent move every platform's estimate)
 
 Termination: none; truncation after ``horizon`` steps (the paper's 400 s / 0.5 s = 800).
 
-Metric (``coloc evaluate``, :meth:`RelayUKFScenario.episode_error`): the paper's, the
+Metric (``coloc evaluate``, ``RelayUKFScenario.episode_error``): the paper's, the
 distance error of the estimate at each measurement time k = 0..K-1 after its update
 (``posterior_error``), averaged over the steps and platforms, as
 ``train/reproduce/wang2019.py`` computes it. The reward's error is the one after the
@@ -101,12 +101,12 @@ update, before the prediction to k + 1: what the paper's metric averages), ``tra
 ``chain_position`` (its place in this step's chain, 0 = m, -1 not reached),
 ``relay_target`` (whom it passed to, -1), ``communication`` (hops it delivered this
 step, 0 or 1; summed over agents = hops), ``messages_sent`` (= ``communication``: one message
-per delivered hop, at its holder) and ``floats_sent`` (that hop's payload, :func:`coloc_env.backends.ukf.dcl_floats`:
+per delivered hop, at its holder) and ``floats_sent`` (that hop's payload, ``coloc_env.backends.ukf.dcl_floats``:
 10 + 5 r + 2 r (r - 1) floats with r platforms reached), ``hops`` and ``hop_cost`` (the team's, this
-step), ``chain_stop`` (index into :data:`coloc_env.world.relay.STOP_REASONS`, -1 without
+step), ``chain_stop`` (index into ``coloc_env.world.relay.STOP_REASONS``, -1 without
 a measurement), ``step``.
 
-Arguments (fields of :class:`RelayUKFConfig`, defaults = the paper's Sec. 4 / Table 1)
+Arguments (fields of ``RelayUKFConfig``, defaults = the paper's Sec. 4 / Table 1)
 -------------------------------------------------------------------------------------
 | field                   | default      | allowed                                                   |
 |-------------------------|--------------|-----------------------------------------------------------|
@@ -141,7 +141,7 @@ Batching: everything is vectorized over copies; two loops remain, over the
 at most N-1 hops of a chain and over the at most N chain positions of the
 UKF-DCL update (each vectorized over the copies whose chain reaches it).
 
-Composition: this preset is a binding (:mod:`coloc_env.scenarios.binding`) on the composable
+Composition: this preset is a binding (``coloc_env.scenarios.binding``) on the composable
 core: world ``circles`` (``num_anchors=0``, the config's layout and noise), network ``relay``
 (``routing="per_holder"``, the config's links and hop costs) and backend ``ukf_dcl``;
 ``coloc_env.PRESETS["relay_ukf"]`` is that composition. The binding keeps the paper's action
@@ -417,7 +417,7 @@ class RelayUKFScenario(PresetScenario):
     def episode_error(self, errors: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
         """The paper's metric: the distance error ||xhat_i - x_i|| averaged over the steps and platforms.
 
-        ``errors`` are the ``posterior_error`` infos (:attr:`metric_error_key`): time k after its
+        ``errors`` are the ``posterior_error`` infos (``metric_error_key``): time k after its
         measurement update, k = 0..K-1, as the reproduction averages them.
         """
         return np.asarray(errors, float).mean(axis=(-2, -1))

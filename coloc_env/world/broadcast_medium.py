@@ -46,8 +46,8 @@ class BroadcastMedium:
         """The ``deliver(senders, listening) -> delivered`` of one step's ``adjacency`` (..., N, N).
 
         senders (..., N) bool, listening (..., N, N) bool [t, s]; delivered (..., N, N) bool [t, s] =
-        t sends, s is adjacent to t and listens (:meth:`deliver`). This is the network an estimator
-        such as :func:`estimators.dnbp.step` is handed.
+        t sends, s is adjacent to t and listens (``deliver``). This is the network an estimator
+        such as ``estimators.dnbp.step`` is handed.
         """
         adjacency = np.asarray(adjacency, bool)
 

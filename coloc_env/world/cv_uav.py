@@ -42,7 +42,7 @@ class ConstantVelocityUAVs:
 
     @property
     def model(self) -> ConstantVelocityAccel:
-        """The model an estimator driven by the readings assumes (:mod:`estimators.cv_models`)."""
+        """The model an estimator driven by the readings assumes (``estimators.cv_models``)."""
         return ConstantVelocityAccel(self.dt, self.accel_noise_std**2)
 
     @property

@@ -10,7 +10,7 @@ Each slot k of each link draws one outcome, i.i.d. over slots and links
 | lost      | LOST 2    | 1 - alpha1 - alpha2 | what it held before                |
 
 The indicator variables xi1 = [on time], xi2 = [late] are exclusive, so
-Cov(xi1, xi2) = -alpha1 alpha2 (see :meth:`BernoulliDelayLink.indicator_cov`).
+Cov(xi1, xi2) = -alpha1 alpha2 (see ``BernoulliDelayLink.indicator_cov``).
 """
 
 from __future__ import annotations

@@ -83,7 +83,7 @@ class TurnSchedulePath:
 
 @dataclass
 class OrbitParameters:
-    """Per-neighbour orbit parameters, each (..., J): rho0, a, w, phi0, om (see :class:`OrbitingNeighbours`)."""
+    """Per-neighbour orbit parameters, each (..., J): rho0, a, w, phi0, om (see ``OrbitingNeighbours``)."""
 
     radius: np.ndarray
     wobble: np.ndarray

@@ -4,7 +4,7 @@ g(k) in {normal, fault} per UAV, independent across UAVs:
 P(fault at k+1 | normal at k) = p_nf, P(normal at k+1 | fault at k) = p_fn;
 g(0) from the stationary law P(normal) = p_fn / (p_nf + p_fn). A normal
 receiver reports z = p + n, n ~ N(0, sigma_gps^2 I2); a faulty one reports
-nothing. :meth:`MarkovGPS.fixed_states` is the "fixed proportion" mode of the
+nothing. ``MarkovGPS.fixed_states`` is the "fixed proportion" mode of the
 paper's Fig. 6(a): exactly ``n_normal`` randomly chosen UAVs normal for all k.
 """
 

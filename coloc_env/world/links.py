@@ -12,8 +12,8 @@ Why nothing here enumerates the product of all links: a receiver has
 5e12 at N = 16 with the paper's n = 3. The feasible set is instead described
 by a table of completions (a dynamic programme over links and the components
 still to spend), which counts it, ranks and unranks it in the fixed order of
-:attr:`BandwidthBudget.feasible`, and finds the best selection for additive
-scores (:meth:`BandwidthBudget.best_selection`) in O(N S budget) per receiver.
+``BandwidthBudget.feasible``, and finds the best selection for additive
+scores (``BandwidthBudget.best_selection``) in O(N S budget) per receiver.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ import numpy as np
 
 from coloc_env.config import check_range
 
-MAX_ENUMERATED = 2_000_000  # feasible selections :attr:`BandwidthBudget.feasible` lists at most
+MAX_ENUMERATED = 2_000_000  # feasible selections ``BandwidthBudget.feasible`` lists at most
 _INT64_LIMIT = 2**62
 
 
@@ -47,8 +47,8 @@ class BandwidthBudget:
     order of the per-link subsets (link 0 outermost; a link's subsets in the
     order of ``itertools.product((0, 1), repeat=n)``, i.e. by the binary
     number with component 0 as the most significant bit), keeping those that
-    meet the budget. :meth:`index_of` and :meth:`selection_at` are that order's
-    codec; :attr:`feasible` lists it.
+    meet the budget. ``index_of`` and ``selection_at`` are that order's
+    codec; ``feasible`` lists it.
     """
 
     num_nodes: int = 4
@@ -90,7 +90,7 @@ class BandwidthBudget:
 
     @cached_property
     def _subset_lookup(self) -> np.ndarray:
-        """``lookup[code]`` = position in :attr:`subsets` of the subset with binary code ``code``, -1 if not allowed."""
+        """``lookup[code]`` = position in ``subsets`` of the subset with binary code ``code``, -1 if not allowed."""
         n = self.dim
         codes = self.subsets.astype(np.int64) @ (1 << np.arange(n - 1, -1, -1))
         lookup = np.full(2**n, -1, dtype=np.int64)
@@ -138,7 +138,7 @@ class BandwidthBudget:
 
     # --- the codec of the fixed order ----------------------------------------------------------------
     def index_of(self, neighbour_selection: np.ndarray) -> np.ndarray:
-        """Index in the fixed order (:attr:`feasible`) of each receiver's selection (..., N-1, n); -1 if infeasible.
+        """Index in the fixed order (``feasible``) of each receiver's selection (..., N-1, n); -1 if infeasible.
 
         The rank: sum over links k of the feasible selections that agree on
         links 0..k-1 and take an earlier subset at link k (the completion table).
@@ -162,7 +162,7 @@ class BandwidthBudget:
         return np.where(allowed, rank, -1)
 
     def selection_at(self, index: np.ndarray) -> np.ndarray:
-        """The selection (..., N-1, n) at ``index`` of the fixed order (the inverse of :meth:`index_of`)."""
+        """The selection (..., N-1, n) at ``index`` of the fixed order (the inverse of ``index_of``)."""
         index = np.asarray(index, dtype=np.int64)
         if np.any(index < 0) or np.any(index >= self.size):
             raise ValueError(f"selection index must be in [0, {self.size - 1}], got "
@@ -185,8 +185,8 @@ class BandwidthBudget:
         """Every feasible selection of one receiver, shape (F, N-1, n), bool, in the fixed order.
 
         For the paper's setting (N=4, n=3, budget 5, 1..3 per link) F = 108.
-        Listed by :meth:`selection_at`; refused beyond ``MAX_ENUMERATED``
-        (2,000,000) selections, where the codec and :meth:`best_selection` still work.
+        Listed by ``selection_at``; refused beyond ``MAX_ENUMERATED``
+        (2,000,000) selections, where the codec and ``best_selection`` still work.
         """
         if self.size == 0:
             raise ValueError(f"budget={self.budget}: no selection meets it with "
@@ -197,7 +197,7 @@ class BandwidthBudget:
         return self.selection_at(np.arange(self.size))
 
     def enumerated_feasible(self) -> np.ndarray:
-        """The reference listing (the product of all links' subsets, filtered): :attr:`feasible`, slowly.
+        """The reference listing (the product of all links' subsets, filtered): ``feasible``, slowly.
 
         Kept to check the codec against (exponential in N: only for small networks).
         """

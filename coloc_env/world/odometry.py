@@ -21,7 +21,7 @@ class OdometrySensor:
 
     The heading a platform integrates from omega_m drifts as a random walk:
     after k steps of length dt its variance is k dt^2 sigma_omega^2
-    (:meth:`heading_variance`).
+    (``heading_variance``).
     """
 
     speed_noise_std: float = 0.5

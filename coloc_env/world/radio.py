@@ -65,7 +65,7 @@ class ReceiveSearchArea:
 class RssAoaSensor:
     """RSS (log-distance path loss) and AOA with a LOS/NLOS-dependent error (spec §4).
 
-    The same fields as :class:`estimators.afge.SignalModel` (the estimator's knowledge);
+    The same fields as ``estimators.afge.SignalModel`` (the estimator's knowledge);
     ``sigma_nav``/``p_nlos`` are not used here.
     """
 

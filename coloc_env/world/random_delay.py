@@ -4,7 +4,7 @@ Each packet draws its own delay tau in {0..D} with P(tau = l) = q_l, independent
 everything else; with probability 1 - sum q_l it is later than the buffer and counts as lost
 (encoded tau = D + 1). A packet arrives at most once, at s + tau; at time k the packets of
 stamp s known to the receiver are those with tau <= k - s (Step 1's reorganisation). Packets
-that were never sent (sender outside the RSA) carry :data:`NEVER`.
+that were never sent (sender outside the RSA) carry ``NEVER``.
 """
 
 from __future__ import annotations

@@ -43,7 +43,7 @@ STOP_REASONS = ("complete", "hop_budget", "stopped", "revisit", "out_of_range", 
 class RelayChain:
     """A resolved chain per copy: ``chain`` (B, N) platforms in order, -1 padded; ``length`` (B,);
     ``hop_distance`` (B, N-1) metres of each delivered hop (nan after the end); ``stop`` (B,)
-    index into :data:`STOP_REASONS`."""
+    index into ``STOP_REASONS``."""
 
     chain: np.ndarray
     length: np.ndarray

@@ -7,7 +7,7 @@ A unicycle moves ``dt * speed`` along its heading, then turns by
 
 With constant v and omega the vertices p(k) lie exactly on a circle (a
 regular polygon) when the start heading is the tangent turned by
-dt omega / 2; :class:`CircularTracks` sets that up, so "ideal circles" hold
+dt omega / 2; ``CircularTracks`` sets that up, so "ideal circles" hold
 at every step, not only in the limit dt -> 0.
 """
 

@@ -1,10 +1,10 @@
 """The world of a composition: truth and sensors for B copies of N agents.
 
 A world simulates the truth with its motion model (an object of
-:mod:`estimators.models`, the one the backends assume) and draws every sensor
+``estimators.models``, the one the backends assume) and draws every sensor
 reading of an episode at reset from the world's own generator, so that the
 same world and seed give every backend the same truth and the same readings.
-At each step it hands the backend a :class:`Readings` of time k, then
+At each step it hands the backend a ``Readings`` of time k, then
 advances to k + 1.
 
 A world subclass fills in small hooks (VMAS-style): ``draw_episode`` (the
@@ -53,7 +53,7 @@ class World:
     | attribute         | meaning                                                              |
     |-------------------|----------------------------------------------------------------------|
     | estimand          | ``"self"``: each agent localizes itself; ``"target"``: a shared state |
-    | motion_kind       | the :mod:`estimators.models` kind the truth follows                  |
+    | motion_kind       | the ``estimators.models`` kind the truth follows                  |
     | measurements      | the measurement kinds it provides (``range``, ``position_fix``, ...) |
     | anchors           | in words: who has absolute position information                      |
     """
@@ -115,7 +115,7 @@ class World:
         raise NotImplementedError
 
     def distances(self) -> np.ndarray:
-        """True distances between the agents at k (B, N, N): ||p_i - p_j|| of :meth:`positions` (a world with a
+        """True distances between the agents at k (B, N, N): ||p_i - p_j|| of ``positions`` (a world with a
         table of them returns the same floats from it)."""
         p = self.positions()
         return np.sqrt(np.sum((p[:, :, None, :] - p[:, None, :, :]) ** 2, axis=-1))

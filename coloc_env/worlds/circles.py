@@ -1,7 +1,7 @@
 """World ``circles`` (wang2019): platforms on circles, odometry dead reckoning, ranges between platforms.
 
 N platforms fly circles at constant speed and turn rate (wang2019 Sec. 4;
-the layout of :func:`default_layout`, shared with the relay_ukf preset) and
+the layout of ``default_layout``, shared with the relay_ukf preset) and
 measure their own speed and turn rate (odometry). At each step, with
 probability ``measurement_probability``, one platform m (drawn uniformly)
 measures its range to the platform its sensing choice names (none if it names
@@ -12,7 +12,7 @@ gives least-squares and particle backends the anchors they need.
 
 | quantity       | value                                                                            |
 |----------------|----------------------------------------------------------------------------------|
-| motion model   | :class:`estimators.models.OdometryDisplacement` (state: position, 2)            |
+| motion model   | ``estimators.models.OdometryDisplacement`` (state: position, 2)            |
 | measurements   | ``range`` (one per step at most), ``position_fix`` (anchors)                     |
 | anchors        | platforms 0..num_anchors-1 (fixes every step)                                    |
 | sensing action | ``Discrete(N + 1)`` per agent: whom to range with if it measures (itself: none, N: nearest) |
@@ -23,7 +23,7 @@ Arguments (``coloc_env.worlds.Circles``)
 | field                   | default | allowed                                           |
 |-------------------------|---------|---------------------------------------------------|
 | num_agents              | 6       | 2..16                                             |
-| centres                 | None    | (N, 2) metres, entries in [-1e6, 1e6]; None = :func:`default_layout` |
+| centres                 | None    | (N, 2) metres, entries in [-1e6, 1e6]; None = ``default_layout`` |
 | start_angles            | None    | (N,) rad, entries in [-1e6, 1e6]; None = 2 pi i / N |
 | directions              | None    | (N,) of +1 (ccw) / -1 (cw); None = platform 1 cw  |
 | speed                   | 1.0     | (0, 1e4] m/s                                      |
@@ -124,7 +124,7 @@ class Circles(PartConfig):
 
     @property
     def tracks(self) -> CircularTracks:
-        """The circles flown: the given layout, :func:`default_layout` where a field is None."""
+        """The circles flown: the given layout, ``default_layout`` where a field is None."""
         centres, angles, directions = default_layout(self.num_agents)
         return CircularTracks(
             centres=centres if self.centres is None else np.asarray(self.centres, float),
@@ -189,7 +189,7 @@ class CirclesWorld(World):
         return self.truth[self.k]
 
     def distances(self) -> np.ndarray:
-        """True distances between the platforms at k (B, N, N), from :attr:`distance_table`."""
+        """True distances between the platforms at k (B, N, N), from ``distance_table``."""
         return self.distance_table[self.k]
 
     def turn_rate_noise_var(self) -> float:

@@ -6,7 +6,7 @@ Sec. 2: x(k+1) = A x(k) + B + w(k) (eqs. 1, 22), y_j(k) = C x(k) + v_j(k)
 C = I, so x is a 3-D position [x, y, z] (m) and B = v dt its known drift. Every
 agent estimates the same x (estimand ``target``). The episode's x(0) ~ N(xhat(0),
 M(0)), w(0..K-1) and v_j(0..K-1) are drawn at reset from the world's
-generator by :func:`coloc_env.scenarios.bandwidth_fusion.draw_episode` (the
+generator by ``coloc_env.scenarios.bandwidth_fusion.draw_episode`` (the
 scenario's own sampler, in its order), so a composition of this world sees
 the ``bandwidth_fusion`` scenario's episodes; x(0..K) is kept (K + 1 states: x(K)
 is the state after the last step, which the last observation and the renderer read).
@@ -19,7 +19,7 @@ the origin, which only the link state of distance-dependent networks
 | quantity          | value                                                                             |
 |-------------------|-----------------------------------------------------------------------------------|
 | estimand          | ``target``: the shared state x (n = 3 by default)                                 |
-| motion model      | :class:`estimators.linear_models.LinearGaussian` (A, B, W), kind ``linear_gaussian`` |
+| motion model      | ``estimators.linear_models.LinearGaussian`` (A, B, W), kind ``linear_gaussian`` |
 | measurements      | ``linear_observation``: y_j = C x + v_j at every step, every agent                 |
 | anchors           | none among the agents: the sensor C x is absolute (the paper's UWB anchors are folded into C) |
 | sensing action    | none                                                                              |
@@ -86,7 +86,7 @@ def ring(num_agents: int, radius: float) -> np.ndarray:
 class TargetWorld(World):
     """Common runtime of the target worlds: the episode's states x(0..K) (B, K+1, n) and readings y (B, K, N, m).
 
-    Subclasses fill ``truth``, ``observations`` in :meth:`draw_episode` and set ``motion_model``,
+    Subclasses fill ``truth``, ``observations`` in ``draw_episode`` and set ``motion_model``,
     ``measurement_model``, ``position_index`` (the two state components called "position"),
     ``metric`` (p, n) (``error`` = ||metric (xhat - x)||^2) and the prior.
     """

@@ -1,15 +1,15 @@
 """World ``gps_denied`` (wan2014): constant-velocity UAVs, Markov GPS faults, ranges between UAVs in range.
 
 The world of the ``gps_denied_nbp`` scenario, drawn the same way
-(:func:`coloc_env.scenarios.gps_denied_nbp.sample_episode`'s blocks, in its
+(``coloc_env.scenarios.gps_denied_nbp.sample_episode``'s blocks, in its
 order, from the world's generator): N UAVs start uniformly in ``[0, side]^2``
 at the nominal velocity plus a spread and fly the constant-velocity model
-driven by a random acceleration (:class:`~coloc_env.world.cv_uav.ConstantVelocityUAVs`);
+driven by a random acceleration (``coloc_env.world.cv_uav.ConstantVelocityUAVs``);
 each reads a noisy accelerometer. Each GPS receiver switches between normal
-and fault by a Markov chain (:class:`~coloc_env.world.gps_markov.MarkovGPS`); a
+and fault by a Markov chain (``coloc_env.world.gps_markov.MarkovGPS``); a
 normal one reports a fix. UAVs within ``comm_range`` measure their distance,
 one reading per unordered pair seen by both ends
-(:class:`~coloc_env.world.range_network.RangeNetwork`). The agents start from
+(``coloc_env.world.range_network.RangeNetwork``). The agents start from
 the scenario's warm-start knowledge: the last fix before the loss and a noisy
 velocity.
 
@@ -23,7 +23,7 @@ is the default square at N = 10).
 
 | quantity       | value                                                                              |
 |----------------|------------------------------------------------------------------------------------|
-| motion model   | :class:`estimators.cv_models.ConstantVelocityAccel` (state [p; v], 4; input: accelerometer, 2) |
+| motion model   | ``estimators.cv_models.ConstantVelocityAccel`` (state [p; v], 4; input: accelerometer, 2) |
 | measurements   | ``range`` (symmetric, every pair within ``comm_range``), ``position_fix`` (GPS-normal UAVs) |
 | anchors        | the GPS-normal UAVs of each step (a fix, sigma ``gps_std``)                         |
 | sensing action | none                                                                               |

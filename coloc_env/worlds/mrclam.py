@@ -3,9 +3,9 @@
 Data: Leung K.Y.K., Halpern Y., Barfoot T.D., Liu H.H.T., "The UTIAS
 multi-robot cooperative localization and mapping dataset", IJRR
 30(8):969-974, 2011 (cite it with results on the data). Loader and noise
-model: :mod:`coloc_env.data.mrclam` (:func:`~coloc_env.data.mrclam.load_cached`,
-:class:`~coloc_env.data.mrclam.NoiseModel`), through the replay tables of the
-hand-wired ``mrclam_relay`` scenario (:func:`coloc_env.scenarios.mrclam_relay._tables`,
+model: ``coloc_env.data.mrclam`` (``coloc_env.data.mrclam.load_cached``,
+``coloc_env.data.mrclam.NoiseModel``), through the replay tables of the
+hand-wired ``mrclam_relay`` scenario (``coloc_env.scenarios.mrclam_relay._tables``,
 imported at build time, cached per data path), so the readings are exactly the
 ones that scenario applies. Nothing is simulated: the motion inputs, the
 measurements and the truth are the data's, on the loader's grid of ``dt``
@@ -21,7 +21,7 @@ the recording; ``start=S`` fixes it (every copy, every episode).
 
 | quantity       | value                                                                                |
 |----------------|--------------------------------------------------------------------------------------|
-| motion model   | :class:`estimators.se2_models.SE2Odometry` (state x, y, theta; input v, omega and    |
+| motion model   | ``estimators.se2_models.SE2Odometry`` (state x, y, theta; input v, omega and    |
 |                | their variances: the noise model's corrected odometry u'[a] and Q(u'))               |
 | measurements   | ``range``, ``bearing`` (robot-robot camera sightings), ``landmark_range_bearing``    |
 |                | (sightings of the 15 surveyed landmarks), ``position_fix`` (landmark pseudo-fixes)   |
@@ -35,15 +35,15 @@ the recording; ``start=S`` fixes it (every copy, every episode).
 | observation    | fraction of the other robots it recorded at this step; 1 if it sighted a landmark    |
 
 Readings of step k (absolute a): ``inputs`` (B, N, 4) = (v', omega', var_v, var_omega)
-(:meth:`~coloc_env.data.mrclam.NoiseModel.odometry` and ``odometry_var`` at a: the
+(``coloc_env.data.mrclam.NoiseModel.odometry`` and ``odometry_var`` at a: the
 command logged ``odometry_delay_steps`` earlier, scaled). ``range``/``range_valid``
 (B, N, N): [m, n] the range of the first line (file order) in which robot m recorded
 robot n at a, where the sensing choice of m selects n (with ``robot_sightings="all"`` the
 ``obs_*`` lists below hold every such line, the matrices still the first). ``fix``/``fix_valid`` (B, N):
-the landmark pseudo-fix of ``coloc reproduce mrclam_nbp`` (:func:`~coloc_env.data.mrclam.pseudo_fix`,
-the rule of :mod:`train.reproduce.mrclam_nbp` at a single step): each robot runs its own
+the landmark pseudo-fix of ``coloc reproduce mrclam_nbp`` (``coloc_env.data.mrclam.pseudo_fix``,
+the rule of ``train.reproduce.mrclam_nbp`` at a single step): each robot runs its own
 navigation filter, a UKF on (x, y, theta) from its odometry and its own landmark sightings
-only (:func:`~coloc_env.data.mrclam.own_nav_update` / ``own_nav_predict``, started at the
+only (``coloc_env.data.mrclam.own_nav_update`` / ``own_nav_predict``, started at the
 episode's initial belief, chi-square(2) 99.9 % gate; no robot-robot data, no Vicon after
 the start). A robot whose filter accepted landmark sightings at a gets
 p = l - r [cos(theta + b), sin(theta + b)] per sighting (theta: its filter's heading after
@@ -82,7 +82,7 @@ Arguments (``coloc_env.worlds.Mrclam``)
 | horizon              | 600          | 1..T-1-start steps (checked against the run at build time)        |
 | start                | None         | None = drawn per episode; 0..T-1-horizon = a fixed first step     |
 | noise_model          | "calibrated" | "calibrated", "baseline", "likelihood"                            |
-|                      |              | (:class:`~coloc_env.data.mrclam.NoiseModel`; "likelihood" is the  |
+|                      |              | (``coloc_env.data.mrclam.NoiseModel``; "likelihood" is the  |
 |                      |              | consistent one, its fit runs filters for seconds at build)        |
 | calibration_s        | None         | (0, 3600] s of the run's start the noise is fitted on; None = the model's rule |
 | initial_position_std | 0.01         | [1e-6, 1000] m (smaller: P(0) not numerically definite)           |
@@ -219,14 +219,14 @@ class MrclamWorld(World):
                       f"{N} = every robot it recorded", default=N, maximum=N, minimum=N)]
 
     def measurement_model(self) -> RangeBearingModel:
-        """The noise model's R as a :class:`~estimators.se2_models.RangeBearingModel` (R at the measured range)."""
+        """The noise model's R as a ``estimators.se2_models.RangeBearingModel`` (R at the measured range)."""
         m = self.noise_model
         a, b = m.range_var
         return RangeBearingModel(m.range_inflation * a, m.bearing_var, m.range_inflation * b)
 
     def fix_noise_var(self) -> float:
         """Variance per axis (m^2) of a pseudo-fix: the median over the run's landmark sightings of
-        :func:`~coloc_env.data.mrclam.fix_std`^2 with the heading variance at initial_heading_std^2 (the
+        ``coloc_env.data.mrclam.fix_std``^2 with the heading variance at initial_heading_std^2 (the
         per-reading value, with the own-navigation heading variance of the step, is ``extra["fix_var"]``)."""
         d = self.data
         lines = np.flatnonzero(d.meas_subject > NUM_ROBOTS)

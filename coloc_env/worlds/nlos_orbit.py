@@ -1,7 +1,7 @@
 """World ``nlos_orbit`` (gao2016): target UAVs, each localizing itself from J orbiting neighbours' RSS/AOA.
 
 The world of the ``nlos_horizon`` scenario, drawn the same way: each copy's episode is
-:func:`coloc_env.scenarios.nlos_horizon.draw_episode` on the world's generator (orbits,
+``coloc_env.scenarios.nlos_horizon.draw_episode`` on the world's generator (orbits,
 LOS/NLOS modes, RSS/AOA noise, navigation noise, the scenario's delay uniforms, prior, in
 that order), so for the same generator the truth, the readings and the prior are the
 scenario's bit for bit. The delays that call draws are **not used**: delivery is the
@@ -9,19 +9,19 @@ network's (``random_delay`` is gao2016's Assumption 3); they are drawn only to k
 stream, and so the prior, identical to the scenario's.
 
 Every agent ``uav_i`` is a target that cannot localize itself directly: it flies straight
-legs and coordinated turns (:class:`~coloc_env.world.flight.TurnSchedulePath`; uav_i starts
+legs and coordinated turns (``coloc_env.world.flight.TurnSchedulePath``; uav_i starts
 at (0, i * target_spacing), its turns i * schedule_shift steps later). J neighbours orbit
-each target (:class:`~coloc_env.world.flight.OrbitingNeighbours`); they are part of the world,
+each target (``coloc_env.world.flight.OrbitingNeighbours``); they are part of the world,
 not agents. A neighbour inside the target's receive-search area (Def. 1, r_inf <= d <=
 r_sup on the true distance) measures the RSS and the AOA of the target (spec §4,
-:class:`~coloc_env.world.radio.RssAoaSensor`), the bias of its link's LOS/NLOS Markov chain
-(:class:`~coloc_env.world.los_nlos.LosNlosChain`) included, and sends a packet stamped k
+``coloc_env.world.radio.RssAoaSensor``), the bias of its link's LOS/NLOS Markov chain
+(``coloc_env.world.los_nlos.LosNlosChain``) included, and sends a packet stamped k
 with its own navigation estimate (truth + N(0, sigma_nav^2 I)) to the target: the backend
-asks the network for its delivery (:meth:`coloc_env.networks.base.Network.node_packets`).
+asks the network for its delivery (``coloc_env.networks.base.Network.node_packets``).
 
 | quantity       | value                                                                              |
 |----------------|------------------------------------------------------------------------------------|
-| motion model   | :class:`estimators.nlos_models.ConstantVelocityWhiteAccel` (state [p; v], 4; no input); |
+| motion model   | ``estimators.nlos_models.ConstantVelocityWhiteAccel`` (state [p; v], 4; no input); |
 |                | the truth is the turn schedule, the model is what the backends assume (sigma_a)     |
 | measurements   | ``rss``, ``aoa`` (each switchable by ``sensors``), ``los_nlos`` (with ``report_mode``) |
 | anchors        | orbiting neighbours with navigation estimates (world nodes, J per agent)           |
@@ -29,7 +29,7 @@ asks the network for its delivery (:meth:`coloc_env.networks.base.Network.node_p
 | observation    | none (the backend shows what arrived)                                              |
 | initial belief | mean truth(0) + N(0, diag(prior_std^2)) (the scenario's prior), cov diag(prior_std^2) |
 
-Readings of time k (:class:`~coloc_env.worlds.base.Readings`; ``inputs`` (B, N, 0), no
+Readings of time k (``coloc_env.worlds.base.Readings``; ``inputs`` (B, N, 0), no
 ranges, no fixes) carry the neighbours' packets in ``extra``:
 
 | key        | shape        | meaning                                                               |
@@ -40,7 +40,7 @@ ranges, no fixes) carry the neighbours' packets in ``extra``:
 | ``nav``    | (B, N, J, 2) | j's own navigation estimate of its position (m)                       |
 | ``mode``   | (B, N, J) int8 | 1 = the link is NLOS at k (with ``report_mode``)                    |
 
-:meth:`NlosOrbitWorld.neighbour_distances` gives the true target-neighbour distances (B, N, J)
+``NlosOrbitWorld.neighbour_distances`` gives the true target-neighbour distances (B, N, J)
 at k: link state for the network (the radios sense it), never an estimator input.
 
 Arguments (``coloc_env.worlds.NlosOrbit``; defaults = ``nlos_horizon``'s, spec §9)
@@ -250,7 +250,7 @@ class NlosOrbitWorld(World):
         return self.scenario_config.prior_cov
 
     def draw_episode(self, rngs, idx) -> None:
-        """Each copy's episode by :func:`~coloc_env.scenarios.nlos_horizon.draw_episode` (its delays unused)."""
+        """Each copy's episode by ``coloc_env.scenarios.nlos_horizon.draw_episode`` (its delays unused)."""
         sc = self.scenario_config
         truth = target_paths(sc, sc.num_uavs, sc.horizon + 1)  # every copy's: drawn from nothing
         for b, rng in zip(idx, rngs, strict=True):

@@ -3,12 +3,12 @@
 Fu, Bi, Gao 2017 (seed ``000_de65bd0f0f4a0cb7.txt``), Sec. 4: the target
 state is x = [x, vx, y, vy, z, vz] with x(k+1) = Phi x(k) + Gamma w(k),
 Phi = blockdiag([[1, T], [0, 1]] x 3), w ~ N(0, q I_3) (eq. 1;
-:class:`coloc_env.world.target.ConstantVelocityTarget`), and every UAV i
+``coloc_env.world.target.ConstantVelocityTarget``), and every UAV i
 measures z_i(k) = H x(k) + v_i(k), H the position rows, v_i ~ N(0, r I_3)
 (eq. 2). Every agent estimates the target (estimand ``target``).
 
 The episode is drawn at reset from the world's generator in the order of
-:meth:`coloc_env.scenarios.lossy_fusion.LossyFusionConfig.sample_episodes`
+``coloc_env.scenarios.lossy_fusion.LossyFusionConfig.sample_episodes``
 (x(0) ~ N(X0, P0), the K - 1 accelerations, the K x L measurement noises;
 that sampler then draws the link outcomes, which here belong to the
 network), so the truth and the measurements equal the ``lossy_fusion``
@@ -22,7 +22,7 @@ The paper does not place the UAVs; they hold a fixed ring of radius
 | quantity          | value                                                                            |
 |-------------------|----------------------------------------------------------------------------------|
 | estimand          | ``target``: the target state x (6)                                               |
-| motion model      | :class:`estimators.linear_models.LinearGaussian` (Phi, 0, q G G^T), ``linear_gaussian`` |
+| motion model      | ``estimators.linear_models.LinearGaussian`` (Phi, 0, q G G^T), ``linear_gaussian`` |
 | measurements      | ``linear_observation``: z_i = H x + v_i at every step, every agent               |
 | anchors           | none: every agent measures the target's absolute position                         |
 | sensing action    | none                                                                             |

@@ -3,7 +3,7 @@ optionally ``TIMESTEPS``, ``ALGORITHM``: ``"ppo"`` (stable-baselines3's PPO, the
 (sb3-contrib's MaskablePPO, which never samples a choice the env's action mask rules out) or ``"recurrent_ppo"``
 (sb3-contrib's RecurrentPPO: an LSTM policy that carries a memory over the episode), and ``CRITIC``:
 ``"decentralized"`` (the default: the critic sees what the actor sees) or ``"centralized"`` (the critic also sees
-the copy's ``state()``; :mod:`agents.centralized_critic`)), and ``CURVE_EPISODES``: how many validation episodes
+the copy's ``state()``; ``agents.centralized_critic``)), and ``CURVE_EPISODES``: how many validation episodes
 score each learning-curve point, the best of which becomes ``model.zip`` (default
 ``train.training.CURVE_EPISODES``)."""
 

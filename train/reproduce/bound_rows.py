@@ -1,11 +1,11 @@
 """The posterior Cramér–Rao bound beside a reproduction's rows: its ``pcrb`` block and report section.
 
-A reproduction whose world has a bound model (:mod:`coloc_env.bound_models`) computes
-:func:`coloc_env.pcrb` over seeded episodes of its composition and hands this module the bound and,
+A reproduction whose world has a bound model (``coloc_env.bound_models``) computes
+``coloc_env.pcrb`` over seeded episodes of its composition and hands this module the bound and,
 per estimator row it reports as a position error, the per-run mean squared 2-D position error
 (m^2, the bound's coordinates: the world's ``position_index``, over the same steps as the bound).
 
-``pcrb`` block of ``metrics.json`` (:func:`pcrb_block`):
+``pcrb`` block of ``metrics.json`` (``pcrb_block``):
 
 | key            | value                                                                             |
 |----------------|-----------------------------------------------------------------------------------|
@@ -26,7 +26,7 @@ import numpy as np
 
 
 def pcrb_block(bounds: dict, rows: dict, episodes: int, seed: int, same_episodes: bool, note: str) -> dict:
-    """The ``pcrb`` block (module docstring) of ``bounds`` (:func:`coloc_env.pcrb`'s dict) and ``rows``
+    """The ``pcrb`` block (module docstring) of ``bounds`` (``coloc_env.pcrb``'s dict) and ``rows``
     {name: per-run MSE (R,) in m^2}."""
     block = {key: (float(np.sqrt(np.mean(bounds[key]))) if key in bounds else None)
              for key in ("centralized", "local", "delivered")}

@@ -21,7 +21,7 @@ from train.io import claims_table
 
 class PresetComposition(ComposedScenario):
     """A composition whose copies draw their episodes by the presets' rule
-    (:meth:`~coloc_env.scenarios.binding.PresetScenario.part_generators`: the world from the episode's
+    (``coloc_env.scenarios.binding.PresetScenario.part_generators``: the world from the episode's
     generator itself, the network and the backend from its first and second child): reset with
     ``default_rng(s)``, a backend on a preset's world and network sees the episode ``env.reset(seed=s)``
     of that preset draws, whichever backend it is."""
@@ -50,7 +50,7 @@ def ci95(values) -> float:
 
 
 def claims_section(claims: list[dict]) -> list[str]:
-    """The report lines of the ``## Claims`` section: a heading, then :func:`train.io.claims_table`."""
+    """The report lines of the ``## Claims`` section: a heading, then ``train.io.claims_table``."""
     return ["## Claims", "", *claims_table(claims)]
 
 

@@ -1,6 +1,6 @@
 """Reproduce Fu, Bi, Gao 2017 (``lossy_fusion``): Figs. 3-5 and the paper's claims, for L = 2 and L = 4 UAVs.
 
-Every filter of :mod:`estimators.lossy_fusion` runs on the same simulated
+Every filter of ``estimators.lossy_fusion`` runs on the same simulated
 runs (paired comparison). Writes ``OUT/fu2017/metrics.json`` with, per
 setting ``L2`` / ``L4`` and filter (``naive_kf``, ``centralized``,
 ``centralized_paper_gain``, ``distributed``, ``informed_kf``,
@@ -14,22 +14,22 @@ setting ``L2`` / ``L4`` and filter (``naive_kf``, ``centralized``,
 * ``naive_divergence``           the naive filter's MSE over k = 40..49 and k = 90..99
 * ``comparisons``                paired differences behind each claim (mean, standard error)
 * ``claims``                     booleans from these numbers
-* ``diagnostics``                per setting, filters outside the comparison proper (:data:`DIAGNOSTICS`):
+* ``diagnostics``                per setting, filters outside the comparison proper (``DIAGNOSTICS``):
                                  ``mse``, ``mse_se``, ``mse_late``, ``mse_late_se``, ``own_covariance_late``
-* ``readings``                   per setting, (B) under each reading of (29) (:data:`READINGS`; ``reading`` of
-                                 :func:`estimators.lossy_fusion.distributed_step`): ``mse``, ``mse_se``,
+* ``readings``                   per setting, (B) under each reading of (29) (``READINGS``; ``reading`` of
+                                 ``estimators.lossy_fusion.distributed_step``): ``mse``, ``mse_se``,
                                  ``mse_late``, ``own_covariance_late``, and ``versus``: the paired difference
-                                 (reading minus reference; mean, se) against each of :data:`REFERENCES`
-* ``pcrb``                       per setting, the posterior Cramér–Rao bound (:func:`bound_block`,
-                                 :mod:`train.reproduce.bound_rows`) of the x, y components over k = 0..99
+                                 (reading minus reference; mean, se) against each of ``REFERENCES``
+* ``pcrb``                       per setting, the posterior Cramér–Rao bound (``bound_block``,
+                                 ``train.reproduce.bound_rows``) of the x, y components over k = 0..99
                                  and each filter's RMSE of x, y and efficiency
 * ``runs``, ``seed``, ``steps``
 
 plus ``report.md`` and PNG figures.
 
-Every filter is a composition stepped batched over the runs (:func:`filter_runs`): the ``lossy_fusion``
+Every filter is a composition stepped batched over the runs (``filter_runs``): the ``lossy_fusion``
 preset's world (``target_cv``: the truth and the measurements) and network (``bernoulli_delay``: the
-followers' link outcomes, eq. 3) with the filter's backend (:func:`filter_backend`: ``kalman``,
+followers' link outcomes, eq. 3) with the filter's backend (``filter_backend``: ``kalman``,
 ``centralized_lmmse`` or ``prediction_compensation``), every follower transmitting every slot; the
 errors and the filters' own covariances are what the compositions report. Run r of setting L is seeded
 ``default_rng([seed, L, r])`` and every filter sees the same episodes and link outcomes (paired
@@ -117,8 +117,8 @@ BOUND_EPISODES = 20  # seeded episodes of the delivered bound (the centralized a
 
 
 def filter_backend(name: str, config: LossyFusionConfig):
-    """The backend config that runs filter ``name`` (of :data:`estimators.lossy_fusion.FILTERS` or
-    :data:`DIAGNOSTICS`) at the leader:
+    """The backend config that runs filter ``name`` (of ``estimators.lossy_fusion.FILTERS`` or
+    ``DIAGNOSTICS``) at the leader:
 
     | filter                        | backend                                                         |
     |-------------------------------|-----------------------------------------------------------------|
@@ -128,7 +128,7 @@ def filter_backend(name: str, config: LossyFusionConfig):
     | ``centralized_paper_gain``    | ``centralized_lmmse`` (gain paper, eq. 21)                      |
     | ``centralized_printed_moments`` | ``centralized_lmmse`` (gain paper, moments printed)           |
     | ``distributed`` and its       | the preset's ``prediction_compensation`` with the row's         |
-    | readings (:data:`READINGS`)   | ``reading`` and ``forward_spread``                              |
+    | readings (``READINGS``)   | ``reading`` and ``forward_spread``                              |
     """
     if name in READINGS:
         reading, spread, _ = READINGS[name]
@@ -149,7 +149,7 @@ def filter_backend(name: str, config: LossyFusionConfig):
 
 class PairedComposition(ComposedScenario):
     """A composition whose copies draw their episodes by the ``lossy_fusion`` preset's rule
-    (:meth:`~coloc_env.scenarios.binding.PresetScenario.part_generators`: the world from the episode's
+    (``coloc_env.scenarios.binding.PresetScenario.part_generators``: the world from the episode's
     generator itself, the network from its first child): reset with ``default_rng(s)``, every backend
     on the preset's world and network sees the episode and the link outcomes ``env.reset(seed=s)``
     draws."""
@@ -161,15 +161,15 @@ def filter_runs(config: LossyFusionConfig, seeds, names=(*lf.FILTERS, *DIAGNOSTI
     """Each filter of ``names`` on the episodes of ``seeds``, as a composition stepped batched.
 
     Filter f is the composition of the ``lossy_fusion`` preset's world (``target_cv``) and network
-    (``bernoulli_delay``) with :func:`filter_backend` ``(f)``, one copy per seed, reset with
-    ``default_rng(seed)`` (:class:`PairedComposition`: every filter on the same episodes and link
+    (``bernoulli_delay``) with ``filter_backend`` ``(f)``, one copy per seed, reset with
+    ``default_rng(seed)`` (``PairedComposition``: every filter on the same episodes and link
     outcomes, those of ``env.reset(seed=seed)``), every follower transmitting every slot and every
     decision at its paper default (the ``always`` action). Returns, per filter, ``errors`` (runs, K):
-    the infos' ``error`` ||H (xhat(k|k) - x(k))||^2 (:meth:`ComposedScenario.target_error`) of the
+    the infos' ``error`` ||H (xhat(k|k) - x(k))||^2 (``ComposedScenario.target_error``) of the
     leader's estimate (shared by every agent), and ``own`` the trace of the position block of the
-    filter's own covariance P(k|k) (the infos' ``trace`` over the world's metric, :meth:`metric_traces`)
+    filter's own covariance P(k|k) (the infos' ``trace`` over the world's metric, ``metric_traces``)
     (runs, K), or (K,) where it does not depend on the data (the same for every run); ``errors_xy`` (runs, K)
-    the squared error of the leader's x, y (the world's ``position_index``, :func:`coloc_env.pcrb`'s
+    the squared error of the leader's x, y (the world's ``position_index``, ``coloc_env.pcrb``'s
     coordinates); and ``delivered``
     the frequencies of the followers' link outcomes (on time, late, lost; eq. 3) the network drew.
     """
@@ -203,17 +203,17 @@ def block_seeds(num_uavs: int, runs: int, seed: int, block: int) -> list:
 
 
 def monte_carlo_block(num_uavs: int, runs: int, seed: int, block: int, config: LossyFusionConfig) -> dict:
-    """``runs`` episodes with ``num_uavs`` UAVs, every filter on the same episodes (:func:`filter_runs` on
-    :func:`block_seeds`)."""
+    """``runs`` episodes with ``num_uavs`` UAVs, every filter on the same episodes (``filter_runs`` on
+    ``block_seeds``)."""
     config = dataclasses.replace(config, num_uavs=num_uavs)
     return {"num_uavs": num_uavs, "block": block,
             **filter_runs(config, block_seeds(num_uavs, runs, seed, block))}
 
 
 def paper_policy_costs(seeds, config: LossyFusionConfig | None = None) -> np.ndarray:
-    """Per-episode MSE (mean over the slots of the squared position error) of :data:`PAPER_FILTER`,
+    """Per-episode MSE (mean over the slots of the squared position error) of ``PAPER_FILTER``,
     the filter the env's ``paper`` policy runs, on the episodes the env draws for ``seeds``
-    (:func:`filter_runs`: the preset's composition reset with ``default_rng(seeds[e])``), with
+    (``filter_runs``: the preset's composition reset with ``default_rng(seeds[e])``), with
     ``config.num_uavs`` UAVs (the env's default 2: setting L2).
     """
     config = config or build_config(LossyFusionConfig, {})
@@ -237,7 +237,7 @@ def _merge(blocks: list[dict]) -> dict:
 
 
 def bound_block(config: LossyFusionConfig, errors_xy: dict, seed: int, episodes: int = BOUND_EPISODES) -> dict:
-    """The ``pcrb`` block of one setting: :func:`coloc_env.pcrb` of the preset's world and network with the
+    """The ``pcrb`` block of one setting: ``coloc_env.pcrb`` of the preset's world and network with the
     ``kalman`` backend (variant ``informed``, whose packets of the followers' readings define ``delivered``),
     beside each filter's error of the x, y components over k = 0..K-1 (``errors_xy`` {filter: (runs, K)}).
 

@@ -7,19 +7,19 @@ absolute numbers of the paper are not comparable). One target per run, as in the
 Monte Carlo through the composable core: every estimator is a backend (``afge`` with each likelihood,
 whose ``constant_x`` gives dfir's output for every constant horizon N = 1..30 of its stack, and
 ``delay_kalman``, the Kalman baseline) on the setting's ``nlos_orbit`` world and ``random_delay``
-network (:func:`drive`: one batched core per estimator, stepped over the runs with every packet kept).
+network (``drive``: one batched core per estimator, stepped over the runs with every packet kept).
 Run r of sweep setting i resets every composition of that setting with
 ``np.random.default_rng([SEED_BASE + seed + i, r])`` (docs/gao2016.md §9: seed 2016, +i for the i-th
 setting; ``--seed S`` shifts the base), so every estimator of a setting sees the same truth, readings
 and delays and comparisons are paired per run. "On-time packets only" is the same network with a
 buffer of length 0 (a late packet is lost; the same uniforms decide which are on time); the Kalman
 filter matched to the turns is ``delay_kalman`` on the world with ``accel_sigma`` 1 m/s^2 (the truth
-does not depend on it). Runs go in blocks of :data:`BLOCK` through :func:`train.executor.map_tasks`
+does not depend on it). Runs go in blocks of ``BLOCK`` through ``train.executor.map_tasks``
 (the blocks are fixed, so any executor gives the same bits).
 
 Writes ``OUT/gao2016/metrics.json`` with exactly the keys of docs/gao2016.md §12 plus ``pcrb``, the
-posterior Cramér–Rao bound of the default setting beside its estimators (:func:`bound_block`,
-:mod:`train.reproduce.bound_rows`), ``report.md`` (each claim, our numbers, holds or not, decided on the
+posterior Cramér–Rao bound of the default setting beside its estimators (``bound_block``,
+``train.reproduce.bound_rows``), ``report.md`` (each claim, our numbers, holds or not, decided on the
 paired per-run interval; the bound's section) and the figures
 ``fig4_rmse_vs_horizon.png`` (the U-curve with AFGE as a line), ``fig6_rmse_over_time.png``,
 ``horizon_over_time.png`` (chosen horizon against the turn schedule) and
@@ -82,7 +82,7 @@ def paper_policy_costs(seeds, config: NlosHorizonConfig | None = None) -> np.nda
     """Per-episode time-averaged squared error of AFGE (the env's ``paper`` policy: AHG with
     ``config.likelihood``, every neighbour kept) over k >= min(50, K - 1), mean over the targets,
     on the episodes the env draws for ``seeds``: ``config``'s composition (``nlos_orbit``, ``random_delay``,
-    ``afge``) driven by :func:`drive`, copy e reset with ``default_rng(seeds[e])`` as ``env.reset(seed=s)``
+    ``afge``) driven by ``drive``, copy e reset with ``default_rng(seeds[e])`` as ``env.reset(seed=s)``
     resets the env."""
     import coloc_env
 
@@ -111,13 +111,13 @@ def _compose(config: NlosHorizonConfig, index: int, backend, lag0: bool = False,
 
 def drive(spec, generators: list, constant: bool = False) -> dict:
     """``spec`` stepped batched over the runs, copy r reset with ``generators[r]`` by the presets' rule
-    (:class:`~train.reproduce.common.PresetComposition`: with the ``nlos_horizon`` preset's parts, the
+    (``train.reproduce.common.PresetComposition``: with the ``nlos_horizon`` preset's parts, the
     episode and the delays ``env.reset`` draws from that generator), every packet kept (the
     ``always`` action: AHG picks AFGE's horizon); per step and target: ``error`` (R, K, N) squared
     position error, ``horizon`` (R, K, N) the horizon output (0: none had an estimate), ``received``
     (R, K, N) packets arriving at k, ``fused_lag0`` (R, K, N) stamp k fused at lag 0, ``fused_final``
     (R, K - D, N) stamp k - D fused at lag D, and with ``constant`` ``constant`` (R, K, N, S): the squared
-    error of dfir with each horizon N = 1..S (:attr:`coloc_env.backends.nlos.PacketFirBackend.constant_x`)."""
+    error of dfir with each horizon N = 1..S (``coloc_env.backends.nlos.PacketFirBackend.constant_x``)."""
     scenario = PresetComposition(spec, batch=len(generators))
     scenario.reset(list(generators))
     backend, K = scenario.backend, scenario.horizon
@@ -255,10 +255,10 @@ BOUND_ROWS = (
 
 
 def bound_block(config: NlosHorizonConfig, res: dict, best: int, seed: int, episodes: int, warm: int) -> dict:
-    """The ``pcrb`` block: :func:`coloc_env.pcrb` of the default setting's composition (``config``'s
+    """The ``pcrb`` block: ``coloc_env.pcrb`` of the default setting's composition (``config``'s
     ``nlos_orbit`` world and ``random_delay`` network with AFGE, every packet kept: ``always``) over
     ``episodes`` seeded episodes (episode e reset with seed + e, not the runs' ``[seed, r]``), beside the
-    per-run MSE of each estimator of :data:`BOUND_ROWS` and of DFIR with the best constant horizon ``best``
+    per-run MSE of each estimator of ``BOUND_ROWS`` and of DFIR with the best constant horizon ``best``
     (row ``dfir_best``)
     (``res`` the merged Monte Carlo, the one target's squared 2-D error after each step), the bound and the
     errors both over k >= ``warm``.

@@ -6,7 +6,7 @@ multi-robot cooperative localization and mapping dataset", IJRR
 ``coloc reproduce all``: it needs a dataset folder (``--data`` or
 ``COLOC_MRCLAM_DATA``).
 
-Estimators (:mod:`estimators.ukf_relay_se2`, state (x, y, theta) per robot):
+Estimators (``estimators.ukf_relay_se2``, state (x, y, theta) per robot):
 
 * ``IL``  dead reckoning from the odometry (v, w), covariance by the same
   linearized time update (no measurements): the ``dead_reckoning`` backend;
@@ -17,7 +17,7 @@ Estimators (:mod:`estimators.ukf_relay_se2`, state (x, y, theta) per robot):
   nearest robot not yet reached (landmark: m -> the others alike) with the
   Roumeliotis-Bekey factorization (any complete chain gives the CCL update):
   the ``ukf_se2`` backend (``landmark_updates="relay"``) over the ``ideal``
-  network; IL and DCL both driven by the ``mrclam`` world's replay (:func:`run_filters`).
+  network; IL and DCL both driven by the ``mrclam`` world's replay (``run_filters``).
 
 Setup (stated in ``report.md``): initial state = the Vicon pose at the first
 step with standard deviations ``INITIAL_STD`` (0.01 m, 0.01 m, 0.01 rad).
@@ -28,12 +28,12 @@ whole-run columns include the calibration window; ``evaluation`` reports each
 model on the steps after it only (the part the noise was not fitted on).
 
 Noise models, every parameter from the calibration window
-(:func:`coloc_env.data.mrclam.calibration_seconds`: the first 10 % of the
+(``coloc_env.data.mrclam.calibration_seconds``: the first 10 % of the
 run, at least 60 s: 75.6 s of dataset 6, 60 s of a ``--quick`` run) against
-Vicon, applied per step by :class:`coloc_env.data.mrclam.NoiseModel` (the same
+Vicon, applied per step by ``coloc_env.data.mrclam.NoiseModel`` (the same
 code as the ``mrclam`` world and the ``mrclam_relay`` scenario):
 
-* per-step shapes by moment rules (:func:`coloc_env.data.mrclam.calibrate_noise`):
+* per-step shapes by moment rules (``coloc_env.data.mrclam.calibrate_noise``):
   the robots move as the command logged ``odometry_delay_steps`` earlier
   (0.2 s) times a scale (``odometry_scale``: they turn ~18 % and drive ~10 %
   less than commanded); odometry variances a_c + b_c u_c^2 (least squares of
@@ -42,7 +42,7 @@ code as the ``mrclam`` world and the ``mrclam_relay`` scenario):
 * ``likelihood`` (the reported model): the four variances scaled by
   (c_v, c_w, c_range, c_bearing) that maximize the composite likelihood of
   UKF-CCL's pose errors against Vicon on the window
-  (:func:`coloc_env.data.mrclam.fit_noise_scales`): the odometry errors are
+  (``coloc_env.data.mrclam.fit_noise_scales``): the odometry errors are
   correlated over seconds (lag-1 autocorrelation 0.37 in v, a per-robot bias)
   and successive sightings of one subject share their error, which a white
   model cannot represent; the scales absorb both into the white model at the
@@ -71,16 +71,16 @@ the same with ``_baseline`` (``noise_baseline``,
 ``report.md`` and figures ``trajectories.png``, ``error_over_time.png``,
 ``nees.png`` (calibrated model).
 
-Lossy / hop-limited links (:func:`lossy_link_study`): the
+Lossy / hop-limited links (``lossy_link_study``): the
 ``mrclam_relay`` scenario core, driven with the ``paper`` policy's actions
 (complete chains m -> n -> the others ascending) over the whole run (window
-start 0), runs UKF-DCL for each link setting of :func:`link_settings`: a
-per-hop loss probability ``loss_at_zero`` in :data:`LOSS_LEVELS` (0 = the
+start 0), runs UKF-DCL for each link setting of ``link_settings``: a
+per-hop loss probability ``loss_at_zero`` in ``LOSS_LEVELS`` (0 = the
 lossless complete chain, which is UKF-CCL on the scenario's observations) and
-a hop budget ``max_hops`` in :data:`HOP_BUDGETS` (lossless), plus IL by the
-same noise model. Lossy settings run :data:`LOSS_DRAWS` loss realizations
+a hop budget ``max_hops`` in ``HOP_BUDGETS`` (lossless), plus IL by the
+same noise model. Lossy settings run ``LOSS_DRAWS`` loss realizations
 (copies seeded ``seed + b``; the same uniforms in every setting). ``--quick``:
-one seeded window of :data:`QUICK_STUDY_STEPS` steps, one draw. Written to
+one seeded window of ``QUICK_STUDY_STEPS`` steps, one draw. Written to
 ``metrics.json`` as ``lossy_links`` {setting | "IL": {"rmse_position_mean",
 "rmse_position_draws", "nees_mean", "hops_per_step", "delivered_fraction",
 "complete_fraction", "used_fraction", "chains_per_step", "draws", and the
@@ -153,20 +153,20 @@ def run_filters(d: mrclam.MrclamData, noise: dict, progress=None, baseline: bool
                 inflate_measurements: bool = True, kind: str | None = None) -> dict:
     """IL, CCL and DCL over the whole of ``d``; estimates (T, N, 3) and own-block covariances (T, N, 3, 3).
 
-    ``noise``: a :func:`coloc_env.data.mrclam.calibrate_noise` dict, applied by
-    :class:`coloc_env.data.mrclam.NoiseModel`: ``baseline`` the constant 1.4826 x MAD noise on the
+    ``noise``: a ``coloc_env.data.mrclam.calibrate_noise`` dict, applied by
+    ``coloc_env.data.mrclam.NoiseModel``: ``baseline`` the constant 1.4826 x MAD noise on the
     raw commands (the model before calibration), else the calibrated model
     (``inflate_measurements=False``: without its measurement inflation, for the ablation).
 
     DCL and IL are the composition's backends, driven step by step as
-    :meth:`coloc_env.scenarios.composed.ComposedScenario.advance` drives them: the ``mrclam`` world
-    (:mod:`coloc_env.worlds.mrclam`, ``robot_sightings="all"``, the same noise model, fitted on the same
-    window) replays ``d`` into ``ukf_se2`` (:mod:`coloc_env.backends.ukf_se2`: UKF-DCL over the ``ideal``
+    ``coloc_env.scenarios.composed.ComposedScenario.advance`` drives them: the ``mrclam`` world
+    (``coloc_env.worlds.mrclam``, ``robot_sightings="all"``, the same noise model, fitted on the same
+    window) replays ``d`` into ``ukf_se2`` (``coloc_env.backends.ukf_se2``: UKF-DCL over the ``ideal``
     network's complete chains, landmark sightings relayed too: ``landmark_updates="relay"``) and ``dead_reckoning``
-    (:mod:`coloc_env.backends.dead_reckoning`). CCL (``ccl_update`` on the joint state) reads ``d`` and the
+    (``coloc_env.backends.dead_reckoning``). CCL (``ccl_update`` on the joint state) reads ``d`` and the
     noise model itself: the independent check that DCL equals CCL (``max_abs_diff``, state and joint
     covariance), and of the world's replay. ``d`` must be a loaded run or a prefix of it (``window(0, S)``)
-    and ``noise`` its :func:`~coloc_env.data.mrclam.calibrate_noise` of ``d`` (the world refits it on the
+    and ``noise`` its ``coloc_env.data.mrclam.calibrate_noise`` of ``d`` (the world refits it on the
     run: ValueError if the two differ).
     """
     kind = kind or ("baseline" if baseline else "calibrated")
@@ -246,8 +246,8 @@ def lossy_link_study(data: str, window_steps: int, seed: int, settings: dict[str
                      draws: int = LOSS_DRAWS, progress=None) -> dict:
     """UKF-DCL of the ``mrclam_relay`` scenario under the paper policy for each link setting, and IL.
 
-    Drives the scenario core (:func:`coloc_env.scenario_class`) with ``window_steps`` (``T - 1``: the whole
-    run, window start 0) and the actions of :func:`agents.mrclam_relay.paper_actions` from its observation
+    Drives the scenario core (``coloc_env.scenario_class``) with ``window_steps`` (``T - 1``: the whole
+    run, window start 0) and the actions of ``agents.mrclam_relay.paper_actions`` from its observation
     (the ``paper`` policy: the lowest-index recorded robot, complete chains m -> n -> the others ascending).
     Copy b of a setting is reset with ``default_rng(seed + b)``: the same window and the same loss uniforms in
     every setting, so the losses are coupled (more loss, never more hops). A lossy setting runs ``draws``
@@ -359,12 +359,12 @@ def _band_fraction(nees: np.ndarray) -> float:
 
 
 def _evaluation(d, result: dict, start: int) -> dict:
-    """:func:`_evaluation_of` UKF-CCL."""
+    """``_evaluation_of`` UKF-CCL."""
     return _evaluation_of(d, result, start, "CCL")
 
 
 def _evaluation_of(d, result: dict, start: int, name: str) -> dict:
-    """Estimator ``name`` of a :func:`run_filters` result on the steps the noise was not fitted on
+    """Estimator ``name`` of a ``run_filters`` result on the steps the noise was not fitted on
     (k >= ``start``): mean NEES (x, y, theta), the fraction of (step, robot) values in the chi-square(3)
     95 % band, position RMSE (mean over robots), position / heading NEES."""
     if start >= d.steps:

@@ -1,12 +1,12 @@
 """dNBP (wan2014) on real robot data: UTIAS MRCLAM, landmark-sighting robots as the "GPS-normal" UAVs.
 
 Issue 9: "dNBP with the robots that see landmarks playing the GPS-normal role".
-:mod:`estimators.dnbp` (Wan et al. 2014, reconstructed in ``docs/wan2014.md``)
-and the least-squares baseline :mod:`estimators.range_ls` are driven on one
-MRCLAM dataset (:func:`coloc_env.data.mrclam.load_cached`; cite Leung et al.,
+``estimators.dnbp`` (Wan et al. 2014, reconstructed in ``docs/wan2014.md``)
+and the least-squares baseline ``estimators.range_ls`` are driven on one
+MRCLAM dataset (``coloc_env.data.mrclam.load_cached``; cite Leung et al.,
 IJRR 2011). No Vicon data after the calibration window enters any estimator;
 Vicon is used for the noise calibration (the first 10 % of the run, the rule of
-:class:`coloc_env.data.mrclam.NoiseModel`, as in ``coloc reproduce mrclam``), for
+``coloc_env.data.mrclam.NoiseModel``, as in ``coloc reproduce mrclam``), for
 the initial poses and for scoring.
 
 Mapping of the data to dNBP's model (every choice)
@@ -22,7 +22,7 @@ Mapping of the data to dNBP's model (every choice)
   comes from outside. Dead-reckoned heading is useless here (dataset 6: off by
   0.2-1.3 rad after 100 s, up to 1.9 rad later). We use each robot's OWN
   navigation filter: a per-robot UKF on (x, y, theta)
-  (:func:`estimators.ukf_relay_se2.ccl_update` with N = 1) driven by its corrected
+  (``estimators.ukf_relay_se2.ccl_update`` with N = 1) driven by its corrected
   odometry and updated only with its own landmark sightings (chi-square(2) 99.9 %
   gate), no robot-robot measurement: the analogue of a UAV's GPS/INS heading,
   non-cooperative. Its heading (and heading variance) at each data step is used;
@@ -116,7 +116,7 @@ fix_std = mrclam.fix_std
 
 
 def own_navigation(d: mrclam.MrclamData, model: mrclam.NoiseModel, x0: np.ndarray):
-    """:func:`coloc_env.data.mrclam.own_navigation` from ``INITIAL_STD`` (poses, covariances, accepted)."""
+    """``coloc_env.data.mrclam.own_navigation`` from ``INITIAL_STD`` (poses, covariances, accepted)."""
     return mrclam.own_navigation(d, model, x0, INITIAL_STD)
 
 

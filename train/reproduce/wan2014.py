@@ -16,21 +16,21 @@ Writes ``OUT/wan2014/metrics.json`` (docs/wan2014.md §7):
   ``sweep_particles`` (Table 1): the same object per point;
 * ``case_study`` (Fig. 4) and ``claims``;
 * ``pcrb``: the posterior Cramér–Rao bound of the ``gps_denied_nbp`` preset at the default point
-  (:func:`bound_block`, :mod:`train.reproduce.bound_rows`) beside the RMSE of dNBP, LS and DR over
+  (``bound_block``, ``train.reproduce.bound_rows``) beside the RMSE of dNBP, LS and DR over
   every run, step and UAV, and their efficiency.
 
 Seeding (common random numbers, docs/wan2014.md §7): run r draws its world from
 ``default_rng([seed, r])`` and its dNBP randomness from
 ``default_rng([seed, 100000 + r])`` at every point, so curves are comparable
 point by point. A point's runs are one batch (vectorized over runs); points
-are the independent tasks of :func:`train.executor.map_tasks`.
+are the independent tasks of ``train.executor.map_tasks``.
 
-The Monte Carlo runs drive the composable parts (:class:`Rig`): the
+The Monte Carlo runs drive the composable parts (``Rig``): the
 ``gps_denied`` world, the ``broadcast`` medium and the backends ``dnbp``
 (dNBP), ``range_ls`` (LS of ref. [7]) and ``range_ls`` with nobody
 transmitting (DR: each UAV's own GPS/accelerometer Kalman filter). Only the
 case study (one intraslice update with its belief history, Fig. 4) calls
-:func:`estimators.dnbp.step` itself.
+``estimators.dnbp.step`` itself.
 
 ``paper_policy_costs(seeds)`` gives this reproduction's per-episode number for dNBP with the
 paper's schedule, the env's ``paper`` policy, on the episodes ``env.reset(seed=s)`` draws for
@@ -138,7 +138,7 @@ METHODS = ("dnbp", "ls", "dr")
 
 def composition_parts(config: GpsDeniedNbpConfig) -> tuple:
     """The composable parts this reproduction drives for ``config``: the ``gps_denied`` world and, per
-    method of :data:`METHODS`, a (network, backend, transmit) triple over wan2014's ``broadcast`` medium
+    method of ``METHODS``, a (network, backend, transmit) triple over wan2014's ``broadcast`` medium
     (the ranging radius is the communication radius, no loss):
 
     * ``dnbp``: the ``dnbp`` backend, every UAV broadcasting in every iteration (the paper's schedule);
@@ -184,7 +184,7 @@ class CountingBroadcast(BroadcastNetwork):
 class Rig:
     """One ``gps_denied`` world and the (network, backend) pair of each method, stepped on the same readings.
 
-    Each step is :meth:`coloc_env.scenarios.composed.ComposedScenario.step`'s: the world's readings of
+    Each step is ``coloc_env.scenarios.composed.ComposedScenario.step``'s: the world's readings of
     time k, the network's link state of time k and its transmit decisions, the backend's update of k (the
     estimate scored at k) and its prediction to k + 1, then the world moves. The world of copy r is reset
     with ``world_rngs[r]`` itself (the draws of ``gps_denied_nbp.sample_episode``, in its order), dnbp
@@ -235,7 +235,7 @@ class Rig:
 
 
 def run_methods(config: GpsDeniedNbpConfig, world_rngs: list, estimator_rngs: list, names=METHODS) -> dict:
-    """dNBP, LS and DR (:class:`Rig`) on the episodes of ``world_rngs``, dNBP's particle randomness of run r
+    """dNBP, LS and DR (``Rig``) on the episodes of ``world_rngs``, dNBP's particle randomness of run r
     from ``estimator_rngs[r]``, all runs batched. Returns ``errors`` {method: (R, T, N)}, ``fault``
     (R, T, N), dNBP's ``messages`` (delivered links) and ``broadcasts`` over all runs, and ``seconds``
     {method: time spent in its network and backend}."""
@@ -263,7 +263,7 @@ def paper_policy_costs(seeds, config: GpsDeniedNbpConfig | None = None) -> np.nd
     As ``env.reset(seed=seeds[e])`` does, episode e is drawn from ``rng = default_rng(seeds[e])`` (the
     ``gps_denied`` world draws ``gps_denied_nbp.sample_episode``'s blocks in its order) and its
     estimator generator is ``rng.spawn(1)[0]``; dNBP runs through the ``dnbp`` backend
-    (:func:`run_methods`).
+    (``run_methods``).
     """
     config = config or build_config(GpsDeniedNbpConfig, {})
     rngs = [np.random.default_rng(s) for s in seeds]
@@ -386,7 +386,7 @@ def run(out: str, runs: int = RUNS, seed: int = 0, quick: bool = False, executor
 
 
 def bound_block(base: dict, mse_runs: dict, seed: int, episodes: int) -> dict:
-    """The ``pcrb`` block: :func:`coloc_env.pcrb` of the ``gps_denied_nbp`` preset with the default point's
+    """The ``pcrb`` block: ``coloc_env.pcrb`` of the ``gps_denied_nbp`` preset with the default point's
     configuration ``base`` (every UAV broadcasting: ``always``), beside each method's RMSE over every run,
     step (k = 0..T-1, after its update) and UAV (``mse_runs`` {method: per-run mean squared error}).
 

@@ -13,12 +13,12 @@ Writes ``OUT/wang2019/metrics.json`` with
   filter) at p = 0.5: default Q, the paper's Q, and a control without turn-rate noise
 * ``truncated_chain``        hop budget 1: the paper's rule for unreached cross-covariances vs ours
 * ``pcrb``                   {"default", "no_turn_rate_noise"} at p = ``measurement_probability``: the posterior
-  Cramér–Rao bound of the ``relay_ukf`` preset under the paper's policy (:func:`bound_block`,
-  :mod:`train.reproduce.bound_rows`) beside the RMSE of IL, CCL and DCL and their efficiency
+  Cramér–Rao bound of the ``relay_ukf`` preset under the paper's policy (``bound_block``,
+  ``train.reproduce.bound_rows``) beside the RMSE of IL, CCL and DCL and their efficiency
 * ``claims``                 each claim -> holds (bool)
 
 plus ``report.md`` and PNG figures. The estimators are the composable backends on
-the ``circles`` world (:class:`Rig`): IL = ``dead_reckoning``, CCL = ``ukf_ccl`` over ``ideal``,
+the ``circles`` world (``Rig``): IL = ``dead_reckoning``, CCL = ``ukf_ccl`` over ``ideal``,
 DCL = ``ukf_dcl`` over ``relay``; the filterpy comparison runs filterpy's update beside the
 ``ukf_ccl`` backend. Every Monte Carlo block draws its runs
 from ``np.random.default_rng([seed, block])``; the same blocks are reused for
@@ -71,8 +71,8 @@ def _block_generators(seed: int, block: int, runs: int):
 
 def composition_parts(config: RelayUKFConfig) -> tuple:
     """The composable parts this reproduction drives for ``config``: the ``circles`` world of the
-    paper's Sec. 4 (4 platforms, no anchors; the relay_ukf preset's, :meth:`RelayUKFConfig.parts`) and,
-    per estimator of :data:`ESTIMATORS`, a
+    paper's Sec. 4 (4 platforms, no anchors; the relay_ukf preset's, ``RelayUKFConfig.parts``) and,
+    per estimator of ``ESTIMATORS``, a
     (network, backend) pair: IL = ``dead_reckoning`` over ``ideal``, CCL = ``ukf_ccl`` over ``ideal``
     (every range reaches the fusion centre), DCL = ``ukf_dcl`` over ``relay`` with the config's links.
     """
@@ -86,7 +86,7 @@ def composition_parts(config: RelayUKFConfig) -> tuple:
 class Rig:
     """One ``circles`` world and several (network, backend) pairs stepped on the same readings.
 
-    Each step is :meth:`coloc_env.scenarios.composed.ComposedScenario.step`'s: the world's readings
+    Each step is ``coloc_env.scenarios.composed.ComposedScenario.step``'s: the world's readings
     of time k, the network's link state of time k (true positions) and transport decisions, the
     backend's update of k (the posterior the errors score) and its prediction to k + 1, then the
     world moves. The world is reset with the caller's generators themselves (the draws of the
@@ -145,17 +145,17 @@ def monte_carlo_block(block: int, runs: int, seed: int, config: RelayUKFConfig) 
     """``runs`` realizations under the paper's policy: IL, UKF-CCL and UKF-DCL on the same data.
 
     The three are the composable backends ``dead_reckoning``, ``ukf_ccl`` and ``ukf_dcl`` on one
-    ``circles`` world (:class:`Rig`). Errors are posterior ones, at each measurement time k = 0..K-1.
+    ``circles`` world (``Rig``). Errors are posterior ones, at each measurement time k = 0..K-1.
     """
     copies, policy_rng = _block_generators(seed, block, runs)
     return {"block": block, **simulate_runs(config, copies, policy_rng)}
 
 
 def simulate_runs(config: RelayUKFConfig, copies: list, policy_rng: np.random.Generator) -> dict:
-    """The runs of :func:`monte_carlo_block` on given generators: copy r of the world reset with
+    """The runs of ``monte_carlo_block`` on given generators: copy r of the world reset with
     ``copies[r]``, the paper policy's random partners drawn from ``policy_rng`` (one call per step
     for all runs). ``per_run`` (3, runs): each run's error averaged over k = 0..K-1 and the platforms,
-    rows :data:`ESTIMATORS`."""
+    rows ``ESTIMATORS``."""
     runs = len(copies)
     rig = Rig(config, runs)
     rig.reset(copies)
@@ -239,7 +239,7 @@ def filterpy_ccl_update(estimate: np.ndarray, cov: np.ndarray, measuring: int, m
 
 def ccl_filterpy_difference(config: RelayUKFConfig, seed: int) -> float:
     """Largest |CCL - filterpy| position difference over one run of the paper's policy: the ``ukf_ccl``
-    backend on the ``circles`` world (:class:`Rig`) and filterpy's update on the same ranges, each
+    backend on the ``circles`` world (``Rig``) and filterpy's update on the same ranges, each
     from the same start (the linear time update of the filterpy side is the world's motion model)."""
     copies, policy_rng = _block_generators(seed, 0, 1)
     rig = Rig(config, 1, names=("CCL",))
@@ -360,9 +360,9 @@ def run(out: str, runs: int = RUNS, seed: int = 0, quick: bool = False, executor
 
 
 def bound_block(config: RelayUKFConfig, merged: dict, seed: int, episodes: int) -> dict:
-    """The ``pcrb`` block of one setting: :func:`coloc_env.pcrb` of the ``relay_ukf`` preset with ``config``
+    """The ``pcrb`` block of one setting: ``coloc_env.pcrb`` of the ``relay_ukf`` preset with ``config``
     under the env's ``paper`` policy (seeded ``seed + e`` for episode e), beside the RMSE of IL, CCL and DCL
-    (``merged`` one setting's :func:`_merge`, errors at k = 0..K-1 after each update, the bound's steps).
+    (``merged`` one setting's ``_merge``, errors at k = 0..K-1 after each update, the bound's steps).
 
     The circles bound depends on the episode (which ranges the random partners took): it is the bound over
     ``episodes`` seeded episodes of the preset (episode e reset with seed + e), not over the runs (drawn from

@@ -9,23 +9,23 @@ Writes ``OUT/zhao2020/metrics.json`` with
 * ``greedy_cost`` exact J_50 of the per-step greedy selection (weights P1)
 * ``baselines``   exact J_50 of a Kalman predictor per node without
   communication and of the centralized Kalman predictor with all measurements
-* ``pcrb``        the posterior Cramér–Rao bound of the preset (:func:`bound_block`,
-  :mod:`train.reproduce.bound_rows`): sqrt of its mean over k = 1..K and the nodes (m, the x, y
+* ``pcrb``        the posterior Cramér–Rao bound of the preset (``bound_block``,
+  ``train.reproduce.bound_rows``): sqrt of its mean over k = 1..K and the nodes (m, the x, y
   components), and per pair the Monte Carlo RMSE of x, y over k = 1..K and efficiency
 
 plus ``report.md`` (claim, our number, holds or not) and PNG figures.
 
 The Monte Carlo runs are the ``bandwidth_fusion`` preset (the composition ``drift`` /
 ``bandwidth`` / ``bandwidth_fusion``) stepped batched over the runs under the action of the
-env's ``paper:<pair>`` policy, one copy per run (:func:`run_pair`): the ``drift`` world draws
+env's ``paper:<pair>`` policy, one copy per run (``run_pair``): the ``drift`` world draws
 the truth and the readings, the ``bandwidth`` network delivers the selected components, the
 ``bandwidth_fusion`` backend fuses, and the errors are the preset's infos. Run r of every pair is
 seeded ``default_rng([seed, r])`` (common random numbers across the pairs). The exact J and the
-bound are the estimator's covariance recursions (:func:`estimators.bandwidth_fusion.expected_cost`),
+bound are the estimator's covariance recursions (``estimators.bandwidth_fusion.expected_cost``),
 no Monte Carlo.
 
 ``paper_policy_costs(seeds)`` gives this reproduction's per-episode number for the tables T1P1
-of the env's ``paper`` policy; J_K without its k = 0 term, which :func:`initial_term` gives, on
+of the env's ``paper`` policy; J_K without its k = 0 term, which ``initial_term`` gives, on
 the episodes ``env.reset(seed=s)`` draws for each s in ``seeds``, through the same path as the
 Monte Carlo above; a test checks that it equals what ``coloc evaluate`` reports for the
 ``paper`` policy on the same seeds.
@@ -74,10 +74,10 @@ def run_pair(pair: str, config: BandwidthFusionConfig, generators: list) -> dict
 
     Copy r is the preset reset with ``generators[r]`` (the world draws x(0), w and v from it, as
     ``env.reset(seed=...)`` does) and driven by the action the env's ``paper:<pair>`` policy takes
-    (:meth:`BandwidthFusionScenario.encode_actions` of the tables). Returns, from the infos at reset
+    (``BandwidthFusionScenario.encode_actions`` of the tables). Returns, from the infos at reset
     (k = 0) and after each step (k = 1..K), ``squared_error`` ||xhat_i(k) - x(k)||^2 (K+1, runs, N),
     ``squared_error_xy`` the same over the world's two position components (``position_index``, the
-    coordinates of :func:`coloc_env.pcrb`) and, for copy 0, ``example_truth`` x(k) (K+1, n) and
+    coordinates of ``coloc_env.pcrb``) and, for copy 0, ``example_truth`` x(k) (K+1, n) and
     ``example_estimate`` xhat_i(k) (K+1, N, n).
     """
     runs = len(generators)
@@ -106,8 +106,8 @@ def episode_generators(seed: int, runs: int) -> list:
 
 
 def monte_carlo_block(pair: str, runs: int, seed: int, config: BandwidthFusionConfig) -> dict:
-    """``runs`` realizations of one (T, P) pair (:func:`run_pair`) on the episodes of
-    :func:`episode_generators`."""
+    """``runs`` realizations of one (T, P) pair (``run_pair``) on the episodes of
+    ``episode_generators``."""
     sim = run_pair(pair, config, episode_generators(seed, runs))
     cumulative = np.cumsum(sim["squared_error"].sum(axis=2), axis=0)  # (K+1, runs): J_k of each realization
     return {
@@ -123,13 +123,13 @@ def monte_carlo_block(pair: str, runs: int, seed: int, config: BandwidthFusionCo
 
 
 def paper_policy_costs(seeds, config: BandwidthFusionConfig | None = None) -> np.ndarray:
-    """Per-episode cost of the env's ``paper`` policy (:data:`PAPER_PAIR`) on the episodes the env
-    draws for ``seeds``, by this reproduction's Monte Carlo path (:func:`run_pair`).
+    """Per-episode cost of the env's ``paper`` policy (``PAPER_PAIR``) on the episodes the env
+    draws for ``seeds``, by this reproduction's Monte Carlo path (``run_pair``).
 
     Episode e is the preset reset with ``default_rng(seeds[e])``, as ``env.reset(seed=seeds[e])``
     resets it. Returns, per episode, the sum over k = 1..K and the nodes of ||xhat_i(k) - x(k)||^2:
     J_K without its k = 0 term, which an env episode does not contain (its expectation is
-    :func:`initial_term`).
+    ``initial_term``).
     """
     config = config or build_config(BandwidthFusionConfig, {})
     sim = run_pair(PAPER_PAIR, config, [np.random.default_rng(s) for s in seeds])
@@ -254,7 +254,7 @@ def run(out: str, runs: int = 500, seed: int = 0, quick: bool = False, executor:
 
 
 def bound_block(config: BandwidthFusionConfig, mc: dict, seed: int) -> dict:
-    """The ``pcrb`` block: :func:`coloc_env.pcrb` of the ``bandwidth_fusion`` preset with ``config`` beside each
+    """The ``pcrb`` block: ``coloc_env.pcrb`` of the ``bandwidth_fusion`` preset with ``config`` beside each
     pair's Monte Carlo error of the x, y components over k = 1..K (the steps an env episode scores).
 
     The ``drift`` world is linear and Gaussian and every node reads at every step, so the bound (the
@@ -444,7 +444,7 @@ def policies_figure(curves: dict, oracle_name: str, oracle_curve: np.ndarray):
 
 def oracle_static_curve(best, config: BandwidthFusionConfig) -> np.ndarray:
     """Per-step sum_i tr Sigma_i(k), k = 0..K, of the searched static selection ``best`` (an
-    :class:`agents.bandwidth_fusion.SearchResult`): its cumulative sum ends at ``best.cost``."""
+    ``agents.bandwidth_fusion.SearchResult``): its cumulative sum ends at ``best.cost``."""
     scenario = BandwidthFusionScenario(config, batch=1)
     full = scenario.links.full_selection(best.selection)
     exact, _ = bf.expected_cost(scenario.model, np.asarray(config.initial_cov, float), full,
