@@ -560,12 +560,21 @@ def _figure(rows: list[dict], path: str) -> None:
     references = {name: series[name] for name in REFERENCE_SCENARIOS if name in series}
     columns = min(3, max(1, len(panels)))
     lines = max(1, math.ceil(len(panels) / columns))
+    from train.plotting import label, plain_log_ticks
+
+    # one colour per series across panels (a series keeps its colour wherever it appears)
+    names = list(dict.fromkeys(what for name in panels for what in series[name]))
+    colour = {what: f"C{k % 10}" for k, what in enumerate(names)}
     fig, axes = plt.subplots(lines, columns, figsize=(5.2 * columns, 5.0 * lines), squeeze=False)
     for ax, name in zip(axes.flat, panels, strict=False):
         for what, points in series[name].items():
             points.sort()
             batches, rates = zip(*points, strict=True)
-            ax.loglog(batches, rates, "o-" if len(points) > 1 else "s", label=what, markersize=4)
+            # a single point (a dNBP size M, a peer at one B) as an open marker of its own colour, no line
+            # (dNBP's sizes M, all at one B, as triangles: the colour cycle repeats past ten series)
+            style = "o-" if len(points) > 1 else ("^" if what.startswith("dNBP step") else "D")
+            ax.loglog(batches, rates, style, color=colour[what], label=what, markersize=4 if len(points) > 1 else 5,
+                      markerfacecolor=None if len(points) > 1 else "none")
         for ref_name, whats in references.items():
             for what, points in whats.items():
                 points.sort()
@@ -573,11 +582,13 @@ def _figure(rows: list[dict], path: str) -> None:
                 ax.loglog(batches, rates, "--", color="0.6", linewidth=1, label=f"{ref_name} ({what})")
         ax.set_title(name, fontsize=10)
         ax.grid(True, which="both", alpha=0.3)
-        ax.set_xlabel("batch B (copies)", fontsize=8)
+        ax.set_xlabel(label("batch B", "copies"), fontsize=8)
+        plain_log_ticks(ax, "x")
+        plain_log_ticks(ax, "y")
         # below the panel, not on it: inside, the legend of a panel with five or more lines covered them
         ax.legend(fontsize=6.5, loc="upper center", bbox_to_anchor=(0.5, -0.2), ncol=2, frameon=False)
-    for ax in axes[:, 0]:
-        ax.set_ylabel("env-steps / s")
+    for ax in axes.flat:
+        ax.set_ylabel(label("throughput", "env-steps/s"), fontsize=8)
     for ax in list(axes.flat)[len(panels):]:
         ax.set_visible(False)
     fig.suptitle(f"coloc bench: throughput vs batch size ({os.cpu_count()}-core CPU)")

@@ -486,3 +486,24 @@ def test_wang2019_fig7_carries_interval_bars_over_the_runs_and_names_the_coincid
     assert any("of the heading-term curve" in t for t in texts), texts
     assert ax.get_xlabel().endswith("[-]")
     plt.close(fig)
+
+
+def test_bench_throughput_figure_follows_the_conventions_with_one_colour_per_series(monkeypatch, tmp_path):
+    from train import bench
+
+    rows = [{"scenario": s, "what": w, "batch": b, "env_steps_per_s": 100.0 * b ** 0.7 * (k + 1)}
+            for s in ("bandwidth_fusion", "relay_ukf") for k, w in enumerate(("vector_env", "estimator step"))
+            for b in (1, 64, 1024)]
+    rows += [{"scenario": "relay_ukf", "what": f"dNBP step, M = {m}", "batch": 4, "env_steps_per_s": 1e4 / m}
+             for m in (50, 100)]
+    drawn = {}
+    monkeypatch.setattr(bench, "save_figure", lambda path, fig: drawn.setdefault("fig", fig))
+    bench._figure(rows, str(tmp_path / "throughput.png"))
+    fig = drawn["fig"]
+    assert plotting.figure_problems(fig) == []
+    colours = {}
+    for ax in fig.axes:
+        for line in ax.get_lines():
+            colours.setdefault(line.get_label(), set()).add(line.get_color())
+    assert all(len(c) == 1 for c in colours.values()), colours
+    plt.close(fig)
