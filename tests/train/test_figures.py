@@ -94,7 +94,7 @@ def test_gao2016_fig6_legend_is_outside_the_data_area():
     (ax,) = fig.axes
     legend = ax.get_legend()
     assert legend is not None
-    assert len(legend.get_texts()) == 6  # five series and the turns' shading
+    assert len(legend.get_texts()) == 7  # five series, the band and the turns' shading
     assert not _overlap(legend.get_window_extent(renderer), ax.get_window_extent(renderer))
     plt.close(fig)
 
@@ -242,6 +242,30 @@ def test_demo_summary_reads_claims_verdicts_and_stage_times(tmp_path, capsys):
     assert any(s.strip().startswith("train relay_ukf") and s.strip().endswith("1 min 15 s") for s in lines)
     assert any(s.strip().startswith("total of the stages") and s.strip().endswith("2 min 25 s") for s in lines)
     assert any(s.strip().startswith("wall clock") and s.strip().endswith("1 min 45 s") for s in lines)
+
+
+def test_gao2016_figure6_is_a_moving_mean_with_its_interval_band_and_follows_the_conventions():
+    """Each curve is the square root of the run-mean of the per-run moving mean of the squared error, and its band
+    the 95 % t-interval of that run-mean (square roots of its ends, cut at the axis where it reaches 0)."""
+    config = build_config(NlosHorizonConfig, {"num_uavs": 1})
+    rng = np.random.default_rng(3)
+    R, K = 5, config.horizon
+    res = {"afge": {"known": rng.gamma(2.0, 2.0, (R, K))}, "dfir": {"known": rng.gamma(2.0, 2.0, (R, K, 10))},
+           "kf": {"known": rng.gamma(2.0, 2.0, (R, K)), "blind": rng.gamma(4.0, 2.0, (R, K))},
+           "kf_matched": {"known": rng.gamma(2.0, 2.0, (R, K))}}
+    fig = gao2016.fig6_rmse_over_time(res, 5, config)
+    assert plotting.figure_problems(fig) == []
+    (ax,) = fig.axes
+    smooth = gao2016.moving_mse(res["afge"]["known"])
+    window = gao2016.SMOOTHING_STEPS
+    assert np.allclose(smooth[:, 50], res["afge"]["known"][:, 50 - window // 2:50 + window // 2 + 1].mean(axis=1),
+                       rtol=1e-12)
+    afge = next(line for line in ax.get_lines() if line.get_label() == "AFGE")
+    assert np.allclose(afge.get_ydata(), np.sqrt(smooth.mean(axis=0)), rtol=1e-12)
+    band = ax.collections[0].get_paths()[0].vertices
+    upper = np.sqrt(smooth.mean(axis=0) + plotting.t975(R - 1) * smooth.std(axis=0, ddof=1) / np.sqrt(R))
+    assert np.isclose(band[:, 1].max(), upper.max(), rtol=1e-12)
+    plt.close(fig)
 
 
 def test_gao2016_fig6_log_ticks_are_plain():

@@ -454,10 +454,12 @@ def _figures(folder: str, res: dict, m: dict, extra: dict, config: NlosHorizonCo
                label=f"AFGE (paper likelihood) {m['afge_paper_likelihood_rmse']:.3f}")
     ax.axhline(m["kf_oracle_rmse"], color="k", ls="-.", label=f"KF oracle {m['kf_oracle_rmse']:.3f}")
     ax.plot([best], [m["dfir_best_rmse"]], "r*", ms=12, label=f"best constant N* = {best}")
-    ax.set_xlabel("horizon size N")
+    ax.set_xlabel("horizon size N [steps]")
     ax.set_ylabel(f"time-averaged RMSE (k >= {warm}) [m]")
     ax.set_title(f"Fig. 4: RMSE vs horizon size ({m['runs']} runs)", fontsize=10)
-    ax.legend(fontsize=7)
+    fig.set_size_inches(9.5, 4)
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0, frameon=False)
+    fig.tight_layout()
     save_figure(os.path.join(folder, "fig4_rmse_vs_horizon.png"), fig)
 
     save_figure(os.path.join(folder, "fig6_rmse_over_time.png"), fig6_rmse_over_time(res, best, config))
@@ -472,50 +474,78 @@ def _figures(folder: str, res: dict, m: dict, extra: dict, config: NlosHorizonCo
     ax.plot(np.arange(K), mean_h, color="tab:red", label="mean over runs")
     ax.axhline(best, color="k", ls=":", label=f"best constant N* = {best}")
     _shade_turns(ax, config)
-    ax.set_xlabel("k [s]")
-    ax.set_ylabel("chosen horizon N")
+    ax.set_xlabel("time k [s]")
+    ax.set_ylabel("chosen horizon N [steps]")
     ax.set_title("AFGE's chosen horizon against the turn schedule (shaded)", fontsize=10)
-    ax.legend(fontsize=7)
+    fig.set_size_inches(9.5, 4)
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0, frameon=False)
+    fig.tight_layout()
     save_figure(os.path.join(folder, "horizon_over_time.png"), fig)
 
     fig, ax = plt.subplots(figsize=(8, 3.5))
     ax.plot(np.arange(K), res["received"][0], lw=0.8, color="0.5", label="run 0")
     ax.plot(np.arange(K), res["received"].mean(axis=0), color="tab:blue", label="mean over runs")
     ax.axhline(4, color="r", ls=":", label="four packets")
-    ax.set_xlabel("k [s]")
-    ax.set_ylabel("packets received")
+    ax.set_xlabel("time k [s]")
+    ax.set_ylabel("packets received [packets]")
     ax.set_title("Fig. 5(b): packets received per step", fontsize=10)
-    ax.legend(fontsize=7)
+    fig.set_size_inches(9.5, 3.5)
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0, frameon=False)
+    fig.tight_layout()
     save_figure(os.path.join(folder, "fig5b_packets_per_step.png"), fig)
 
 
+SMOOTHING_STEPS = 21  # the centred moving window of Fig. 6 (steps): the per-step RMSE over a few runs is noise
+
+
+def moving_mse(errors: np.ndarray, window: int = SMOOTHING_STEPS) -> np.ndarray:
+    """(R, K) per-run squared errors -> (R, K) their centred moving mean over ``window`` steps (fewer at the ends)."""
+    errors = np.asarray(errors, float)
+    kernel = np.ones(window)
+    sums = np.apply_along_axis(lambda row: np.convolve(row, kernel, mode="same"), 1, errors)
+    counts = np.convolve(np.ones(errors.shape[1]), kernel, mode="same")
+    return sums / counts
+
+
 def fig6_rmse_over_time(res: dict, best: int, config: NlosHorizonConfig):
-    """Fig. 6: position RMSE over time of AFGE, DFIR_N*, and the KFs; the legend sits right of the axes,
-    off the data. Returns the figure."""
+    """Fig. 6: position RMSE over time of AFGE, DFIR_N*, and the KFs, each the square root of the run-mean of a
+    centred moving mean of the squared error over ``SMOOTHING_STEPS`` steps, with the 95 % t-interval of that
+    run-mean as a band (square roots of its ends); the legend sits right of the axes, off the data. Returns the
+    figure."""
     import matplotlib.pyplot as plt
     from matplotlib.patches import Patch
+
+    from train.plotting import label, legend_outside, plain_log_ticks, t975
 
     fig, ax = plt.subplots(figsize=(9.5, 4), layout="constrained")
     K = config.horizon
     series = {"AFGE": res["afge"]["known"], f"DFIR N*={best}": res["dfir"]["known"][:, :, best - 1],
               "KF oracle": res["kf"]["known"], "KF blind": res["kf"]["blind"],
               "KF oracle, sigma_a=1": res["kf_matched"]["known"]}
+    k = np.arange(K)
+    lowest = np.inf
     for name, errors in series.items():
-        ax.semilogy(np.arange(K), np.sqrt(errors.mean(axis=0)), lw=1, label=name)
+        smooth = moving_mse(errors[:, :K])
+        runs = smooth.shape[0]
+        mean = smooth.mean(axis=0)
+        (line,) = ax.plot(k, np.sqrt(mean), lw=1.2, label=name)
+        lowest = min(lowest, float(np.sqrt(mean).min()))
+        if runs > 1:
+            half = t975(runs - 1) * smooth.std(axis=0, ddof=1) / np.sqrt(runs)
+            ax.fill_between(k, np.sqrt(np.maximum(mean - half, 1e-12)), np.sqrt(mean + half),
+                            color=line.get_color(), alpha=0.15, lw=0)
+    ax.set_yscale("log")
+    # a band whose lower end reaches 0 (a few heavy-tailed runs) is cut at the axis, not drawn to 1e-6
+    ax.set_ylim(bottom=0.5 * lowest)
     _shade_turns(ax, config)
-    # plain numbers (0.5, 1, 2, ...) on the major ticks only, never "3x10^0" on the minor ones
-    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
-
-    ax.yaxis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
-    ax.yaxis.set_major_formatter(FuncFormatter(lambda value, _pos: f"{value:g}"))
-    ax.yaxis.set_minor_formatter(NullFormatter())
-    ax.set_xlabel("k [s]")
-    ax.set_ylabel("RMSE over runs [m]")
-    ax.set_title("Fig. 6: position RMSE over time (shaded: turns)", fontsize=10)
+    plain_log_ticks(ax, "y")
+    ax.set_xlabel(label("time k", "s"))
+    ax.set_ylabel(label(f"RMSE over runs, {SMOOTHING_STEPS}-step moving mean", "m"))
+    ax.set_title(f"Fig. 6: position RMSE over time ({series['AFGE'].shape[0]} runs; shaded: turns)", fontsize=10)
     handles, labels = ax.get_legend_handles_labels()
-    handles.append(Patch(color="tab:orange", alpha=0.15))
-    labels.append("turns (config.turn_windows)")
-    ax.legend(handles, labels, fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
+    handles += [Patch(color="0.5", alpha=0.3), Patch(color="tab:orange", alpha=0.15)]
+    labels += ["95 % interval over runs (band)", "turns (config.turn_windows)"]
+    legend_outside(ax, "right", handles=handles, labels=labels, fontsize=7)
     return fig
 
 
