@@ -1063,6 +1063,9 @@ def _scaling_figure(rows: list[dict], sizes, against: str | None, path: str) -> 
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import FixedLocator, FuncFormatter, NullFormatter
+
+    from train.plotting import label, plain_log_ticks
 
     panels = list(dict.fromkeys((r["layout"], r["batch"]) for r in rows))
     fig, axes = plt.subplots(1, max(1, len(panels)), figsize=(5.4 * max(1, len(panels)), 5.2), squeeze=False)
@@ -1079,8 +1082,12 @@ def _scaling_figure(rows: list[dict], sizes, against: str | None, path: str) -> 
                 ax.loglog(n, t, style, color=color, markersize=4,
                           label=f"{row['backend']} / {row['network']}{suffix}{slope}")
         ax.set_title(f"{layout}, B = {batch}", fontsize=10)
-        ax.set_xlabel("agents N")
-        ax.set_ylabel("time per env-step [s]")
+        ax.set_xlabel(label("agents N", "agents"))
+        ax.set_ylabel(label("time per env-step", "s"))
+        ax.xaxis.set_major_locator(FixedLocator([n for n in sizes]))
+        ax.xaxis.set_major_formatter(FuncFormatter(lambda value, _pos: f"{value:g}"))
+        ax.xaxis.set_minor_formatter(NullFormatter())
+        plain_log_ticks(ax, "y")
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=6.5, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=2, frameon=False)
     fig.suptitle(f"coloc bench --scaling: gps_denied, random actions ({os.cpu_count()}-core CPU)")

@@ -531,3 +531,24 @@ def test_bench_throughput_figure_follows_the_conventions_with_one_colour_per_ser
             colours.setdefault(line.get_label(), set()).add(line.get_color())
     assert all(len(c) == 1 for c in colours.values()), colours
     plt.close(fig)
+
+
+def test_bench_scaling_figure_follows_the_conventions(monkeypatch):
+    """coloc bench --scaling's log-log figure: units on both axes, the sizes as plain x ticks, plain y ticks, the
+    legend below the panels."""
+    from train import bench
+
+    saved = _capture(monkeypatch, bench)
+    sizes = (5, 10, 20, 40, 80)
+    rows = [{"layout": layout, "batch": 8, "backend": backend, "network": "broadcast",
+             "current": {"env_steps_per_s": [rate / n ** slope for n in sizes], "exponent": slope},
+             "reference": {"env_steps_per_s": [rate / 2 / n ** slope for n in sizes[:3]] + [None, None],
+                           "exponent": slope}}
+            for layout in ("fixed area", "fixed density")
+            for backend, rate, slope in (("ukf_ccl", 2e4, 2.5), ("range_ls", 5e4, 1.0))]
+    bench._scaling_figure(rows, sizes, "REF", "scaling.png")
+    fig = saved["fig"]
+    assert plotting.figure_problems(fig) == []
+    for ax in fig.axes:
+        assert [t.get_text() for t in ax.get_xticklabels() if t.get_text()] == ["5", "10", "20", "40", "80"]
+    plt.close(fig)
