@@ -51,6 +51,8 @@ from typing import ClassVar
 
 import numpy as np
 
+from estimators.models import symmetric_root_draw
+
 __all__ = ["OdometryHeadingError"]
 
 
@@ -124,9 +126,7 @@ class OdometryHeadingError:
 
     def rvs(self, rng: np.random.Generator, state: np.ndarray, inputs: np.ndarray) -> np.ndarray:
         """One draw of the process noise per agent, shape like ``state`` (Q is rank 2: symmetric square root)."""
-        values, vectors = np.linalg.eigh(self.covar(state, inputs))
-        factor = vectors * np.sqrt(np.maximum(values, 0.0))[..., None, :]
-        return np.einsum("...ij,...j->...i", factor, rng.standard_normal(np.shape(state)))
+        return symmetric_root_draw(rng, self.covar(state, inputs), np.shape(state))
 
     @staticmethod
     def position(state: np.ndarray) -> np.ndarray:

@@ -66,13 +66,19 @@ class OdometryDisplacement:
 
         Q is often singular (rank 1 at k = 0, where the heading is known exactly), so the square root
         is the symmetric one from the eigendecomposition, not a Cholesky factor."""
-        values, vectors = np.linalg.eigh(self.covar(state, inputs))
-        factor = vectors * np.sqrt(np.maximum(values, 0.0))[..., None, :]
-        return np.einsum("...ij,...j->...i", factor, rng.standard_normal(np.shape(state)))
+        return symmetric_root_draw(rng, self.covar(state, inputs), np.shape(state))
 
     @staticmethod
     def position(state: np.ndarray) -> np.ndarray:
         return state[..., :2]
+
+
+def symmetric_root_draw(rng: np.random.Generator, cov: np.ndarray, shape) -> np.ndarray:
+    """One N(0, cov) draw per leading index, ``shape`` = cov's (..., n): S z with S the symmetric square root of
+    ``cov`` from its eigendecomposition (defined for a singular, PSD ``cov``, where a Cholesky factor is not)."""
+    values, vectors = np.linalg.eigh(cov)
+    factor = vectors * np.sqrt(np.maximum(values, 0.0))[..., None, :]
+    return np.einsum("...ij,...j->...i", factor, rng.standard_normal(shape))
 
 
 @dataclass(frozen=True)
