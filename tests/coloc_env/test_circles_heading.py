@@ -8,29 +8,15 @@ import pytest
 from scipy import stats
 
 import coloc_env
-from coloc_env.scenarios.composed import ComposedScenario
-from train.consistency import band_checks
+from train.consistency import band_checks, play
 
 EPISODES, STEPS, SEED = 20, 400, 100
 
 
 def run(backend: str, motion: str, episodes: int = EPISODES, steps: int = STEPS, **world):
     """Per-step own-position NEES (K, E, N) and per-episode mean squared position error (E,), `always` policy."""
-    spec = coloc_env.compose(world={"name": "circles", **world}, network="ideal",
-                             backend={"name": backend, "motion": motion}, horizon=steps)
-    core = ComposedScenario(spec, batch=episodes)
-    core.reset([np.random.default_rng(SEED + e) for e in range(episodes)])
-    one = core.action_vector("maximum")
-    actions = np.broadcast_to(one, (episodes, core.num_agents, one.size))
-    nees, squared = [], []
-    for _ in range(steps):
-        core.step(actions)
-        info = core.info()
-        diff = info["estimated_position"] - info["true_position"]
-        cov = core.backend.posterior_position_cov
-        nees.append(np.einsum("kna,knab,knb->kn", diff, np.linalg.inv(cov), diff))
-        squared.append(np.sum(diff**2, axis=-1))
-    return np.array(nees), np.mean(squared, axis=(0, 2))
+    nees, squared = play(backend, motion, episodes, SEED, world, horizon=steps)
+    return nees, squared.mean(axis=(0, 2))
 
 
 @pytest.fixture(scope="module")
