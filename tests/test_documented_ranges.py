@@ -30,6 +30,8 @@ from tests.test_bad_config_properties import (
     CHEAP_PART,
     CHEAP_PRESET,
     HAVE_MRCLAM,
+    make_part,
+    make_preset,
     names_field,
     partners,
 )
@@ -198,17 +200,9 @@ def names_of(target, config_cls) -> dict:
 
 def build(target, field: str, value) -> None:
     if target[0] == "preset":
-        config = {k: v for k, v in CHEAP_PRESET.get(target[1], {}).items() if k != field}
-        coloc_env.parallel_env(target[1], **config, **{field: value})
-        return
-    kind, name = target
-    trio = partners(kind, name)
-    specs = {}
-    for k in ("world", "network", "backend"):
-        cheap = {f: v for f, v in CHEAP_PART.get(trio[k], {}).items() if not (k == kind and f == field)}
-        specs[k] = {"name": trio[k], **cheap}
-    specs[kind][field] = value
-    coloc_env.parallel_env(coloc_env.compose(**specs))
+        make_preset(target[1], field, value)
+    else:
+        make_part(*target, field, value)
 
 
 def field_kind(f: dataclasses.Field) -> str:
