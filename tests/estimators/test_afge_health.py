@@ -90,20 +90,19 @@ def test_a_horizon_whose_second_stamp_carries_no_information_has_no_estimate(com
 def _run_preset(config: dict, policy: str, seed: int, steps: int) -> None:
     env = coloc_env.parallel_env("nlos_horizon", **config)
     pol = agents.make_policy(policy, env, seed=seed) if policy == "random" else agents.make_policy(policy, env)
-    obs, _ = env.reset(seed=seed)
-    for step in range(steps):
-        obs, rewards, *_ = env.step(pol.act(obs))
-        for name, cov in _covariances(env.unwrapped.scenario.backend).items():
-            _check_health(name, cov, step)
-        assert all(np.isfinite(r) for r in rewards.values()), f"reward not finite at step {step}"
+    _play_healthy(env, pol, seed, steps)
 
 
 def _run_composition(world: dict, network, backend: str, seed: int, steps: int) -> None:
     env = coloc_env.parallel_env(coloc_env.compose(world=world, network=network, backend=backend))
-    pol = agents.make_policy("random", env, seed=seed)
+    _play_healthy(env, agents.make_policy("random", env, seed=seed), seed, steps)
+
+
+def _play_healthy(env, policy, seed: int, steps: int) -> None:
+    """``steps`` steps from ``reset(seed)``: after each, every covariance of the backend healthy, rewards finite."""
     obs, _ = env.reset(seed=seed)
     for step in range(steps):
-        obs, rewards, *_ = env.step(pol.act(obs))
+        obs, rewards, *_ = env.step(policy.act(obs))
         for name, cov in _covariances(env.unwrapped.scenario.backend).items():
             _check_health(name, cov, step)
         assert all(np.isfinite(r) for r in rewards.values()), f"reward not finite at step {step}"
