@@ -268,10 +268,8 @@ PINNED_REPRODUCTION = {
     "zhao2020_greedy_exact_J50": 27.972655455118463,
     "zhao2020_paper_policy_costs_seeds0-3_sum": 107.08535205212901,
     "fu2017_centralized_own_trace_sum_L2": 2038.8361504805816,
-    # the reproduction drives the compositions: run r of the block is the lossy_fusion world and network reset with
-    # default_rng([7, 2, r]) (the link outcomes are the network's counter-based draws), no longer one block of
-    # LossyFusionConfig.sample_episodes; coloc reproduce fu2017 (500 runs) stays within 3.3 combined standard
-    # errors of d8e4812 in every value, every claim the same
+    # run r of the block is the lossy_fusion world and network reset with default_rng([7, 2, r]) (the link
+    # outcomes are the network's counter-based draws), as the reproduction drives the compositions
     "fu2017_distributed_mse_L2_5runs_seed7": 137.09716962026596,
     "wang2019_DCL_error_2runs_seed0_K100": 1.2267641113962275,
     "wang2019_IL_error_2runs_seed0_K100": 1.5412870579730336,
