@@ -105,7 +105,7 @@ import numpy as np
 import estimators.afge as af
 from coloc_env.backends.base import Backend
 from coloc_env.parts import BACKENDS, Block, PartConfig, check_choice, check_range
-from coloc_env.world.random_delay import NEVER
+from coloc_env.primitives.random_delay import NEVER
 
 INVALID_LOG_TRACE = 14.0  # log tr P shown for a horizon without an estimate (~ a 1 km spread)
 LOG_BOUND = 50.0

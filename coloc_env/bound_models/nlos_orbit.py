@@ -31,7 +31,7 @@ import numpy as np
 
 from coloc_env.bound_models import delivered_kind, estimates_reason
 from coloc_env.bounds import BoundProblem, Recursion, delivered_recursion
-from coloc_env.world.flight import OrbitParameters
+from coloc_env.primitives.flight import OrbitParameters
 from estimators.bounds import rss_aoa_information
 
 

@@ -137,11 +137,11 @@ import estimators.bandwidth_fusion as bf
 from coloc_env.backends.fusion import BandwidthFusion
 from coloc_env.config import as_array, check_choice, check_psd, check_range
 from coloc_env.networks.bandwidth import Bandwidth
+from coloc_env.primitives import BandwidthBudget, LinearMotion, LinearSensor
+from coloc_env.primitives.noise import covariance_factor, sample_gaussian
 from coloc_env.rendering import Link, Scene, ring_layout
 from coloc_env.scenarios.base import Scenario
 from coloc_env.scenarios.binding import PresetScenario
-from coloc_env.world import BandwidthBudget, LinearMotion, LinearSensor
-from coloc_env.world.noise import covariance_factor, sample_gaussian
 from coloc_env.worlds.drift import Drift
 
 _COMPONENT_NAMES = "xyzabcdefghijklmnop"

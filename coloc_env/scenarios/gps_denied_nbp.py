@@ -8,11 +8,11 @@ the contract is the reconstruction ``shared/specs/wan2014_dnbp.md`` (tags
 (LS of ref. [7], dead reckoning): ``estimators.range_ls``.
 
 N UAVs fly at a common nominal velocity in 2-D (constant-velocity model driven
-by an accelerometer, ``coloc_env.world.cv_uav.ConstantVelocityUAVs``);
+by an accelerometer, ``coloc_env.primitives.cv_uav.ConstantVelocityUAVs``);
 each GPS receiver switches between normal and fault by a Markov chain
-(``coloc_env.world.gps_markov.MarkovGPS``); UAVs within the range R
+(``coloc_env.primitives.gps_markov.MarkovGPS``); UAVs within the range R
 measure their distance and can talk
-(``coloc_env.world.range_network.RangeNetwork``). One env step is one
+(``coloc_env.primitives.range_network.RangeNetwork``). One env step is one
 time step tau: the UAVs run ``num_iterations`` NBP iterations over the
 broadcast medium with the paper's modified schedule (normal UAVs broadcast at
 iteration 0 to their fault neighbours; a fault UAV may broadcast to its fault
@@ -146,11 +146,11 @@ import estimators.dnbp as dn
 from coloc_env.backends.particles import Dnbp
 from coloc_env.config import MIN_STD, as_array, check_choice, check_entries, check_range
 from coloc_env.networks.broadcast import Broadcast
+from coloc_env.primitives.cv_uav import ConstantVelocityUAVs
+from coloc_env.primitives.gps_markov import MarkovGPS
+from coloc_env.primitives.range_network import RangeNetwork
 from coloc_env.rendering import Link, Scene
 from coloc_env.scenarios.binding import PresetScenario
-from coloc_env.world.cv_uav import ConstantVelocityUAVs
-from coloc_env.world.gps_markov import MarkovGPS
-from coloc_env.world.range_network import RangeNetwork
 from coloc_env.worlds.gps_denied import GpsDenied
 
 OBS_DIM = 8

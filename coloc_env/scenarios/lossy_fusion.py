@@ -141,11 +141,11 @@ from coloc_env.backends.fusion import PredictionCompensation
 from coloc_env.config import as_array, check_choice, check_psd, check_range
 from coloc_env.networks.bernoulli_delay import BernoulliDelay
 from coloc_env.parts import check_flag
+from coloc_env.primitives.delay_links import BernoulliDelayLink
+from coloc_env.primitives.sensors import LinearSensor
+from coloc_env.primitives.target import ConstantVelocityTarget
 from coloc_env.rendering import Link, Scene, ring_layout
 from coloc_env.scenarios.binding import PresetScenario
-from coloc_env.world.delay_links import BernoulliDelayLink
-from coloc_env.world.sensors import LinearSensor
-from coloc_env.world.target import ConstantVelocityTarget
 from coloc_env.worlds.target_cv import TargetCv
 
 AGE_SCALE = 10.0

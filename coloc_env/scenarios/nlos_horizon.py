@@ -166,12 +166,12 @@ import numpy as np
 
 import estimators.afge as af
 from coloc_env.config import ORBIT_LIMITS, as_array, check_choice, check_entries, check_range, check_step_windows
+from coloc_env.primitives.flight import OrbitingNeighbours, OrbitParameters, TurnSchedulePath
+from coloc_env.primitives.los_nlos import LosNlosChain
+from coloc_env.primitives.radio import ReceiveSearchArea, RssAoaSensor
+from coloc_env.primitives.random_delay import NEVER, BoundedRandomDelay
 from coloc_env.rendering import Link, Scene
 from coloc_env.scenarios.binding import PresetScenario
-from coloc_env.world.flight import OrbitingNeighbours, OrbitParameters, TurnSchedulePath
-from coloc_env.world.los_nlos import LosNlosChain
-from coloc_env.world.radio import ReceiveSearchArea, RssAoaSensor
-from coloc_env.world.random_delay import NEVER, BoundedRandomDelay
 
 
 @dataclass(frozen=True)

@@ -103,7 +103,7 @@ update, before the prediction to k + 1: what the paper's metric averages), ``tra
 step, 0 or 1; summed over agents = hops), ``messages_sent`` (= ``communication``: one message
 per delivered hop, at its holder) and ``floats_sent`` (that hop's payload, ``coloc_env.backends.ukf.dcl_floats``:
 10 + 5 r + 2 r (r - 1) floats with r platforms reached), ``hops`` and ``hop_cost`` (the team's, this
-step), ``chain_stop`` (index into ``coloc_env.world.relay.STOP_REASONS``, -1 without
+step), ``chain_stop`` (index into ``coloc_env.primitives.relay.STOP_REASONS``, -1 without
 a measurement), ``step``.
 
 Arguments (fields of ``RelayUKFConfig``, defaults = the paper's Sec. 4 / Table 1)
@@ -165,11 +165,11 @@ import estimators.ukf_relay as ukf
 from coloc_env.backends.ukf import UkfDcl
 from coloc_env.config import as_array, check_choice, check_entries, check_range
 from coloc_env.networks.relay import Relay
+from coloc_env.primitives.odometry import OdometrySensor, RangeSensor
+from coloc_env.primitives.relay import STOP_REASONS, RelayChain, RelayChainLinks, check_distance
+from coloc_env.primitives.unicycle import CircularTracks
 from coloc_env.rendering import Link, Scene
 from coloc_env.scenarios.binding import PresetScenario
-from coloc_env.world.odometry import OdometrySensor, RangeSensor
-from coloc_env.world.relay import STOP_REASONS, RelayChain, RelayChainLinks, check_distance
-from coloc_env.world.unicycle import CircularTracks
 from coloc_env.worlds.circles import Circles
 
 DISTANCE_SCALE = 100.0  # metres per unit in the observation

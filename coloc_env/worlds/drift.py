@@ -59,7 +59,7 @@ import numpy as np
 
 from coloc_env.config import as_array, check_psd, check_range, check_stable
 from coloc_env.parts import WORLDS, PartConfig
-from coloc_env.world.sensors import LinearSensor
+from coloc_env.primitives.sensors import LinearSensor
 from coloc_env.worlds.base import Readings, World
 from estimators.linear_models import LinearGaussian, LinearObservation
 

@@ -4,12 +4,12 @@ The world of the ``gps_denied_nbp`` scenario, drawn the same way
 (``coloc_env.scenarios.gps_denied_nbp.sample_episode``'s blocks, in its
 order, from the world's generator): N UAVs start uniformly in ``[0, side]^2``
 at the nominal velocity plus a spread and fly the constant-velocity model
-driven by a random acceleration (``coloc_env.world.cv_uav.ConstantVelocityUAVs``);
+driven by a random acceleration (``coloc_env.primitives.cv_uav.ConstantVelocityUAVs``);
 each reads a noisy accelerometer. Each GPS receiver switches between normal
-and fault by a Markov chain (``coloc_env.world.gps_markov.MarkovGPS``); a
+and fault by a Markov chain (``coloc_env.primitives.gps_markov.MarkovGPS``); a
 normal one reports a fix. UAVs within ``comm_range`` measure their distance,
 one reading per unordered pair seen by both ends
-(``coloc_env.world.range_network.RangeNetwork``). The agents start from
+(``coloc_env.primitives.range_network.RangeNetwork``). The agents start from
 the scenario's warm-start knowledge: the last fix before the loss and a noisy
 velocity.
 
@@ -65,9 +65,9 @@ import numpy as np
 
 from coloc_env.config import MIN_STD, as_array, check_entries
 from coloc_env.parts import WORLDS, PartConfig, check_range
-from coloc_env.world.cv_uav import ConstantVelocityUAVs
-from coloc_env.world.gps_markov import MarkovGPS
-from coloc_env.world.range_network import RangeNetwork
+from coloc_env.primitives.cv_uav import ConstantVelocityUAVs
+from coloc_env.primitives.gps_markov import MarkovGPS
+from coloc_env.primitives.range_network import RangeNetwork
 from coloc_env.worlds.base import Readings, World
 from estimators.cv_models import ConstantVelocityAccel
 

@@ -9,13 +9,13 @@ network's (``random_delay`` is gao2016's Assumption 3); they are drawn only to k
 stream, and so the prior, identical to the scenario's.
 
 Every agent ``uav_i`` is a target that cannot localize itself directly: it flies straight
-legs and coordinated turns (``coloc_env.world.flight.TurnSchedulePath``; uav_i starts
+legs and coordinated turns (``coloc_env.primitives.flight.TurnSchedulePath``; uav_i starts
 at (0, i * target_spacing), its turns i * schedule_shift steps later). J neighbours orbit
-each target (``coloc_env.world.flight.OrbitingNeighbours``); they are part of the world,
+each target (``coloc_env.primitives.flight.OrbitingNeighbours``); they are part of the world,
 not agents. A neighbour inside the target's receive-search area (Def. 1, r_inf <= d <=
 r_sup on the true distance) measures the RSS and the AOA of the target (spec §4,
-``coloc_env.world.radio.RssAoaSensor``), the bias of its link's LOS/NLOS Markov chain
-(``coloc_env.world.los_nlos.LosNlosChain``) included, and sends a packet stamped k
+``coloc_env.primitives.radio.RssAoaSensor``), the bias of its link's LOS/NLOS Markov chain
+(``coloc_env.primitives.los_nlos.LosNlosChain``) included, and sends a packet stamped k
 with its own navigation estimate (truth + N(0, sigma_nav^2 I)) to the target: the backend
 asks the network for its delivery (``coloc_env.networks.base.Network.node_packets``).
 
@@ -96,11 +96,11 @@ import numpy as np
 
 from coloc_env.config import ORBIT_LIMITS, as_array, check_entries, check_step_windows
 from coloc_env.parts import WORLDS, PartConfig, check_flag, check_range
+from coloc_env.primitives.flight import OrbitParameters
+from coloc_env.primitives.los_nlos import LosNlosChain
+from coloc_env.primitives.radio import ReceiveSearchArea
+from coloc_env.primitives.random_delay import NEVER
 from coloc_env.scenarios.nlos_horizon import NlosHorizonConfig, draw_episode_parts, target_paths
-from coloc_env.world.flight import OrbitParameters
-from coloc_env.world.los_nlos import LosNlosChain
-from coloc_env.world.radio import ReceiveSearchArea
-from coloc_env.world.random_delay import NEVER
 from coloc_env.worlds.base import Readings, World
 from estimators.afge import SignalModel
 from estimators.nlos_models import ConstantVelocityWhiteAccel, RssAoaModel

@@ -6,12 +6,12 @@ import pytest
 
 import coloc_env
 from coloc_env.networks.bandwidth import Bandwidth
+from coloc_env.primitives import BandwidthBudget
 from coloc_env.scenarios.bandwidth_fusion import (
     ENUMERATED_DECODE_LIMIT,
     BandwidthFusionConfig,
     BandwidthFusionScenario,
 )
-from coloc_env.world import BandwidthBudget
 
 # (num_nodes, dim, budget, min_per_link, max_per_link, exact_budget): the paper's, relaxed, empty links allowed,
 # and budgets at either end of their range

@@ -12,8 +12,8 @@ import agents
 import coloc_env
 import estimators.dnbp as dn
 from coloc_env.config import build_config
+from coloc_env.primitives.broadcast_medium import BroadcastMedium
 from coloc_env.scenarios.gps_denied_nbp import GpsDeniedNbpConfig, initial_beliefs, sample_episode
-from coloc_env.world.broadcast_medium import BroadcastMedium
 from tests.helpers import play
 
 NAME = "gps_denied_nbp"

@@ -19,8 +19,8 @@ import agents
 import coloc_env
 from coloc_env.data import mrclam
 from coloc_env.networks.relay import Relay
+from coloc_env.primitives.relay import STOP_REASONS
 from coloc_env.scenarios.mrclam_relay import MrclamRelayConfig, MrclamRelayScenario
-from coloc_env.world.relay import STOP_REASONS
 
 REPO_ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 from tests.conftest import MRCLAM_DATASET6 as DATASET6  # noqa: E402

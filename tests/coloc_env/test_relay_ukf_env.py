@@ -12,8 +12,8 @@ import coloc_env
 import estimators.ukf_relay as ur
 from agents.relay_ukf import paper_actions
 from coloc_env.config import build_config
+from coloc_env.primitives.relay import STOP_REASONS
 from coloc_env.scenarios.relay_ukf import RelayUKFConfig, RelayUKFScenario
-from coloc_env.world.relay import STOP_REASONS
 from tests.helpers import play
 
 NAME = "relay_ukf"

@@ -8,8 +8,8 @@ import pytest
 
 import estimators.afge as af
 from coloc_env.config import build_config
+from coloc_env.primitives.random_delay import NEVER
 from coloc_env.scenarios.nlos_horizon import NlosHorizonConfig, draw_episode, fused_by_stamp_and_lag, in_turn
-from coloc_env.world.random_delay import NEVER
 
 MOTION = af.MotionModel(1.0, 0.3)
 

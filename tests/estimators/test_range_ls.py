@@ -3,7 +3,7 @@
 import numpy as np
 
 import estimators.range_ls as rl
-from coloc_env.world.cv_uav import ConstantVelocityUAVs
+from coloc_env.primitives.cv_uav import ConstantVelocityUAVs
 
 ANCHORS = np.array([[0.0, 0.0], [200.0, 0.0], [0.0, 200.0], [0.0, 0.0]])
 MASK = np.array([True, True, True, False])

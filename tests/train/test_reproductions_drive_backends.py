@@ -2,7 +2,7 @@
 compute what the validated estimator code computes on the same draws.
 
 The references here are the estimators' own functions, run on the episodes the scenarios draw from the
-same generators (``relay_ukf``'s draws and relay rules, :class:`coloc_env.world.relay.RelayChainLinks`, with
+same generators (``relay_ukf``'s draws and relay rules, :class:`coloc_env.primitives.relay.RelayChainLinks`, with
 ``estimators.ukf_relay``; ``gps_denied_nbp``'s
 ``sample_episode`` with ``estimators.range_ls.step``; ``bandwidth_fusion``'s ``draw_episode`` with
 ``estimators.bandwidth_fusion.step``; the ``target_cv`` world's episodes and the ``bernoulli_delay`` network's
@@ -21,19 +21,19 @@ import estimators.range_ls as rl
 import estimators.ukf_relay as ukf
 from agents.relay_ukf import paper_actions
 from coloc_env.config import build_config
+from coloc_env.primitives.unicycle import UnicycleMotion
 from coloc_env.scenarios.bandwidth_fusion import BandwidthFusionConfig, draw_episode, paper_selection, paper_weights
 from coloc_env.scenarios.gps_denied_nbp import GpsDeniedNbpConfig, sample_episode
 from coloc_env.scenarios.lossy_fusion import LossyFusionConfig
 from coloc_env.scenarios.nlos_horizon import NlosHorizonConfig
 from coloc_env.scenarios.relay_ukf import RelayUKFConfig
-from coloc_env.world.unicycle import UnicycleMotion
 from train.reproduce import fu2017, gao2016, wan2014, wang2019, zhao2020
 
 
 def _reference_wang2019(config, copies, policy_rng):
     """Errors (3, K, runs, N) of IL, CCL and DCL by the estimator functions on the episodes drawn from
     ``copies`` in the relay_ukf scenario's order (odometry noise, schedule, range noise), with the chains
-    resolved by :class:`coloc_env.world.relay.RelayChainLinks` (the paper scenario's own delivery code,
+    resolved by :class:`coloc_env.primitives.relay.RelayChainLinks` (the paper scenario's own delivery code,
     not the network the backends ask)."""
     runs, K, N, dt = len(copies), config.horizon, config.num_platforms, config.dt
     truth, true_heading, true_speed, true_turn = config.tracks.trajectory(K)
@@ -220,8 +220,8 @@ def _reference_gao2016(config, index, generators, mode_info="known", lag0=False,
     ``nlos_horizon`` scenario of sweep setting ``index`` draws from ``generators``, with its network's delays
     (``lag0``: every late packet dropped): squared errors of target 0."""
     import estimators.afge as af
+    from coloc_env.primitives.random_delay import NEVER
     from coloc_env.scenarios.nlos_horizon import NlosHorizonScenario, fused_by_stamp_and_lag
-    from coloc_env.world.random_delay import NEVER
 
     cfg = dataclasses.replace(gao2016._setting_config(config, index), mode_info=mode_info)
     core = NlosHorizonScenario(cfg, batch=len(generators))

@@ -96,7 +96,7 @@ import estimators.dnbp as dn
 import estimators.range_ls as ls
 import estimators.ukf_relay_se2 as se2
 from coloc_env.data import mrclam
-from coloc_env.world.broadcast_medium import BroadcastMedium
+from coloc_env.primitives.broadcast_medium import BroadcastMedium
 
 SLICE_STEPS = 10  # data steps per slice: Delta t = 1 s
 PARTICLES = 100

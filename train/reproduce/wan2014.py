@@ -55,8 +55,8 @@ from coloc_env.composition import compose
 from coloc_env.config import build_config
 from coloc_env.networks import Broadcast
 from coloc_env.networks.broadcast import BroadcastNetwork
+from coloc_env.primitives.broadcast_medium import BroadcastMedium
 from coloc_env.scenarios.gps_denied_nbp import GpsDeniedNbpConfig
-from coloc_env.world.broadcast_medium import BroadcastMedium
 from coloc_env.worlds import GpsDenied
 from train.executor import map_tasks
 from train.io import save_figure, write_json, write_text

@@ -47,8 +47,8 @@ from coloc_env.backends import DeadReckoning, UkfCcl
 from coloc_env.composition import compose
 from coloc_env.config import build_config
 from coloc_env.networks import Ideal
+from coloc_env.primitives.relay import STOP_REASONS
 from coloc_env.scenarios.relay_ukf import RelayUKFConfig
-from coloc_env.world.relay import STOP_REASONS
 from estimators.models import predict_joint
 from train.executor import map_tasks
 from train.io import save_figure, write_json, write_text
