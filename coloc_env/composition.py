@@ -50,13 +50,17 @@ class Composition:
     def validate(self) -> None:
         for part in (self.world, self.network, self.backend):
             part.validate()
-        check_choice("reward", self.reward, ("error", "trace"))
-        check_range("communication_cost", self.communication_cost, 0.0, 1e12)
-        if self.horizon is not None:
-            check_range("horizon", self.horizon, 1, 1_000_000, integer=True)
+        self.check_options()
         reason = incompatibility(self.world, self.network, self.backend)
         if reason:
             raise BadInput(reason)
+
+    def check_options(self, prefix: str = "") -> None:
+        """The composition-level fields: a ``ValueError`` naming ``prefix + field`` and its range."""
+        check_choice(f"{prefix}reward", self.reward, ("error", "trace"))
+        check_range(f"{prefix}communication_cost", self.communication_cost, 0.0, 1e12)
+        if self.horizon is not None:
+            check_range(f"{prefix}horizon", self.horizon, 1, 1_000_000, integer=True)
 
     @property
     def name(self) -> str:

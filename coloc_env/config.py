@@ -28,12 +28,21 @@ class BadInput(ValueError):
 
 
 def build_config(config_cls: type[C], kwargs: dict[str, Any]) -> C:
-    """Instantiate ``config_cls(**kwargs)`` after rejecting unknown keys, then validate it."""
+    """Instantiate ``config_cls(**kwargs)`` after rejecting unknown keys, then validate it. A key listed in
+    the class's ``aliases`` (older name -> current name) is read as its current name."""
     names = {f.name for f in dataclasses.fields(config_cls)}
+    kwargs = dict(kwargs)
+    for alias, name in getattr(config_cls, "aliases", {}).items():
+        if alias in kwargs:
+            if name in kwargs:
+                raise BadInput(f"{alias} is another name of {name}; give only one of them")
+            kwargs[name] = kwargs.pop(alias)
     unknown = sorted(set(kwargs) - names)
     if unknown:
+        aliases = getattr(config_cls, "aliases", {})
+        also = f" (and their older names {sorted(aliases)})" if aliases else ""
         raise BadInput(
-            f"unknown config key(s) {unknown} for {config_cls.__name__}; allowed keys: {sorted(names)}"
+            f"unknown config key(s) {unknown} for {config_cls.__name__}; allowed keys: {sorted(names)}{also}"
         )
     config = config_cls(**kwargs)
     validate_fields(config)

@@ -10,8 +10,9 @@ something the generic composition leaves open:
 
 | hook                          | what a binding gives                                               |
 |-------------------------------|--------------------------------------------------------------------|
-| ``Config.parts()``            | the world, network and backend configs of its flat config          |
-| ``composition_options``       | composition-level fields its flat config sets (``reward``, ...)    |
+| ``Config`` (a ``PresetConfig``)| its flat config: each keyword declared with ``keyword(default,    |
+|                               | "world.field", ...)``, the part fields it sets (``parts()`` and    |
+|                               | ``validate()`` are derived from the declarations)                  |
 | ``action_space`` /            | its action codec: the paper's action, decoded into the parts'      |
 | ``decode_actions``            | blocks                                                             |
 | ``observation`` (+ ``_space``)| its observation features                                           |
@@ -23,10 +24,99 @@ something the generic composition leaves open:
 
 from __future__ import annotations
 
-from typing import ClassVar
+import dataclasses
+import re
+from typing import Any, ClassVar
 
 from coloc_env.composition import Composition
+from coloc_env.config import BadInput, field_type_problem
 from coloc_env.scenarios.composed import ComposedScenario
+
+TARGET_KINDS = ("world", "network", "backend", "composition", "preset")
+# Part checks name a field as prefix + field; with this prefix the message's field names can be told apart
+# from its prose and replaced by the preset keywords that set them.
+_FIELD_MARK = "\x1f"
+
+
+def keyword(default: Any, *targets: str) -> Any:
+    """A preset keyword: its paper default and the part fields it sets, each ``"<kind>.<field>"`` with kind
+    world, network, backend or composition, or ``"preset"`` for a keyword the preset's own codec reads
+    (checked by the config's ``check_preset``). A ``dataclasses.field`` carrying the targets as metadata."""
+    for target in targets:
+        kind = target.split(".", 1)[0]
+        if kind not in TARGET_KINDS or (kind != "preset") != ("." in target):
+            raise TypeError(f"keyword target {target!r} must be '<kind>.<field>' with kind in {TARGET_KINDS[:4]} "
+                            f"or 'preset'")
+    return dataclasses.field(default=default, metadata={"targets": targets})
+
+
+class PresetConfig:
+    """Base of a preset's flat config: a frozen dataclass whose fields are ``keyword`` declarations.
+
+    ``parts()`` builds the world, network and backend configs (classes ``World``, ``Network``, ``Backend``)
+    from the keywords' targets, ``composition_options()`` the composition-level fields; ``validate()`` runs
+    each part's own check once and reports a refused value under the keyword the user wrote
+    (``relay_ukf: num_platforms must be ...``). ``aliases`` maps older keywords to their current names
+    (``make`` and ``parallel_env`` accept both)."""
+
+    preset: ClassVar[str]
+    World: ClassVar[type]
+    Network: ClassVar[type]
+    Backend: ClassVar[type]
+    aliases: ClassVar[dict[str, str]] = {}
+
+    @classmethod
+    def bindings(cls) -> dict[str, tuple[str, ...]]:
+        """Keyword -> the targets it sets, in declaration order."""
+        return {f.name: f.metadata["targets"] for f in dataclasses.fields(cls) if "targets" in f.metadata}
+
+    def bound_fields(self, kind: str) -> dict[str, Any]:
+        """The fields of part ``kind`` the keywords set: {part field: value}."""
+        fields = {}
+        for name, targets in self.bindings().items():
+            for target in targets:
+                if target.startswith(kind + "."):
+                    fields[target.split(".", 1)[1]] = getattr(self, name)
+        return fields
+
+    def parts(self) -> tuple:
+        """The (world, network, backend) configs this flat config stands for (not yet validated)."""
+        return (self.World(**self.bound_fields("world")), self.Network(**self.bound_fields("network")),
+                self.Backend(**self.bound_fields("backend")))
+
+    def composition_options(self) -> dict[str, Any]:
+        """The composition-level fields (``reward``, ``communication_cost``, ``horizon``) the keywords set."""
+        return self.bound_fields("composition")
+
+    def check_preset(self) -> None:
+        """Checks of the keywords only the preset reads (targets ``"preset"``); none by default."""
+
+    def _keyword_of(self, kind: str, field: str) -> str:
+        for name, targets in self.bindings().items():
+            if f"{kind}.{field}" in targets:
+                return name
+        return f"{kind}.{field}"
+
+    def validate(self) -> None:
+        """Every keyword's type, then each part's own check, under the keywords' names."""
+        problem = field_type_problem(self)
+        if problem:
+            raise BadInput(f"{self.preset}: {problem}")
+        world, network, backend = self.parts()
+        composition = Composition(world, network, backend, **self.composition_options())
+        checks = {"world": world.check, "network": network.check, "backend": backend.check,
+                  "composition": composition.check_options}
+        for kind, check in checks.items():
+            try:
+                check(_FIELD_MARK)
+            except ValueError as exc:
+                message = re.sub(re.escape(_FIELD_MARK) + r"(\w+)", lambda m, kind=kind: self._keyword_of(kind, m[1]),
+                                 str(exc))
+                raise BadInput(f"{self.preset}: {message}") from exc
+        try:
+            self.check_preset()
+        except ValueError as exc:
+            raise BadInput(f"{self.preset}: {exc}") from exc
 
 
 class PresetScenario(ComposedScenario):
@@ -56,5 +146,8 @@ class PresetScenario(ComposedScenario):
 
     @classmethod
     def composition_options(cls, config) -> dict:
-        """Composition-level fields (``reward``, ``communication_cost``) the flat config sets; none by default."""
+        """Composition-level fields (``reward``, ``communication_cost``) the flat config sets: a
+        ``PresetConfig``'s declared ones (its ``horizon`` is passed separately); none by default."""
+        if isinstance(config, PresetConfig):
+            return {k: v for k, v in config.composition_options().items() if k != "horizon"}
         return {}

@@ -138,14 +138,13 @@ import numpy as np
 
 import estimators.lossy_fusion as lf
 from coloc_env.backends.fusion import PredictionCompensation
-from coloc_env.config import as_array, check_choice, check_psd, check_range
 from coloc_env.networks.bernoulli_delay import BernoulliDelay
 from coloc_env.parts import check_flag
 from coloc_env.primitives.delay_links import BernoulliDelayLink
 from coloc_env.primitives.sensors import LinearSensor
 from coloc_env.primitives.target import ConstantVelocityTarget
 from coloc_env.rendering import Link, Scene, ring_layout
-from coloc_env.scenarios.binding import PresetScenario
+from coloc_env.scenarios.binding import PresetConfig, PresetScenario, keyword
 from coloc_env.worlds.target_cv import TargetCv
 
 AGE_SCALE = 10.0
@@ -157,22 +156,28 @@ def _diag(*values):
 
 
 @dataclass(frozen=True)
-class LossyFusionConfig:
+class LossyFusionConfig(PresetConfig):
     """Configuration of ``lossy_fusion``; defaults are the paper's simulation (Sec. 4)."""
 
-    num_uavs: int = 2
-    period: float = 1.0
-    accel_noise: float = 5.0
-    measurement_noise: float = 10.0
-    initial_state: tuple = (100.0, 10.0, 100.0, 10.0, 100.0, 0.0)
-    initial_cov: tuple = _diag(100.0, 5.0, 100.0, 5.0, 100.0, 5.0)
-    on_time_probability: float = 0.4
-    late_probability: float = 0.3
-    horizon: int = 100
-    reward: str = "error"
-    message_cost: float = 0.0
-    weight_logit_scale: float = 3.0
-    time_stamps: bool = False
+    preset = "lossy_fusion"
+    World, Network, Backend = TargetCv, BernoulliDelay, PredictionCompensation
+
+    num_uavs: int = keyword(2, "world.num_agents")
+    period: float = keyword(1.0, "world.period")
+    accel_noise: float = keyword(5.0, "world.accel_noise")
+    measurement_noise: float = keyword(10.0, "world.measurement_noise")
+    initial_state: tuple = keyword((100.0, 10.0, 100.0, 10.0, 100.0, 0.0), "world.initial_state")
+    initial_cov: tuple = keyword(_diag(100.0, 5.0, 100.0, 5.0, 100.0, 5.0), "world.initial_cov")
+    on_time_probability: float = keyword(0.4, "network.on_time_probability")
+    late_probability: float = keyword(0.3, "network.late_probability")
+    horizon: int = keyword(100, "world.horizon", "composition.horizon")
+    reward: str = keyword("error", "composition.reward")
+    message_cost: float = keyword(0.0, "composition.communication_cost")
+    weight_logit_scale: float = keyword(3.0, "backend.weight_logit_scale")
+    time_stamps: bool = keyword(False, "preset")
+
+    def check_preset(self) -> None:
+        check_flag("time_stamps", self.time_stamps)
 
     @property
     def target(self) -> ConstantVelocityTarget:
@@ -185,29 +190,6 @@ class LossyFusionConfig:
     @property
     def sensor(self) -> LinearSensor:
         return LinearSensor(self.target.position_matrix, float(self.measurement_noise) * np.eye(3))
-
-    def validate(self) -> None:
-        check_range("num_uavs", self.num_uavs, 2, 16, integer=True)
-        self.target.validate()
-        check_range("measurement_noise", self.measurement_noise, 1e-6, 1e12)
-        as_array("initial_state", self.initial_state, shape=(6,), bound=1e6)
-        check_psd("initial_cov", self.initial_cov, 6, strict=True, bound=1e12)
-        self.link.validate("on_time_probability", "late_probability")
-        check_range("horizon", self.horizon, 1, 100_000, integer=True)
-        check_choice("reward", self.reward, ("error", "trace"))
-        check_range("message_cost", self.message_cost, 0.0, 1e12)
-        check_range("weight_logit_scale", self.weight_logit_scale, 0.0, 50.0, low_open=True)
-        check_flag("time_stamps", self.time_stamps)
-
-    def parts(self) -> tuple:
-        """The (world, network, backend) configs this flat config stands for: ``target_cv`` with the same
-        target, sensors and prior, ``bernoulli_delay`` with (alpha1, alpha2), ``prediction_compensation``."""
-        world = TargetCv(num_agents=self.num_uavs, period=self.period, accel_noise=self.accel_noise,
-                         measurement_noise=self.measurement_noise, initial_state=self.initial_state,
-                         initial_cov=self.initial_cov, horizon=self.horizon)
-        network = BernoulliDelay(on_time_probability=self.on_time_probability,
-                                 late_probability=self.late_probability)
-        return world, network, PredictionCompensation(weight_logit_scale=self.weight_logit_scale)
 
     def lossy_model(self) -> lf.LossyModel:
         L, target = self.num_uavs, self.target
