@@ -51,6 +51,7 @@ class PartConfig:
 
     name: ClassVar[str]
     kind: ClassVar[str]  # "world", "network" or "backend"
+    aliases: ClassVar[dict[str, str]] = {}  # older field name -> current name, accepted by make_config
 
     def check(self, prefix: str) -> None:  # pragma: no cover - interface
         """Raise ``ValueError`` naming ``prefix + field`` for a bad value."""
@@ -70,7 +71,14 @@ class PartConfig:
 
 
 def make_config(cls: type, fields: dict[str, Any], kind: str) -> PartConfig:
-    """``cls(**fields)`` after refusing unknown fields, then validated."""
+    """``cls(**fields)`` after refusing unknown fields, then validated. A field listed in the class's
+    ``aliases`` (older name -> current name) is read as its current name."""
+    fields = dict(fields)
+    for alias, name in getattr(cls, "aliases", {}).items():
+        if alias in fields:
+            if name in fields:
+                raise BadInput(f"{kind}.{alias} is another name of {kind}.{name}; give only one of them")
+            fields[name] = fields.pop(alias)
     allowed = {f.name for f in dataclasses.fields(cls)}
     unknown = sorted(set(fields) - allowed)
     if unknown:
