@@ -86,16 +86,20 @@ def _rate(fn: Callable[[], None], min_seconds: float) -> float:
 
 def _gps_denied_nbp_episode(batch: int, num_particles: int = 100):
     """(model, episode arrays stacked over B copies, initial dNBP state, per-copy generators) at the defaults."""
+    import estimators.dnbp as dn
     from coloc_env.config import build_config
-    from coloc_env.scenarios.gps_denied_nbp import GpsDeniedNbpConfig, initial_beliefs, sample_episode
+    from coloc_env.scenarios.gps_denied_nbp import GpsDeniedNbpConfig
+    from coloc_env.worlds.gps_denied import sample_episode
 
     config = build_config(GpsDeniedNbpConfig, {"num_particles": num_particles})
     model = config.estimator_model()
-    episodes = [sample_episode(config, np.random.default_rng([0, b])) for b in range(batch)]
+    episodes = [sample_episode(config.parts()[0], np.random.default_rng([0, b])) for b in range(batch)]
     rngs = [np.random.default_rng([1, b]) for b in range(batch)]
     stack = {k: np.stack([getattr(e, k) for e in episodes]) for k in
              ("gps_normal", "gps_fix", "adjacency", "ranges", "accel")}
-    return config, model, stack, initial_beliefs(config, model, episodes, rngs), rngs
+    state = dn.initial_state(model, rngs, "warm", np.stack([e.init_position for e in episodes]),
+                             np.stack([e.init_velocity for e in episodes]), config.velocity_spread)
+    return config, model, stack, state, rngs
 
 
 def _gps_denied_nbp_inputs(stack: dict, k: int) -> tuple:

@@ -137,10 +137,9 @@ class PresetScenario(ComposedScenario):
         return spec
 
     def part_generators(self, rng):
-        """The presets' rule: the world draws from the episode's generator itself, in the order the hand-wired
-        scenario it replaced drew (so seeded episodes keep their truth and readings); the network and the
-        backend draw from its first and second child. (gps_denied_nbp gives its backend the first child, as
-        its scenario always did.)"""
+        """The presets' rule: the world draws from the episode's generator itself; the network and the backend
+        draw from its first and second child. (``gps_denied_nbp``'s rule gives its backend the first child and
+        its network the second.)"""
         network, backend = rng.spawn(2)
         return rng, network, backend
 

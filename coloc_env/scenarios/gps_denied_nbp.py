@@ -260,59 +260,6 @@ class GpsDeniedNbpConfig:
             truncation=self.truncation)
 
 
-@dataclass
-class Episode:
-    """One copy's whole episode (T slices, N UAVs), drawn at reset.
-
-    ``truth`` (T, N, 4); ``accel`` (T, N, 2) readings a_hat(tau) (used to
-    predict tau + 1); ``gps_normal`` (T, N); ``gps_fix`` (T, N, 2) (NaN where
-    faulty); ``adjacency`` (T, N, N); ``ranges`` (T, N, N); ``init_position``
-    and ``init_velocity`` (N, 2): the warm-start knowledge p~_0, v~_0.
-    """
-
-    truth: np.ndarray
-    accel: np.ndarray
-    gps_normal: np.ndarray
-    gps_fix: np.ndarray
-    adjacency: np.ndarray
-    ranges: np.ndarray
-    init_position: np.ndarray
-    init_velocity: np.ndarray
-
-
-def sample_episode(config: GpsDeniedNbpConfig, rng: np.random.Generator) -> Episode:
-    """Draw an episode from ``rng`` in blocks, in a fixed order (spec §2)."""
-    N, T = config.num_uavs, config.horizon
-    motion, gps, network = config.motion, config.gps, config.network
-    position = config.area * rng.random((N, 2))
-    velocity = np.asarray(config.nominal_velocity, float) + config.velocity_spread * rng.standard_normal((N, 2))
-    if config.num_normal is None:
-        normal = gps.sample_states(rng, T, N)
-    else:
-        normal = gps.fixed_states(rng, T, N, config.num_normal)
-    true_accel, reading = motion.sample_accelerations(rng, (T, N))
-    gps_noise = gps.sample_noise(rng, (T, N))
-    range_noise = network.sample_noise(rng, (T,), N)
-    init_position = position + config.gps_std * rng.standard_normal((N, 2))
-    init_velocity = velocity + config.velocity_spread * rng.standard_normal((N, 2))
-    truth = motion.trajectory(np.concatenate([position, velocity], axis=-1), true_accel[:-1])
-    adjacency, ranges = network.measure(truth[..., :2], range_noise)
-    return Episode(truth=truth, accel=reading, gps_normal=normal,
-                   gps_fix=gps.measure(truth[..., :2], gps_noise, normal), adjacency=adjacency, ranges=ranges,
-                   init_position=init_position, init_velocity=init_velocity)
-
-
-def initial_beliefs(config: GpsDeniedNbpConfig, model: dn.DnbpModel, episodes: list[Episode],
-                    rngs: list[np.random.Generator]) -> dn.DnbpState:
-    """The tau = 0 priors of the copies (warm: last fix before the loss; cold: the box)."""
-    position = np.stack([e.init_position for e in episodes])
-    if config.init == "warm":
-        velocity = np.stack([e.init_velocity for e in episodes])
-    else:
-        velocity = np.broadcast_to(np.asarray(config.nominal_velocity, float), position.shape)
-    return dn.initial_state(model, rngs, config.init, position, velocity, config.velocity_spread)
-
-
 def bimodality(points: np.ndarray, centred: np.ndarray | None = None) -> np.ndarray:
     """Sarle's bimodality coefficient (g^2 + 1) / kappa of points (..., M, 2) along their principal axis
     (``centred``: points minus their mean, where the caller has them)."""
@@ -399,8 +346,8 @@ class GpsDeniedNbpScenario(PresetScenario):
 
     # --- dynamics ----------------------------------------------------------------
     def part_generators(self, rng):
-        # The world draws the episode from the episode's generator itself, in sample_episode's order, and the
-        # estimator takes its first child, as this scenario always did; the network (no loss by default) the second.
+        """This preset's rule: the world draws from the episode's generator itself, the backend (the particle
+        filter) from its first child, the network (lossless by default) from its second."""
         backend, network = rng.spawn(2)
         return rng, network, backend
 

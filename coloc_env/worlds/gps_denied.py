@@ -1,17 +1,21 @@
 """World ``gps_denied`` (wan2014): constant-velocity UAVs, Markov GPS faults, ranges between UAVs in range.
 
-The world of the ``gps_denied_nbp`` scenario, drawn the same way
-(``coloc_env.scenarios.gps_denied_nbp.sample_episode``'s blocks, in its
-order, from the world's generator): N UAVs start uniformly in ``[0, side]^2``
-at the nominal velocity plus a spread and fly the constant-velocity model
-driven by a random acceleration (``coloc_env.primitives.cv_uav.ConstantVelocityUAVs``);
-each reads a noisy accelerometer. Each GPS receiver switches between normal
-and fault by a Markov chain (``coloc_env.primitives.gps_markov.MarkovGPS``); a
-normal one reports a fix. UAVs within ``comm_range`` measure their distance,
-one reading per unordered pair seen by both ends
+N UAVs start uniformly in ``[0, side]^2`` at the nominal velocity plus a
+spread and fly the constant-velocity model driven by a random acceleration
+(``coloc_env.primitives.cv_uav.ConstantVelocityUAVs``); each reads a noisy
+accelerometer. Each GPS receiver switches between normal and fault by a
+Markov chain (``coloc_env.primitives.gps_markov.MarkovGPS``); a normal one
+reports a fix. UAVs within ``comm_range`` measure their distance, one reading
+per unordered pair seen by both ends
 (``coloc_env.primitives.range_network.RangeNetwork``). The agents start from
-the scenario's warm-start knowledge: the last fix before the loss and a noisy
-velocity.
+a warm start: the last fix before the loss, p~_0 = p_0 + N(0, gps_std^2 I),
+and a noisy velocity, v~_0 = v_0 + N(0, velocity_spread^2 I).
+
+``sample_episode`` draws one copy's whole episode from the copy's generator at
+reset, in blocks and in this order: start positions, start velocities, the GPS
+states (Markov chain, or ``num_normal`` fixed normal UAVs), the true
+accelerations and accelerometer readings, the GPS noise, the range noise,
+p~_0, v~_0. The truth, fixes and ranges are computed from these draws.
 
 Swarm size. With ``density`` None the start square has side ``area`` whatever
 N is (wan2014's setting): doubling N doubles every UAV's neighbours within
@@ -28,7 +32,7 @@ is the default square at N = 10).
 | anchors        | the GPS-normal UAVs of each step (a fix, sigma ``gps_std``)                         |
 | sensing action | none                                                                               |
 | observation    | 1 if my GPS is normal at this step                                                 |
-| initial belief | mean [p~_0; v~_0] (the scenario's warm start), covariance diag(gps_std^2 I2, velocity_spread^2 I2) |
+| initial belief | mean [p~_0; v~_0] (the warm start), covariance diag(gps_std^2 I2, velocity_spread^2 I2) |
 
 Arguments (``coloc_env.worlds.GpsDenied``; defaults = ``gps_denied_nbp``'s)
 
@@ -59,6 +63,7 @@ is not a known anchor.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -142,6 +147,46 @@ class GpsDenied(PartConfig):
         return GpsDeniedWorld(self, batch, horizon)
 
 
+@dataclass
+class Episode:
+    """One copy's whole episode (T steps, N UAVs): ``truth`` (T, N, 4) [p; v]; ``accel`` (T, N, 2) the
+    accelerometer readings a_hat(k) (the input from k to k + 1); ``gps_normal`` (T, N); ``gps_fix`` (T, N, 2)
+    (NaN where faulty); ``adjacency`` (T, N, N); ``ranges`` (T, N, N); ``init_position`` and
+    ``init_velocity`` (N, 2): the warm start p~_0, v~_0."""
+
+    truth: np.ndarray
+    accel: np.ndarray
+    gps_normal: np.ndarray
+    gps_fix: np.ndarray
+    adjacency: np.ndarray
+    ranges: np.ndarray
+    init_position: np.ndarray
+    init_velocity: np.ndarray
+
+
+def sample_episode(config: GpsDenied, rng: np.random.Generator, horizon: int | None = None) -> Episode:
+    """One episode of ``horizon`` steps (default ``config.horizon``) drawn from ``rng`` in the blocks and order
+    of the module docstring."""
+    N, T = config.num_agents, config.horizon if horizon is None else horizon
+    motion, gps, ranging = config.motion, config.gps, config.ranging
+    position = config.side * rng.random((N, 2))
+    velocity = np.asarray(config.nominal_velocity, float) + config.velocity_spread * rng.standard_normal((N, 2))
+    if config.num_normal is None:
+        normal = gps.sample_states(rng, T, N)
+    else:
+        normal = gps.fixed_states(rng, T, N, config.num_normal)
+    true_accel, reading = motion.sample_accelerations(rng, (T, N))
+    gps_noise = gps.sample_noise(rng, (T, N))
+    range_noise = ranging.sample_noise(rng, (T,), N)
+    init_position = position + config.gps_std * rng.standard_normal((N, 2))
+    init_velocity = velocity + config.velocity_spread * rng.standard_normal((N, 2))
+    truth = motion.trajectory(np.concatenate([position, velocity], axis=-1), true_accel[:-1])
+    adjacency, ranges = ranging.measure(truth[..., :2], range_noise)
+    fix = gps.measure(truth[..., :2], gps_noise, normal)
+    return Episode(truth=truth, accel=reading, gps_normal=normal, gps_fix=fix, adjacency=adjacency, ranges=ranges,
+                   init_position=init_position, init_velocity=init_velocity)
+
+
 class GpsDeniedWorld(World):
     symmetric_ranges = True
     agent_prefix = "uav"
@@ -166,27 +211,11 @@ class GpsDeniedWorld(World):
         return self.config.gps_std**2
 
     def draw_episode(self, rngs, idx) -> None:
-        """Each copy's episode in the blocks and order of ``gps_denied_nbp.sample_episode``."""
-        c = self.config
-        N, T = c.num_agents, self.horizon
-        motion, gps, ranging = c.motion, c.gps, c.ranging
-        side = c.side
+        """Each copy's episode (``sample_episode``) from its own generator."""
         for b, rng in zip(idx, rngs, strict=True):
-            position = side * rng.random((N, 2))
-            velocity = np.asarray(c.nominal_velocity, float) + c.velocity_spread * rng.standard_normal((N, 2))
-            if c.num_normal is None:
-                normal = gps.sample_states(rng, T, N)
-            else:
-                normal = gps.fixed_states(rng, T, N, c.num_normal)
-            true_accel, reading = motion.sample_accelerations(rng, (T, N))
-            gps_noise = gps.sample_noise(rng, (T, N))
-            range_noise = ranging.sample_noise(rng, (T,), N)
-            self.init_position[b] = position + c.gps_std * rng.standard_normal((N, 2))
-            self.init_velocity[b] = velocity + c.velocity_spread * rng.standard_normal((N, 2))
-            truth = motion.trajectory(np.concatenate([position, velocity], axis=-1), true_accel[:-1])
-            self.truth[b], self.accel[b], self.gps_normal[b] = truth, reading, normal
-            self.gps_fix[b] = gps.measure(truth[..., :2], gps_noise, normal)
-            self.adjacency[b], self.ranges[b] = ranging.measure(truth[..., :2], range_noise)
+            episode = sample_episode(self.config, rng, self.horizon)
+            for field in dataclasses.fields(Episode):
+                getattr(self, field.name)[b] = getattr(episode, field.name)
 
     def _slice(self, array: np.ndarray) -> np.ndarray:
         """Time k's slice (B, ...) of an episode array; the last slice after the horizon."""

@@ -7,7 +7,8 @@ import agents
 import coloc_env
 import estimators.dnbp as dn
 from coloc_env.primitives.broadcast_medium import BroadcastMedium
-from coloc_env.scenarios.gps_denied_nbp import GpsDeniedNbpConfig, initial_beliefs, sample_episode
+from coloc_env.scenarios.gps_denied_nbp import GpsDeniedNbpConfig
+from coloc_env.worlds.gps_denied import sample_episode
 
 DNBP_SMALL = {"name": "dnbp", "num_particles": 50}
 
@@ -37,10 +38,11 @@ def test_dnbp_over_broadcast_equals_the_estimator_on_the_scenarios_episode():
     truth, estimates, _, _, env = _run(spec, seed, steps)
     config = GpsDeniedNbpConfig(num_particles=50)
     world_rng, _, backend_rng = np.random.default_rng(seed).spawn(3)  # the composition's children of the seed
-    episode = sample_episode(config, world_rng)
+    episode = sample_episode(config.parts()[0], world_rng)
     np.testing.assert_array_equal(env.unwrapped.scenario.world.truth[0], episode.truth)
     model = config.estimator_model()
-    state = initial_beliefs(config, model, [episode], [backend_rng])
+    state = dn.initial_state(model, [backend_rng], "warm", episode.init_position[None], episode.init_velocity[None],
+                             config.velocity_spread)
     ones = np.ones((1, config.num_uavs, config.num_iterations), bool)
     for k in range(steps):
         state, result = dn.step(model, state, episode.gps_normal[k][None], episode.gps_fix[k][None],

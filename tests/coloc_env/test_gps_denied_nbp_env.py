@@ -13,7 +13,8 @@ import coloc_env
 import estimators.dnbp as dn
 from coloc_env.config import build_config
 from coloc_env.primitives.broadcast_medium import BroadcastMedium
-from coloc_env.scenarios.gps_denied_nbp import GpsDeniedNbpConfig, initial_beliefs, sample_episode
+from coloc_env.scenarios.gps_denied_nbp import GpsDeniedNbpConfig
+from coloc_env.worlds.gps_denied import sample_episode
 from tests.helpers import play
 
 NAME = "gps_denied_nbp"
@@ -145,10 +146,11 @@ def test_env_with_paper_policy_equals_the_estimator_called_directly():
     # the same episode and estimator generator, rebuilt from the seed exactly as reset does
     config = build_config(GpsDeniedNbpConfig, SMALL)
     rng = np.random.default_rng(7)
-    episode = sample_episode(config, rng)
+    episode = sample_episode(config.parts()[0], rng)
     estimator_rng = rng.spawn(1)[0]
     model = config.estimator_model()
-    state = initial_beliefs(config, model, [episode], [estimator_rng])
+    state = dn.initial_state(model, [estimator_rng], "warm", episode.init_position[None], episode.init_velocity[None],
+                             config.velocity_spread)
     for k in range(config.horizon):
         observations, rewards, _, _, infos = env.step(policy.act(observations))
         state, result = dn.step(model, state, episode.gps_normal[k][None], episode.gps_fix[k][None],

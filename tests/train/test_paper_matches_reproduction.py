@@ -69,15 +69,16 @@ def _wan2014_by_the_estimator_function(seeds, config) -> np.ndarray:
     on ``sample_episode``'s draws (all broadcasts the schedule allows): no backend, no network, no env."""
     import estimators.dnbp as dn
     from coloc_env.primitives.broadcast_medium import BroadcastMedium
-    from coloc_env.scenarios.gps_denied_nbp import initial_beliefs, sample_episode
+    from coloc_env.worlds.gps_denied import sample_episode
 
     model = config.estimator_model()
     costs = []
     for s in seeds:
         rng = np.random.default_rng(s)
-        episode = sample_episode(config, rng)
+        episode = sample_episode(config.parts()[0], rng)
         estimator_rng = rng.spawn(1)[0]
-        state = initial_beliefs(config, model, [episode], [estimator_rng])
+        state = dn.initial_state(model, [estimator_rng], "warm", episode.init_position[None],
+                                 episode.init_velocity[None], config.velocity_spread)
         errors, fault = [], []
         ones = np.ones((1, config.num_uavs, config.num_iterations), bool)
         for k in range(config.horizon):

@@ -3,7 +3,7 @@ compute what the validated estimator code computes on the same draws.
 
 The references here are the estimators' own functions, run on the episodes the scenarios draw from the
 same generators (``relay_ukf``'s draws and relay rules, :class:`coloc_env.primitives.relay.RelayChainLinks`, with
-``estimators.ukf_relay``; ``gps_denied_nbp``'s
+``estimators.ukf_relay``; the ``gps_denied`` world's
 ``sample_episode`` with ``estimators.range_ls.step``; ``bandwidth_fusion``'s ``draw_episode`` with
 ``estimators.bandwidth_fusion.step``; the ``target_cv`` world's episodes and the ``bernoulli_delay`` network's
 link outcomes with ``estimators.lossy_fusion``'s filters), so a change in the backends, the worlds or the
@@ -23,10 +23,11 @@ from agents.relay_ukf import paper_actions
 from coloc_env.config import build_config
 from coloc_env.primitives.unicycle import UnicycleMotion
 from coloc_env.scenarios.bandwidth_fusion import BandwidthFusionConfig, draw_episode, paper_selection, paper_weights
-from coloc_env.scenarios.gps_denied_nbp import GpsDeniedNbpConfig, sample_episode
+from coloc_env.scenarios.gps_denied_nbp import GpsDeniedNbpConfig
 from coloc_env.scenarios.lossy_fusion import LossyFusionConfig
 from coloc_env.scenarios.nlos_horizon import NlosHorizonConfig
 from coloc_env.scenarios.relay_ukf import RelayUKFConfig
+from coloc_env.worlds.gps_denied import sample_episode
 from train.reproduce import fu2017, gao2016, wan2014, wang2019, zhao2020
 
 
@@ -112,7 +113,7 @@ def test_wang2019_rig_flies_the_configured_layout_and_matches_the_reference_on_i
 def test_wan2014_ls_and_dr_backends_equal_the_estimator_on_the_same_episodes():
     config = build_config(GpsDeniedNbpConfig, {"num_uavs": 8, "horizon": 12, "num_particles": 30})
     world_seeds = [[6, r] for r in range(3)]
-    episodes = [sample_episode(config, np.random.default_rng(s)) for s in world_seeds]
+    episodes = [sample_episode(config.parts()[0], np.random.default_rng(s)) for s in world_seeds]
     out = wan2014.run_methods(config, [np.random.default_rng(s) for s in world_seeds],
                               [np.random.default_rng([6, 100_000 + r]) for r in range(3)], names=("ls", "dr"))
     motion = config.motion

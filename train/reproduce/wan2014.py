@@ -187,7 +187,7 @@ class Rig:
     Each step is ``coloc_env.scenarios.composed.ComposedScenario.step``'s: the world's readings of
     time k, the network's link state of time k and its transmit decisions, the backend's update of k (the
     estimate scored at k) and its prediction to k + 1, then the world moves. The world of copy r is reset
-    with ``world_rngs[r]`` itself (the draws of ``gps_denied_nbp.sample_episode``, in its order), dnbp
+    with ``world_rngs[r]`` itself (``coloc_env.worlds.gps_denied.sample_episode``), dnbp
     with ``estimator_rngs[r]``; the networks (lossless: no draw matters) get a child of the world's
     generator.
     ``seconds`` accumulates each method's time in its network and backend calls.
@@ -261,7 +261,7 @@ def paper_policy_costs(seeds, config: GpsDeniedNbpConfig | None = None) -> np.nd
     draws for ``seeds``.
 
     As ``env.reset(seed=seeds[e])`` does, episode e is drawn from ``rng = default_rng(seeds[e])`` (the
-    ``gps_denied`` world draws ``gps_denied_nbp.sample_episode``'s blocks in its order) and its
+    ``gps_denied`` world draws it with ``sample_episode``) and its
     estimator generator is ``rng.spawn(1)[0]``; dNBP runs through the ``dnbp`` backend
     (``run_methods``).
     """
