@@ -90,9 +90,10 @@ def _gps_denied_nbp_episode(batch: int, num_particles: int = 100):
     from coloc_env.config import build_config
     from coloc_env.scenarios.gps_denied_nbp import GpsDeniedNbpConfig
     from coloc_env.worlds.gps_denied import sample_episode
+    from train.reproduce.wan2014 import dnbp_model
 
     config = build_config(GpsDeniedNbpConfig, {"num_particles": num_particles})
-    model = config.estimator_model()
+    model = dnbp_model(config)
     episodes = [sample_episode(config.parts()[0], np.random.default_rng([0, b])) for b in range(batch)]
     rngs = [np.random.default_rng([1, b]) for b in range(batch)]
     stack = {k: np.stack([getattr(e, k) for e in episodes]) for k in

@@ -3,26 +3,23 @@
 Paper: Wan, Zhong, Zhang, "Cooperative localization of multi-UAVs via dynamic
 nonparametric belief propagation under GPS signal loss condition", IJDSN 2014
 (seed ``003_44c6eab8acc44e0f.txt``). Its equations were lost in extraction;
-the contract is the reconstruction ``shared/specs/wan2014_dnbp.md`` (tags
-[paper] / [chosen] as there). Estimator: ``estimators.dnbp``; baselines
-(LS of ref. [7], dead reckoning): ``estimators.range_ls``.
+the model is the reconstruction in ``docs/wan2014.md`` (tags [paper] /
+[chosen] as there). Estimator: ``estimators.dnbp``; baselines (LS of ref. [7],
+dead reckoning): ``estimators.range_ls``.
 
-N UAVs fly at a common nominal velocity in 2-D (constant-velocity model driven
-by an accelerometer, ``coloc_env.primitives.cv_uav.ConstantVelocityUAVs``);
-each GPS receiver switches between normal and fault by a Markov chain
-(``coloc_env.primitives.gps_markov.MarkovGPS``); UAVs within the range R
-measure their distance and can talk
-(``coloc_env.primitives.range_network.RangeNetwork``). One env step is one
-time step tau: the UAVs run ``num_iterations`` NBP iterations over the
-broadcast medium with the paper's modified schedule (normal UAVs broadcast at
-iteration 0 to their fault neighbours; a fault UAV may broadcast to its fault
-neighbours once it has heard from theta distinct neighbours, theta = 3 -> 2 -> 1),
-then every belief is propagated to tau + 1. The agents decide what the paper
-fixes: whether to use each broadcast opportunity the schedule gives them.
+N UAVs fly at a common nominal velocity in 2-D, each GPS receiver switches
+between normal and fault by a Markov chain, UAVs within the range R measure
+their distance and can talk: the ``gps_denied`` world, which draws each
+episode (``coloc_env.worlds.gps_denied``). One env step is one time step tau:
+the UAVs run ``num_iterations`` NBP iterations over the broadcast medium with
+the paper's modified schedule (normal UAVs broadcast at iteration 0 to their
+fault neighbours; a fault UAV may broadcast to its fault neighbours once it
+has heard from theta distinct neighbours, theta = 3 -> 2 -> 1), then every
+belief is propagated to tau + 1. The agents decide what the paper fixes:
+whether to use each broadcast opportunity the schedule gives them.
 
-Action (per UAV, ``MultiDiscrete([2] * num_iterations)``, int64; ``MultiBinary`` before issue 14,
-which RLlib's PPO refuses)
-------------------------------------------------------------------------------------------------
+Action (per UAV, ``MultiDiscrete([2] * num_iterations)``, int64)
+-----------------------------------------------------------------
 | index | meaning                                                                              |
 |-------|--------------------------------------------------------------------------------------|
 | ``n`` | 1 = broadcast my message in NBP iteration n of this step if the schedule allows it;  |
@@ -51,25 +48,28 @@ about the coming step tau
 |       | of the distinct UAVs each heard from in the previous step, / (N - 1) (0 without |
 |       | neighbours and at reset) [chosen: each UAV's count rides on its beacon]          |
 
-Entry 4 alone is unbounded: a lost fault UAV's prior spreads without limit. (Before, entry 5 was
-bounded by [0, inf) too.)
-
-Entry 7 was added for learning (issue 15): a broadcast helps most where the neighbours heard
-little; without it a UAV knew only its own count (entry 3).
+Entry 4 alone is unbounded: a lost fault UAV's prior spreads without limit. Entry 7 serves
+learning: a broadcast helps most where the neighbours heard little, which entry 3 (the UAV's own
+count) does not show.
 
 Truth is used only in the reward, never in observations. ``state()``
 (centralized critic): every agent's observation, then log(1 + e_s) of the
 last step's errors.
 
-Reward (metres; spec §9)
-------------------------
-| ``reward=``  | value after step tau                                                                 |
-|--------------|--------------------------------------------------------------------------------------|
-| ``"team"``   | every UAV: -mean_{s in F_tau} e_{s,tau} - broadcast_cost * (broadcasts of all UAVs)   |
-|              | (0 error term when no GPS is faulty); e = ||p_hat - p|| of the belief mean           |
-| ``"own"``    | each UAV: -e_{s,tau} - broadcast_cost * (its own broadcasts)                         |
+Reward (metres, the unit of ``error``: a distance)
+--------------------------------------------------
+e_s = ||p_hat_s - p_s|| of the belief mean at tau; sigma_s = sqrt(tr Cov_s), the RMS
+of the belief particles' positions (the ``trace`` info key is tr Cov_s, m^2); F_tau the
+UAVs whose GPS is faulty at tau; lambda = ``communication_cost``.
 
-The spec's optional particle-count action (and its lambda_M term) is not implemented.
+| ``reward=`` | ``team_reward=True`` (every UAV)                   | ``team_reward=False`` (each UAV s) |
+|-------------|-----------------------------------------------------|-------------------------------------|
+| ``"error"`` | -mean_{s in F_tau} e_s - lambda (all broadcasts)     | -e_s - lambda (its own broadcasts)  |
+| ``"trace"`` | -mean_{s in F_tau} sigma_s - lambda (all broadcasts) | -sigma_s - lambda (its broadcasts)  |
+
+The mean over F_tau is 0 when no GPS is faulty. A broadcast is counted as the schedule
+counts it (``infos["broadcasts"]``), heard or not. The reconstruction's optional
+particle-count action (and its lambda_M term) is not implemented.
 
 Termination: none; truncation after ``horizon`` steps (T = 30 [chosen]).
 
@@ -78,37 +78,34 @@ Termination: none; truncation after ``horizon`` steps (T = 30 [chosen]).
 belief particles' sample covariance), ``fault`` (GPS faulty at tau), ``broadcasts`` (this
 step, as the schedule counts them), ``communication`` (= broadcasts: what ``coloc
 evaluate`` counts), ``messages_sent`` (the network's count at the sender: one per
-broadcast that reached a listener; before issue 14 this key counted directed
-deliveries), ``floats_sent`` (3 M + 1 floats per message), ``messages_received``
-(directed: the messages this UAV took), ``neighbours``, ``step``. At reset the estimate
-is the tau = 0 prior mean.
+broadcast that reached a listener), ``floats_sent`` (3 M + 1 floats per message),
+``messages_received`` (directed: the messages this UAV took), ``neighbours``, ``step``.
+At reset the estimate is the tau = 0 prior mean.
 
-Composition: a binding (``coloc_env.scenarios.binding``) of world ``gps_denied``
-(the same flight, GPS chain and ranging), network ``broadcast`` (radius ``comm_range``,
-no loss) and backend ``dnbp`` (``init`` included); ``coloc_env.PRESETS["gps_denied_nbp"]``
-is that composition. The world draws from the episode's generator itself and the
-estimator from its first child, as before the core, so the same seed and actions give
-the same numbers bit for bit.
+Composition: a binding (``coloc_env.scenarios.binding``) of world ``gps_denied``,
+network ``broadcast`` (radius ``comm_range``, no loss) and backend ``dnbp``;
+``coloc_env.PRESETS["gps_denied_nbp"]`` is that composition. Generators: the world
+draws from the episode's generator itself, the backend from its first child, the
+network from its second (``part_generators``).
 
-Batching and seeding: reset draws each copy's whole episode (truth,
-accelerometer, GPS chain and fixes, ranges, the warm-start knowledge) from the
-copy's generator in blocks, then spawns the copy's estimator generator from
-it; steps are one batched call of ``estimators.dnbp.step`` (through the backend,
-each iteration's delivery asked of the network) over copies,
-particles and messages. What remains a loop over copies is the drawing of the
-particle filter's random numbers (resampling, proposals, message directions):
-each copy draws its block from its own estimator generator, so copy b of a
-batch is bit-identical to the same seed run alone.
+Batching and seeding: reset draws each copy's whole episode from the copy's
+generator in blocks (``coloc_env.worlds.gps_denied.sample_episode``); steps are
+one batched call of ``estimators.dnbp.step`` (through the backend, each
+iteration's delivery asked of the network) over copies, particles and
+messages. What remains a loop over copies is the drawing of the particle
+filter's random numbers (resampling, proposals, message directions): each copy
+draws its block from its own estimator generator, so copy b of a batch is
+bit-identical to the same seed run alone.
 
-Arguments (fields of ``GpsDeniedNbpConfig``, defaults = spec §1)
-------------------------------------------------------------------
+Arguments (fields of ``GpsDeniedNbpConfig``, defaults = docs/wan2014.md section 1)
+--------------------------------------------------------------------------------
 | field              | default     | allowed                   | tag / meaning                                |
 |--------------------|-------------|---------------------------|----------------------------------------------|
-| num_uavs           | 10          | 2..64                     | N [chosen]                                   |
+| num_uavs           | 10          | 2..128                    | N [chosen]                                   |
 | horizon            | 30          | 1..10000                  | T [chosen] (50 allowed)                      |
 | dt                 | 1.0         | (0, 1000]                 | Delta t [chosen]                             |
 | area               | 500         | (0, 1e7]                  | initial positions ~ U([0, area]^2) [chosen]  |
-| nominal_velocity   | (20, 0)     | (2,) entries in [-1e4, 1e4] | v_nom [chosen]                               |
+| nominal_velocity   | (20, 0)     | (2,) entries in [-1e4, 1e4] | v_nom [chosen]                             |
 | velocity_spread    | 2.0         | [0, 1e4]                  | sigma_v0 [chosen]                            |
 | accel_std          | 0.5         | [0, 1000]                 | sigma_a,true [chosen]                        |
 | accel_noise_std    | 0.3         | [0.001, 1000]             | sigma_acc [chosen]                           |
@@ -128,136 +125,85 @@ Arguments (fields of ``GpsDeniedNbpConfig``, defaults = spec §1)
 | initial_threshold  | 3           | 1..N                      | theta_0 [paper]                              |
 | schedule           | "modified"  | "modified", "parallel"    | Sec. 3.4 [paper]; parallel = ablation        |
 | kernel             | "truncated" | "exact", "truncated"      | belief-update mixture kernel [chosen]; the   |
-|                    |             |                           | truncated one approximates (estimators.dnbp; |
-|                    |             |                           | the default since issue 18, "exact" before)  |
+|                    |             |                           | truncated one approximates (estimators.dnbp) |
 | truncation         | 6.0         | [1, 10] bandwidths        | r of the truncated kernel [chosen]           |
-| reward             | "team"      | "team", "own"             | see the reward table                         |
-| broadcast_cost     | 0.0         | [0, 1e12]                 | lambda_c, metres per broadcast               |
+| reward             | "error"     | "error", "trace"          | the reward table; the older "team" and "own" |
+|                    |             |                           | are read as "error" with team_reward True /  |
+|                    |             |                           | False                                        |
+| team_reward        | True        | True, False               | the reward table's columns                   |
+| communication_cost | 0.0         | [0, 1e12]                 | lambda, metres per broadcast (older name:    |
+|                    |             |                           | ``broadcast_cost``)                          |
+
+Each keyword sets the part field of the same name (``num_uavs``: the world's ``num_agents``;
+``comm_range``: the world's ranging radius and the network's; ``horizon``, ``reward`` and
+``communication_cost``: the composition's); each check is the part's.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import gymnasium
 import numpy as np
 
-import estimators.dnbp as dn
 from coloc_env.backends.particles import Dnbp
-from coloc_env.config import MIN_STD, as_array, check_choice, check_entries, check_range
+from coloc_env.config import check_range
 from coloc_env.networks.broadcast import Broadcast
-from coloc_env.primitives.cv_uav import ConstantVelocityUAVs
-from coloc_env.primitives.gps_markov import MarkovGPS
-from coloc_env.primitives.range_network import RangeNetwork
-from coloc_env.rendering import Link, Scene
-from coloc_env.scenarios.binding import PresetScenario
+from coloc_env.parts import check_flag
+from coloc_env.rendering import Scene
+from coloc_env.scenarios.binding import PresetConfig, PresetScenario, keyword
 from coloc_env.worlds.gps_denied import GpsDenied
 
 OBS_DIM = 8
 
 
 @dataclass(frozen=True)
-class GpsDeniedNbpConfig:
-    """Configuration of ``gps_denied_nbp``; defaults are spec §1 (mostly [chosen])."""
+class GpsDeniedNbpConfig(PresetConfig):
+    """Configuration of ``gps_denied_nbp``; defaults are docs/wan2014.md's (mostly [chosen])."""
 
-    num_uavs: int = 10
-    horizon: int = 30
-    dt: float = 1.0
-    area: float = 500.0
-    nominal_velocity: tuple = (20.0, 0.0)
-    velocity_spread: float = 2.0
-    accel_std: float = 0.5
-    accel_noise_std: float = 0.3
-    gps_std: float = 3.0
-    range_std: float = 2.0
-    comm_range: float = 300.0
-    p_normal_to_fault: float = 0.02
-    p_fault_to_normal: float = 0.02
-    num_normal: int | None = None
-    num_particles: int = 100
-    num_iterations: int = 5
-    oversampling: int = 2
-    defensive_weight: float = 0.01
-    init: str = "warm"
-    box_margin: float = 150.0
-    min_bandwidth: float = 0.5
-    initial_threshold: int = 3
-    schedule: str = "modified"
-    kernel: str = "truncated"
-    truncation: float = 6.0
-    reward: str = "team"
-    broadcast_cost: float = 0.0
+    preset = "gps_denied_nbp"
+    World, Network, Backend = GpsDenied, Broadcast, Dnbp
+    aliases = {"broadcast_cost": "communication_cost"}
 
-    @property
-    def motion(self) -> ConstantVelocityUAVs:
-        return ConstantVelocityUAVs(self.dt, self.accel_std, self.accel_noise_std)
+    num_uavs: int = keyword(10, "world.num_agents")
+    horizon: int = keyword(30, "world.horizon", "composition.horizon")
+    dt: float = keyword(1.0, "world.dt")
+    area: float = keyword(500.0, "world.area")
+    nominal_velocity: tuple = keyword((20.0, 0.0), "world.nominal_velocity")
+    velocity_spread: float = keyword(2.0, "world.velocity_spread")
+    accel_std: float = keyword(0.5, "world.accel_std")
+    accel_noise_std: float = keyword(0.3, "world.accel_noise_std")
+    gps_std: float = keyword(3.0, "world.gps_std")
+    range_std: float = keyword(2.0, "world.range_std")
+    comm_range: float = keyword(300.0, "world.comm_range", "network.comm_range")
+    p_normal_to_fault: float = keyword(0.02, "world.p_normal_to_fault")
+    p_fault_to_normal: float = keyword(0.02, "world.p_fault_to_normal")
+    num_normal: int | None = keyword(None, "world.num_normal")
+    num_particles: int = keyword(100, "backend.num_particles")
+    num_iterations: int = keyword(5, "backend.num_iterations")
+    oversampling: int = keyword(2, "backend.oversampling")
+    defensive_weight: float = keyword(0.01, "backend.defensive_weight")
+    init: str = keyword("warm", "backend.init")
+    box_margin: float = keyword(150.0, "backend.box_margin")
+    min_bandwidth: float = keyword(0.5, "backend.min_bandwidth")
+    initial_threshold: int = keyword(3, "backend.initial_threshold")
+    schedule: str = keyword("modified", "backend.schedule")
+    kernel: str = keyword("truncated", "backend.kernel")
+    truncation: float = keyword(6.0, "backend.truncation")
+    reward: str = keyword("error", "composition.reward")
+    team_reward: bool = keyword(True, "preset")
+    communication_cost: float = keyword(0.0, "composition.communication_cost")
 
-    @property
-    def gps(self) -> MarkovGPS:
-        return MarkovGPS(self.p_normal_to_fault, self.p_fault_to_normal, self.gps_std)
+    def __post_init__(self):
+        if isinstance(self.reward, str) and self.reward in ("team", "own"):  # the older spelling
+            object.__setattr__(self, "team_reward", self.reward == "team")
+            object.__setattr__(self, "reward", "error")
 
-    @property
-    def network(self) -> RangeNetwork:
-        return RangeNetwork(self.comm_range, self.range_std)
-
-    def validate(self) -> None:
-        check_range("num_uavs", self.num_uavs, 2, 64, integer=True)
-        check_range("horizon", self.horizon, 1, 10_000, integer=True)
-        check_range("area", self.area, 0.0, 1e7, low_open=True)
-        check_entries("nominal_velocity", as_array("nominal_velocity", self.nominal_velocity, shape=(2,)), -1e4, 1e4)
-        check_range("velocity_spread", self.velocity_spread, 0.0, 1e4)
-        check_range("dt", self.dt, 0.0, 1e3, low_open=True)
-        check_range("accel_std", self.accel_std, 0.0, 1e3)
-        # the particle filter divides by these squared (kernel bandwidths, likelihoods): coloc_env.config.MIN_STD
-        check_range("accel_noise_std", self.accel_noise_std, MIN_STD, 1e3)
-        check_range("gps_std", self.gps_std, MIN_STD, 1e4)
-        check_range("range_std", self.range_std, MIN_STD, 1e4)
-        for part in (self.motion, self.gps, self.network):  # the fields above are checked under their own names
-            part.validate()
-        if self.num_normal is not None:
-            check_range("num_normal", self.num_normal, 0, self.num_uavs, integer=True, high_label="num_uavs")
-        check_range("num_particles", self.num_particles, 2, 5000, integer=True)
-        check_range("num_iterations", self.num_iterations, 1, 20, integer=True)
-        check_range("oversampling", self.oversampling, 1, 16, integer=True)
-        check_range("defensive_weight", self.defensive_weight, 0.0, 0.999)
-        check_choice("init", self.init, ("warm", "cold"))
-        check_range("box_margin", self.box_margin, 0.0, 1e7)
-        check_range("min_bandwidth", self.min_bandwidth, MIN_STD, 1e4)
-        check_range("initial_threshold", self.initial_threshold, 1, self.num_uavs, integer=True,
-                    high_label="num_uavs")
-        check_choice("schedule", self.schedule, ("modified", "parallel"))
-        check_choice("kernel", self.kernel, dn.KERNELS)
-        check_range("truncation", self.truncation, *dn.TRUNCATION_RANGE)
-        check_choice("reward", self.reward, ("team", "own"))
-        check_range("broadcast_cost", self.broadcast_cost, 0.0, 1e12)
-
-    def parts(self) -> tuple:
-        """The (world, network, backend) configs this flat config stands for: ``gps_denied`` with the same
-        flight, GPS chain and ranging, ``broadcast`` over the ranging radius without loss, ``dnbp``."""
-        world = GpsDenied(num_agents=self.num_uavs, horizon=self.horizon, dt=self.dt, area=self.area,
-                          nominal_velocity=self.nominal_velocity, velocity_spread=self.velocity_spread,
-                          accel_std=self.accel_std, accel_noise_std=self.accel_noise_std, gps_std=self.gps_std,
-                          range_std=self.range_std, comm_range=self.comm_range,
-                          p_normal_to_fault=self.p_normal_to_fault, p_fault_to_normal=self.p_fault_to_normal,
-                          num_normal=self.num_normal)
-        backend = Dnbp(num_particles=self.num_particles, num_iterations=self.num_iterations,
-                       oversampling=self.oversampling, defensive_weight=self.defensive_weight,
-                       box_margin=self.box_margin, min_bandwidth=self.min_bandwidth,
-                       initial_threshold=self.initial_threshold, schedule=self.schedule, init=self.init,
-                       kernel=self.kernel, truncation=self.truncation)
-        return world, Broadcast(comm_range=self.comm_range, loss=0.0), backend
-
-    def estimator_model(self) -> dn.DnbpModel:
-        """The dNBP parameters; the defensive box covers the whole flight (spec §4.3)."""
-        travel = float(np.linalg.norm(self.nominal_velocity)) * self.dt * self.horizon
-        m = self.box_margin
-        return dn.DnbpModel(
-            dt=self.dt, accel_noise_std=self.accel_noise_std, gps_std=self.gps_std, range_std=self.range_std,
-            num_particles=self.num_particles, num_iterations=self.num_iterations, oversampling=self.oversampling,
-            defensive_weight=self.defensive_weight, defensive_box=(-m, self.area + m + travel),
-            cold_box=(-m, self.area + m), min_bandwidth=self.min_bandwidth,
-            initial_threshold=self.initial_threshold, schedule=self.schedule, kernel=self.kernel,
-            truncation=self.truncation)
+    def check_preset(self) -> None:
+        check_flag("team_reward", self.team_reward)
+        # the backend's threshold against the world's N: a rule between two parts
+        check_range("initial_threshold", self.initial_threshold, 1, self.num_uavs, integer=True, high_label="num_uavs")
 
 
 def bimodality(points: np.ndarray, centred: np.ndarray | None = None) -> np.ndarray:
@@ -293,53 +239,9 @@ class GpsDeniedNbpScenario(PresetScenario):
         self.heard = np.zeros((B, N), int)
         self.fault = np.zeros((B, N), bool)
 
-    # --- the paper scenario's names for the parts' state (tests, policies, the reproduction, the renderer) -----
-    @property
-    def model(self) -> dn.DnbpModel:
-        return self.backend.model
-
-    @property
-    def belief_state(self) -> dn.DnbpState:
-        return self.backend.state
-
-    @property
-    def estimator_rngs(self) -> list:
-        return self.backend.rngs
-
-    @property
-    def truth(self) -> np.ndarray:
-        """(B, T, N, 4) true [position, velocity] of every slice."""
-        return self.world.truth
-
-    @property
-    def gps_normal(self) -> np.ndarray:
-        return self.world.gps_normal
-
-    @property
-    def adjacency(self) -> np.ndarray:
-        return self.world.adjacency
-
-    @property
-    def estimate(self) -> np.ndarray:
-        """Belief means (B, N, 2) of the last step's slice tau (the tau = 0 prior mean at reset)."""
-        return self.backend.posterior_position
-
-    @property
-    def errors(self) -> np.ndarray:
-        return self.position_error()
-
-    # --- description ------------------------------------------------------------
-    @property
-    def num_agents(self) -> int:
-        return self.config.num_uavs
-
     def observation_space(self):
-        low = np.zeros(OBS_DIM, np.float32)
         high = np.array([1.0, 1.0, 1.0, 1.0, np.inf, 1.0, 1.0, 1.0], np.float32)
-        return gymnasium.spaces.Box(low, high, dtype=np.float32)
-
-    def action_space(self):
-        return gymnasium.spaces.MultiDiscrete([2] * int(self.config.num_iterations), dtype=np.int64)
+        return gymnasium.spaces.Box(np.zeros(OBS_DIM, np.float32), high, dtype=np.float32)
 
     def state_space(self):
         return gymnasium.spaces.Box(-np.inf, np.inf, shape=(self.num_agents * (OBS_DIM + 1),), dtype=np.float32)
@@ -372,13 +274,15 @@ class GpsDeniedNbpScenario(PresetScenario):
         self.delivered, self.broadcasts, self.heard = result.delivered, result.broadcasts, result.received
 
     def compute_reward(self) -> np.ndarray:
-        """The reward table: the fault UAVs' mean error (team) or each UAV's own, minus the broadcast cost."""
-        errors, fault, cost = self.position_error(), self.fault, self.config.broadcast_cost
-        if self.config.reward == "team":
-            mean_fault = np.sum(errors * fault, axis=1) / np.maximum(fault.sum(axis=1), 1)
+        """The reward table: the error (or the belief's RMS) of the fault UAVs' mean (team) or each UAV's own,
+        minus the cost of the broadcasts."""
+        loss = self.position_error() if self.config.reward == "error" else np.sqrt(self.posterior_traces())
+        cost, fault = self.config.communication_cost, self.fault
+        if self.config.team_reward:
+            mean_fault = np.sum(loss * fault, axis=1) / np.maximum(fault.sum(axis=1), 1)
             team = -mean_fault - cost * self.broadcasts.sum(axis=1)
             return np.repeat(team[:, None], self.num_agents, axis=1)
-        return -errors - cost * self.broadcasts
+        return -loss - cost * self.broadcasts
 
     # --- views -------------------------------------------------------------------
     def _slice(self, array: np.ndarray, k: np.ndarray) -> np.ndarray:
@@ -386,9 +290,9 @@ class GpsDeniedNbpScenario(PresetScenario):
 
     def observation(self) -> np.ndarray:
         N = self.num_agents
-        normal = self._slice(self.gps_normal, self.k)
-        adjacency = self._slice(self.adjacency, self.k)
-        prior = self.belief_state.prior[..., :2]
+        normal = self._slice(self.world.gps_normal, self.k)
+        adjacency = self._slice(self.world.adjacency, self.k)
+        prior = self.backend.state.prior[..., :2]
         centred = prior - prior.mean(axis=2, keepdims=True)
         spread = np.sqrt(np.mean(np.sum(centred**2, axis=-1), axis=-1))
         frac = np.broadcast_to((self.k / self.horizon)[:, None], normal.shape)
@@ -396,7 +300,7 @@ class GpsDeniedNbpScenario(PresetScenario):
         neighbours_heard = (adjacency * self.heard[:, None, :]).sum(axis=-1) / np.maximum(neighbours, 1)
         obs = np.stack([
             normal.astype(float),
-            adjacency.sum(axis=-1) / (N - 1),
+            neighbours / (N - 1),
             (adjacency & normal[:, None, :]).sum(axis=-1) / (N - 1),
             self.heard / (N - 1),
             np.log1p(spread),
@@ -416,15 +320,10 @@ class GpsDeniedNbpScenario(PresetScenario):
 
     def state(self) -> np.ndarray:
         obs = self.observation().reshape(self.batch, -1)
-        return np.concatenate([obs, np.log1p(self.errors)], axis=-1).astype(np.float32)
-
-    def _estimated_slice(self) -> np.ndarray:
-        """The slice the current estimates refer to: tau - 1 after a step, 0 at reset."""
-        return np.maximum(self.k - 1, 0)
+        return np.concatenate([obs, np.log1p(self.position_error())], axis=-1).astype(np.float32)
 
     def info(self) -> dict[str, np.ndarray]:
         B, N = self.batch, self.num_agents
-        k_est = self._estimated_slice()
         error = self.position_error()
         return {
             "true_position": self._truth.copy(),
@@ -438,39 +337,17 @@ class GpsDeniedNbpScenario(PresetScenario):
             "messages_sent": self.network.messages_sent.copy(),
             "floats_sent": self.network.floats_sent.copy(),
             "messages_received": self.delivered.sum(axis=(1, 2)),
-            "neighbours": self._slice(self.adjacency, k_est).sum(axis=-1),
+            "neighbours": self._slice(self.world.adjacency, np.maximum(self.k - 1, 0)).sum(axis=-1),
             "step": np.broadcast_to(self.k[:, None], (B, N)).copy(),
         }
 
     def scene(self, b: int) -> Scene:
-        N, k = self.num_agents, int(self.k[b])
-        k_est = max(k - 1, 0)
-        truth = self.truth[b, k_est, :, :2]
-        particles = self.belief_state.belief[b, :, :, :2]
-        centred = particles - particles.mean(axis=1, keepdims=True)
-        cov = np.einsum("nmi,nmj->nij", centred, centred) / particles.shape[1]
-        fault = ~self.gps_normal[b, k_est]
-        low, high = truth.min(axis=0) - 120.0, truth.max(axis=0) + 120.0
-        centre, half = 0.5 * (low + high), 0.5 * float(np.max(high - low))
-        counts = self.delivered[b].sum(axis=0)
-        # every message of the step, plus each silent edge once (drawn faint)
-        edges = self.adjacency[b, k_est] & ((counts > 0) | (np.arange(N)[:, None] < np.arange(N)))
-        links = [Link(source=int(t), target=int(s), value=float(counts[t, s]))
-                 for t, s in zip(*np.nonzero(edges | (counts > 0)), strict=True)]
-        mean_fault = float(self.errors[b][fault].mean()) if fault.any() else 0.0
-        return Scene(
-            title=f"gps_denied_nbp (wan2014)  tau = {k_est}/{self.horizon}",
-            truth=truth,
-            estimates=self.estimate[b],
-            covariances=cov,
-            trails=np.swapaxes(self.truth[b, max(0, k_est - 10): k_est + 1, :, :2], 0, 1),
-            particles=particles,
-            node_positions=(truth - centre) / max(half, 1e-9),
-            node_labels=list(self.agent_names),
-            node_status=["GPS fault" if fault[i] else "" for i in range(N)],
-            links=links,
-            link_value_max=float(self.config.num_iterations),
-            link_value_name="iterations with a message",
-            extent=(centre[0] - half, centre[0] + half, centre[1] - half, centre[1] + half),
-            notes=[f"mean fault-UAV error {mean_fault:.1f} m; broadcasts this step {int(self.broadcasts[b].sum())}"],
-        )
+        """The core's scene with the slice the estimates refer to, the GPS faults and the fault UAVs' error."""
+        k = max(int(self.k[b]) - 1, 0)
+        fault = ~self.world.gps_normal[b, k]
+        mean_fault = float(self.position_error()[b][fault].mean()) if fault.any() else 0.0
+        return dataclasses.replace(
+            super().scene(b), title=f"gps_denied_nbp (wan2014)  tau = {k}/{self.horizon}",
+            trails=np.swapaxes(self.world.truth[b, max(0, k - 10): k + 1, :, :2], 0, 1),
+            node_status=["GPS fault" if f else "" for f in fault],
+            notes=[f"mean fault-UAV error {mean_fault:.1f} m; broadcasts this step {int(self.broadcasts[b].sum())}"])

@@ -40,7 +40,7 @@ def test_dnbp_over_broadcast_equals_the_estimator_on_the_scenarios_episode():
     world_rng, _, backend_rng = np.random.default_rng(seed).spawn(3)  # the composition's children of the seed
     episode = sample_episode(config.parts()[0], world_rng)
     np.testing.assert_array_equal(env.unwrapped.scenario.world.truth[0], episode.truth)
-    model = config.estimator_model()
+    model = env.unwrapped.scenario.backend.model
     state = dn.initial_state(model, [backend_rng], "warm", episode.init_position[None], episode.init_velocity[None],
                              config.velocity_spread)
     ones = np.ones((1, config.num_uavs, config.num_iterations), bool)

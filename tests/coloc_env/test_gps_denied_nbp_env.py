@@ -57,7 +57,7 @@ def test_spaces_state_render_and_infos():
     faults = [infos[a]["fault"] for a in env.agents]
     errors = [infos[a]["error"] for a in env.agents]
     expected = -np.mean([e for e, f in zip(errors, faults, strict=True) if f]) if any(faults) else 0.0
-    assert rewards["uav_0"] == pytest.approx(expected)  # team reward, broadcast_cost 0
+    assert rewards["uav_0"] == pytest.approx(expected)  # team reward, communication_cost 0
     # a broadcast is one message however many hear it (counted at the sender by the network); the receivers
     # count each message they took, so every message sent was received at least once
     sent = sum(infos[a]["messages_sent"] for a in env.possible_agents)
@@ -83,7 +83,10 @@ def test_spaces_state_render_and_infos():
     ({"init": "hot"}, "init"),
     ({"schedule": "random"}, "schedule"),
     ({"reward": "mse"}, "reward"),
-    ({"broadcast_cost": -0.1}, "broadcast_cost"),
+    ({"communication_cost": -0.1}, "communication_cost"),
+    ({"broadcast_cost": -0.1}, "communication_cost"),  # its older name
+    ({"team_reward": 1}, "team_reward"),
+    ({"initial_threshold": 11}, r"initial_threshold must be in \[1, num_uavs = 10\]"),
     ({"nominal_velocity": (20.0, np.nan)}, "nominal_velocity"),
     ({"defensive_weight": 1.0}, "defensive_weight"),
     ({"initial_threshold": 0}, "initial_threshold"),
@@ -148,7 +151,7 @@ def test_env_with_paper_policy_equals_the_estimator_called_directly():
     rng = np.random.default_rng(7)
     episode = sample_episode(config.parts()[0], rng)
     estimator_rng = rng.spawn(1)[0]
-    model = config.estimator_model()
+    model = env.unwrapped.scenario.backend.model
     state = dn.initial_state(model, [estimator_rng], "warm", episode.init_position[None], episode.init_velocity[None],
                              config.velocity_spread)
     for k in range(config.horizon):
@@ -194,7 +197,7 @@ def test_the_observation_says_what_the_neighbours_heard():
         for k in range(4):
             observations, *_ = env.step({a: action for a in env.agents})
             heard = scenario.network.delivered[0].sum(axis=0)  # [t, s]: t's message reached s, any round
-            now = scenario.adjacency[0, k + 1].astype(float)
+            now = scenario.world.adjacency[0, k + 1].astype(float)
             expected = (now @ heard) / np.maximum(now.sum(axis=1), 1) / (N - 1)
             np.testing.assert_allclose([observations[a][7] for a in env.possible_agents], expected, atol=1e-6)
             assert bits == 1 or not np.any(expected)

@@ -90,7 +90,7 @@ def test_the_library_defaults_to_the_exact_kernel_and_the_env_to_the_truncated_o
     assert dn.DnbpModel().kernel == "exact"
     assert coloc_env.backends.Dnbp().kernel == "truncated"
     assert coloc_env.scenarios.gps_denied_nbp.GpsDeniedNbpConfig().kernel == "truncated"
-    assert coloc_env.parallel_env("gps_denied_nbp", kernel="exact").unwrapped.scenario.model.kernel == "exact"
+    assert coloc_env.parallel_env("gps_denied_nbp", kernel="exact").unwrapped.scenario.backend.model.kernel == "exact"
 
 
 @pytest.mark.parametrize(("options", "message"), [

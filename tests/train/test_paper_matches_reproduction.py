@@ -66,12 +66,20 @@ def _wang2019_by_the_estimator_functions(seeds, config) -> np.ndarray:
 
 def _wan2014_by_the_estimator_function(seeds, config) -> np.ndarray:
     """Per-episode fault-UAV error of :func:`estimators.dnbp.step` over the paper scenario's broadcast medium
-    on ``sample_episode``'s draws (all broadcasts the schedule allows): no backend, no network, no env."""
+    on ``sample_episode``'s draws (all broadcasts the schedule allows), with the dNBP parameters written out
+    (the defensive box covers the whole flight): no backend, no network, no env."""
     import estimators.dnbp as dn
     from coloc_env.primitives.broadcast_medium import BroadcastMedium
     from coloc_env.worlds.gps_denied import sample_episode
 
-    model = config.estimator_model()
+    travel, m = float(np.linalg.norm(config.nominal_velocity)) * config.dt * config.horizon, config.box_margin
+    model = dn.DnbpModel(
+        dt=config.dt, accel_noise_std=config.accel_noise_std, gps_std=config.gps_std, range_std=config.range_std,
+        num_particles=config.num_particles, num_iterations=config.num_iterations, oversampling=config.oversampling,
+        defensive_weight=config.defensive_weight, defensive_box=(-m, config.area + m + travel),
+        cold_box=(-m, config.area + m), min_bandwidth=config.min_bandwidth,
+        initial_threshold=config.initial_threshold, schedule=config.schedule, kernel=config.kernel,
+        truncation=config.truncation)
     costs = []
     for s in seeds:
         rng = np.random.default_rng(s)

@@ -116,7 +116,7 @@ def test_wan2014_ls_and_dr_backends_equal_the_estimator_on_the_same_episodes():
     episodes = [sample_episode(config.parts()[0], np.random.default_rng(s)) for s in world_seeds]
     out = wan2014.run_methods(config, [np.random.default_rng(s) for s in world_seeds],
                               [np.random.default_rng([6, 100_000 + r]) for r in range(3)], names=("ls", "dr"))
-    motion = config.motion
+    motion = config.parts()[0].motion
     stack = {name: np.stack([getattr(e, name) for e in episodes]) for name in
              ("truth", "accel", "gps_normal", "gps_fix", "adjacency", "ranges", "init_position", "init_velocity")}
     np.testing.assert_array_equal(out["fault"], ~stack["gps_normal"])

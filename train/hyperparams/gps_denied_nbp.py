@@ -1,15 +1,15 @@
 """PPO settings for ``gps_denied_nbp`` (set by reasoning, not tuned on evaluation seeds).
 
-* ``broadcast_cost=0.02`` m per broadcast: without a price on the channel the
+* ``communication_cost=0.02`` m per broadcast: without a price on the channel the
   paper's schedule (broadcast whenever allowed) is already the best a policy
   can do in expectation, so there would be nothing to learn. The price should
   be small against the few-metre error of a localized fault UAV and against
   the tens of metres of a lost one, so a policy stays silent only where its
   message adds little (e.g. a normal UAV whose fault neighbours already hear
-  three anchors). Up to 2026-12-03 it was 0.05 m; the target then asked for
-  the error of the 20 m ``threshold`` rule within 5 %, and at 20 broadcasts
-  per step 0.05 m weighs 1 m a step against a ~6 m error, so the policies
-  bought their 64 % saving with 4 % more error. Chosen on validation episodes
+  three anchors). The target asks for the error of the 20 m ``threshold``
+  rule within 5 %; at 20 broadcasts per step 0.05 m weighs 1 m a step
+  against a ~6 m error, so policies trained at 0.05 m bought their 64 %
+  saving with 4 % more error. Chosen on validation episodes
   that neither training nor the learning curve uses (256 episodes at M = 100,
   ``train.evaluate.evaluate_policy("gps_denied_nbp", policy, 256,
   VALIDATION_SEED_BASE + 10_000)``, each model paired against ``threshold``),
@@ -17,7 +17,7 @@
 
   | setting | seed 0 | seed 1 | seed 2 | broadcasts/step |
   |---|---|---|---|---|
-  | 0.05 (before) | +0.340 m | (= seed 0's policy) | +0.331 m | 7.6 / 7.4 |
+  | 0.05 | +0.340 m | (= seed 0's policy) | +0.331 m | 7.6 / 7.4 |
   | 0.02 | +0.133 m | +0.029 m | -0.115 m | 8.8 / 11.8 / 8.1 |
   | 0.05, ``CURVE_EPISODES = 64`` | +0.340 m | +0.084 m | +0.331 m | 7.6 / 12.0 / 7.4 |
   | 0.02, ``CURVE_EPISODES = 64`` | +0.340 m | +0.029 m | +0.070 m | 7.6 / 11.8 / 10.4 |
@@ -35,10 +35,10 @@
   transitions per update, minibatches of 600.
 * A message mostly helps the current step and, through the prior, the next
   few: gamma 0.9, GAE 0.95.
-* Small networks (64, 64): the observation has 7 numbers.
+* Small networks (64, 64): the observation has 8 numbers.
 """
 
-ENV_CONFIG = {"broadcast_cost": 0.02, "num_particles": 50}
+ENV_CONFIG = {"communication_cost": 0.02, "num_particles": 50}
 
 HYPERPARAMS = {
     "n_steps": 60,

@@ -50,14 +50,12 @@ import numpy as np
 import coloc_env
 import estimators.dnbp as dn
 import estimators.range_ls as rl
-from coloc_env.backends import Dnbp, RangeLs
+from coloc_env.backends import RangeLs
 from coloc_env.composition import compose
 from coloc_env.config import build_config
-from coloc_env.networks import Broadcast
 from coloc_env.networks.broadcast import BroadcastNetwork
 from coloc_env.primitives.broadcast_medium import BroadcastMedium
 from coloc_env.scenarios.gps_denied_nbp import GpsDeniedNbpConfig
-from coloc_env.worlds import GpsDenied
 from train.executor import map_tasks
 from train.io import save_figure, write_json, write_text
 from train.plotting import legend_outside, t_interval
@@ -149,18 +147,7 @@ def composition_parts(config: GpsDeniedNbpConfig) -> tuple:
     """
     if config.init != "warm":
         raise ValueError(f"the gps_denied world gives the warm start only; init must be 'warm', got {config.init!r}")
-    world = GpsDenied(num_agents=config.num_uavs, horizon=config.horizon, dt=config.dt, area=config.area,
-                      nominal_velocity=tuple(config.nominal_velocity), velocity_spread=config.velocity_spread,
-                      accel_std=config.accel_std, accel_noise_std=config.accel_noise_std, gps_std=config.gps_std,
-                      range_std=config.range_std, comm_range=config.comm_range,
-                      p_normal_to_fault=config.p_normal_to_fault, p_fault_to_normal=config.p_fault_to_normal,
-                      num_normal=config.num_normal)
-    medium = Broadcast(comm_range=config.comm_range, loss=0.0)
-    dnbp = Dnbp(num_particles=config.num_particles, num_iterations=config.num_iterations,
-                oversampling=config.oversampling, defensive_weight=config.defensive_weight,
-                box_margin=config.box_margin, min_bandwidth=config.min_bandwidth,
-                initial_threshold=config.initial_threshold, schedule=config.schedule, kernel=config.kernel,
-                truncation=config.truncation)
+    world, medium, dnbp = config.parts()
     ls = RangeLs(min_anchors=rl.LsParams.min_anchors, max_rms=rl.LsParams.max_rms, max_std=rl.LsParams.max_std,
                  gate_chi2=rl.LsParams.gate_chi2)
     return world, {"dnbp": (medium, dnbp, 1), "ls": (medium, ls, 1), "dr": (medium, ls, 0)}
@@ -297,17 +284,26 @@ def evaluate_point(overrides: dict, base: dict, runs: int, seed: int) -> dict:
     }
 
 
+def dnbp_model(config: GpsDeniedNbpConfig) -> dn.DnbpModel:
+    """The dNBP parameters of ``config``: those its ``dnbp`` backend derives from its ``gps_denied`` world (the
+    defensive box covers the whole flight, docs/wan2014.md section 4.3)."""
+    world, network, backend = config.parts()
+    built = world.build(1, config.horizon)
+    return backend.build(built, network.build(config.num_uavs, 1, backend.message_kind, backend.rounds), 1).model
+
+
 def case_study(config: GpsDeniedNbpConfig, seed: int) -> dict:
     """One intraslice update on the case-study graph (Sec. 4.1, Fig. 4) from a cold start."""
-    model = dataclasses.replace(config.estimator_model(), num_iterations=3)
+    model = dataclasses.replace(dnbp_model(config), num_iterations=3)
+    world = config.parts()[0]
     N = len(CASE_POSITIONS)
     rng = np.random.default_rng([seed, 7])
     state = dn.initial_state(model, [rng], "cold", np.zeros((1, N, 2)), np.zeros((1, N, 2)), 0.0)
     distances = np.linalg.norm(CASE_POSITIONS[:, None] - CASE_POSITIONS[None], axis=-1)
-    noise = config.network.sample_noise(rng, (), N)
+    noise = world.ranging.sample_noise(rng, (), N)
     adjacency = (distances <= config.comm_range) & ~np.eye(N, dtype=bool)
     ranges = np.where(adjacency, distances + noise, 0.0)
-    fix = CASE_POSITIONS + config.gps.sample_noise(rng, (N,))
+    fix = CASE_POSITIONS + world.gps.sample_noise(rng, (N,))
     _, result = dn.step(model, state, CASE_NORMAL[None], fix[None], BroadcastMedium().over(adjacency[None]),
                         ranges[None], np.zeros((1, N, 2)), [rng], record=True)
     sent = {n: sorted((int(t) + 1, int(s) + 1) for t, s in zip(*np.nonzero(result.delivered[0, n]), strict=True))
