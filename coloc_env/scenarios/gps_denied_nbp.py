@@ -150,7 +150,6 @@ import numpy as np
 from coloc_env.backends.particles import Dnbp
 from coloc_env.config import check_range
 from coloc_env.networks.broadcast import Broadcast
-from coloc_env.parts import check_flag
 from coloc_env.rendering import Scene
 from coloc_env.scenarios.binding import PresetConfig, PresetScenario, keyword
 from coloc_env.worlds.gps_denied import GpsDenied
@@ -201,8 +200,7 @@ class GpsDeniedNbpConfig(PresetConfig):
             object.__setattr__(self, "reward", "error")
 
     def check_preset(self) -> None:
-        check_flag("team_reward", self.team_reward)
-        # the backend's threshold against the world's N: a rule between two parts
+        """The backend's threshold against the world's N: a rule between two parts."""
         check_range("initial_threshold", self.initial_threshold, 1, self.num_uavs, integer=True, high_label="num_uavs")
 
 

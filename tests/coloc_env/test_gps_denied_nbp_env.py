@@ -97,6 +97,31 @@ def test_bad_config_names_the_field(kwargs, field):
         coloc_env.parallel_env(NAME, **kwargs)
 
 
+@pytest.mark.parametrize("kwargs", [{"reward": "trace"}, {"reward": "trace", "team_reward": False},
+                                    {"reward": "own"}, {"team_reward": False}])
+def test_the_reward_follows_its_table(kwargs):
+    """"trace" is the belief's RMS sqrt(tr Cov) (the ``trace`` info key is tr Cov, m^2), in metres as "error" is;
+    the team's is the mean over the fault UAVs, ``team_reward=False`` (or the older ``reward="own"``) gives each
+    UAV its own; the cost is per broadcast the schedule counts."""
+    cost = 0.25
+    env = coloc_env.parallel_env(NAME, communication_cost=cost, num_normal=2, **kwargs, **SMALL)  # 3 faulty
+    config = env.unwrapped.scenario.config
+    assert config.team_reward == kwargs.get("team_reward", kwargs.get("reward") != "own")
+    assert build_config(GpsDeniedNbpConfig, {"reward": "team"}) == GpsDeniedNbpConfig()
+    policy = agents.make_policy("random", env, seed=1)
+    for _, rewards, infos in play(env, policy, 4)[1:]:
+        info = [infos[a] for a in env.possible_agents]
+        loss = np.array([np.sqrt(i["trace"]) if config.reward == "trace" else i["error"] for i in info])
+        fault = np.array([i["fault"] for i in info])
+        broadcasts = np.array([i["broadcasts"] for i in info])
+        if config.team_reward:
+            mean = loss[fault].mean() if fault.any() else 0.0
+            expected = np.full(len(info), -mean - cost * broadcasts.sum())
+        else:
+            expected = -loss - cost * broadcasts
+        np.testing.assert_allclose([rewards[a] for a in env.possible_agents], expected, rtol=1e-12, atol=1e-12)
+
+
 @pytest.mark.parametrize("bad", [np.nan, np.inf])
 def test_non_finite_or_misshaped_action_is_refused(bad):
     env = coloc_env.parallel_env(NAME, **SMALL)
