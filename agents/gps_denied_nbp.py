@@ -1,9 +1,9 @@
 """Policies for ``gps_denied_nbp`` (wan2014).
 
-* ``paper`` (also ``always``): the paper's modified schedule (Sec. 3.4, spec §5): every UAV
+* ``paper`` (also ``always``): the paper's modified schedule (Sec. 3.4; docs/wan2014.md, section 5): every UAV
   broadcasts whenever the schedule allows it (all action bits set).
 * ``silent``: nobody ever broadcasts; every fault UAV is reduced to dead
-  reckoning on its own prior (the "never send" reference of spec §9).
+  reckoning on its own prior (the "never send" reference of docs/wan2014.md, section 9).
 * ``threshold:S`` (``threshold`` = ``THRESHOLD_SPREAD`` metres): a GPS-normal UAV broadcasts
   whenever the schedule allows (its fix is what the fault UAVs localize against); a fault UAV
   broadcasts only while the spread of its own prior, sqrt(tr Cov) of its particle positions

@@ -1,5 +1,5 @@
 """Flight paths for ``nlos_horizon``: a target of straight legs and coordinated turns, and
-neighbours orbiting it (gao2016 spec §9, [chosen] values).
+neighbours orbiting it ([chosen] values of docs/gao2016.md, section 9).
 
 A coordinated turn keeps the speed and turns the heading at a constant rate omega; within
 one step of length T the exact arc is flown,
@@ -24,7 +24,7 @@ __all__ = ["TurnSchedulePath", "OrbitingNeighbours", "OrbitParameters"]
 
 @dataclass(frozen=True)
 class TurnSchedulePath:
-    """Straight legs joined by coordinated turns (spec §9) [chosen].
+    """Straight legs joined by coordinated turns [chosen].
 
     | field          | meaning                               | default                                 |
     |----------------|---------------------------------------|-----------------------------------------|
@@ -94,7 +94,7 @@ class OrbitParameters:
 
 @dataclass(frozen=True)
 class OrbitingNeighbours:
-    """J neighbours on moving orbits about a target (spec §9) [chosen].
+    """J neighbours on moving orbits about a target [chosen].
 
     Offset of neighbour j from the target at time t = k T: radius ``rho0 + a sin(w t + phi0)``,
     bearing ``phi0 + om t``, with rho0 ~ U(radius_range), a ~ U(0, wobble_max),

@@ -8,7 +8,7 @@ Log-distance path loss (Def. 2) [reconstructed]:
 A neighbour is in the RSA of the target when r_inf <= ||p_i - p_j|| <= r_sup (Def. 1), decided
 on the true distance (the receiver either decodes or not).
 
-Measurements of a packet (spec §4) [reconstructed]: RSS = P_T - PL(d0) - 10 n log10(d/d0) - eps
+Measurements of a packet (docs/gao2016.md, section 4) [reconstructed]: RSS = P_T - PL(d0) - 10 n log10(d/d0) - eps
 with eps ~ N(0, s_db^2) in LOS and N(mu_db, s_db^2 + s_b,db^2) in NLOS (mu_db > 0 weakens the
 signal); AOA theta = atan2(p_i - p_j) + n_theta, n_theta ~ N(0, s_th^2) in LOS and
 N(mu_th, s_th^2 + s_b,th^2) in NLOS.
@@ -63,7 +63,7 @@ class ReceiveSearchArea:
 
 @dataclass(frozen=True)
 class RssAoaSensor:
-    """RSS (log-distance path loss) and AOA with a LOS/NLOS-dependent error (spec §4).
+    """RSS (log-distance path loss) and AOA with a LOS/NLOS-dependent error (docs/gao2016.md, section 4).
 
     The same fields as ``estimators.afge.SignalModel`` (the estimator's knowledge);
     ``sigma_nav``/``p_nlos`` are not used here.

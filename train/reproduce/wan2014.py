@@ -63,8 +63,8 @@ from train.reproduce.bound_rows import pcrb_block, report_section
 from train.reproduce.common import claims_section, pyplot
 
 KEY = "wan2014"
-# 16 runs cost ~15 min of CPU on the 2-core development machine (13.8 min user + 1.4 min sys, measured), so the
-# default is 12 (~11 min); the paper used 100, the spec asks >= 16 for its acceptance checks: pass --runs 16.
+# The paper used 100 runs per point; docs/wan2014.md section 11 asks at least 16 for a firm verdict (pass --runs 16).
+# The default is 12: the CPU time grows linearly with the runs (16 runs take about 15 min on two cores).
 RUNS = 12
 QUICK_RUNS = 2
 QUICK_HORIZON = 10
