@@ -122,7 +122,7 @@ Arguments (fields of ``GpsDeniedNbpConfig``, defaults = docs/wan2014.md section 
 | init               | "warm"      | "warm", "cold"            | tau = 0 knowledge [chosen]                   |
 | box_margin         | 150         | [0, 1e7]                  | cold box [-m, area+m]^2 [chosen]             |
 | min_bandwidth      | 0.5         | [0.001, 10000]            | floor of h_ts [chosen]                       |
-| initial_threshold  | 3           | 1..N                      | theta_0 [paper]                              |
+| initial_threshold  | 3           | 1..N, at most 64          | theta_0 [paper]                              |
 | schedule           | "modified"  | "modified", "parallel"    | Sec. 3.4 [paper]; parallel = ablation        |
 | kernel             | "truncated" | "exact", "truncated"      | belief-update mixture kernel [chosen]; the   |
 |                    |             |                           | truncated one approximates (estimators.dnbp) |
