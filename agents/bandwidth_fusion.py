@@ -23,7 +23,7 @@ import numpy as np
 import estimators.bandwidth_fusion as bf
 from agents.base import FixedActionPolicy, Policy
 from coloc_env.config import BadInput
-from coloc_env.scenarios.bandwidth_fusion import paper_selection, paper_weights
+from estimators.bandwidth_fusion import paper_selection, paper_weights
 
 
 def _scenario(env):
@@ -53,6 +53,29 @@ class PaperPolicy(FixedActionPolicy):
         super().__init__(env, scenario.encode_actions(paper_selection(t_name), paper_weights(p_name)))
 
 
+def decode_tables(scenario, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Actions (B, N, A) of the ``bandwidth_fusion`` core -> the receiver-relative selections (B, N, N-1, n) and
+    absolute weights (B, N, N) it decodes them to (the network's selection, the backend's fusion weights)."""
+    blocks = scenario.decode_actions(actions)
+    selection = scenario.links.selection_at(blocks[..., 0].astype(np.int64))
+    return selection, scenario.backend.decode_weights(blocks[..., 1:])
+
+
+def advance_tables(scenario, selection: np.ndarray, weights: np.ndarray) -> None:
+    """One step of every copy of the ``bandwidth_fusion`` core under receiver-relative selections (B, N, N-1, n)
+    and absolute weights (B, N, N), without the action encoding (so any selection the budget admits and any
+    weights, zeros included). The backend's weights are the softmax of ``log weights``: the same to rounding,
+    exact for equal weights; a zero weight stays exactly 0."""
+    index = scenario.links.index_of(selection)
+    if np.any(index < 0):
+        raise ValueError("selection does not meet the bandwidth budget for every receiver")
+    scenario.network.offer_selection(index, np.asarray(selection, bool))
+    order = np.broadcast_to(scenario.backend.weight_order, np.shape(weights))
+    with np.errstate(divide="ignore"):  # a zero weight: logit -inf, weight exactly 0
+        logits = np.log(np.take_along_axis(np.asarray(weights, float), order, axis=-1))
+    scenario.advance(scenario.part_decisions(index, logits / scenario.config.weight_logit_scale))
+
+
 GREEDY_MAX_OPTIONS = 4096
 
 
@@ -65,7 +88,7 @@ def greedy_selection(scenario, weights: np.ndarray) -> np.ndarray:
     ``GREEDY_MAX_OPTIONS`` (4,096) selections per receiver instead of
     scoring ~1e12 of them (N = 16) or returning something else under its name.
     """
-    links, model = scenario.links, scenario.model
+    links, model = scenario.links, scenario.backend.model
     if links.size > GREEDY_MAX_OPTIONS:
         raise ValueError(f"greedy scores every feasible selection: {links.size} with num_uavs={links.num_nodes}, "
                          f"budget={links.budget}, more than {GREEDY_MAX_OPTIONS}; use fewer UAVs or a tighter "
@@ -164,7 +187,7 @@ def oracle_static_search(scenario) -> list[SearchResult]:
         for p_name in ("P1", "P2", "P3"):
             for t_name in ("T1", "T2", "T3"):
                 sel, cost, sweeps, evals, hist = coordinate_descent(
-                    scenario.model, scenario.links, np.asarray(scenario.config.initial_cov, float),
+                    scenario.backend.model, scenario.links, np.asarray(scenario.config.initial_cov, float),
                     paper_weights(p_name), paper_selection(t_name), scenario.horizon)
                 results.append(SearchResult(t_name, p_name, sel, cost, sweeps, evals, hist))
         _SEARCH_CACHE[key] = sorted(results, key=lambda r: r.cost)

@@ -88,6 +88,10 @@ __all__ = [
     "initial_state",
     "step",
     "expected_cost",
+    "PAPER_SELECTIONS",
+    "PAPER_WEIGHTS",
+    "paper_selection",
+    "paper_weights",
 ]
 
 
@@ -405,3 +409,44 @@ def expected_cost(
         bound.append(np.trace(state.bound, axis1=-2, axis2=-1))
     return np.stack(exact), np.stack(bound)
 
+
+
+# --- the paper's tables (Sec. 2: N = 4 nodes, n = 3 components) ------------------------------------------------
+
+# The component selections T1..T3. T_ji = T_ij (eq. 5), so each unordered pair {i, j} (1-based as printed)
+# maps to the diagonal of T_ji.
+PAPER_SELECTIONS: dict[str, dict[tuple[int, int], tuple[int, ...]]] = {
+    "T1": {(1, 2): (0, 1, 0), (1, 3): (1, 1, 0), (1, 4): (0, 1, 1),
+           (2, 3): (1, 1, 0), (2, 4): (0, 1, 1), (3, 4): (0, 1, 0)},
+    "T2": {(1, 2): (1, 0, 0), (1, 3): (1, 0, 1), (1, 4): (1, 0, 1),
+           (2, 3): (1, 0, 1), (2, 4): (1, 0, 1), (3, 4): (0, 0, 1)},
+    "T3": {(1, 2): (1, 0, 0), (1, 3): (0, 1, 1), (1, 4): (1, 1, 0),
+           (2, 3): (0, 1, 1), (2, 4): (1, 0, 1), (3, 4): (1, 0, 0)},
+}
+
+# The weight tables P1..P3, p_ij = the weight fusion node i gives node j (rows sum to 1; the printed tables
+# are symmetric).
+PAPER_WEIGHTS: dict[str, tuple[tuple[float, ...], ...]] = {
+    "P1": ((0.25, 0.25, 0.25, 0.25),) * 4,
+    "P2": ((0.45, 0.15, 0.15, 0.25), (0.15, 0.45, 0.25, 0.15),
+           (0.15, 0.25, 0.45, 0.15), (0.25, 0.15, 0.15, 0.45)),
+    "P3": ((0.65, 0.15, 0.15, 0.05), (0.15, 0.65, 0.05, 0.15),
+           (0.15, 0.05, 0.65, 0.15), (0.05, 0.15, 0.15, 0.65)),
+}
+
+
+def paper_selection(name: str) -> np.ndarray:
+    """The paper's table ``name`` (T1, T2, T3) as a ``selection`` (4, 4, 3), T_ii = I."""
+    if name not in PAPER_SELECTIONS:
+        raise ValueError(f"selection table must be one of {sorted(PAPER_SELECTIONS)}, got {name!r}")
+    full = np.ones((4, 4, 3), dtype=bool)
+    for (a, b), diag in PAPER_SELECTIONS[name].items():
+        full[a - 1, b - 1] = full[b - 1, a - 1] = np.asarray(diag, bool)
+    return full
+
+
+def paper_weights(name: str) -> np.ndarray:
+    """The paper's weight table ``name`` (P1, P2, P3) as ``weights`` (4, 4)."""
+    if name not in PAPER_WEIGHTS:
+        raise ValueError(f"weight table must be one of {sorted(PAPER_WEIGHTS)}, got {name!r}")
+    return np.array(PAPER_WEIGHTS[name], dtype=float)

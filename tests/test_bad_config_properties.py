@@ -377,7 +377,8 @@ def test_every_boolean_field_takes_numpy_booleans(target, field, value):
 
 
 def test_an_error_names_the_field_the_user_wrote():
-    with pytest.raises(ValueError, match=r"^measurement_noise must be \(m, m\) with m = 1, the rows of measurement"):
+    with pytest.raises(ValueError, match=r"^bandwidth_fusion: measurement_noise must be \(m, m\) with m = 1, the "
+                                         r"rows of measurement"):
         coloc_env.parallel_env("bandwidth_fusion", measurement=((1.0, 0.0, 0.0),))
     with pytest.raises(ValueError, match=r"world.measurement_noise .* the rows of world.measurement"):
         coloc_env.compose(world={"name": "drift", "measurement": ((1.0, 0.0, 0.0),)}, network="ideal",

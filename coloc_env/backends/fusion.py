@@ -322,14 +322,19 @@ class BandwidthFusion(PartConfig):
         return BandwidthFusionBackend(self, world, network, batch)
 
 
+def fusion_model(motion, sensor, num_agents: int) -> bf.FusionModel:
+    """The fusion estimator's model of a linear world: A, B, W of its ``motion`` (``LinearGaussian``), C and
+    every agent's V_j of its ``sensor`` (``LinearObservation``)."""
+    return bf.FusionModel(transition=motion.transition, drift=motion.drift, measurement=sensor.matrix,
+                          process_noise=motion.process_noise, measurement_noise=sensor.noise_of(num_agents))
+
+
 class BandwidthFusionBackend(TargetBackend):
 
     def __init__(self, config, world, network, batch):
         super().__init__(config, world, network, batch)
         N = self.num_agents
-        motion, sensor = world.motion_model, world.measurement_model
-        self.model = bf.FusionModel(transition=motion.transition, drift=motion.drift, measurement=sensor.matrix,
-                                    process_noise=motion.process_noise, measurement_noise=sensor.noise_of(N))
+        self.model = fusion_model(world.motion_model, world.measurement_model, N)
         if hasattr(network, "set_component_dim"):
             network.set_component_dim(self.n)
         self._x0, self._P0 = world.prior()

@@ -17,6 +17,8 @@ Up to 4,096 selections (``TABLE_LIMIT``) the index is decoded by a lookup in
 a table built once from ``BandwidthBudget.feasible``; beyond, by
 ``BandwidthBudget.selection_at`` (unranking by the completion table), so
 nothing is listed; the Discrete's size is capped at 100,000 (``MAX_SELECTIONS``).
+``ScoredBandwidth`` is the same network for a caller that decodes its own
+action into selections (the ``bandwidth_fusion`` preset's scores): no cap.
 
 | quantity   | value                                                                                    |
 |------------|------------------------------------------------------------------------------------------|
@@ -92,6 +94,21 @@ class Bandwidth(PartConfig):
 
     def build(self, num_agents: int, batch: int, message_kind: str, rounds: int = 1) -> Network:
         return BandwidthNetwork(self, num_agents, batch, message_kind, rounds)
+
+
+@dataclass(frozen=True)
+class ScoredBandwidth(Bandwidth):
+    """The ``bandwidth`` network with the same rules and delivery, but a budget is not refused beyond
+    ``MAX_SELECTIONS`` feasible selections (the limit of a Discrete selection action): for a caller whose
+    action decodes to selections itself (``BandwidthBudget.best_selection``) and hands them over with
+    ``BandwidthNetwork.offer_selection``; the selection index only carries the result (int64, exact for
+    the ~7e11 selections of N = 16)."""
+
+    def budget_for(self, num_agents: int, dim: int, prefix: str = "network.") -> BandwidthBudget:
+        links = BandwidthBudget(num_agents, dim, self.budget, self.min_per_link,
+                                dim if self.max_per_link is None else self.max_per_link, self.exact_budget)
+        links.validate(prefix)
+        return links
 
 
 class BandwidthNetwork(Network):

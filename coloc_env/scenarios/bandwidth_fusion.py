@@ -16,11 +16,13 @@ with weights p_ij. The agents choose what the paper fixes by hand: the
 component selection T and the fusion weights p.
 
 The preset is the composition ``drift`` / ``bandwidth`` / ``bandwidth_fusion``
-(``BandwidthFusionConfig.parts``) with this action codec, observation,
-reward and info. The world draws the episode (x(0), w, v_j) from the
-episode's generator itself, in the order of ``draw_episode``; the
-bandwidth network delivers every selected component on time and draws
-nothing. Timing: the backend reports xhat_i(k) at step k (the composition's
+(``BandwidthFusionConfig.parts``: each keyword below sets the part field
+of the same meaning) with this action codec, observation, reward and info.
+The world draws the episode (x(0), w, v_j) from the episode's generator
+itself (``coloc_env.worlds.drift.draw_episode``); the bandwidth network
+delivers every selected component on time and draws nothing. The paper's
+tables T1..T3 and P1..P3 are ``estimators.bandwidth_fusion.paper_selection``
+and ``paper_weights`` (also importable from here). Timing: the backend reports xhat_i(k) at step k (the composition's
 pairing of J_K); the preset reports, after step k, the estimate xhat_i(k+1)
 it has just formed with y(k), against x(k+1), so that the reward credits a
 step's selection and weights at once (the same sequence of estimates, one
@@ -59,17 +61,23 @@ Observation (per agent, ``Box(shape=(n + (N-1)*n + 1,), float32)``)
 | ``[-1]``                 | step fraction k / horizon                                    | [0, 1]    |
 
 The log-diagonal is unbounded: a selection that starves a component lets M_i grow without limit
-(like 1.5^k), and a well-fed one shrinks it towards 0. (Before, every entry was unbounded.)
+(like 1.5^k), and a well-fed one shrinks it towards 0.
 
 ``state()`` (centralized critic): every agent's observation, then
 log diag Sigma_i(k) of the exact error covariance of every node.
 
 Reward (per agent: each node has its own estimate)
 --------------------------------------------------
-| ``reward=``  | value after step k -> k+1 (squared metres)                               |
+| ``reward=``  | value after step k -> k+1 (m^2, the unit of ``error``)                   |
 |--------------|--------------------------------------------------------------------------|
-| ``"error"``  | -||xhat_i(k+1) - x(k+1)||^2 - component_cost * components received      |
-| ``"trace"``  | -tr Sigma_i(k+1) (exact covariance, noise-free) - component_cost * ...   |
+| ``"error"``  | -||xhat_i(k+1) - x(k+1)||^2 (m^2): minus the ``error`` info key          |
+| ``"trace"``  | -tr Sigma_i(k+1) (m^2): the exact covariance of that error (noise-free,  |
+|              | its expectation), minus the ``trace`` info key                           |
+
+both minus ``component_cost`` per component the node received this step
+(``components_received``; the receiver chooses them) and minus
+``communication_cost`` per message it sent (``messages_sent``: one per
+receiver that took a component of it), each in m^2.
 
 Minus the sum over agents of an episode's return (k = 1..50) plus the k = 0
 term sum_i tr M(0) = 1.44 is the paper's J_50 (eq. 12) for one realization.
@@ -103,27 +111,31 @@ reset, where each copy draws its whole episode's noise from its own generator.
 
 Arguments (fields of ``BandwidthFusionConfig``, defaults = the paper)
 ------------------------------------------------------------------------
+Each keyword sets the part field named beside it; the part's check is the one that runs.
+
 | field               | default                  | allowed                                   |
 |---------------------|--------------------------|-------------------------------------------|
-| num_uavs            | 4                        | 2..16                                     |
-| transition          | I_3                      | (n, n), entries in [-1e6, 1e6], spectral  |
-|                     |                          | radius <= 1.001 (finite over the horizon) |
-| drift               | (0.5, 0.5, 0.5)          | (n,), entries in [-1e6, 1e6]              |
-| measurement         | I_3                      | (m, n), entries in [-1e6, 1e6]            |
-| process_noise       | diag(0.02, 0.05, 0.03)   | (n, n) PSD, entries <= 1e12               |
+| num_uavs            | 4                        | 2..16 (world ``num_agents``)              |
+| transition          | I_3                      | (n, n), n in 2..16, entries in [-1e6, 1e6],|
+|                     |                          | spectral radius <= 1.001 (world)          |
+| drift               | (0.5, 0.5, 0.5)          | (n,), entries in [-1e6, 1e6] (world)      |
+| measurement         | I_3                      | (m, n), m in 1..16, entries in [-1e6, 1e6]|
+| process_noise       | diag(0.02, 0.05, 0.03)   | (n, n) PSD, entries <= 1e12 (world)       |
 | measurement_noise   | diag(0.03, 0.04, 0.02)   | (m, m) or (N, m, m) PD, entries <= 1e12   |
 | initial_state       | (10, 10, 10)             | (n,) in [-1e6, 1e6]: xhat_i(0); x(0) ~ N  |
 | initial_cov         | diag(0.19, 0.09, 0.08)   | (n, n) positive definite, entries <= 1e12:|
 |                     |                          | M_i(0) = Sigma_i(0) (the observation      |
 |                     |                          | divides by it: a singular one is refused) |
-| budget              | 5                        | (N-1)*min_per_link .. (N-1)*max_per_link  |
-| min_per_link        | 1                        | 0..max_per_link                           |
-| max_per_link        | 3                        | 0..n                                      |
-| exact_budget        | True                     | False: sum_j t_ji <= budget               |
-| horizon             | 50                       | 1..100000                                 |
-| reward              | "error"                  | "error", "trace"                          |
-| component_cost      | 0.0                      | [0, 1e12], per received component per step|
-| weight_logit_scale  | 4.0                      | (0, 1000]                                 |
+| budget              | 5                        | (N-1)*min_per_link .. (N-1)*max_per_link; |
+|                     |                          | without exact_budget up to 10000 (network)|
+| min_per_link        | 1                        | 0..max_per_link (network)                 |
+| max_per_link        | 3                        | 0..n (network)                            |
+| exact_budget        | True                     | False: sum_j t_ji <= budget (network)     |
+| horizon             | 50                       | 1..100000 (world and composition)         |
+| reward              | "error"                  | "error", "trace" (composition)            |
+| component_cost      | 0.0                      | [0, 1e12], m^2 per component received     |
+| communication_cost  | 0.0                      | [0, 1e12], m^2 per message sent (composition)|
+| weight_logit_scale  | 4.0                      | (0, 1000] (backend)                       |
 """
 
 from __future__ import annotations
@@ -134,199 +146,62 @@ import gymnasium
 import numpy as np
 
 import estimators.bandwidth_fusion as bf
-from coloc_env.backends.fusion import BandwidthFusion
-from coloc_env.config import as_array, check_choice, check_psd, check_range
-from coloc_env.networks.bandwidth import Bandwidth
-from coloc_env.primitives import BandwidthBudget, LinearMotion, LinearSensor
-from coloc_env.primitives.noise import covariance_factor, sample_gaussian
+from coloc_env.backends.fusion import BandwidthFusion, fusion_model
+from coloc_env.config import check_psd, check_range
+from coloc_env.networks.bandwidth import ScoredBandwidth
+from coloc_env.primitives import BandwidthBudget
 from coloc_env.rendering import Link, Scene, ring_layout
 from coloc_env.scenarios.base import Scenario
-from coloc_env.scenarios.binding import PresetScenario
+from coloc_env.scenarios.binding import PresetConfig, PresetScenario, keyword
 from coloc_env.worlds.drift import Drift
+from estimators.bandwidth_fusion import paper_selection, paper_weights  # noqa: F401 - the paper's tables, here too
 
 _COMPONENT_NAMES = "xyzabcdefghijklmnop"
 ENUMERATED_DECODE_LIMIT = 2048  # feasible selections up to which decoding lists them (108 in the paper's setting)
 
-# The paper's component selections (Sec. 2). T_ji = T_ij (eq. 5), so each
-# unordered pair {i, j} (1-based as printed) maps to the diagonal of T_ji.
-PAPER_SELECTIONS: dict[str, dict[tuple[int, int], tuple[int, ...]]] = {
-    "T1": {(1, 2): (0, 1, 0), (1, 3): (1, 1, 0), (1, 4): (0, 1, 1),
-           (2, 3): (1, 1, 0), (2, 4): (0, 1, 1), (3, 4): (0, 1, 0)},
-    "T2": {(1, 2): (1, 0, 0), (1, 3): (1, 0, 1), (1, 4): (1, 0, 1),
-           (2, 3): (1, 0, 1), (2, 4): (1, 0, 1), (3, 4): (0, 0, 1)},
-    "T3": {(1, 2): (1, 0, 0), (1, 3): (0, 1, 1), (1, 4): (1, 1, 0),
-           (2, 3): (0, 1, 1), (2, 4): (1, 0, 1), (3, 4): (1, 0, 0)},
-}
-
-# The paper's weight tables, p_ij = the weight fusion node i gives node j
-# (rows sum to 1; the printed tables are symmetric).
-PAPER_WEIGHTS: dict[str, tuple[tuple[float, ...], ...]] = {
-    "P1": ((0.25, 0.25, 0.25, 0.25),) * 4,
-    "P2": ((0.45, 0.15, 0.15, 0.25), (0.15, 0.45, 0.25, 0.15),
-           (0.15, 0.25, 0.45, 0.15), (0.25, 0.15, 0.15, 0.45)),
-    "P3": ((0.65, 0.15, 0.15, 0.05), (0.15, 0.65, 0.05, 0.15),
-           (0.15, 0.05, 0.65, 0.15), (0.05, 0.15, 0.15, 0.65)),
-}
-
-
-def paper_selection(name: str) -> np.ndarray:
-    """The paper's table ``name`` (T1, T2, T3) as an absolute selection (4, 4, 3), T_ii = I."""
-    if name not in PAPER_SELECTIONS:
-        raise ValueError(f"selection table must be one of {sorted(PAPER_SELECTIONS)}, got {name!r}")
-    full = np.ones((4, 4, 3), dtype=bool)
-    for (a, b), diag in PAPER_SELECTIONS[name].items():
-        full[a - 1, b - 1] = full[b - 1, a - 1] = np.asarray(diag, bool)
-    return full
-
-
-def paper_weights(name: str) -> np.ndarray:
-    """The paper's weight table ``name`` (P1, P2, P3), shape (4, 4)."""
-    if name not in PAPER_WEIGHTS:
-        raise ValueError(f"weight table must be one of {sorted(PAPER_WEIGHTS)}, got {name!r}")
-    return np.array(PAPER_WEIGHTS[name], dtype=float)
-
-
-def _eye(n):
-    return tuple(tuple(float(i == j) for j in range(n)) for i in range(n))
-
-
-def _diag(*values):
-    return tuple(tuple(v if i == j else 0.0 for j in range(len(values))) for i, v in enumerate(values))
-
 
 @dataclass(frozen=True)
-class BandwidthFusionConfig:
-    """Configuration of ``bandwidth_fusion``; defaults are the paper's simulation (Sec. 2)."""
+class BandwidthFusionConfig(PresetConfig):
+    """Configuration of ``bandwidth_fusion``; defaults are the paper's simulation (Sec. 2), which are the
+    ``drift`` world's."""
 
-    num_uavs: int = 4
-    transition: tuple = _eye(3)
-    drift: tuple = (0.5, 0.5, 0.5)
-    measurement: tuple = _eye(3)
-    process_noise: tuple = _diag(0.02, 0.05, 0.03)
-    measurement_noise: tuple = _diag(0.03, 0.04, 0.02)
-    initial_state: tuple = (10.0, 10.0, 10.0)
-    initial_cov: tuple = _diag(0.19, 0.09, 0.08)
-    budget: int = 5
-    min_per_link: int = 1
-    max_per_link: int = 3
-    exact_budget: bool = True
-    horizon: int = 50
-    reward: str = "error"
-    component_cost: float = 0.0
-    weight_logit_scale: float = 4.0
+    preset = "bandwidth_fusion"
+    World, Network, Backend = Drift, ScoredBandwidth, BandwidthFusion
 
-    @property
-    def motion(self) -> LinearMotion:
-        return LinearMotion(np.asarray(self.transition, float), np.asarray(self.drift, float),
-                            np.asarray(self.process_noise, float))
+    num_uavs: int = keyword(4, "world.num_agents")
+    transition: tuple = keyword(Drift.transition, "world.transition")
+    drift: tuple = keyword(Drift.drift, "world.drift")
+    measurement: tuple = keyword(Drift.measurement, "world.measurement")
+    process_noise: tuple = keyword(Drift.process_noise, "world.process_noise")
+    measurement_noise: tuple = keyword(Drift.measurement_noise, "world.measurement_noise")
+    initial_state: tuple = keyword(Drift.initial_state, "world.initial_state")
+    initial_cov: tuple = keyword(Drift.initial_cov, "world.initial_cov")
+    budget: int = keyword(5, "network.budget")
+    min_per_link: int = keyword(1, "network.min_per_link")
+    max_per_link: int = keyword(3, "network.max_per_link")
+    exact_budget: bool = keyword(True, "network.exact_budget")
+    horizon: int = keyword(50, "world.horizon", "composition.horizon")
+    reward: str = keyword("error", "composition.reward")
+    component_cost: float = keyword(0.0, "preset")
+    communication_cost: float = keyword(0.0, "composition.communication_cost")
+    weight_logit_scale: float = keyword(4.0, "backend.weight_logit_scale")
 
-    @property
-    def sensor_noise(self) -> np.ndarray:
-        """V_j of every node, shape (N, m, m)."""
-        V = np.asarray(self.measurement_noise, float)
-        return V if V.ndim == 3 else np.broadcast_to(V, (self.num_uavs, *V.shape)).copy()
-
-    @property
-    def links(self) -> BandwidthBudget:
-        return BandwidthBudget(self.num_uavs, np.asarray(self.transition).shape[0], self.budget,
-                               self.min_per_link, self.max_per_link, self.exact_budget)
-
-    def validate(self) -> None:
-        from coloc_env.worlds.drift import check_linear_world  # the drift world's checks (its raw fields first)
-
-        check_range("num_uavs", self.num_uavs, 2, 16, integer=True)
-        check_linear_world("", self, strict_prior=True)
-        self.motion.validate()
-        n = self.motion.dim
-        C = as_array("measurement", self.measurement, ndim=2)
-        if C.shape[1] != n:
-            raise ValueError(f"measurement must have shape (m, {n}), got {C.shape}")
-        V = as_array("measurement_noise", self.measurement_noise)
-        per_node = V if V.ndim == 3 else V[None]
-        if V.ndim == 3 and V.shape[0] != self.num_uavs:
-            raise ValueError(f"measurement_noise must be (m, m) or ({self.num_uavs}, m, m), got {V.shape}")
-        for j, Vj in enumerate(per_node):
-            LinearSensor(C, Vj).validate(n, noise_name="measurement_noise" + (f"[{j}]" if V.ndim == 3 else ""))
-        as_array("initial_state", self.initial_state, shape=(n,))
+    def check_preset(self) -> None:
+        """What only the preset asks: M(0) positive definite (the observation takes the log of its diagonal),
+        ``component_cost``, and the budget feasible for ``num_uavs`` agents and n components (the network's
+        own check, ``ScoredBandwidth.budget_for``, which the parts' checks cannot run without n)."""
+        n = np.asarray(self.transition).shape[0]
         check_psd("initial_cov", self.initial_cov, n, strict=True)
-        try:
-            self.links.validate()
-        except ValueError as exc:  # a cross-field range: name the fields it depends on
-            raise ValueError(f"{exc} (with budget={self.budget}, min_per_link={self.min_per_link}, "
-                             f"max_per_link={self.max_per_link}, num_uavs={self.num_uavs})") from exc
-        check_range("horizon", self.horizon, 1, 100_000, integer=True)
-        check_choice("reward", self.reward, ("error", "trace"))
         check_range("component_cost", self.component_cost, 0.0, 1e12)
-        check_range("weight_logit_scale", self.weight_logit_scale, 0.0, 1e3, low_open=True)
+        try:
+            self.parts()[1].budget_for(self.num_uavs, n, prefix="")
+        except ValueError as exc:  # a range the other keywords set: name them
+            raise ValueError(f"{exc} (with num_uavs={self.num_uavs}, min_per_link={self.min_per_link}, "
+                             f"max_per_link={self.max_per_link})") from exc
 
     def fusion_model(self) -> bf.FusionModel:
-        return bf.FusionModel(
-            transition=np.asarray(self.transition, float),
-            drift=np.asarray(self.drift, float),
-            measurement=np.asarray(self.measurement, float),
-            process_noise=np.asarray(self.process_noise, float),
-            measurement_noise=self.sensor_noise,
-        )
-
-    def parts(self) -> tuple:
-        """The (world, network, backend) configs this flat config stands for: ``drift`` with the same system
-        and prior, ``bandwidth`` with the same budget (``ScoredBandwidth``), ``bandwidth_fusion``."""
-        world = Drift(num_agents=self.num_uavs, transition=self.transition, drift=self.drift,
-                      measurement=self.measurement, process_noise=self.process_noise,
-                      measurement_noise=self.measurement_noise, initial_state=self.initial_state,
-                      initial_cov=self.initial_cov, horizon=self.horizon)
-        network = ScoredBandwidth(budget=self.budget, min_per_link=self.min_per_link,
-                                  max_per_link=self.max_per_link, exact_budget=self.exact_budget)
-        return world, network, BandwidthFusion(weight_logit_scale=self.weight_logit_scale)
-
-
-@dataclass(frozen=True)
-class ScoredBandwidth(Bandwidth):
-    """The ``bandwidth`` network as the preset drives it: the same rules and delivery, but a budget is not
-    refused beyond ``MAX_SELECTIONS`` feasible selections (the limit of a Discrete selection action). The
-    preset's action is a score per (neighbour, component), decoded by the argmax over the feasible
-    selections (``BandwidthBudget.best_selection``); the network's selection index only carries the
-    result (int64, exact for the ~7e11 selections of N = 16)."""
-
-    def budget_for(self, num_agents: int, dim: int, prefix: str = "network.") -> BandwidthBudget:
-        links = BandwidthBudget(num_agents, dim, self.budget, self.min_per_link,
-                                dim if self.max_per_link is None else self.max_per_link, self.exact_budget)
-        links.validate(prefix)
-        return links
-
-
-@dataclass(frozen=True)
-class NoiseFactors:
-    """Square-root factors F (F F^T = covariance) of one config's noises, computed once per scenario."""
-
-    initial: np.ndarray  # (n, n), of M(0)
-    process: np.ndarray  # (n, n), of W
-    measurement: np.ndarray  # (N, m, m), of each V_j
-
-
-def noise_factors(config: BandwidthFusionConfig) -> NoiseFactors:
-    model = config.fusion_model()
-    return NoiseFactors(initial=covariance_factor(np.asarray(config.initial_cov, float)),
-                        process=config.motion.noise_factor,
-                        measurement=np.stack([covariance_factor(V) for V in model.measurement_noise]))
-
-
-def draw_episode(config: BandwidthFusionConfig, rng: np.random.Generator,
-                 factors: NoiseFactors | None = None) -> dict[str, np.ndarray]:
-    """One episode's randomness, drawn from ``rng`` in the order ``reset`` draws it for a copy (the ``drift``
-    world draws it from the episode's generator itself: ``BandwidthFusionScenario.part_generators``).
-
-    Returns ``initial_state`` x(0) ~ N(xhat(0), M(0)) (n,), ``process_noise`` w(0..K-1) (K, n)
-    and ``measurement_noise`` v_j(0..K-1) of every node (K, N, m).
-    ``factors``: ``noise_factors`` of ``config``, when the caller has them.
-    """
-    factors = noise_factors(config) if factors is None else factors
-    K, N, m = config.horizon, config.num_uavs, factors.measurement.shape[-1]
-    x0 = np.asarray(config.initial_state, float) + sample_gaussian(rng, factors.initial, ())
-    process = sample_gaussian(rng, factors.process, (K,))
-    white = rng.standard_normal((K, N, m))
-    measurement = (factors.measurement @ white[..., None])[..., 0]
-    return {"initial_state": x0, "process_noise": process, "measurement_noise": measurement}
+        """The estimator's model of this system, as the backend builds it from the world's models."""
+        return fusion_model(*self.parts()[0].models(), self.num_uavs)
 
 
 class BandwidthFusionScenario(PresetScenario):
@@ -337,23 +212,15 @@ class BandwidthFusionScenario(PresetScenario):
     paper = "zhao2020"
     Config = BandwidthFusionConfig
 
-    @classmethod
-    def composition_options(cls, config) -> dict:
-        return {"reward": config.reward}
-
     def __init__(self, config: BandwidthFusionConfig, batch: int = 1):
         super().__init__(config, batch)
         self.n = self.world.state_dim
-        self.m = self.world.measurement_dim
         links = self.links
         # Up to a few thousand selections one matmul + argmax over the list is the faster decoder; beyond,
         # the dynamic programme (BandwidthBudget.best_selection). Both give the same selection (a test holds it).
         self._feasible = links.feasible if links.size <= ENUMERATED_DECODE_LIMIT else None
         self._feasible_flat = (None if self._feasible is None
                                else self._feasible.reshape(links.size, -1).astype(float))
-        # weight_order[i] = absolute node index of [self, neighbour 0, ...] of receiver i
-        self._weight_order = self.backend.weight_order
-        self._initial_cov = np.asarray(config.initial_cov, float)
         # built once (check_actions reads it every step); float64: the paper's weight tables must survive
         # the softmax encoding exactly (float32 loses 1e-9)
         self._preset_action_space = gymnasium.spaces.Box(-1.0, 1.0, shape=(self.action_dim,), dtype=np.float64)
@@ -362,10 +229,6 @@ class BandwidthFusionScenario(PresetScenario):
         self.selection = np.zeros((B, N, N - 1, n), dtype=bool)
 
     # --- the parts' state, by the paper's names ------------------------------------------
-    @property
-    def model(self) -> bf.FusionModel:
-        return self.backend.model
-
     @property
     def fusion(self) -> bf.FusionState:
         """Every node's xhat_i, M_i and the exact joint error covariance (``estimators.bandwidth_fusion``)."""
@@ -381,16 +244,6 @@ class BandwidthFusionScenario(PresetScenario):
         """The true state now (B, n): x(k+1) after step k, x(0) at reset."""
         return self.world.target_state()
 
-    @property
-    def trail(self) -> np.ndarray:
-        """The episode's true states x(0..K) (B, K + 1, n)."""
-        return self.world.truth
-
-    @property
-    def weights(self) -> np.ndarray:
-        """(B, N, N) the fusion weights p_ij of the last step (1/N at reset)."""
-        return self.backend.weights
-
     # --- description ------------------------------------------------------------
     @property
     def action_dim(self) -> int:
@@ -401,9 +254,9 @@ class BandwidthFusionScenario(PresetScenario):
         return self.n + (self.num_agents - 1) * self.n + 1
 
     def observation_space(self):
-        unbounded, fractions = self.n, (self.num_agents - 1) * self.n + 1
-        low = np.concatenate([np.full(unbounded, -np.inf), np.zeros(fractions)])
-        high = np.concatenate([np.full(unbounded, np.inf), np.ones(fractions)])
+        fractions = (self.num_agents - 1) * self.n + 1  # after the n unbounded log-diagonal entries
+        low = np.r_[np.full(self.n, -np.inf), np.zeros(fractions)]
+        high = np.r_[np.full(self.n, np.inf), np.ones(fractions)]
         return gymnasium.spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
 
     def action_space(self):
@@ -428,10 +281,12 @@ class BandwidthFusionScenario(PresetScenario):
             index = self.links.index_of(selection)
         return selection, index, actions[..., (N - 1) * n :]
 
-    def decode_actions(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Actions (B, N, A) -> receiver-relative selections (B, N, N-1, n) and absolute weights (B, N, N)."""
-        selection, _, logits = self._decode(actions)
-        return selection, self.backend.decode_weights(logits)
+    def decode_actions(self, actions: np.ndarray) -> np.ndarray:
+        """Actions (B, N, A), checked, -> the parts' blocks (``part_decisions``); the decoded selections go to the
+        network with their indices (``offer_selection``: it need not decode an index again)."""
+        selection, index, logits = self._decode(self.check_actions(actions))
+        self.network.offer_selection(index, selection)
+        return self.part_decisions(index, logits)
 
     def part_decisions(self, index: np.ndarray, logits: np.ndarray) -> np.ndarray:
         """The parts' blocks (B, N, 1 + N): the network's ``selection`` (an index in the feasible order) and
@@ -458,7 +313,7 @@ class BandwidthFusionScenario(PresetScenario):
         weights = bf.check_weights(np.asarray(weights, float))
         if np.any(weights <= 0):
             raise ValueError("weights: the softmax encoding cannot reach a zero weight p_ij")
-        log_rel = np.log(np.take_along_axis(weights, self._weight_order, axis=-1))
+        log_rel = np.log(np.take_along_axis(weights, self.backend.weight_order, axis=-1))
         logit_action = (log_rel - log_rel.mean(axis=-1, keepdims=True)) / self.config.weight_logit_scale
         if np.any(np.abs(logit_action) > 1.0):
             raise ValueError("weights too uneven for the action encoding; raise weight_logit_scale")
@@ -472,32 +327,11 @@ class BandwidthFusionScenario(PresetScenario):
         self.ages[idx] = 0.0
         self.selection[idx] = False  # nothing received before the first step
 
-    def step(self, actions) -> None:
-        actions = self.check_actions(actions)
-        if np.any(self.k >= self.horizon):
-            raise RuntimeError("step() on a copy whose episode is over; reset it first")
-        selection, index, logits = self._decode(actions)
-        self.network.offer_selection(index, selection)  # the network need not decode the index again
-        self.advance(self.part_decisions(index, logits))
-
-    def advance(self, decoded: np.ndarray, weights: np.ndarray | None = None) -> None:
-        """One step of every copy under decoded decisions: the parts' blocks (B, N, 1 + N)
-        (``part_decisions``), or receiver-relative selections (B, N, N-1, n) with absolute weights
-        (B, N, N) (the fusion weights are then the softmax of their logarithms: the same to rounding, exact
-        for equal weights)."""
-        if weights is not None:
-            index = self.links.index_of(decoded)
-            if np.any(index < 0):
-                raise ValueError("selection does not meet the bandwidth budget for every receiver")
-            self.network.offer_selection(index, np.asarray(decoded, bool))
-            with np.errstate(divide="ignore"):  # a zero weight: logit -inf, weight exactly 0
-                logits = np.log(np.take_along_axis(np.asarray(weights, float),
-                                                   np.broadcast_to(self._weight_order, np.shape(weights)), axis=-1))
-            decoded = self.part_decisions(index, logits / self.config.weight_logit_scale)
+    def advance(self, decoded: np.ndarray) -> None:
+        """One step of every copy under the parts' blocks (B, N, 1 + N) (``part_decisions``)."""
         super().advance(decoded)
         self.selection = self.links.relative_selection(self.backend.delivered_selection)
         self.ages = np.where(self.selection, 0.0, self.ages + 1.0)
-        self._reward = self.compute_reward()
 
     def compute_reward(self) -> np.ndarray:
         """The reward table of the module docstring, after ``advance``: xhat_i(k+1) against x(k+1)."""
@@ -505,13 +339,14 @@ class BandwidthFusionScenario(PresetScenario):
             loss = self._squared_error()
         else:
             loss = bf.node_traces(self.fusion.error_cov, self.num_agents)
-        if self.config.component_cost == 0:  # -loss - 0 * count is -loss exactly: no count needed
+        cost = self.config.component_cost, self.config.communication_cost
+        if cost == (0, 0):  # -loss - 0 * count is -loss exactly: no count needed
             return -loss
-        return -loss - self.config.component_cost * self.links.components_received(self.selection)
+        return -loss - cost[0] * self.links.components_received(self.selection) - cost[1] * self.network.messages_sent
 
     def initial_cost(self) -> float:
         """The k = 0 term of J_K: sum_i tr M_i(0) = N tr M(0) (1.44 m^2 with the paper's values)."""
-        return float(self.num_agents * np.trace(self._initial_cov))
+        return float(self.num_agents * np.trace(np.asarray(self.config.initial_cov, float)))
 
     def episode_error(self, errors: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
         """The paper's J_K without its k = 0 term: the squared errors summed over the steps and nodes."""
@@ -551,33 +386,24 @@ class BandwidthFusionScenario(PresetScenario):
             "communication": received.astype(float),
             "messages_sent": self.network.messages_sent.copy(),
             "floats_sent": self.network.floats_sent.copy(),
-            "weights": self.weights.copy(),
+            "weights": self.backend.weights.copy(),
             "step": np.broadcast_to(self.k[:, None], (B, N)).copy(),
         }
 
     def scene(self, b: int) -> Scene:
-        N, k = self.num_agents, int(self.k[b])
-        node_cov = bf.node_covariances(self.fusion.error_cov[b], N)
-        spread = max(1.0, 3.0 * float(np.sqrt(node_cov[:, :2, :2].diagonal(axis1=-2, axis2=-1).max())))
-        truth = self.truth[b]
-        centre = truth[:2]
-        links = []
-        for i in range(N):
-            for kk, j in enumerate(self.links.neighbours[i]):
-                comps = self.selection[b, i, kk]
-                label = "".join(_COMPONENT_NAMES[c] for c in np.flatnonzero(comps))
-                links.append(Link(source=int(j), target=i, value=float(comps.sum()), label=label))
+        N, k, truth = self.num_agents, int(self.k[b]), self.truth[b, :2]
+        node_cov = bf.node_covariances(self.fusion.error_cov[b], N)[:, :2, :2]
+        spread = max(1.0, 3.0 * float(np.sqrt(node_cov.diagonal(axis1=-2, axis2=-1).max())))
+        received = self.selection[b]  # [i, kk]: what receiver i took from its neighbour kk
+        links = [Link(source=int(j), target=i, value=float(received[i, kk].sum()),
+                      label="".join(_COMPONENT_NAMES[c] for c in np.flatnonzero(received[i, kk])))
+                 for i in range(N) for kk, j in enumerate(self.links.neighbours[i])]
         return Scene(
-            title=f"bandwidth_fusion (zhao2020)  k = {k}/{self.horizon}",
-            truth=truth[:2][None],
-            estimates=self.fusion.estimate[b, :, :2],
-            covariances=node_cov[:, :2, :2],
-            trails=self.trail[b, max(0, k - 10) : k + 1, :2][None],
-            node_positions=ring_layout(N),
-            node_labels=self.agent_names,
-            links=links,
-            link_value_max=float(self.n),
+            title=f"bandwidth_fusion (zhao2020)  k = {k}/{self.horizon}", truth=truth[None],
+            estimates=self.fusion.estimate[b, :, :2], covariances=node_cov,
+            trails=self.world.truth[b, max(0, k - 10) : k + 1, :2][None], node_positions=ring_layout(N),
+            node_labels=self.agent_names, links=links, link_value_max=float(self.n),
             link_value_name="components received",
-            extent=(centre[0] - spread, centre[0] + spread, centre[1] - spread, centre[1] + spread),
+            extent=(truth[0] - spread, truth[0] + spread, truth[1] - spread, truth[1] + spread),
             notes=[f"mean tr Sigma_i = {bf.node_traces(self.fusion.error_cov[b], N).mean():.3f} m^2"],
         )

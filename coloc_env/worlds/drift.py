@@ -6,10 +6,10 @@ Sec. 2: x(k+1) = A x(k) + B + w(k) (eqs. 1, 22), y_j(k) = C x(k) + v_j(k)
 C = I, so x is a 3-D position [x, y, z] (m) and B = v dt its known drift. Every
 agent estimates the same x (estimand ``target``). The episode's x(0) ~ N(xhat(0),
 M(0)), w(0..K-1) and v_j(0..K-1) are drawn at reset from the world's
-generator by ``coloc_env.scenarios.bandwidth_fusion.draw_episode`` (the
-scenario's own sampler, in its order), so a composition of this world sees
-the ``bandwidth_fusion`` scenario's episodes; x(0..K) is kept (K + 1 states: x(K)
-is the state after the last step, which the last observation and the renderer read).
+generator by ``draw_episode``, in that order (every composition of this
+world, the ``bandwidth_fusion`` preset included, sees the same episodes for
+the same seed); x(0..K) is kept (K + 1 states: x(K) is the state after the
+last step, which the last observation and the renderer read).
 
 The paper does not say where the UAVs fly (its links do not depend on
 distance); the agents hold a fixed ring of radius ``formation_radius`` about
@@ -59,6 +59,7 @@ import numpy as np
 
 from coloc_env.config import as_array, check_psd, check_range, check_stable
 from coloc_env.parts import WORLDS, PartConfig
+from coloc_env.primitives.noise import covariance_factor, sample_gaussian
 from coloc_env.primitives.sensors import LinearSensor
 from coloc_env.worlds.base import Readings, World
 from estimators.linear_models import LinearGaussian, LinearObservation
@@ -164,9 +165,8 @@ VALUE_BOUND = 1e6   # |entries| of drift, measurement, initial_state
 COV_BOUND = 1e12    # |entries| of the noise and prior covariances (m^2)
 
 
-def check_linear_world(prefix: str, config, strict_prior: bool = False) -> tuple[int, int]:
-    """Shared checks of a (transition, measurement, noises) world; returns (n, m). ``strict_prior``: the
-    prior covariance must be positive definite (a scenario whose observation divides by it)."""
+def check_linear_world(prefix: str, config) -> tuple[int, int]:
+    """Checks of a (transition, measurement, noises, prior) world; returns (n, m)."""
     A = as_array(f"{prefix}transition", config.transition, ndim=2, bound=VALUE_BOUND)
     n = A.shape[0]
     if A.shape != (n, n) or not 2 <= n <= 16:
@@ -178,16 +178,15 @@ def check_linear_world(prefix: str, config, strict_prior: bool = False) -> tuple
         raise ValueError(f"{prefix}measurement must have shape (m, {n}) with m in [1, 16], got {C.shape}")
     check_psd(f"{prefix}process_noise", config.process_noise, n, bound=COV_BOUND)
     V = as_array(f"{prefix}measurement_noise", config.measurement_noise, bound=COV_BOUND)
-    agents = getattr(config, "num_agents", getattr(config, "num_uavs", None))
-    if V.ndim not in (2, 3) or (V.ndim == 3 and V.shape[0] != agents):
-        raise ValueError(f"{prefix}measurement_noise must be (m, m) or ({agents}, m, m), got {V.shape}")
+    if V.ndim not in (2, 3) or (V.ndim == 3 and V.shape[0] != config.num_agents):
+        raise ValueError(f"{prefix}measurement_noise must be (m, m) or ({config.num_agents}, m, m), got {V.shape}")
     if V.shape[-2:] != (C.shape[0],) * 2:  # m is set by measurement: a mismatch names both fields
         raise ValueError(f"{prefix}measurement_noise must be (m, m) with m = {C.shape[0]}, the rows of "
                          f"{prefix}measurement (shape {C.shape}), got shape {V.shape}")
     for j, Vj in enumerate(V if V.ndim == 3 else V[None]):
         check_psd(f"{prefix}measurement_noise" + (f"[{j}]" if V.ndim == 3 else ""), Vj, C.shape[0], strict=True)
     as_array(f"{prefix}initial_state", config.initial_state, shape=(n,), bound=VALUE_BOUND)
-    check_psd(f"{prefix}initial_cov", config.initial_cov, n, strict=strict_prior, bound=COV_BOUND)
+    check_psd(f"{prefix}initial_cov", config.initial_cov, n, bound=COV_BOUND)
     return n, C.shape[0]
 
 
@@ -218,17 +217,50 @@ class Drift(PartConfig):
         check_range(f"{prefix}horizon", self.horizon, 1, 100_000, integer=True)
         check_range(f"{prefix}formation_radius", self.formation_radius, 0.0, 1e6)
 
-    def scenario_config(self, horizon: int | None = None):
-        """The ``bandwidth_fusion`` scenario's config with this world's system (its sampler draws the episodes)."""
-        from coloc_env.scenarios.bandwidth_fusion import BandwidthFusionConfig
-
-        fields = {f: getattr(self, f) for f in ("transition", "drift", "measurement", "process_noise",
-                                                "measurement_noise", "initial_state", "initial_cov")}
-        return BandwidthFusionConfig(num_uavs=self.num_agents, horizon=self.horizon if horizon is None else horizon,
-                                     **fields)
+    def models(self) -> tuple[LinearGaussian, LinearObservation]:
+        """The motion model (A, B, W) and the agents' measurement model (C, V_j) the world simulates with."""
+        return (LinearGaussian(self.transition, self.drift, self.process_noise),
+                LinearObservation(self.measurement, np.asarray(self.measurement_noise, float)))
 
     def build(self, batch: int, horizon: int) -> DriftWorld:
         return DriftWorld(self, batch, horizon)
+
+
+@dataclass(frozen=True)
+class NoiseFactors:
+    """Square-root factors F (F F^T = covariance) of a ``Drift`` config's noises, computed once per world."""
+
+    initial: np.ndarray  # (n, n), of M(0)
+    process: np.ndarray  # (n, n), of W
+    measurement: np.ndarray  # (N, m, m), of each V_j
+
+
+def noise_factors(config: Drift) -> NoiseFactors:
+    """The factors of M(0), W and every agent's V_j (``coloc_env.primitives.noise.covariance_factor``)."""
+    V = np.asarray(config.measurement_noise, float)
+    per_agent = V if V.ndim == 3 else np.broadcast_to(V, (config.num_agents, *V.shape))
+    return NoiseFactors(initial=covariance_factor(np.asarray(config.initial_cov, float)),
+                        process=covariance_factor(np.asarray(config.process_noise, float)),
+                        measurement=np.stack([covariance_factor(Vj) for Vj in per_agent]))
+
+
+def draw_episode(config: Drift, rng: np.random.Generator, factors: NoiseFactors | None = None,
+                 horizon: int | None = None) -> dict[str, np.ndarray]:
+    """One episode's randomness drawn from ``rng``, in this order: x(0) ~ N(xhat(0), M(0)), w(0..K-1),
+    then v_j(0..K-1) of every agent (standard normals (K, N, m) times each F_j).
+
+    Returns ``initial_state`` x(0) (n,), ``process_noise`` (K, n) and ``measurement_noise`` (K, N, m).
+    ``factors``: ``noise_factors(config)``, when the caller has them; ``horizon``: K, by default the
+    config's.
+    """
+    factors = noise_factors(config) if factors is None else factors
+    K = config.horizon if horizon is None else horizon
+    N, m = factors.measurement.shape[:2]
+    x0 = np.asarray(config.initial_state, float) + sample_gaussian(rng, factors.initial, ())
+    process = sample_gaussian(rng, factors.process, (K,))
+    white = rng.standard_normal((K, N, m))
+    measurement = (factors.measurement @ white[..., None])[..., 0]
+    return {"initial_state": x0, "process_noise": process, "measurement_noise": measurement}
 
 
 class DriftWorld(TargetWorld):
@@ -238,25 +270,18 @@ class DriftWorld(TargetWorld):
         n = np.asarray(config.transition).shape[0]
         m = np.asarray(config.measurement).shape[0]
         super().__init__(config, batch, horizon, n, m, np.eye(n))
-        self.motion_model = LinearGaussian(config.transition, config.drift, config.process_noise)
-        V = np.asarray(config.measurement_noise, float)
-        self.measurement_model = LinearObservation(config.measurement, V if V.ndim == 3 else V)
-        self._scenario_config = config.scenario_config(self.horizon)
+        self.motion_model, self.measurement_model = config.models()
         self._sensor = LinearSensor(np.asarray(config.measurement, float), np.eye(m))
-        from coloc_env.scenarios.bandwidth_fusion import noise_factors
-
-        self._factors = noise_factors(self._scenario_config)
+        self._factors = noise_factors(config)
 
     def prior(self):
         return np.asarray(self.config.initial_state, float), np.asarray(self.config.initial_cov, float)
 
     def draw_episode(self, rngs, idx) -> None:
-        from coloc_env.scenarios.bandwidth_fusion import draw_episode
-
         A = self.motion_model
         # each copy's noise from its own generator; the recursion then runs once over all of them (einsum's
         # own loops: the same bits per copy as the copy alone, whatever the batch)
-        episodes = [draw_episode(self._scenario_config, rng, self._factors) for rng in rngs]
+        episodes = [draw_episode(self.config, rng, self._factors, self.horizon) for rng in rngs]
         if not episodes:
             return
         idx = np.asarray(idx)
@@ -270,4 +295,5 @@ class DriftWorld(TargetWorld):
                                                       np.stack([episode["measurement_noise"] for episode in episodes]))
 
 
-__all__ = ["Drift", "DriftWorld", "TargetWorld", "check_linear_world", "ring"]
+__all__ = ["Drift", "DriftWorld", "NoiseFactors", "TargetWorld", "check_linear_world", "draw_episode", "noise_factors",
+           "ring"]

@@ -6,8 +6,8 @@ import pytest
 import agents
 import coloc_env
 import estimators.bandwidth_fusion as bf
-from agents.bandwidth_fusion import coordinate_descent, greedy_selection
-from coloc_env.scenarios.bandwidth_fusion import paper_selection, paper_weights
+from agents.bandwidth_fusion import advance_tables, coordinate_descent, decode_tables, greedy_selection
+from estimators.bandwidth_fusion import paper_selection, paper_weights
 
 NAME = "bandwidth_fusion"
 M0 = np.diag([0.19, 0.09, 0.08])
@@ -30,7 +30,7 @@ def test_paper_policy_decodes_to_the_printed_tables():
             policy = agents.make_policy(f"paper:{t}{p}", env)
             observations, _ = env.reset(seed=0)
             actions = policy.act(observations)
-            sel, w = env.scenario.decode_actions(np.stack([actions[a] for a in env.possible_agents])[None])
+            sel, w = decode_tables(env.scenario, np.stack([actions[a] for a in env.possible_agents])[None])
             np.testing.assert_array_equal(env.scenario.links.full_selection(sel[0]), paper_selection(t))
             np.testing.assert_allclose(w[0], paper_weights(p), atol=1e-15)
             assert all(env.action_space(a).contains(actions[a]) for a in actions)
@@ -52,15 +52,15 @@ def test_greedy_choice_minimizes_each_receivers_next_trace():
     scenario = env.scenario
     weights = paper_weights("P1")
     for _ in range(3):  # move away from the symmetric initial state
-        scenario.advance(scenario.links.relative_selection(paper_selection("T3"))[None], weights[None])
+        advance_tables(scenario, scenario.links.relative_selection(paper_selection("T3"))[None], weights[None])
     chosen = greedy_selection(scenario, weights[None])[0]
-    gain = bf.gains(scenario.model, scenario.fusion.bound[0])
+    gain = bf.gains(scenario.backend.model, scenario.fusion.bound[0])
     base = scenario.links.relative_selection(paper_selection("T1"))
     for i in range(4):
         def trace_if(option, i=i):
             rel = base.copy()
             rel[i] = option
-            nxt = bf.exact_covariance_step(scenario.model, scenario.fusion.error_cov[0], gain,
+            nxt = bf.exact_covariance_step(scenario.backend.model, scenario.fusion.error_cov[0], gain,
                                            scenario.links.full_selection(rel), weights)
             return bf.node_traces(nxt, 4)[i]
         best = min(trace_if(opt) for opt in scenario.links.feasible)
@@ -83,18 +83,18 @@ def test_coordinate_descent_ends_in_a_local_optimum():
     horizon = 8
     start = paper_selection("T2")
     selection, cost, sweeps, evaluations, history = coordinate_descent(
-        scenario.model, scenario.links, M0, weights, start, horizon)
-    start_cost = bf.expected_cost(scenario.model, M0, start, weights, horizon)[0].sum()
+        scenario.backend.model, scenario.links, M0, weights, start, horizon)
+    start_cost = bf.expected_cost(scenario.backend.model, M0, start, weights, horizon)[0].sum()
     assert history[0] == pytest.approx(start_cost, rel=1e-12)
     assert cost <= start_cost and all(np.diff(history) <= 0)
-    assert cost == pytest.approx(bf.expected_cost(scenario.model, M0, scenario.links.full_selection(selection),
+    assert cost == pytest.approx(bf.expected_cost(scenario.backend.model, M0, scenario.links.full_selection(selection),
                                                   weights, horizon)[0].sum(), rel=1e-12)
     # no single receiver can improve alone
     for i in range(4):
         for option in scenario.links.feasible:
             trial = selection.copy()
             trial[i] = option
-            trial_cost = bf.expected_cost(scenario.model, M0, scenario.links.full_selection(trial), weights,
+            trial_cost = bf.expected_cost(scenario.backend.model, M0, scenario.links.full_selection(trial), weights,
                                           horizon)[0].sum()
             assert trial_cost >= cost * (1 - 1e-9)
     assert evaluations == 1 + 108 * 4 * sweeps

@@ -10,7 +10,9 @@ from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test
 import agents
 import coloc_env
 import estimators.bandwidth_fusion as bf
-from coloc_env.scenarios.bandwidth_fusion import draw_episode, paper_selection, paper_weights
+from agents.bandwidth_fusion import advance_tables, decode_tables
+from coloc_env.worlds.drift import draw_episode
+from estimators.bandwidth_fusion import paper_selection, paper_weights
 from tests.helpers import play
 
 NAME = "bandwidth_fusion"
@@ -96,8 +98,8 @@ def test_env_with_paper_policy_equals_the_estimator(tables):
     policy = agents.make_policy(f"paper:{tables}", env)
     observations, infos = env.reset(seed=7)
     scenario = env.scenario
-    # the episode reset(seed=7) draws: draw_episode on the episode's generator, in its order
-    episode = draw_episode(scenario.config, np.random.default_rng(7))
+    # the episode reset(seed=7) draws: the drift world's draw_episode on the episode's generator
+    episode = draw_episode(scenario.config.parts()[0], np.random.default_rng(7))
     truth = episode["initial_state"]
     np.testing.assert_array_equal(scenario.truth[0], truth)
     noise_v, noise_w = episode["measurement_noise"], episode["process_noise"]
@@ -141,21 +143,21 @@ def test_infos_carry_the_contract_keys_in_the_presets_units():
     assert sum(infos[a]["floats_sent"] for a in env.possible_agents) == 4 * 5
 
 
-def test_advance_takes_decoded_selections_and_weights():
-    """advance(selection, weights): the old scenario's entry point (the reproduction's greedy curve) steps the
-    parts with that selection and those weights (to rounding: the backend's softmax of their logarithms)."""
+def test_advance_tables_takes_decoded_selections_and_weights():
+    """advance_tables(scenario, selection, weights) (the reproduction's greedy curve) steps the parts with that
+    selection and those weights (to rounding: the backend's softmax of their logarithms)."""
     env = coloc_env.parallel_env(NAME)
     env.reset(seed=0)
     scenario = env.scenario
     relative = scenario.links.relative_selection(paper_selection("T2"))[None]
     for name in ("P1", "P3"):
         weights = paper_weights(name)[None]
-        scenario.advance(relative, weights)
+        advance_tables(scenario, relative, weights)
         np.testing.assert_array_equal(scenario.selection, relative)
-        np.testing.assert_allclose(scenario.weights, weights, rtol=0, atol=1e-15)
+        np.testing.assert_allclose(scenario.backend.weights, weights, rtol=0, atol=1e-15)
     assert scenario.k[0] == 2
     with pytest.raises(ValueError, match="budget"):
-        scenario.advance(np.ones_like(relative), weights)
+        advance_tables(scenario, np.ones_like(relative), weights)
 
 
 def test_every_feasible_selection_and_weights_round_trip_through_the_action():
@@ -167,7 +169,7 @@ def test_every_feasible_selection_and_weights_round_trip_through_the_action():
         weights = rng.dirichlet(np.ones(4) * 5, size=4)
         actions = scenario.encode_actions(selection, weights)
         assert np.all(np.abs(actions) <= 1)
-        decoded_sel, decoded_w = scenario.decode_actions(actions[None])
+        decoded_sel, decoded_w = decode_tables(scenario, actions[None])
         np.testing.assert_array_equal(decoded_sel[0], selection)
         np.testing.assert_allclose(decoded_w[0], weights, atol=1e-14)
     with pytest.raises(ValueError, match="budget"):
@@ -179,16 +181,18 @@ def test_every_feasible_selection_and_weights_round_trip_through_the_action():
 
 
 def test_rewards_follow_the_reward_option_and_communication_cost():
+    """component_cost per component received, communication_cost per message sent (one per receiver that takes a
+    component: min_per_link = 1, so every node sends to its 3 receivers), both subtracted in m^2."""
     for reward in ("error", "trace"):
-        env = coloc_env.parallel_env(NAME, reward=reward, component_cost=0.01)
+        env = coloc_env.parallel_env(NAME, reward=reward, component_cost=0.01, communication_cost=0.1)
         policy = agents.make_policy("paper", env)
         observations, _ = env.reset(seed=3)
         observations, rewards, _, _, infos = env.step(policy.act(observations))
         for agent in env.possible_agents:
             info = infos[agent]
-            loss = info["error"] if reward == "error" else info["trace_error"]
-            assert info["components_received"] == 5
-            assert rewards[agent] == pytest.approx(-loss - 0.05, abs=1e-12)
+            loss = info["error"] if reward == "error" else info["trace"]
+            assert info["components_received"] == 5 and info["messages_sent"] == 3
+            assert rewards[agent] == pytest.approx(-loss - 0.05 - 0.3, abs=1e-12)
 
 
 def test_observation_is_local_and_ages_count_missing_components():

@@ -1,10 +1,11 @@
-"""Bandwidth budgets that scale (issue 18): the completion-table codec and the DP decoding equal the
+"""Bandwidth budgets that scale: the completion-table codec and the DP decoding equal the
 enumerated product of all links wherever both run (N = 2..6), and N = 16 constructs, resets and steps."""
 
 import numpy as np
 import pytest
 
 import coloc_env
+from agents.bandwidth_fusion import decode_tables
 from coloc_env.networks.bandwidth import Bandwidth
 from coloc_env.primitives import BandwidthBudget
 from coloc_env.scenarios.bandwidth_fusion import (
@@ -72,13 +73,13 @@ def test_scenario_decodes_like_the_enumerated_argmax(num_uavs, budget):
     dynamic programme: both are the reference argmax, on generic and on tied (dyadic) scores."""
     config = BandwidthFusionConfig(num_uavs=num_uavs, budget=budget)
     scenario = BandwidthFusionScenario(config, batch=3)
-    assert (scenario._feasible is None) == (config.links.size > ENUMERATED_DECODE_LIMIT)
-    reference = config.links.enumerated_feasible()
+    assert (scenario._feasible is None) == (scenario.links.size > ENUMERATED_DECODE_LIMIT)
+    reference = scenario.links.enumerated_feasible()
     flat = reference.reshape(len(reference), -1).astype(float)
     rng = np.random.default_rng(3)
     shape = (3, num_uavs, scenario.action_dim)
     for actions in (rng.uniform(-1.2, 1.2, shape), rng.integers(-2, 3, shape) / 2.0):
-        selection, _ = scenario.decode_actions(actions)
+        selection, _ = decode_tables(scenario, actions)
         scores = np.clip(actions, -1, 1)[..., : (num_uavs - 1) * 3]
         np.testing.assert_array_equal(selection, reference[np.argmax(scores @ flat.T, axis=-1)])
 
@@ -93,7 +94,7 @@ def test_sixteen_uavs_construct_reset_step_and_round_trip_their_actions():
     selection = scenario.links.selection_at(rng.integers(0, scenario.links.size, size=16))
     weights = np.full((16, 16), 1.0 / 16)
     actions = scenario.encode_actions(selection, weights)
-    decoded, decoded_weights = scenario.decode_actions(actions[None])
+    decoded, decoded_weights = decode_tables(scenario, actions[None])
     np.testing.assert_array_equal(decoded[0], selection)
     np.testing.assert_allclose(decoded_weights[0], weights, atol=1e-12)
     observations, rewards, *_ = env.step({a: actions[i] for i, a in enumerate(env.possible_agents)})

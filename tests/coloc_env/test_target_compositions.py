@@ -73,7 +73,7 @@ def test_the_bandwidth_fusion_preset_is_drift_bandwidth_bandwidth_fusion():
     preset.world.observations[:] = composed.world.observations
     preset.network.keys[:] = composed.network.keys
     paper = preset.encode_actions(paper_selection("T1"), paper_weights("P1"))
-    np.testing.assert_array_equal(preset.decode_actions(paper[None])[0][0], relative)
+    np.testing.assert_array_equal(preset.decode_actions(paper[None])[0, :, 0], index)
     composition_action = {a: np.concatenate([[index[i]], np.zeros(N)]).astype(np.float32)
                           for i, a in enumerate(env.possible_agents)}
     assert (preset.composition.world, preset.composition.backend) == (spec.world, spec.backend)

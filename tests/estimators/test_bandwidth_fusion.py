@@ -6,7 +6,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import estimators.bandwidth_fusion as bf
-from coloc_env.scenarios.bandwidth_fusion import paper_selection, paper_weights
+from estimators.bandwidth_fusion import paper_selection, paper_weights
 from tests.conftest import random_selection, random_weights
 
 M0 = np.diag([0.19, 0.09, 0.08])

@@ -4,7 +4,7 @@ compute what the validated estimator code computes on the same draws.
 The references here are the estimators' own functions, run on the episodes the scenarios draw from the
 same generators (``relay_ukf``'s draws and relay rules, :class:`coloc_env.primitives.relay.RelayChainLinks`, with
 ``estimators.ukf_relay``; the ``gps_denied`` world's
-``sample_episode`` with ``estimators.range_ls.step``; ``bandwidth_fusion``'s ``draw_episode`` with
+``sample_episode`` with ``estimators.range_ls.step``; the ``drift`` world's ``draw_episode`` with
 ``estimators.bandwidth_fusion.step``; the ``target_cv`` world's episodes and the ``bernoulli_delay`` network's
 link outcomes with ``estimators.lossy_fusion``'s filters), so a change in the backends, the worlds or the
 seeding that moved a reproduction's numbers fails here.
@@ -22,12 +22,14 @@ import estimators.ukf_relay as ukf
 from agents.relay_ukf import paper_actions
 from coloc_env.config import build_config
 from coloc_env.primitives.unicycle import UnicycleMotion
-from coloc_env.scenarios.bandwidth_fusion import BandwidthFusionConfig, draw_episode, paper_selection, paper_weights
+from coloc_env.scenarios.bandwidth_fusion import BandwidthFusionConfig
 from coloc_env.scenarios.gps_denied_nbp import GpsDeniedNbpConfig
 from coloc_env.scenarios.lossy_fusion import LossyFusionConfig
 from coloc_env.scenarios.nlos_horizon import NlosHorizonConfig
 from coloc_env.scenarios.relay_ukf import RelayUKFConfig
+from coloc_env.worlds.drift import draw_episode
 from coloc_env.worlds.gps_denied import sample_episode
+from estimators.bandwidth_fusion import paper_selection, paper_weights
 from train.reproduce import fu2017, gao2016, wan2014, wang2019, zhao2020
 
 
@@ -146,10 +148,10 @@ def test_wan2014_counts_dnbp_messages_and_broadcasts_from_the_network():
 
 def _reference_zhao2020(config, pair, generators):
     """Squared errors (K+1, runs, N) of :func:`estimators.bandwidth_fusion.step` under the tables ``pair`` on the
-    episodes :func:`~coloc_env.scenarios.bandwidth_fusion.draw_episode` draws from ``generators`` (the preset's
-    sampler, in its order): the truth recursion x(k+1) = A x(k) + B + w(k) and y_j = C x + v_j written out."""
+    episodes :func:`~coloc_env.worlds.drift.draw_episode` draws from ``generators`` (the world's sampler, in its
+    order): the truth recursion x(k+1) = A x(k) + B + w(k) and y_j = C x + v_j written out."""
     model = config.fusion_model()
-    episodes = [draw_episode(config, rng) for rng in generators]
+    episodes = [draw_episode(config.parts()[0], rng) for rng in generators]
     x = np.stack([e["initial_state"] for e in episodes])
     w = np.stack([e["process_noise"] for e in episodes], axis=1)
     v = np.stack([e["measurement_noise"] for e in episodes], axis=1)

@@ -40,18 +40,14 @@ import numpy as np
 
 import coloc_env
 import estimators.bandwidth_fusion as bf
-from agents.bandwidth_fusion import greedy_selection, oracle_static_search, parse_tables
+from agents.bandwidth_fusion import advance_tables, greedy_selection, oracle_static_search, parse_tables
 from coloc_env.backends import Kalman
 from coloc_env.composition import compose
 from coloc_env.config import build_config
 from coloc_env.networks import Ideal
-from coloc_env.scenarios.bandwidth_fusion import (
-    BandwidthFusionConfig,
-    BandwidthFusionScenario,
-    paper_selection,
-    paper_weights,
-)
+from coloc_env.scenarios.bandwidth_fusion import BandwidthFusionConfig, BandwidthFusionScenario
 from coloc_env.scenarios.composed import ComposedScenario
+from estimators.bandwidth_fusion import paper_selection, paper_weights
 from train.executor import map_tasks
 from train.io import save_figure, write_json, write_text
 from train.reproduce.bound_rows import pcrb_block, report_section
@@ -179,7 +175,7 @@ def greedy_exact_curve(config: BandwidthFusionConfig, weights_name: str = "P1") 
     weights = paper_weights(weights_name)[None]
     curve = [bf.node_traces(scenario.fusion.error_cov, scenario.num_agents).sum()]
     for _ in range(config.horizon):
-        scenario.advance(greedy_selection(scenario, weights), weights)
+        advance_tables(scenario, greedy_selection(scenario, weights), weights)
         curve.append(scenario.info()["trace_error"].sum())
     return np.array(curve)
 
@@ -447,7 +443,7 @@ def oracle_static_curve(best, config: BandwidthFusionConfig) -> np.ndarray:
     ``agents.bandwidth_fusion.SearchResult``): its cumulative sum ends at ``best.cost``."""
     scenario = BandwidthFusionScenario(config, batch=1)
     full = scenario.links.full_selection(best.selection)
-    exact, _ = bf.expected_cost(scenario.model, np.asarray(config.initial_cov, float), full,
+    exact, _ = bf.expected_cost(scenario.backend.model, np.asarray(config.initial_cov, float), full,
                                 paper_weights(best.weights), scenario.horizon)
     return exact.sum(axis=-1)
 
