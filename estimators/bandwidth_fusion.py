@@ -62,6 +62,9 @@ Departures from the printed equations
 The bound (19) is the paper's; it holds because for a convex combination
 Cov(sum_j p_j a_j) <= sum_j p_j E[a_j a_j^T] and (a + b)(a + b)^T <= 2 a a^T + 2 b b^T,
 and sum_j p_ij^2 <= sum_j p_ij for the noise term. A test checks M_i >= Sigma_ii.
+
+The paper's simulation (Sec. 2, N = 4, n = 3) fixes the selections T1..T3 and
+the weights P1..P3 by hand: ``paper_selection`` and ``paper_weights``.
 """
 
 from __future__ import annotations

@@ -16,17 +16,19 @@ with weights p_ij. The agents choose what the paper fixes by hand: the
 component selection T and the fusion weights p.
 
 The preset is the composition ``drift`` / ``bandwidth`` / ``bandwidth_fusion``
-(``BandwidthFusionConfig.parts``: each keyword below sets the part field
-of the same meaning) with this action codec, observation, reward and info.
+(``BandwidthFusionConfig.parts``: each keyword sets the part field named in
+the Arguments table) with this action codec, observation, reward and info.
 The world draws the episode (x(0), w, v_j) from the episode's generator
 itself (``coloc_env.worlds.drift.draw_episode``); the bandwidth network
 delivers every selected component on time and draws nothing. The paper's
 tables T1..T3 and P1..P3 are ``estimators.bandwidth_fusion.paper_selection``
-and ``paper_weights`` (also importable from here). Timing: the backend reports xhat_i(k) at step k (the composition's
-pairing of J_K); the preset reports, after step k, the estimate xhat_i(k+1)
-it has just formed with y(k), against x(k+1), so that the reward credits a
-step's selection and weights at once (the same sequence of estimates, one
-step earlier than the composition's).
+and ``paper_weights`` (also importable from here).
+
+Timing: the backend reports xhat_i(k) at step k (the composition's pairing
+of J_K); the preset reports, after step k, the estimate xhat_i(k+1) it has
+just formed with y(k), against x(k+1), so that the reward credits a step's
+selection and weights at once (the same sequence of estimates, one step
+earlier than the composition's).
 
 Action (one per receiver, the same Box for all agents)
 ------------------------------------------------------
@@ -111,31 +113,34 @@ reset, where each copy draws its whole episode's noise from its own generator.
 
 Arguments (fields of ``BandwidthFusionConfig``, defaults = the paper)
 ------------------------------------------------------------------------
-Each keyword sets the part field named beside it; the part's check is the one that runs.
+Each keyword sets the part field in ``sets``, whose check is the one that runs
+(a refused value is reported as ``bandwidth_fusion: <keyword> must be ...``);
+``preset``: read by this module only.
 
-| field               | default                  | allowed                                   |
-|---------------------|--------------------------|-------------------------------------------|
-| num_uavs            | 4                        | 2..16 (world ``num_agents``)              |
-| transition          | I_3                      | (n, n), n in 2..16, entries in [-1e6, 1e6],|
-|                     |                          | spectral radius <= 1.001 (world)          |
-| drift               | (0.5, 0.5, 0.5)          | (n,), entries in [-1e6, 1e6] (world)      |
-| measurement         | I_3                      | (m, n), m in 1..16, entries in [-1e6, 1e6]|
-| process_noise       | diag(0.02, 0.05, 0.03)   | (n, n) PSD, entries <= 1e12 (world)       |
-| measurement_noise   | diag(0.03, 0.04, 0.02)   | (m, m) or (N, m, m) PD, entries <= 1e12   |
-| initial_state       | (10, 10, 10)             | (n,) in [-1e6, 1e6]: xhat_i(0); x(0) ~ N  |
-| initial_cov         | diag(0.19, 0.09, 0.08)   | (n, n) positive definite, entries <= 1e12:|
-|                     |                          | M_i(0) = Sigma_i(0) (the observation      |
-|                     |                          | divides by it: a singular one is refused) |
-| budget              | 5                        | (N-1)*min_per_link .. (N-1)*max_per_link; |
-|                     |                          | without exact_budget up to 10000 (network)|
-| min_per_link        | 1                        | 0..max_per_link (network)                 |
-| max_per_link        | 3                        | 0..n (network)                            |
-| exact_budget        | True                     | False: sum_j t_ji <= budget (network)     |
-| horizon             | 50                       | 1..100000 (world and composition)         |
-| reward              | "error"                  | "error", "trace" (composition)            |
-| component_cost      | 0.0                      | [0, 1e12], m^2 per component received     |
-| communication_cost  | 0.0                      | [0, 1e12], m^2 per message sent (composition)|
-| weight_logit_scale  | 4.0                      | (0, 1000] (backend)                       |
+| field              | default                | allowed                                              | sets                    |
+|--------------------|------------------------|------------------------------------------------------|-------------------------|
+| num_uavs           | 4                      | 2..16                                                | world.num_agents        |
+| transition         | I_3                    | (n, n), n in 2..16, entries in [-1e6, 1e6], spectral | world.transition        |
+|                    |                        | radius <= 1.001 (finite over the horizon)            |                         |
+| drift              | (0.5, 0.5, 0.5)        | (n,), entries in [-1e6, 1e6] (m per step)            | world.drift             |
+| measurement        | I_3                    | (m, n), m in 1..16, entries in [-1e6, 1e6]           | world.measurement       |
+| process_noise      | diag(0.02, 0.05, 0.03) | (n, n) PSD, entries <= 1e12 (m^2)                    | world.process_noise     |
+| measurement_noise  | diag(0.03, 0.04, 0.02) | (m, m) or (N, m, m) PD, entries <= 1e12 (m^2)        | world.measurement_noise |
+| initial_state      | (10, 10, 10)           | (n,) in [-1e6, 1e6]: xhat_i(0); x(0) ~ N(this, M(0)) | world.initial_state     |
+| initial_cov        | diag(0.19, 0.09, 0.08) | (n, n) positive definite, entries <= 1e12: M_i(0) =  | world.initial_cov (PD:  |
+|                    |                        | Sigma_i(0) (the observation takes the log of its     | preset)                 |
+|                    |                        | diagonal: a singular one is refused)                 |                         |
+| budget             | 5                      | (N-1)*min_per_link .. (N-1)*max_per_link; without    | network.budget          |
+|                    |                        | exact_budget from (N-1)*min_per_link up to 10000     |                         |
+| min_per_link       | 1                      | 0..max_per_link                                      | network.min_per_link    |
+| max_per_link       | 3                      | 0..n                                                 | network.max_per_link    |
+| exact_budget       | True                   | False: sum_j t_ji <= budget                          | network.exact_budget    |
+| horizon            | 50                     | 1..100000                                            | world.horizon and       |
+|                    |                        |                                                      | composition.horizon     |
+| reward             | "error"                | "error", "trace" (both m^2)                          | composition.reward      |
+| component_cost     | 0.0                    | [0, 1e12], m^2 per component received                | preset                  |
+| communication_cost | 0.0                    | [0, 1e12], m^2 per message sent                      | composition.communication_cost |
+| weight_logit_scale | 4.0                    | (0, 1000]                                            | backend.weight_logit_scale |
 """
 
 from __future__ import annotations

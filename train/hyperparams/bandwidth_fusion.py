@@ -23,7 +23,7 @@ HYPERPARAMS = {
 }
 
 NUM_COPIES = 8
-# 1.5M (5-6 CPU-min a seed): at 500k every seed's validation curve was still falling (seed 0 26.10 -> 26.02,
-# seed 1 26.14 -> 26.13, seed 2 26.39 -> 26.35 m^2 over its last 50k steps; 16 validation episodes), and
-# on the evaluation seeds seed 2 was not yet distinguishable from oracle_static (docs/learning_history.md).
-TIMESTEPS = 1_500_000  # docs/learning.md's budget: `coloc train bandwidth_fusion` at its defaults reproduces the table
+# A budget at which every seed's validation curve has levelled off (a third of it leaves them still falling;
+# docs/learning_history.md has the curves). docs/learning.md's table is `coloc train bandwidth_fusion` at
+# these defaults.
+TIMESTEPS = 1_500_000
