@@ -113,34 +113,35 @@ reset, where each copy draws its whole episode's noise from its own generator.
 
 Arguments (fields of ``BandwidthFusionConfig``, defaults = the paper)
 ------------------------------------------------------------------------
-Each keyword sets the part field in ``sets``, whose check is the one that runs
-(a refused value is reported as ``bandwidth_fusion: <keyword> must be ...``);
-``preset``: read by this module only.
+Each keyword sets the field of the same name (or the one named) of the part
+in ``sets``, whose check is the one that runs (a refused value is reported as
+``bandwidth_fusion: <keyword> must be ...``); ``preset``: read by this module
+only.
 
-| field              | default                | allowed                                              | sets                    |
-|--------------------|------------------------|------------------------------------------------------|-------------------------|
-| num_uavs           | 4                      | 2..16                                                | world.num_agents        |
-| transition         | I_3                    | (n, n), n in 2..16, entries in [-1e6, 1e6], spectral | world.transition        |
-|                    |                        | radius <= 1.001 (finite over the horizon)            |                         |
-| drift              | (0.5, 0.5, 0.5)        | (n,), entries in [-1e6, 1e6] (m per step)            | world.drift             |
-| measurement        | I_3                    | (m, n), m in 1..16, entries in [-1e6, 1e6]           | world.measurement       |
-| process_noise      | diag(0.02, 0.05, 0.03) | (n, n) PSD, entries <= 1e12 (m^2)                    | world.process_noise     |
-| measurement_noise  | diag(0.03, 0.04, 0.02) | (m, m) or (N, m, m) PD, entries <= 1e12 (m^2)        | world.measurement_noise |
-| initial_state      | (10, 10, 10)           | (n,) in [-1e6, 1e6]: xhat_i(0); x(0) ~ N(this, M(0)) | world.initial_state     |
-| initial_cov        | diag(0.19, 0.09, 0.08) | (n, n) positive definite, entries <= 1e12: M_i(0) =  | world.initial_cov (PD:  |
-|                    |                        | Sigma_i(0) (the observation takes the log of its     | preset)                 |
-|                    |                        | diagonal: a singular one is refused)                 |                         |
-| budget             | 5                      | (N-1)*min_per_link .. (N-1)*max_per_link; without    | network.budget          |
-|                    |                        | exact_budget from (N-1)*min_per_link up to 10000     |                         |
-| min_per_link       | 1                      | 0..max_per_link                                      | network.min_per_link    |
-| max_per_link       | 3                      | 0..n                                                 | network.max_per_link    |
-| exact_budget       | True                   | False: sum_j t_ji <= budget                          | network.exact_budget    |
-| horizon            | 50                     | 1..100000                                            | world.horizon and       |
-|                    |                        |                                                      | composition.horizon     |
-| reward             | "error"                | "error", "trace" (both m^2)                          | composition.reward      |
-| component_cost     | 0.0                    | [0, 1e12], m^2 per component received                | preset                  |
-| communication_cost | 0.0                    | [0, 1e12], m^2 per message sent                      | composition.communication_cost |
-| weight_logit_scale | 4.0                    | (0, 1000]                                            | backend.weight_logit_scale |
+| field              | default                | allowed                                      | sets                |
+|--------------------|------------------------|----------------------------------------------|---------------------|
+| num_uavs           | 4                      | 2..16                                        | world (num_agents)  |
+| transition         | I_3                    | (n, n), n in 2..16, entries in [-1e6, 1e6],  | world               |
+|                    |                        | spectral radius <= 1.001                     |                     |
+| drift              | (0.5, 0.5, 0.5)        | (n,), entries in [-1e6, 1e6] (m per step)    | world               |
+| measurement        | I_3                    | (m, n), m in 1..16, entries in [-1e6, 1e6]   | world               |
+| process_noise      | diag(0.02, 0.05, 0.03) | (n, n) PSD, entries <= 1e12 (m^2)            | world               |
+| measurement_noise  | diag(0.03, 0.04, 0.02) | (m, m) or (N, m, m) PD, entries <= 1e12      | world               |
+| initial_state      | (10, 10, 10)           | (n,) in [-1e6, 1e6]: xhat_i(0); x(0) ~ N(.,  | world               |
+|                    |                        | M(0))                                        |                     |
+| initial_cov        | diag(0.19, 0.09, 0.08) | (n, n) positive definite, entries <= 1e12:   | world (positive     |
+|                    |                        | M_i(0) = Sigma_i(0) (the observation takes   | definite: preset)   |
+|                    |                        | the log of its diagonal)                     |                     |
+| budget             | 5                      | (N-1)*min_per_link .. (N-1)*max_per_link;    | network             |
+|                    |                        | without exact_budget up to 10000             |                     |
+| min_per_link       | 1                      | 0..max_per_link                              | network             |
+| max_per_link       | 3                      | 0..n                                         | network             |
+| exact_budget       | True                   | False: sum_j t_ji <= budget                  | network             |
+| horizon            | 50                     | 1..100000                                    | world, composition  |
+| reward             | "error"                | "error", "trace" (both m^2)                  | composition         |
+| component_cost     | 0.0                    | [0, 1e12], m^2 per component received        | preset              |
+| communication_cost | 0.0                    | [0, 1e12], m^2 per message sent              | composition         |
+| weight_logit_scale | 4.0                    | (0, 1000]                                    | backend             |
 """
 
 from __future__ import annotations
