@@ -1,24 +1,29 @@
 """Policies for ``nlos_horizon`` (gao2016).
 
-* ``paper``: AHG (Algorithm 10, spec §7) with the config's defaults (N_min 4, N_max 30,
+* ``paper``: AHG (Algorithm 10, docs/gao2016.md §7) with the config's defaults (N_min 4, N_max 30,
   dN 2, M 5, N_c(0) 12, ``likelihood`` from the config) and every neighbour kept (the
   ``n_strongest`` rule then selects the packets). With it the env *is* AFGE. It reads the
   costs J_N(k) of the agent's own DFIR stack from the scenario (information the agent has;
   the env's observation carries only a summary of it).
-* ``bound_hindsight_constant`` (formerly ``oracle_constant``, still accepted by
-  ``agents.make_policy`` as an alias): the best constant horizon in hindsight. At the start
+* ``bound_hindsight_constant`` (``agents.make_policy`` also accepts the name ``oracle_constant``):
+  the best constant window in hindsight. At the start
   of each episode it plays the whole episode on a copy of the world (privileged look-ahead:
   the future and the truth) and keeps, per agent, the N in [N_min, N_max] with the lowest
   summed squared error; every neighbour kept. A bound, not a baseline: no agent can do this.
-* ``constant:N``: horizon N every step (default N_c(0) = 12), all kept.
-* ``best_constant``: ``constant:N`` at ``BEST_CONSTANT_WINDOW``, the one horizon for all
+* ``constant:N``: window N every step (default N_c(0) = 12), all kept.
+* ``best_constant``: ``constant:N`` at ``BEST_CONSTANT_WINDOW``, the one window for all
   agents with the lowest mean cost on the VALIDATION seeds 2 * 10^6 + e (never the
   evaluation seeds 10^6 + e); the strongest realizable baseline of this scenario.
 * ``always``: every packet kept at the AHG's N_c(0) (= ``constant``); ``silent``: no
-  neighbour packet used, the same horizon.
+  neighbour packet used, the same window.
+
+The FIR window N is the paper's "horizon size" (``horizon`` is the episode length). The policies read
+the agent's own DFIR stack from the ``afge`` backend (``window_costs``, ``constant_window_errors``).
 """
 
 from __future__ import annotations
+
+import copy
 
 import numpy as np
 
@@ -32,6 +37,33 @@ def _scenario(env):
     if scenario.name != "nlos_horizon":
         raise ValueError(f"this policy is for nlos_horizon, not {scenario.name}")
     return scenario
+
+
+def window_costs(scenario, likelihood: str) -> np.ndarray:
+    """AHG costs J_N(k) (B, N, S) of every window N = 1..S at the current time, computed with the last
+    mask (``predictive`` or ``paper``; ``smoothed`` is the policy's own forgetting of the predictive costs)."""
+    if likelihood not in ("predictive", "paper"):
+        raise ValueError(f"likelihood must be 'predictive' or 'paper' here, got {likelihood!r}")
+    backend = scenario.backend
+    return backend.costs(backend.pending, likelihood)
+
+
+def constant_window_errors(scenario) -> np.ndarray:
+    """Summed squared error (B, N, S) of every constant window N = 1..S from now to the end of the episode,
+    all packets kept (privileged: a look-ahead on a copy of the scenario, its world included)."""
+    sim = copy.deepcopy(scenario)
+    be = sim.backend
+    A = be.motion.transition
+    pred = np.broadcast_to(be.pred_x[:, :, None, :], (*be.prev_valid.shape, 4)).copy()
+    total = np.zeros(be.prev_valid.shape)
+    action = sim.encode_actions(np.full((sim.batch, sim.num_agents), scenario.config.window_min))
+    while not np.all(sim.k >= sim.horizon):
+        t = be.pending
+        out = np.where(t["valid"][..., None], t["x"], pred)
+        total += np.sum((out[..., :2] - sim.world.positions()[:, :, None, :]) ** 2, axis=-1)
+        pred = out @ A.T
+        sim.step(action)
+    return total
 
 
 class _EpisodePolicy(Policy):
@@ -58,11 +90,11 @@ class _EpisodePolicy(Policy):
 
 
 class PaperPolicy(_EpisodePolicy):
-    """AHG: the horizon group around the centre N_c, the member with the lowest likelihood cost."""
+    """AHG: the window group around the centre N_c, the member with the lowest likelihood cost."""
 
     def __init__(self, env, likelihood: str | None = None, tables: str | None = None):
         super().__init__(env)
-        self.params = self.scenario.ahg
+        self.params = self.scenario.backend.ahg
         # ``paper:smoothed`` (make_policy's variant syntax) arrives as ``tables``
         self.likelihood = likelihood or tables or self.params.likelihood
         if self.likelihood not in af.LIKELIHOODS:
@@ -76,18 +108,19 @@ class PaperPolicy(_EpisodePolicy):
             self.raw = np.zeros((*shape, sc.S))
             self.count = np.zeros((*shape, sc.S), np.int64)
         if self.likelihood == "paper":
-            costs = sc.horizon_costs("paper")
+            costs = window_costs(sc, "paper")
         else:
-            costs = sc.horizon_costs("predictive")
+            costs = window_costs(sc, "predictive")
             if self.likelihood == "smoothed":
                 self.raw, self.count, costs = af.smooth_costs(self.raw, self.count, costs, self.params.smoothing)
-        chosen, self.centre = af.ahg_select(self.params, self.centre, costs, sc.horizon_valid, sc.fresh)
+        pending = sc.backend.pending
+        chosen, self.centre = af.ahg_select(self.params, self.centre, costs, pending["valid"], pending["fresh"])
         # chosen = 0: no member has an estimate; the centre (also without one) makes the env predict
         return sc.encode_actions(np.where(chosen > 0, chosen, self.centre))
 
 
 class ConstantPolicy(_EpisodePolicy):
-    """Horizon ``window`` every step (default: the AHG's N_c(0)), all neighbours kept."""
+    """Window ``window`` every step (default: the AHG's N_c(0)), all neighbours kept."""
 
     def __init__(self, env, window: int | None = None, tables: str | None = None):
         super().__init__(env)
@@ -109,14 +142,14 @@ class ConstantPolicy(_EpisodePolicy):
 
 
 class OracleConstantPolicy(_EpisodePolicy):
-    """The constant horizon with the lowest summed squared error over the episode (privileged: hindsight
+    """The constant window with the lowest summed squared error over the episode (privileged: hindsight
     and the truth; ``bound_hindsight_constant``)."""
 
     def batch_actions(self):
         sc = self.scenario
         if self._new_episode():
             c = sc.config
-            errors = sc.constant_horizon_errors()[..., c.window_min - 1:c.window_max]
+            errors = constant_window_errors(sc)[..., c.window_min - 1:c.window_max]
             self.window = c.window_min + np.argmin(errors, axis=-1)
         return sc.encode_actions(self.window)
 
@@ -125,7 +158,7 @@ class OracleConstantPolicy(_EpisodePolicy):
 #   .venv/bin/python -c "from train.evaluate import constant_horizon_sweep as s; \
 #     r = s(range(4, 31), episodes=16); print({n: round(v['mean_cost'], 3) for n, v in r.items()})"
 # on seeds VALIDATION_SEED_BASE + e = 2_000_000 .. 2_000_015, disjoint from the evaluation seeds 10^6 + e,
-# printed (mean cost, m^2; re-run when nlos_horizon became a binding and its delays the network's draws):
+# printed (mean cost, m^2):
 # 4: 8.96, 5: 7.347, 6: 6.872, 7: 7.31, 8: 8.636, 9: 10.831, 10: 13.795, 12: 21.191, 16: 34.403, 20: 39.591,
 # 30: 39.424; N = 6 is lower than N = 5 and N = 7 on the paired validation episodes (differences -0.475
 # [-0.546, -0.404] and -0.438 [-0.494, -0.382] m^2, 95 %).
@@ -134,7 +167,7 @@ BEST_CONSTANT_WINDOW = 6
 
 
 class BestConstantPolicy(ConstantPolicy):
-    """The constant horizon ``BEST_CONSTANT_WINDOW`` chosen on validation seeds, all neighbours kept."""
+    """The constant window ``BEST_CONSTANT_WINDOW`` chosen on validation seeds, all neighbours kept."""
 
     def __init__(self, env):
         super().__init__(env, window=BEST_CONSTANT_WINDOW)

@@ -26,8 +26,8 @@ How exactly the parts reproduce each preset (tests/coloc_env):
   (``LossyFusionScenario.link_outcomes``). bandwidth_fusion: drift / bandwidth (the preset's scored
   selection) / bandwidth_fusion, reporting xhat(k+1) after step k (the plain composition scores the
   one-step prediction xhat(k) against x(k), eq. 12's pairing). nlos_horizon: nlos_orbit / random_delay /
-  afge, receiving before deciding (the agent sees stamp k's packets and the horizons' costs before it
-  picks the horizon of k); its packet delays are the network's draws (``NlosHorizonScenario.packet_delays``).
+  afge, receiving before deciding (the agent sees stamp k's packets and the windows' costs before it
+  picks the window of k); its packet delays are the network's draws (``coloc_env.backends.nlos.episode_delays``).
   mrclam_relay: mrclam / relay (``routing="per_source"``: one next hop per measuring robot) / ukf_se2, the
   action vector passed verbatim, the team's mean error after the time update minus the team's hop cost.
   Each binding's test shows that the plain composition, handed the same world draws and network key,

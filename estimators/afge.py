@@ -3,13 +3,13 @@
 Gao S., Gao Y., Zhong Y., Wei W., "Adaptive finite-horizon group estimator for networked
 navigation under mixed LOS/NLOS environments and random delay", 2016 (seed
 ``004_4a0edde314525ef9.txt``). The extracted text lost every formula; this module
-implements the reconstruction ``../shared/specs/gao2016_afge.md`` (the contract) and keeps
-its labels: **[paper]** stated in the text we have, **[reconstructed]** rebuilt from the
+implements the reconstruction in ``docs/gao2016.md`` (the contract; "§N" below is its section N)
+and keeps its labels: **[paper]** stated in the text we have, **[reconstructed]** rebuilt from the
 prose and standard results, **[chosen]** a value the paper had but we lost.
 
 Pipeline for one target (all functions take a leading batch shape ``...``):
 
-1. Packet -> position fix (spec §4, eqs. 4-6) [reconstructed], ``packet_fixes``.
+1. Packet -> position fix (§4, eqs. 4-6) [reconstructed], ``packet_fixes``.
    Neighbour j sends its own position estimate p_hat_j, the RSS and the AOA of the target.
    With the mode information m (the true NLOS flag / pi / 0 for ``mode_info`` =
    ``known`` / ``mean`` / ``blind``) the NLOS bias is removed and the variance moment-matched,
@@ -42,7 +42,7 @@ Pipeline for one target (all functions take a leading batch shape ``...``):
    ``ahg_group``, ``ahg_select`` with the costs ``predictive_costs`` (default),
    ``in_sample_costs`` (``likelihood="paper"``) and ``smooth_costs`` (``"smoothed"``,
    an extension, not in the paper).
-6. Baseline: the delay-aware Kalman filter on the same fused observations (spec §8) is the
+6. Baseline: the delay-aware Kalman filter on the same fused observations (§8) is the
    same information recursion without the shift, started from the prior at stamp 0
    (``shift=False`` in ``buffer_step``; ``run_kalman``).
 
@@ -52,7 +52,7 @@ position/velocity model with period T].
 
 Departures
 ----------
-* The printed formulas are lost: everything above is the spec's reconstruction, not a
+* The printed formulas are lost: everything above is the reconstruction, not a
   transcription. In particular the distance weights of Def. 6 are normalised to sum to one
   (a covariance-intersection-type bound, so the fused R(s) is never smaller than the plain
   information sum). The fixes are independent, so the bound is conservative by about the number
@@ -83,15 +83,19 @@ Departures
   for Y^-1): numpy's stacked matmul/solve on 4x4 matrices is dominated by per-matrix
   overhead. The reference batch form ``dfir_batch`` uses
   ``scipy.linalg.solve``; a test holds the two equal to 1e-9.
-* Speed (issue 18): where numba is installed, a time step's buffer re-run and estimates
+* Speed: where numba is installed, a time step's buffer re-run and estimates
   (``buffer_estimates``) and the packet selection and fusion (``fuse_packets``) run
   as compiled kernels, one (copy, target) element at a time with every horizon slot held in
   registers, the stack kept as a ring so the shift moves nothing. They evaluate the same
   formulas in the same order as the numpy form (including numpy's pairwise order for the
   fusion weights' normaliser), so results agree to the last bit on the tests' machine and
   to 1e-9 by test; ``compiled=False`` is the numpy reference, also used without numba. The
-  numpy block form allocated an (elements, S)-sized temporary for every block product:
-  cProfile of ``vector_env("nlos_horizon", num_envs=1024)`` put ~80 % of a step there.
+  numpy block form allocates an (elements, S)-sized temporary for every block product, which
+  dominates a step at large batches.
+
+Noise parameters: the library's models take variances (``estimators.models``); this module keeps the
+paper's standard deviations where the paper states them (``MotionModel.accel_sigma``, the ``sigma_*``
+fields of ``SignalModel``), each said so in its docstring; ``run_kalman``'s ``accel_var`` is a variance.
 """
 
 from __future__ import annotations
@@ -122,6 +126,7 @@ __all__ = [
     "fuse_fixes",
     "fused_fix",
     "fuse_packets",
+    "fuse_episode",
     "dfir_batch",
     "information_predict",
     "buffer_estimates",
@@ -151,9 +156,10 @@ LIKELIHOODS = ("predictive", "paper", "smoothed")
 # --------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class MotionModel:
-    """The estimator's constant-velocity model (spec §2) [reconstructed].
+    """The estimator's constant-velocity model (§2) [reconstructed].
 
-    ``period`` T (s), ``accel_sigma`` sigma_a (m/s^2): Q = sigma_a^2 I_2, Gam = B Q B^T.
+    ``period`` T (s), ``accel_sigma`` sigma_a (m/s^2), a standard deviation (not a variance):
+    Q = sigma_a^2 I_2, Gam = B Q B^T.
     """
 
     period: float = 1.0
@@ -191,9 +197,11 @@ class MotionModel:
 
 @dataclass(frozen=True)
 class SignalModel:
-    """What the estimator knows of the RSS/AOA packets (spec §4) [reconstructed].
+    """What the estimator knows of the RSS/AOA packets (§4) [reconstructed].
 
-    Units: dBm / dB, Hz, m, radians. ``p_nlos`` is pi, used by ``mode_info="mean"``.
+    Units: dBm / dB, Hz, m, radians. ``sigma_db``, ``sigma_theta``, ``nlos_sigma_db``, ``nlos_sigma_theta``
+    and ``sigma_nav`` (m per axis) are standard deviations, not variances. ``p_nlos`` is pi, used by
+    ``mode_info="mean"``.
     """
 
     tx_power_dbm: float = 20.0
@@ -259,7 +267,7 @@ class HorizonStack:
 
 
 # --------------------------------------------------------------------------------------
-# packets -> fused position observations (spec §4-5)
+# packets -> fused position observations (§4-5)
 # --------------------------------------------------------------------------------------
 def reference_path_loss(frequency_hz: float, d0: float) -> float:
     """Free-space loss at d0, PL(d0) = 20 log10(4 pi d0 f / c) (dB) (Def. 2) [reconstructed]."""
@@ -273,7 +281,7 @@ def range_from_power(power_dbm, tx_power_dbm: float, reference_loss_db: float, e
 
 
 def mode_weight(mode_info: str, modes: np.ndarray, p_nlos: float) -> np.ndarray:
-    """m per packet: the true NLOS flag (``known``), pi (``mean``) or 0 (``blind``) (spec §4)."""
+    """m per packet: the true NLOS flag (``known``), pi (``mean``) or 0 (``blind``) (§4)."""
     modes = np.asarray(modes)
     if mode_info == "known":
         return modes.astype(float)
@@ -306,7 +314,7 @@ def _fixes_kernel_source(sender, rss, aoa, m, constants, z, R, r_hat):  # pragma
 
 
 def packet_fixes(signal: SignalModel, sender_position, rss, aoa, m, compiled: bool | None = None):
-    """Target position fix of each packet (spec §4, eqs. 4-6 + sender error) [reconstructed].
+    """Target position fix of each packet (§4, eqs. 4-6 + sender error) [reconstructed].
 
     ``sender_position`` (..., 2) p_hat_j, ``rss`` (...) dBm, ``aoa`` (...) rad (bearing of the
     target seen from j), ``m`` (...) mode weight. Returns ``z`` (..., 2), ``R`` (..., 2, 2),
@@ -418,7 +426,7 @@ def fuse_packets(signal: SignalModel, rss, aoa, nav, modes, delays, lags, keep, 
                  mode_info: str = "known", weighting: str = "distance", min_packets: int = 1,
                  fixes: tuple | None = None, compiled: bool | None = None):
     """Steps 1-2 for buffered stamps: the fused observation of each stamp from its packets
-    known now (spec §4-5) [paper/reconstructed]; ``known_at_lag``, ``select_strongest``,
+    known now (§4-5) [paper/reconstructed]; ``known_at_lag``, ``select_strongest``,
     ``mode_weight``, ``packet_fixes`` and ``fuse_fixes`` in that order.
 
     Packets on the last axis J: ``rss``/``aoa``/``modes``/``delays`` (..., J), ``nav`` (..., J, 2)
@@ -456,6 +464,23 @@ def fuse_packets(signal: SignalModel, rss, aoa, nav, modes, delays, lags, keep, 
         weighting == "distance", int(min_packets), out_Y, out_y, out_gamma, out_used)
     return (out_Y.reshape(*batch, 2, 2), out_y.reshape(*batch, 2), out_gamma.reshape(batch),
             out_used.reshape(*batch, J))
+
+
+def fuse_episode(signal: SignalModel, rss, aoa, nav, modes, delays, buffer_length: int, n_strongest: int,
+                 mode_info: str = "known", weighting: str = "distance", min_packets: int = 1):
+    """Every fused observation of a whole episode by (stamp, lag), every packet kept: ``fuse_packets`` of
+    stamp s as known at lag l = 0..D (D = ``buffer_length``).
+
+    Packets (K+1, T, J) of T targets from J senders: ``rss``, ``aoa``, ``modes``, ``delays`` (a delay above D
+    never arrives), ``nav`` (K+1, T, J, 2). Returns ``(Y, y, gamma)``, (T, K+1, D+1, 2, 2), (T, K+1, D+1, 2)
+    and (T, K+1, D+1): the layout ``run_fixed_mask`` and ``run_kalman`` take.
+    """
+    rss = np.asarray(rss)
+    lags = np.broadcast_to(np.arange(buffer_length + 1), (*rss.shape[:2], buffer_length + 1))
+    Y, y, gamma, _ = fuse_packets(signal, rss[:, :, None], np.asarray(aoa)[:, :, None], np.asarray(nav)[:, :, None],
+                                  np.asarray(modes)[:, :, None], np.asarray(delays)[:, :, None], lags,
+                                  np.ones(1, bool), n_strongest, mode_info, weighting, min_packets)
+    return np.moveaxis(Y, 0, 1), np.moveaxis(y, 0, 1), np.moveaxis(gamma, 0, 1)
 
 
 def _numpy_sum(values):  # pragma: no cover - compiled by numba
@@ -622,7 +647,7 @@ def _assemble(P11, P12, P22, shape) -> np.ndarray:
 
 
 def information_predict(motion: MotionModel, info: np.ndarray, vector: np.ndarray, accel_var=None):
-    """Information-form prediction valid for singular Y (spec §6) [reconstructed], in Joseph form.
+    """Information-form prediction valid for singular Y (§6) [reconstructed], in Joseph form.
 
     ``M = A^-T Y A^-1``, ``Y <- (I + M Gam)^-1 M``, ``y <- (I + M Gam)^-1 A^-T y``. With
     Gam = B Q B^T, Woodbury gives ``(I + M Gam)^-1 = I - K B^T``, ``K = M B W^-1``,
@@ -682,7 +707,7 @@ def empty_stack(batch_shape: tuple, size: int) -> HorizonStack:
 
 
 def prior_stack(prior_mean: np.ndarray, prior_cov: np.ndarray) -> HorizonStack:
-    """A Kalman filter (S = 1) holding the prior of x(0) (before stamp 0's update), spec §8."""
+    """A Kalman filter (S = 1) holding the prior of x(0) (before stamp 0's update), §8."""
     prior_mean = np.asarray(prior_mean, float)
     Y0 = np.linalg.inv(np.asarray(prior_cov, float))
     info = np.broadcast_to(Y0, (*prior_mean.shape[:-1], 1, 4, 4)).copy()
@@ -692,7 +717,7 @@ def prior_stack(prior_mean: np.ndarray, prior_cov: np.ndarray) -> HorizonStack:
 
 def stack_advance(motion: MotionModel, stack: HorizonStack, obs_info, obs_vector, obs_success, stamp,
                   shift: bool = True, accel_var=None) -> HorizonStack:
-    """Advance every filter by one stamp (spec §6): shift in a zero filter (``shift``), predict
+    """Advance every filter by one stamp (§6): shift in a zero filter (``shift``), predict
     (where ``stamp > 0``), update with the fused observation of that stamp.
 
     ``obs_info`` (..., 2, 2), ``obs_vector`` (..., 2), ``obs_success`` (...) gamma, ``stamp``
@@ -797,7 +822,7 @@ def buffer_observations(fused_info, fused_vector, fused_success, k):
 
 def buffer_step(motion: MotionModel, final: HorizonStack, k, buffer_info, buffer_vector, buffer_success,
                 shift: bool = True, accel_var=None) -> tuple[HorizonStack, HorizonStack]:
-    """One time step of the delay-aware re-run (spec §6): returns (final at k - D, current at k).
+    """One time step of the delay-aware re-run (§6): returns (final at k - D, current at k).
 
     ``final`` holds stamps < k - D; ``buffer_*`` (..., D+1, ...) the observations of stamps
     k-D..k as known at time k (oldest first). Stamp k - D becomes final now (all its packets
@@ -1313,7 +1338,7 @@ def run_fixed_mask(motion: MotionModel, fused_info, fused_vector, fused_success,
 
 def run_kalman(motion: MotionModel, fused_info, fused_vector, fused_success, truth_position, prior_mean,
                prior_cov, accel_var=None) -> np.ndarray:
-    """Delay-aware Kalman filter on the same fused observations (spec §8): the posterior at
+    """Delay-aware Kalman filter on the same fused observations (§8): the posterior at
     k - D is kept and the last D stamps re-filtered each step; prior x(0) ~ N(``prior_mean``,
     ``prior_cov``). ``accel_var`` (scalar or (...)) is its sigma_a^2 (default: the model's).
     Returns the per-step squared position error (..., K)."""

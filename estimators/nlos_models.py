@@ -5,7 +5,7 @@
 | ``ConstantVelocityWhiteAccel`` | ``cv_white_accel`` | [px, py, vx, vy] (4) | none (0) | gao2016 |
 | ``RssAoaModel``                | ``rss_aoa``      | target position (2), seen from a sender | - | gao2016 |
 
-Motion (spec §2) [reconstructed]: ``x(k+1) = A x(k) + B w(k)``, ``w ~ N(0, accel_var I_2)``,
+Motion (docs/gao2016.md §2) [reconstructed]: ``x(k+1) = A x(k) + B w(k)``, ``w ~ N(0, accel_var I_2)``,
 ``A = [[I, T I], [0, I]]``, ``B = [[T^2/2 I], [T I]]``; the matrices are those of
 ``estimators.afge.MotionModel`` (this class wraps it; no second copy). Unlike
 ``estimators.cv_models.ConstantVelocityAccel`` there is no accelerometer: the target's
@@ -13,7 +13,7 @@ acceleration is an unknown white input, so the model takes an empty input ``u`` 
 Noise is a variance here (the library's convention); ``ConstantVelocityWhiteAccel.afge``
 converts to the estimator's ``accel_sigma`` at the boundary.
 
-Measurement (spec §4) [reconstructed]: what neighbour j measures of the target, the RSS
+Measurement (§4) [reconstructed]: what neighbour j measures of the target, the RSS
 ``P_T - PL(d0) - 10 n log10(d / d0) - eps`` (dBm) and the AOA ``atan2(p - p_j) + n_theta``
 (rad), with ``(eps, n_theta) ~ N(0, diag(s_db^2, s_th^2))`` in LOS and
 ``N((mu_db, mu_th), diag(s_db^2 + s_b,db^2, s_th^2 + s_b,th^2))`` in NLOS, as
@@ -36,7 +36,7 @@ __all__ = ["ConstantVelocityWhiteAccel", "RssAoaModel"]
 
 @dataclass(frozen=True)
 class ConstantVelocityWhiteAccel:
-    """x(k+1) = A x + w, w ~ N(0, Gam), Gam = accel_var B B^T (spec §2) [reconstructed]; no input."""
+    """x(k+1) = A x + w, w ~ N(0, Gam), Gam = accel_var B B^T (§2) [reconstructed]; no input."""
 
     period: float
     accel_var: float
@@ -85,7 +85,7 @@ class ConstantVelocityWhiteAccel:
 
 @dataclass(frozen=True)
 class RssAoaModel:
-    """RSS (dBm) and AOA (rad) of a target at ``position`` seen from a sender at ``sender`` (spec §4).
+    """RSS (dBm) and AOA (rad) of a target at ``position`` seen from a sender at ``sender`` (§4).
 
     ``function`` is the noiseless (LOS, bias-free) reading, ``jacobian`` its derivative with
     respect to the target position (2, 2), ``covar(nlos)`` the reading's covariance in each

@@ -1,12 +1,14 @@
 """Backends ``afge``, ``dfir`` and ``delay_kalman`` (gao2016): estimation from neighbours' delayed RSS/AOA packets.
 
-Both adapt ``estimators.afge`` (no second copy of its math): each agent is a target that
-fuses the packets of its J world neighbours (``coloc_env.worlds.nlos_orbit``'s readings).
-Both receive before they decide (``receives_before_deciding``): where the composition allows it
-(no sensing or transport decisions), steps 1-3 run with the last step's mask before the agent
-acts (``PacketFirBackend.receive``, the core's "receive, then decide"), so its observation
-and the AHG costs describe the packets of stamp k, and step k re-filters only if the agent
-changes the mask. Per step k, for each agent:
+All three adapt ``estimators.afge`` (no second copy of its math): each agent is a target that
+fuses the packets of its J world neighbours (``coloc_env.worlds.nlos_orbit``'s readings). The
+paper's "horizon size" N, the length of a finite-impulse-response window, is called the *window*
+here (``horizon`` is the episode length). All three receive before they decide
+(``receives_before_deciding``): where the composition allows it (no sensing or transport
+decisions), steps 1-3 run with the last step's mask before the agent acts
+(``PacketFirBackend.receive``, the core's "receive, then decide"), so its observation and the
+AHG costs describe the packets of stamp k, and step k re-filters only if the agent changes the
+mask. Per step k, for each agent:
 
 1. the packets stamped k (one per neighbour that measured the target) go to the network
    (``coloc_env.networks.base.Network.node_packets``, slot 0), which returns each one's
@@ -15,14 +17,14 @@ changes the mask. Per step k, for each agent:
    tau <= k - s (Step 1, ``estimators.afge.known_at_lag``);
 2. the known packets of each buffered stamp are fused (Step 2, eqs. 21-27, Def. 6:
    ``estimators.afge.fuse_packets``, the ``n_strongest`` by RSS among the kept ones);
-3. the DFIR stack of every horizon N = 1..S (Lemma 7 in recursive form) is re-run from the
+3. the DFIR stack of every window N = 1..S (Lemma 7 in recursive form) is re-run from the
    last final stamp k - D (``estimators.afge.buffer_step``, ``estimators.afge.stack_estimates``);
-4. the output x_hat(k) is the chosen horizon's estimate; without one (fewer than two
-   observed stamps in it) the prediction A x_hat(k-1) (``afge``: horizon chosen by AHG,
-   Algorithm 10, ``estimators.afge.ahg_select``, or by the agent; ``dfir``: ``horizon``);
-5. ``predict``: x_hat <- A x_hat, P <- A P A^T + Gam (spec §2), the fallback of step k + 1.
+4. the output x_hat(k) is the chosen window's estimate; without one (fewer than two
+   observed stamps in it) the prediction A x_hat(k-1) (``afge``: window chosen by AHG,
+   Algorithm 10, ``estimators.afge.ahg_select``, or by the agent; ``dfir``: ``window``);
+5. ``predict``: x_hat <- A x_hat, P <- A P A^T + Gam (docs/gao2016.md §2), the fallback of step k + 1.
 
-With the ``always`` policy (horizon decision 0 = AHG, every neighbour kept) ``afge`` is the
+With the ``always`` policy (window decision 0 = AHG, every neighbour kept) ``afge`` is the
 ``nlos_horizon`` scenario under its ``paper`` policy: the same estimates to 1e-9 given the
 same episode and the same delays (``tests/coloc_env/test_nlos_composition.py``).
 
@@ -36,13 +38,13 @@ same episode and the same delays (``tests/coloc_env/test_nlos_composition.py``).
 | lost message    | never known: that stamp is fused without it; a stamp with fewer than ``min_packets`` | the same |
 |                 | packets has gamma = 0 (no observation)         |                                            |
 | late message    | buffered: stamp s is re-fused when it arrives (tau <= D) and the last D stamps are | the same |
-|                 | re-filtered from the final stamp k - D (the delay-aware re-run, spec §6) |                  |
-| under-determined | a horizon with fewer than two observed stamps, or whose information is singular to | the same |
+|                 | re-filtered from the final stamp k - D (the delay-aware re-run, §6)      |                  |
+| under-determined | a window with fewer than two observed stamps, or whose information is singular to | the same |
 |                 | rounding (a fix with ~1e-20 of another's information at sigma_db = 100), has no |        |
 |                 | estimate: the output is the prediction A x_hat(k-1) (AHG: a group without a valid member) | |
-| decisions       | ``horizon`` Discrete(N_max - N_min + 2): 0 = AHG (default), v = horizon N_min + v - 1; | none |
+| decisions       | ``window`` Discrete(N_max - N_min + 2): 0 = AHG (default), v = window N_min + v - 1;   | none |
 |                 | ``keep`` MultiDiscrete([2] * J): keep (1, default) / drop (0) the packets of RSS slot s |   |
-| position cov    | P of the output's horizon (or the predicted P); | the same; mean NEES 0.57 (distance) and   |
+| position cov    | P of the output's window (or the predicted P);  | the same; mean NEES 0.57 (distance) and   |
 |                 | with the model matched the mean position NEES   | 2.05 (information)                        |
 |                 | (2 DOF) is 0.60 with ``weighting="distance"``   |                                           |
 |                 | (conservative: P about 3.5x the error           |                                           |
@@ -50,8 +52,8 @@ same episode and the same delays (``tests/coloc_env/test_nlos_composition.py``).
 |                 | and 2.15 with ``"information"`` (docs/gao2016.md, section 15) |                             |
 | observation     | packets of stamp k - l known / J (l = 0..D); per RSS slot: present, | packets of stamp k - l   |
 |                 | (RSS + 80) / 10, mode (+1 NLOS / -1 LOS with ``known``, else 0);    | known / J (l = 0..D);    |
-|                 | log(1 + NIS); last horizon / N_max; log tr P_N over the AHG group   | 1 if the output had an   |
-|                 | of the last horizon (14 where invalid); each member's AHG cost J_N  | estimate of its own      |
+|                 | log(1 + NIS); last window / N_max; log tr P_N over the AHG group    | 1 if the output had an   |
+|                 | of the last window (14 where invalid); each member's AHG cost J_N   | estimate of its own      |
 |                 | minus the group's lowest (0 = AHG's pick; 50 where invalid or       |                          |
 |                 | without a fresh observation, capped)                                |                          |
 
@@ -59,10 +61,10 @@ RSS slots (``keep``): the neighbours ordered by the RSS of their packet of the n
 as the agent's observation showed it (strongest first, then the neighbours without one, by
 index): stamp k where it received before deciding, else stamp k - 1; the bit applies to that
 neighbour's packets of every buffered stamp. As in the scenario, ``n_strongest`` is applied after the
-mask. AHG's centre runs every step, also while the agent overrides the horizon (a binding whose codec
+mask. AHG's centre runs every step, also while the agent overrides the window (a binding whose codec
 never offers v = 0 turns it off: ``AfgeBackend.adaptive``).
 
-Arguments (``coloc_env.backends.Afge``; defaults = ``nlos_horizon``'s, spec §9)
+Arguments (``coloc_env.backends.Afge``; defaults = ``nlos_horizon``'s, docs/gao2016.md §9)
 
 | field          | default      | allowed                                           |
 |----------------|--------------|---------------------------------------------------|
@@ -78,47 +80,57 @@ Arguments (``coloc_env.backends.Afge``; defaults = ``nlos_horizon``'s, spec §9)
 | likelihood     | "predictive" | "predictive", "paper", "smoothed"                 |
 | smoothing      | 0.5          | lam in (0, 1)                                     |
 
-Every backend here also keeps ``constant_x`` (B, N, S, 4): the output dfir with horizon N would give, for
-every N = 1..S of its stack (the horizon's estimate, else the prediction of that output at k - 1), so
-one run gives the whole constant-horizon curve.
+Every backend here also keeps ``constant_x`` (B, N, S, 4): the output dfir with window N would give, for
+every N = 1..S of its stack (the window's estimate, else the prediction of that output at k - 1), so
+one run gives the whole constant-window curve.
 
-``delay_kalman`` is the Kalman baseline on the same fused packets: one horizon that never drops a stamp,
+``delay_kalman`` is the Kalman baseline on the same fused packets: one window that never drops a stamp,
 started from the world's prior (``estimators.afge.prior_stack``), the last D stamps re-filtered from
 the posterior at k - D as packets arrive (``estimators.afge.run_kalman``'s filter); its sigma_a is the
 world's ``accel_sigma``. Decisions, observation and payload as ``dfir``; its fields are ``dfir``'s
-without ``horizon``.
+without ``window``.
 
-Arguments (``coloc_env.backends.Dfir``; ``DelayKalman``: the same rows but ``horizon``)
+Arguments (``coloc_env.backends.Dfir``; ``DelayKalman``: the same rows but ``window``)
 
 | field          | default      | allowed                                           |
 |----------------|--------------|---------------------------------------------------|
-| horizon        | 12           | N: 2..1000 (the paper's best constant N)          |
+| window         | 12           | N: 2..1000 (the paper's best constant N)          |
 | n_strongest, min_packets, weighting, mode_info | as ``afge`` | as ``afge``              |
+
+``dfir`` also reads ``horizon`` as the older name of ``window`` (``Dfir.aliases``: a dict config or
+``coloc study --sweep backend.horizon=...`` keeps working); give only one of them.
 """
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 
 import numpy as np
 
 import estimators.afge as af
 from coloc_env.backends.base import Backend
+from coloc_env.config import BadInput
 from coloc_env.parts import BACKENDS, Block, PartConfig, check_choice, check_range
 from coloc_env.primitives.random_delay import NEVER
 
-INVALID_LOG_TRACE = 14.0  # log tr P shown for a horizon without an estimate (~ a 1 km spread)
+INVALID_LOG_TRACE = 14.0  # log tr P shown for a window without an estimate (~ a 1 km spread)
 LOG_BOUND = 50.0
 RSS_BOUND = 20.0
 COST_BOUND = 50.0  # an AHG cost's excess over the group's best, shown up to this (and where invalid)
 
 
+@dataclass(frozen=True)
 class _PacketFirConfig(PartConfig):
-    """Fields and declarations shared by ``afge`` and ``dfir``."""
+    """The packet fields and declarations ``afge``, ``dfir`` and ``delay_kalman`` share."""
 
     estimand = "self"
     motion_kinds = frozenset({"cv_white_accel"})
     message_kind = "packets"
+    n_strongest: int = 4
+    min_packets: int = 1
+    weighting: str = "distance"
+    mode_info: str = "known"
 
     @property
     def requires(self) -> tuple:
@@ -130,21 +142,30 @@ class _PacketFirConfig(PartConfig):
         """Floats per packet: nav estimate 2, RSS 1, AOA 1, stamp 1, and the mode flag with ``known``."""
         return 5.0 + (self.mode_info == "known")
 
-    def check_packets(self, prefix: str) -> None:
+    def check(self, prefix: str) -> None:
         check_range(f"{prefix}n_strongest", self.n_strongest, 1, 32, integer=True)
         check_range(f"{prefix}min_packets", self.min_packets, 1, 32, integer=True)
         check_choice(f"{prefix}weighting", self.weighting, af.WEIGHTINGS)
         check_choice(f"{prefix}mode_info", self.mode_info, af.MODE_INFOS)
+
+    def check_against(self, neighbours: int, max_delay: int, names: dict | None = None) -> None:
+        """The checks that need the other parts: ``n_strongest`` and ``min_packets`` at most the world's J
+        neighbours (``afge``: ``window_min`` at least the network's longest delay D + 1). ``names``: how a
+        message calls ``n_strongest``, ``min_packets``, ``window_min``, ``num_neighbours`` and
+        ``buffer_length`` (default: ``backend.<field>``, "the number of neighbours", "the network's buffer
+        length")."""
+        names = names or {}
+        for field in ("n_strongest", "min_packets"):
+            if getattr(self, field) > neighbours:
+                raise BadInput(f"{names.get(field, 'backend.' + field)} must be <= "
+                               f"{names.get('num_neighbours', 'the number of neighbours')} = {neighbours}, "
+                               f"got {getattr(self, field)}")
 
 
 @BACKENDS.register
 @dataclass(frozen=True)
 class Afge(_PacketFirConfig):
     name = "afge"
-    n_strongest: int = 4
-    min_packets: int = 1
-    weighting: str = "distance"
-    mode_info: str = "known"
     window_min: int = 4
     window_max: int = 30
     window_step: int = 2
@@ -160,7 +181,7 @@ class Afge(_PacketFirConfig):
 
     def check(self, prefix: str) -> None:
         p = prefix
-        self.check_packets(p)
+        super().check(p)
         check_range(f"{p}window_max", self.window_max, 2, 1000, integer=True)
         check_range(f"{p}window_min", self.window_min, 2, self.window_max, integer=True, high_label=f"{p}window_max")
         check_range(f"{p}window_step", self.window_step, 1, 1000, integer=True)
@@ -174,6 +195,15 @@ class Afge(_PacketFirConfig):
         check_choice(f"{p}likelihood", self.likelihood, af.LIKELIHOODS)
         check_range(f"{p}smoothing", self.smoothing, 0.0, 1.0, low_open=True, high_open=True)
 
+    def check_against(self, neighbours: int, max_delay: int, names: dict | None = None) -> None:
+        super().check_against(neighbours, max_delay, names)
+        names = names or {}
+        if self.window_min < max_delay + 1:
+            raise BadInput(f"{names.get('window_min', 'backend.window_min')} must be >= "
+                           f"{names.get('buffer_length', 'the network' + chr(39) + 's buffer length')} + 1 = "
+                           f"{max_delay + 1} (the group reflects the possible delay, docs/gao2016.md §7), "
+                           f"got {self.window_min}")
+
     def build(self, world, network, batch: int) -> Backend:
         return AfgeBackend(self, world, network, batch)
 
@@ -182,18 +212,29 @@ class Afge(_PacketFirConfig):
 @dataclass(frozen=True)
 class Dfir(_PacketFirConfig):
     name = "dfir"
-    horizon: int = 12
-    n_strongest: int = 4
-    min_packets: int = 1
-    weighting: str = "distance"
-    mode_info: str = "known"
+    aliases = {"horizon": "window"}
+    window: int = 12
 
     def check(self, prefix: str) -> None:
-        self.check_packets(prefix)
-        check_range(f"{prefix}horizon", self.horizon, 2, 1000, integer=True)
+        super().check(prefix)
+        check_range(f"{prefix}window", self.window, 2, 1000, integer=True)
 
     def build(self, world, network, batch: int) -> Backend:
         return DfirBackend(self, world, network, batch)
+
+
+def episode_delays(world, network, payload: float) -> np.ndarray:
+    """(B, K + 1, N, J) int64: the delay ``network`` gives the packet of stamp s from neighbour j to target i,
+    -1 where none was sent (outside the receive-search area) or it was lost, for every stamp of the episode
+    ``world`` drew: the question these backends ask each step (``Network.node_packets``, slot 0), asked for
+    every stamp at once on a copy of the network (its draws are counter-based, fixed at reset)."""
+    net = copy.deepcopy(network)
+    B, K1, N = world.batch, world.horizon + 1, world.num_agents
+    out = np.empty((B, K1, N, world.num_neighbours), np.int64)
+    for s in range(K1):
+        net.begin(np.full(B, s), world.truth[:, s, :, :2], np.zeros((B, N, 0), np.int64))
+        out[:, s] = net.node_packets(world.in_rsa[:, s], world.distance[:, s], payload, slot=0)
+    return out
 
 
 class PacketFirBackend(Backend):
@@ -209,10 +250,7 @@ class PacketFirBackend(Backend):
         if J is None:
             raise ValueError(f"backend {config.name} needs a world with neighbour packets (world "
                              f"{world.config.name!r} has none)")
-        for name in ("n_strongest", "min_packets"):
-            if getattr(config, name) > J:
-                raise ValueError(f"backend.{name} must be <= the number of neighbours {J}, "
-                                 f"got {getattr(config, name)}")
+        config.check_against(int(J), int(network.max_delay()))
         self.J, self.S = int(J), int(stack_size)
         self.D = int(network.max_delay())
         self.motion = world.motion_model.afge
@@ -238,7 +276,7 @@ class PacketFirBackend(Backend):
         self._taken = np.zeros(B, bool)  # stamp k's packets are in the buffer
         self.pending: dict | None = None
         self.used = np.zeros((B, N, D1, J), bool)
-        self.horizon_used = np.zeros((B, N), np.int64)
+        self.window_used = np.zeros((B, N), np.int64)
         self.valid_used = np.zeros((B, N), bool)
         self.packets_used = np.zeros((B, N))
         self.packets_arrived = np.zeros((B, N))
@@ -266,7 +304,7 @@ class PacketFirBackend(Backend):
         self.mask[idx] = True
         self._taken[idx] = False
         self.slots[idx] = np.arange(self.J)
-        self.horizon_used[idx], self.valid_used[idx] = 0, False
+        self.window_used[idx], self.valid_used[idx] = 0, False
         self.packets_used[idx], self.packets_arrived[idx] = 0.0, 0.0
         self.used[idx] = False
         self._build_view()  # the other copies' view, before this one's defaults
@@ -360,7 +398,7 @@ class PacketFirBackend(Backend):
         self.out_x = np.where(valid_w[..., None], x_w, self.pred_x)
         self.out_P = np.where(valid_w[..., None, None], P_w, self.pred_P)
         self.constant_x = np.where(t["valid"][..., None], t["x"], self.constant_pred)
-        self.horizon_used, self.valid_used = np.asarray(window, np.int64), valid_w
+        self.window_used, self.valid_used = np.asarray(window, np.int64), valid_w
         lags = t["lags"]
         arrived = (self.delays == lags[..., None]) & (lags[..., None] >= 0)
         self.packets_used = (t["used"] & arrived).sum(axis=(-1, -2)).astype(float)
@@ -394,7 +432,7 @@ class PacketFirBackend(Backend):
         return np.ones((self.batch, self.num_agents, self.J), bool)
 
     def _choose(self, decisions, t: dict) -> np.ndarray:  # pragma: no cover - interface
-        """The horizon N (B, N) to output, given filter ``t``."""
+        """The window N (B, N) to output, given filter ``t``."""
         raise NotImplementedError
 
     def predict(self, inputs) -> None:
@@ -427,9 +465,6 @@ class AfgeBackend(PacketFirBackend):
         self.ahg = config.ahg
         self.M = config.group_size
         super().__init__(config, world, network, batch, config.window_max)
-        if config.window_min < self.D + 1:
-            raise ValueError(f"backend.window_min must be >= the network's buffer length + 1 = {self.D + 1} "
-                             f"(the group reflects the possible delay, spec §7), got {config.window_min}")
         B, N = self.batch, self.num_agents
         self.centre = np.full((B, N), config.window_centre, np.int64)
         self.raw = np.zeros((B, N, self.S))
@@ -440,7 +475,7 @@ class AfgeBackend(PacketFirBackend):
     def decision_blocks(self) -> list[Block]:
         c = self.config
         n = c.window_max - c.window_min + 2
-        return [Block("horizon", 1, n, f"0 = AHG (Algorithm 10), v = horizon N_min + v - 1 (N_min = {c.window_min})",
+        return [Block("window", 1, n, f"0 = AHG (Algorithm 10), v = window N_min + v - 1 (N_min = {c.window_min})",
                       default=0, maximum=0, minimum=0),
                 Block("keep", self.J, 2, "keep (1) / drop (0) the packets of RSS slot s", default=1, maximum=1,
                       minimum=1)]
@@ -511,12 +546,12 @@ class AfgeBackend(PacketFirBackend):
         else:
             slots[..., 2] = 0.0
         h = self.ahg.half * c.window_step
-        centre = np.minimum(np.maximum(np.where(self.horizon_used > 0, self.horizon_used, c.window_centre),
+        centre = np.minimum(np.maximum(np.where(self.window_used > 0, self.window_used, c.window_centre),
                                        c.window_min + h), c.window_max - h)  # before the first output: N_c(0)
         by_member = (self._copy3, self._agent3, af.ahg_group(self.ahg, centre) - 1)
         last = D1 + 3 * J
         out[..., last] = np.minimum(np.log1p(nis), LOG_BOUND)
-        out[..., last + 1] = self.horizon_used / c.window_max
+        out[..., last + 1] = self.window_used / c.window_max
         # gathered to the M members before the arithmetic: the other S - M horizons' logs would be discarded
         member_valid = valid[by_member]
         trace = P[..., 0, 0][by_member] + P[..., 1, 1][by_member]
@@ -533,10 +568,10 @@ class AfgeBackend(PacketFirBackend):
 
 class DfirBackend(PacketFirBackend):
     def __init__(self, config: Dfir, world, network, batch):
-        super().__init__(config, world, network, batch, config.horizon)
+        super().__init__(config, world, network, batch, config.window)
 
     def _choose(self, decisions, t: dict) -> np.ndarray:
-        return np.full((self.batch, self.num_agents), self.config.horizon, np.int64)
+        return np.full((self.batch, self.num_agents), self.config.window, np.int64)
 
     def feature_bounds(self):
         D1 = self.D + 1
@@ -550,13 +585,6 @@ class DfirBackend(PacketFirBackend):
 @dataclass(frozen=True)
 class DelayKalman(_PacketFirConfig):
     name = "delay_kalman"
-    n_strongest: int = 4
-    min_packets: int = 1
-    weighting: str = "distance"
-    mode_info: str = "known"
-
-    def check(self, prefix: str) -> None:
-        self.check_packets(prefix)
 
     def build(self, world, network, batch: int) -> Backend:
         return DelayKalmanBackend(self, world, network, batch)

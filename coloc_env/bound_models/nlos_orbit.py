@@ -32,17 +32,16 @@ import numpy as np
 from coloc_env.bound_models import delivered_kind, estimates_reason
 from coloc_env.bounds import BoundProblem, Recursion, delivered_recursion
 from coloc_env.primitives.flight import OrbitParameters
+from coloc_env.worlds.nlos_orbit import ORBIT_FIELDS
 from estimators.bounds import rss_aoa_information
 
 
 def reading_information(world, K: int) -> np.ndarray:
     """(K, N, J, 4, 4): the information of neighbour j's reading of target i at k on i's [p; v] (0 outside the RSA)."""
     c = world.config
-    sc = world.scenario_config
-    orbits = OrbitParameters(*(getattr(world.orbits, f)[0] for f in ("radius", "wobble", "wobble_rate", "phase",
-                                                                      "bearing_rate")))
+    orbits = OrbitParameters(*(getattr(world.orbits, f)[0] for f in ORBIT_FIELDS))
     truth = world.truth[0, :K]  # (K, N, 4)
-    senders = truth[:, :, None, :2] + sc.neighbours.offsets(orbits, world.horizon + 1)[:K]  # (K, N, J, 2)
+    senders = truth[:, :, None, :2] + world.neighbours.offsets(orbits, world.horizon + 1)[:K]  # (K, N, J, 2)
     modes = world.modes[0, :K]
     variances = np.diagonal(world.measurement_model.covar(modes), axis1=-2, axis2=-1)  # (K, N, J, 2)
     use = ("rss" in c.sensors, "aoa" in c.sensors)

@@ -1,4 +1,4 @@
-"""Two-state LOS/NLOS Markov chain per link (gao2016, spec §4) [paper: one chain per
+"""Two-state LOS/NLOS Markov chain per link (gao2016, docs/gao2016.md §4) [paper: one chain per
 (receiver, neighbour) link; the target can be LOS to one neighbour and NLOS to another].
 
 Transition matrix [[1 - p01, p01], [p10, 1 - p10]] (0 = LOS, 1 = NLOS), parametrised by the
@@ -52,8 +52,7 @@ class LosNlosChain:
         Computed without a loop over steps: step k maps mode_{k-1} to a constant (both tests agree), to itself
         or to its negation, so mode_k is the constant of the last constant map at or before k (mode_0 if none)
         flipped once per negating map since then (a count difference of a cumulative sum). Booleans and
-        integers only: the same modes as the recursion (a Python loop over steps was 3.5 ms of each copy's
-        ~11 ms nlos_horizon reset)."""
+        integers only: the same modes as the recursion."""
         u = rng.random((steps, *size))
         if steps == 0:
             return np.zeros((0, *size), np.int8)

@@ -48,7 +48,11 @@ class BoundedRandomDelay:
 
     def sample(self, rng: np.random.Generator, size: tuple) -> np.ndarray:
         """Delays (int16) of shape ``size``: 0..D, or D + 1 for a lost packet; one uniform each."""
-        u = rng.random(size)
+        return self.from_uniforms(rng.random(size))
+
+    def from_uniforms(self, u: np.ndarray) -> np.ndarray:
+        """Delays (int16) of uniforms ``u`` by the inverse CDF, tau = #{l : q_0 + ... + q_l <= u}: 0..D, or
+        D + 1 for a lost packet."""
         edges = np.cumsum(np.asarray(self.probabilities, float))
         return np.searchsorted(edges, u, side="right").astype(np.int16)
 

@@ -1,19 +1,19 @@
 """World ``nlos_orbit`` (gao2016): target UAVs, each localizing itself from J orbiting neighbours' RSS/AOA.
 
-The world of the ``nlos_horizon`` scenario, drawn the same way: each copy's episode is
-``coloc_env.scenarios.nlos_horizon.draw_episode`` on the world's generator (orbits,
-LOS/NLOS modes, RSS/AOA noise, navigation noise, the scenario's delay uniforms, prior, in
-that order), so for the same generator the truth, the readings and the prior are the
-scenario's bit for bit. The delays that call draws are **not used**: delivery is the
-network's (``random_delay`` is gao2016's Assumption 3); they are drawn only to keep the
-stream, and so the prior, identical to the scenario's.
+The world owns its generative model: ``draw_episode`` draws each copy's whole episode at reset from
+the world's generator, in this order: the orbits of the neighbours, the LOS/NLOS modes, the RSS/AOA
+noise, the navigation noise, one uniform per packet (stamp, target, neighbour) and the prior's error.
+The world uses no packet uniform: delivery is the network's (``random_delay``, gao2016's Assumption 3,
+draws the delays from its own generator). They are drawn all the same, so that the prior's error comes
+after them, and kept in ``Episode.packet_uniforms`` for code that wants one delay per packet on the
+world's own episode (``coloc_env.primitives.random_delay.BoundedRandomDelay.from_uniforms``).
 
 Every agent ``uav_i`` is a target that cannot localize itself directly: it flies straight
 legs and coordinated turns (``coloc_env.primitives.flight.TurnSchedulePath``; uav_i starts
 at (0, i * target_spacing), its turns i * schedule_shift steps later). J neighbours orbit
 each target (``coloc_env.primitives.flight.OrbitingNeighbours``); they are part of the world,
 not agents. A neighbour inside the target's receive-search area (Def. 1, r_inf <= d <=
-r_sup on the true distance) measures the RSS and the AOA of the target (spec §4,
+r_sup on the true distance) measures the RSS and the AOA of the target (docs/gao2016.md §4,
 ``coloc_env.primitives.radio.RssAoaSensor``), the bias of its link's LOS/NLOS Markov chain
 (``coloc_env.primitives.los_nlos.LosNlosChain``) included, and sends a packet stamped k
 with its own navigation estimate (truth + N(0, sigma_nav^2 I)) to the target: the backend
@@ -27,7 +27,7 @@ asks the network for its delivery (``coloc_env.networks.base.Network.node_packet
 | anchors        | orbiting neighbours with navigation estimates (world nodes, J per agent)           |
 | sensing action | none                                                                               |
 | observation    | none (the backend shows what arrived)                                              |
-| initial belief | mean truth(0) + N(0, diag(prior_std^2)) (the scenario's prior), cov diag(prior_std^2) |
+| initial belief | mean truth(0) + N(0, diag(prior_std^2)), cov diag(prior_std^2)                       |
 
 Readings of time k (``coloc_env.worlds.base.Readings``; ``inputs`` (B, N, 0), no
 ranges, no fixes) carry the neighbours' packets in ``extra``:
@@ -43,7 +43,7 @@ ranges, no fixes) carry the neighbours' packets in ``extra``:
 ``NlosOrbitWorld.neighbour_distances`` gives the true target-neighbour distances (B, N, J)
 at k: link state for the network (the radios sense it), never an estimator input.
 
-Arguments (``coloc_env.worlds.NlosOrbit``; defaults = ``nlos_horizon``'s, spec §9)
+Arguments (``coloc_env.worlds.NlosOrbit``; defaults = ``nlos_horizon``'s, docs/gao2016.md §9)
 
 | field               | default                      | allowed                                          |
 |---------------------|------------------------------|--------------------------------------------------|
@@ -96,21 +96,15 @@ import numpy as np
 
 from coloc_env.config import ORBIT_LIMITS, as_array, check_entries, check_step_windows
 from coloc_env.parts import WORLDS, PartConfig, check_flag, check_range
-from coloc_env.primitives.flight import OrbitParameters
+from coloc_env.primitives.flight import OrbitingNeighbours, OrbitParameters, TurnSchedulePath
 from coloc_env.primitives.los_nlos import LosNlosChain
-from coloc_env.primitives.radio import ReceiveSearchArea
-from coloc_env.primitives.random_delay import NEVER
-from coloc_env.scenarios.nlos_horizon import NlosHorizonConfig, draw_episode_parts, target_paths
+from coloc_env.primitives.radio import ReceiveSearchArea, RssAoaSensor
 from coloc_env.worlds.base import Readings, World
 from estimators.afge import SignalModel
 from estimators.nlos_models import ConstantVelocityWhiteAccel, RssAoaModel
 
 SENSORS = ("rss", "aoa")
-SCENARIO_FIELDS = ("num_neighbours", "period", "accel_sigma", "speed", "turn_rates_deg", "turn_windows",
-                    "target_spacing", "schedule_shift", "orbit_radius", "orbit_wobble", "orbit_wobble_rate",
-                    "orbit_bearing_rate", "r_inf", "r_sup", "sigma_nav", "tx_power_dbm", "frequency_hz", "d0",
-                    "path_loss_exponent", "sigma_db", "sigma_theta_deg", "nlos_bias_db", "nlos_sigma_db",
-                    "nlos_bias_deg", "nlos_sigma_deg", "p_nlos", "p10", "prior_std")
+ORBIT_FIELDS = ("radius", "wobble", "wobble_rate", "phase", "bearing_rate")
 
 
 @WORLDS.register
@@ -159,16 +153,45 @@ class NlosOrbit(PartConfig):
     def measurements(self) -> frozenset:
         return frozenset(self.sensors) | (frozenset({"los_nlos"}) if self.report_mode else frozenset())
 
-    def scenario_config(self, horizon: int | None = None) -> NlosHorizonConfig:
-        """The ``nlos_horizon`` config whose episode draw this world uses (its estimator fields at their defaults)."""
-        fields = {f: getattr(self, f) for f in SCENARIO_FIELDS}
-        return NlosHorizonConfig(num_uavs=self.num_agents, horizon=self.horizon if horizon is None else horizon,
-                                 **fields)
+    # --- the generative model's pieces ---------------------------------------------------------------
+    @property
+    def path(self) -> TurnSchedulePath:
+        """Every target's flight (uav_i's shifted by i * schedule_shift steps, ``target_paths``)."""
+        return TurnSchedulePath(speed=self.speed, turn_rates=tuple(np.deg2rad(self.turn_rates_deg).tolist()),
+                                turn_windows=tuple(tuple(w) for w in self.turn_windows), period=self.period)
+
+    @property
+    def neighbours(self) -> OrbitingNeighbours:
+        return OrbitingNeighbours(self.num_neighbours, tuple(self.orbit_radius), self.orbit_wobble,
+                                  tuple(self.orbit_wobble_rate), self.orbit_bearing_rate, self.period)
+
+    @property
+    def area(self) -> ReceiveSearchArea:
+        return ReceiveSearchArea(self.r_inf, self.r_sup)
 
     @property
     def signal(self) -> SignalModel:
-        """The RSS/AOA model of the packets (what the sensors draw and the backends assume)."""
-        return self.scenario_config().signal
+        """The RSS/AOA model of the packets (what the sensors draw and the backends assume); angles in rad."""
+        return SignalModel(
+            tx_power_dbm=float(self.tx_power_dbm), frequency_hz=float(self.frequency_hz), d0=float(self.d0),
+            exponent=float(self.path_loss_exponent), sigma_db=float(self.sigma_db),
+            sigma_theta=float(np.deg2rad(self.sigma_theta_deg)), nlos_bias_db=float(self.nlos_bias_db),
+            nlos_sigma_db=float(self.nlos_sigma_db), nlos_bias_theta=float(np.deg2rad(self.nlos_bias_deg)),
+            nlos_sigma_theta=float(np.deg2rad(self.nlos_sigma_deg)), sigma_nav=float(self.sigma_nav),
+            p_nlos=float(self.p_nlos))
+
+    @property
+    def chain(self) -> LosNlosChain:
+        return LosNlosChain(self.p_nlos, self.p10)
+
+    @property
+    def motion_model(self) -> ConstantVelocityWhiteAccel:
+        """The white-acceleration model the backends assume (variance accel_sigma^2)."""
+        return ConstantVelocityWhiteAccel(float(self.period), float(self.accel_sigma) ** 2)
+
+    @property
+    def prior_cov(self) -> np.ndarray:
+        return np.diag(np.asarray(self.prior_std, float) ** 2)
 
     def check(self, prefix: str) -> None:
         p = prefix
@@ -194,7 +217,7 @@ class NlosOrbit(PartConfig):
                 raise ValueError(f"{p}{name} must be (low, high) with 0 <= low <= high, got {getattr(self, name)}")
         check_range(f"{p}orbit_wobble", self.orbit_wobble, 0.0, 1e6)
         check_range(f"{p}orbit_bearing_rate", self.orbit_bearing_rate, 0.0, 10.0)
-        ReceiveSearchArea(self.r_inf, self.r_sup).validate(f"{p}r_inf", f"{p}r_sup")
+        self.area.validate(f"{p}r_inf", f"{p}r_sup")
         check_range(f"{p}sigma_nav", self.sigma_nav, 0.0, 1e4, low_open=True)
         check_range(f"{p}tx_power_dbm", self.tx_power_dbm, -200.0, 200.0)
         check_range(f"{p}frequency_hz", self.frequency_hz, 1.0, 1e13)
@@ -206,7 +229,7 @@ class NlosOrbit(PartConfig):
         check_range(f"{p}nlos_sigma_db", self.nlos_sigma_db, 0.0, 100.0)
         check_range(f"{p}nlos_bias_deg", self.nlos_bias_deg, -180.0, 180.0)
         check_range(f"{p}nlos_sigma_deg", self.nlos_sigma_deg, 0.0, 180.0)
-        LosNlosChain(self.p_nlos, self.p10).validate(f"{p}p_nlos", f"{p}p10")
+        self.chain.validate(f"{p}p_nlos", f"{p}p10")
         check_entries(f"{p}prior_std", as_array(f"{p}prior_std", self.prior_std, shape=(4,)), 0.0, 1e6, low_open=True)
         sensors = tuple(self.sensors) if isinstance(self.sensors, (tuple, list)) else None
         if not sensors or any(s not in SENSORS for s in sensors) or len(set(sensors)) != len(sensors):
@@ -218,17 +241,75 @@ class NlosOrbit(PartConfig):
         return NlosOrbitWorld(self, batch, horizon)
 
 
+@dataclass
+class Episode:
+    """One copy's whole episode, stamps 0..K, targets T, neighbours J (``draw_episode``).
+
+    ``truth`` (K+1, T, 4); ``rss``/``aoa`` (K+1, T, J); ``nav`` (K+1, T, J, 2) the neighbours' own position
+    estimates; ``modes`` (K+1, T, J) int8 (1 = NLOS); ``distance`` (K+1, T, J) the true target-neighbour
+    distances; ``in_rsa`` (K+1, T, J) the neighbour is in the target's receive-search area (it measures and
+    sends); ``packet_uniforms`` (K+1, T, J) one U(0, 1) per packet, unused by the world; ``prior`` (T, 4) the
+    prior mean; ``orbits`` (T, J) the neighbours' orbit parameters.
+    """
+
+    truth: np.ndarray
+    rss: np.ndarray
+    aoa: np.ndarray
+    nav: np.ndarray
+    modes: np.ndarray
+    distance: np.ndarray
+    in_rsa: np.ndarray
+    packet_uniforms: np.ndarray
+    prior: np.ndarray
+    orbits: OrbitParameters
+
+
+def target_paths(config: NlosOrbit, steps: int) -> np.ndarray:
+    """True states (steps, T, 4) of the T = ``num_agents`` targets: uav_i starts at (0, i * target_spacing)
+    and turns i * schedule_shift steps later. Deterministic: it draws nothing."""
+    path = config.path
+    return np.stack([path.trajectory(steps, start=(0.0, i * float(config.target_spacing)),
+                                     shift=i * int(config.schedule_shift)) for i in range(config.num_agents)], axis=1)
+
+
+def in_turn(config: NlosOrbit, steps: int) -> np.ndarray:
+    """(steps, T) True where target i is turning."""
+    path = config.path
+    return np.stack([path.in_turn(steps, i * int(config.schedule_shift)) for i in range(config.num_agents)], axis=1)
+
+
+def draw_episode(config: NlosOrbit, rng: np.random.Generator, horizon: int | None = None,
+                 truth: np.ndarray | None = None) -> Episode:
+    """One copy's episode of ``horizon`` steps (default ``config.horizon``) drawn from ``rng`` in the order of
+    the module docstring. ``truth``: the targets' paths if the caller has them (``target_paths`` of the same
+    config and horizon + 1 steps; a batch's reset computes them once)."""
+    K1 = (config.horizon if horizon is None else int(horizon)) + 1
+    T, J = config.num_agents, config.num_neighbours
+    truth = target_paths(config, K1) if truth is None else truth
+    orbits = config.neighbours.sample(rng, (T,))
+    senders = truth[:, :, None, :2] + config.neighbours.offsets(orbits, K1)  # (K+1, T, J, 2)
+    modes = config.chain.sample(rng, K1, (T, J))
+    white = rng.standard_normal((K1, T, J, 2))
+    rss, aoa = RssAoaSensor(config.signal).measure(truth[:, :, None, :2], senders, modes, white)
+    nav = senders + config.sigma_nav * rng.standard_normal((K1, T, J, 2))
+    distance = np.linalg.norm(truth[:, :, None, :2] - senders, axis=-1)
+    packet_uniforms = rng.random((K1, T, J))
+    prior = truth[0] + rng.standard_normal((T, 4)) * np.asarray(config.prior_std, float)
+    return Episode(truth, rss, aoa, nav, modes, distance, config.area.contains(distance), packet_uniforms, prior,
+                   orbits)
+
+
 class NlosOrbitWorld(World):
     agent_prefix = "uav"
 
     def __init__(self, config: NlosOrbit, batch: int, horizon: int):
         super().__init__(config, batch, horizon)
         c = config
-        self.scenario_config = c.scenario_config(self.horizon)
-        self.motion_model = ConstantVelocityWhiteAccel(float(c.period), float(c.accel_sigma) ** 2)
-        self.signal = self.scenario_config.signal
+        self.motion_model = c.motion_model
+        self.signal = c.signal
         self.measurement_model = RssAoaModel(self.signal)
-        self.chain = self.scenario_config.chain
+        self.chain = c.chain
+        self.neighbours = c.neighbours
         B, K1, N, J = self.batch, self.horizon + 1, c.num_agents, c.num_neighbours
         self.num_neighbours = J
         self.truth = np.zeros((B, K1, N, 4))
@@ -239,7 +320,7 @@ class NlosOrbitWorld(World):
         self.in_rsa = np.zeros((B, K1, N, J), bool)
         self.distance = np.zeros((B, K1, N, J))
         self.prior = np.zeros((B, N, 4))
-        self.orbits = OrbitParameters(*(np.zeros((B, N, J)) for _ in range(5)))
+        self.orbits = OrbitParameters(*(np.zeros((B, N, J)) for _ in ORBIT_FIELDS))
 
     @property
     def dt(self) -> float:
@@ -247,20 +328,21 @@ class NlosOrbitWorld(World):
 
     @property
     def prior_cov(self) -> np.ndarray:
-        return self.scenario_config.prior_cov
+        return self.config.prior_cov
 
     def draw_episode(self, rngs, idx) -> None:
-        """Each copy's episode by ``coloc_env.scenarios.nlos_horizon.draw_episode`` (its delays unused)."""
-        sc = self.scenario_config
-        truth = target_paths(sc, sc.num_uavs, sc.horizon + 1)  # every copy's: drawn from nothing
+        """Each copy's episode by ``draw_episode`` from its own generator."""
+        truth = target_paths(self.config, self.horizon + 1)  # the same for every copy: drawn from nothing
         for b, rng in zip(idx, rngs, strict=True):
-            ep, distance = draw_episode_parts(sc, rng, truth=truth)
+            ep = draw_episode(self.config, rng, self.horizon, truth)
             self.truth[b], self.rss[b], self.aoa[b], self.nav[b] = ep.truth, ep.rss, ep.aoa, ep.nav
-            self.modes[b], self.prior[b] = ep.modes, ep.prior
-            self.in_rsa[b] = ep.delays != NEVER  # draw_episode marks the neighbours outside the RSA with NEVER
-            self.distance[b] = distance
-            for name in ("radius", "wobble", "wobble_rate", "phase", "bearing_rate"):
+            self.modes[b], self.prior[b], self.in_rsa[b], self.distance[b] = ep.modes, ep.prior, ep.in_rsa, ep.distance
+            for name in ORBIT_FIELDS:
                 getattr(self.orbits, name)[b] = getattr(ep.orbits, name)
+
+    def orbit_parameters(self, b: int, agent: int = 0) -> OrbitParameters:
+        """The orbit parameters (J,) of copy ``b``'s target ``agent``'s neighbours."""
+        return OrbitParameters(*(getattr(self.orbits, name)[b, agent] for name in ORBIT_FIELDS))
 
     def _slice(self, array: np.ndarray) -> np.ndarray:
         return array[np.arange(self.batch), np.minimum(self.k, self.horizon)]

@@ -6,6 +6,7 @@ import pytest
 import agents
 import coloc_env
 from coloc_env.backends.dead_reckoning import DeadReckoning
+from coloc_env.backends.nlos import episode_delays
 from coloc_env.networks.random_delay import delays_from_uniforms
 from coloc_env.primitives.random_delay import BoundedRandomDelay
 from coloc_env.scenarios.composed import ComposedScenario
@@ -68,7 +69,9 @@ def test_the_preset_is_the_composition_and_receives_before_deciding():
     J = delays.shape[-1]
     np.testing.assert_allclose(on_time_seen, (delays == 0).sum(axis=-1) / J, rtol=0, atol=1e-7)
     np.testing.assert_array_equal(node_messages, in_rsa.sum(axis=-1))
-    np.testing.assert_array_equal(preset.unwrapped.scenario.packet_delays()[0, :steps], delays)
+    core = preset.unwrapped.scenario
+    np.testing.assert_array_equal(episode_delays(core.world, core.network, core.backend.config.payload)[0, :steps],
+                                  delays)
 
 
 def test_afge_without_delays_equals_the_preset():
@@ -104,7 +107,7 @@ def test_seeded_monte_carlo_afge_beats_dfir_and_delay_costs_accuracy():
     afge = _batched_errors(coloc_env.compose(world=world, network="random_delay", backend="afge", horizon=steps),
                            seeds)
     dfir = {n: _batched_errors(coloc_env.compose(world=world, network="random_delay",
-                                                 backend={"name": "dfir", "horizon": n}, horizon=steps), seeds)
+                                                 backend={"name": "dfir", "window": n}, horizon=steps), seeds)
             for n in (8, 12)}
     assert np.all(afge_ideal < afge), (afge_ideal, afge)
     best_fixed = min(float(np.mean(v)) for v in dfir.values())
@@ -220,8 +223,14 @@ def test_compatibility_reasons_and_bad_fields_name_the_part():
         coloc_env.compose(world={"name": "nlos_orbit", "sensors": ("gps",)}, network="ideal", backend="afge")
     with pytest.raises(ValueError, match=r"backend\.group_size must be odd"):
         coloc_env.compose(world="nlos_orbit", network="ideal", backend={"name": "afge", "group_size": 4})
-    with pytest.raises(ValueError, match=r"backend\.horizon must be in \[2, 1000\]"):
+    with pytest.raises(ValueError, match=r"backend\.window must be in \[2, 1000\]"):
+        coloc_env.compose(world="nlos_orbit", network="ideal", backend={"name": "dfir", "window": 1})
+    with pytest.raises(ValueError, match=r"backend\.window must be in \[2, 1000\]"):  # its older name
         coloc_env.compose(world="nlos_orbit", network="ideal", backend={"name": "dfir", "horizon": 1})
+    with pytest.raises(ValueError, match=r"backend\.horizon is another name of backend\.window"):
+        coloc_env.compose(world="nlos_orbit", network="ideal", backend={"name": "dfir", "horizon": 8, "window": 8})
+    assert coloc_env.compose(world="nlos_orbit", network="ideal", backend={"name": "dfir", "horizon": 8}).backend \
+        == coloc_env.backends.Dfir(window=8)
     spec = coloc_env.compose(world="nlos_orbit", network={"name": "random_delay", "buffer_length": 5,
                                                           "delay_probs": (0.5,) * 2 + (0.0,) * 4}, backend="afge")
     with pytest.raises(ValueError, match=r"backend\.window_min must be >= the network's buffer length \+ 1 = 6"):
@@ -230,19 +239,12 @@ def test_compatibility_reasons_and_bad_fields_name_the_part():
 
 def test_the_parts_defaults_are_the_nlos_horizon_scenarios():
     """So that PRESETS["nlos_horizon"] can name (nlos_orbit, random_delay, afge): every default agrees."""
-    import dataclasses as dc
-
     from coloc_env.backends.nlos import Afge
     from coloc_env.networks.random_delay import RandomDelay
     from coloc_env.scenarios.nlos_horizon import NlosHorizonConfig
 
-    scenario = NlosHorizonConfig()
-    assert NlosOrbit().scenario_config() == scenario
-    assert NlosOrbit().num_agents == scenario.num_uavs and NlosOrbit().horizon == scenario.horizon
-    assert RandomDelay().delay_probs == scenario.delay_probs and RandomDelay().buffer_length == scenario.buffer_length
-    afge = Afge()
-    for f in dc.fields(afge):
-        assert getattr(afge, f.name) == getattr(scenario, f.name), f.name
+    assert NlosHorizonConfig().parts() == (NlosOrbit(), RandomDelay(), Afge())
+    assert NlosHorizonConfig().composition_options() == {"horizon": 1000, "reward": "error", "communication_cost": 0.0}
     assert coloc_env.compose(world="nlos_orbit", network="random_delay", backend="afge").episode_steps == 1000
 
 

@@ -10,7 +10,9 @@ from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test
 import agents
 import coloc_env
 import estimators.afge as af
-from coloc_env.scenarios.nlos_horizon import drawn_episodes, fused_by_stamp_and_lag
+from coloc_env.backends.nlos import episode_delays
+from coloc_env.primitives.random_delay import NEVER
+from coloc_env.scenarios.nlos_horizon import NlosHorizonScenario
 from tests.helpers import play
 
 NAME = "nlos_horizon"
@@ -57,11 +59,15 @@ def test_env_with_the_paper_policy_equals_afge_run_directly(likelihood):
         estimates.append([infos[a]["estimated_position"] for a in env.possible_agents])
         rewards.append([reward[a] for a in env.possible_agents])
     config = env.config
-    episode = drawn_episodes(config, [21])[0]  # the world's draw, the network's delays
-    Y, y, g = fused_by_stamp_and_lag(config, episode)
-    truth = np.moveaxis(episode.truth[:horizon, :, :2], 0, 1)
-    out = af.run_fixed_mask(config.motion, Y[:, :horizon], y[:, :horizon], g[:, :horizon], truth, episode.prior,
-                            config.ahg, config.window_max, (likelihood,))
+    core = NlosHorizonScenario(config)  # the episode reset(seed=21) draws: the world's draw, the network's delays
+    core.reset([np.random.default_rng(21)])
+    w, afge = core.world, core.backend.config
+    delays = episode_delays(w, core.network, afge.payload)[0]
+    Y, y, g = af.fuse_episode(w.signal, w.rss[0], w.aoa[0], w.nav[0], w.modes[0], np.where(delays >= 0, delays, NEVER),
+                              config.buffer_length, afge.n_strongest, afge.mode_info, afge.weighting, afge.min_packets)
+    truth = np.moveaxis(w.truth[0, :horizon, :, :2], 0, 1)
+    out = af.run_fixed_mask(w.motion_model.afge, Y[:, :horizon], y[:, :horizon], g[:, :horizon], truth, w.prior[0],
+                            afge.ahg, config.window_max, (likelihood,))
     direct = np.moveaxis(out[f"afge_{likelihood}_position"], 0, 1)
     np.testing.assert_allclose(np.array(estimates), direct, rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(-np.array(rewards), np.moveaxis(out[f"afge_{likelihood}"], 0, 1),
@@ -123,7 +129,7 @@ def test_same_seed_gives_identical_episodes_and_reset_continues_the_generator():
 
 
 def test_dropping_every_neighbour_leaves_only_the_prediction_and_costs_count_packets():
-    env = coloc_env.parallel_env(NAME, horizon=30, packet_cost=0.5)
+    env = coloc_env.parallel_env(NAME, horizon=30, communication_cost=0.5)
     observations, _ = env.reset(seed=4)
     scenario = env.scenario
     keep_all = {a: scenario.encode_actions(np.array(6)) for a in env.agents}
@@ -137,7 +143,7 @@ def test_dropping_every_neighbour_leaves_only_the_prediction_and_costs_count_pac
     _, rewards, _, _, infos = env.step(drop_all)
     for a in env.possible_agents:
         assert infos[a]["communication"] == 0
-        # fewer stamps observed in the horizon than with every packet, and the output moves on
+        # fewer stamps observed in the window than with every packet, and the output moves on
         assert not np.array_equal(infos[a]["estimated_position"], last[a])
     for _ in range(6):
         _, rewards, _, _, infos = env.step(drop_all)

@@ -1,7 +1,8 @@
 """estimators.afge: Lemma 7 vs the recursion, fusion bound, delays, Kalman and AFGE on the
-default world (spec §14)."""
+default world (docs/gao2016.md §14)."""
 
 import dataclasses
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -9,9 +10,35 @@ import pytest
 import estimators.afge as af
 from coloc_env.config import build_config
 from coloc_env.primitives.random_delay import NEVER
-from coloc_env.scenarios.nlos_horizon import NlosHorizonConfig, draw_episode, fused_by_stamp_and_lag, in_turn
+from coloc_env.scenarios.nlos_horizon import NlosHorizonConfig
+from coloc_env.worlds.nlos_orbit import draw_episode, in_turn
 
 MOTION = af.MotionModel(1.0, 0.3)
+
+
+def _episode(config, rng):
+    """The episode the preset ``config``'s world draws from ``rng``, with one delay per packet from the world's
+    packet uniforms by ``config``'s delay law (``NEVER`` where the neighbour is outside the RSA)."""
+    world, network, _ = config.parts()
+    ep = draw_episode(world, rng)
+    delays = np.where(ep.in_rsa, network.delay.from_uniforms(ep.packet_uniforms), NEVER).astype(np.int16)
+    return SimpleNamespace(truth=ep.truth, rss=ep.rss, aoa=ep.aoa, nav=ep.nav, modes=ep.modes, delays=delays,
+                           prior=ep.prior)
+
+
+def _fused(config, ep):
+    """(Y, y, gamma) of ``ep`` by (stamp, lag) with ``config``'s fusion fields, every packet kept."""
+    return af.fuse_episode(config.parts()[0].signal, ep.rss, ep.aoa, ep.nav, ep.modes, ep.delays,
+                           config.buffer_length, config.n_strongest, config.mode_info, config.weighting,
+                           config.min_packets)
+
+
+def _motion(config):
+    return config.parts()[0].motion_model.afge
+
+
+def _ahg(config):
+    return config.parts()[2].ahg
 
 
 def random_fix(rng, scale=10.0):
@@ -108,23 +135,24 @@ def test_nlos_correction_has_the_simulators_sign():
 
 
 def _single_packet_episode(config, stamp, tau):
-    ep = draw_episode(config, np.random.default_rng(0), targets=1)
+    ep = _episode(config, np.random.default_rng(0))
     delays = np.full(ep.delays.shape, NEVER, np.int16)
     delays[stamp, 0, 3] = tau
-    return dataclasses.replace(ep, delays=delays)
+    ep.delays = delays
+    return ep
 
 
 @pytest.mark.parametrize("tau", [0, 2, 3, 4])
 def test_a_packet_counts_once_at_its_own_stamp_and_never_past_the_buffer(tau):
     config = build_config(NlosHorizonConfig, {"num_uavs": 1, "horizon": 20})
-    Y, y, gamma = fused_by_stamp_and_lag(config, _single_packet_episode(config, 7, tau))
+    Y, y, gamma = _fused(config, _single_packet_episode(config, 7, tau))
     D = config.buffer_length
     expected = np.zeros(gamma.shape, bool)
     if tau <= D:
         expected[0, 7, tau:] = True
     np.testing.assert_array_equal(gamma, expected)
     # run over time: the packet's information enters the horizon filters exactly once
-    motion = config.motion
+    motion = _motion(config)
     final = af.empty_stack((1,), 3)
     for k in range(gamma.shape[1] - 1):
         Yb, yb, gb, _ = af.buffer_observations(Y, y, gamma, k)
@@ -134,17 +162,17 @@ def test_a_packet_counts_once_at_its_own_stamp_and_never_past_the_buffer(tau):
 
 def test_buffer_rerun_equals_filtering_every_stamp_once_with_what_is_known():
     config = build_config(NlosHorizonConfig, {"num_uavs": 1, "horizon": 40, "delay_probs": (0.3, 0.3, 0.2, 0.1)})
-    ep = draw_episode(config, np.random.default_rng(5), targets=1)
-    Y, y, gamma = fused_by_stamp_and_lag(config, ep)
+    ep = _episode(config, np.random.default_rng(5))
+    Y, y, gamma = _fused(config, ep)
     D, S = config.buffer_length, 6
     final = af.empty_stack((1,), S)
     for k in range(30):
         Yb, yb, gb, _ = af.buffer_observations(Y, y, gamma, k)
-        final, current = af.buffer_step(config.motion, final, k, Yb, yb, gb)
+        final, current = af.buffer_step(_motion(config), final, k, Yb, yb, gb)
     fresh = af.empty_stack((1,), S)
     for s in range(30):
         lag = min(29 - s, D)
-        fresh = af.stack_advance(config.motion, fresh, Y[:, s, lag], y[:, s, lag], gamma[:, s, lag], s)
+        fresh = af.stack_advance(_motion(config), fresh, Y[:, s, lag], y[:, s, lag], gamma[:, s, lag], s)
     np.testing.assert_allclose(current.info, fresh.info, rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(current.vector, fresh.vector, rtol=1e-12, atol=1e-9)
 
@@ -152,12 +180,12 @@ def test_buffer_rerun_equals_filtering_every_stamp_once_with_what_is_known():
 def test_without_delay_the_buffer_rerun_changes_nothing():
     config = build_config(NlosHorizonConfig, {"num_uavs": 1, "horizon": 120, "buffer_length": 0,
                                               "delay_probs": (1.0,)})
-    ep = draw_episode(config, np.random.default_rng(6), targets=1)
-    Y, y, g = fused_by_stamp_and_lag(config, ep)
+    ep = _episode(config, np.random.default_rng(6))
+    Y, y, g = _fused(config, ep)
     truth = np.moveaxis(ep.truth[:, :, :2], 0, 1)
     tile = lambda a: np.repeat(a, 4, axis=2)  # noqa: E731 - D = 3 buffer holding the same observations
-    direct = af.run_fixed_mask(config.motion, Y, y, g, truth, ep.prior, config.ahg, 30)
-    buffered = af.run_fixed_mask(config.motion, tile(Y), tile(y), tile(g), truth, ep.prior, config.ahg, 30)
+    direct = af.run_fixed_mask(_motion(config), Y, y, g, truth, ep.prior, _ahg(config), 30)
+    buffered = af.run_fixed_mask(_motion(config), tile(Y), tile(y), tile(g), truth, ep.prior, _ahg(config), 30)
     for key in ("dfir", "afge_predictive"):
         np.testing.assert_allclose(buffered[key], direct[key], rtol=1e-9, atol=1e-9)
     np.testing.assert_array_equal(buffered["afge_predictive_horizon"], direct["afge_predictive_horizon"])
@@ -201,13 +229,14 @@ def test_seeded_monte_carlo_oracle_kf_beats_blind_kf():
     """sigma_a = 1 m/s^2 (matched to the turns), pi = 0.3: knowing the mode lowers the error."""
     config = build_config(NlosHorizonConfig, {"num_uavs": 1, "horizon": 300})
     runs = 6
-    eps = [draw_episode(config, np.random.default_rng([2016, r]), targets=1) for r in range(runs)]
-    fused = [fused_by_stamp_and_lag(dataclasses.replace(config, mode_info=mode), ep)
+    eps = [_episode(config, np.random.default_rng([2016, r])) for r in range(runs)]
+    fused = [_fused(dataclasses.replace(config, mode_info=mode), ep)
              for mode in ("known", "blind") for ep in eps]
     cat = lambda i: np.concatenate([f[i] for f in fused])[:, :300]  # noqa: E731
     truth = np.concatenate([np.moveaxis(ep.truth[:300, :, :2], 0, 1) for ep in eps] * 2)
     prior = np.concatenate([ep.prior for ep in eps] * 2)
-    err = af.run_kalman(config.motion, cat(0), cat(1), cat(2), truth, prior, config.prior_cov, accel_var=1.0)
+    err = af.run_kalman(_motion(config), cat(0), cat(1), cat(2), truth, prior, config.parts()[0].prior_cov,
+                         accel_var=1.0)
     mse = err[:, 50:].mean(axis=1)
     diffs = mse[:runs] - mse[runs:]
     assert diffs.mean() + 2 * diffs.std(ddof=1) / np.sqrt(runs) < 0
@@ -217,13 +246,13 @@ def test_seeded_monte_carlo_oracle_kf_beats_blind_kf():
 def default_world_runs():
     """Three full default episodes (1000 s, turns included), DFIR for every N and AFGE."""
     config = build_config(NlosHorizonConfig, {"num_uavs": 1})
-    eps = [draw_episode(config, np.random.default_rng([7, r]), targets=1) for r in range(3)]
-    fused = [fused_by_stamp_and_lag(config, ep) for ep in eps]
+    eps = [_episode(config, np.random.default_rng([7, r])) for r in range(3)]
+    fused = [_fused(config, ep) for ep in eps]
     K = config.horizon
     cat = lambda i: np.concatenate([f[i] for f in fused])[:, :K]  # noqa: E731
     truth = np.concatenate([np.moveaxis(ep.truth[:K, :, :2], 0, 1) for ep in eps])
     prior = np.concatenate([ep.prior for ep in eps])
-    return config, af.run_fixed_mask(config.motion, cat(0), cat(1), cat(2), truth, prior, config.ahg, 30)
+    return config, af.run_fixed_mask(_motion(config), cat(0), cat(1), cat(2), truth, prior, _ahg(config), 30)
 
 
 def test_dfir_rmse_vs_horizon_has_an_interior_minimum(default_world_runs):
@@ -237,7 +266,7 @@ def test_dfir_rmse_vs_horizon_has_an_interior_minimum(default_world_runs):
 def test_afge_horizon_is_shorter_in_turns_than_on_straight_legs(default_world_runs):
     config, out = default_world_runs
     h = out["afge_predictive_horizon"][:, 50:]
-    turning = in_turn(config, 1, config.horizon)[50:, 0]
+    turning = in_turn(config.parts()[0], config.horizon)[50:, 0]
     chosen = h > 0
     in_turns = h[chosen & turning].mean()
     straight = h[chosen & ~turning].mean()

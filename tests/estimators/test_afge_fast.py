@@ -145,8 +145,9 @@ def _rollout(steps=40, batch=4):
         actions = np.stack([env.action_space.sample() for _ in range(env.num_envs)])
         observation, reward, _, _ = env.step(actions)
         out += [observation, reward]
-    pending = env.scenario.pending
-    return out + [pending["x"], pending["P"], env.scenario.horizon_costs("predictive")]
+    backend = env.scenario.backend
+    pending = backend.pending
+    return out + [pending["x"], pending["P"], backend.costs(pending, "predictive")]
 
 
 def test_nlos_horizon_rollout_with_random_actions_equals_the_numpy_path(monkeypatch):

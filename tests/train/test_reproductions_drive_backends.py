@@ -11,7 +11,6 @@ seeding that moved a reproduction's numbers fails here.
 """
 
 import dataclasses
-from types import SimpleNamespace
 
 import numpy as np
 
@@ -223,26 +222,29 @@ def _reference_gao2016(config, index, generators, mode_info="known", lag0=False,
     ``nlos_horizon`` scenario of sweep setting ``index`` draws from ``generators``, with its network's delays
     (``lag0``: every late packet dropped): squared errors of target 0."""
     import estimators.afge as af
+    from coloc_env.backends.nlos import episode_delays
     from coloc_env.primitives.random_delay import NEVER
-    from coloc_env.scenarios.nlos_horizon import NlosHorizonScenario, fused_by_stamp_and_lag
+    from coloc_env.scenarios.nlos_horizon import NlosHorizonScenario
 
     cfg = dataclasses.replace(gao2016._setting_config(config, index), mode_info=mode_info)
     core = NlosHorizonScenario(cfg, batch=len(generators))
     core.reset(generators)
-    world, delays = core.world, core.packet_delays()
+    world, afge = core.world, core.backend.config
+    delays = episode_delays(world, core.network, afge.payload)
     keep = (delays == 0) if lag0 else (delays >= 0)
     delays = np.where(keep, delays, NEVER).astype(np.int16)
-    parts = [fused_by_stamp_and_lag(cfg, SimpleNamespace(rss=world.rss[b], aoa=world.aoa[b], nav=world.nav[b],
-                                                         modes=world.modes[b], delays=delays[b]))
+    parts = [af.fuse_episode(world.signal, world.rss[b], world.aoa[b], world.nav[b], world.modes[b], delays[b],
+                             cfg.buffer_length, afge.n_strongest, afge.mode_info, afge.weighting, afge.min_packets)
              for b in range(len(generators))]
     K = cfg.horizon
     Y, y, g = (np.concatenate([p[n] for p in parts])[:, :K] for n in range(3))
     truth = np.moveaxis(world.truth[:, :K, :, :2], 1, 2).reshape(-1, K, 2)
     prior = world.prior.reshape(-1, 4)
-    out = af.run_fixed_mask(cfg.motion, Y, y, g, truth, prior, cfg.ahg, max(gao2016.HORIZONS),
+    motion = world.motion_model.afge
+    out = af.run_fixed_mask(motion, Y, y, g, truth, prior, afge.ahg, max(gao2016.HORIZONS),
                             ("predictive", "paper", "smoothed"))
     accel_var = None if accel_sigma is None else accel_sigma**2
-    out["kf"] = af.run_kalman(cfg.motion, Y, y, g, truth, prior, cfg.prior_cov, accel_var=accel_var)
+    out["kf"] = af.run_kalman(motion, Y, y, g, truth, prior, world.prior_cov, accel_var=accel_var)
     return out
 
 

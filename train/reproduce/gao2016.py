@@ -39,7 +39,8 @@ import os
 import numpy as np
 
 from coloc_env.config import build_config
-from coloc_env.scenarios.nlos_horizon import NlosHorizonConfig, in_turn
+from coloc_env.scenarios.nlos_horizon import NlosHorizonConfig
+from coloc_env.worlds.nlos_orbit import in_turn
 from train.executor import map_tasks
 from train.io import claims_table, save_figure, write_json, write_text
 from train.reproduce.bound_rows import pcrb_block, report_section
@@ -54,7 +55,7 @@ WARMUP = 50
 HORIZONS = tuple(range(2, 31))
 BOUND_EPISODES = 10  # seeded episodes of the bound (at most the runs): a fraction of a second each
 MATCHED_ACCEL_SIGMA = 1.0  # m/s^2, the KF matched to the turns (docs/gao2016.md §8)
-SETTINGS = (  # (name, config changes): spec's sweep, the default first
+SETTINGS = (  # (name, config changes): the sweep of docs/gao2016.md §12, the default first
     ("default", {}),
     ("pi=0.1", {"p_nlos": 0.1}),
     ("pi=0.5", {"p_nlos": 0.5}),
@@ -130,7 +131,7 @@ def drive(spec, generators: list, constant: bool = False) -> dict:
         scenario.step(actions)
         truth = scenario._truth
         out["error"].append(np.sum((backend.posterior_position - truth) ** 2, axis=-1))
-        out["horizon"].append(np.where(backend.valid_used, backend.horizon_used, 0))
+        out["horizon"].append(np.where(backend.valid_used, backend.window_used, 0))
         out["received"].append(backend.packets_arrived)
         out["fused_lag0"].append(backend.used[:, :, -1].sum(axis=-1) >= n_min)
         if k >= backend.D:
@@ -289,7 +290,7 @@ def _metrics(res: dict, config: NlosHorizonConfig, runs: int, seed: int, warm: i
     curve = {n: float(np.sqrt(by_n["known"][:, n - 1].mean())) for n in HORIZONS}
     best = min(curve, key=curve.get)
     horizon = res["afge_horizon"][:, warm:]
-    turning = in_turn(config, 1, config.horizon)[warm:, 0]
+    turning = in_turn(config.parts()[0], config.horizon)[warm:, 0]
     chosen = horizon > 0
     mean_h = float(horizon[chosen].mean())
     turns_h = float(horizon[chosen & turning[None]].mean()) if np.any(turning) else float("nan")
