@@ -383,8 +383,8 @@ def test_an_error_names_the_field_the_user_wrote():
     with pytest.raises(ValueError, match=r"world.measurement_noise .* the rows of world.measurement"):
         coloc_env.compose(world={"name": "drift", "measurement": ((1.0, 0.0, 0.0),)}, network="ideal",
                           backend="kalman")
-    with pytest.raises(ValueError, match=r"^turn_windows must have shape \(3, 2\), one \[start, end\) per entry of "
-                                         r"turn_rates_deg"):
+    with pytest.raises(ValueError, match=r"^nlos_horizon: turn_windows must have shape \(3, 2\), one \[start, end\) "
+                                         r"per entry of turn_rates_deg"):
         coloc_env.parallel_env("nlos_horizon", turn_rates_deg=(1.0, 2.0, 3.0))
     with pytest.raises(ValueError, match=r"^world.turn_windows .* per entry of world.turn_rates_deg"):
         coloc_env.compose(world={"name": "nlos_orbit", "turn_rates_deg": (1.0, 2.0, 3.0)}, network="ideal",

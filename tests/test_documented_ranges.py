@@ -347,7 +347,7 @@ def test_relay_ukf_takes_a_ukf_lambda_inside_minus_2n():
 
 @pytest.mark.parametrize("value", [1.0, 2.0, 0.0])
 def test_smoothing_states_its_open_interval(value):
-    with pytest.raises(ValueError, match=r"^smoothing must be in \(0.0, 1.0\), got"):
+    with pytest.raises(ValueError, match=r"^nlos_horizon: smoothing must be in \(0.0, 1.0\), got"):
         coloc_env.parallel_env("nlos_horizon", smoothing=value)
     with pytest.raises(ValueError, match=r"^backend.smoothing must be in \(0.0, 1.0\), got"):
         coloc_env.compose(world="nlos_orbit", network="random_delay", backend={"name": "afge", "smoothing": value})
