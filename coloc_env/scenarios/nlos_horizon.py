@@ -245,9 +245,8 @@ class NlosHorizonConfig(PresetConfig):
     def check_preset(self) -> None:
         """The rules between the parts (the backend's ``check_against``), under the keywords' names."""
         _, network, backend = self.parts()
-        names = {"num_neighbours": "num_neighbours", "buffer_length": "buffer_length"}
-        backend.check_against(self.num_neighbours, network.buffer_length,
-                              {**names, **{f: f for f in ("n_strongest", "min_packets", "window_min")}})
+        names = ("n_strongest", "min_packets", "window_min", "num_neighbours", "buffer_length")
+        backend.check_against(self.num_neighbours, network.buffer_length, {name: name for name in names})
 
 
 class NlosHorizonScenario(PresetScenario):
