@@ -1,4 +1,4 @@
-"""The compiled AFGE kernels (issue 18) compute what the numpy block form does.
+"""The compiled AFGE kernels compute what the numpy block form does.
 
 :func:`estimators.afge.buffer_estimates` (the buffer re-run of every horizon and the
 estimates) and :func:`estimators.afge.fuse_packets` (selection and complementary fusion) run
