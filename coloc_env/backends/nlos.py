@@ -154,11 +154,11 @@ class _PacketFirConfig(PartConfig):
         message calls ``n_strongest``, ``min_packets``, ``window_min``, ``num_neighbours`` and
         ``buffer_length`` (default: ``backend.<field>``, "the number of neighbours", "the network's buffer
         length")."""
-        names = names or {}
+        names = {"n_strongest": "backend.n_strongest", "min_packets": "backend.min_packets",
+                 "num_neighbours": "the number of neighbours", **(names or {})}
         for field in ("n_strongest", "min_packets"):
             if getattr(self, field) > neighbours:
-                raise BadInput(f"{names.get(field, 'backend.' + field)} must be <= "
-                               f"{names.get('num_neighbours', 'the number of neighbours')} = {neighbours}, "
+                raise BadInput(f"{names[field]} must be <= {names['num_neighbours']} = {neighbours}, "
                                f"got {getattr(self, field)}")
 
 
@@ -197,12 +197,10 @@ class Afge(_PacketFirConfig):
 
     def check_against(self, neighbours: int, max_delay: int, names: dict | None = None) -> None:
         super().check_against(neighbours, max_delay, names)
-        names = names or {}
+        names = {"window_min": "backend.window_min", "buffer_length": "the network's buffer length", **(names or {})}
         if self.window_min < max_delay + 1:
-            raise BadInput(f"{names.get('window_min', 'backend.window_min')} must be >= "
-                           f"{names.get('buffer_length', 'the network' + chr(39) + 's buffer length')} + 1 = "
-                           f"{max_delay + 1} (the group reflects the possible delay, docs/gao2016.md §7), "
-                           f"got {self.window_min}")
+            raise BadInput(f"{names['window_min']} must be >= {names['buffer_length']} + 1 = {max_delay + 1} "
+                           f"(the group reflects the possible delay, docs/gao2016.md §7), got {self.window_min}")
 
     def build(self, world, network, batch: int) -> Backend:
         return AfgeBackend(self, world, network, batch)

@@ -180,12 +180,14 @@ from coloc_env.worlds.nlos_orbit import NlosOrbit
 _W, _B = NlosOrbit(), Afge()  # the parts' defaults are the preset's
 
 
-def _world(name: str, field: str | None = None):
-    return keyword(getattr(_W, field or name), f"world.{field or name}")
+def _world(field: str):
+    """A keyword setting the world's ``field``, with the world's default."""
+    return keyword(getattr(_W, field), f"world.{field}")
 
 
-def _backend(name: str):
-    return keyword(getattr(_B, name), f"backend.{name}")
+def _backend(field: str):
+    """A keyword setting the backend's ``field``, with the backend's default."""
+    return keyword(getattr(_B, field), f"backend.{field}")
 
 
 @dataclass(frozen=True)
@@ -196,7 +198,7 @@ class NlosHorizonConfig(PresetConfig):
     World, Network, Backend = NlosOrbit, RandomDelay, Afge
     aliases = {"packet_cost": "communication_cost"}
 
-    num_uavs: int = _world("num_uavs", "num_agents")
+    num_uavs: int = _world("num_agents")
     num_neighbours: int = _world("num_neighbours")
     horizon: int = keyword(_W.horizon, "world.horizon", "composition.horizon")
     period: float = _world("period")
