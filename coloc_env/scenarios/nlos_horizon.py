@@ -136,7 +136,7 @@ the part named, ``num_uavs`` the world's ``num_agents``)
 | nlos_sigma_deg      | 1.0                          | [0, 180] deg [chosen]                             |
 | p_nlos              | 0.3                          | pi in [0, 1] [chosen]                             |
 | p10                 | 0.1                          | [0, 1], pi p10 <= 1 - pi [chosen]                 |
-| buffer_length       | 3                            | D, 0..1000 (N_min >= D + 1) [chosen]              |
+| buffer_length       | 3                            | D, 0..999 (N_min >= D + 1, N_max <= 1000) [chosen] |
 | delay_probs         | (0.6, 0.2, 0.1, 0.05)        | D + 1 entries in [0, 1], sum <= 1 [chosen]        |
 | n_strongest         | 4                            | 1..J [chosen] ("only the strongest" [paper])      |
 | min_packets         | 1                            | n_min, 1..J [chosen]                              |
