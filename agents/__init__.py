@@ -32,7 +32,7 @@ SCENARIO_POLICIES = {"bandwidth_fusion": {**bandwidth_fusion.POLICIES, **generic
 BOUND_POLICIES = {"nlos_horizon": nlos_horizon.BOUNDS}
 ALIASES = {"nlos_horizon": nlos_horizon.ALIASES}  # old name -> current name, accepted by make_policy only
 
-# The strongest realizable baselines with the agents' information (issue 15 §1). lossy_fusion's are the
+# The strongest realizable baselines with the agents' information. lossy_fusion's are the
 # leader-alone Kalman filter and the centralized filter (A), estimators rather than env policies:
 # ``train.evaluate.REFERENCE_FILTERS`` runs them on the same episodes; its informed filter is a bound.
 STRONGEST_BASELINES = {

@@ -110,7 +110,7 @@ class CoLocParallelEnv(ParallelEnv):
     """PettingZoo ``ParallelEnv`` over one copy of a ``Scenario``.
 
     ``reset(seed=s)`` gives the env ``np.random.default_rng(s)``; ``reset()``
-    without a seed continues the same generator (DESIGN.md, Seeding).
+    without a seed continues the same generator.
     Episodes end by truncation at the scenario's horizon; ``max_cycles``
     (PettingZoo's keyword) sets it (``with_max_cycles``).
 

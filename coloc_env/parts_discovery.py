@@ -1,8 +1,8 @@
 """Import every module of a parts package, so that each part registers itself when its package loads.
 
 The order of a registry (``coloc_env.WORLDS`` and friends) follows ``preferred``
-(DESIGN.md's order), then the remaining modules alphabetically; a new part is a
-new module, and no list has to be edited.
+(the order the package's ``__init__`` gives), then the remaining modules alphabetically; a new part
+is a new module, and no list has to be edited.
 """
 
 from __future__ import annotations

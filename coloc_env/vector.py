@@ -6,7 +6,7 @@ the batched ``coloc_env.scenarios.base.Scenario`` core: no Python loop
 over copies, except to build the info dicts of the copies whose episode just
 ended (SB3 needs one dict per sub-env).
 
-Seeding follows DESIGN.md: copy b of ``vector_env(name, num_envs=B, seed=s)``
+Seeding: copy b of ``vector_env(name, num_envs=B, seed=s)``
 is exactly ``parallel_env(name)`` reset with seed ``s + b``, and a copy's
 later episodes continue its generator as ``reset()`` would. ``seed(s)``
 (called by SB3's ``PPO(seed=s)``) reseeds copy b with ``s + b`` at the next

@@ -48,7 +48,7 @@ COMMUNICATION = {"bandwidth_fusion": "components received", "lossy_fusion": "mes
                  "nlos_horizon": "packets", "relay_ukf": "relays", "gps_denied_nbp": "broadcasts",
                  "mrclam_relay": "messages delivered"}  # the words of train/cli.py's COMMUNICATION_UNITS
 
-# Issue 15's target per scenario: (what it says, the largest |paired error difference| relative to the
+# The learned policies' target per scenario: (what it says, the largest |paired error difference| relative to the
 # baseline's mean that counts as matching it, the communication saving a match needs).
 TARGETS = {
     "bandwidth_fusion": ("beat the strongest baseline, or match it with 30 % less communication", 0.02, 0.30),
@@ -60,7 +60,8 @@ TARGETS = {
                        0.05, 0.30),
 }
 
-# A composition's (issue 15's cross-combination): the error-communication trade-off against always and silent.
+# A composition's target (a combination of parts no paper ran): the error-communication trade-off against
+# always and silent.
 # "Lower error at equal messages" is judged against the time-sharing of the two (``tradeoff_comparison``),
 # the only way always and silent reach a message rate between theirs.
 COMPOSITION_TARGET = ("beat always and silent on the error-communication trade-off: a lower error than the better "

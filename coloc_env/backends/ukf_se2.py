@@ -34,14 +34,12 @@ Step k, in the world's file order (``Readings.extra["obs_*"]``, see
 * then every robot predicts with its odometry input (``time_update_factored``,
   Q = G diag(var_v, var_omega) G^T per robot and step: the world's input).
 
-This is the loop of the hand-wired ``mrclam_relay`` scenario (its
-``measurement_update`` / ``time_update``); over an ideal network, or a loss-free
-relay whose chains are complete, a composition reproduces its estimates
-(tests/coloc_env/test_mrclam_composition.py checks 1e-9); over a relay with
-``routing="per_source"`` (the scenario's routing table) it reproduces them for
-any routing, hop budget, range limit and loss, given the scenario the network's
-loss uniforms (tests/coloc_env/test_mrclam_preset_parts.py, 1e-9): the parts of
-``PRESETS["mrclam_relay"]``.
+The preset ``mrclam_relay`` is this backend on the ``mrclam`` world over a relay
+network with ``routing="per_source"`` (a routing table per source robot). Over an ideal
+network, or a loss-free relay whose chains are complete, every update is UKF-CCL's;
+the preset and the plain composition give the same estimates to 1e-9 under any
+routing, hop budget, range limit and loss when handed the same network key
+(tests/coloc_env/test_mrclam_composition.py, tests/coloc_env/test_mrclam_preset_parts.py).
 
 | quantity         | value                                                                                |
 |------------------|--------------------------------------------------------------------------------------|

@@ -1,4 +1,4 @@
-"""PPO settings for the composition ``circles/broadcast/ukf_ccl``, a cross-combination no paper ran (issue 15 §3).
+"""PPO settings for the composition ``circles/broadcast/ukf_ccl``, a cross-combination no paper ran.
 
 wang2019's circling platforms (the ``circles`` world: six platforms, each ranging with one partner per step)
 with the centralized UKF (``ukf_ccl``) fed over a lossless ``broadcast`` network: each agent decides per step
