@@ -10,9 +10,9 @@ def renamed(fn, suffix: str):
 
     numba's disk cache files a function's compiled forms by its name and signature, not by ``parallel``: a
     serial and a threaded form of one function share an entry, and the next process's dispatcher of one form
-    may load the other's code. Found twice: dNBP's serial mixture kernel ran threaded, 7x slower, on a loaded
-    machine; AFGE's threaded buffer kernel ran serial (45.9 ms serial, 43.1 ms "threaded" at 4,096 elements).
-    Compiling the threaded form from a renamed copy gives it its own cache entry.
+    may load the other's code: a kernel meant to run serially would then run threaded (or the reverse),
+    giving the same numbers at the other form's speed. Compiling the threaded form from a renamed copy gives
+    it its own cache entry.
     """
     copy = types.FunctionType(fn.__code__, fn.__globals__, fn.__name__ + suffix, fn.__defaults__, fn.__closure__)
     copy.__qualname__ = fn.__qualname__ + suffix
