@@ -8,9 +8,8 @@ noise. A measurement model does the same for a reading z = h(x) + v. Every
 array carries arbitrary leading batch axes (the library's convention:
 copies first, then agents).
 
-Noise is given one way across the library: **variances** in the models
-(``*_var`` fields, m^2, rad^2), standard deviations only at a config's
-boundary where a paper states them.
+The models take their noise as variances (``*_var`` fields, m^2, rad^2) or
+covariances, the package's convention (``estimators``).
 
 | model                         | kind                      | state x      | input u                     | paper  |
 |-------------------------------|---------------------------|--------------|-----------------------------|--------|
