@@ -63,6 +63,12 @@ def _mark_truncation_wrapper():
     return MarkTruncation
 
 
+def mark_truncation(venv):
+    """``venv``, a SuperSuit SB3 vec env, with every episode end flagged ``TimeLimit.truncated = True`` (so
+    that PPO bootstraps the value of the last observation: coloc's episodes end only at the horizon)."""
+    return _mark_truncation_wrapper()(venv)
+
+
 def make_supersuit_vec_env(scenario: str, copies: int, env_config: dict):
     """B copies x N agents as one SB3 VecEnv through SuperSuit (each agent a sub-env)."""
     import supersuit as ss
@@ -71,7 +77,7 @@ def make_supersuit_vec_env(scenario: str, copies: int, env_config: dict):
 
     env = coloc_env.parallel_env(scenario, **env_config)
     venv = ss.pettingzoo_env_to_vec_env_v1(env)
-    return _mark_truncation_wrapper()(ss.concat_vec_envs_v1(venv, copies, num_cpus=0, base_class="stable_baselines3"))
+    return mark_truncation(ss.concat_vec_envs_v1(venv, copies, num_cpus=0, base_class="stable_baselines3"))
 
 
 def seed_supersuit_vec_env(venv, seed: int) -> None:

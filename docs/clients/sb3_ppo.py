@@ -10,7 +10,9 @@ PPO rollout is ``n_steps`` x (copies x agents) transitions: here 32 x (2 x 4) =
 default ``n_steps=2048`` would make the first rollout 2048 x 8 = 16,384
 transitions before anything is printed.) ``coloc_env.vector_env`` is the
 faster native alternative (one batched numpy call for all copies, infos
-already marked for truncation); this file shows the generic PettingZoo route.
+already marked for truncation); this file shows the generic PettingZoo route, with
+``train.training.mark_truncation`` (the wrapper ``coloc train --vec supersuit`` uses) marking
+SuperSuit's episode ends as truncations.
 """
 
 from __future__ import annotations
@@ -18,32 +20,10 @@ from __future__ import annotations
 import supersuit as ss
 from stable_baselines3 import PPO
 from stable_baselines3.common.utils import set_random_seed
-from stable_baselines3.common.vec_env import VecEnvWrapper, VecMonitor
+from stable_baselines3.common.vec_env import VecMonitor
 
 from coloc_env.envs import relay_ukf
-
-
-class MarkTruncation(VecEnvWrapper):
-    """Flags every episode end as a truncation (``TimeLimit.truncated``) so that PPO bootstraps the value
-    of the last observation: coloc's episodes end only at ``max_cycles``, and SuperSuit reports that as a
-    plain ``done``."""
-
-    def get_attr(self, attr_name, indices=None):
-        # SB3's VecEnv constructor asks for render_mode through get_attr; SuperSuit's SB3 wrapper forwards
-        # get_attr to its ConcatVecEnv, which has none, so SB3 would warn that render_mode is not defined.
-        if attr_name == "render_mode":
-            return [self.venv.render_mode for _ in self._get_indices(indices)]
-        return self.venv.get_attr(attr_name, indices)
-
-    def reset(self):
-        return self.venv.reset()
-
-    def step_wait(self):
-        observations, rewards, dones, infos = self.venv.step_wait()
-        for info in infos:
-            if "terminal_observation" in info:
-                info["TimeLimit.truncated"] = True
-        return observations, rewards, dones, infos
+from train.training import mark_truncation
 
 
 def make_vec_env(copies: int = 2, max_cycles: int = 64, seed: int = 0) -> VecMonitor:
@@ -54,8 +34,10 @@ def make_vec_env(copies: int = 2, max_cycles: int = 64, seed: int = 0) -> VecMon
     # SuperSuit's reset() passes no seed (and its VecEnv has no seed()): seed each copy's generator.
     for c, markov_env in enumerate(vec.venv.vec_envs):
         markov_env.par_env.seed_generator(seed + c)
-    # VecMonitor writes SB3's episode info (return, length), so that PPO logs rollout/ep_rew_mean
-    return VecMonitor(MarkTruncation(vec))
+    # SuperSuit reports the end of an episode (always at max_cycles) as a plain done: mark_truncation flags it
+    # TimeLimit.truncated so that PPO bootstraps the last value. VecMonitor writes SB3's episode info
+    # (return, length), so that PPO logs rollout/ep_rew_mean.
+    return VecMonitor(mark_truncation(vec))
 
 
 def main(total_timesteps: int = 512, copies: int = 2, seed: int = 0) -> PPO:

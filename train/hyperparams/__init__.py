@@ -7,7 +7,18 @@ the copy's ``state()``; ``agents.centralized_critic``)), and ``CURVE_EPISODES``:
 score each learning-curve point, the best of which becomes ``model.zip`` (default
 ``train.training.CURVE_EPISODES``)."""
 
+import copy
 import importlib
+
+# The PPO settings a scenario module starts from with ``ppo``: stable-baselines3's own defaults, written out
+# so that each trained model's model.json records them.
+PPO_DEFAULTS = {"n_epochs": 10, "learning_rate": 3e-4, "gae_lambda": 0.95, "clip_range": 0.2,
+                "policy_kwargs": {"net_arch": [64, 64]}}
+
+
+def ppo(**settings) -> dict:
+    """PPO keyword arguments: ``settings`` over ``PPO_DEFAULTS`` (a fresh copy, so no module shares one)."""
+    return {**copy.deepcopy(PPO_DEFAULTS), **settings}
 
 
 def module_name(scenario: str) -> str:

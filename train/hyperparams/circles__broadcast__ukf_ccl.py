@@ -28,19 +28,11 @@ The last messages of ``always`` are the least valuable: halving them costs 0.168
 * Networks (64, 64): the observation has 3N + 2 + features = 21 numbers.
 """
 
+from train.hyperparams import ppo
+
 ENV_CONFIG = {"reward": "trace", "communication_cost": 0.5}
 
-HYPERPARAMS = {
-    "n_steps": 64,
-    "batch_size": 384,
-    "n_epochs": 10,
-    "learning_rate": 3e-4,
-    "gamma": 0.98,
-    "gae_lambda": 0.95,
-    "ent_coef": 0.01,
-    "clip_range": 0.2,
-    "policy_kwargs": {"net_arch": [64, 64]},
-}
+HYPERPARAMS = ppo(n_steps=64, batch_size=384, gamma=0.98, ent_coef=0.01)
 
 NUM_COPIES = 8
 TIMESTEPS = 300_000

@@ -29,19 +29,11 @@ the episode, while the realized error scatters by centimetres from window to win
   180k steps).
 """
 
+from train.hyperparams import ppo
+
 ENV_CONFIG = {"reward": "trace", "hop_cost": 2e-4}
 
-HYPERPARAMS = {
-    "n_steps": 64,
-    "batch_size": 320,
-    "n_epochs": 10,
-    "learning_rate": 3e-4,
-    "gamma": 0.99,
-    "gae_lambda": 0.95,
-    "ent_coef": 0.01,
-    "clip_range": 0.2,
-    "policy_kwargs": {"net_arch": [64, 64]},
-}
+HYPERPARAMS = ppo(n_steps=64, batch_size=320, gamma=0.99, ent_coef=0.01)
 
 ALGORITHM = "maskable_ppo"
 NUM_COPIES = 8
