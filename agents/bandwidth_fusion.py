@@ -29,7 +29,7 @@ from estimators.bandwidth_fusion import paper_selection, paper_weights
 def _scenario(env):
     scenario = getattr(env, "scenario", None) or env.unwrapped.scenario
     if scenario.name != "bandwidth_fusion":
-        raise ValueError(f"this policy is for bandwidth_fusion, not {scenario.name}")
+        raise BadInput(f"this policy is for bandwidth_fusion, not {scenario.name}")
     return scenario
 
 
@@ -90,7 +90,7 @@ def greedy_selection(scenario, weights: np.ndarray) -> np.ndarray:
     """
     links, model = scenario.links, scenario.backend.model
     if links.size > GREEDY_MAX_OPTIONS:
-        raise ValueError(f"greedy scores every feasible selection: {links.size} with num_uavs={links.num_nodes}, "
+        raise BadInput(f"greedy scores every feasible selection: {links.size} with num_uavs={links.num_nodes}, "
                          f"budget={links.budget}, more than {GREEDY_MAX_OPTIONS}; use fewer UAVs or a tighter "
                          "min_per_link / max_per_link")
     feasible = links.feasible  # (F, N-1, n)
@@ -151,7 +151,7 @@ def coordinate_descent(model, links, initial_cov, weights, start, horizon, max_s
     feasible = links.feasible
     current = links.index_of(links.relative_selection(start) if start.shape[1] == links.num_nodes else start)
     if np.any(current < 0):
-        raise ValueError("start selection does not meet the budget")
+        raise BadInput("start selection does not meet the budget")
 
     def cost_of(indices):  # indices (C, N) -> J (C,)
         full = links.full_selection(feasible[indices])
@@ -200,7 +200,7 @@ class OracleStaticPolicy(FixedActionPolicy):
     def __init__(self, env):
         scenario = _scenario(env)
         if (scenario.num_agents, scenario.n) != (4, 3):
-            raise ValueError("oracle_static starts from the paper's tables and needs num_uavs=4 with a 3-d state")
+            raise BadInput("oracle_static starts from the paper's tables and needs num_uavs=4 with a 3-d state")
         self.result = oracle_static_search(scenario)[0]
         super().__init__(env, scenario.encode_actions(self.result.selection, paper_weights(self.result.weights)))
 

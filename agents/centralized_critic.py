@@ -37,6 +37,8 @@ from stable_baselines3.common.torch_layers import MlpExtractor
 from stable_baselines3.common.vec_env import VecEnvWrapper
 from torch import nn
 
+from coloc_env.config import BadInput
+
 CRITICS = ("decentralized", "centralized")  # the settings' CRITIC: the agent's own view (PPO's default), or + state()
 
 
@@ -68,7 +70,7 @@ class CriticStateObservation(VecEnvWrapper):
     def __init__(self, venv):
         scenario = getattr(venv, "scenario", None)
         if scenario is None:
-            raise ValueError("the centralized critic needs coloc_env.vector_env (it reads the core's state()); "
+            raise BadInput("the centralized critic needs coloc_env.vector_env (it reads the core's state()); "
                              f"got {type(venv).__name__}")
         self.scenario = scenario
         self.num_copies = venv.num_copies
@@ -100,7 +102,7 @@ class SplitMlpExtractor(nn.Module):
     def __init__(self, local_dim: int, feature_dim: int, net_arch, activation_fn, device):
         super().__init__()
         if not 0 < local_dim <= feature_dim:
-            raise ValueError(f"local_dim must be in 1..{feature_dim} (the observation's size), got {local_dim!r}")
+            raise BadInput(f"local_dim must be in 1..{feature_dim} (the observation's size), got {local_dim!r}")
         self.local_dim = int(local_dim)
         actor = MlpExtractor(self.local_dim, net_arch=net_arch, activation_fn=activation_fn, device=device)
         critic = MlpExtractor(feature_dim, net_arch=net_arch, activation_fn=activation_fn, device=device)

@@ -18,6 +18,7 @@ import itertools
 import numpy as np
 
 from agents.base import FixedActionPolicy, Policy
+from coloc_env.config import BadInput
 from coloc_env.scenarios.binding import PresetScenario
 
 
@@ -29,7 +30,7 @@ def _is_composition(scenario) -> bool:
 def _fixed(env, which: str) -> FixedActionPolicy:
     scenario = env.unwrapped.scenario
     if not _is_composition(scenario):
-        raise ValueError(f"policy {'always' if which == 'maximum' else 'silent'!r} needs a composition "
+        raise BadInput(f"policy {'always' if which == 'maximum' else 'silent'!r} needs a composition "
                          f"(coloc_env.compose); {scenario.name} is a preset with its own policies")
     vector = scenario.action_vector(which)
     return FixedActionPolicy(env, np.tile(vector, (scenario.num_agents, 1)))
@@ -68,7 +69,7 @@ class GreedyPolicy(Policy):
         super().__init__(env)
         core = env.unwrapped.scenario
         if not _is_composition(core):
-            raise ValueError(f"policy 'greedy' needs a composition (coloc_env.compose); {core.name} is a preset "
+            raise BadInput(f"policy 'greedy' needs a composition (coloc_env.compose); {core.name} is a preset "
                              "with its own policies")
         self.max_candidates = int(max_candidates)
         self.start = core.action_vector("maximum")
@@ -81,7 +82,7 @@ class GreedyPolicy(Policy):
                     choices.append(blk.choices)
                 position += 1
         if not entries:
-            raise ValueError(f"policy 'greedy' needs a decision to make; {core.name} has no transport or "
+            raise BadInput(f"policy 'greedy' needs a decision to make; {core.name} has no transport or "
                              "backend decisions")
         self.entries = entries
         if int(np.prod(choices, dtype=float)) <= self.max_candidates:
@@ -90,7 +91,7 @@ class GreedyPolicy(Policy):
         else:
             self.candidates = [{e: v} for e, c in zip(entries, choices, strict=True) for v in range(c)]
         if self._team_cost(core, np.tile(self.start, (core.num_agents, 1))) is None:
-            raise ValueError(f"policy 'greedy' needs a backend with a covariance; {core.name}'s has none")
+            raise BadInput(f"policy 'greedy' needs a backend with a covariance; {core.name}'s has none")
 
     @staticmethod
     def _team_cost(core, actions: np.ndarray) -> float | None:
@@ -146,7 +147,7 @@ def _bandwidth_fusion_fixed(env, fewest: bool) -> FixedActionPolicy:
 
     scenario = env.unwrapped.scenario
     if scenario.name != "bandwidth_fusion":
-        raise ValueError(f"this policy is for bandwidth_fusion, not {scenario.name}")
+        raise BadInput(f"this policy is for bandwidth_fusion, not {scenario.name}")
     N, n = scenario.num_agents, scenario.n
     scores = (N - 1) * n
     actions = np.zeros((N, scenario.action_space().shape[0]))

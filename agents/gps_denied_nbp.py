@@ -40,7 +40,7 @@ THRESHOLD_SPREAD = 20.0
 def _scenario(env):
     scenario = getattr(env, "scenario", None) or env.unwrapped.scenario
     if scenario.name != "gps_denied_nbp":
-        raise ValueError(f"this policy is for gps_denied_nbp, not {scenario.name}")
+        raise BadInput(f"this policy is for gps_denied_nbp, not {scenario.name}")
     return scenario
 
 
@@ -87,7 +87,7 @@ class ThresholdPolicy(Policy):
                 raise BadInput(f"threshold spread must be a number of metres > 0, got {tables!r}") from None
         spread = THRESHOLD_SPREAD if spread is None else spread
         if isinstance(spread, bool) or not isinstance(spread, (int, float)) or not spread > 0:
-            raise ValueError(f"threshold spread must be a number of metres > 0, got {spread!r}")
+            raise BadInput(f"threshold spread must be a number of metres > 0, got {spread!r}")
         self.spread = float(spread)
 
     def act(self, observations):

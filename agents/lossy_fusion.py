@@ -14,12 +14,13 @@
 from __future__ import annotations
 
 from agents.base import FixedActionPolicy
+from coloc_env.config import BadInput
 
 
 def _scenario(env):
     scenario = getattr(env, "scenario", None) or env.unwrapped.scenario
     if scenario.name != "lossy_fusion":
-        raise ValueError(f"this policy is for lossy_fusion, not {scenario.name}")
+        raise BadInput(f"this policy is for lossy_fusion, not {scenario.name}")
     return scenario
 
 

@@ -35,7 +35,7 @@ from coloc_env.config import BadInput
 def _scenario(env):
     scenario = getattr(env, "scenario", None) or env.unwrapped.scenario
     if scenario.name != "nlos_horizon":
-        raise ValueError(f"this policy is for nlos_horizon, not {scenario.name}")
+        raise BadInput(f"this policy is for nlos_horizon, not {scenario.name}")
     return scenario
 
 

@@ -25,10 +25,11 @@ def history_lines(package_paths) -> list[str]:
 
 
 def test_history_pattern_catches_what_it_is_for():
-    for text in ("(issue 15 §1)", "Issue 34's target", "the issue-15 note", "spec §12", "as in session 3", "see DESIGN.md",
-                 "../shared/specs/gao2016_afge.md"):
+    for text in ("(issue 15 §1)", "Issue 34's target", "the issue-15 note", "spec §12", "as in session 3",
+                 "see DESIGN.md", "../shared/specs/gao2016_afge.md"):
         assert HISTORY.search(text), text
-    for text in ("an issue of units", "issues arise", "the session's seed", "spec_dict", "the design's rule", "shared/data"):
+    for text in ("an issue of units", "issues arise", "the session's seed", "spec_dict", "the design's rule",
+                 "shared/data"):
         assert not HISTORY.search(text), text
 
 

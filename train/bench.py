@@ -63,6 +63,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from coloc_env.config import BadInput
 from train.io import save_figure, write_json, write_text
 
 BATCHES = (1, 64, 1024)
@@ -325,7 +326,7 @@ def record_backend_calls(name: str, batch: int, steps: int | None = None, seed: 
     horizon = int(venv.scenario.horizon)
     steps = steps or min(horizon, max(8, -(-REPLAY_SAMPLES // batch)))
     if steps > horizon:
-        raise ValueError(f"record at most one episode ({horizon} steps), got {steps}")
+        raise BadInput(f"record at most one episode ({horizon} steps), got {steps}")
     tape = BackendTape(calls)
     patched, depth = [], [0]
 
@@ -814,7 +815,7 @@ def scaling_world(num_agents: int, layout: str) -> dict:
     from coloc_env.worlds.gps_denied import GpsDenied
 
     if layout not in SCALING_LAYOUTS:
-        raise ValueError(f"layout must be one of {SCALING_LAYOUTS}, got {layout!r}")
+        raise BadInput(f"layout must be one of {SCALING_LAYOUTS}, got {layout!r}")
     world = {"name": "gps_denied", "num_agents": int(num_agents)}
     if layout == "fixed density":
         world["area"] = GpsDenied(num_agents=int(num_agents), density=SCALING_DENSITY).side

@@ -490,15 +490,16 @@ def cmd_study(args) -> int:
 def cmd_list(args) -> int:
     """Print the parts, the presets (with their registered env ids) and one line per (world, network,
     backend): ok, or why not; ``--ok`` keeps the compatible rows, ``--world`` / ``--network`` / ``--backend``
-    the rows of that part (a ValueError names the flag and the known names)."""
+    the rows of that part (a ``BadInput`` names the flag and the known names)."""
     import coloc_env
+    from coloc_env.config import BadInput
     from coloc_env.registry import env_id
 
     filters = {part: getattr(args, part, None) for part in ("world", "network", "backend")}
     known = {"world": coloc_env.WORLDS, "network": coloc_env.NETWORKS, "backend": coloc_env.BACKENDS}
     for part, value in filters.items():
         if value is not None and value not in known[part]:
-            raise ValueError(f"--{part} must be one of {', '.join(known[part])}; got {value!r}")
+            raise BadInput(f"--{part} must be one of {', '.join(known[part])}; got {value!r}")
     only_ok = bool(getattr(args, "ok", False))
     print("worlds:   " + ", ".join(coloc_env.WORLDS))
     print("networks: " + ", ".join(coloc_env.NETWORKS))
@@ -538,10 +539,10 @@ def _wide_output_when_not_a_terminal():
             os.environ.pop("COLUMNS", None)
 
 
-# Where a plain ValueError (not a BadInput) still means bad input: raised by the command line's own layer, the
-# policy loader or a data loader, each of which checks what the user named (a flag, a policy, a model or
-# data file). Anywhere else (numpy, an estimator, a backend's step) it is an internal error.
-INPUT_LAYERS = ("train", "agents", os.path.join("coloc_env", "data"))
+# Where a plain ValueError (not a BadInput) still means bad input: raised by the recorded-data loader, whose
+# checks name the data file the user gave. Anywhere else (numpy, an estimator, a backend's step) it is an
+# internal error; the checks of the command line and of the policies raise BadInput.
+INPUT_LAYERS = (os.path.join("coloc_env", "data"),)
 PACKAGE_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 

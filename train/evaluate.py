@@ -186,8 +186,9 @@ def attach_bounds(result: dict, scenario: str, seed_base: int, trace: dict, boun
 
 def check_not_evaluation_seeds(seed_base: int, episodes: int, what: str) -> None:
     """Refuse a tuning run whose seeds seed_base .. seed_base + episodes - 1 meet the evaluation seeds."""
+    from coloc_env.config import BadInput
     if seed_base < EVAL_SEED_BASE + SEED_RANGE and seed_base + episodes > EVAL_SEED_BASE:
-        raise ValueError(f"{what}: seed_base {seed_base} with {episodes} episodes overlaps the evaluation seeds "
+        raise BadInput(f"{what}: seed_base {seed_base} with {episodes} episodes overlaps the evaluation seeds "
                          f"[{EVAL_SEED_BASE}, {EVAL_SEED_BASE + SEED_RANGE}); choose on validation seeds "
                          f"(seed_base >= {VALIDATION_SEED_BASE})")
 
@@ -235,6 +236,7 @@ def evaluate_policy(scenario: str, policy_name: str, episodes: int, seed_base: i
     (torch seeded with ``seed_base``) and is recorded as ``PATH.zip (stochastic)``.
     Every policy row gets the columns of ``attach_bounds`` (``bounds=False``: RMSE and NEES only).
     """
+    from coloc_env.config import BadInput
     if policy_name in REFERENCE_FILTERS.get(scenario, {}):
         result = run_reference_filter(scenario, policy_name, episodes, seed_base)
         if progress:
@@ -255,7 +257,7 @@ def evaluate_policy(scenario: str, policy_name: str, episodes: int, seed_base: i
     import coloc_env
 
     if episodes < 2:
-        raise ValueError(f"episodes must be >= 2 for a confidence interval, got {episodes}")
+        raise BadInput(f"episodes must be >= 2 for a confidence interval, got {episodes}")
     policy = agents.make_policy(policy_name, coloc_env.parallel_env(scenario))  # checks scenario and spaces
     result = run_model_batched(policy.model, scenario, episodes, seed_base, deterministic=not stochastic, trace=trace)
     if progress:
@@ -272,11 +274,12 @@ def run_reference_filter(scenario: str, name: str, episodes: int, seed_base: int
     lossy_fusion's metric is the fused position MSE averaged over the slots (its ``episode_error``);
     communication is the packets the followers send per slot as the env counts them.
     """
+    from coloc_env.config import BadInput
     filters = REFERENCE_FILTERS.get(scenario, {})
     if name not in filters:
-        raise ValueError(f"unknown reference filter {name!r} for {scenario}; available: {list(filters)}")
+        raise BadInput(f"unknown reference filter {name!r} for {scenario}; available: {list(filters)}")
     if episodes < 2:
-        raise ValueError(f"episodes must be >= 2 for a confidence interval, got {episodes}")
+        raise BadInput(f"episodes must be >= 2 for a confidence interval, got {episodes}")
     costs, comms = reference_filter_costs(scenario, filters[name][0], episodes, seed_base, **env_config)
     return summarize(scenario, name, costs, comms * filters[name][1], seed_base, 0.0)
 
@@ -284,12 +287,12 @@ def run_reference_filter(scenario: str, name: str, episodes: int, seed_base: int
 def reference_filter_costs(scenario: str, filter_name: str, episodes: int, seed_base: int,
                            **env_config) -> tuple[np.ndarray, float]:
     """Per-episode costs (episodes,) of one of fu2017's filters and the followers' count L - 1."""
-    from coloc_env.config import build_config
+    from coloc_env.config import BadInput, build_config
     from coloc_env.scenarios.lossy_fusion import LossyFusionConfig
     from train.reproduce.fu2017 import filter_runs
 
     if scenario != "lossy_fusion":
-        raise ValueError(f"reference filters exist for {list(REFERENCE_FILTERS)}, not {scenario!r}")
+        raise BadInput(f"reference filters exist for {list(REFERENCE_FILTERS)}, not {scenario!r}")
     config = build_config(LossyFusionConfig, env_config)
     seeds = [seed_base + e for e in range(episodes)]
     errors = filter_runs(config, seeds, (filter_name,))["errors"][filter_name]  # (episodes, K) squared errors
@@ -301,9 +304,10 @@ def run_episodes(scenario: str, policy_name: str, episodes: int, seed_base: int 
     """Any policy by name through the PettingZoo env, one episode per seed ``seed_base + e``."""
     import agents
     import coloc_env
+    from coloc_env.config import BadInput
 
     if episodes < 2:
-        raise ValueError(f"episodes must be >= 2 for a confidence interval, got {episodes}")
+        raise BadInput(f"episodes must be >= 2 for a confidence interval, got {episodes}")
     env = coloc_env.parallel_env(scenario, **env_config)
     policy = agents.make_policy(policy_name, env, seed=seed_base)
     error_key, weight_key = env.scenario.metric_error_key, env.scenario.metric_weight_key
@@ -393,9 +397,10 @@ def run_policy_batched(scenario: str, policy_name: str, episodes: int, seed_base
 
     import agents
     import coloc_env
+    from coloc_env.config import BadInput
 
     if episodes < 2:
-        raise ValueError(f"episodes must be >= 2 for a confidence interval, got {episodes}")
+        raise BadInput(f"episodes must be >= 2 for a confidence interval, got {episodes}")
     env = coloc_env.parallel_env(scenario, **env_config)
     probe = agents.make_policy(policy_name, env, seed=seed_base)
     if probe.batching not in ("per_copy", "core"):

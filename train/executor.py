@@ -13,14 +13,15 @@ from typing import Any
 def map_tasks(fn: Callable[..., Any], items: Sequence[tuple], executor: str = "local",
               address: str | None = None) -> list[Any]:
     """``[fn(*item) for item in items]``, on this process or on a Ray cluster."""
+    from coloc_env.config import BadInput
     if executor == "local":
         return [fn(*item) for item in items]
     if executor != "ray":
-        raise ValueError(f"executor must be 'local' or 'ray', got {executor!r}")
+        raise BadInput(f"executor must be 'local' or 'ray', got {executor!r}")
     try:
         import ray
     except ImportError as exc:  # pragma: no cover - depends on the install
-        raise ValueError("executor 'ray' needs the ray extra: pip install 'coloc[ray]'") from exc
+        raise BadInput("executor 'ray' needs the ray extra: pip install 'coloc[ray]'") from exc
     started = not ray.is_initialized()
     if started:
         ray.init(address=address, include_dashboard=False, log_to_driver=False)

@@ -29,6 +29,7 @@ import os
 
 import numpy as np
 
+from coloc_env.config import BadInput
 from train.io import read_json, save_figure, write_json, write_text
 
 LOCK_NAME = ".leaderboard.lock"
@@ -139,9 +140,9 @@ def paired_difference(costs, reference) -> dict:
     the interval's ends and the episodes a difference of this size needs (``episodes_needed``)."""
     costs, reference = np.asarray(costs, float), np.asarray(reference, float)
     if costs.shape != reference.shape or costs.ndim != 1:
-        raise ValueError(f"paired costs must be two 1-d arrays of one length, got {costs.shape} and {reference.shape}")
+        raise BadInput(f"paired costs must be two 1-d arrays of one length, got {costs.shape} and {reference.shape}")
     if len(costs) < 2:
-        raise ValueError(f"a paired interval needs at least 2 episodes, got {len(costs)}")
+        raise BadInput(f"a paired interval needs at least 2 episodes, got {len(costs)}")
     d = costs - reference
     mean, sd = float(d.mean()), float(d.std(ddof=1))
     half = _t975(len(d) - 1) * sd / math.sqrt(len(d))

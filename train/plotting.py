@@ -49,6 +49,7 @@ def t_interval(sd: float | None, n: int) -> float:
 
 def legend_outside(ax, where: str = "right", **kwargs):
     """The axes' legend outside its data area: ``"right"`` (upper left corner beside the axes) or ``"below"``."""
+    from coloc_env.config import BadInput
     options = {"fontsize": 8, "frameon": False}
     options.update(kwargs)
     if where == "right":
@@ -56,7 +57,7 @@ def legend_outside(ax, where: str = "right", **kwargs):
     if where == "below":
         options.setdefault("ncol", 2)
         return ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.18), **options)
-    raise ValueError(f"where must be 'right' or 'below', got {where!r}")
+    raise BadInput(f"where must be 'right' or 'below', got {where!r}")
 
 
 def plain_log_ticks(ax, axis: str = "y", minimum: int = 3) -> None:

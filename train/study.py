@@ -119,9 +119,10 @@ FIGURE = "position_error.png"
 # --- argument parsing and checks --------------------------------------------------------------------------
 def parse_value(token: str) -> Any:
     """A sweep value from its text: bool, None, int, float, else the string itself."""
+    from coloc_env.config import BadInput
     text = token.strip()
     if not text:
-        raise ValueError("--sweep has an empty value; give PART.FIELD=v1,v2,...")
+        raise BadInput("--sweep has an empty value; give PART.FIELD=v1,v2,...")
     lower = text.lower()
     if lower in ("true", "false"):
         return lower == "true"
@@ -137,25 +138,26 @@ def parse_value(token: str) -> Any:
 
 def parse_sweep(sweep: str | None) -> tuple[str, str, list[str], list[Any]] | None:
     """``"PART.FIELD=v1,v2"`` -> (part, field, value texts, parsed values); None for no sweep."""
+    from coloc_env.config import BadInput
     if sweep is None:
         return None
     if not isinstance(sweep, str) or "=" not in sweep:
-        raise ValueError(f"--sweep must look like PART.FIELD=v1,v2,... (PART one of {list(PARTS)}), got {sweep!r}")
+        raise BadInput(f"--sweep must look like PART.FIELD=v1,v2,... (PART one of {list(PARTS)}), got {sweep!r}")
     target, _, values = sweep.partition("=")
     part, dot, field = target.strip().partition(".")
     if part not in PARTS or not dot:
-        raise ValueError(f"--sweep PART must be one of {list(PARTS)} (as PART.FIELD=...), got {target.strip()!r}")
+        raise BadInput(f"--sweep PART must be one of {list(PARTS)} (as PART.FIELD=...), got {target.strip()!r}")
     if not field.isidentifier():
-        raise ValueError(f"--sweep FIELD must be a field name of the {part}, got {field!r}")
+        raise BadInput(f"--sweep FIELD must be a field name of the {part}, got {field!r}")
     if field == "name":
-        raise ValueError(f"--sweep cannot change {part}.name; choose the part with --{part}"
+        raise BadInput(f"--sweep cannot change {part}.name; choose the part with --{part}"
                          f"{'s' if part == 'backend' else ''}")
     texts = [t.strip() for t in values.split(",")]
     parsed = [parse_value(t) for t in texts]
     seen = []
     for text, value in zip(texts, parsed, strict=True):
         if any(value == v and type(value) is type(v) for v in seen):
-            raise ValueError(f"--sweep {part}.{field} lists the value {text!r} twice")
+            raise BadInput(f"--sweep {part}.{field} lists the value {text!r} twice")
         seen.append(value)
     return part, field, texts, parsed
 
@@ -168,29 +170,32 @@ def _coerce(value: Any, default: Any) -> Any:
 
 
 def _check_int(name: str, value: Any, low: int, high: int) -> int:
+    from coloc_env.config import BadInput
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not low <= value <= high:
-        raise ValueError(f"{name} must be an integer in [{low}, {high}], got {value!r}")
+        raise BadInput(f"{name} must be an integer in [{low}, {high}], got {value!r}")
     return int(value)
 
 
 def _backend_list(backends: str | Sequence[str]) -> list[str]:
+    from coloc_env.config import BadInput
     if isinstance(backends, str):
         backends = backends.split(",")
     if isinstance(backends, (bytes, dict)) or not isinstance(backends, Sequence):
-        raise ValueError(f"backends must be a comma-separated string or a list of names, got {backends!r}")
+        raise BadInput(f"backends must be a comma-separated string or a list of names, got {backends!r}")
     names = [b.strip() if isinstance(b, str) else b for b in backends]
     if not names or any(not isinstance(b, str) or not b for b in names):
-        raise ValueError(f"backends must be one or more backend names (a,b,c), got {backends!r}")
+        raise BadInput(f"backends must be one or more backend names (a,b,c), got {backends!r}")
     duplicated = sorted({b for b in names if names.count(b) > 1})
     if duplicated:
-        raise ValueError(f"backends lists {duplicated} more than once")
+        raise BadInput(f"backends lists {duplicated} more than once")
     return names
 
 
 def _check_name(name: str) -> str:
+    from coloc_env.config import BadInput
     if (not isinstance(name, str) or not name or name in (".", "..") or "/" in name or "\\" in name
             or name != name.strip()):
-        raise ValueError(f"name must be a non-empty folder name without path separators, got {name!r}")
+        raise BadInput(f"name must be a non-empty folder name without path separators, got {name!r}")
     return name
 
 
@@ -203,6 +208,7 @@ def study_name(world: str, network: str, sweep: tuple | None) -> str:
 def build_cells(world: str, network: str, backends: list[str], sweep: tuple | None, horizon: int | None):
     """``{(backend, value key): Composition}``, composing every cell (so that every ValueError comes first)."""
     import coloc_env
+    from coloc_env.config import BadInput
     from coloc_env.parts import BACKENDS, NETWORKS, WORLDS
 
     registries = {"world": WORLDS, "network": NETWORKS, "backend": BACKENDS}
@@ -224,7 +230,7 @@ def build_cells(world: str, network: str, backends: list[str], sweep: tuple | No
             try:
                 cells[backend, text] = coloc_env.compose(**parts, **options)
             except ValueError as exc:
-                raise ValueError(f"--sweep {part}.{field}={text} with backend {backend}: {exc}") from exc
+                raise BadInput(f"--sweep {part}.{field}={text} with backend {backend}: {exc}") from exc
     return cells
 
 
@@ -677,27 +683,28 @@ def run_study(world: str, network: str, backends: str | Sequence[str], sweep: st
     line passes its own, which also remembers the folder to name it on Ctrl-C."""
     import agents
     import coloc_env
+    from coloc_env.config import BadInput
 
     # 1. every check, before anything is computed or written
     for label, value in (("world", world), ("network", network)):
         if not isinstance(value, str):
-            raise ValueError(f"{label} must be a name, one of {list(getattr(coloc_env, label.upper() + 'S'))}, "
+            raise BadInput(f"{label} must be a name, one of {list(getattr(coloc_env, label.upper() + 'S'))}, "
                              f"got {value!r}")
     backends = _backend_list(backends)
     parsed = parse_sweep(sweep)
     if not isinstance(policy, str) or policy not in POLICIES:
-        raise ValueError(f"policy must be one of {list(POLICIES)}, got {policy!r}")
+        raise BadInput(f"policy must be one of {list(POLICIES)}, got {policy!r}")
     if not isinstance(batched, (bool, np.bool_)):
-        raise ValueError(f"batched must be True or False, got {batched!r}")
+        raise BadInput(f"batched must be True or False, got {batched!r}")
     if batched and policy not in BATCHABLE_POLICIES:
-        raise ValueError(f"batched runs support the policies {list(BATCHABLE_POLICIES)} (their actions never read "
+        raise BadInput(f"batched runs support the policies {list(BATCHABLE_POLICIES)} (their actions never read "
                          f"the env), got {policy!r}; run it without batched")
     episodes = _check_int("episodes", episodes, 2, MAX_EPISODES)
     seed = _check_int("seed", seed, 0, MAX_SEED)
     if executor not in ("local", "ray"):
-        raise ValueError(f"executor must be 'local' or 'ray', got {executor!r}")
+        raise BadInput(f"executor must be 'local' or 'ray', got {executor!r}")
     if not isinstance(out, (str, os.PathLike)):
-        raise ValueError(f"out must be a folder path, got {out!r}")
+        raise BadInput(f"out must be a folder path, got {out!r}")
     name = _check_name(study_name(world, network, parsed) if name is None else name)
     cells = build_cells(world, network, backends, parsed, horizon)
     keys = ["default"] if parsed is None else parsed[2]
@@ -711,7 +718,7 @@ def run_study(world: str, network: str, backends: str | Sequence[str], sweep: st
     try:
         check_output_folder(folder)  # creates nothing: refused input leaves OUT as it was
     except ValueError as exc:
-        raise ValueError(f"study folder not writable: {exc}") from exc
+        raise BadInput(f"study folder not writable: {exc}") from exc
     command = command_line(world, network, backends, sweep, policy, episodes, seed, horizon, batched, executor,
                            address, os.fspath(out), name)
 

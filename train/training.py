@@ -22,6 +22,7 @@ import textwrap
 
 import numpy as np
 
+from coloc_env.config import BadInput
 from train.io import copy_file, save_model, write_json
 from train.leaderboard import metric
 
@@ -101,7 +102,7 @@ def make_vec_env(scenario: str, copies: int, env_config: dict, seed: int, vec: s
         venv = make_supersuit_vec_env(scenario, copies, env_config)
         seed_supersuit_vec_env(venv, seed)
         return venv
-    raise ValueError(f"vec must be 'native' or 'supersuit', got {vec!r}")
+    raise BadInput(f"vec must be 'native' or 'supersuit', got {vec!r}")
 
 
 def _callbacks(scenario: str, folder: str, timesteps: int, curve: list, points: int, episodes: int, report=None):
@@ -217,30 +218,30 @@ def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = 
     if timesteps is None:
         timesteps = budget(scenario, DEFAULT_TIMESTEPS)
     if isinstance(timesteps, bool) or not isinstance(timesteps, (int, np.integer)) or timesteps < 1:
-        raise ValueError(f"timesteps must be an integer >= 1, got {timesteps!r}")
+        raise BadInput(f"timesteps must be an integer >= 1, got {timesteps!r}")
     if not 0 <= seed < MAX_TRAINING_SEED:
-        raise ValueError(f"seed must be in [0, {MAX_TRAINING_SEED}) (disjoint from evaluation seeds), got {seed}")
+        raise BadInput(f"seed must be in [0, {MAX_TRAINING_SEED}) (disjoint from evaluation seeds), got {seed}")
     if tensorboard:
         try:
             import tensorboard as _  # noqa: F401
         except ImportError as exc:
-            raise ValueError("--tensorboard needs the tensorboard package: pip install tensorboard") from exc
+            raise BadInput("--tensorboard needs the tensorboard package: pip install tensorboard") from exc
     hyper, env_config = load(scenario)
     episodes = curve_episodes(scenario, CURVE_EPISODES)
     copies = module(scenario).NUM_COPIES
     algorithm_name = algorithm(scenario)
     if algorithm_name == "maskable_ppo" and vec != "native":
-        raise ValueError(f"{scenario} trains with maskable_ppo, which reads the native vector env's action masks; "
+        raise BadInput(f"{scenario} trains with maskable_ppo, which reads the native vector env's action masks; "
                          f"use --vec native, not {vec!r}")
     critic_name = critic(scenario)
     if critic_name == "centralized" and vec != "native":
-        raise ValueError(f"{scenario} trains with a centralized critic, which reads the native vector env's state(); "
+        raise BadInput(f"{scenario} trains with a centralized critic, which reads the native vector env's state(); "
                          f"use --vec native, not {vec!r}")
     Algorithm = algorithm_class(algorithm_name)
     from stable_baselines3.common.utils import set_random_seed
 
     if critic_name == "centralized" and algorithm_name == "recurrent_ppo":
-        raise ValueError(f"{scenario}: the centralized critic is built for ppo and maskable_ppo, not recurrent_ppo")
+        raise BadInput(f"{scenario}: the centralized critic is built for ppo and maskable_ppo, not recurrent_ppo")
     inner = make_vec_env(scenario, copies, env_config, seed, vec)
     policy = "MlpLstmPolicy" if algorithm_name == "recurrent_ppo" else "MlpPolicy"
     if critic_name == "centralized":

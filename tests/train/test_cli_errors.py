@@ -4,6 +4,8 @@ no run that never ends)."""
 
 from __future__ import annotations
 
+import ast
+import glob
 import os
 import re
 import signal
@@ -126,6 +128,36 @@ def test_a_value_error_of_an_estimator_is_internal_and_a_bad_input_from_anywhere
     monkeypatch.setattr(train.evaluate, "evaluate_policy", refused)
     assert main(["evaluate", "relay_ukf", "--episodes", "2", "--out", str(tmp_path)]) == BAD_INPUT
     assert capsys.readouterr().err == "coloc evaluate: error: backend.window_min must be >= 4\n"
+
+
+def test_the_checks_of_train_and_agents_raise_bad_input():
+    """The command line reads a plain ValueError from train/ or agents/ as an internal error (exit 1), so each
+    check there of what a user gave raises ``coloc_env.config.BadInput`` (exit 2), never a bare ValueError."""
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    plain = []
+    for package in ("train", "agents"):
+        for path in sorted(glob.glob(os.path.join(root, package, "**", "*.py"), recursive=True)):
+            with open(path, encoding="utf-8") as handle:
+                tree = ast.parse(handle.read())
+            plain += [f"{os.path.relpath(path, root)}:{node.lineno}" for node in ast.walk(tree)
+                      if isinstance(node, ast.Raise) and isinstance(node.exc, ast.Call)
+                      and isinstance(node.exc.func, ast.Name) and node.exc.func.id == "ValueError"]
+    assert not plain, f"checks raising a plain ValueError: {plain}"
+
+
+def test_a_value_error_inside_train_that_no_check_raised_is_internal(tmp_path, capsys, monkeypatch):
+    """A ValueError raised in train/ by something other than a check (here ``int`` of a malformed setting, its
+    innermost frame in train/hyperparams) is a bug: exit 1 with the request to report it, not exit 2."""
+    import train.evaluate
+    import train.hyperparams
+    import train.hyperparams.relay_ukf as settings
+
+    monkeypatch.setattr(settings, "TIMESTEPS", "many")
+    monkeypatch.setattr(train.evaluate, "evaluate_policy", lambda *a, **k: train.hyperparams.budget("relay_ukf", 1))
+    assert main(["evaluate", "relay_ukf", "--episodes", "2", "--out", str(tmp_path)]) == INTERNAL_ERROR
+    err = _one_line(capsys.readouterr().err)
+    assert err.startswith("coloc evaluate: internal error: ValueError: invalid literal for int()"), err
+    assert "train/hyperparams/__init__.py" in err
 
 
 def test_an_interrupt_as_the_command_ends_prints_its_line_and_a_script_ignores_a_second_one(tmp_path, capsys,

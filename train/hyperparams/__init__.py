@@ -29,10 +29,11 @@ def module_name(scenario: str) -> str:
 
 def module(scenario: str):
     """The hyperparameter module of ``scenario`` (ValueError naming the scenario where it has none)."""
+    from coloc_env.config import BadInput
     try:
         return importlib.import_module(f"train.hyperparams.{module_name(scenario)}")
     except ModuleNotFoundError as exc:
-        raise ValueError(f"no training hyperparameters for scenario {scenario!r} (train/hyperparams/"
+        raise BadInput(f"no training hyperparameters for scenario {scenario!r} (train/hyperparams/"
                          f"{module_name(scenario)}.py)") from exc
 
 
@@ -44,9 +45,10 @@ def load(scenario: str) -> tuple[dict, dict]:
 
 def _setting_choice(scenario: str, field: str, allowed, default: str) -> str:
     """The scenario module's ``field`` (``default`` where it sets none), which must be one of ``allowed``."""
+    from coloc_env.config import BadInput
     name = getattr(module(scenario), field, default)
     if name not in allowed:
-        raise ValueError(f"{field} of train/hyperparams/{module_name(scenario)}.py must be one of "
+        raise BadInput(f"{field} of train/hyperparams/{module_name(scenario)}.py must be one of "
                          f"{list(allowed)}, got {name!r}")
     return name
 
@@ -67,9 +69,10 @@ def budget(scenario: str, default: int) -> int:
 def curve_episodes(scenario: str, default: int) -> int:
     """Validation episodes per learning-curve point (its module's ``CURVE_EPISODES``, else ``default``): an
     integer >= 2, since a point carries a 95 % interval."""
+    from coloc_env.config import BadInput
     value = getattr(module(scenario), "CURVE_EPISODES", default)
     if isinstance(value, bool) or not isinstance(value, int) or value < 2:
-        raise ValueError(f"CURVE_EPISODES of train/hyperparams/{module_name(scenario)}.py must be an integer >= 2, "
+        raise BadInput(f"CURVE_EPISODES of train/hyperparams/{module_name(scenario)}.py must be an integer >= 2, "
                          f"got {value!r}")
     return value
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from coloc_env.config import BadInput
 from coloc_env.scenarios.binding import PresetScenario
 from coloc_env.scenarios.composed import ComposedScenario
 from train.io import claims_table
@@ -32,7 +33,7 @@ class PresetComposition(ComposedScenario):
 def block_sizes(runs: int, block: int) -> list[int]:
     """``runs`` split into blocks of ``block`` runs, the last one holding the rest (``[]`` for 0 runs)."""
     if block < 1:
-        raise ValueError(f"block must be >= 1, got {block}")
+        raise BadInput(f"block must be >= 1, got {block}")
     return [block] * (runs // block) + ([runs % block] if runs % block else [])
 
 
@@ -40,7 +41,7 @@ def mean_se(values) -> tuple[float, float]:
     """Mean of ``values`` (one per run) and its standard error, std (ddof 1) / sqrt(n); n >= 2."""
     values = np.asarray(values, float)
     if values.size < 2:
-        raise ValueError(f"a standard error needs at least 2 runs, got {values.size}")
+        raise BadInput(f"a standard error needs at least 2 runs, got {values.size}")
     return float(values.mean()), float(values.std(ddof=1) / np.sqrt(values.size))
 
 

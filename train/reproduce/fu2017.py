@@ -54,7 +54,7 @@ import estimators.lossy_fusion as lf
 from coloc_env.backends import CentralizedLmmse, Kalman
 from coloc_env.backends.fusion import LEADER
 from coloc_env.composition import compose
-from coloc_env.config import build_config
+from coloc_env.config import BadInput, build_config
 from coloc_env.scenarios.binding import PresetScenario
 from coloc_env.scenarios.composed import ComposedScenario
 from coloc_env.scenarios.lossy_fusion import LossyFusionConfig
@@ -143,7 +143,7 @@ def filter_backend(name: str, config: LossyFusionConfig):
         "centralized_printed_moments": CentralizedLmmse(gain="paper", moments="printed"),
     }
     if name not in backends:
-        raise ValueError(f"unknown filter {name!r}; available: {[*lf.FILTERS, *DIAGNOSTICS]}")
+        raise BadInput(f"unknown filter {name!r}; available: {[*lf.FILTERS, *DIAGNOSTICS]}")
     return backends[name]
 
 
@@ -263,10 +263,10 @@ def run(out: str, runs: int = RUNS, seed: int = 0, quick: bool = False, executor
     """Compute everything, write ``out/fu2017/``, return the metrics dict."""
     config = config or build_config(LossyFusionConfig, {})
     if runs < 2:
-        raise ValueError(f"runs must be >= 2 for a standard error, got {runs}")
+        raise BadInput(f"runs must be >= 2 for a standard error, got {runs}")
     K = config.horizon
     if K < 100:
-        raise ValueError(f"the paper's windows need horizon >= 100 slots, got {K}")
+        raise BadInput(f"the paper's windows need horizon >= 100 slots, got {K}")
     late = slice(K // 2, K)
     items = [(L, size, seed, block, config) for L in SETTINGS.values()
              for block, size in enumerate(block_sizes(runs, BLOCK_RUNS))]

@@ -38,7 +38,7 @@ import os
 
 import numpy as np
 
-from coloc_env.config import build_config
+from coloc_env.config import BadInput, build_config
 from coloc_env.scenarios.nlos_horizon import NlosHorizonConfig
 from coloc_env.worlds.nlos_orbit import in_turn
 from train.executor import map_tasks
@@ -221,9 +221,9 @@ def run(out: str, runs: int = RUNS, seed: int = 0, quick: bool = False, executor
     for _, changes in SETTINGS:
         dataclasses.replace(config, **changes).validate()
     if runs < 2:
-        raise ValueError(f"runs must be >= 2 for a paired interval, got {runs}")
+        raise BadInput(f"runs must be >= 2 for a paired interval, got {runs}")
     if config.window_max < max(HORIZONS):
-        raise ValueError(f"window_max must be >= {max(HORIZONS)} for the horizon sweep, got {config.window_max}")
+        raise BadInput(f"window_max must be >= {max(HORIZONS)} for the horizon sweep, got {config.window_max}")
     base = SEED_BASE + int(seed)
     warm = min(WARMUP, config.horizon - 1)
     items = [(config, base, tuple(range(a, min(a + BLOCK, runs)))) for a in range(0, runs, BLOCK)]

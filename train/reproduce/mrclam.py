@@ -98,6 +98,7 @@ import time
 import numpy as np
 
 import estimators.ukf_relay_se2 as se2
+from coloc_env.config import BadInput
 from coloc_env.data import mrclam
 from train.io import save_figure, write_json, write_text
 from train.reproduce import mrclam_nbp
@@ -120,10 +121,10 @@ def _backend_parts(d: mrclam.MrclamData, noise: dict, model: mrclam.NoiseModel, 
 
     full = mrclam.load_cached(d.path, d.dt)
     if d.steps < 2 or d.t0 != full.t0 or d.steps > full.steps:
-        raise ValueError(f"run_filters needs a run or a prefix of it (the world replays {d.path} from step 0) "
+        raise BadInput(f"run_filters needs a run or a prefix of it (the world replays {d.path} from step 0) "
                          f"of at least 2 steps; got {d.steps} steps from t0 = {d.t0}")
     if INITIAL_STD[0] != INITIAL_STD[1]:
-        raise ValueError(f"the world has one initial position std for x and y, got INITIAL_STD = {INITIAL_STD}")
+        raise BadInput(f"the world has one initial position std for x and y, got INITIAL_STD = {INITIAL_STD}")
     world = {"name": "mrclam", "data": d.path, "dt": d.dt, "horizon": d.steps - 1, "start": 0,
              "noise_model": kind, "calibration_s": float(noise["calibration_s"]),
              "measurement_inflation": bool(inflate_measurements) or kind == "baseline",
@@ -137,7 +138,7 @@ def _backend_parts(d: mrclam.MrclamData, noise: dict, model: mrclam.NoiseModel, 
     backends = dcl.backend.build(w, network, 1), il.backend.build(w, network, 1)
     w.fixes_needed = any(b.reads_fixes for b in backends)  # neither reads the pseudo-fixes: none are made
     if w.noise_model != model:  # the world fits its own model: it must be the one the caller calibrated
-        raise ValueError(f"the mrclam world's {kind} noise model (fitted on the first "
+        raise BadInput(f"the mrclam world's {kind} noise model (fitted on the first "
                          f"{noise['calibration_s']:g} s of {d.path}) differs from the given noise dict")
     # nothing is drawn (fixed start, lossless network); the generators only fill the interface
     rngs = np.random.default_rng(0).spawn(3)

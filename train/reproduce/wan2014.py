@@ -52,7 +52,7 @@ import estimators.dnbp as dn
 import estimators.range_ls as rl
 from coloc_env.backends import RangeLs
 from coloc_env.composition import compose
-from coloc_env.config import build_config
+from coloc_env.config import BadInput, build_config
 from coloc_env.networks.broadcast import BroadcastNetwork
 from coloc_env.primitives.broadcast_medium import BroadcastMedium
 from coloc_env.scenarios.gps_denied_nbp import GpsDeniedNbpConfig
@@ -146,7 +146,7 @@ def composition_parts(config: GpsDeniedNbpConfig) -> tuple:
       ``dead_reckoning`` backend would ignore the fixes too).
     """
     if config.init != "warm":
-        raise ValueError(f"the gps_denied world gives the warm start only; init must be 'warm', got {config.init!r}")
+        raise BadInput(f"the gps_denied world gives the warm start only; init must be 'warm', got {config.init!r}")
     world, medium, dnbp = config.parts()
     ls = RangeLs(min_anchors=rl.LsParams.min_anchors, max_rms=rl.LsParams.max_rms, max_std=rl.LsParams.max_std,
                  gate_chi2=rl.LsParams.gate_chi2)
@@ -334,7 +334,7 @@ def run(out: str, runs: int = RUNS, seed: int = 0, quick: bool = False, executor
         config = dataclasses.replace(config, horizon=min(config.horizon, QUICK_HORIZON))
     config.validate()
     if runs < 2:
-        raise ValueError(f"runs must be >= 2 for a run-to-run spread, got {runs}")
+        raise BadInput(f"runs must be >= 2 for a run-to-run spread, got {runs}")
     base = {f.name: getattr(config, f.name) for f in dataclasses.fields(config)}
     folder = os.path.join(out, KEY)
     started = time.perf_counter()

@@ -45,7 +45,7 @@ import estimators.ukf_relay as ukf
 from agents.relay_ukf import paper_actions
 from coloc_env.backends import DeadReckoning, UkfCcl
 from coloc_env.composition import compose
-from coloc_env.config import build_config
+from coloc_env.config import BadInput, build_config
 from coloc_env.networks import Ideal
 from coloc_env.primitives.relay import STOP_REASONS
 from coloc_env.scenarios.relay_ukf import RelayUKFConfig
@@ -291,7 +291,7 @@ def run(out: str, runs: int = RUNS, seed: int = 0, quick: bool = False, executor
     """Compute everything, write ``out/wang2019/``, return the metrics dict."""
     config = config or build_config(RelayUKFConfig, {})
     if runs < 2:
-        raise ValueError(f"runs must be >= 2 for a confidence interval, got {runs}")
+        raise BadInput(f"runs must be >= 2 for a confidence interval, got {runs}")
     folder = os.path.join(out, KEY)
     sizes = block_sizes(runs, BLOCK_SIZE)
     variants = {"default": {}, "paper_literal": {"heading_noise": False}}

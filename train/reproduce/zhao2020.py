@@ -43,7 +43,7 @@ import estimators.bandwidth_fusion as bf
 from agents.bandwidth_fusion import advance_tables, greedy_selection, oracle_static_search, parse_tables
 from coloc_env.backends import Kalman
 from coloc_env.composition import compose
-from coloc_env.config import build_config
+from coloc_env.config import BadInput, build_config
 from coloc_env.networks import Ideal
 from coloc_env.scenarios.bandwidth_fusion import BandwidthFusionConfig, BandwidthFusionScenario
 from coloc_env.scenarios.composed import ComposedScenario
@@ -151,7 +151,7 @@ def kalman_predictor_cost(config: BandwidthFusionConfig, nodes_pooled: int) -> n
     """
     N = config.num_uavs
     if nodes_pooled not in (1, N):
-        raise ValueError(f"nodes_pooled must be 1 or num_uavs={N}, got {nodes_pooled}")
+        raise BadInput(f"nodes_pooled must be 1 or num_uavs={N}, got {nodes_pooled}")
     world = config.parts()[0]
     spec = compose(world=world, network=Ideal(), backend=Kalman(variant="leader_only" if nodes_pooled == 1
                                                                  else "ideal"), horizon=config.horizon)
@@ -185,7 +185,7 @@ def run(out: str, runs: int = 500, seed: int = 0, quick: bool = False, executor:
     """Compute everything, write ``out/zhao2020/``, return the metrics dict."""
     config = config or build_config(BandwidthFusionConfig, {})
     if runs < 2:
-        raise ValueError(f"runs must be >= 2 for a confidence interval, got {runs}")
+        raise BadInput(f"runs must be >= 2 for a confidence interval, got {runs}")
     model = config.fusion_model()
     M0 = np.asarray(config.initial_cov, float)
     K = config.horizon
