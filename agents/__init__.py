@@ -109,7 +109,7 @@ def make_policy(name: str, env, seed: int | None = None, **kwargs) -> Policy:
     table = {**SCENARIO_POLICIES.get(scenario, generic.POLICIES), **BOUND_POLICIES.get(scenario, {})}
     if base not in table:
         raise BadInput(f"unknown policy {name!r} for {scenario}; available: {available_policies(scenario)}, "
-                         f"bounds: {bound_policies(scenario)} or a .zip")
+                       f"bounds: {bound_policies(scenario)} or a .zip")
     if variant:
         if "tables" not in inspect.signature(table[base]).parameters:
             raise BadInput(f"policy {base!r} of {scenario} takes no variant, got {name!r}")

@@ -91,8 +91,8 @@ def greedy_selection(scenario, weights: np.ndarray) -> np.ndarray:
     links, model = scenario.links, scenario.backend.model
     if links.size > GREEDY_MAX_OPTIONS:
         raise BadInput(f"greedy scores every feasible selection: {links.size} with num_uavs={links.num_nodes}, "
-                         f"budget={links.budget}, more than {GREEDY_MAX_OPTIONS}; use fewer UAVs or a tighter "
-                         "min_per_link / max_per_link")
+                       f"budget={links.budget}, more than {GREEDY_MAX_OPTIONS}; use fewer UAVs or a tighter "
+                       "min_per_link / max_per_link")
     feasible = links.feasible  # (F, N-1, n)
     N = scenario.num_agents
     every = links.full_selection(np.broadcast_to(feasible[:, None], (len(feasible), N, *feasible.shape[1:])))

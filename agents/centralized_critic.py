@@ -71,7 +71,7 @@ class CriticStateObservation(VecEnvWrapper):
         scenario = getattr(venv, "scenario", None)
         if scenario is None:
             raise BadInput("the centralized critic needs coloc_env.vector_env (it reads the core's state()); "
-                             f"got {type(venv).__name__}")
+                           f"got {type(venv).__name__}")
         self.scenario = scenario
         self.num_copies = venv.num_copies
         self.num_agents = venv.num_agents

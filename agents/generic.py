@@ -31,7 +31,7 @@ def _fixed(env, which: str) -> FixedActionPolicy:
     scenario = env.unwrapped.scenario
     if not _is_composition(scenario):
         raise BadInput(f"policy {'always' if which == 'maximum' else 'silent'!r} needs a composition "
-                         f"(coloc_env.compose); {scenario.name} is a preset with its own policies")
+                       f"(coloc_env.compose); {scenario.name} is a preset with its own policies")
     vector = scenario.action_vector(which)
     return FixedActionPolicy(env, np.tile(vector, (scenario.num_agents, 1)))
 
@@ -70,7 +70,7 @@ class GreedyPolicy(Policy):
         core = env.unwrapped.scenario
         if not _is_composition(core):
             raise BadInput(f"policy 'greedy' needs a composition (coloc_env.compose); {core.name} is a preset "
-                             "with its own policies")
+                           "with its own policies")
         self.max_candidates = int(max_candidates)
         self.start = core.action_vector("maximum")
         entries, choices = [], []
@@ -83,7 +83,7 @@ class GreedyPolicy(Policy):
                 position += 1
         if not entries:
             raise BadInput(f"policy 'greedy' needs a decision to make; {core.name} has no transport or "
-                             "backend decisions")
+                           "backend decisions")
         self.entries = entries
         if int(np.prod(choices, dtype=float)) <= self.max_candidates:
             self.candidates = [dict(zip(entries, values, strict=True))

@@ -39,6 +39,8 @@ import math
 
 import numpy as np
 
+from coloc_env.config import BadInput
+
 EVAL_SEED_BASE = 10**6
 VALIDATION_SEED_BASE = 2 * 10**6
 SEED_RANGE = 10**6  # episodes each seed range can hold before it would run into the next
@@ -186,10 +188,9 @@ def attach_bounds(result: dict, scenario: str, seed_base: int, trace: dict, boun
 
 def check_not_evaluation_seeds(seed_base: int, episodes: int, what: str) -> None:
     """Refuse a tuning run whose seeds seed_base .. seed_base + episodes - 1 meet the evaluation seeds."""
-    from coloc_env.config import BadInput
     if seed_base < EVAL_SEED_BASE + SEED_RANGE and seed_base + episodes > EVAL_SEED_BASE:
         raise BadInput(f"{what}: seed_base {seed_base} with {episodes} episodes overlaps the evaluation seeds "
-                         f"[{EVAL_SEED_BASE}, {EVAL_SEED_BASE + SEED_RANGE}); choose on validation seeds "
+                       f"[{EVAL_SEED_BASE}, {EVAL_SEED_BASE + SEED_RANGE}); choose on validation seeds "
                          f"(seed_base >= {VALIDATION_SEED_BASE})")
 
 
@@ -236,7 +237,6 @@ def evaluate_policy(scenario: str, policy_name: str, episodes: int, seed_base: i
     (torch seeded with ``seed_base``) and is recorded as ``PATH.zip (stochastic)``.
     Every policy row gets the columns of ``attach_bounds`` (``bounds=False``: RMSE and NEES only).
     """
-    from coloc_env.config import BadInput
     if policy_name in REFERENCE_FILTERS.get(scenario, {}):
         result = run_reference_filter(scenario, policy_name, episodes, seed_base)
         if progress:
@@ -274,7 +274,6 @@ def run_reference_filter(scenario: str, name: str, episodes: int, seed_base: int
     lossy_fusion's metric is the fused position MSE averaged over the slots (its ``episode_error``);
     communication is the packets the followers send per slot as the env counts them.
     """
-    from coloc_env.config import BadInput
     filters = REFERENCE_FILTERS.get(scenario, {})
     if name not in filters:
         raise BadInput(f"unknown reference filter {name!r} for {scenario}; available: {list(filters)}")
@@ -287,7 +286,7 @@ def run_reference_filter(scenario: str, name: str, episodes: int, seed_base: int
 def reference_filter_costs(scenario: str, filter_name: str, episodes: int, seed_base: int,
                            **env_config) -> tuple[np.ndarray, float]:
     """Per-episode costs (episodes,) of one of fu2017's filters and the followers' count L - 1."""
-    from coloc_env.config import BadInput, build_config
+    from coloc_env.config import build_config
     from coloc_env.scenarios.lossy_fusion import LossyFusionConfig
     from train.reproduce.fu2017 import filter_runs
 
@@ -304,7 +303,6 @@ def run_episodes(scenario: str, policy_name: str, episodes: int, seed_base: int 
     """Any policy by name through the PettingZoo env, one episode per seed ``seed_base + e``."""
     import agents
     import coloc_env
-    from coloc_env.config import BadInput
 
     if episodes < 2:
         raise BadInput(f"episodes must be >= 2 for a confidence interval, got {episodes}")
@@ -397,7 +395,6 @@ def run_policy_batched(scenario: str, policy_name: str, episodes: int, seed_base
 
     import agents
     import coloc_env
-    from coloc_env.config import BadInput
 
     if episodes < 2:
         raise BadInput(f"episodes must be >= 2 for a confidence interval, got {episodes}")

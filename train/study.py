@@ -107,6 +107,8 @@ from typing import Any
 
 import numpy as np
 
+from coloc_env.config import BadInput
+
 PARTS = ("world", "network", "backend")
 POLICIES = ("always", "silent", "random", "paper")
 BATCHABLE_POLICIES = ("always", "silent", "random")  # their actions never read the env's state
@@ -119,7 +121,6 @@ FIGURE = "position_error.png"
 # --- argument parsing and checks --------------------------------------------------------------------------
 def parse_value(token: str) -> Any:
     """A sweep value from its text: bool, None, int, float, else the string itself."""
-    from coloc_env.config import BadInput
     text = token.strip()
     if not text:
         raise BadInput("--sweep has an empty value; give PART.FIELD=v1,v2,...")
@@ -138,7 +139,6 @@ def parse_value(token: str) -> Any:
 
 def parse_sweep(sweep: str | None) -> tuple[str, str, list[str], list[Any]] | None:
     """``"PART.FIELD=v1,v2"`` -> (part, field, value texts, parsed values); None for no sweep."""
-    from coloc_env.config import BadInput
     if sweep is None:
         return None
     if not isinstance(sweep, str) or "=" not in sweep:
@@ -151,7 +151,7 @@ def parse_sweep(sweep: str | None) -> tuple[str, str, list[str], list[Any]] | No
         raise BadInput(f"--sweep FIELD must be a field name of the {part}, got {field!r}")
     if field == "name":
         raise BadInput(f"--sweep cannot change {part}.name; choose the part with --{part}"
-                         f"{'s' if part == 'backend' else ''}")
+                       f"{'s' if part == 'backend' else ''}")
     texts = [t.strip() for t in values.split(",")]
     parsed = [parse_value(t) for t in texts]
     seen = []
@@ -170,14 +170,12 @@ def _coerce(value: Any, default: Any) -> Any:
 
 
 def _check_int(name: str, value: Any, low: int, high: int) -> int:
-    from coloc_env.config import BadInput
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not low <= value <= high:
         raise BadInput(f"{name} must be an integer in [{low}, {high}], got {value!r}")
     return int(value)
 
 
 def _backend_list(backends: str | Sequence[str]) -> list[str]:
-    from coloc_env.config import BadInput
     if isinstance(backends, str):
         backends = backends.split(",")
     if isinstance(backends, (bytes, dict)) or not isinstance(backends, Sequence):
@@ -192,7 +190,6 @@ def _backend_list(backends: str | Sequence[str]) -> list[str]:
 
 
 def _check_name(name: str) -> str:
-    from coloc_env.config import BadInput
     if (not isinstance(name, str) or not name or name in (".", "..") or "/" in name or "\\" in name
             or name != name.strip()):
         raise BadInput(f"name must be a non-empty folder name without path separators, got {name!r}")
@@ -208,7 +205,6 @@ def study_name(world: str, network: str, sweep: tuple | None) -> str:
 def build_cells(world: str, network: str, backends: list[str], sweep: tuple | None, horizon: int | None):
     """``{(backend, value key): Composition}``, composing every cell (so that every ValueError comes first)."""
     import coloc_env
-    from coloc_env.config import BadInput
     from coloc_env.parts import BACKENDS, NETWORKS, WORLDS
 
     registries = {"world": WORLDS, "network": NETWORKS, "backend": BACKENDS}
@@ -683,13 +679,12 @@ def run_study(world: str, network: str, backends: str | Sequence[str], sweep: st
     line passes its own, which also remembers the folder to name it on Ctrl-C."""
     import agents
     import coloc_env
-    from coloc_env.config import BadInput
 
     # 1. every check, before anything is computed or written
     for label, value in (("world", world), ("network", network)):
         if not isinstance(value, str):
             raise BadInput(f"{label} must be a name, one of {list(getattr(coloc_env, label.upper() + 'S'))}, "
-                             f"got {value!r}")
+                           f"got {value!r}")
     backends = _backend_list(backends)
     parsed = parse_sweep(sweep)
     if not isinstance(policy, str) or policy not in POLICIES:
@@ -698,7 +693,7 @@ def run_study(world: str, network: str, backends: str | Sequence[str], sweep: st
         raise BadInput(f"batched must be True or False, got {batched!r}")
     if batched and policy not in BATCHABLE_POLICIES:
         raise BadInput(f"batched runs support the policies {list(BATCHABLE_POLICIES)} (their actions never read "
-                         f"the env), got {policy!r}; run it without batched")
+                       f"the env), got {policy!r}; run it without batched")
     episodes = _check_int("episodes", episodes, 2, MAX_EPISODES)
     seed = _check_int("seed", seed, 0, MAX_SEED)
     if executor not in ("local", "ray"):

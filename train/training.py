@@ -232,11 +232,11 @@ def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = 
     algorithm_name = algorithm(scenario)
     if algorithm_name == "maskable_ppo" and vec != "native":
         raise BadInput(f"{scenario} trains with maskable_ppo, which reads the native vector env's action masks; "
-                         f"use --vec native, not {vec!r}")
+                       f"use --vec native, not {vec!r}")
     critic_name = critic(scenario)
     if critic_name == "centralized" and vec != "native":
         raise BadInput(f"{scenario} trains with a centralized critic, which reads the native vector env's state(); "
-                         f"use --vec native, not {vec!r}")
+                       f"use --vec native, not {vec!r}")
     Algorithm = algorithm_class(algorithm_name)
     from stable_baselines3.common.utils import set_random_seed
 

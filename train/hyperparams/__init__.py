@@ -34,7 +34,7 @@ def module(scenario: str):
         return importlib.import_module(f"train.hyperparams.{module_name(scenario)}")
     except ModuleNotFoundError as exc:
         raise BadInput(f"no training hyperparameters for scenario {scenario!r} (train/hyperparams/"
-                         f"{module_name(scenario)}.py)") from exc
+                       f"{module_name(scenario)}.py)") from exc
 
 
 def load(scenario: str) -> tuple[dict, dict]:
@@ -49,7 +49,7 @@ def _setting_choice(scenario: str, field: str, allowed, default: str) -> str:
     name = getattr(module(scenario), field, default)
     if name not in allowed:
         raise BadInput(f"{field} of train/hyperparams/{module_name(scenario)}.py must be one of "
-                         f"{list(allowed)}, got {name!r}")
+                       f"{list(allowed)}, got {name!r}")
     return name
 
 
@@ -73,7 +73,7 @@ def curve_episodes(scenario: str, default: int) -> int:
     value = getattr(module(scenario), "CURVE_EPISODES", default)
     if isinstance(value, bool) or not isinstance(value, int) or value < 2:
         raise BadInput(f"CURVE_EPISODES of train/hyperparams/{module_name(scenario)}.py must be an integer >= 2, "
-                         f"got {value!r}")
+                       f"got {value!r}")
     return value
 
 

@@ -122,7 +122,7 @@ def _backend_parts(d: mrclam.MrclamData, noise: dict, model: mrclam.NoiseModel, 
     full = mrclam.load_cached(d.path, d.dt)
     if d.steps < 2 or d.t0 != full.t0 or d.steps > full.steps:
         raise BadInput(f"run_filters needs a run or a prefix of it (the world replays {d.path} from step 0) "
-                         f"of at least 2 steps; got {d.steps} steps from t0 = {d.t0}")
+                       f"of at least 2 steps; got {d.steps} steps from t0 = {d.t0}")
     if INITIAL_STD[0] != INITIAL_STD[1]:
         raise BadInput(f"the world has one initial position std for x and y, got INITIAL_STD = {INITIAL_STD}")
     world = {"name": "mrclam", "data": d.path, "dt": d.dt, "horizon": d.steps - 1, "start": 0,
@@ -139,7 +139,7 @@ def _backend_parts(d: mrclam.MrclamData, noise: dict, model: mrclam.NoiseModel, 
     w.fixes_needed = any(b.reads_fixes for b in backends)  # neither reads the pseudo-fixes: none are made
     if w.noise_model != model:  # the world fits its own model: it must be the one the caller calibrated
         raise BadInput(f"the mrclam world's {kind} noise model (fitted on the first "
-                         f"{noise['calibration_s']:g} s of {d.path}) differs from the given noise dict")
+                       f"{noise['calibration_s']:g} s of {d.path}) differs from the given noise dict")
     # nothing is drawn (fixed start, lossless network); the generators only fill the interface
     rngs = np.random.default_rng(0).spawn(3)
     idx = np.arange(1)
