@@ -27,16 +27,23 @@ class BadInput(ValueError):
     estimator's numerics is a bug, not bad input."""
 
 
-def build_config(config_cls: type[C], kwargs: dict[str, Any]) -> C:
-    """Instantiate ``config_cls(**kwargs)`` after rejecting unknown keys, then validate it. A key listed in
-    the class's ``aliases`` (older name -> current name) is read as its current name."""
-    names = {f.name for f in dataclasses.fields(config_cls)}
+def read_aliases(config_cls: type, kwargs: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    """A copy of ``kwargs`` with each key listed in the class's ``aliases`` (older name -> current name)
+    renamed to its current name; giving both names is a ``BadInput`` (names shown as ``prefix + name``)."""
     kwargs = dict(kwargs)
     for alias, name in getattr(config_cls, "aliases", {}).items():
         if alias in kwargs:
             if name in kwargs:
-                raise BadInput(f"{alias} is another name of {name}; give only one of them")
+                raise BadInput(f"{prefix}{alias} is another name of {prefix}{name}; give only one of them")
             kwargs[name] = kwargs.pop(alias)
+    return kwargs
+
+
+def build_config(config_cls: type[C], kwargs: dict[str, Any]) -> C:
+    """Instantiate ``config_cls(**kwargs)`` after rejecting unknown keys, then validate it. A key listed in
+    the class's ``aliases`` (older name -> current name) is read as its current name."""
+    names = {f.name for f in dataclasses.fields(config_cls)}
+    kwargs = read_aliases(config_cls, kwargs)
     unknown = sorted(set(kwargs) - names)
     if unknown:
         aliases = getattr(config_cls, "aliases", {})

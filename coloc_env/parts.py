@@ -21,7 +21,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from coloc_env.config import BadInput, check_choice, check_range, validate_fields
+from coloc_env.config import BadInput, check_choice, check_range, read_aliases, validate_fields
 
 
 @dataclass(frozen=True)
@@ -73,12 +73,7 @@ class PartConfig:
 def make_config(cls: type, fields: dict[str, Any], kind: str) -> PartConfig:
     """``cls(**fields)`` after refusing unknown fields, then validated. A field listed in the class's
     ``aliases`` (older name -> current name) is read as its current name."""
-    fields = dict(fields)
-    for alias, name in getattr(cls, "aliases", {}).items():
-        if alias in fields:
-            if name in fields:
-                raise BadInput(f"{kind}.{alias} is another name of {kind}.{name}; give only one of them")
-            fields[name] = fields.pop(alias)
+    fields = read_aliases(cls, fields, f"{kind}.")
     allowed = {f.name for f in dataclasses.fields(cls)}
     unknown = sorted(set(fields) - allowed)
     if unknown:
