@@ -68,7 +68,7 @@ def advance_tables(scenario, selection: np.ndarray, weights: np.ndarray) -> None
     exact for equal weights; a zero weight stays exactly 0."""
     index = scenario.links.index_of(selection)
     if np.any(index < 0):
-        raise ValueError("selection does not meet the bandwidth budget for every receiver")
+        raise BadInput("selection does not meet the bandwidth budget for every receiver")
     scenario.network.offer_selection(index, np.asarray(selection, bool))
     order = np.broadcast_to(scenario.backend.weight_order, np.shape(weights))
     with np.errstate(divide="ignore"):  # a zero weight: logit -inf, weight exactly 0
