@@ -62,8 +62,9 @@ def build_scenario(scenario_cls: type[Scenario], batch: int, composition=None, m
     try:
         built = build_config(scenario_cls.Config, config)
     except ValueError as exc:
-        if max_cycles is not None and str(exc).startswith(field):
-            raise BadInput(f"max_cycles sets {field} of {scenario_cls.name}: {exc}") from exc
+        message = str(exc).removeprefix(f"{scenario_cls.name}: ")  # a PresetConfig names its preset first
+        if max_cycles is not None and message.startswith(field):
+            raise BadInput(f"max_cycles sets {field} of {scenario_cls.name}: {message}") from exc
         raise
     return _built(scenario_cls, built, batch)
 
