@@ -43,7 +43,7 @@ def window_costs(scenario, likelihood: str) -> np.ndarray:
     """AHG costs J_N(k) (B, N, S) of every window N = 1..S at the current time, computed with the last
     mask (``predictive`` or ``paper``; ``smoothed`` is the policy's own forgetting of the predictive costs)."""
     if likelihood not in ("predictive", "paper"):
-        raise ValueError(f"likelihood must be 'predictive' or 'paper' here, got {likelihood!r}")
+        raise BadInput(f"likelihood must be 'predictive' or 'paper' here, got {likelihood!r}")
     backend = scenario.backend
     return backend.costs(backend.pending, likelihood)
 
