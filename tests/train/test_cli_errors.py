@@ -160,6 +160,18 @@ def test_a_value_error_inside_train_that_no_check_raised_is_internal(tmp_path, c
     assert "train/hyperparams/__init__.py" in err
 
 
+def test_a_folder_that_is_no_mrclam_dataset_is_one_line_and_exit_2(tmp_path, capsys):
+    """The recorded-data loader's refusals are bad input too: a missing folder, a folder without the files."""
+    (tmp_path / "empty").mkdir()
+    for data, message in ((tmp_path / "nowhere", "is not a folder (expected an MRCLAM dataset folder"),
+                          (tmp_path / "empty", "missing file Barcodes.dat: not an MRCLAM dataset folder")):
+        out = tmp_path / "out"
+        assert main(["reproduce", "mrclam", "--data", str(data), "--out", str(out)]) == BAD_INPUT
+        err = _one_line(capsys.readouterr().err)
+        assert err.startswith("coloc reproduce: error: ") and message in err, err
+        assert not out.exists()
+
+
 def test_an_interrupt_as_the_command_ends_prints_its_line_and_a_script_ignores_a_second_one(tmp_path, capsys,
                                                                                              monkeypatch):
     import train.evaluate
