@@ -91,6 +91,12 @@ class Network:
         """The network's part of the action for this backend's message kind; none by default."""
         return []
 
+    def transport_masks(self, distances) -> list[np.ndarray] | None:
+        """The valid choices of the transport blocks for the coming step, one (B, N, size, choices) bool per
+        block, by the network's own rule (a masked choice does what the block's "stop" does); ``distances()``
+        gives the (B, N, N) distances between the agents now. None (the default): every choice valid."""
+        return None
+
     # --- rules (subclasses) -------------------------------------------------------------------
     def usable(self, distance: np.ndarray) -> np.ndarray:
         """Links that can carry a packet at this distance (range limit); all by default."""

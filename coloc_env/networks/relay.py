@@ -10,6 +10,8 @@ A hop of length d is lost with p_loss(d) = 1 - (1 - loss_at_zero) exp(-d / loss_
 |            | N + 1 = the nearest not yet reached; one entry (``routing="per_holder"``) or N entries,  |
 |            | entry m for the chain whose source is platform m (``routing="per_source"``);             |
 |            | ``broadcast``: ``transmit`` ([2] * rounds)                                                |
+| mask       | ``next_hop``: itself, a platform beyond ``comm_range`` and (``per_source``) entry m's    |
+|            | source m end the chain as N = stop does; N + 1 where no other platform is in range       |
 | always     | nearest-first relay, transmit in every round                                             |
 | silent     | stop at once (the measured platform alone), transmit nothing                             |
 | accounting | one message per delivered hop, at its holder (``coloc_env.networks.base``); the hop    |
@@ -107,6 +109,24 @@ class RelayNetwork(Network):
             return [Block("transmit", self.rounds, 2, "transmit in this round (1) or not (0)", default=1,
                           maximum=1, minimum=0)]
         return []
+
+    def transport_masks(self, distances) -> list[np.ndarray] | None:
+        """``next_hop``: itself and a platform beyond ``comm_range`` end the chain, as N = stop does; with
+        ``per_source`` routing, entry m's source m too (every chain of m has reached it); N + 1 (the nearest
+        not yet reached) only where another platform is within ``comm_range``. Stop is always valid."""
+        if self.message_kind != "chain":
+            return None
+        N = self.num_agents
+        others = ~np.eye(N, dtype=bool)
+        reach = np.asarray(self.usable(distances()), bool) & others  # [holder, j]
+        if self.config.routing == "per_source":  # entry m for the chain whose source is m
+            allowed = reach[:, :, None, :] & others[None, None, :, :]  # [holder, m, j]
+        else:  # per_holder: one next hop for whatever chain the holder holds
+            allowed = reach[:, :, None, :]
+        mask = np.ones((self.batch, N, allowed.shape[2], N + 2), dtype=bool)
+        mask[..., :N] = allowed
+        mask[..., N + 1] = allowed.any(axis=-1)
+        return [mask]
 
     def usable(self, distance):
         return np.asarray(distance) <= self.config.comm_range

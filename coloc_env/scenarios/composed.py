@@ -56,21 +56,12 @@ the same as the block's explicit "stop" / "none" choice, decided from the distan
 (the observation's link-layer knowledge). Nothing the agent cannot observe masks a choice (who is
 reached before it, a spent hop budget, a loss, whom an mrclam robot recorded). A ``Box`` action has no mask.
 
-| block (part)              | masked choices                            | why (the part's own rule)                  |
-|---------------------------|-------------------------------------------|--------------------------------------------|
-| ``next_hop`` (``relay``)  | itself; a platform beyond ``comm_range``; | the chain ends there, as at N = stop (stop |
-|                           | per source, entry m's source m; N + 1     | reasons "stopped", "out_of_range",         |
-|                           | (nearest not yet reached) where no other  | "revisit": the source is reached by every  |
-|                           | platform is within ``comm_range``         | chain of its own)                          |
-| ``partner`` (``circles``) | a platform beyond ``sensing_range``; N    | no measurement, as itself ("none": kept,   |
-|                           | (the nearest) where all are beyond it     | the way to decline a measurement)          |
-| ``partner`` (``mrclam``)  | none                                      | whom it recorded is not observed (a count) |
-| ``transmit``, ``keep``,   | none                                      | every value is a decision                  |
-| ``selection``, ``horizon``|                                           |                                            |
-
-N = stop is never masked, nor itself in a ``partner`` block, so every entry keeps a valid choice. A
-binding with its own action codec masks nothing unless it overrides ``action_mask`` (``relay_ukf``
-does).
+The rules are the parts': the core asks the world (``World.sensing_masks``) and the network
+(``Network.transport_masks``) for their blocks' masks, and each part's module table states its rule
+(``circles``: its ``partner`` block; ``relay``: its ``next_hop`` block). A part without a rule, and
+every backend decision, keeps every choice valid. A rule never masks a block's "stop" / "none" choice,
+so every entry keeps a valid one. A binding with its own action codec masks nothing unless it
+overrides ``action_mask`` (``relay_ukf`` does).
 
 Observation (per agent, ``Box(float32)``; both estimands)
 ---------------------------------------------------------
@@ -112,6 +103,7 @@ Termination: none; truncation after ``horizon`` steps.
 from __future__ import annotations
 
 import copy
+import functools
 
 import gymnasium
 import numpy as np
@@ -121,8 +113,6 @@ from coloc_env.scenarios.base import Scenario
 
 LOG_TRACE_BOUND = 50.0
 DISTANCE_SCALE = 100.0
-# the action-mask rules of block_choice_masks that read the distances between the agents
-_DISTANCE_RULES = {("world", "circles", "partner"), ("network", "relay", "next_hop")}
 # what a network records of one step's sending (the infos report it); RelayChain last_chain apart
 _RECORD_ARRAYS = ("messages_sent", "floats_sent", "delivered", "cost_sent", "node_messages", "node_floats")
 
@@ -162,9 +152,10 @@ class ComposedScenario(Scenario):
         self._ahead_record: dict | None = None  # the network's record of the coming step's call
         self.blocks = [*self.world.sensing_blocks(), *self.network.transport_blocks(),
                        *self.backend.decision_blocks()]
-        self.block_parts = (["world"] * len(self.world.sensing_blocks())
-                            + ["network"] * len(self.network.transport_blocks())
-                            + ["backend"] * len(self.backend.decision_blocks()))
+        self._block_counts = (len(self.world.sensing_blocks()), len(self.network.transport_blocks()),
+                              len(self.backend.decision_blocks()))
+        self.block_parts = [part for part, n in zip(("world", "network", "backend"), self._block_counts,
+                                                    strict=True) for _ in range(n)]
         sizes = [blk.size for blk in self.blocks]
         self._splits = np.cumsum(sizes)[:-1] if sizes else []
         self._n_world = sum(blk.size for blk in self.world.sensing_blocks())
@@ -254,38 +245,20 @@ class ComposedScenario(Scenario):
 
     def block_choice_masks(self) -> list[np.ndarray | None]:
         """One (B, N, size, choices) bool per block (None for a continuous block): the valid choices of each
-        entry now (the module's "Action masks" table), from the distances at the coming step, which every
-        agent observes (link-layer knowledge)."""
-        B, N = self.batch, self.num_agents
-        rules = getattr(self, "_mask_rules", None)
-        if rules is None:  # the blocks are fixed: which rule each follows, once
-            rules = self._mask_rules = [(part, getattr(self.composition, part).name, blk.name)
-                                        for blk, part in zip(self.blocks, self.block_parts, strict=True)]
-            self._other_platforms = ~np.eye(N, dtype=bool)
-        distance = self.world.distances() if any(r in _DISTANCE_RULES for r in rules) else None  # [i, j] (B, N, N)
-        others = self._other_platforms
+        entry now, by the world's and the network's own rules (``sensing_masks``, ``transport_masks``; the
+        backend's decisions are all valid), from the distances at the coming step, which every agent
+        observes (link-layer knowledge)."""
+        B = self.batch
+        distances = functools.cache(self.world.distances)  # read once, by whichever part's rule needs them
+        n_world, n_network, n_backend = self._block_counts
+        given = [*(self.world.sensing_masks(distances) or [None] * n_world),
+                 *(self.network.transport_masks(distances) or [None] * n_network), *[None] * n_backend]
         masks: list[np.ndarray | None] = []
-        for blk, rule in zip(self.blocks, rules, strict=True):
+        for blk, mask in zip(self.blocks, given, strict=True):
             if not blk.discrete:
-                masks.append(None)
-                continue
-            mask = np.ones((B, N, blk.size, blk.choices), dtype=bool)
-            if rule == ("world", "circles", "partner"):
-                # a platform beyond sensing_range gives no measurement, as itself does (kept: "none");
-                # the nearest is beyond it only when every platform is
-                reach = (distance <= self.world.range_sensor.max_range) & others
-                mask[:, :, 0, :N] = reach | ~others
-                mask[:, :, 0, N] = reach.any(axis=-1)
-            elif rule == ("network", "relay", "next_hop"):
-                # itself, a platform beyond comm_range (and, per source, the source, which every chain has
-                # reached) end the chain, as N = stop does; the nearest not yet reached only where one is in range
-                reach = np.asarray(self.network.usable(distance), bool) & others  # [holder, j]
-                if blk.size == 1:  # per_holder: one next hop for whatever chain the holder holds
-                    allowed = reach[:, :, None, :]
-                else:  # per_source: entry m for the chain whose source is m
-                    allowed = reach[:, :, None, :] & others[None, None, :, :]  # [holder, m, j]
-                mask[..., :N] = allowed
-                mask[..., N + 1] = allowed.any(axis=-1)
+                mask = None
+            elif mask is None:
+                mask = np.ones((B, self.num_agents, blk.size, blk.choices), dtype=bool)
             masks.append(mask)
         return masks
 

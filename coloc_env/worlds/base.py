@@ -86,6 +86,12 @@ class World:
         """The world's part of the action (sensing choices); none by default."""
         return []
 
+    def sensing_masks(self, distances) -> list[np.ndarray] | None:
+        """The valid choices of the sensing blocks for the coming step, one (B, N, size, choices) bool per
+        block, by the world's own rule (a masked choice does what the block's "none" does); ``distances()``
+        gives the (B, N, N) distances between the agents now. None (the default): every choice valid."""
+        return None
+
     def range_noise_var(self) -> float:
         """Variance of a range reading (m^2), where the world has ranges."""
         raise NotImplementedError

@@ -16,6 +16,7 @@ gives least-squares and particle backends the anchors they need.
 | measurements   | ``range`` (one per step at most), ``position_fix`` (anchors)                     |
 | anchors        | platforms 0..num_anchors-1 (fixes every step)                                    |
 | sensing action | ``Discrete(N + 1)`` per agent: whom to range with if it measures (itself: none, N: nearest) |
+| action mask    | a platform beyond ``sensing_range`` (no measurement, as itself); N where all are beyond it |
 | observation    | 1 if this agent measures at this step                                            |
 
 Arguments (``coloc_env.worlds.Circles``)
@@ -162,6 +163,17 @@ class CirclesWorld(World):
         N = self.num_agents
         return [Block("partner", 1, N + 1, f"whom to range with if this agent measures now: a platform, itself = "
                       f"no measurement, {N} = the nearest", default=N, maximum=N, minimum=N)]
+
+    def sensing_masks(self, distances) -> list[np.ndarray]:
+        """``partner``: a platform beyond ``sensing_range`` gives no measurement, as itself does (itself stays
+        valid: the way to decline a measurement); N (the nearest) only where a platform is within it."""
+        N = self.num_agents
+        others = ~np.eye(N, dtype=bool)
+        reach = (distances() <= self.range_sensor.max_range) & others
+        mask = np.empty((self.batch, N, 1, N + 1), dtype=bool)
+        mask[:, :, 0, :N] = reach | ~others
+        mask[:, :, 0, N] = reach.any(axis=-1)
+        return [mask]
 
     def range_noise_var(self) -> float:
         return self.config.range_noise_var
