@@ -26,12 +26,12 @@ so two chains that pass the same holder can take different routes (with one
 next hop per holder they could not both be complete).
 
 Hop cost. The price of a hop's radio energy (free-space energy grows like
-d^2), in the unit of the reward it is charged to (the ``mrclam_relay`` and
-``relay_ukf`` bindings subtract the team's total from every agent's reward,
-in metres). The network accounts it at the sender in ``cost_sent``; a
-composition's reward (``coloc_env.scenarios.composed``) subtracts only
-``communication_cost`` per message and does not read ``cost_sent``: the hop
-cost changes no estimate and no delivery, only what the accounting reports.
+d^2), in the unit of the reward it is charged to. The network accounts it at
+the sender in ``cost_sent``, and a composition's reward subtracts it with
+``communication_cost`` per message (``coloc_env.scenarios.composed``); as
+the network sends one message per delivered hop, ``hop_cost`` and the
+composition's ``communication_cost`` charge the same thing (the relay presets
+set only the latter). The hop cost changes no estimate and no delivery.
 
 Arguments (``coloc_env.networks.Relay``)
 
@@ -84,6 +84,12 @@ class Relay(PartConfig):
         check_range(f"{prefix}hop_cost", self.hop_cost, 0.0, 1e12)
         check_range(f"{prefix}hop_cost_per_m2", self.hop_cost_per_m2, 0.0, 1e12)
 
+    @property
+    def links(self) -> RelayChainLinks:
+        """The hop rules: range limit, hop budget, distance loss and hop cost."""
+        return RelayChainLinks(self.comm_range, self.max_hops, self.loss_at_zero, self.loss_length, self.hop_cost,
+                               self.hop_cost_per_m2)
+
     def build(self, num_agents: int, batch: int, message_kind: str, rounds: int = 1) -> Network:
         return RelayNetwork(self, num_agents, batch, message_kind, rounds)
 
@@ -91,8 +97,7 @@ class Relay(PartConfig):
 class RelayNetwork(Network):
     def __init__(self, config: Relay, num_agents, batch, message_kind, rounds=1):
         super().__init__(config, num_agents, batch, message_kind, rounds)
-        self.links = RelayChainLinks(config.comm_range, config.max_hops, config.loss_at_zero, config.loss_length,
-                                     config.hop_cost, config.hop_cost_per_m2)
+        self.links = config.links
         self.cost_sent = np.zeros((self.batch, self.num_agents))
         self._source = np.zeros(self.batch, dtype=int)
 

@@ -399,9 +399,14 @@ class ComposedScenario(Scenario):
         else:
             trace = self.posterior_traces()
             loss = self.position_error() if trace is None else np.sqrt(trace)
+        return -loss - self.communication_costs()
+
+    def communication_costs(self) -> np.ndarray:
+        """What each agent's sending cost this step (B, N): ``communication_cost`` per message it sent, plus the
+        cost the network itself charged it (``relay``'s hop costs; 0 for the other networks)."""
         cost = self.composition.communication_cost * self.network.messages_sent
         network_cost = getattr(self.network, "cost_sent", None)  # relay hop costs, where the network sets them
-        return -loss - (cost if network_cost is None else cost + network_cost)
+        return cost if network_cost is None else cost + network_cost
 
     # --- views -------------------------------------------------------------------------
     def _target_truth(self, offset: int = 0, state: np.ndarray | None = None) -> np.ndarray:

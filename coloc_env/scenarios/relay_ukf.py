@@ -48,7 +48,7 @@ often than ``measurement_probability``.
 Action mask (``infos[agent]["action_mask"]``, ``vector_env(...).action_masks()``; (2N + 1,): index 0's
 N choices, then index 1's N + 1; ``RelayUKFScenario.action_mask``): nothing is refused, so a mask
 only drops a choice that does by definition what an explicit one does, from the distances at this
-step (observation ``[N+1, 2N+1)``):
+step (observation ``[N+1, 2N+1)``); the rules are the ``circles`` world's and the ``relay`` network's:
 
 | index | masked                                          | valid                                                  |
 |-------|-------------------------------------------------|--------------------------------------------------------|
@@ -69,9 +69,8 @@ Observation (per agent, ``Box(shape=(2N + 3,), float32)``)
 | ``[2N+1]``       | log tr P_ii, the agent's own covariance (m^2)                         | unbounded  |
 | ``[2N+2]``       | step fraction k / horizon                                             | [0, 1]     |
 
-(Before the composable core every entry was unbounded; the one-hots, the flag and the fraction now
-carry their bounds. The distances are unbounded because ``centres`` may be anywhere; log tr P_ii is
-unbounded because dead reckoning without measurements grows P without limit.)
+The distances are unbounded because ``centres`` may be anywhere; log tr P_ii is unbounded because
+dead reckoning without measurements grows P without limit.
 
 ``state()`` (centralized critic): every agent's observation, then log of the
 diagonal of the joint covariance P (2N values).
@@ -80,8 +79,13 @@ Reward (team: the decisions of one agent move every platform's estimate)
 ------------------------------------------------------------------------
 | ``reward=`` | value for every agent after step k -> k+1 (metres; the paper's metric is a distance) |
 |-------------|--------------------------------------------------------------------------------------|
-| ``"error"`` | -mean_i ||xhat_i(k+1) - x_i(k+1)|| - sum over delivered hops of the hop cost          |
-| ``"trace"`` | -mean_i sqrt(tr P_ii(k+1)) (the filter's own RMS error) - the same hop cost           |
+| ``"error"`` | -mean_i ||xhat_i(k+1) - x_i(k+1)|| (m) - the step's hop costs                        |
+| ``"trace"`` | -mean_i sqrt(tr P_ii(k+1)) (m: the filter's own RMS error, in the unit of ``error``) |
+|             | - the same hop costs; the ``trace`` info key stays tr P_ii in m^2                    |
+
+The step's hop costs: ``communication_cost`` per delivered hop (one message each) plus
+``hop_cost_per_m2`` d^2 for a hop of length d, summed over the chain (metres of error, as the
+reward; ``coloc_env.scenarios.relay_codec``).
 
 Termination: none; truncation after ``horizon`` steps (the paper's 400 s / 0.5 s = 800).
 
@@ -103,8 +107,8 @@ update, before the prediction to k + 1: what the paper's metric averages), ``tra
 step, 0 or 1; summed over agents = hops), ``messages_sent`` (= ``communication``: one message
 per delivered hop, at its holder) and ``floats_sent`` (that hop's payload, ``coloc_env.backends.ukf.dcl_floats``:
 10 + 5 r + 2 r (r - 1) floats with r platforms reached), ``hops`` and ``hop_cost`` (the team's, this
-step), ``chain_stop`` (index into ``coloc_env.primitives.relay.STOP_REASONS``, -1 without
-a measurement), ``step``.
+step: the hop costs the reward subtracts), ``chain_stop`` (index into
+``coloc_env.primitives.relay.STOP_REASONS``, -1 without a measurement), ``step``.
 
 Arguments (fields of ``RelayUKFConfig``, defaults = the paper's Sec. 4 / Table 1)
 -------------------------------------------------------------------------------------
@@ -128,8 +132,8 @@ Arguments (fields of ``RelayUKFConfig``, defaults = the paper's Sec. 4 / Table 1
 | max_hops                | None         | 1..N-1 hops per measurement, None = no limit              |
 | loss_at_zero            | 0.0          | [0, 1]                                                    |
 | loss_length             | inf          | (0, inf] m (p_loss(d) = 1 - (1 - loss_at_zero) e^(-d/loss_length)) |
-| hop_cost                | 0.0          | [0, 1e12] per delivered hop                               |
-| hop_cost_per_m2         | 0.0          | [0, 1e12] per hop and squared metre                       |
+| communication_cost      | 0.0          | [0, 1e12] m per delivered hop (one message); older name ``hop_cost`` |
+| hop_cost_per_m2         | 0.0          | [0, 1e12] m per hop and squared metre                     |
 | initial_position_std    | 0.1          | [1e-6, 1e6] m: P(0) = std^2 I (a Cholesky needs P > 0; the paper's |
 |                         |              | start is known, and the estimates start at the truth)      |
 | heading_noise           | True         | False: the paper's literal Q (speed noise only)           |
@@ -143,15 +147,15 @@ UKF-DCL update (each vectorized over the copies whose chain reaches it).
 
 Composition: this preset is a binding (``coloc_env.scenarios.binding``) on the composable
 core: world ``circles`` (``num_anchors=0``, the config's layout and noise), network ``relay``
-(``routing="per_holder"``, the config's links and hop costs) and backend ``ukf_dcl``;
-``coloc_env.PRESETS["relay_ukf"]`` is that composition. The binding keeps the paper's action
-codec (index 0 is the world's sensing choice, index 1 the network's next hop), its observation,
-its team reward after the prediction, and its infos. Seeding: the world draws from the episode's
-generator itself, in the order this scenario drew before the core (odometry noise, schedule,
-range noise), so seeded episodes keep their readings; the relay's losses come from the network's
-own counter-based draws (a child generator), no longer from the episode generator, so with
-``loss_at_zero > 0`` or a finite ``loss_length`` the losses of a seed differ from earlier versions
-(same distribution), as do the draws of a second episode after ``reset()`` without a seed.
+(``routing="per_holder"``, the config's links and hop costs) and backend ``ukf_dcl``
+(``motion="displacement"``: the paper's position-only state); ``coloc_env.PRESETS["relay_ukf"]``
+is that composition. Each keyword sets the part field of the same name (``num_platforms`` sets
+the world's ``num_agents``, ``communication_cost`` the composition's); the parts check them, and
+the preset checks what couples a part to the team's size (``max_hops``, ``ukf_lambda``). The
+binding keeps the paper's action codec (index 0 is the world's sensing choice, index 1 the
+network's next hop), its observation, its team reward after the prediction, and its infos.
+Seeding: the world draws from the episode's generator itself (odometry noise, schedule, range
+noise); the relay's losses are the network's own counter-based draws from a child generator.
 """
 
 from __future__ import annotations
@@ -163,108 +167,49 @@ import numpy as np
 
 import estimators.ukf_relay as ukf
 from coloc_env.backends.ukf import UkfDcl
-from coloc_env.config import as_array, check_choice, check_entries, check_range
 from coloc_env.networks.relay import Relay
-from coloc_env.primitives.odometry import OdometrySensor, RangeSensor
-from coloc_env.primitives.relay import STOP_REASONS, RelayChain, RelayChainLinks, check_distance
-from coloc_env.primitives.unicycle import CircularTracks
-from coloc_env.rendering import Link, Scene
-from coloc_env.scenarios.binding import PresetScenario
+from coloc_env.primitives.relay import STOP_REASONS, RelayChain
+from coloc_env.rendering import Scene
+from coloc_env.scenarios.binding import keyword
+from coloc_env.scenarios.relay_codec import RelayTeamConfig, RelayTeamScenario, chain_links
 from coloc_env.worlds.circles import Circles
 
 DISTANCE_SCALE = 100.0  # metres per unit in the observation
 
 
 @dataclass(frozen=True)
-class RelayUKFConfig:
+class RelayUKFConfig(RelayTeamConfig):
     """Configuration of ``relay_ukf``; defaults are the paper's simulation (Sec. 4, Table 1)."""
 
-    num_platforms: int = 4
-    centres: tuple | None = None
-    start_angles: tuple | None = None
-    directions: tuple | None = None
-    speed: float = 1.0
-    turn_rate: float = 0.015
-    dt: float = 0.5
-    horizon: int = 800
-    speed_noise_std: float = 0.5
-    turn_rate_noise_std: float = 1e-3
-    range_noise_var: float = 1.0
-    measurement_probability: float = 0.5
-    sensing_range: float = float("inf")
-    comm_range: float = float("inf")
-    max_hops: int | None = None
-    loss_at_zero: float = 0.0
-    loss_length: float = float("inf")
-    hop_cost: float = 0.0
-    hop_cost_per_m2: float = 0.0
-    initial_position_std: float = 0.1
-    heading_noise: bool = True
-    ukf_lambda: float = 0.0
-    truncation: str = "consistent"
-    reward: str = "error"
+    preset = "relay_ukf"
+    World, Network, Backend = Circles, Relay, UkfDcl
+    # no anchors; one next hop per holder; wang2019's position-only state
+    fixed = {"world.num_anchors": 0, "network.routing": "per_holder", "backend.motion": "displacement"}
+    agent_state_dim, ukf_lambda_label = 2, "-2 num_platforms"
+
+    num_platforms: int = keyword(4, "world.num_agents")
+    centres: tuple | None = keyword(None, "world.centres")
+    start_angles: tuple | None = keyword(None, "world.start_angles")
+    directions: tuple | None = keyword(None, "world.directions")
+    speed: float = keyword(1.0, "world.speed")
+    turn_rate: float = keyword(0.015, "world.turn_rate")
+    dt: float = keyword(0.5, "world.dt")
+    horizon: int = keyword(800, "world.horizon", "composition.horizon")
+    speed_noise_std: float = keyword(0.5, "world.speed_noise_std")
+    turn_rate_noise_std: float = keyword(1e-3, "world.turn_rate_noise_std")
+    range_noise_var: float = keyword(1.0, "world.range_noise_var")
+    measurement_probability: float = keyword(0.5, "world.measurement_probability")
+    sensing_range: float = keyword(float("inf"), "world.sensing_range")
+    initial_position_std: float = keyword(0.1, "world.initial_position_std")
+    heading_noise: bool = keyword(True, "world.heading_noise")
+    truncation: str = keyword("consistent", "backend.truncation")
 
     @property
-    def tracks(self) -> CircularTracks:
-        """The circles flown: the ``circles`` world's (its layout where a field is None)."""
-        return self.parts()[0].tracks
-
-    @property
-    def odometry(self) -> OdometrySensor:
-        return OdometrySensor(self.speed_noise_std, self.turn_rate_noise_std)
-
-    @property
-    def range_sensor(self) -> RangeSensor:
-        return RangeSensor(self.range_noise_var, self.sensing_range)
-
-    @property
-    def links(self) -> RelayChainLinks:
-        return RelayChainLinks(self.comm_range, self.max_hops, self.loss_at_zero, self.loss_length,
-                               self.hop_cost, self.hop_cost_per_m2)
-
-    def parts(self) -> tuple:
-        """The (world, network, backend) configs this flat config stands for: ``circles`` without anchors,
-        ``relay`` with one next hop per holder, ``ukf_dcl``."""
-        world = Circles(num_agents=self.num_platforms, centres=self.centres, start_angles=self.start_angles,
-                        directions=self.directions, speed=self.speed, turn_rate=self.turn_rate, dt=self.dt,
-                        horizon=self.horizon, speed_noise_std=self.speed_noise_std,
-                        turn_rate_noise_std=self.turn_rate_noise_std, range_noise_var=self.range_noise_var,
-                        measurement_probability=self.measurement_probability, sensing_range=self.sensing_range,
-                        num_anchors=0, initial_position_std=self.initial_position_std,
-                        heading_noise=self.heading_noise)
-        network = Relay(comm_range=self.comm_range, max_hops=self.max_hops, loss_at_zero=self.loss_at_zero,
-                        loss_length=self.loss_length, routing="per_holder", hop_cost=self.hop_cost,
-                        hop_cost_per_m2=self.hop_cost_per_m2)
-        return world, network, UkfDcl(ukf_lambda=self.ukf_lambda, truncation=self.truncation,
-                                       motion="displacement")  # wang2019: position-only state
-
-    def validate(self) -> None:
-        check_range("num_platforms", self.num_platforms, 2, 16, integer=True)
-        N = self.num_platforms
-        for name in ("centres", "start_angles", "directions"):
-            value = getattr(self, name)
-            if value is not None:
-                shape = (N, 2) if name == "centres" else (N,)
-                check_entries(name, as_array(name, value, shape=shape), -1e6, 1e6)
-        check_range("dt", self.dt, 1e-6, 3600.0)
-        check_range("speed", self.speed, 0.0, 1e4, low_open=True)
-        check_range("turn_rate", self.turn_rate, 1e-6, np.pi / self.dt, high_label="pi/dt")
-        self.tracks.validate()
-        check_range("horizon", self.horizon, 1, 1_000_000, integer=True)
-        self.odometry.validate()
-        check_range("range_noise_var", self.range_noise_var, 0.0, 1e6, low_open=True)
-        check_distance("sensing_range", self.sensing_range)
-        check_range("measurement_probability", self.measurement_probability, 0.0, 1.0)
-        self.links.validate(N)
-        check_range("initial_position_std", self.initial_position_std, 1e-6, 1e6)
-        if not isinstance(self.heading_noise, (bool, np.bool_)):
-            raise ValueError(f"heading_noise must be True or False, got {self.heading_noise!r}")
-        check_range("ukf_lambda", self.ukf_lambda, -2.0 * N, 1e6, low_open=True, low_label="-2 num_platforms")
-        check_choice("truncation", self.truncation, ("consistent", "paper"))
-        check_choice("reward", self.reward, ("error", "trace"))
+    def team_size(self) -> int:
+        return self.num_platforms
 
 
-class RelayUKFScenario(PresetScenario):
+class RelayUKFScenario(RelayTeamScenario):
     """``relay_ukf`` as a binding: ``circles`` / ``relay`` / ``ukf_dcl`` with the paper's action codec,
     observation, team reward and infos (module docstring)."""
 
@@ -273,39 +218,14 @@ class RelayUKFScenario(PresetScenario):
     Config = RelayUKFConfig
     agent_prefix = "platform"
     metric_error_key = "posterior_error"
+    distance_scale = DISTANCE_SCALE
+    agent_state_dim = 2
 
     def __init__(self, config: RelayUKFConfig, batch: int = 1):
         super().__init__(config, batch)
         B, N = self.batch, self.num_agents
         self.dead_reckoning = np.zeros((B, N, 2))
         self.posterior_error = np.zeros((B, N))
-
-    @classmethod
-    def composition_options(cls, config: RelayUKFConfig) -> dict:
-        return {"reward": config.reward}
-
-    # --- the paper scenario's names for the parts' state (tests, policies, the reproduction) ---------------
-    @property
-    def truth(self) -> np.ndarray:
-        """True positions (K + 1, N, 2): every copy flies the same circles (no process noise)."""
-        return self.world.truth
-
-    @property
-    def true_heading(self) -> np.ndarray:
-        return self.world.true_heading
-
-    @property
-    def schedule(self) -> np.ndarray:
-        """The measuring platform of each step (B, K), -1 for none."""
-        return self.world.schedule
-
-    @property
-    def measured_speed(self) -> np.ndarray:
-        return self.world.measured_speed
-
-    @property
-    def measured_heading(self) -> np.ndarray:
-        return self.world.measured_heading
 
     @property
     def estimate(self) -> np.ndarray:
@@ -327,20 +247,10 @@ class RelayUKFScenario(PresetScenario):
                                hop_distance=np.full((B, max(N - 1, 1)), np.nan), stop=np.full(B, -1))
         return chain
 
-    # --- description ------------------------------------------------------------
+    # --- codec ---------------------------------------------------------------------------------------
     @property
     def num_agents(self) -> int:
         return self.config.num_platforms
-
-    @property
-    def obs_dim(self) -> int:
-        return 2 * self.num_agents + 3
-
-    def observation_space(self):
-        N = self.num_agents
-        low = np.concatenate([np.zeros(N + 1), np.zeros(N), [-np.inf], [0.0]])
-        high = np.concatenate([np.ones(N + 1), np.full(N, np.inf), [np.inf], [1.0]])
-        return gymnasium.spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
 
     def action_space(self):
         N = self.num_agents
@@ -348,21 +258,9 @@ class RelayUKFScenario(PresetScenario):
 
     def action_mask(self) -> np.ndarray:
         """(B, N, 2N + 1) bool, the "Action masks" table: index 0's N choices, then index 1's N + 1 (the
-        core's ``partner`` and ``next_hop`` rules without their ``nearest`` entries, which this codec lacks)."""
-        N = self.num_agents
-        partner, next_hop = self.block_choice_masks()
-        return np.concatenate([partner[:, :, 0, :N], next_hop[:, :, 0, :N + 1]], axis=-1)
-
-    def state_space(self):
-        dim = self.num_agents * self.obs_dim + 2 * self.num_agents
-        return gymnasium.spaces.Box(-np.inf, np.inf, shape=(dim,), dtype=np.float32)
-
-    # --- dynamics ------------------------------------------------------------------
-    def reset(self, rngs, env_index=None) -> None:
-        super().reset(rngs, env_index)
-        idx = self._indices(env_index)
-        self.dead_reckoning[idx] = self.world.truth[0]
-        self.posterior_error[idx] = 0.0  # the estimates start at the truth
+        parts' ``partner`` and ``next_hop`` rules without their ``nearest`` entries, which this codec lacks)."""
+        (partner, _), relay = self.relay_masks()
+        return np.concatenate([partner[:, :, 0, :self.num_agents], relay], axis=-1)
 
     def decode_actions(self, actions) -> np.ndarray:
         """Actions (B, N, 2) -> the parts' blocks: whom to range with (the world's sensing choice; never its
@@ -371,116 +269,61 @@ class RelayUKFScenario(PresetScenario):
         return self.check_discrete_actions(
             actions, ("action[0] (whom to range with)", f"action[1] (whom to relay to, {N} = stop)"))
 
+    def own_features(self) -> np.ndarray:
+        """1 where the agent measures at this step (B, N, 1)."""
+        return (np.arange(self.num_agents)[None, :] == self.world.measuring()[:, None])[..., None]
+
+    def feature_bounds(self):
+        return np.zeros(1), np.ones(1)
+
+    # --- dynamics ------------------------------------------------------------------------------------
+    def reset(self, rngs, env_index=None) -> None:
+        super().reset(rngs, env_index)
+        idx = self._indices(env_index)
+        self.dead_reckoning[idx] = self.world.truth[0]
+        self.posterior_error[idx] = 0.0  # the estimates start at the truth
+
     def advance(self, decoded) -> None:
         super().advance(decoded)
         self.posterior_error = self.position_error()
         speed, heading = self.readings.inputs[..., 0], self.readings.inputs[..., 1]
         self.dead_reckoning, _ = ukf.time_update(self.dead_reckoning, None, speed, heading, self.config.dt, 0.0)
 
-    def compute_reward(self) -> np.ndarray:
-        """The team's: minus the mean over platforms of the error (or RMS) after the prediction to k + 1, minus
-        the hop cost of the step's chain."""
-        if self.config.reward == "error":
-            loss = self.prior_error().mean(axis=-1)
-        else:
-            loss = np.sqrt(self.own_traces()).mean(axis=-1)
-        cost = self.network.cost_sent.sum(axis=-1)
-        return np.repeat((-loss - cost)[:, None], self.num_agents, axis=1)
+    # --- views ---------------------------------------------------------------------------------------
+    def truth_xy(self) -> np.ndarray:
+        return np.broadcast_to(self.world.positions(), (self.batch, self.num_agents, 2))
 
-    # --- views -------------------------------------------------------------------------
-    def prior_error(self) -> np.ndarray:
+    def team_error(self) -> np.ndarray:
         """||xhat_i(k+1) - x_i(k+1)|| (B, N), metres: the current estimate after a step's prediction."""
         return np.linalg.norm(self.backend.mean - self.world.positions(), axis=-1)
 
     def own_traces(self) -> np.ndarray:
         """tr P_ii (B, N) of the current estimate (the joint covariance's diagonal, in pairs)."""
-        return np.diagonal(self.backend.cov, axis1=-2, axis2=-1).reshape(self.batch, self.num_agents, 2).sum(axis=-1)
+        return self.own_variances().reshape(self.batch, self.num_agents, 2).sum(axis=-1)
 
-    def distances(self) -> np.ndarray:
-        """True distances between platforms at the current step (B, N, N)."""
-        return self.world.distances()
-
-    def observation(self) -> np.ndarray:
-        B, N = self.batch, self.num_agents
-        table = self.world.distance_table
-        cached = getattr(self, "_scaled_distances", None)
-        if cached is None or cached[0] is not table:  # the world's table of distances, in the observation's unit
-            cached = self._scaled_distances = (table, (table / DISTANCE_SCALE).astype(np.float32))
-        obs = np.empty((B, N, 2 * N + 3), dtype=np.float32)  # each entry cast from float64, as astype would
-        obs[:, :, :N] = np.eye(N)
-        obs[:, :, N] = np.arange(N)[None, :] == self.world.measuring()[:, None]
-        obs[:, :, N + 1:2 * N + 1] = cached[1][self.world.k]
-        obs[:, :, 2 * N + 1] = np.log(self.own_traces())
-        obs[:, :, 2 * N + 2] = (self.k / self.horizon)[:, None]
-        return obs
-
-    def episode_error(self, errors: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
-        """The paper's metric: the distance error ||xhat_i - x_i|| averaged over the steps and platforms.
-
-        ``errors`` are the ``posterior_error`` infos (``metric_error_key``): time k after its
-        measurement update, k = 0..K-1, as the reproduction averages them.
-        """
-        return np.asarray(errors, float).mean(axis=(-2, -1))
-
-    def state(self) -> np.ndarray:
-        log_var = np.log(np.diagonal(self.backend.cov, axis1=-2, axis2=-1))
-        return np.concatenate([self.observation().reshape(self.batch, -1), log_var], axis=-1).astype(np.float32)
+    def own_variances(self) -> np.ndarray:
+        return np.diagonal(self.backend.cov, axis1=-2, axis2=-1)
 
     def info(self) -> dict[str, np.ndarray]:
         B, N = self.batch, self.num_agents
         chain = self.chain
-        ids = np.arange(N)[None, :]
-        measuring_platform = np.where(chain.length > 0, chain.chain[:, 0], -1)
-        measuring = ids == measuring_platform[:, None]
+        measuring = np.arange(N)[None, :] == np.where(chain.length > 0, chain.chain[:, 0], -1)[:, None]
         partner = np.where(chain.length > 0, np.argmax(self.readings.range_valid.any(axis=1), axis=-1), -1) \
             if self.readings is not None else np.full(B, -1)
-        relay_target = chain.next_hop(N)
-        team = lambda values: np.repeat(np.asarray(values)[:, None], N, axis=1)  # noqa: E731
-        truth = np.broadcast_to(self.world.positions(), (B, N, 2)).copy()
-        error = self.prior_error()
-        return {
-            "true_position": truth,
-            "estimated_position": self.backend.mean.copy(),
-            "position_error": error,
-            "error": error.copy(),
-            "posterior_error": self.posterior_error.copy(),
-            "trace": self.own_traces(),
-            "dead_reckoning_error": np.linalg.norm(self.dead_reckoning - truth, axis=-1),
-            "measuring": measuring,
-            "partner": np.where(measuring, partner[:, None], -1),
-            "chain_position": chain.position_of(N),
-            "relay_target": relay_target,
-            "communication": (relay_target >= 0).astype(float),
-            "messages_sent": self.network.messages_sent.copy(),
-            "floats_sent": self.network.floats_sent.copy(),
-            "hops": team(chain.hops),
-            "hop_cost": team(self.network.cost_sent.sum(axis=-1)),
-            "chain_stop": team(chain.stop),
-            "step": team(self.k),
-        }
+        return {**self.team_info(), "posterior_error": self.posterior_error.copy(), "measuring": measuring,
+                "partner": np.where(measuring, partner[:, None], -1), "chain_position": chain.position_of(N),
+                "relay_target": chain.next_hop(N), "hops": self.team(chain.hops), "chain_stop": self.team(chain.stop)}
 
     def scene(self, b: int) -> Scene:
-        N, k = self.num_agents, int(self.k[b])
-        positions = self.truth[k]
-        reach = float(np.abs(self.truth).max()) + 10.0
-        chain = self.chain.chain[b]
-        hops = [int(p) for p in chain if p >= 0]
-        links = [Link(source=a, target=c, value=1.0, label=("range" if h == 0 else str(h + 1)))
-                 for h, (a, c) in enumerate(zip(hops[:-1], hops[1:], strict=True))]
+        N, k, truth = self.num_agents, int(self.k[b]), self.world.truth
+        reach = self.world.extent()
+        hops, links = chain_links(self.chain.chain[b])
         reason = STOP_REASONS[self.chain.stop[b]] if self.chain.stop[b] >= 0 else "no measurement"
-        cov_blocks = np.stack([self.cov[b, 2 * i:2 * i + 2, 2 * i:2 * i + 2] for i in range(N)])
         return Scene(
-            title=f"relay_ukf (wang2019)  t = {k * self.config.dt:.1f} s",
-            truth=positions,
-            estimates=self.estimate[b],
-            covariances=cov_blocks,
-            trails=np.swapaxes(self.truth[: k + 1], 0, 1),
-            node_positions=positions / reach,
-            node_labels=self.agent_names,
-            links=links,
-            link_value_max=1.0,
-            link_value_name="relay hop of the last step",
+            title=f"relay_ukf (wang2019)  t = {k * self.config.dt:.1f} s", truth=truth[k], estimates=self.estimate[b],
+            covariances=np.stack([self.cov[b, 2 * i:2 * i + 2, 2 * i:2 * i + 2] for i in range(N)]),
+            trails=np.swapaxes(truth[: k + 1], 0, 1), node_positions=truth[k] / reach, node_labels=self.agent_names,
+            links=links, link_value_max=1.0, link_value_name="relay hop of the last step",
             extent=(-reach, reach, -reach, reach),
             notes=[f"chain {' -> '.join(map(str, hops)) or '-'} ({reason})",
-                   f"mean error {self.prior_error()[b].mean():.2f} m"],
-        )
+                   f"mean error {self.team_error()[b].mean():.2f} m"])

@@ -113,7 +113,7 @@ class Circles(PartConfig):
                 check_entries(f"{prefix}{name}", arr, -1e6, 1e6)
         self.tracks.validate(prefix)
         check_range(f"{prefix}horizon", self.horizon, 1, 1_000_000, integer=True)
-        OdometrySensor(self.speed_noise_std, self.turn_rate_noise_std).validate(prefix)
+        self.odometry.validate(prefix)
         check_range(f"{prefix}range_noise_var", self.range_noise_var, 0.0, 1e6, low_open=True)
         check_range(f"{prefix}measurement_probability", self.measurement_probability, 0.0, 1.0)
         check_distance(f"{prefix}sensing_range", self.sensing_range)
@@ -133,6 +133,15 @@ class Circles(PartConfig):
             directions=directions if self.directions is None else np.asarray(self.directions, float),
             speed=self.speed, turn_rate=self.turn_rate, dt=self.dt)
 
+    @property
+    def odometry(self) -> OdometrySensor:
+        """The speed and turn-rate readings' noise."""
+        return OdometrySensor(self.speed_noise_std, self.turn_rate_noise_std)
+
+    @property
+    def range_sensor(self) -> RangeSensor:
+        return RangeSensor(self.range_noise_var, self.sensing_range)
+
     def build(self, batch: int, horizon: int) -> CirclesWorld:
         return CirclesWorld(self, batch, horizon)
 
@@ -150,8 +159,7 @@ class CirclesWorld(World):
         # every copy flies the same tracks: the distances between the platforms at each step, once
         # (sqrt of the summed squared differences, the same floats as ||p_i - p_j|| at each step)
         self.distance_table = np.sqrt(np.sum((self.truth[:, :, None, :] - self.truth[:, None, :, :]) ** 2, axis=-1))
-        self.odometry = OdometrySensor(config.speed_noise_std, config.turn_rate_noise_std)
-        self.range_sensor = RangeSensor(config.range_noise_var, config.sensing_range)
+        self.odometry, self.range_sensor = config.odometry, config.range_sensor
         self.motion_model = OdometryDisplacement(config.dt, config.speed_noise_std**2)
         self.measured_speed = np.zeros((B, K, N))
         self.measured_heading = np.zeros((B, K, N))

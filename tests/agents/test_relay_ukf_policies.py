@@ -49,7 +49,7 @@ def test_paper_policy_is_reproducible_from_its_seed_and_unknown_names_fail():
     draws = []
     for seed in (3, 3, 4):
         policy = agents.make_policy("paper", env, seed=seed)
-        draws.append([policy.act(observations)["platform_" + str(int(env.scenario.schedule[0, 0]))][0]
+        draws.append([policy.act(observations)["platform_" + str(int(env.scenario.world.schedule[0, 0]))][0]
                       for _ in range(20)])
     assert draws[0] == draws[1] and draws[0] != draws[2]
     with pytest.raises(ValueError, match="unknown policy"):

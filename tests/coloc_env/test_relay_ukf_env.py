@@ -50,17 +50,17 @@ def test_spaces_defaults_and_geometry():
     scenario = env.scenario
     assert scenario.horizon == 800 and scenario.config.dt == 0.5
     # the platforms stay within ~150 m of each other; every one turns by 0.015 rad/s at 1 m/s
-    distances = np.linalg.norm(scenario.truth[:, :, None] - scenario.truth[:, None], axis=-1)
+    distances = np.linalg.norm(scenario.world.truth[:, :, None] - scenario.world.truth[:, None], axis=-1)
     assert distances.max() < 160.0
-    step = np.linalg.norm(np.diff(scenario.truth, axis=0), axis=-1)
+    step = np.linalg.norm(np.diff(scenario.world.truth, axis=0), axis=-1)
     np.testing.assert_allclose(step, 0.5, atol=1e-12)
-    turn = np.diff(scenario.true_heading, axis=0)
+    turn = np.diff(scenario.world.true_heading, axis=0)
     np.testing.assert_allclose(turn, np.broadcast_to(0.5 * 0.015 * np.array([1, -1, 1, 1]), turn.shape), atol=1e-12)
     for agent in env.possible_agents:
         np.testing.assert_array_equal(infos[agent]["estimated_position"], infos[agent]["true_position"])
     # the measuring flag is the schedule's
     flags = np.array([observations[a][4] for a in env.possible_agents])
-    measuring = scenario.schedule[0, 0]
+    measuring = scenario.world.schedule[0, 0]
     assert flags.sum() == (measuring >= 0) and (measuring < 0 or flags[measuring] == 1)
 
 
@@ -82,7 +82,9 @@ def test_spaces_defaults_and_geometry():
     ({"reward": "rmse"}, "reward"),
     ({"heading_noise": "yes"}, "heading_noise"),
     ({"horizon": 0}, "horizon"),
-    ({"hop_cost": -1.0}, "hop_cost"),
+    ({"communication_cost": -1.0}, "^relay_ukf: communication_cost must be in"),
+    ({"hop_cost": -1.0}, "^relay_ukf: communication_cost must be in"),  # the older name of communication_cost
+    ({"hop_cost_per_m2": -1.0}, "^relay_ukf: hop_cost_per_m2 must be in"),
     ({"max_hop": 2}, "unknown config key"),
 ])
 def test_bad_config_names_the_field(kwargs, field):
@@ -115,12 +117,12 @@ def test_same_seed_gives_identical_episodes_and_reset_continues_the_generator():
     assert data_equivalence(first_a, first_b)
     other = play(coloc_env.parallel_env(NAME, **SHORT), agents.make_policy("paper", env_a, seed=5), 12)
     assert not data_equivalence(first_a, other)
-    first_speed = env_a.scenario.measured_speed.copy()
+    first_speed = env_a.scenario.world.measured_speed.copy()
     env_a.reset()
     env_b.reset()
-    np.testing.assert_array_equal(env_a.scenario.schedule, env_b.scenario.schedule)
-    np.testing.assert_array_equal(env_a.scenario.measured_speed, env_b.scenario.measured_speed)
-    assert not np.array_equal(env_a.scenario.measured_speed, first_speed)
+    np.testing.assert_array_equal(env_a.scenario.world.schedule, env_b.scenario.world.schedule)
+    np.testing.assert_array_equal(env_a.scenario.world.measured_speed, env_b.scenario.world.measured_speed)
+    assert not np.array_equal(env_a.scenario.world.measured_speed, first_speed)
 
 
 def test_batched_copies_equal_single_envs_seeded_alike():
@@ -132,7 +134,7 @@ def test_batched_copies_equal_single_envs_seeded_alike():
         single.reset([np.random.default_rng(s)])
     rng = np.random.default_rng(0)
     for _ in range(config.horizon):
-        actions = paper_actions(batch.distances(), batch.schedule[np.arange(3), batch.k], rng)
+        actions = paper_actions(batch.world.distances(), batch.world.schedule[np.arange(3), batch.k], rng)
         batch.step(actions)
         for b, single in enumerate(singles):
             single.step(actions[b:b + 1])
@@ -154,9 +156,9 @@ def test_env_with_paper_policy_equals_the_estimator_called_directly():
     config = scenario.config
     x = np.array([infos[a]["true_position"] for a in env.possible_agents])
     P = 0.01 * np.eye(8)
-    speed, heading = scenario.measured_speed[0].copy(), scenario.measured_heading[0].copy()
-    schedule, noise = scenario.schedule[0].copy(), scenario.world.range_noise[0].copy()
-    truth = scenario.truth
+    speed, heading = scenario.world.measured_speed[0].copy(), scenario.world.measured_heading[0].copy()
+    schedule, noise = scenario.world.schedule[0].copy(), scenario.world.range_noise[0].copy()
+    truth = scenario.world.truth
     updates, k = 0, 0
     while env.agents:
         actions = policy.act(observations)
@@ -198,7 +200,7 @@ def test_relay_choices_truncate_the_chain_and_hop_costs_enter_the_reward():
     env = coloc_env.parallel_env(NAME, measurement_probability=1.0, hop_cost=0.5, hop_cost_per_m2=1e-3, **SHORT)
     observations, _ = env.reset(seed=1)
     scenario = env.scenario
-    m = int(scenario.schedule[0, 0])
+    m = int(scenario.world.schedule[0, 0])
     n = (m + 1) % 4
     third = (m + 2) % 4
     actions = {a: np.array([i, 4]) for i, a in enumerate(env.possible_agents)}
@@ -211,17 +213,17 @@ def test_relay_choices_truncate_the_chain_and_hop_costs_enter_the_reward():
     assert chain[m] == 0 and chain[n] == 1 and chain[third] == 2 and sorted(chain)[0] == -1
     assert STOP_REASONS[int(infos["platform_0"]["chain_stop"])] == "revisit"
     assert infos["platform_0"]["hops"] == 2 and sum(infos[a]["communication"] for a in infos) == 2
-    d = np.linalg.norm(scenario.truth[0, [m, n]] - scenario.truth[0, [n, third]], axis=-1)
+    d = np.linalg.norm(scenario.world.truth[0, [m, n]] - scenario.world.truth[0, [n, third]], axis=-1)
     assert infos["platform_0"]["hop_cost"] == pytest.approx(1.0 + 1e-3 * np.sum(d**2), abs=1e-12)
     errors = np.array([infos[a]["error"] for a in env.possible_agents])
     assert rewards["platform_0"] == pytest.approx(-errors.mean() - infos["platform_0"]["hop_cost"], abs=1e-12)
     unreached = [i for i in range(4) if chain[i] < 0][0]
-    speed, heading = scenario.measured_speed[0, 0], scenario.measured_heading[0, 0]
+    speed, heading = scenario.world.measured_speed[0, 0], scenario.world.measured_heading[0, 0]
     np.testing.assert_allclose(scenario.estimate[0, unreached],
                                before[unreached] + 0.5 * speed[unreached] * np.array(
                                    [np.cos(heading[unreached]), np.sin(heading[unreached])]), atol=1e-12)
     # ranging with oneself declines the measurement: nobody updates, no hop
-    m = int(scenario.schedule[0, 1])
+    m = int(scenario.world.schedule[0, 1])
     observations, rewards, _, _, infos = env.step({a: np.array([i, 4]) for i, a in enumerate(env.possible_agents)})
     assert infos["platform_0"]["hops"] == 0 and infos["platform_0"]["chain_stop"] == -1
     assert not any(infos[a]["measuring"] for a in infos)
@@ -252,7 +254,7 @@ def test_truncated_chains_keep_p_positive_definite_only_with_the_consistent_upda
         values = []
         try:
             for k in range(config.horizon):
-                scenario.step(paper_actions(scenario.distances(), scenario.schedule[:, k], rng))
+                scenario.step(paper_actions(scenario.world.distances(), scenario.world.schedule[:, k], rng))
                 values.append(np.linalg.eigvalsh(scenario.cov).min())
         except np.linalg.LinAlgError as exc:
             assert rule == "paper" and "positive definite" in str(exc)

@@ -38,8 +38,9 @@ def _reference_wang2019(config, copies, policy_rng):
     resolved by :class:`coloc_env.primitives.relay.RelayChainLinks` (the paper scenario's own delivery code,
     not the network the backends ask)."""
     runs, K, N, dt = len(copies), config.horizon, config.num_platforms, config.dt
-    truth, true_heading, true_speed, true_turn = config.tracks.trajectory(K)
-    odometry, range_sensor, links = config.odometry, config.range_sensor, config.links
+    world, network, _ = config.parts()
+    truth, true_heading, true_speed, true_turn = world.tracks.trajectory(K)
+    odometry, range_sensor, links = world.odometry, world.range_sensor, network.links
     speed, turn = np.empty((runs, K, N)), np.empty((runs, K, N))
     schedule, noise = np.empty((runs, K), dtype=int), np.empty((runs, K))
     for c, rng in enumerate(copies):
@@ -102,8 +103,9 @@ def test_wang2019_rig_flies_the_configured_layout_and_matches_the_reference_on_i
     directions = (1.0, 1.0, 1.0, 1.0)  # not the paper's (platform 1 flies clockwise there)
     config = build_config(RelayUKFConfig, {"horizon": 40, "directions": directions, "measurement_probability": 0.8})
     rig = wang2019.Rig(config, 1)
-    np.testing.assert_array_equal(rig.world.truth, config.tracks.trajectory(40)[0])
-    assert not np.array_equal(rig.world.truth, build_config(RelayUKFConfig, {"horizon": 40}).tracks.trajectory(40)[0])
+    np.testing.assert_array_equal(rig.world.truth, config.parts()[0].tracks.trajectory(40)[0])
+    paper_layout = build_config(RelayUKFConfig, {"horizon": 40}).parts()[0].tracks.trajectory(40)[0]
+    assert not np.array_equal(rig.world.truth, paper_layout)
     copies, policy_rng = wang2019._block_generators(2, 0, 2)
     reference = _reference_wang2019(config, copies, policy_rng)
     copies, policy_rng = wang2019._block_generators(2, 0, 2)

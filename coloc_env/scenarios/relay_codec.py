@@ -1,0 +1,198 @@
+"""What the relay-chain presets share (``relay_ukf``, ``mrclam_relay``): a team that passes location information
+along chains of the ``relay`` network to a joint UKF, rewarded as one.
+
+| piece           | shared rule                                                                                 |
+|-----------------|---------------------------------------------------------------------------------------------|
+| keywords        | ``RelayTeamConfig``: the relay links (``comm_range``, ``max_hops``, ``loss_at_zero``,       |
+|                 | ``loss_length``, ``hop_cost_per_m2``), ``communication_cost``, ``ukf_lambda``, ``reward``; the |
+|                 | old ``hop_cost`` an alias of ``communication_cost``                                          |
+| observation     | one-hot of the agent's index (N), the preset's own features, the distance to each agent      |
+|                 | / ``distance_scale`` (N, 0 for itself), log tr P_ii (m^2), the step fraction k / horizon     |
+| action mask     | each relay entry: the ``relay`` network's ``next_hop`` rule without its "nearest" choice     |
+| reward          | the team's, for every agent: ``"error"`` -mean_i ||xhat_i - x_i|| (m), ``"trace"``          |
+|                 | -mean_i sqrt(tr P_ii) (m, the filter's own RMS error), minus the step's communication cost   |
+| state           | every agent's observation, then the log of each agent's covariance diagonal                 |
+| metric          | the distance error averaged over the steps and agents                                       |
+
+Communication cost: the relay network sends one message per delivered hop, at its holder, so the
+composition's per-message ``communication_cost`` is the cost of a hop; the network adds its own
+``hop_cost_per_m2`` d^2 of each delivered hop (``coloc_env.networks.relay``). Both are subtracted in
+metres, the unit of the reward's error.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, ClassVar
+
+import gymnasium
+import numpy as np
+
+from coloc_env.config import check_range
+from coloc_env.rendering import Link
+from coloc_env.scenarios.binding import PresetConfig, PresetScenario, keyword
+
+
+@dataclasses.dataclass(frozen=True)
+class RelayTeamConfig(PresetConfig):
+    """The keywords of a relay-chain preset's links, costs and filter. A subclass names its parts, the part
+    fields it fixes (``fixed``: ``"<kind>.<field>"`` -> value) and the size of one agent's state
+    (``agent_state_dim``: the UKF's lambda must exceed -agent_state_dim N)."""
+
+    fixed: ClassVar[dict[str, Any]] = {}
+    agent_state_dim: ClassVar[int]
+    ukf_lambda_label: ClassVar[str]
+    aliases: ClassVar[dict[str, str]] = {"hop_cost": "communication_cost"}
+
+    comm_range: float = keyword(float("inf"), "network.comm_range")
+    max_hops: int | None = keyword(None, "network.max_hops")
+    loss_at_zero: float = keyword(0.0, "network.loss_at_zero")
+    loss_length: float = keyword(float("inf"), "network.loss_length")
+    communication_cost: float = keyword(0.0, "composition.communication_cost")
+    hop_cost_per_m2: float = keyword(0.0, "network.hop_cost_per_m2")
+    ukf_lambda: float = keyword(0.0, "backend.ukf_lambda")
+    reward: str = keyword("error", "composition.reward")
+
+    @property
+    def team_size(self) -> int:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def bound_fields(self, kind: str) -> dict[str, Any]:
+        """The keywords' fields of part ``kind`` over the fields the preset fixes."""
+        fixed = {target.split(".", 1)[1]: value for target, value in self.fixed.items()
+                 if target.split(".", 1)[0] == kind}
+        return {**fixed, **super().bound_fields(kind)}
+
+    def check_preset(self) -> None:
+        """The rules between a part field and the team's size, which a part's own check cannot see: a chain
+        has at most N - 1 hops; the UKF's spread needs lambda > -d N (d the state size of one agent)."""
+        N = self.team_size
+        if self.max_hops is not None:
+            check_range("max_hops", self.max_hops, 1, max(1, N - 1), integer=True)
+        check_range("ukf_lambda", self.ukf_lambda, -float(self.agent_state_dim * N), 1e6, low_open=True,
+                    low_label=self.ukf_lambda_label)
+
+
+class RelayTeamScenario(PresetScenario):
+    """Batched core of a relay-chain preset (module table). A subclass gives ``own_features`` and
+    ``feature_bounds`` (its observation's entries after the one-hot), ``team_error``, ``own_traces``,
+    ``own_variances`` and ``truth_xy``, and keeps ``dead_reckoning`` (B, N, >= 2)."""
+
+    distance_scale: ClassVar[float]  # metres per unit of the observation's distances
+    agent_state_dim: ClassVar[int]
+    dead_reckoning: np.ndarray
+
+    # --- what a preset gives -------------------------------------------------------------------------------
+    def own_features(self) -> np.ndarray:  # pragma: no cover - interface
+        """The preset's observation entries after the one-hot (B, N, m)."""
+        raise NotImplementedError
+
+    def feature_bounds(self) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def team_error(self) -> np.ndarray:  # pragma: no cover - interface
+        """||xhat_i - x_i|| (B, N), metres, of the current estimate (after a step: its prediction to k + 1)."""
+        raise NotImplementedError
+
+    def own_traces(self) -> np.ndarray:  # pragma: no cover - interface
+        """tr P_ii (B, N), m^2, of each agent's position covariance in the current estimate."""
+        raise NotImplementedError
+
+    def own_variances(self) -> np.ndarray:  # pragma: no cover - interface
+        """The diagonal of every agent's covariance (B, N agent_state_dim), for ``state``."""
+        raise NotImplementedError
+
+    def truth_xy(self) -> np.ndarray:  # pragma: no cover - interface
+        """True positions (B, N, 2) at the current estimate's time."""
+        raise NotImplementedError
+
+    def observed_distances(self) -> np.ndarray:
+        """The distances between the agents the observation shows (B, N, N), metres: the world's."""
+        return self.world.distances()
+
+    # --- the shared codec ----------------------------------------------------------------------------------
+    @property
+    def obs_dim(self) -> int:
+        return 2 * self.num_agents + self.feature_bounds()[0].size + 2
+
+    def observation_space(self):
+        N = self.num_agents
+        low, high = self.feature_bounds()
+        low = np.concatenate([np.zeros(N), low, np.zeros(N), [-np.inf], [0.0]])
+        high = np.concatenate([np.ones(N), high, np.full(N, np.inf), [np.inf], [1.0]])
+        return gymnasium.spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
+
+    def state_space(self):
+        dim = self.num_agents * (self.obs_dim + self.agent_state_dim)
+        return gymnasium.spaces.Box(-np.inf, np.inf, shape=(dim,), dtype=np.float32)
+
+    def observation(self) -> np.ndarray:
+        B, N = self.batch, self.num_agents
+        features = self.own_features()
+        m = features.shape[-1]
+        obs = np.empty((B, N, 2 * N + m + 2), dtype=np.float32)  # each entry cast from float64, as astype would
+        obs[:, :, :N] = np.eye(N)
+        obs[:, :, N:N + m] = features
+        obs[:, :, N + m:2 * N + m] = self.observed_distances() / self.distance_scale
+        obs[:, :, -2] = np.log(self.own_traces())
+        obs[:, :, -1] = (self.k / self.horizon)[:, None]
+        return obs
+
+    def state(self) -> np.ndarray:
+        log_var = np.log(self.own_variances())
+        return np.concatenate([self.observation().reshape(self.batch, -1), log_var], axis=-1).astype(np.float32)
+
+    def relay_masks(self) -> tuple[list, np.ndarray]:
+        """(the blocks' masks, the relay entries' valid choices (B, N, entries (N + 1))): the ``relay``
+        network's ``next_hop`` rule without its "nearest" choice N + 1, which the codec lacks."""
+        masks = self.block_choice_masks()
+        next_hop = masks[self.block_parts.index("network")]
+        return masks, next_hop[..., :self.num_agents + 1].reshape(self.batch, self.num_agents, -1)
+
+    def step_cost(self) -> np.ndarray:
+        """The team's communication cost of the step (B,): every agent's ``communication_costs``, summed."""
+        return self.communication_costs().sum(axis=-1)
+
+    def compute_reward(self) -> np.ndarray:
+        """The team's, for every agent: minus the mean over agents of the error (or sqrt tr P_ii) of the
+        current estimate, minus the step's communication cost."""
+        if self.composition.reward == "error":
+            loss = self.team_error().mean(axis=-1)
+        else:
+            loss = np.sqrt(self.own_traces()).mean(axis=-1)
+        return np.repeat((-loss - self.step_cost())[:, None], self.num_agents, axis=1)
+
+    def team(self, values) -> np.ndarray:
+        """A per-copy value (B,) repeated for every agent (B, N)."""
+        return np.repeat(np.asarray(values)[:, None], self.num_agents, axis=1)
+
+    def team_info(self) -> dict[str, np.ndarray]:
+        """The infos both presets report: positions, errors (m), ``trace`` (m^2), dead reckoning's error,
+        the messages and floats each agent sent, the team's ``hop_cost``, ``step``."""
+        truth, error = self.truth_xy(), self.team_error()
+        return {
+            "true_position": truth.copy(),
+            "estimated_position": self.estimate[..., :2].copy(),
+            "position_error": error,
+            "error": error.copy(),
+            "trace": self.own_traces(),
+            "dead_reckoning_error": np.linalg.norm(self.dead_reckoning[..., :2] - truth, axis=-1),
+            "messages_sent": self.network.messages_sent.copy(),
+            "floats_sent": self.network.floats_sent.copy(),
+            "communication": self.network.messages_sent.copy(),
+            "hop_cost": self.team(self.step_cost()),
+            "step": self.team(self.k),
+        }
+
+    def episode_error(self, errors: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
+        """The mean distance error over the steps and agents (m)."""
+        return np.asarray(errors, float).mean(axis=(-2, -1))
+
+
+def chain_links(chain: np.ndarray, prefix: str = "") -> tuple[list[int], list[Link]]:
+    """The platforms of one chain (a row of ``RelayChain.chain``) and its hops as scene links, labelled
+    ``prefix`` + "range" for the measured hop and + the hop's number after it."""
+    hops = [int(p) for p in chain if p >= 0]
+    links = [Link(source=a, target=c, value=1.0, label=f"{prefix}range" if h == 0 else f"{prefix}{h + 1}")
+             for h, (a, c) in enumerate(zip(hops[:-1], hops[1:], strict=True))]
+    return hops, links
