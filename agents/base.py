@@ -55,11 +55,9 @@ class Policy:
         raise NotImplementedError
 
 
-class RandomPolicy(Policy):
-    """Uniform samples of each agent's action space, from its own generator (``seed``; an evaluation
-    restarts it for each episode: ``Policy.start_episode``)."""
-
-    batching = "per_copy"
+class SeededPolicy(Policy):
+    """A stochastic policy: it draws from its own generator ``rng`` (``default_rng(seed)``), which an evaluation
+    restarts for each episode (``episode_generator``)."""
 
     def __init__(self, env, seed: int | None = None):
         super().__init__(env)
@@ -67,6 +65,13 @@ class RandomPolicy(Policy):
 
     def start_episode(self, seed: int) -> None:
         self.rng = episode_generator(seed)
+
+
+class RandomPolicy(SeededPolicy):
+    """Uniform samples of each agent's action space, from its own generator (``seed``; an evaluation
+    restarts it for each episode: ``Policy.start_episode``)."""
+
+    batching = "per_copy"
 
     def act(self, observations):
         actions = {}

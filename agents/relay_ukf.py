@@ -3,7 +3,7 @@
 * ``paper``: the paper's choices (Sec. 4). The measuring platform ranges with a
   partner drawn uniformly among the others (from the policy's own generator,
   ``seed``, which an evaluation restarts for each episode from the episode's seed:
-  ``agents.base.episode_generator``); the location information then goes to the nearest platform not yet
+  ``agents.base.SeededPolicy``); the location information then goes to the nearest platform not yet
   reached, until every platform is reached (the paper's "closest neighbour"
   topology). One relay choice per agent is enough: a chain is a path, so each
   platform has at most one successor; the last one stops.
@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from agents.base import Policy, episode_generator
+from agents.base import Policy, SeededPolicy
 from coloc_env.scenarios.relay_ukf import DISTANCE_SCALE
 
 
@@ -76,18 +76,11 @@ def paper_actions(distances: np.ndarray, measuring: np.ndarray, rng: np.random.G
     return actions
 
 
-class PaperPolicy(Policy):
+class PaperPolicy(SeededPolicy):
     """Random partner, nearest-not-yet-reached relay until everyone is reached (Sec. 4)."""
 
     relay = True
     batching = "per_copy"
-
-    def __init__(self, env, seed: int | None = None):
-        super().__init__(env)
-        self.rng = np.random.default_rng(seed)
-
-    def start_episode(self, seed: int) -> None:
-        self.rng = episode_generator(seed)
 
     def act(self, observations):
         order = list(self.env.possible_agents)

@@ -1,4 +1,4 @@
-"""dNBP and least squares on wang2019's circles (issue 14 §3): cross-combinations no paper ran.
+"""dNBP and least squares on wang2019's circles: cross-combinations no paper ran.
 
 Both run through the motion-model interface (particles propagated by the
 model's function and one draw of its process noise; the KF by the EKF time

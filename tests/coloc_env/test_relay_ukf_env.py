@@ -197,7 +197,8 @@ def test_env_with_paper_policy_equals_the_estimator_called_directly():
 
 
 def test_relay_choices_truncate_the_chain_and_hop_costs_enter_the_reward():
-    env = coloc_env.parallel_env(NAME, measurement_probability=1.0, hop_cost=0.5, hop_cost_per_m2=1e-3, **SHORT)
+    env = coloc_env.parallel_env(NAME, measurement_probability=1.0, communication_cost=0.5, hop_cost_per_m2=1e-3,
+                                 **SHORT)
     observations, _ = env.reset(seed=1)
     scenario = env.scenario
     m = int(scenario.world.schedule[0, 0])
@@ -279,7 +280,7 @@ def test_rgb_render_draws_trajectories_and_the_chain():
 
 def test_the_papers_truncation_rule_warns_when_chosen_and_fails_with_a_clear_error():
     """wang2019's rule (P_RU unchanged on a truncated chain) loses positive definiteness; the env says so
-    when the rule is chosen and, when it happens, raises a ValueError naming the option (issue 17)."""
+    when the rule is chosen and, when it happens, raises a ValueError naming the option."""
     with pytest.warns(UserWarning, match="truncation='paper'.*loses positive definiteness"):
         env = coloc_env.parallel_env("relay_ukf", truncation="paper", max_hops=1, horizon=300)
     policy = agents.make_policy("paper", env, seed=0)

@@ -13,7 +13,7 @@
   information reached whom; its flaw is the filter's overconfidence under
   turn-rate noise (see the wang2019 report), which scales every policy's
   trace alike.
-* ``hop_cost=0.01`` m per delivered hop: the target is the full chain's error
+* ``communication_cost=0.01`` m per delivered hop: the target is the full chain's error
   with fewer hops, and without a price on hops a hop that helps by a hair is
   still worth sending. One centimetre is small against the ~1.5 m mean error,
   so only hops that move the team's mean error by less than 1 cm are worth
@@ -27,28 +27,20 @@
 * A little entropy (0.01): the relay choice only matters when the location
   information reaches the agent, so most samples carry no gradient and the
   policy should not collapse early.
-* ``ALGORITHM = "maskable_ppo"`` (since 2026-12-03, on the composable core): a
-  next hop to itself or beyond ``comm_range``, and a ranging partner beyond
-  ``sensing_range``, are masked (``RelayUKFScenario.action_mask``), so the
-  policy never spends samples on choices that do what "stop" does. The run of
-  2026-11-23 (plain PPO, before the core) is in docs/learning_history.md.
-* The critic sees what the actor sees (``CRITIC`` left at "decentralized"). Measured on 2026-12-03 with
-  ``CRITIC = "centralized"`` (the critic also reads ``state()``: every agent's observation, who measured,
-  the chain's holders), seeds 0..2, 600k steps each, otherwise these settings: the best validation errors
-  were 1.709 / 1.637 / 1.502 m against 1.581 / 1.580 / 1.581 m for these settings' own runs, on the same
-  16 validation episodes (paper 1.467 m there). Mean 1.616 vs 1.581 m: no gain, and two seeds worse,
-  so the cheaper critic stays.
-* ``ALGORITHM`` stays "maskable_ppo", not "recurrent_ppo". Measured on 2026-12-03 with ``ALGORITHM =
-  "recurrent_ppo"`` (an LSTM of 64 units after the (64, 64) layers; sb3-contrib's RecurrentPPO reads no action
-  masks, so masked choices act as "stop"), seeds 0..2, otherwise these settings: 360k steps, the most that fits
-  the 10 CPU-minute budget (6.8 / 7.2 / 8.1 CPU min under load, against 2.2-3.5 for 600k MaskablePPO steps).
-  The best validation errors were 1.586 / 1.718 / 1.609 m, against 1.581 / 1.580 / 1.581 m for these settings,
-  on the same 16 validation episodes. The memory did not help within the budget, and seed 1 is worse.
+* ``ALGORITHM = "maskable_ppo"``: a next hop to itself or beyond ``comm_range``,
+  and a ranging partner beyond ``sensing_range``, are masked
+  (``RelayUKFScenario.action_mask``), so the policy never spends samples on
+  choices that do what "stop" does.
+* The critic sees what the actor sees (``CRITIC`` left at "decentralized"), and
+  ``ALGORITHM`` is not "recurrent_ppo" (whose sb3-contrib implementation reads
+  no action masks): on the same validation episodes neither a centralized
+  critic (which also reads ``state()``) nor an LSTM within the CPU budget
+  beat these settings (the measurements are in docs/learning.md).
 """
 
 from train.hyperparams import ppo
 
-ENV_CONFIG = {"reward": "trace", "hop_cost": 0.01}
+ENV_CONFIG = {"reward": "trace", "communication_cost": 0.01}
 
 HYPERPARAMS = ppo(n_steps=128, batch_size=256, gamma=0.99, ent_coef=0.01)
 
