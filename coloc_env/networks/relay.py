@@ -52,6 +52,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from coloc_env.config import BadInput
 from coloc_env.networks.base import Network
 from coloc_env.parts import NETWORKS, Block, PartConfig, check_choice, check_range
 from coloc_env.primitives.relay import RelayChainLinks, check_distance
@@ -97,6 +98,9 @@ class Relay(PartConfig):
 class RelayNetwork(Network):
     def __init__(self, config: Relay, num_agents, batch, message_kind, rounds=1):
         super().__init__(config, num_agents, batch, message_kind, rounds)
+        if config.max_hops is not None and config.max_hops > max(1, num_agents - 1):
+            raise BadInput(f"network.max_hops must be in [1, N-1] = [1, {max(1, num_agents - 1)}] with N = "
+                           f"{num_agents} agents, got {config.max_hops!r}")
         self.links = config.links
         self.cost_sent = np.zeros((self.batch, self.num_agents))
         self._source = np.zeros(self.batch, dtype=int)

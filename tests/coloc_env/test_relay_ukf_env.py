@@ -310,3 +310,28 @@ def test_reset_infos_report_no_chain_or_messages_of_the_episode_before():
     for a in env.possible_agents:
         assert infos[a]["messages_sent"] == 0 and infos[a]["floats_sent"] == 0
         assert infos[a]["chain_position"] == -1 and infos[a]["partner"] == -1 and infos[a]["hops"] == 0
+
+
+def test_a_relay_hop_budget_beyond_the_team_is_refused_in_a_composition_too():
+    with pytest.raises(ValueError, match=r"^network.max_hops must be in \[1, N-1\] = \[1, 5\] with N = 6 agents"):
+        coloc_env.parallel_env(coloc_env.compose(world="circles", network={"name": "relay", "max_hops": 6},
+                                                 backend="ukf_dcl"))
+    env = coloc_env.parallel_env(coloc_env.compose(world="circles", network={"name": "relay", "max_hops": 5},
+                                                   backend="ukf_dcl"))
+    assert env.scenario.network.max_hops() == 5
+
+
+def test_communication_cost_is_the_cost_of_a_hop_under_both_names():
+    rewards = []
+    for cost in ({"communication_cost": 0.25}, {"hop_cost": 0.25}):
+        env = coloc_env.parallel_env(NAME, measurement_probability=1.0, **cost, **SHORT)
+        assert env.scenario.composition.communication_cost == 0.25 and env.scenario.network.config.hop_cost == 0.0
+        env.reset(seed=3)
+        actions = {a: np.array([(i + 1) % 4, 4]) for i, a in enumerate(env.possible_agents)}
+        _, reward, _, _, infos = env.step(actions)
+        hops = infos["platform_0"]["hops"]
+        assert hops == 1 and infos["platform_0"]["hop_cost"] == 0.25 * hops
+        errors = np.array([infos[a]["error"] for a in env.possible_agents])
+        assert reward["platform_0"] == pytest.approx(-errors.mean() - 0.25, abs=1e-12)
+        rewards.append(reward["platform_0"])
+    assert rewards[0] == rewards[1]
