@@ -45,6 +45,14 @@ class Policy:
     def act(self, observations: dict) -> dict:  # pragma: no cover - interface
         raise NotImplementedError
 
+    def observation_rows(self, observations: dict) -> tuple[list[str], np.ndarray]:
+        """The env's agents in order and their observations stacked as floats (N, obs_dim), zeros for an agent
+        without one (a policy that reads every agent's observation)."""
+        order = list(self.env.possible_agents)
+        dim = self.env.observation_space(order[0]).shape[0]
+        rows = [np.asarray(observations[a], float) if a in observations else np.zeros(dim) for a in order]
+        return order, np.stack(rows)
+
     def start_episode(self, seed: int) -> None:
         """Called by an evaluation before the episode ``env.reset(seed=seed)`` plays. A stochastic
         policy restarts its generator there (``episode_generator``), so that episode e's actions

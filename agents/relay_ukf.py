@@ -83,10 +83,8 @@ class PaperPolicy(SeededPolicy):
     batching = "per_copy"
 
     def act(self, observations):
-        order = list(self.env.possible_agents)
+        order, obs = self.observation_rows(observations)
         N = len(order)
-        obs = np.stack([np.asarray(observations[a], float) if a in observations else np.zeros(2 * N + 3)
-                        for a in order])
         flags = obs[:, N]
         measuring = np.array([int(np.argmax(flags)) if flags.max() > 0.5 else -1])
         distances = (obs[:, N + 1:2 * N + 1] * DISTANCE_SCALE)[None]
