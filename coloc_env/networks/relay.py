@@ -52,7 +52,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from coloc_env.config import BadInput
 from coloc_env.networks.base import Network
 from coloc_env.parts import NETWORKS, Block, PartConfig, check_choice, check_range
 from coloc_env.primitives.relay import RelayChainLinks, check_distance
@@ -85,6 +84,12 @@ class Relay(PartConfig):
         check_range(f"{prefix}hop_cost", self.hop_cost, 0.0, 1e12)
         check_range(f"{prefix}hop_cost_per_m2", self.hop_cost_per_m2, 0.0, 1e12)
 
+    def check_hop_budget(self, num_agents: int, prefix: str, agents: str) -> None:
+        """``max_hops`` against the team: at most N - 1 hops (``agents`` names N in the message)."""
+        if self.max_hops is not None:
+            check_range(f"{prefix}max_hops", self.max_hops, 1, max(1, num_agents - 1), integer=True,
+                        high_label=f"{agents} - 1")
+
     @property
     def links(self) -> RelayChainLinks:
         """The hop rules: range limit, hop budget, distance loss and hop cost."""
@@ -98,9 +103,7 @@ class Relay(PartConfig):
 class RelayNetwork(Network):
     def __init__(self, config: Relay, num_agents, batch, message_kind, rounds=1):
         super().__init__(config, num_agents, batch, message_kind, rounds)
-        if config.max_hops is not None and config.max_hops > max(1, num_agents - 1):
-            raise BadInput(f"network.max_hops must be in [1, N-1] = [1, {max(1, num_agents - 1)}] with N = "
-                           f"{num_agents} agents, got {config.max_hops!r}")
+        config.check_hop_budget(num_agents, "network.", "world.num_agents")
         self.links = config.links
         self.cost_sent = np.zeros((self.batch, self.num_agents))
         self._source = np.zeros(self.batch, dtype=int)

@@ -36,11 +36,13 @@ from coloc_env.scenarios.binding import PresetConfig, PresetScenario, keyword
 @dataclasses.dataclass(frozen=True)
 class RelayTeamConfig(PresetConfig):
     """The keywords of a relay-chain preset's links, costs and filter. A subclass names its parts, the part
-    fields it fixes (``fixed``: ``"<kind>.<field>"`` -> value) and the size of one agent's state
-    (``agent_state_dim``: the UKF's lambda must exceed -agent_state_dim N)."""
+    fields it fixes (``fixed``: ``"<kind>.<field>"`` -> value), its team's size (``team_size``, named
+    ``team_label`` in messages) and the size of one agent's state (``agent_state_dim``: the UKF's lambda
+    must exceed -agent_state_dim N, named ``ukf_lambda_label``)."""
 
     fixed: ClassVar[dict[str, Any]] = {}
     agent_state_dim: ClassVar[int]
+    team_label: ClassVar[str]  # how a message names N (the keyword that sets it)
     ukf_lambda_label: ClassVar[str]
     aliases: ClassVar[dict[str, str]] = {"hop_cost": "communication_cost"}
 
@@ -67,8 +69,7 @@ class RelayTeamConfig(PresetConfig):
         """The rules between a part field and the team's size, which a part's own check cannot see: a chain
         has at most N - 1 hops; the UKF's spread needs lambda > -d N (d the state size of one agent)."""
         N = self.team_size
-        if self.max_hops is not None:
-            check_range("max_hops", self.max_hops, 1, max(1, N - 1), integer=True)
+        self.parts()[1].check_hop_budget(N, "", self.team_label)
         check_range("ukf_lambda", self.ukf_lambda, -float(self.agent_state_dim * N), 1e6, low_open=True,
                     low_label=self.ukf_lambda_label)
 

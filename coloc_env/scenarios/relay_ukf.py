@@ -185,7 +185,7 @@ class RelayUKFConfig(RelayTeamConfig):
     World, Network, Backend = Circles, Relay, UkfDcl
     # no anchors; one next hop per holder; wang2019's position-only state
     fixed = {"world.num_anchors": 0, "network.routing": "per_holder", "backend.motion": "displacement"}
-    agent_state_dim, ukf_lambda_label = 2, "-2 num_platforms"
+    agent_state_dim, team_label, ukf_lambda_label = 2, "num_platforms", "-2 num_platforms"
 
     num_platforms: int = keyword(4, "world.num_agents")
     centres: tuple | None = keyword(None, "world.centres")

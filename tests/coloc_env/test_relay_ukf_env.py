@@ -68,7 +68,7 @@ def test_spaces_defaults_and_geometry():
     ({"measurement_probability": 1.5}, "measurement_probability"),
     ({"range_noise_var": 0.0}, "range_noise_var"),
     ({"speed_noise_std": -0.1}, "speed_noise_std"),
-    ({"max_hops": 4}, "max_hops"),
+    ({"max_hops": 4}, r"^relay_ukf: max_hops must be in \[1, num_platforms - 1 = 3\], got 4"),
     ({"max_hops": 0}, "max_hops"),
     ({"loss_at_zero": -0.1}, "loss_at_zero"),
     ({"comm_range": 0.0}, "comm_range"),
@@ -313,7 +313,7 @@ def test_reset_infos_report_no_chain_or_messages_of_the_episode_before():
 
 
 def test_a_relay_hop_budget_beyond_the_team_is_refused_in_a_composition_too():
-    with pytest.raises(ValueError, match=r"^network.max_hops must be in \[1, N-1\] = \[1, 5\] with N = 6 agents"):
+    with pytest.raises(ValueError, match=r"^network.max_hops must be in \[1, world.num_agents - 1 = 5\], got 6"):
         coloc_env.parallel_env(coloc_env.compose(world="circles", network={"name": "relay", "max_hops": 6},
                                                  backend="ukf_dcl"))
     env = coloc_env.parallel_env(coloc_env.compose(world="circles", network={"name": "relay", "max_hops": 5},
