@@ -77,11 +77,13 @@ class RelayTeamConfig(PresetConfig):
 class RelayTeamScenario(PresetScenario):
     """Batched core of a relay-chain preset (module table). A subclass gives ``own_features`` and
     ``feature_bounds`` (its observation's entries after the one-hot), ``team_error``, ``own_traces``,
-    ``own_variances`` and ``truth_xy``, and keeps ``dead_reckoning`` (B, N, >= 2)."""
+    ``own_variances`` and ``truth_xy``, its ``estimate`` (B, N, >= 2: position first), and keeps
+    ``dead_reckoning`` (B, N, >= 2)."""
 
     distance_scale: ClassVar[float]  # metres per unit of the observation's distances
     agent_state_dim: ClassVar[int]
     dead_reckoning: np.ndarray
+    estimate: np.ndarray
 
     # --- what a preset gives -------------------------------------------------------------------------------
     def own_features(self) -> np.ndarray:  # pragma: no cover - interface
