@@ -88,6 +88,11 @@ def dcl_floats(hop: int, d: int = 2) -> float:
     return 2 + 4 * d + r * d * (d + 1) / 2 + d * d * r * (r - 1) / 2 + r * d
 
 
+def check_spread(ukf_lambda, num_agents: int, prefix: str, agents: str) -> None:
+    """The joint UKF's lambda against the team: (-2N, 1e6] (N the agents, named ``agents`` in the message)."""
+    check_range(f"{prefix}ukf_lambda", ukf_lambda, -2.0 * num_agents, 1e6, low_open=True, low_label=f"-2 {agents}")
+
+
 @BACKENDS.register
 @dataclass(frozen=True)
 class UkfCcl(PartConfig):
@@ -102,6 +107,9 @@ class UkfCcl(PartConfig):
     def check(self, prefix: str) -> None:
         check_range(f"{prefix}ukf_lambda", self.ukf_lambda, -np.inf, 1e6, low_open=True)  # > -2N: at build
         check_choice(f"{prefix}motion", self.motion, MOTIONS)
+
+    def check_spread(self, num_agents: int, prefix: str, agents: str) -> None:
+        check_spread(self.ukf_lambda, num_agents, prefix, agents)
 
     def build(self, world, network, batch: int) -> Backend:
         return JointUkfBackend(self, world, network, batch, distributed=False)
@@ -124,6 +132,9 @@ class UkfDcl(PartConfig):
         check_choice(f"{prefix}truncation", self.truncation, ("consistent", "paper"))
         check_choice(f"{prefix}motion", self.motion, MOTIONS)
 
+    def check_spread(self, num_agents: int, prefix: str, agents: str) -> None:
+        check_spread(self.ukf_lambda, num_agents, prefix, agents)
+
     def build(self, world, network, batch: int) -> Backend:
         return JointUkfBackend(self, world, network, batch, distributed=True)
 
@@ -135,9 +146,7 @@ class JointUkfBackend(Backend):
         N = self.num_agents
         self.motion_model = ukf_motion_model(config.motion, world)
         d = self.d = self.motion_model.state_dim
-        if config.ukf_lambda <= -2 * N:
-            raise ValueError(f"backend.ukf_lambda must be in (-2N, 1e6] = ({-2 * N}, 1e6] with N = {N} agents, "
-                             f"got {config.ukf_lambda!r}")
+        config.check_spread(N, "backend.", "world.num_agents")
         self.mean = np.zeros((self.batch, N, d))
         self.cov = np.zeros((self.batch, d * N, d * N))
         if distributed and config.truncation == "paper":

@@ -112,6 +112,11 @@ class UkfSe2(PartConfig):
             check_range(f"{prefix}gate", self.gate, 0.0, 1e12, low_open=True)
         check_choice(f"{prefix}landmark_updates", self.landmark_updates, ("local", "relay"))
 
+    def check_spread(self, num_agents: int, prefix: str, agents: str) -> None:
+        """The UT's lambda against the team: > -3N (N the robots, named ``agents`` in the message)."""
+        check_range(f"{prefix}ukf_lambda", self.ukf_lambda, -3.0 * num_agents, 1e6, low_open=True,
+                    low_label=f"-3 {agents}")
+
     def build(self, world, network, batch: int) -> Backend:
         return UkfSe2Backend(self, world, network, batch)
 
@@ -122,8 +127,7 @@ class UkfSe2Backend(Backend):
     def __init__(self, config: UkfSe2, world, network, batch: int):
         super().__init__(config, world, network, batch)
         B, N = self.batch, self.num_agents
-        if config.ukf_lambda <= -3 * N:
-            raise ValueError(f"backend.ukf_lambda must be > -3N = {-3 * N}, got {config.ukf_lambda!r}")
+        config.check_spread(N, "backend.", "world.num_agents")
         self.estimate = np.zeros((B, N, 3))
         self.P_ii = np.zeros((B, N, 3, 3))
         self.phi = np.zeros((B, N, 3, 3))

@@ -28,7 +28,6 @@ from typing import Any, ClassVar
 import gymnasium
 import numpy as np
 
-from coloc_env.config import check_range
 from coloc_env.rendering import Link
 from coloc_env.scenarios.binding import PresetConfig, PresetScenario, keyword
 
@@ -36,14 +35,11 @@ from coloc_env.scenarios.binding import PresetConfig, PresetScenario, keyword
 @dataclasses.dataclass(frozen=True)
 class RelayTeamConfig(PresetConfig):
     """The keywords of a relay-chain preset's links, costs and filter. A subclass names its parts, the part
-    fields it fixes (``fixed``: ``"<kind>.<field>"`` -> value), its team's size (``team_size``, named
-    ``team_label`` in messages) and the size of one agent's state (``agent_state_dim``: the UKF's lambda
-    must exceed -agent_state_dim N, named ``ukf_lambda_label``)."""
+    fields it fixes (``fixed``: ``"<kind>.<field>"`` -> value) and its team's size (``team_size``, named
+    ``team_label`` in messages)."""
 
     fixed: ClassVar[dict[str, Any]] = {}
-    agent_state_dim: ClassVar[int]
     team_label: ClassVar[str]  # how a message names N (the keyword that sets it)
-    ukf_lambda_label: ClassVar[str]
     aliases: ClassVar[dict[str, str]] = {"hop_cost": "communication_cost"}
 
     comm_range: float = keyword(float("inf"), "network.comm_range")
@@ -66,12 +62,11 @@ class RelayTeamConfig(PresetConfig):
         return {**fixed, **super().bound_fields(kind)}
 
     def check_preset(self) -> None:
-        """The rules between a part field and the team's size, which a part's own check cannot see: a chain
-        has at most N - 1 hops; the UKF's spread needs lambda > -d N (d the state size of one agent)."""
-        N = self.team_size
-        self.parts()[1].check_hop_budget(N, "", self.team_label)
-        check_range("ukf_lambda", self.ukf_lambda, -float(self.agent_state_dim * N), 1e6, low_open=True,
-                    low_label=self.ukf_lambda_label)
+        """The parts' rules between a field and the team's size, which a part's own check cannot see (the
+        network's hop budget, the backend's UKF spread; the parts apply them again at build)."""
+        _, network, backend = self.parts()
+        network.check_hop_budget(self.team_size, "", self.team_label)
+        backend.check_spread(self.team_size, "", self.team_label)
 
 
 class RelayTeamScenario(PresetScenario):

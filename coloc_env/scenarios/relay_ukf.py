@@ -150,8 +150,8 @@ core: world ``circles`` (``num_anchors=0``, the config's layout and noise), netw
 (``routing="per_holder"``, the config's links and hop costs) and backend ``ukf_dcl``
 (``motion="displacement"``: the paper's position-only state); ``coloc_env.PRESETS["relay_ukf"]``
 is that composition. Each keyword sets the part field of the same name (``num_platforms`` sets
-the world's ``num_agents``, ``communication_cost`` the composition's); the parts check them, and
-the preset checks what couples a part to the team's size (``max_hops``, ``ukf_lambda``). The
+the world's ``num_agents``, ``communication_cost`` the composition's); the parts check them, the
+rules that tie a part field to the team's size (``max_hops``, ``ukf_lambda``) with ``num_platforms``. The
 binding keeps the paper's action codec (index 0 is the world's sensing choice, index 1 the
 network's next hop), its observation, its team reward after the prediction, and its infos.
 Seeding: the world draws from the episode's generator itself (odometry noise, schedule, range
@@ -185,7 +185,7 @@ class RelayUKFConfig(RelayTeamConfig):
     World, Network, Backend = Circles, Relay, UkfDcl
     # no anchors; one next hop per holder; wang2019's position-only state
     fixed = {"world.num_anchors": 0, "network.routing": "per_holder", "backend.motion": "displacement"}
-    agent_state_dim, team_label, ukf_lambda_label = 2, "num_platforms", "-2 num_platforms"
+    team_label = "num_platforms"
 
     num_platforms: int = keyword(4, "world.num_agents")
     centres: tuple | None = keyword(None, "world.centres")
