@@ -98,10 +98,8 @@ class PresetConfig:
         return f"{kind}.{field}"
 
     def validate(self) -> None:
-        """Every keyword's type, then each part's own check, under the keywords' names."""
-        problem = field_type_problem(self)
-        if problem:
-            raise BadInput(f"{self.preset}: {problem}")
+        """Each part's own check under the keywords' names (a wrongly typed keyword is refused there with its
+        range), then every keyword's type."""
         world, network, backend = self.parts()
         composition = Composition(world, network, backend, **self.composition_options())
         checks = {"world": world.check, "network": network.check, "backend": backend.check,
@@ -113,6 +111,14 @@ class PresetConfig:
                 message = re.sub(re.escape(_FIELD_MARK) + r"(\w+)", lambda m, kind=kind: self._keyword_of(kind, m[1]),
                                  str(exc))
                 raise BadInput(f"{self.preset}: {message}") from exc
+            except Exception as exc:  # a wrongly typed keyword broke a check's arithmetic: name its type
+                problem = field_type_problem(self)
+                if not problem:
+                    raise
+                raise BadInput(f"{self.preset}: {problem}") from exc
+        problem = field_type_problem(self)
+        if problem:
+            raise BadInput(f"{self.preset}: {problem}")
         try:
             self.check_preset()
         except ValueError as exc:
