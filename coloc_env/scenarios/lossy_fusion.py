@@ -21,11 +21,10 @@ This is the paper's distributed algorithm (B). One env step is one slot.
 The preset is the composition ``target_cv`` / ``bernoulli_delay`` /
 ``prediction_compensation`` (``LossyFusionConfig.parts``) with this
 action codec, observation and info. The world draws the episode (x(0), the
-accelerations, the measurement noise) from the episode's generator in the
-order of ``LossyFusionConfig.sample_episodes``; the link outcomes are
-the network's (its counter-based draws from its own generator, fixed at
-reset: ``LossyFusionScenario.link_outcomes``), not the sampler's. One
-reading differs from eq. (3) as printed and changes no estimate: a "late"
+accelerations, the measurement noise) from the episode's generator
+(``coloc_env.worlds.target_cv``); the link outcomes are the network's
+counter-based draws from its own generator, fixed at reset
+(``LossyFusionScenario.link_outcomes``). One reading differs from eq. (3) as printed and changes no estimate: a "late"
 outcome after an on-time packet delivers nothing (the packet it would
 re-deliver is the one already held; ``delivered`` then says lost, and the
 held value and its age are the same either way).
@@ -201,23 +200,6 @@ class LossyFusionConfig(PresetConfig):
             on_time=np.r_[1.0, np.full(L - 1, float(self.on_time_probability))],
             late=np.r_[0.0, np.full(L - 1, float(self.late_probability))],
         )
-
-    def sample_episodes(self, rng: np.random.Generator, size: tuple[int, ...] = ()) -> dict[str, np.ndarray]:
-        """Whole episodes drawn from ``rng`` in blocks, in this order: x(0), accelerations, measurement
-        noise, link outcomes (the env's world draws the same truth and measurements, but its network draws
-        the link outcomes: ``LossyFusionScenario.link_outcomes``). Returns ``truth`` (*size, K, 6),
-        ``z`` (*size, K, L, 3) and ``outcome`` (*size, K, L) (the leader's column always on time)."""
-        K, L = self.horizon, self.num_uavs
-        target, sensor = self.target, self.sensor
-        x0 = rng.multivariate_normal(np.asarray(self.initial_state, float), np.asarray(self.initial_cov, float),
-                                     size=size)
-        accelerations = target.sample_noise(rng, (*size, K - 1))
-        noise = sensor.sample_noise(rng, (*size, K, L))
-        follower_outcome = self.link.sample(rng, (*size, K, L - 1))
-        truth = target.trajectory(x0, accelerations)
-        z = sensor.measure(truth[..., None, :], noise)
-        outcome = np.concatenate([np.full((*size, K, 1), lf.ON_TIME, np.int8), follower_outcome], axis=-1)
-        return {"truth": truth, "z": z, "outcome": outcome}
 
 
 class LossyFusionScenario(PresetScenario):

@@ -7,14 +7,11 @@ Phi = blockdiag([[1, T], [0, 1]] x 3), w ~ N(0, q I_3) (eq. 1;
 measures z_i(k) = H x(k) + v_i(k), H the position rows, v_i ~ N(0, r I_3)
 (eq. 2). Every agent estimates the target (estimand ``target``).
 
-The episode is drawn at reset from the world's generator in the order of
-``coloc_env.scenarios.lossy_fusion.LossyFusionConfig.sample_episodes``
-(x(0) ~ N(X0, P0), the K - 1 accelerations, the K x L measurement noises;
-that sampler then draws the link outcomes, which here belong to the
-network), so the truth and the measurements equal the ``lossy_fusion``
-scenario's for the same generator. One more acceleration is drawn after
-them so that x(K), the state after the last step (which the last observation
-and the renderer read), exists; it changes none of the earlier draws.
+The episode is drawn at reset from each copy's generator, in this order:
+x(0) ~ N(X0, P0), the accelerations w(0..K-2), the K x L measurement noises
+v_i(0..K-1), then w(K-1), so that x(K), the state after the last step (which
+the last observation and the renderer read), exists. The link outcomes are
+the network's, drawn from a generator of its own.
 
 The paper does not place the UAVs; they hold a fixed ring of radius
 ``formation_radius`` (the link state of distance-dependent networks reads it).
@@ -138,14 +135,13 @@ class TargetCvWorld(TargetWorld):
         C = len(rngs)
         x0, accelerations, noise = np.empty((C, 6)), np.empty((C, K, 3)), np.empty((C, K, L, 3))
         for c, rng in enumerate(rngs):
-            # the order of LossyFusionConfig.sample_episodes: x(0), accelerations, measurement noise, then w(K-1)
-            # (for x(K) only)
+            # the module's order: x(0), w(0..K-2), the measurement noise, then w(K-1) (for x(K) only)
             x0[c] = rng.multivariate_normal(x0_mean, P0)
             accelerations[c, :K - 1] = self.target.sample_noise(rng, (K - 1,))
             noise[c] = self.sensor.sample_noise(rng, (K, L))
             accelerations[c, K - 1:] = self.target.sample_noise(rng, (1,))
-        # every copy's trajectory and measurements at once (a Python loop over the horizon per copy cost 0.37 s
-        # of a 1024-copy reset): the same numbers, the motion being written per axis (ConstantVelocityTarget.step)
+        # every copy's trajectory and measurements at once, not a loop over the horizon per copy: the same
+        # numbers, the motion being written per axis (ConstantVelocityTarget.step)
         truth = self.target.trajectory(x0, accelerations)
         idx = np.asarray(idx)
         self.truth[idx] = truth

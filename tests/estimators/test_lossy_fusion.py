@@ -8,19 +8,25 @@ import scipy.linalg
 
 import estimators.lossy_fusion as lf
 from coloc_env.config import build_config
-from coloc_env.scenarios.lossy_fusion import LossyFusionConfig
+from coloc_env.scenarios.lossy_fusion import LossyFusionConfig, LossyFusionScenario
 
 X0 = np.array([100.0, 10.0, 100.0, 10.0, 100.0, 0.0])
 P0 = np.diag([100.0, 5.0, 100.0, 5.0, 100.0, 5.0])
 
 
-def config(**kwargs):
-    return build_config(LossyFusionConfig, kwargs)
+def model_of(**kwargs) -> lf.LossyModel:
+    """fu2017's model of the ``lossy_fusion`` preset with these keywords (its backend's)."""
+    return LossyFusionScenario(build_config(LossyFusionConfig, kwargs)).model
 
 
 def episodes(runs, seed, **kwargs):
-    cfg = config(**kwargs)
-    return cfg.lossy_model(), cfg.sample_episodes(np.random.default_rng(seed), (runs,)), cfg.target.position_matrix
+    """The model, ``runs`` episodes of the ``lossy_fusion`` preset with these keywords (copy r reset with the r-th
+    child of ``default_rng(seed)``): its world's ``truth`` x(0..K-1) (runs, K, 6) and readings ``z`` (runs, K, L, 3),
+    its network's link ``outcome`` to the leader (runs, K, L), and the position rows H."""
+    scenario = LossyFusionScenario(build_config(LossyFusionConfig, kwargs), batch=runs)
+    scenario.reset(np.random.default_rng(seed).spawn(runs))
+    sim = {"truth": scenario.truth[:, :scenario.horizon], "z": scenario.z, "outcome": scenario.link_outcomes()}
+    return scenario.model, sim, scenario.H
 
 
 def squared_errors(estimates, truth, H):
@@ -61,7 +67,7 @@ def _enumerate_links(model):
 
 def test_augmented_moments_match_an_enumeration_of_the_link_outcomes():
     """Phibar, Psi = E[dPhi q dPhi^T] and Qbar = E[Gammat W W^T Gammat^T] from all 27 joint outcomes (L = 4)."""
-    model = config(num_uavs=4, on_time_probability=0.5, late_probability=0.2).lossy_model()
+    model = model_of(num_uavs=4, on_time_probability=0.5, late_probability=0.2)
     mats = lf.augmented_matrices(model)
     n, m = model.state_dim, 3 * model.num_uavs
     d = n + 2 * m
@@ -109,7 +115,7 @@ def test_augmented_moments_match_an_enumeration_of_the_link_outcomes():
 
 def test_optimal_predictor_knows_the_received_buffer_exactly():
     """y(k) is the last block of X(k+1): the optimal gain leaves it no error, the paper's gain (21) does."""
-    model = config(num_uavs=3).lossy_model()
+    model = model_of(num_uavs=3)
     mats = lf.augmented_matrices(model)
     m = 9
     y = np.tile(model.measurement @ X0, (3, 1))
@@ -254,7 +260,7 @@ def test_batch_axes_give_the_same_numbers_as_a_flat_batch():
 
 
 def test_model_and_filter_arguments_are_checked():
-    model = config().lossy_model()
+    model = model_of()
     with pytest.raises(ValueError, match="leader"):
         lf.LossyModel(model.transition, model.process_noise, model.measurement, model.measurement_noise,
                       np.array([0.4, 0.4]), np.array([0.3, 0.3]))
@@ -268,7 +274,7 @@ def test_model_and_filter_arguments_are_checked():
 
 
 def test_derived_link_moment_does_not_depend_on_the_origin_but_the_printed_one_does():
-    model = config(num_uavs=3).lossy_model()
+    model = model_of(num_uavs=3)
     mats = lf.augmented_matrices(model)
     rng = np.random.default_rng(8)
     d = mats.phi_bar.shape[0]

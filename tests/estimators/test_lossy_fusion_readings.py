@@ -4,16 +4,7 @@ import numpy as np
 import pytest
 
 import estimators.lossy_fusion as lf
-from coloc_env.config import build_config
-from coloc_env.scenarios.lossy_fusion import LossyFusionConfig
-
-X0 = np.array([100.0, 10.0, 100.0, 10.0, 100.0, 0.0])
-P0 = np.diag([100.0, 5.0, 100.0, 5.0, 100.0, 5.0])
-
-
-def episodes(runs, seed, **kwargs):
-    cfg = build_config(LossyFusionConfig, kwargs)
-    return cfg.lossy_model(), cfg.sample_episodes(np.random.default_rng(seed), (runs,)), cfg.target.position_matrix
+from tests.estimators.test_lossy_fusion import P0, X0, episodes
 
 
 @pytest.mark.parametrize("num_uavs", [2, 4])

@@ -111,7 +111,7 @@ def _zhao2020_by_the_estimator_functions(seeds, config) -> np.ndarray:
 
 def _fu2017_by_the_estimator_functions(seeds, config) -> np.ndarray:
     """Per-episode MSE of (B) as printed, :func:`estimators.lossy_fusion.distributed_filter`, on
-    ``sample_episodes``' truth and measurements and the network's link outcomes: no backend, no env."""
+    the world's truth and measurements and the network's link outcomes: no backend, no env."""
     from tests.train.test_reproductions_drive_backends import _reference_fu2017
 
     return _reference_fu2017(config, seeds)["distributed"][0].mean(axis=1)

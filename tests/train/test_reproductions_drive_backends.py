@@ -19,6 +19,7 @@ import estimators.lossy_fusion as lf
 import estimators.range_ls as rl
 import estimators.ukf_relay as ukf
 from agents.relay_ukf import paper_actions
+from coloc_env.backends.fusion import lossy_model
 from coloc_env.config import build_config
 from coloc_env.primitives.unicycle import UnicycleMotion
 from coloc_env.scenarios.bandwidth_fusion import BandwidthFusionConfig
@@ -182,17 +183,19 @@ def test_zhao2020_preset_gives_the_estimator_functions_numbers_on_the_same_draws
 
 def _reference_fu2017(config, seeds):
     """Every filter of the reproduction by :mod:`estimators.lossy_fusion`'s own episode functions on the truth and
-    measurements :meth:`LossyFusionConfig.sample_episodes` draws from ``default_rng(seed)`` (the order the
-    ``target_cv`` world draws them in) and the link outcomes of a ``bernoulli_delay`` network reset with that
-    generator's first child (the preset's rule): name -> (squared position errors (runs, K), own traces)."""
-    K = config.horizon
-    sims = [config.sample_episodes(np.random.default_rng(s)) for s in seeds]
-    truth, z = np.stack([e["truth"] for e in sims]), np.stack([e["z"] for e in sims])
-    network = config.parts()[1].build(config.num_uavs, len(seeds), "packets")
-    network.reset([np.random.default_rng(s).spawn(2)[0] for s in seeds], np.arange(len(seeds)))
+    measurements the preset's ``target_cv`` world draws from ``default_rng(seed)`` and the link outcomes of a
+    ``bernoulli_delay`` network reset with that generator's first child (the preset's rule), without a backend:
+    name -> (squared position errors (runs, K), own traces)."""
+    K, copies = config.horizon, np.arange(len(seeds))
+    world_config, network_config, _ = config.parts()
+    world = world_config.build(len(seeds), K)
+    world.reset([np.random.default_rng(s) for s in seeds], copies)
+    truth, z = world.truth[:, :K], world.observations
+    network = network_config.build(world.num_agents, len(seeds), "packets")
+    network.reset([np.random.default_rng(s).spawn(2)[0] for s in seeds], copies)
     outcome = network.slot_outcomes(range(K))[:, :, :, 0].copy()  # each agent's link to the leader
     outcome[..., 0] = lf.ON_TIME
-    model, H = config.lossy_model(), config.target.position_matrix
+    model, H = lossy_model(world, network), world.metric
     x0, P0 = np.asarray(config.initial_state, float), np.asarray(config.initial_cov, float)
     runs = lf.run_filters(model, x0, P0, z, outcome)
     for name, (reading, spread, _) in fu2017.READINGS.items():
