@@ -295,7 +295,7 @@ def reference_filter_costs(scenario: str, filter_name: str, episodes: int, seed_
     config = build_config(LossyFusionConfig, env_config)
     seeds = [seed_base + e for e in range(episodes)]
     errors = filter_runs(config, seeds, (filter_name,))["errors"][filter_name]  # (episodes, K) squared errors
-    return errors.mean(axis=1), float(config.num_uavs - 1)
+    return errors.mean(axis=1), float(config.num_agents - 1)
 
 
 def run_episodes(scenario: str, policy_name: str, episodes: int, seed_base: int = EVAL_SEED_BASE,

@@ -80,13 +80,14 @@ link outcome of each follower's last slot (on time, late, lost).
 
 Reward (the fused estimate is shared: every agent gets the team's loss)
 ----------------------------------------------------------------------
-| ``reward=``  | value after slot k (squared metres)                                     |
+| ``reward=``  | value after slot k (m^2)                                                 |
 |--------------|-------------------------------------------------------------------------|
-| ``"error"``  | -||H (x0hat(k) - x(k))||^2, the fused position error                     |
-| ``"trace"``  | -tr(H P0(k) H^T), the leader's own (eq. 30) position covariance          |
+| ``"error"``  | -||H (x0hat(k) - x(k))||^2, the fused squared position error (m^2)       |
+| ``"trace"``  | -tr(H P0(k) H^T), the leader's own (eq. 30) position covariance (m^2,    |
+|              | the unit of ``error``; the ``trace`` info key is the same number)        |
 
-minus ``message_cost`` for each packet the agent itself sent this slot
-(followers only). Note that the paper's inverse-trace weights already minimize
+minus ``communication_cost`` (m^2) for each packet the agent itself sent this
+slot (followers only). Note that the paper's inverse-trace weights already minimize
 tr P0 = sum a_i^2 tr P_i, so ``"trace"`` rewards exactly the paper's weights.
 
 Termination: none; truncation after ``horizon`` slots (the paper's 100).
@@ -111,21 +112,27 @@ Arguments (fields of ``LossyFusionConfig``, defaults = the paper)
 ---------------------------------------------------------------------
 | field                | default                          | allowed                                  |
 |----------------------|----------------------------------|------------------------------------------|
-| num_uavs             | 2                                | 2..16 (L, leader included)               |
-| period               | 1.0                              | > 0 (T, seconds)                         |
-| accel_noise          | 5.0                              | [0, 1e12] (q, m^2/s^4 per axis)          |
-| measurement_noise    | 10.0                             | [1e-6, 1e12] (r, m^2 per axis)           |
-| initial_state        | (100, 10, 100, 10, 100, 0)       | (6,) in [-1e6, 1e6]: X0, x(0) ~ N(X0, P0)|
-| initial_cov          | diag(100, 5, 100, 5, 100, 5)     | (6, 6) positive definite (the observation|
-|                      |                                  | divides by it), entries <= 1e12: P0      |
-| on_time_probability  | 0.4                              | [0, 1] (alpha1)                          |
-| late_probability     | 0.3                              | [0, 1] (alpha2), alpha1 + alpha2 in (0, 1]|
-| horizon              | 100                              | 1..100000                                |
-| reward               | "error"                          | "error", "trace"                         |
-| message_cost         | 0.0                              | [0, 1e12], per packet sent               |
+| num_agents           | 2                                | 2..16: L, the leader included            |
+| period               | 1.0                              | (0, 1e4] s: T; with accel_noise, the     |
+|                      |                                  | process noise q G G^T must pass the      |
+|                      |                                  | model's PSD check (a large q T^4 fails)  |
+| accel_noise          | 5.0                              | [0, 1e12] m^2/s^4 per axis: q            |
+| measurement_noise    | 10.0                             | [1e-6, 1e12] m^2 per axis: r             |
+| initial_state        | (100, 10, 100, 10, 100, 0)       | (6,) in [-1e6, 1e6]: X0; x(0) ~ N(X0, P0)|
+| initial_cov          | diag(100, 5, 100, 5, 100, 5)     | (6, 6) positive definite, entries        |
+|                      |                                  | <= 1e12: P0 (the observation divides by  |
+|                      |                                  | its trace)                               |
+| on_time_probability  | 0.4                              | [0, 1]: alpha1                           |
+| late_probability     | 0.3                              | [0, 1]: alpha2; alpha1 + alpha2 in (0, 1]|
+| horizon              | 100                              | 1..100000 slots                          |
+| reward               | "error"                          | "error", "trace" (both m^2)              |
+| communication_cost   | 0.0                              | [0, 1e12] m^2 per packet sent            |
 | weight_logit_scale   | 3.0                              | (0, 50]                                  |
 | time_stamps          | False                            | bool: packets carry their slot (the      |
 |                      |                                  | observation shows ages, not arrivals)    |
+
+Older keywords, still accepted by ``make`` and ``parallel_env`` (give one name of a pair):
+``num_uavs`` is ``num_agents``, ``message_cost`` is ``communication_cost``.
 """
 
 from __future__ import annotations
@@ -161,7 +168,9 @@ class LossyFusionConfig(PresetConfig):
     preset = "lossy_fusion"
     World, Network, Backend = TargetCv, BernoulliDelay, PredictionCompensation
 
-    num_uavs: int = keyword(2, "world.num_agents")
+    aliases = {"num_uavs": "num_agents", "message_cost": "communication_cost"}
+
+    num_agents: int = keyword(2, "world.num_agents")
     period: float = keyword(1.0, "world.period")
     accel_noise: float = keyword(5.0, "world.accel_noise")
     measurement_noise: float = keyword(10.0, "world.measurement_noise")
@@ -171,7 +180,7 @@ class LossyFusionConfig(PresetConfig):
     late_probability: float = keyword(0.3, "network.late_probability")
     horizon: int = keyword(100, "world.horizon", "composition.horizon")
     reward: str = keyword("error", "composition.reward")
-    message_cost: float = keyword(0.0, "composition.communication_cost")
+    communication_cost: float = keyword(0.0, "composition.communication_cost")
     weight_logit_scale: float = keyword(3.0, "backend.weight_logit_scale")
     time_stamps: bool = keyword(False, "preset")
 
@@ -191,7 +200,7 @@ class LossyFusionConfig(PresetConfig):
         return LinearSensor(self.target.position_matrix, float(self.measurement_noise) * np.eye(3))
 
     def lossy_model(self) -> lf.LossyModel:
-        L, target = self.num_uavs, self.target
+        L, target = self.num_agents, self.target
         return lf.LossyModel(
             transition=target.transition,
             process_noise=target.process_noise,
@@ -209,10 +218,6 @@ class LossyFusionScenario(PresetScenario):
     name = "lossy_fusion"
     paper = "fu2017"
     Config = LossyFusionConfig
-
-    @classmethod
-    def composition_options(cls, config) -> dict:
-        return {"reward": config.reward, "communication_cost": config.message_cost}
 
     def __init__(self, config: LossyFusionConfig, batch: int = 1):
         super().__init__(config, batch)

@@ -39,7 +39,9 @@ Arguments (``coloc_env.worlds.TargetCv``; defaults = the paper's Sec. 4)
 | accel_noise        | 5.0                              | [0, 1e12] m^2/s^4 per axis (q)           |
 | measurement_noise  | 10.0                             | [1e-6, 1e12] m^2 per axis (r)            |
 | initial_state      | (100, 10, 100, 10, 100, 0)       | (6,) in [-1e6, 1e6]: X0; x(0) ~ N(X0, P0)|
-| initial_cov        | diag(100, 5, 100, 5, 100, 5)     | (6, 6) PSD, entries <= 1e12: P0          |
+| initial_cov        | diag(100, 5, 100, 5, 100, 5)     | (6, 6) positive definite, entries        |
+|                    |                                  | <= 1e12: P0 (the fusion weights divide   |
+|                    |                                  | by covariance traces)                    |
 | horizon            | 100                              | 1..100000 steps (the composition's default) |
 | formation_radius   | 10.0                             | [0, 1e6] m: the agents' fixed ring       |
 
@@ -99,7 +101,7 @@ class TargetCv(PartConfig):
                              f"period or accel_noise") from exc
         check_range(f"{prefix}measurement_noise", self.measurement_noise, 1e-6, 1e12)
         as_array(f"{prefix}initial_state", self.initial_state, shape=(6,), bound=1e6)
-        check_psd(f"{prefix}initial_cov", self.initial_cov, 6, bound=1e12)
+        check_psd(f"{prefix}initial_cov", self.initial_cov, 6, strict=True, bound=1e12)
         check_range(f"{prefix}horizon", self.horizon, 1, 100_000, integer=True)
         check_range(f"{prefix}formation_radius", self.formation_radius, 0.0, 1e6)
 

@@ -226,7 +226,7 @@ CROWDED = {
                                                          render_mode="rgb_array"),
     "bandwidth_fusion-16": lambda: coloc_env.parallel_env("bandwidth_fusion", num_uavs=16, budget=20,
                                                           render_mode="rgb_array"),
-    "lossy_fusion-8": lambda: coloc_env.parallel_env("lossy_fusion", num_uavs=8, render_mode="rgb_array"),
+    "lossy_fusion-8": lambda: coloc_env.parallel_env("lossy_fusion", num_agents=8, render_mode="rgb_array"),
     "nlos_horizon": lambda: coloc_env.parallel_env("nlos_horizon", horizon=40, render_mode="rgb_array"),
     "drift-8-relay-kalman": lambda: coloc_env.parallel_env(coloc_env.compose(
         world={"name": "drift", "num_agents": 8}, network="relay", backend="kalman", horizon=20),

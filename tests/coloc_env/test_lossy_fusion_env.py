@@ -20,18 +20,18 @@ P0 = np.diag([100.0, 5.0, 100.0, 5.0, 100.0, 5.0])
 UNBOUNDED_OBSERVATION = r"Agent's (minimum|maximum) observation space value is -?infinity"
 
 
-@pytest.mark.parametrize("num_uavs", [2, 3])
-def test_pettingzoo_api_and_seed_tests(num_uavs):
+@pytest.mark.parametrize("num_agents", [2, 3])
+def test_pettingzoo_api_and_seed_tests(num_agents):
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # anything else PettingZoo reports only by warning fails the test
         warnings.filterwarnings("ignore", message=UNBOUNDED_OBSERVATION, category=UserWarning)
-        parallel_api_test(coloc_env.parallel_env(NAME, num_uavs=num_uavs), num_cycles=120)
-        parallel_seed_test(lambda: coloc_env.parallel_env(NAME, num_uavs=num_uavs), num_cycles=60)
-        api_test(coloc_env.env(NAME, num_uavs=num_uavs), num_cycles=30)
+        parallel_api_test(coloc_env.parallel_env(NAME, num_agents=num_agents), num_cycles=120)
+        parallel_seed_test(lambda: coloc_env.parallel_env(NAME, num_agents=num_agents), num_cycles=60)
+        api_test(coloc_env.env(NAME, num_agents=num_agents), num_cycles=30)
 
 
 def test_spaces_are_shared_and_cached():
-    env = coloc_env.parallel_env(NAME, num_uavs=4)
+    env = coloc_env.parallel_env(NAME, num_agents=4)
     assert env.possible_agents == ["uav_0", "uav_1", "uav_2", "uav_3"]
     assert env.action_space("uav_0") is env.action_space("uav_0")
     assert env.action_space("uav_0") == env.action_space("uav_3")
@@ -49,14 +49,16 @@ def test_spaces_are_shared_and_cached():
     ({"measurement_noise": -10.0}, "measurement_noise"),
     ({"measurement_noise": 0.0}, "measurement_noise"),
     ({"accel_noise": -5.0}, "accel_noise"),
-    ({"num_uavs": 1}, "num_uavs"),
-    ({"num_uavs": 2.5}, "num_uavs"),
+    ({"num_agents": 1}, "num_agents"),
+    ({"num_agents": 2.5}, "num_agents"),
     ({"period": 0.0}, "period"),
     ({"initial_cov": np.diag([100.0, 5, 100, 5, 100, -5]).tolist()}, "initial_cov"),
+    ({"initial_cov": np.zeros((6, 6)).tolist()}, "^lossy_fusion: initial_cov must be positive definite"),
+    ({"num_uavs": 3, "num_agents": 3}, "num_uavs is another name of num_agents"),
     ({"initial_state": [100.0, 10.0, 100.0]}, "initial_state"),
     ({"reward": "rmse"}, "reward"),
     ({"horizon": 0}, "horizon"),
-    ({"message_cost": -1.0}, "message_cost"),
+    ({"communication_cost": -1.0}, "communication_cost"),
     ({"weight_logit_scale": 0.0}, "weight_logit_scale"),
     ({"alpha1": 0.4}, "unknown config key"),
 ])
@@ -96,9 +98,9 @@ def test_same_seed_gives_identical_episodes_and_reset_continues_the_generator():
     assert not np.array_equal(info_a["uav_0"]["true_position"], first_a[0][1]["uav_0"]["true_position"])
 
 
-@pytest.mark.parametrize("num_uavs, seed", [(2, 7), (4, 3)])
-def test_env_with_paper_policy_equals_the_estimator(num_uavs, seed):
-    env = coloc_env.parallel_env(NAME, num_uavs=num_uavs)
+@pytest.mark.parametrize("num_agents, seed", [(2, 7), (4, 3)])
+def test_env_with_paper_policy_equals_the_estimator(num_agents, seed):
+    env = coloc_env.parallel_env(NAME, num_agents=num_agents)
     policy = agents.make_policy("paper", env)
     observations, infos = env.reset(seed=seed)
     scenario = env.scenario
@@ -123,8 +125,8 @@ def test_env_with_paper_policy_equals_the_estimator(num_uavs, seed):
     assert np.all(outcome[:, 0] == lf.ON_TIME) and np.any(outcome[:, 1:] != lf.ON_TIME)
 
 
-def test_silent_followers_deliver_nothing_and_pay_no_message_cost():
-    env = coloc_env.parallel_env(NAME, num_uavs=3, message_cost=2.0)
+def test_silent_followers_deliver_nothing_and_pay_no_communication_cost():
+    env = coloc_env.parallel_env(NAME, num_agents=3, communication_cost=2.0)
     paper = env.scenario.paper_actions()
     silent = paper.copy()
     silent[1:, 0] = -1.0
@@ -184,7 +186,7 @@ def test_weight_tilts_reach_the_estimator():
 
 
 def test_observation_is_local():
-    env = coloc_env.parallel_env(NAME, num_uavs=3)
+    env = coloc_env.parallel_env(NAME, num_agents=3)
     policy = agents.make_policy("paper", env)
     observations, _ = env.reset(seed=0)
     np.testing.assert_allclose(observations["uav_0"][2], np.log(315.0), rtol=1e-6)
@@ -198,7 +200,7 @@ def test_observation_is_local():
 
 
 def test_rgb_render_draws_a_frame():
-    env = coloc_env.parallel_env(NAME, render_mode="rgb_array", num_uavs=3)
+    env = coloc_env.parallel_env(NAME, render_mode="rgb_array", num_agents=3)
     env.reset(seed=0)
     assert env.render().shape[2] == 3
     env.step({a: env.action_space(a).sample() for a in env.agents})

@@ -20,7 +20,7 @@ def test_each_reading_equals_the_estimator_s_distributed_filter(reading):
     world = env.unwrapped.scenario.world
     outcome = _uniform_outcomes(env, len(infos))
     assert {lf.ON_TIME, lf.LATE, lf.LOST} <= set(np.unique(outcome[:, 1:]))
-    model = LossyFusionConfig(num_uavs=L, horizon=len(infos)).lossy_model()
+    model = LossyFusionConfig(num_agents=L, horizon=len(infos)).lossy_model()
     x0, P0 = world.prior()
     estimates, covariances = lf.distributed_filter(model, x0, P0, world.observations[0], outcome, reading=reading)
     got = _stack(infos, "estimated_position", env)

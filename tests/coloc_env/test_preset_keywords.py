@@ -33,8 +33,8 @@ def test_every_keyword_reaches_its_target(preset):
 def test_refused_value_names_the_keyword():
     from coloc_env.scenarios.lossy_fusion import LossyFusionConfig
 
-    with pytest.raises(ValueError, match=r"^lossy_fusion: message_cost must be in \[0.0, "):
-        LossyFusionConfig(message_cost=-1.0).validate()
+    with pytest.raises(ValueError, match=r"^lossy_fusion: communication_cost must be in \[0.0, "):
+        LossyFusionConfig(communication_cost=-1.0).validate()
     with pytest.raises(ValueError, match=r"^lossy_fusion: on_time_probability \+ late_probability must be in"):
         coloc_env.parallel_env("lossy_fusion", on_time_probability=0.8)
 

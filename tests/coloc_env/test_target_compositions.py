@@ -166,7 +166,7 @@ def test_fu2017_backends_equal_the_reproduction_filters(backend, reference):
     world = env.unwrapped.scenario.world
     K = len(infos)
     outcome = _uniform_outcomes(env, K)
-    model = LossyFusionConfig(num_uavs=L, horizon=K).lossy_model()
+    model = LossyFusionConfig(num_agents=L, horizon=K).lossy_model()
     x0, P0 = world.prior()
     estimates, _ = lf.run_filters(model, x0, P0, world.observations[0], outcome, filters=(reference,))[reference]
     got = _stack(infos, "estimated_position", env)

@@ -67,7 +67,7 @@ def _enumerate_links(model):
 
 def test_augmented_moments_match_an_enumeration_of_the_link_outcomes():
     """Phibar, Psi = E[dPhi q dPhi^T] and Qbar = E[Gammat W W^T Gammat^T] from all 27 joint outcomes (L = 4)."""
-    model = model_of(num_uavs=4, on_time_probability=0.5, late_probability=0.2)
+    model = model_of(num_agents=4, on_time_probability=0.5, late_probability=0.2)
     mats = lf.augmented_matrices(model)
     n, m = model.state_dim, 3 * model.num_uavs
     d = n + 2 * m
@@ -115,7 +115,7 @@ def test_augmented_moments_match_an_enumeration_of_the_link_outcomes():
 
 def test_optimal_predictor_knows_the_received_buffer_exactly():
     """y(k) is the last block of X(k+1): the optimal gain leaves it no error, the paper's gain (21) does."""
-    model = model_of(num_uavs=3)
+    model = model_of(num_agents=3)
     mats = lf.augmented_matrices(model)
     m = 9
     y = np.tile(model.measurement @ X0, (3, 1))
@@ -128,9 +128,9 @@ def test_optimal_predictor_knows_the_received_buffer_exactly():
         assert np.trace(paper.covariance[-m:, -m:]) > 1.0
 
 
-@pytest.mark.parametrize("num_uavs", [2, 3])
-def test_without_losses_every_filter_of_the_raw_measurements_is_the_ideal_kf(num_uavs):
-    model, sim, H = episodes(20, 1, num_uavs=num_uavs, on_time_probability=1.0, late_probability=0.0)
+@pytest.mark.parametrize("num_agents", [2, 3])
+def test_without_losses_every_filter_of_the_raw_measurements_is_the_ideal_kf(num_agents):
+    model, sim, H = episodes(20, 1, num_agents=num_agents, on_time_probability=1.0, late_probability=0.0)
     results = lf.run_filters(model, X0, P0, sim["z"], sim["outcome"],
                              ("naive_kf", "centralized", "centralized_paper_gain", "informed_kf", "ideal_kf"))
     ideal, ideal_cov = results["ideal_kf"]
@@ -141,11 +141,11 @@ def test_without_losses_every_filter_of_the_raw_measurements_is_the_ideal_kf(num
                                    np.broadcast_to(ideal_cov, cov.shape), atol=1e-8, err_msg=name)
 
 
-@pytest.mark.parametrize("gain, num_uavs", [("optimal", 2), ("paper", 2), ("optimal", 4)])
-def test_centralized_covariance_matches_its_monte_carlo_error(gain, num_uavs):
+@pytest.mark.parametrize("gain, num_agents", [("optimal", 2), ("paper", 2), ("optimal", 4)])
+def test_centralized_covariance_matches_its_monte_carlo_error(gain, num_agents):
     """(A)'s own P(k|k) is its true MSE: Monte Carlo within 3 standard errors, over all k and late k."""
     runs = 400
-    model, sim, H = episodes(runs, 10 + num_uavs, num_uavs=num_uavs)
+    model, sim, H = episodes(runs, 10 + num_agents, num_agents=num_agents)
     y = lf.received_measurements(sim["z"], sim["outcome"], H @ X0)
     est, cov = lf.centralized_filter(model, X0, P0, y, gain)
     err = squared_errors(est, sim["truth"], H)  # (runs, K)
@@ -159,7 +159,7 @@ def test_centralized_covariance_matches_its_monte_carlo_error(gain, num_uavs):
 def test_optimal_gain_is_never_worse_than_the_paper_gain():
     """Both own covariances are exact MSEs, so the LMMSE gain must give the smaller trace at every k."""
     for on_time, late in ((0.4, 0.3), (0.1, 0.8), (0.7, 0.0)):
-        model, sim, H = episodes(1, 0, num_uavs=3, on_time_probability=on_time, late_probability=late)
+        model, sim, H = episodes(1, 0, num_agents=3, on_time_probability=on_time, late_probability=late)
         y = lf.received_measurements(sim["z"], sim["outcome"], H @ X0)
         _, optimal = lf.centralized_filter(model, X0, P0, y, "optimal")
         _, paper = lf.centralized_filter(model, X0, P0, y, "paper")
@@ -171,7 +171,7 @@ def test_optimal_gain_is_never_worse_than_the_paper_gain():
 def test_orderings_over_seeded_monte_carlo():
     """ideal < informed < centralized < {leader only, naive}: paired differences beyond 3 standard errors."""
     runs = 300
-    model, sim, H = episodes(runs, 5, num_uavs=3)
+    model, sim, H = episodes(runs, 5, num_agents=3)
     results = lf.run_filters(model, X0, P0, sim["z"], sim["outcome"])
     per_run = {name: squared_errors(est, sim["truth"], H).mean(axis=1) for name, (est, _) in results.items()}
 
@@ -231,7 +231,7 @@ def reference_distributed(model, z, outcome, transmit):
 
 
 def test_distributed_matches_an_independent_slot_by_slot_implementation():
-    model, sim, H = episodes(3, 2, num_uavs=3, horizon=25)
+    model, sim, H = episodes(3, 2, num_agents=3, horizon=25)
     rng = np.random.default_rng(0)
     transmit = rng.random((3, 25, 2)) < 0.7
     state = lf.distributed_initial(model, X0, P0, (3,))
@@ -249,7 +249,7 @@ def test_distributed_matches_an_independent_slot_by_slot_implementation():
 
 
 def test_batch_axes_give_the_same_numbers_as_a_flat_batch():
-    model, sim, H = episodes(6, 4, num_uavs=3, horizon=15)
+    model, sim, H = episodes(6, 4, num_agents=3, horizon=15)
     flat = lf.run_filters(model, X0, P0, sim["z"], sim["outcome"])
     shaped = lf.run_filters(model, X0, P0, sim["z"].reshape(2, 3, 15, 3, 3), sim["outcome"].reshape(2, 3, 15, 3))
     for name in lf.FILTERS:
@@ -274,7 +274,7 @@ def test_model_and_filter_arguments_are_checked():
 
 
 def test_derived_link_moment_does_not_depend_on_the_origin_but_the_printed_one_does():
-    model = model_of(num_uavs=3)
+    model = model_of(num_agents=3)
     mats = lf.augmented_matrices(model)
     rng = np.random.default_rng(8)
     d = mats.phi_bar.shape[0]

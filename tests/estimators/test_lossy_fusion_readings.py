@@ -7,11 +7,11 @@ import estimators.lossy_fusion as lf
 from tests.estimators.test_lossy_fusion import P0, X0, episodes
 
 
-@pytest.mark.parametrize("num_uavs", [2, 4])
-def test_with_every_link_on_time_every_reading_is_the_paper_s(num_uavs):
+@pytest.mark.parametrize("num_agents", [2, 4])
+def test_with_every_link_on_time_every_reading_is_the_paper_s(num_agents):
     """alpha1 = 1: the weights (29) are (1, 0, 0) and every held packet is the fresh one (age 0), so forward
     prediction by the possible ages, by the known age and the printed reading all fuse x_i(k|k)."""
-    model, sim, _ = episodes(4, 1, num_uavs=num_uavs, on_time_probability=1.0, late_probability=0.0, horizon=30)
+    model, sim, _ = episodes(4, 1, num_agents=num_agents, on_time_probability=1.0, late_probability=0.0, horizon=30)
     assert np.all(sim["outcome"] == lf.ON_TIME)
     paper = lf.distributed_filter(model, X0, P0, sim["z"], sim["outcome"])
     for reading, spread in (("forward", True), ("forward", False), ("age_aware", True)):
@@ -25,7 +25,7 @@ def test_forward_reading_spread_is_what_separates_it_from_the_printed_covariance
     the three predictions: at every slot its compensated covariance dominates the printed one, while the
     compensated estimate is the same (the followers' filters and the held packets do not depend on the fusion);
     only the fusion weights (30), hence the fused estimate, change."""
-    model, sim, _ = episodes(3, 2, num_uavs=3, horizon=20)
+    model, sim, _ = episodes(3, 2, num_agents=3, horizon=20)
     state = {s: lf.distributed_initial(model, X0, P0, (3,)) for s in (True, False)}
     for k in range(20):
         for s in state:
@@ -37,13 +37,13 @@ def test_forward_reading_spread_is_what_separates_it_from_the_printed_covariance
     assert np.abs(state[True].fused - state[False].fused).max() > 1e-3
 
 
-@pytest.mark.parametrize("num_uavs", [2, 4])
-def test_predicting_the_held_packet_forward_beats_using_it_as_current(num_uavs):
+@pytest.mark.parametrize("num_agents", [2, 4])
+def test_predicting_the_held_packet_forward_beats_using_it_as_current(num_agents):
     """The target moves ~14 m per slot: a held packet a slots old lags it by a slots. The printed reading keeps
     that whole lag (E[A^2] v^2 in the follower's error); predicting by the possible ages removes its mean,
     leaving Var(A) v^2, and the spread term tells the fusion (30) how much of it is left. Paired over 120 seeded
     runs of the paper's links, forward's MSE is below the printed reading's, the 95 % interval excluding 0."""
-    model, sim, H = episodes(120, 9, num_uavs=num_uavs)
+    model, sim, H = episodes(120, 9, num_agents=num_agents)
     mse = {r: np.sum(((lf.distributed_filter(model, X0, P0, sim["z"], sim["outcome"], reading=r)[0] - sim["truth"])
                       @ H.T) ** 2, axis=-1).mean(axis=1) for r in ("current", "forward")}
     diff = mse["forward"] - mse["current"]

@@ -207,7 +207,7 @@ def _reference_fu2017(config, seeds):
 
 
 def test_fu2017_compositions_give_the_estimator_filters_numbers_on_the_same_draws():
-    config = build_config(LossyFusionConfig, {"num_uavs": 3, "horizon": 30})
+    config = build_config(LossyFusionConfig, {"num_agents": 3, "horizon": 30})
     block = fu2017.monte_carlo_block(3, 3, 4, 1, config)
     reference = _reference_fu2017(config, fu2017.block_seeds(3, 3, 4, 1))
     assert set(block["errors"]) == set(reference) == {*lf.FILTERS, *fu2017.DIAGNOSTICS}

@@ -30,7 +30,7 @@ SHORT = {
 # (mrclam_relay has none: its five robots are the data set's.)
 OTHER_SPACES = {
     "bandwidth_fusion": {"num_uavs": 3},
-    "lossy_fusion": {"num_uavs": 3},
+    "lossy_fusion": {"num_agents": 3},
     "relay_ukf": {"num_platforms": 3},
     "nlos_horizon": {"window_max": 20},
     "gps_denied_nbp": {"num_iterations": 3},

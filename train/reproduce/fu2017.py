@@ -197,24 +197,24 @@ def filter_runs(config: LossyFusionConfig, seeds, names=(*lf.FILTERS, *DIAGNOSTI
     return {"errors": errors, "own": own, "errors_xy": errors_xy, "delivered": delivered}
 
 
-def block_seeds(num_uavs: int, runs: int, seed: int, block: int) -> list:
+def block_seeds(num_agents: int, runs: int, seed: int, block: int) -> list:
     """The episode seeds of one block: run r of block b is ``[seed, L, b * BLOCK_RUNS + r]``."""
-    return [[seed, num_uavs, block * BLOCK_RUNS + r] for r in range(runs)]
+    return [[seed, num_agents, block * BLOCK_RUNS + r] for r in range(runs)]
 
 
-def monte_carlo_block(num_uavs: int, runs: int, seed: int, block: int, config: LossyFusionConfig) -> dict:
-    """``runs`` episodes with ``num_uavs`` UAVs, every filter on the same episodes (``filter_runs`` on
+def monte_carlo_block(num_agents: int, runs: int, seed: int, block: int, config: LossyFusionConfig) -> dict:
+    """``runs`` episodes with ``num_agents`` UAVs, every filter on the same episodes (``filter_runs`` on
     ``block_seeds``)."""
-    config = dataclasses.replace(config, num_uavs=num_uavs)
-    return {"num_uavs": num_uavs, "block": block,
-            **filter_runs(config, block_seeds(num_uavs, runs, seed, block))}
+    config = dataclasses.replace(config, num_agents=num_agents)
+    return {"num_agents": num_agents, "block": block,
+            **filter_runs(config, block_seeds(num_agents, runs, seed, block))}
 
 
 def paper_policy_costs(seeds, config: LossyFusionConfig | None = None) -> np.ndarray:
     """Per-episode MSE (mean over the slots of the squared position error) of ``PAPER_FILTER``,
     the filter the env's ``paper`` policy runs, on the episodes the env draws for ``seeds``
     (``filter_runs``: the preset's composition reset with ``default_rng(seeds[e])``), with
-    ``config.num_uavs`` UAVs (the env's default 2: setting L2).
+    ``config.num_agents`` UAVs (the env's default 2: setting L2).
     """
     config = config or build_config(LossyFusionConfig, {})
     return filter_runs(config, seeds, (PAPER_FILTER,))["errors"][PAPER_FILTER].mean(axis=1)
@@ -271,7 +271,7 @@ def run(out: str, runs: int = RUNS, seed: int = 0, quick: bool = False, executor
     items = [(L, size, seed, block, config) for L in SETTINGS.values()
              for block, size in enumerate(block_sizes(runs, BLOCK_RUNS))]
     blocks = map_tasks(monte_carlo_block, items, executor, address)
-    data = {key: _merge([b for b in blocks if b["num_uavs"] == L]) for key, L in SETTINGS.items()}
+    data = {key: _merge([b for b in blocks if b["num_agents"] == L]) for key, L in SETTINGS.items()}
     if progress:
         progress(f"Monte Carlo ({runs} runs x {len(SETTINGS)} settings) done")
 
@@ -328,7 +328,7 @@ def run(out: str, runs: int = RUNS, seed: int = 0, quick: bool = False, executor
             "naive_diverges", "centralized_beats_leader_only", "distributed_beats_leader_only")}
     metrics["link_outcome_frequencies"] = {key: {"on_time": float(d["delivered"][0]), "late": float(d["delivered"][1]),
                                                  "lost": float(d["delivered"][2])} for key, d in data.items()}
-    metrics["pcrb"] = {key: bound_block(dataclasses.replace(config, num_uavs=L), data[key]["errors_xy"], seed)
+    metrics["pcrb"] = {key: bound_block(dataclasses.replace(config, num_agents=L), data[key]["errors_xy"], seed)
                        for key, L in SETTINGS.items()}
     if progress:
         progress("Cramér–Rao bounds done")
