@@ -13,6 +13,8 @@
 
 from __future__ import annotations
 
+import numpy as np
+
 from agents.base import FixedActionPolicy
 from coloc_env.config import BadInput
 
@@ -24,18 +26,26 @@ def _scenario(env):
     return scenario
 
 
+def paper_actions(scenario) -> np.ndarray:
+    """The action (N, A) of the paper's algorithm (B) on a ``lossy_fusion`` core: every follower transmits
+    (entry 0 >= 0), every tilt 0, i.e. the compensation weights (29) and the fusion weights (30)."""
+    actions = np.zeros((scenario.num_agents, scenario.action_dim))
+    actions[:, 0] = 1.0
+    return actions
+
+
 class PaperPolicy(FixedActionPolicy):
     """Always transmit; weights (29)/(30)."""
 
     def __init__(self, env):
-        super().__init__(env, _scenario(env).paper_actions())
+        super().__init__(env, paper_actions(_scenario(env)))
 
 
 class SilentPolicy(FixedActionPolicy):
     """No follower transmits; weights (29)/(30)."""
 
     def __init__(self, env):
-        actions = _scenario(env).paper_actions()
+        actions = paper_actions(_scenario(env))
         actions[:, 0] = -1.0
         super().__init__(env, actions)
 

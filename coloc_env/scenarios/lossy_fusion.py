@@ -66,14 +66,13 @@ Observation (per agent, ``Box(shape=(3 + 4 (L-1),), float32)``)
 
 The log-traces are unbounded (a filter fed by nothing but losses grows its covariance without
 limit); the packet ages have no upper bound, since a link can lose every packet of an episode of any
-``horizon``. (Before, every entry was unbounded.)
+``horizon``.
 
 Packets carry no time stamp in the paper, so without ``time_stamps`` the leader cannot
 tell a late packet from an on-time one: it knows only when each packet arrived (a late
-packet held since it arrived is one slot older than the entry says). Before issue 15 the
-entry was the age itself, which the paper's leader cannot know; ``time_stamps=True`` gives
-it back (packets stamped with their slot, one more number on the air, not counted in
-``floats_sent``, which counts the estimates).
+packet held since it arrived is one slot older than the entry says). With ``time_stamps=True``
+the entry is the packet's age (packets stamped with their slot, one more number on the air, not
+counted in ``floats_sent``, which counts the estimates).
 
 ``state()`` (centralized critic): every agent's observation, then the one-hot
 link outcome of each follower's last slot (on time, late, lost).
@@ -146,9 +145,6 @@ import estimators.lossy_fusion as lf
 from coloc_env.backends.fusion import PredictionCompensation
 from coloc_env.networks.bernoulli_delay import BernoulliDelay
 from coloc_env.parts import check_flag
-from coloc_env.primitives.delay_links import BernoulliDelayLink
-from coloc_env.primitives.sensors import LinearSensor
-from coloc_env.primitives.target import ConstantVelocityTarget
 from coloc_env.rendering import Link, Scene, ring_layout
 from coloc_env.scenarios.binding import PresetConfig, PresetScenario, keyword
 from coloc_env.worlds.target_cv import TargetCv
@@ -157,25 +153,20 @@ AGE_SCALE = 10.0
 _OUTCOME_NAMES = {lf.ON_TIME: "on time", lf.LATE: "late", lf.LOST: "lost"}
 
 
-def _diag(*values):
-    return tuple(tuple(v if i == j else 0.0 for j in range(len(values))) for i, v in enumerate(values))
-
-
 @dataclass(frozen=True)
 class LossyFusionConfig(PresetConfig):
     """Configuration of ``lossy_fusion``; defaults are the paper's simulation (Sec. 4)."""
 
     preset = "lossy_fusion"
     World, Network, Backend = TargetCv, BernoulliDelay, PredictionCompensation
-
     aliases = {"num_uavs": "num_agents", "message_cost": "communication_cost"}
 
     num_agents: int = keyword(2, "world.num_agents")
     period: float = keyword(1.0, "world.period")
     accel_noise: float = keyword(5.0, "world.accel_noise")
     measurement_noise: float = keyword(10.0, "world.measurement_noise")
-    initial_state: tuple = keyword((100.0, 10.0, 100.0, 10.0, 100.0, 0.0), "world.initial_state")
-    initial_cov: tuple = keyword(_diag(100.0, 5.0, 100.0, 5.0, 100.0, 5.0), "world.initial_cov")
+    initial_state: tuple = keyword(TargetCv.initial_state, "world.initial_state")
+    initial_cov: tuple = keyword(TargetCv.initial_cov, "world.initial_cov")
     on_time_probability: float = keyword(0.4, "network.on_time_probability")
     late_probability: float = keyword(0.3, "network.late_probability")
     horizon: int = keyword(100, "world.horizon", "composition.horizon")
@@ -186,29 +177,6 @@ class LossyFusionConfig(PresetConfig):
 
     def check_preset(self) -> None:
         check_flag("time_stamps", self.time_stamps)
-
-    @property
-    def target(self) -> ConstantVelocityTarget:
-        return ConstantVelocityTarget(3, self.period, self.accel_noise)
-
-    @property
-    def link(self) -> BernoulliDelayLink:
-        return BernoulliDelayLink(self.on_time_probability, self.late_probability)
-
-    @property
-    def sensor(self) -> LinearSensor:
-        return LinearSensor(self.target.position_matrix, float(self.measurement_noise) * np.eye(3))
-
-    def lossy_model(self) -> lf.LossyModel:
-        L, target = self.num_agents, self.target
-        return lf.LossyModel(
-            transition=target.transition,
-            process_noise=target.process_noise,
-            measurement=target.position_matrix,
-            measurement_noise=np.broadcast_to(self.sensor.noise, (L, 3, 3)).copy(),
-            on_time=np.r_[1.0, np.full(L - 1, float(self.on_time_probability))],
-            late=np.r_[0.0, np.full(L - 1, float(self.late_probability))],
-        )
 
 
 class LossyFusionScenario(PresetScenario):
@@ -292,12 +260,6 @@ class LossyFusionScenario(PresetScenario):
         backend's fusion and compensation tilts (entries 1.., clipped to [-1, 1]), in the same order."""
         arr = np.clip(self.check_actions(actions), -1.0, 1.0)
         return np.concatenate([(arr[..., :1] >= 0.0).astype(float), arr[..., 1:]], axis=-1)
-
-    def paper_actions(self) -> np.ndarray:
-        """The action (N, A) of the paper's algorithm: every follower transmits, weights (29)/(30)."""
-        actions = np.zeros((self.num_agents, self.action_dim))
-        actions[:, 0] = 1.0
-        return actions
 
     # --- dynamics ----------------------------------------------------------------
     def reset(self, rngs, env_index=None) -> None:

@@ -10,6 +10,7 @@ from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test
 import agents
 import coloc_env
 import estimators.lossy_fusion as lf
+from agents.lossy_fusion import paper_actions
 from tests.helpers import play
 
 NAME = "lossy_fusion"
@@ -127,7 +128,7 @@ def test_env_with_paper_policy_equals_the_estimator(num_agents, seed):
 
 def test_silent_followers_deliver_nothing_and_pay_no_communication_cost():
     env = coloc_env.parallel_env(NAME, num_agents=3, communication_cost=2.0)
-    paper = env.scenario.paper_actions()
+    paper = paper_actions(env.scenario)
     silent = paper.copy()
     silent[1:, 0] = -1.0
     observations, _ = env.reset(seed=1)
@@ -168,7 +169,7 @@ def test_weight_tilts_reach_the_estimator():
     """Tilting the leader's fusion weight toward itself moves the weights the estimator uses."""
     env = coloc_env.parallel_env(NAME)
     scenario = env.scenario
-    actions = scenario.paper_actions()
+    actions = paper_actions(scenario)
     actions[0, 1] = 1.0  # the leader's own fusion tilt
     actions[0, 4] = -1.0  # follower 1: less weight on x(s|s-1)
     decoded = scenario.decode_actions(actions[None])  # the network's transmit, then the backend's tilts
@@ -181,7 +182,7 @@ def test_weight_tilts_reach_the_estimator():
     env.reset(seed=0)
     _, _, _, _, tilted = env.step({a: actions[i] for i, a in enumerate(env.possible_agents)})
     env.reset(seed=0)
-    _, _, _, _, plain = env.step({a: scenario.paper_actions()[i] for i, a in enumerate(env.possible_agents)})
+    _, _, _, _, plain = env.step({a: paper_actions(scenario)[i] for i, a in enumerate(env.possible_agents)})
     assert tilted["uav_0"]["fusion_weight"] > plain["uav_0"]["fusion_weight"]
 
 

@@ -5,8 +5,7 @@ import pytest
 
 import coloc_env
 import estimators.lossy_fusion as lf
-from coloc_env.scenarios.lossy_fusion import LossyFusionConfig
-from tests.coloc_env.test_target_compositions import _always, _episode, _stack, _uniform_outcomes
+from tests.coloc_env.test_target_compositions import _always, _episode, _stack, _uniform_outcomes, paper_model
 
 
 @pytest.mark.parametrize("reading", lf.READINGS)
@@ -20,7 +19,7 @@ def test_each_reading_equals_the_estimator_s_distributed_filter(reading):
     world = env.unwrapped.scenario.world
     outcome = _uniform_outcomes(env, len(infos))
     assert {lf.ON_TIME, lf.LATE, lf.LOST} <= set(np.unique(outcome[:, 1:]))
-    model = LossyFusionConfig(num_agents=L, horizon=len(infos)).lossy_model()
+    model = paper_model(L)
     x0, P0 = world.prior()
     estimates, covariances = lf.distributed_filter(model, x0, P0, world.observations[0], outcome, reading=reading)
     got = _stack(infos, "estimated_position", env)

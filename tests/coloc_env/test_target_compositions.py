@@ -8,7 +8,9 @@ import agents
 import coloc_env
 import estimators.bandwidth_fusion as bf
 import estimators.lossy_fusion as lf
+from agents.lossy_fusion import paper_actions
 from coloc_env.draws import uniforms
+from coloc_env.primitives.target import ConstantVelocityTarget
 from coloc_env.scenarios.bandwidth_fusion import BandwidthFusionScenario, paper_selection, paper_weights
 from coloc_env.scenarios.lossy_fusion import LossyFusionConfig, LossyFusionScenario
 
@@ -106,6 +108,16 @@ def _position_trace(scenario):
     return cov[:, 0, 0] + cov[:, 1, 1]
 
 
+def paper_model(num_agents: int) -> lf.LossyModel:
+    """fu2017's model of its simulation (Sec. 4) written out from the paper: 3-D constant velocity, T = 1 s,
+    q = 5, r = 10 per axis, alpha1 = 0.4, alpha2 = 0.3 (the leader's own link always on time)."""
+    target, followers = ConstantVelocityTarget(3, 1.0, 5.0), num_agents - 1
+    return lf.LossyModel(transition=target.transition, process_noise=target.process_noise,
+                         measurement=target.position_matrix,
+                         measurement_noise=np.tile(10.0 * np.eye(3), (num_agents, 1, 1)),
+                         on_time=np.r_[1.0, np.full(followers, 0.4)], late=np.r_[0.0, np.full(followers, 0.3)])
+
+
 def _uniform_outcomes(env, steps):
     """fu2017's per-slot codes of each follower's link to the leader, from the network's own uniforms."""
     net = env.unwrapped.scenario.network
@@ -132,7 +144,7 @@ def test_the_lossy_fusion_preset_is_target_cv_bernoulli_delay_prediction_compens
     preset.world.observations[:] = composed.world.observations
     preset.network.keys[:] = composed.network.keys
     assert {lf.ON_TIME, lf.LATE, lf.LOST} <= set(np.unique(_uniform_outcomes(env, 100)[:, 1]))
-    paper = preset.paper_actions()[None]
+    paper = paper_actions(preset)[None]
     k = 0
     while env.agents:
         _, rewards, _, _, info = env.step(_always(env, k))
@@ -166,7 +178,7 @@ def test_fu2017_backends_equal_the_reproduction_filters(backend, reference):
     world = env.unwrapped.scenario.world
     K = len(infos)
     outcome = _uniform_outcomes(env, K)
-    model = LossyFusionConfig(num_agents=L, horizon=K).lossy_model()
+    model = paper_model(L)
     x0, P0 = world.prior()
     estimates, _ = lf.run_filters(model, x0, P0, world.observations[0], outcome, filters=(reference,))[reference]
     got = _stack(infos, "estimated_position", env)
