@@ -28,6 +28,8 @@ from __future__ import annotations
 
 import importlib
 
+import numpy as np
+
 READING_PACKETS = frozenset({"kalman", "centralized_lmmse", "afge", "dfir", "delay_kalman", "ukf_ccl"})
 # backends whose one estimate is the leader's (agent 0's), reported by every agent: their delivered bound is the
 # leader's for every agent (the followers' own information is not what their reported estimate uses)
@@ -50,6 +52,25 @@ def delivered_kind(backend_name: str) -> str:
 def estimates_reason(backend_name: str) -> str:
     return (f"{backend_name}'s messages carry estimates (the sender's whole history), not readings: a per-reading "
             "account of what arrived bounds no estimator that fuses them")
+
+
+def with_delivered(problem, core, record, message_kind: str, shape: tuple, readings_bound):
+    """``problem`` with its delivered bound set by the backend's ``delivered_kind``: ``"nothing"``, the local
+    bounds; ``"readings"``, ``readings_bound(arrival, lags)`` -> (recursions, their agents), ``arrival`` the
+    record's first arrival step of each ``message_kind`` message (``shape``, -1 throughout when none was sent)
+    and ``lags`` the network's longest delay; ``"estimates"``, none, with the reason. Returns ``problem``."""
+    name = core.composition.backend.name
+    kind = delivered_kind(name)
+    if kind == "nothing":
+        problem.delivered, problem.delivered_agents = problem.local, problem.local_agents
+    elif kind == "readings":
+        arrival = record.first_arrival(message_kind)
+        if arrival is None:
+            arrival = np.full(shape, -1, dtype=np.int64)
+        problem.delivered, problem.delivered_agents = readings_bound(arrival, core.network.max_delay())
+    else:
+        problem.delivered_reason = estimates_reason(name)
+    return problem
 
 
 def centre_received(record, k: int, pairs, fixes, N: int):

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from coloc_env.bound_models import delivered_kind, estimates_reason
+from coloc_env.bound_models import with_delivered
 from coloc_env.bounds import BoundProblem, Recursion, delivered_recursion
 from coloc_env.primitives.flight import OrbitParameters
 from coloc_env.worlds.nlos_orbit import ORBIT_FIELDS
@@ -83,18 +83,10 @@ def problem(core, record) -> BoundProblem:
     F, Q = np.broadcast_to(f, (steps, 4, 4)), np.broadcast_to(q, (steps, 4, 4))
     local = [Recursion(p0, np.zeros((K, 4, 4)), F, Q, np.array([[0, 1]])) for _ in range(N)]
     agents = [np.array([i]) for i in range(N)]
-    result = BoundProblem(centralized, local, agents)
-    kind = delivered_kind(core.composition.backend.name)
-    if kind == "nothing":
-        result.delivered, result.delivered_agents = local, agents
-    elif kind == "readings":
-        arrival = record.first_arrival("node_packets")  # (K, N, J)
-        if arrival is None:
-            arrival = np.full((K, N, J), -1, dtype=np.int64)
-        lags = core.network.max_delay()
-        result.delivered = [delivered_recursion(p0, F, Q, per_reading[:, i], arrival[:, i], lags, np.array([[0, 1]]))
-                            for i in range(N)]
-        result.delivered_agents = agents
-    else:
-        result.delivered_reason = estimates_reason(core.composition.backend.name)
-    return result
+
+    def readings_bound(arrival, lags):  # arrival (K, N, J)
+        return [delivered_recursion(p0, F, Q, per_reading[:, i], arrival[:, i], lags, np.array([[0, 1]]))
+                for i in range(N)], agents
+
+    return with_delivered(BoundProblem(centralized, local, agents), core, record, "node_packets", (K, N, J),
+                          readings_bound)

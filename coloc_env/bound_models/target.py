@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from coloc_env.bound_models import SHARED_AT_LEADER, delivered_kind, estimates_reason
+from coloc_env.bound_models import SHARED_AT_LEADER, with_delivered
 from coloc_env.bounds import BoundProblem, Recursion, delivered_recursion
 from estimators.bounds import linear_information
 
@@ -50,23 +50,16 @@ def problem(core, record) -> BoundProblem:
     centralized = Recursion(P0, np.broadcast_to(own.sum(axis=0), (K, n, n)), F, Q, positions)
     local = [Recursion(P0, np.broadcast_to(own[i], (K, n, n)), F, Q, one) for i in range(N)]
     agents = [np.array([i]) for i in range(N)]
-    result = BoundProblem(centralized, local, agents)
-    kind = delivered_kind(core.composition.backend.name)
-    if kind == "nothing":
-        result.delivered, result.delivered_agents = local, agents
-    elif kind == "readings":
-        arrival = record.first_arrival("packets")  # (K, N, N) [t, s]
-        if arrival is None:
-            arrival = np.full((K, N, N), -1, dtype=np.int64)
-        sender_info = np.broadcast_to(own, (K, N, n, n))
-        lags = core.network.max_delay()
-        result.delivered, result.delivered_agents = [], agents
-        for s in range(N):
+    shared = core.composition.backend.name in SHARED_AT_LEADER  # every agent reports the leader's estimate
+    sender_info = np.broadcast_to(own, (K, N, n, n))
+
+    def readings_bound(arrival, lags):  # arrival (K, N, N) [t, s]: each receiver's own z at once, the packets' later
+        delivered = []
+        for s in range(1 if shared else N):
             at_s = arrival[..., s].copy()
-            at_s[..., s] = 0  # its own reading, at once
-            result.delivered.append(delivered_recursion(P0, F, Q, sender_info, at_s, lags, one))
-        if core.composition.backend.name in SHARED_AT_LEADER:  # every agent reports the leader's estimate
-            result.delivered, result.delivered_agents = result.delivered[:1], [np.arange(N)]
-    else:
-        result.delivered_reason = estimates_reason(core.composition.backend.name)
-    return result
+            at_s[..., s] = 0
+            delivered.append(delivered_recursion(P0, F, Q, sender_info, at_s, lags, one))
+        return delivered, ([np.arange(N)] if shared else agents)
+
+    return with_delivered(BoundProblem(centralized, local, agents), core, record, "packets", (K, N, N),
+                          readings_bound)
