@@ -288,10 +288,12 @@ def _right_solve(S: np.ndarray, B: np.ndarray) -> np.ndarray:
 def deliver(fresh: np.ndarray, previous: np.ndarray, held: np.ndarray, outcome: np.ndarray) -> np.ndarray:
     """Eq. (3) for one slot: ``fresh`` if on time, ``previous`` if late, else ``held``.
 
-    ``outcome`` has shape (..., L); the arrays (..., L, *tail) broadcast against it.
+    ``outcome`` has shape (..., L); the arrays (..., L, *tail) broadcast against it (one of them at least
+    carries every leading axis; the others may lack them, e.g. a covariance shared by the copies).
     """
     outcome = np.asarray(outcome)
-    code = outcome.reshape(outcome.shape + (1,) * (np.ndim(fresh) - outcome.ndim))
+    tail = max(np.ndim(fresh), np.ndim(previous), np.ndim(held)) - outcome.ndim
+    code = outcome.reshape(outcome.shape + (1,) * tail)
     return np.where(code == ON_TIME, fresh, np.where(code == LATE, previous, held))
 
 
@@ -611,6 +613,10 @@ class DistributedState:
     weights                      (..., L)               the fusion weights a_i used (leader first)
     compensated(_cov)            (..., L-1, n[, n])     the compensated follower estimates of (29)
     delivered                    (..., L-1) int         ON_TIME / LATE (a packet arrived) or LOST (none)
+
+    The followers' filters read every slot whatever they send, so ``prediction_cov`` and ``packet_cov``
+    do not depend on the data: they may lack the leading axes (one stack shared by runs at the same slot),
+    and ``distributed_step`` then returns them without those axes too.
     """
 
     prediction: np.ndarray

@@ -138,6 +138,7 @@ what the printed ones cost; the filter's covariance is then no longer its MSE. `
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 
 import numpy as np
@@ -224,6 +225,13 @@ class TargetBackend(Backend):
 
     def predict(self, inputs) -> None:
         return None
+
+    def copies_by_step(self) -> list:
+        """[(k, rows)]: the copies at each step k of the world (every copy at one k: a slice, no index array)."""
+        k = np.asarray(self.world.k)
+        if np.all(k == k[0]):
+            return [(int(k[0]), slice(None))]
+        return [(int(step), np.flatnonzero(k == step)) for step in np.unique(k)]
 
     def position(self) -> np.ndarray:
         return self.estimate[..., self.pos]
@@ -462,10 +470,8 @@ class CentralizedLmmseBackend(TargetBackend):
         outcome = self.links.outcomes(float(self.model.meas_dim))
         self.held = lf.deliver(z, self.previous, self.held, outcome)
         self.previous = z
-        k = np.asarray(self.world.k)
         offset = self.shift.now()
-        for step in np.unique(k):  # copies at the same k share P(k|k-1); the list grows one k at a time
-            rows = np.flatnonzero(k == step)
+        for step, rows in self.copies_by_step():  # copies at the same k share P(k|k-1); one more k at a time
             cov, mean_m, cov_m = self._moments[step]
             state = lf.CentralizedState(self.augmented[rows], cov, mean_m, cov_m)
             nxt, filtered, filtered_cov = lf.centralized_step(self.model, state, self.held[rows], self.config.gain,
@@ -500,7 +506,15 @@ class PredictionCompensation(PartConfig):
         return PredictionCompensationBackend(self, world, network, batch)
 
 
+# the followers' filter covariances: the same for every copy at a slot (DistributedState)
+FOLLOWER_COVS = ("prediction_cov", "packet_cov")
+
+
 class PredictionCompensationBackend(TargetBackend):
+    """(B) at the leader. The followers' own filters read every slot whatever they send, so their covariances
+    depend on the slot only: one stack (L-1, ...) for the copies at each slot k (``follower_covs[k]``, kept
+    for the slots some copy is at), shown per copy in ``fusion``."""
+
     def __init__(self, config, world, network, batch):
         super().__init__(config, world, network, batch)
         self.model = lossy_model(world, network)
@@ -509,6 +523,10 @@ class PredictionCompensationBackend(TargetBackend):
         self.shift = ShiftedInput(world)
         self._x0, self._P0 = world.prior()
         self.fusion = lf.distributed_initial(self.model, self._x0, self._P0, (self.batch,))
+        first = lf.distributed_initial(self.model, self._x0, self._P0)
+        self._first_covs = tuple(getattr(first, name) for name in FOLLOWER_COVS)
+        self.follower_covs = {0: self._first_covs}
+        self._show_follower_covs(self.copies_by_step())
         n = self.n
         self.payload = 3 * n + 3 * n * (n + 1) // 2
         self.outcome = np.zeros((self.batch, self.num_agents), np.int8)
@@ -527,7 +545,10 @@ class PredictionCompensationBackend(TargetBackend):
     def reset(self, rngs, idx) -> None:
         fresh = lf.distributed_initial(self.model, self._x0, self._P0, (len(idx),))
         for field, value in vars(fresh).items():
-            getattr(self.fusion, field)[idx] = value
+            if field not in FOLLOWER_COVS:
+                getattr(self.fusion, field)[idx] = value
+        self.follower_covs[0] = self._first_covs
+        self._show_follower_covs(self.copies_by_step())
         self.links.reset(idx)
         self.estimate[idx] = self._x0
         self.cov[idx] = self._P0
@@ -546,10 +567,52 @@ class PredictionCompensationBackend(TargetBackend):
         z = self.shift.measurements(readings.extra["linear"])
         self.outcome = self.links.outcomes(float(self.payload))
         compensation, fusion_factors = self.decode(decisions)
-        self.fusion = lf.distributed_step(self.model, self.fusion, z, self.outcome, None, compensation,
-                                          fusion_factors, self.config.reading, self.config.forward_spread)
+        groups = self.copies_by_step()
+        if len(groups) == 1:
+            self.fusion = self._fuse(groups[0][0], self.fusion, z, self.outcome, compensation, fusion_factors)
+        else:  # copies reset at other slots: the copies of each slot apart, then one state again
+            parts = [(rows, self._fuse(k, self._rows(self.fusion, rows), z[rows], self.outcome[rows],
+                                       compensation[rows], fusion_factors[rows])) for k, rows in groups]
+            merged = {}
+            for name, value in vars(self.fusion).items():
+                if name not in FOLLOWER_COVS:  # those are shown below
+                    value = np.empty((self.batch, *getattr(parts[0][1], name).shape[1:]), value.dtype)
+                    for rows, part in parts:
+                        value[rows] = getattr(part, name)
+                merged[name] = value
+            self.fusion = lf.DistributedState(**merged)
+        self._show_follower_covs([(k + 1, rows) for k, rows in groups])
         self.estimate[:] = (self.fusion.fused + self.shift.now())[:, None, :]
         self.cov[:] = self.fusion.fused_cov[:, None]
+
+    def _fuse(self, k: int, state, z, outcome, compensation, fusion_factors):
+        """``estimators.lossy_fusion.distributed_step`` of the copies at slot k (``state`` theirs) with the
+        followers' covariances of slot k, shared; keeps those of slot k + 1."""
+        state = copy.copy(state)
+        state.prediction_cov, state.packet_cov = self.follower_covs[k]
+        new = lf.distributed_step(self.model, state, z, outcome, None, compensation, fusion_factors,
+                                  self.config.reading, self.config.forward_spread)
+        self.follower_covs[k + 1] = (new.prediction_cov, new.packet_cov)
+        return new
+
+    @staticmethod
+    def _rows(state, rows):
+        return lf.DistributedState(**{name: value if name in FOLLOWER_COVS else value[rows]
+                                      for name, value in vars(state).items()})
+
+    def _show_follower_covs(self, groups) -> None:
+        """``fusion.prediction_cov`` / ``packet_cov`` (B, L-1, ...) at each copy's slot (read-only views of the
+        shared stack when every copy is at one slot); the stacks of slots no copy is at are dropped."""
+        self.follower_covs = {k: self.follower_covs[k] for k, _ in groups}
+        for index, name in enumerate(FOLLOWER_COVS):
+            shared = self.follower_covs[groups[0][0]][index]
+            if len(groups) == 1:
+                setattr(self.fusion, name, np.broadcast_to(shared, (self.batch, *shared.shape)))
+                continue
+            full = np.empty((self.batch, *shared.shape))
+            for k, rows in groups:
+                full[rows] = self.follower_covs[k][index]
+            setattr(self.fusion, name, full)
 
 
 __all__ = ["BandwidthFusion", "CentralizedLmmse", "PredictionCompensation", "TargetBackend", "slot_probabilities"]

@@ -162,22 +162,15 @@ class KalmanBackend(TargetBackend):
             self.mean, self.full_cov = self.mean @ F.T, symmetrize(F @ self.full_cov @ F.T + Qa)
         else:
             self.mean = self.mean @ self.A.T
-            for k, rows in self._groups():
+            for k, rows in self.copies_by_step():
                 if len(self._priors) == k + 1:
                     self._priors.append(symmetrize(self.A @ self._posteriors[k] @ self.A.T + self.Q))
                 self.full_cov[rows] = self._priors[k + 1]
 
-    def _groups(self):
-        """(k, rows): the copies at each step k (every copy: a slice, no index arrays)."""
-        k = np.asarray(self.world.k)
-        if np.all(k == k[0]):
-            return [(int(k[0]), slice(None))]
-        return [(int(step), np.flatnonzero(k == step)) for step in np.unique(k)]
-
     def _shared_update(self, z: np.ndarray) -> None:
         """``estimators.lossy_fusion.kalman_update`` of every copy with z (B, p), the covariance of the
         copies at the same k computed once (a (1, n, n) stack, the batched path's values per copy)."""
-        for k, rows in self._groups():
+        for k, rows in self.copies_by_step():
             mean, post = lf.kalman_update(self.mean[rows], self._priors[k], z[rows], self.H_stack, self.R_stack)
             if len(self._posteriors) == k:
                 self._posteriors.append(post)
