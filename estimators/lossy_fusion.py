@@ -385,10 +385,24 @@ def informed_update(model: LossyModel, mean, cov, used_before, y_k: np.ndarray, 
     R = np.asarray(model.measurement_noise, float)
     _, _, H_now, H_before = informed_matrices(model) if mats is None else mats
     for i in range(model.num_uavs):
-        mean, cov = kalman_update(mean, cov, y_k[..., i, :], H_now, R[i], code[..., i] == ON_TIME)
+        on_time = code[..., i] == ON_TIME
         late_new = (code[..., i] == LATE) & ~used_before[..., i]
-        mean, cov = kalman_update(mean, cov, y_k[..., i, :], H_before, R[i], late_new)
+        for H, mask in ((H_now, on_time), (H_before, late_new)):
+            mean, cov = _masked_update(mean, cov, y_k[..., i, :], H, R[i], mask)
     return mean, cov, code == ON_TIME
+
+
+def _masked_update(mean, cov, z, H, R, mask):
+    """``kalman_update`` of the runs where ``mask`` (...) is True, computed for those runs only (each run's
+    update is its own: the same values); new arrays where any run is updated, the inputs where none is."""
+    if mask.all():
+        return kalman_update(mean, cov, z, H, R)
+    if not mask.any():
+        return mean, cov
+    rows = np.nonzero(mask)
+    mean, cov = mean.copy(), cov.copy()
+    mean[rows], cov[rows] = kalman_update(mean[rows], cov[rows], z[rows], H, R)
+    return mean, cov
 
 
 def informed_filter(model: LossyModel, x0_mean, P0, y: np.ndarray, outcome: np.ndarray):
@@ -761,6 +775,8 @@ def distributed_filter(model: LossyModel, x0_mean, P0, z: np.ndarray, outcome: n
     z = np.asarray(z, float)
     K, batch, n = z.shape[-3], z.shape[:-3], model.state_dim
     state = distributed_initial(model, x0_mean, P0, batch)
+    shared = distributed_initial(model, x0_mean, P0)  # the followers' covariances: one stack for every run
+    state.prediction_cov, state.packet_cov = shared.prediction_cov, shared.packet_cov
     estimates, covariances = np.empty((*batch, K, n)), np.empty((*batch, K, n, n))
     for k in range(K):
         state = distributed_step(model, state, z[..., k, :, :], outcome[..., k, :], reading=reading,
