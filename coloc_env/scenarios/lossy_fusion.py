@@ -24,10 +24,11 @@ action codec, observation and info. The world draws the episode (x(0), the
 accelerations, the measurement noise) from the episode's generator
 (``coloc_env.worlds.target_cv``); the link outcomes are the network's
 counter-based draws from its own generator, fixed at reset
-(``LossyFusionScenario.link_outcomes``). One reading differs from eq. (3) as printed and changes no estimate: a "late"
-outcome after an on-time packet delivers nothing (the packet it would
-re-deliver is the one already held; ``delivered`` then says lost, and the
-held value and its age are the same either way).
+(``LossyFusionScenario.link_outcomes``). One reading differs from eq. (3)
+as printed and changes no estimate: a "late" outcome after an on-time
+packet delivers nothing (the packet it would re-deliver is the one already
+held; ``delivered`` then says lost, and the held value and its age are the
+same either way).
 
 The agents decide what the paper fixes: followers whether to transmit each
 slot, the leader how to tilt the compensation and fusion weights away from
