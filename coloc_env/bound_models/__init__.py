@@ -18,10 +18,11 @@ Which backends' messages define ``delivered`` (``delivered_kind``):
 |             | ``ukf_ccl`` (each range and fix sent to the | the centre's: every odometry (its model), the |
 |             | centre, agent 0)                            | readings that reached it (``centre_received``) |
 | nothing     | ``dead_reckoning``                         | = local                                       |
+| estimates   | every other backend                        | left out (see ``coloc_env.bounds``)           |
 
 ``kalman``, ``centralized_lmmse`` and ``ukf_ccl`` fuse at the leader (the centre) and every agent reports its
-estimate: their delivered bound is the leader's, for every agent (``SHARED_AT_LEADER``).
-| estimates   | every other backend                        | left out (see ``coloc_env.bounds``)        |
+estimate: their delivered bound is the leader's, for every agent (``SHARED_AT_LEADER``). ``with_delivered``
+sets a problem's delivered bound by this table; a world's module gives only its readings' recursion.
 """
 
 from __future__ import annotations
