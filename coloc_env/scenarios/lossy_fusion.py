@@ -110,29 +110,31 @@ the packet the leader holds from this follower; 0 for the leader),
 
 Arguments (fields of ``LossyFusionConfig``, defaults = the paper)
 ---------------------------------------------------------------------
-| field                | default                          | allowed                                  |
-|----------------------|----------------------------------|------------------------------------------|
-| num_agents           | 2                                | 2..16: L, the leader included            |
-| period               | 1.0                              | (0, 1e4] s: T; with accel_noise, the     |
-|                      |                                  | process noise q G G^T must pass the      |
-|                      |                                  | model's PSD check (a large q T^4 fails)  |
-| accel_noise          | 5.0                              | [0, 1e12] m^2/s^4 per axis: q            |
-| measurement_noise    | 10.0                             | [1e-6, 1e12] m^2 per axis: r             |
-| initial_state        | (100, 10, 100, 10, 100, 0)       | (6,) in [-1e6, 1e6]: X0; x(0) ~ N(X0, P0)|
-| initial_cov          | diag(100, 5, 100, 5, 100, 5)     | (6, 6) positive definite, entries        |
-|                      |                                  | <= 1e12: P0 (the observation divides by  |
-|                      |                                  | its trace)                               |
-| on_time_probability  | 0.4                              | [0, 1]: alpha1                           |
-| late_probability     | 0.3                              | [0, 1]: alpha2; alpha1 + alpha2 in (0, 1]|
-| horizon              | 100                              | 1..100000 slots                          |
-| reward               | "error"                          | "error", "trace" (both m^2)              |
-| communication_cost   | 0.0                              | [0, 1e12] m^2 per packet sent            |
-| weight_logit_scale   | 3.0                              | (0, 50]                                  |
-| time_stamps          | False                            | bool: packets carry their slot (the      |
-|                      |                                  | observation shows ages, not arrivals)    |
+Each keyword sets the field of the same name of the part in ``sets``, whose check is the one that
+runs (a refused value is reported as ``lossy_fusion: <keyword> must be ...``); ``preset``: read by
+this module only. Older keywords, still accepted by ``make`` and ``parallel_env`` (give one name of
+a pair): ``num_uavs`` for ``num_agents``, ``message_cost`` for ``communication_cost``.
 
-Older keywords, still accepted by ``make`` and ``parallel_env`` (give one name of a pair):
-``num_uavs`` is ``num_agents``, ``message_cost`` is ``communication_cost``.
+| field               | default                      | allowed                                   | sets              |
+|---------------------|------------------------------|-------------------------------------------|-------------------|
+| num_agents          | 2                            | 2..16: L, the leader included             | world             |
+| period              | 1.0                          | (0, 1e4] s: T; with accel_noise, the      | world             |
+|                     |                              | process noise q G G^T must pass the       |                   |
+|                     |                              | model's PSD check (a large q T^4 fails)   |                   |
+| accel_noise         | 5.0                          | [0, 1e12] m^2/s^4 per axis: q             | world             |
+| measurement_noise   | 10.0                         | [1e-6, 1e12] m^2 per axis: r              | world             |
+| initial_state       | (100, 10, 100, 10, 100, 0)   | (6,) in [-1e6, 1e6]: X0; x(0) ~ N(X0, P0) | world             |
+| initial_cov         | diag(100, 5, 100, 5, 100, 5) | (6, 6) positive definite, entries         | world             |
+|                     |                              | <= 1e12: P0 (the observation divides by   |                   |
+|                     |                              | its trace)                                |                   |
+| on_time_probability | 0.4                          | [0, 1]: alpha1                            | network           |
+| late_probability    | 0.3                          | [0, 1]: alpha2; alpha1 + alpha2 in (0, 1] | network           |
+| horizon             | 100                          | 1..100000 slots                           | world, composition|
+| reward              | "error"                      | "error", "trace" (both m^2)               | composition       |
+| communication_cost  | 0.0                          | [0, 1e12] m^2 per packet sent             | composition       |
+| weight_logit_scale  | 3.0                          | (0, 50]                                   | backend           |
+| time_stamps         | False                        | bool: packets carry their slot (the       | preset            |
+|                     |                              | observation shows ages, not arrivals)     |                   |
 """
 
 from __future__ import annotations
