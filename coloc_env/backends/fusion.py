@@ -138,7 +138,6 @@ what the printed ones cost; the filter's covariance is then no longer its MSE. `
 
 from __future__ import annotations
 
-import copy
 from dataclasses import dataclass
 
 import numpy as np
@@ -228,9 +227,10 @@ class TargetBackend(Backend):
 
     def copies_by_step(self) -> list:
         """[(k, rows)]: the copies at each step k of the world (every copy at one k: a slice, no index array)."""
-        k = np.asarray(self.world.k)
-        if np.all(k == k[0]):
-            return [(int(k[0]), slice(None))]
+        k = self.world.k
+        first = int(k[0])
+        if self.batch == 1 or (k == first).all():  # the method: np.all's dispatch costs more at one copy
+            return [(first, slice(None))]
         return [(int(step), np.flatnonzero(k == step)) for step in np.unique(k)]
 
     def position(self) -> np.ndarray:
@@ -586,9 +586,8 @@ class PredictionCompensationBackend(TargetBackend):
         self.cov[:] = self.fusion.fused_cov[:, None]
 
     def _fuse(self, k: int, state, z, outcome, compensation, fusion_factors):
-        """``estimators.lossy_fusion.distributed_step`` of the copies at slot k (``state`` theirs) with the
-        followers' covariances of slot k, shared; keeps those of slot k + 1."""
-        state = copy.copy(state)
+        """``estimators.lossy_fusion.distributed_step`` of the copies at slot k (``state`` theirs, which the result
+        replaces) with the followers' covariances of slot k, shared; keeps those of slot k + 1."""
         state.prediction_cov, state.packet_cov = self.follower_covs[k]
         new = lf.distributed_step(self.model, state, z, outcome, None, compensation, fusion_factors,
                                   self.config.reading, self.config.forward_spread)
@@ -601,14 +600,18 @@ class PredictionCompensationBackend(TargetBackend):
                                       for name, value in vars(state).items()})
 
     def _show_follower_covs(self, groups) -> None:
-        """``fusion.prediction_cov`` / ``packet_cov`` (B, L-1, ...) at each copy's slot (read-only views of the
-        shared stack when every copy is at one slot); the stacks of slots no copy is at are dropped."""
+        """``fusion.prediction_cov`` / ``packet_cov`` (B, L-1, ...) at each copy's slot (views of the shared stack
+        when every copy is at one slot: read them, never write); the stacks of slots no copy is at are dropped."""
+        if len(groups) == 1:
+            k = groups[0][0]
+            self.follower_covs = {k: self.follower_covs[k]}
+            for shared, name in zip(self.follower_covs[k], FOLLOWER_COVS, strict=True):  # one copy: a new axis
+                setattr(self.fusion, name, shared[None] if self.batch == 1 else
+                        np.broadcast_to(shared, (self.batch, *shared.shape)))
+            return
         self.follower_covs = {k: self.follower_covs[k] for k, _ in groups}
         for index, name in enumerate(FOLLOWER_COVS):
             shared = self.follower_covs[groups[0][0]][index]
-            if len(groups) == 1:
-                setattr(self.fusion, name, np.broadcast_to(shared, (self.batch, *shared.shape)))
-                continue
             full = np.empty((self.batch, *shared.shape))
             for k, rows in groups:
                 full[rows] = self.follower_covs[k][index]
