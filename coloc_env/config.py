@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import numbers
+import re
 from typing import Any, TypeVar
 
 import numpy as np
@@ -41,8 +42,10 @@ def read_aliases(config_cls: type, kwargs: dict[str, Any], prefix: str = "") -> 
 
 def build_config(config_cls: type[C], kwargs: dict[str, Any]) -> C:
     """Instantiate ``config_cls(**kwargs)`` after rejecting unknown keys, then validate it. A key listed in
-    the class's ``aliases`` (older name -> current name) is read as its current name."""
+    the class's ``aliases`` (older name -> current name) is read as its current name, and an error about
+    its value names it as the user wrote it."""
     names = {f.name for f in dataclasses.fields(config_cls)}
+    given = set(kwargs)
     kwargs = read_aliases(config_cls, kwargs)
     unknown = sorted(set(kwargs) - names)
     if unknown:
@@ -52,7 +55,17 @@ def build_config(config_cls: type[C], kwargs: dict[str, Any]) -> C:
             f"unknown config key(s) {unknown} for {config_cls.__name__}; allowed keys: {sorted(names)}{also}"
         )
     config = config_cls(**kwargs)
-    validate_fields(config)
+    try:
+        validate_fields(config)
+    except BadInput as exc:
+        # a value given under an older name is refused under the name the user wrote
+        message = str(exc)
+        for alias, name in getattr(config_cls, "aliases", {}).items():
+            if alias in given:
+                message = re.sub(rf"(?<![\w.]){re.escape(name)}(?!\w)", alias, message)
+        if message == str(exc):
+            raise
+        raise BadInput(message) from exc
     return config
 
 
