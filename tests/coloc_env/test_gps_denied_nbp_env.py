@@ -84,7 +84,7 @@ def test_spaces_state_render_and_infos():
     ({"schedule": "random"}, "schedule"),
     ({"reward": "mse"}, "reward"),
     ({"communication_cost": -0.1}, "communication_cost"),
-    ({"broadcast_cost": -0.1}, "communication_cost"),  # its older name
+    ({"broadcast_cost": -0.1}, "^gps_denied_nbp: broadcast_cost must be in"),  # its older name, as written
     ({"team_reward": 1}, "team_reward"),
     ({"initial_threshold": 11}, r"initial_threshold must be in \[1, num_uavs = 10\]"),
     ({"nominal_velocity": (20.0, np.nan)}, "nominal_velocity"),

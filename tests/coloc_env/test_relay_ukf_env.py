@@ -83,7 +83,7 @@ def test_spaces_defaults_and_geometry():
     ({"heading_noise": "yes"}, "heading_noise"),
     ({"horizon": 0}, "horizon"),
     ({"communication_cost": -1.0}, "^relay_ukf: communication_cost must be in"),
-    ({"hop_cost": -1.0}, "^relay_ukf: communication_cost must be in"),  # the older name of communication_cost
+    ({"hop_cost": -1.0}, "^relay_ukf: hop_cost must be in"),  # the older name of communication_cost, as written
     ({"hop_cost_per_m2": -1.0}, "^relay_ukf: hop_cost_per_m2 must be in"),
     ({"max_hop": 2}, "unknown config key"),
 ])
