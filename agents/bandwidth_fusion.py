@@ -90,7 +90,7 @@ def greedy_selection(scenario, weights: np.ndarray) -> np.ndarray:
     """
     links, model = scenario.links, scenario.backend.model
     if links.size > GREEDY_MAX_OPTIONS:
-        raise BadInput(f"greedy scores every feasible selection: {links.size} with num_uavs={links.num_nodes}, "
+        raise BadInput(f"greedy scores every feasible selection: {links.size} with num_agents={links.num_nodes}, "
                        f"budget={links.budget}, more than {GREEDY_MAX_OPTIONS}; use fewer UAVs or a tighter "
                        "min_per_link / max_per_link")
     feasible = links.feasible  # (F, N-1, n)
@@ -200,7 +200,7 @@ class OracleStaticPolicy(FixedActionPolicy):
     def __init__(self, env):
         scenario = _scenario(env)
         if (scenario.num_agents, scenario.n) != (4, 3):
-            raise BadInput("oracle_static starts from the paper's tables and needs num_uavs=4 with a 3-d state")
+            raise BadInput("oracle_static starts from the paper's tables and needs num_agents=4 with a 3-d state")
         self.result = oracle_static_search(scenario)[0]
         super().__init__(env, scenario.encode_actions(self.result.selection, paper_weights(self.result.weights)))
 

@@ -125,14 +125,14 @@ STRESS = os.environ.get("COLOC_STRESS") == "1"
 # A documented end that a rule between two fields refuses with the other field's default runs with the other
 # field moved to a value the rule allows (target name, field, end) -> the other fields (a part: per kind).
 COMPANIONS = {
-    ("bandwidth_fusion", "num_uavs", "min"): {"budget": 2},
-    ("bandwidth_fusion", "num_uavs", "max"): {"budget": 30},
+    ("bandwidth_fusion", "num_agents", "min"): {"budget": 2},
+    ("bandwidth_fusion", "num_agents", "max"): {"budget": 30},
     ("bandwidth_fusion", "min_per_link", "max"): {"budget": 9},
     ("bandwidth_fusion", "max_per_link", "min"): {"min_per_link": 0, "budget": 0},
     ("lossy_fusion", "on_time_probability", "max"): {"late_probability": 0.0},
     ("lossy_fusion", "late_probability", "max"): {"on_time_probability": 0.0},
     ("relay_ukf", "dt", "max"): {"turn_rate": 1e-4},
-    ("gps_denied_nbp", "num_uavs", "min"): {"initial_threshold": 2},
+    ("gps_denied_nbp", "num_agents", "min"): {"initial_threshold": 2},
     ("nlos_horizon", "num_neighbours", "min"): {"n_strongest": 1, "min_packets": 1},
     ("nlos_horizon", "p_nlos", "max"): {"p10": 0.0},
     ("nlos_horizon", "buffer_length", "min"): {"delay_probs": (0.9,)},

@@ -150,7 +150,7 @@ def _gps_denied_nbp_particle_rows(min_seconds: float, batch: int | None = None, 
             fault_steps += int((~stack["gps_normal"][:, k]).sum())
         rate = steps / elapsed
         rows.append({"scenario": "gps_denied_nbp", "what": f"dNBP step, M = {M}", "batch": batch,
-                     "env_steps_per_s": rate * batch, "agent_steps_per_s": rate * batch * config.num_uavs,
+                     "env_steps_per_s": rate * batch, "agent_steps_per_s": rate * batch * config.num_agents,
                      "time_per_fault_uav_step_s": elapsed / max(fault_steps, 1)})
     return rows
 

@@ -113,14 +113,14 @@ reset, where each copy draws its whole episode's noise from its own generator.
 
 Arguments (fields of ``BandwidthFusionConfig``, defaults = the paper)
 ------------------------------------------------------------------------
-Each keyword sets the field of the same name (or the one named) of the part
-in ``sets``, whose check is the one that runs (a refused value is reported as
+Each keyword sets the field of the same name of the part in ``sets``, whose
+check is the one that runs (a refused value is reported as
 ``bandwidth_fusion: <keyword> must be ...``); ``preset``: read by this module
 only.
 
 | field              | default                | allowed                                      | sets                |
 |--------------------|------------------------|----------------------------------------------|---------------------|
-| num_uavs           | 4                      | 2..16                                        | world (num_agents)  |
+| num_agents         | 4                      | 2..16 (older name: ``num_uavs``)             | world               |
 | transition         | I_3                    | (n, n), n in 2..16, entries in [-1e6, 1e6],  | world               |
 |                    |                        | spectral radius <= 1.001                     |                     |
 | drift              | (0.5, 0.5, 0.5)        | (n,), entries in [-1e6, 1e6] (m per step)    | world               |
@@ -173,8 +173,9 @@ class BandwidthFusionConfig(PresetConfig):
 
     preset = "bandwidth_fusion"
     World, Network, Backend = Drift, ScoredBandwidth, BandwidthFusion
+    aliases = {"num_uavs": "num_agents"}
 
-    num_uavs: int = keyword(4, "world.num_agents")
+    num_agents: int = keyword(4, "world.num_agents")
     transition: tuple = keyword(Drift.transition, "world.transition")
     drift: tuple = keyword(Drift.drift, "world.drift")
     measurement: tuple = keyword(Drift.measurement, "world.measurement")
@@ -194,20 +195,20 @@ class BandwidthFusionConfig(PresetConfig):
 
     def check_preset(self) -> None:
         """What only the preset asks: M(0) positive definite (the observation takes the log of its diagonal),
-        ``component_cost``, and the budget feasible for ``num_uavs`` agents and n components (the network's
+        ``component_cost``, and the budget feasible for ``num_agents`` agents and n components (the network's
         own check, ``ScoredBandwidth.budget_for``, which the parts' checks cannot run without n)."""
         n = np.asarray(self.transition).shape[0]
         check_psd("initial_cov", self.initial_cov, n, strict=True)
         check_range("component_cost", self.component_cost, 0.0, 1e12)
         try:
-            self.parts()[1].budget_for(self.num_uavs, n, prefix="")
+            self.parts()[1].budget_for(self.num_agents, n, prefix="")
         except ValueError as exc:  # a range the other keywords set: name them
-            raise ValueError(f"{exc} (with num_uavs={self.num_uavs}, min_per_link={self.min_per_link}, "
+            raise ValueError(f"{exc} (with num_agents={self.num_agents}, min_per_link={self.min_per_link}, "
                              f"max_per_link={self.max_per_link})") from exc
 
     def fusion_model(self) -> bf.FusionModel:
         """The estimator's model of this system, as the backend builds it from the world's models."""
-        return fusion_model(*self.parts()[0].models(), self.num_uavs)
+        return fusion_model(*self.parts()[0].models(), self.num_agents)
 
 
 class BandwidthFusionScenario(PresetScenario):

@@ -101,7 +101,7 @@ Arguments (fields of ``GpsDeniedNbpConfig``, defaults = docs/wan2014.md section 
 --------------------------------------------------------------------------------
 | field              | default     | allowed                   | tag / meaning                                |
 |--------------------|-------------|---------------------------|----------------------------------------------|
-| num_uavs           | 10          | 2..128                    | N [chosen]                                   |
+| num_agents         | 10          | 2..128                    | N [chosen] (older name: ``num_uavs``)        |
 | horizon            | 30          | 1..10000                  | T [chosen] (50 allowed)                      |
 | dt                 | 1.0         | (0, 1000]                 | Delta t [chosen]                             |
 | area               | 500         | (0, 1e7]                  | initial positions ~ U([0, area]^2) [chosen]  |
@@ -134,9 +134,8 @@ Arguments (fields of ``GpsDeniedNbpConfig``, defaults = docs/wan2014.md section 
 | communication_cost | 0.0         | [0, 1e12]                 | lambda, metres per broadcast (older name:    |
 |                    |             |                           | ``broadcast_cost``)                          |
 
-Each keyword sets the part field of the same name (``num_uavs``: the world's ``num_agents``;
-``comm_range``: the world's ranging radius and the network's; ``horizon``, ``reward`` and
-``communication_cost``: the composition's); each check is the part's.
+Each keyword sets the part field of the same name (``comm_range``: the world's ranging radius and the
+network's; ``horizon``, ``reward`` and ``communication_cost``: the composition's); each check is the part's.
 """
 
 from __future__ import annotations
@@ -163,9 +162,9 @@ class GpsDeniedNbpConfig(PresetConfig):
 
     preset = "gps_denied_nbp"
     World, Network, Backend = GpsDenied, Broadcast, Dnbp
-    aliases = {"broadcast_cost": "communication_cost"}
+    aliases = {"num_uavs": "num_agents", "broadcast_cost": "communication_cost"}
 
-    num_uavs: int = keyword(10, "world.num_agents")
+    num_agents: int = keyword(10, "world.num_agents")
     horizon: int = keyword(30, "world.horizon", "composition.horizon")
     dt: float = keyword(1.0, "world.dt")
     area: float = keyword(500.0, "world.area")
@@ -201,7 +200,8 @@ class GpsDeniedNbpConfig(PresetConfig):
 
     def check_preset(self) -> None:
         """The backend's threshold against the world's N: a rule between two parts."""
-        check_range("initial_threshold", self.initial_threshold, 1, self.num_uavs, integer=True, high_label="num_uavs")
+        check_range("initial_threshold", self.initial_threshold, 1, self.num_agents, integer=True,
+                    high_label="num_agents")
 
 
 def bimodality(points: np.ndarray, centred: np.ndarray | None = None) -> np.ndarray:
@@ -231,7 +231,7 @@ class GpsDeniedNbpScenario(PresetScenario):
 
     def __init__(self, config: GpsDeniedNbpConfig, batch: int = 1):
         super().__init__(config, batch)
-        B, N, n = self.batch, config.num_uavs, config.num_iterations
+        B, N, n = self.batch, config.num_agents, config.num_iterations
         self.delivered = np.zeros((B, n, N, N), bool)
         self.broadcasts = np.zeros((B, N), int)
         self.heard = np.zeros((B, N), int)

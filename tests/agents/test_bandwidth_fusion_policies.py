@@ -111,4 +111,4 @@ def test_sb3_model_loads_only_for_matching_spaces(tmp_path):
     assert set(actions) == set(env.possible_agents)
     assert all(env.action_space("uav_0").shape == a.shape for a in actions.values())
     with pytest.raises(ValueError, match="space"):
-        agents.make_policy(path, coloc_env.parallel_env(NAME, num_uavs=3, budget=4))
+        agents.make_policy(path, coloc_env.parallel_env(NAME, num_agents=3, budget=4))

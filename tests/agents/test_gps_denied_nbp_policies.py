@@ -8,7 +8,7 @@ import coloc_env
 
 
 def test_paper_and_silent_emit_the_action_space_dtype():
-    env = coloc_env.parallel_env("gps_denied_nbp", num_uavs=4, num_particles=10, num_iterations=3, horizon=2)
+    env = coloc_env.parallel_env("gps_denied_nbp", num_agents=4, num_particles=10, num_iterations=3, horizon=2)
     observations, _ = env.reset(seed=0)
     assert "paper" in agents.available_policies("gps_denied_nbp") and "silent" in agents.available_policies(
         "gps_denied_nbp")

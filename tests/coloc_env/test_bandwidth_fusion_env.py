@@ -50,7 +50,7 @@ def test_spaces_are_shared_and_cached():
     ({"reward": "rmse"}, "reward"),
     ({"horizon": 0}, "horizon"),
     ({"component_cost": -1.0}, "component_cost"),
-    ({"num_uavs": 1}, "num_uavs"),
+    ({"num_agents": 1}, "num_agents"),
     ({"bugdet": 5}, "unknown config key"),
     ({"initial_state": [10.0, np.nan, 10.0]}, "initial_state"),
 ])

@@ -67,26 +67,26 @@ def test_infeasible_selections_rank_minus_one_and_bad_indices_are_refused():
         budget.selection_at(np.array([budget.size]))
 
 
-@pytest.mark.parametrize("num_uavs, budget", [(4, 5), (5, 6), (6, 7)])
-def test_scenario_decodes_like_the_enumerated_argmax(num_uavs, budget):
+@pytest.mark.parametrize("num_agents, budget", [(4, 5), (5, 6), (6, 7)])
+def test_scenario_decodes_like_the_enumerated_argmax(num_agents, budget):
     """108 and 594 selections decode by the listed argmax, 2,835 (above ENUMERATED_DECODE_LIMIT) by the
     dynamic programme: both are the reference argmax, on generic and on tied (dyadic) scores."""
-    config = BandwidthFusionConfig(num_uavs=num_uavs, budget=budget)
+    config = BandwidthFusionConfig(num_agents=num_agents, budget=budget)
     scenario = BandwidthFusionScenario(config, batch=3)
     assert (scenario._feasible is None) == (scenario.links.size > ENUMERATED_DECODE_LIMIT)
     reference = scenario.links.enumerated_feasible()
     flat = reference.reshape(len(reference), -1).astype(float)
     rng = np.random.default_rng(3)
-    shape = (3, num_uavs, scenario.action_dim)
+    shape = (3, num_agents, scenario.action_dim)
     for actions in (rng.uniform(-1.2, 1.2, shape), rng.integers(-2, 3, shape) / 2.0):
         selection, _ = decode_tables(scenario, actions)
-        scores = np.clip(actions, -1, 1)[..., : (num_uavs - 1) * 3]
+        scores = np.clip(actions, -1, 1)[..., : (num_agents - 1) * 3]
         np.testing.assert_array_equal(selection, reference[np.argmax(scores @ flat.T, axis=-1)])
 
 
 def test_sixteen_uavs_construct_reset_step_and_round_trip_their_actions():
     budget = 25  # (N-1) min_per_link = 15 .. (N-1) max_per_link = 45
-    env = coloc_env.parallel_env("bandwidth_fusion", num_uavs=16, budget=budget)
+    env = coloc_env.parallel_env("bandwidth_fusion", num_agents=16, budget=budget)
     env.reset(seed=0)
     scenario = env.unwrapped.scenario
     assert scenario.links.size > 10**11  # what enumeration could not list
@@ -101,7 +101,7 @@ def test_sixteen_uavs_construct_reset_step_and_round_trip_their_actions():
     assert np.all(scenario.links.components_received(scenario.selection) == budget)
     assert all(np.isfinite(r) for r in rewards.values())
 
-    vec = coloc_env.vector_env("bandwidth_fusion", num_envs=4, seed=1, num_uavs=16, budget=budget)
+    vec = coloc_env.vector_env("bandwidth_fusion", num_envs=4, seed=1, num_agents=16, budget=budget)
     vec.reset()
     vec.step(np.random.default_rng(2).uniform(-1, 1, (vec.num_envs, *vec.action_space.shape)))
     assert np.all(vec.scenario.links.is_feasible(vec.scenario.selection))
@@ -118,6 +118,6 @@ def test_network_counts_without_listing_and_names_the_limit():
 def test_greedy_refuses_a_search_it_cannot_finish():
     from agents.bandwidth_fusion import greedy_selection
 
-    scenario = BandwidthFusionScenario(BandwidthFusionConfig(num_uavs=16, budget=25), batch=1)
+    scenario = BandwidthFusionScenario(BandwidthFusionConfig(num_agents=16, budget=25), batch=1)
     with pytest.raises(ValueError, match="greedy scores every feasible selection: .* more than 4096"):
         greedy_selection(scenario, np.full((1, 16, 16), 1.0 / 16))

@@ -118,7 +118,7 @@ def test_one_per_link_packets_call_equals_one_call_per_receiver():
         np.testing.assert_array_equal(one.delivered, each.delivered)
 
 
-@pytest.mark.parametrize("config", [{}, {"num_uavs": 5, "budget": 6}])
+@pytest.mark.parametrize("config", [{}, {"num_agents": 5, "budget": 6}])
 def test_bandwidth_lookup_table_and_offered_selections_decode_like_the_unranking(config):
     env = coloc_env.vector_env("bandwidth_fusion", num_envs=1, **config)
     net = env.scenario.network

@@ -222,9 +222,9 @@ def _overlap(a, b) -> float:
 
 CROWDED = {
     "bandwidth_fusion": lambda: coloc_env.parallel_env("bandwidth_fusion", render_mode="rgb_array"),
-    "bandwidth_fusion-8": lambda: coloc_env.parallel_env("bandwidth_fusion", num_uavs=8, budget=10,
+    "bandwidth_fusion-8": lambda: coloc_env.parallel_env("bandwidth_fusion", num_agents=8, budget=10,
                                                          render_mode="rgb_array"),
-    "bandwidth_fusion-16": lambda: coloc_env.parallel_env("bandwidth_fusion", num_uavs=16, budget=20,
+    "bandwidth_fusion-16": lambda: coloc_env.parallel_env("bandwidth_fusion", num_agents=16, budget=20,
                                                           render_mode="rgb_array"),
     "lossy_fusion-8": lambda: coloc_env.parallel_env("lossy_fusion", num_agents=8, render_mode="rgb_array"),
     "nlos_horizon": lambda: coloc_env.parallel_env("nlos_horizon", horizon=40, render_mode="rgb_array"),

@@ -43,7 +43,7 @@ def test_dnbp_over_broadcast_equals_the_estimator_on_the_scenarios_episode():
     model = env.unwrapped.scenario.backend.model
     state = dn.initial_state(model, [backend_rng], "warm", episode.init_position[None], episode.init_velocity[None],
                              config.velocity_spread)
-    ones = np.ones((1, config.num_uavs, config.num_iterations), bool)
+    ones = np.ones((1, config.num_agents, config.num_iterations), bool)
     for k in range(steps):
         state, result = dn.step(model, state, episode.gps_normal[k][None], episode.gps_fix[k][None],
                                 BroadcastMedium().over(episode.adjacency[k][None]), episode.ranges[k][None],

@@ -18,7 +18,7 @@ from coloc_env.worlds.gps_denied import sample_episode
 from tests.helpers import play
 
 NAME = "gps_denied_nbp"
-SMALL = {"num_uavs": 5, "num_particles": 20, "horizon": 8, "area": 300.0}
+SMALL = {"num_agents": 5, "num_particles": 20, "horizon": 8, "area": 300.0}
 # The known-harmless warnings of pettingzoo.test: unbounded observation entries (positions, log-variances,
 # errors: quantities with no finite bound, as the scenario docstring says),
 # and a MultiDiscrete action space (a valid Gymnasium space that SB3, TorchRL and RLlib take; api_test
@@ -69,7 +69,7 @@ def test_spaces_state_render_and_infos():
 
 
 @pytest.mark.parametrize("kwargs, field", [
-    ({"num_uavs": 1}, "num_uavs"),
+    ({"num_agents": 1}, "num_agents"),
     ({"p_normal_to_fault": 1.5}, "p_normal_to_fault"),
     ({"gps_std": 0.0}, "gps_std"),
     # subnormal: squared it is 0, and the particle kernels divide by it (found by hypothesis)
@@ -86,7 +86,7 @@ def test_spaces_state_render_and_infos():
     ({"communication_cost": -0.1}, "communication_cost"),
     ({"broadcast_cost": -0.1}, "^gps_denied_nbp: broadcast_cost must be in"),  # its older name, as written
     ({"team_reward": 1}, "team_reward"),
-    ({"initial_threshold": 11}, r"initial_threshold must be in \[1, num_uavs = 10\]"),
+    ({"initial_threshold": 11}, r"initial_threshold must be in \[1, num_agents = 10\]"),
     ({"nominal_velocity": (20.0, np.nan)}, "nominal_velocity"),
     ({"defensive_weight": 1.0}, "defensive_weight"),
     ({"initial_threshold": 0}, "initial_threshold"),
@@ -192,7 +192,7 @@ def test_env_with_paper_policy_equals_the_estimator_called_directly():
 
 
 def test_silent_policy_sends_nothing_and_paper_beats_it_on_fault_uavs():
-    config = {"num_uavs": 8, "num_particles": 40, "horizon": 10, "num_normal": 4}
+    config = {"num_agents": 8, "num_particles": 40, "horizon": 10, "num_normal": 4}
     totals = {}
     for name in ("paper", "silent"):
         env = coloc_env.parallel_env(NAME, **config)

@@ -88,7 +88,7 @@ def _wan2014_by_the_estimator_function(seeds, config) -> np.ndarray:
         state = dn.initial_state(model, [estimator_rng], "warm", episode.init_position[None],
                                  episode.init_velocity[None], config.velocity_spread)
         errors, fault = [], []
-        ones = np.ones((1, config.num_uavs, config.num_iterations), bool)
+        ones = np.ones((1, config.num_agents, config.num_iterations), bool)
         for k in range(config.horizon):
             state, result = dn.step(model, state, episode.gps_normal[k][None], episode.gps_fix[k][None],
                                     BroadcastMedium().over(episode.adjacency[k][None]), episode.ranges[k][None],

@@ -115,7 +115,7 @@ def test_wang2019_rig_flies_the_configured_layout_and_matches_the_reference_on_i
 
 
 def test_wan2014_ls_and_dr_backends_equal_the_estimator_on_the_same_episodes():
-    config = build_config(GpsDeniedNbpConfig, {"num_uavs": 8, "horizon": 12, "num_particles": 30})
+    config = build_config(GpsDeniedNbpConfig, {"num_agents": 8, "horizon": 12, "num_particles": 30})
     world_seeds = [[6, r] for r in range(3)]
     episodes = [sample_episode(config.parts()[0], np.random.default_rng(s)) for s in world_seeds]
     out = wan2014.run_methods(config, [np.random.default_rng(s) for s in world_seeds],
@@ -140,11 +140,11 @@ def test_wan2014_ls_and_dr_backends_equal_the_estimator_on_the_same_episodes():
 
 
 def test_wan2014_counts_dnbp_messages_and_broadcasts_from_the_network():
-    config = build_config(GpsDeniedNbpConfig, {"num_uavs": 6, "horizon": 3, "num_particles": 20})
+    config = build_config(GpsDeniedNbpConfig, {"num_agents": 6, "horizon": 3, "num_particles": 20})
     out = wan2014.run_methods(config, [np.random.default_rng([1, r]) for r in range(2)],
                               [np.random.default_rng([1, 100_000 + r]) for r in range(2)], names=("dnbp",))
     assert 0 < out["broadcasts"] <= out["messages"]
-    assert out["broadcasts"] <= 2 * config.horizon * config.num_uavs * config.num_iterations
+    assert out["broadcasts"] <= 2 * config.horizon * config.num_agents * config.num_iterations
     assert out["seconds"]["dnbp"] > 0
 
 

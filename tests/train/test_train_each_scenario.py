@@ -29,7 +29,7 @@ SHORT = {
 # changes only the action space's nvec (27 horizon choices -> 17), the case a shape-and-type check lets through.
 # (mrclam_relay has none: its five robots are the data set's.)
 OTHER_SPACES = {
-    "bandwidth_fusion": {"num_uavs": 3},
+    "bandwidth_fusion": {"num_agents": 3},
     "lossy_fusion": {"num_agents": 3},
     "relay_ukf": {"num_platforms": 3},
     "nlos_horizon": {"window_max": 20},

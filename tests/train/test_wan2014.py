@@ -9,7 +9,7 @@ from coloc_env.config import build_config
 from coloc_env.scenarios.gps_denied_nbp import GpsDeniedNbpConfig
 from train.reproduce import wan2014
 
-SMALL = {"num_uavs": 6, "horizon": 3, "num_particles": 30}
+SMALL = {"num_agents": 6, "horizon": 3, "num_particles": 30}
 
 
 def test_reproduce_writes_the_spec_metrics_report_and_figures(tmp_path):
@@ -75,7 +75,7 @@ def test_train_smoke_then_the_model_plays_the_env(tmp_path):
 
     path = train("gps_denied_nbp", timesteps=64, seed=1, out=str(tmp_path), progress_bar=False, curve_points=0)
     assert (tmp_path / "gps_denied_nbp" / "seed1" / "model.zip").is_file()
-    env = coloc_env.parallel_env("gps_denied_nbp", num_uavs=10, num_particles=20, horizon=3)
+    env = coloc_env.parallel_env("gps_denied_nbp", num_agents=10, num_particles=20, horizon=3)
     policy = agents.make_policy(path, env)
     observations, _ = env.reset(seed=0)
     steps = 0

@@ -101,7 +101,7 @@ def _point_key(value) -> str:
 
 def _sweep_override(field: str, value, config: GpsDeniedNbpConfig) -> dict:
     if field == "num_normal":
-        return {"num_normal": int(round(value * config.num_uavs))}
+        return {"num_normal": int(round(value * config.num_agents))}
     return {field: value}
 
 
@@ -182,7 +182,7 @@ class Rig:
 
     def __init__(self, config: GpsDeniedNbpConfig, batch: int, names=METHODS):
         world, parts = composition_parts(config)
-        self.batch, self.num_agents = batch, config.num_uavs
+        self.batch, self.num_agents = batch, config.num_agents
         self.world = None
         self.networks, self.backends, self.transmit = {}, {}, {}
         for name in names:
@@ -226,7 +226,7 @@ def run_methods(config: GpsDeniedNbpConfig, world_rngs: list, estimator_rngs: li
     from ``estimator_rngs[r]``, all runs batched. Returns ``errors`` {method: (R, T, N)}, ``fault``
     (R, T, N), dNBP's ``messages`` (delivered links) and ``broadcasts`` over all runs, and ``seconds``
     {method: time spent in its network and backend}."""
-    runs, T, N = len(world_rngs), config.horizon, config.num_uavs
+    runs, T, N = len(world_rngs), config.horizon, config.num_agents
     rig = Rig(config, runs, names)
     rig.reset(world_rngs, estimator_rngs)
     errors = {name: np.zeros((runs, T, N)) for name in names}
@@ -289,7 +289,7 @@ def dnbp_model(config: GpsDeniedNbpConfig) -> dn.DnbpModel:
     defensive box covers the whole flight, docs/wan2014.md section 4.3)."""
     world, network, backend = config.parts()
     built = world.build(1, config.horizon)
-    return backend.build(built, network.build(config.num_uavs, 1, backend.message_kind, backend.rounds), 1).model
+    return backend.build(built, network.build(config.num_agents, 1, backend.message_kind, backend.rounds), 1).model
 
 
 def case_study(config: GpsDeniedNbpConfig, seed: int) -> dict:

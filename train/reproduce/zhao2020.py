@@ -149,9 +149,9 @@ def kalman_predictor_cost(config: BandwidthFusionConfig, nodes_pooled: int) -> n
     network (one copy: its covariance does not depend on the data); its filtered P(k|k) gives the
     predictor's P(k+1|k) = A P(k|k) A^T + W, and P(0) = M(0).
     """
-    N = config.num_uavs
+    N = config.num_agents
     if nodes_pooled not in (1, N):
-        raise BadInput(f"nodes_pooled must be 1 or num_uavs={N}, got {nodes_pooled}")
+        raise BadInput(f"nodes_pooled must be 1 or num_agents={N}, got {nodes_pooled}")
     world = config.parts()[0]
     spec = compose(world=world, network=Ideal(), backend=Kalman(variant="leader_only" if nodes_pooled == 1
                                                                  else "ideal"), horizon=config.horizon)
@@ -210,7 +210,7 @@ def run(out: str, runs: int = 500, seed: int = 0, quick: bool = False, executor:
     if progress:
         progress("oracle_static coordinate descent done")
     greedy_curve = greedy_exact_curve(config)
-    N = config.num_uavs
+    N = config.num_agents
     local_kf = N * kalman_predictor_cost(config, 1)
     central_kf = N * kalman_predictor_cost(config, N)
 
@@ -269,7 +269,7 @@ def bound_block(config: BandwidthFusionConfig, mc: dict, seed: int) -> dict:
 
 def _claims(metrics, exact_curves, mc, config) -> list[dict]:
     ce, cm, ci = metrics["cost_exact"], metrics["cost_mc"], metrics["cost_mc_ci95"]
-    N = config.num_uavs
+    N = config.num_agents
     final_trace = exact_curves["T1P1"][-1] / N
     initial_trace = exact_curves["T1P1"][0] / N
     step_length = float(np.linalg.norm(np.asarray(config.drift, float)))
@@ -335,7 +335,7 @@ K_SETTLE = 10
 
 def _bound_growth_example(config) -> str:
     """A (receiver, component) of T1/P1 whose bound grows geometrically, described in words."""
-    if config.num_uavs != 4:
+    if config.num_agents != 4:
         return ""
     selection, weights = _tables("T1P1")
     unselected = np.einsum("ij,ijc->ic", weights, ~selection)  # weight of nodes not sending c to i
