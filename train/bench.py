@@ -456,13 +456,13 @@ class ActionSource:
             from agents.mrclam_relay import paper_actions
 
             N = self.num_agents
-            self._table = paper_actions(core.tables.first_index[:, :N, :N] >= 0)
+            self._table = paper_actions(core.world.tables.first_index[:, :N, :N] >= 0)
         return self._table
 
     def __call__(self, cores) -> np.ndarray:
         if self.constant():
             return self.tiled(sum(core.batch for core in cores))
-        steps = np.concatenate([core.absolute_step() for core in cores])
+        steps = np.concatenate([core.world.absolute_step() for core in cores])
         table = self.table(cores[0])
         return table[np.minimum(steps, len(table) - 1)].reshape(-1, *table.shape[2:])
 

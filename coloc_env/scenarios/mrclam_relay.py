@@ -21,8 +21,8 @@ Each env step is one data step k -> k+1 (absolute step a = s + k):
 
 1. each robot m that recorded measurements of other robots at a chooses one of
    them (action index 0); its location information travels along a relay chain
-   m -> n -> ... through the link model (loss, hop budget, comm range, hop
-   cost), each holder passing it on by its action for m's chain (below);
+   m -> n -> ... through the link model (loss, hop budget, comm range), each
+   holder passing it on by its action for m's chain (below);
 2. the estimator applies, in file order within step a (robot by robot, each
    robot's lines in the order of its file): every landmark sighting, to the
    robot that saw it (UKF-DCL on the chain [m] alone: no communication, the
@@ -41,11 +41,12 @@ robot), not one next hop per agent as in ``relay_ukf`` (where only one
 platform measures per step). With a single next hop per agent, two chains
 passing the same holder could not both be complete.
 
-Noise: ``coloc_env.data.mrclam.NoiseModel``, the model (and the code
-applying it) of ``coloc reproduce mrclam``, fitted by
+Noise: the ``mrclam`` world's (``coloc_env.data.mrclam.NoiseModel``, the model
+and the code of ``coloc reproduce mrclam``), fitted by
 ``coloc_env.data.mrclam.calibrate_noise`` against Vicon on the start of
-the whole run (computed once per data path, ``dt``, ``noise_model`` and
-``calibration_s``, and cached; episodes may overlap the calibration window).
+the whole run (``coloc_env.worlds.mrclam.replay_tables``: once per data path, ``dt``,
+``noise_model`` and ``calibration_s``, and cached; episodes may overlap the
+calibration window).
 
 * ``noise_model="calibrated"`` (default), fitted on the first
   ``coloc_env.data.mrclam.calibration_seconds`` (10 % of the run, at
@@ -57,10 +58,14 @@ the whole run (computed once per data path, ``dt``, ``noise_model`` and
   r_w (a_w + b_w w'^2)) (speed-dependent, inflated for errors correlated over
   steps); each observation's R = diag(r_range (a_r + b_r z_r^2), sigma_b^2)
   from its measured range z_r.
-* ``noise_model="baseline"``: the model before it (first 60 s; constant
+* ``noise_model="baseline"``: the simpler model (first 60 s; constant
   1.4826 x MAD noise, raw commands). It is overconfident: with the paper
   policy its gate refuses 5-30 % of the observations of a 150-step window of
   dataset 6, the calibrated model's none (tests/coloc_env/test_mrclam_relay.py).
+* ``noise_model="likelihood"``: the calibrated shapes with the four variances
+  scaled to maximize the likelihood of UKF-CCL's pose errors on the calibration
+  window (``coloc_env.data.mrclam.fit_noise_scales``; the fit runs filters for
+  seconds when an env is built).
 
 Initial estimate: the Vicon pose at the window start, with
 covariance diag(``initial_position_std``^2, same, ``initial_heading_std``^2)
@@ -101,7 +106,7 @@ Observation (per agent, ``Box(shape=(3N + 3,), float32)``)
 
 The sighting count and the distances have no upper bound in the model (a data set may hold any
 number of sightings per step, robots anywhere); the log-trace is unbounded because a robot that sees
-nothing dead-reckons with a growing covariance. (Before, every entry was unbounded.)
+nothing dead-reckons with a growing covariance.
 
 After the last step the measurement entries are 0. ``state()`` (centralized
 critic): every agent's observation, then the log of the diagonal of each
@@ -109,10 +114,15 @@ robot's own covariance block (x, y, theta; 3N values).
 
 Reward (team: one agent's decisions move every robot's estimate)
 ----------------------------------------------------------------
-| ``reward=`` | value for every agent after step k -> k+1 (metres; a distance, as in ``relay_ukf``)  |
+| ``reward=`` | value for every agent after step k -> k+1 (m: ``error`` is a distance)                |
 |-------------|--------------------------------------------------------------------------------------|
-| ``"error"`` | -mean_i ||p_hat_i(k+1) - p_i(k+1)|| against Vicon - the hop cost of this step's hops   |
-| ``"trace"`` | -mean_i sqrt(tr P_ii^pos(k+1)) (the filter's own RMS error) - the same hop cost        |
+| ``"error"`` | -mean_i ||p_hat_i(k+1) - p_i(k+1)|| against Vicon - C                                 |
+| ``"trace"`` | -mean_i sqrt(tr P_ii^pos(k+1)) (m: the filter's own RMS position error, the unit of   |
+|             | ``error``; the ``trace`` info key is tr P_ii^pos itself, m^2) - C                    |
+
+C, the team's communication cost of the step, in the reward's unit (m): ``communication_cost`` per
+delivered hop (one hop is one message of the relay network) plus ``hop_cost_per_m2`` d^2 per hop of
+length d (the network's ``cost_sent``), summed over every chain of the step.
 
 Termination: none; truncation after ``window_steps`` steps. The episode metric
 (``episode_error``) is the mean distance error over the steps and robots.
@@ -127,8 +137,8 @@ measurement reached the measured robot and passed the gate), ``landmarks``
 the gate), ``chain_length`` (robots its chain reached, 0 without a chain),
 ``chain_stop`` (index into ``coloc_env.primitives.relay.STOP_REASONS``, -1
 without a chain), ``communication`` (hops it delivered this step over all
-chains; summed over agents = hops), ``hops`` and ``hop_cost`` (the team's,
-this step), ``step``.
+chains; summed over agents = hops), ``hops`` and ``hop_cost`` (the team's, this
+step: hops delivered and C), ``step``.
 
 Arguments (fields of ``MrclamRelayConfig``)
 ------------------------------------------------
@@ -139,7 +149,7 @@ Arguments (fields of ``MrclamRelayConfig``)
 | dt                   | 0.1            | [0.01, 1] s, the step grid of the loader (finer: too many    |
 |                      |                | steps to hold)                                               |
 | window_steps         | 600            | 1..T-1 steps (600 = 60 s at dt 0.1)                          |
-| noise_model          | "calibrated"   | "calibrated", "baseline" (see Noise)                         |
+| noise_model          | "calibrated"   | "calibrated", "baseline", "likelihood" (see Noise)           |
 | calibration_s        | None           | (0, 3600] s of the run's start used to fit the noise; None = |
 |                      |                | the model's rule (calibrated: max(60 s, 10 % of the run);    |
 |                      |                | baseline: 60 s)                                              |
@@ -151,17 +161,24 @@ Arguments (fields of ``MrclamRelayConfig``)
 | max_hops             | None           | 1..N-1 hops per chain, None = no limit                       |
 | loss_at_zero         | 0.0            | [0, 1]                                                       |
 | loss_length          | inf            | (0, inf] m (p_loss(d) = 1 - (1 - loss_at_zero) e^(-d/loss_length)) |
-| hop_cost             | 0.0            | [0, 1e12] per delivered hop                                  |
-| hop_cost_per_m2      | 0.0            | [0, 1e12] per hop and squared metre                          |
+| communication_cost   | 0.0            | [0, 1e12] m per delivered hop (old name ``hop_cost``, still  |
+|                      |                | accepted)                                                    |
+| hop_cost_per_m2      | 0.0            | [0, 1e12] m per hop and squared metre of its length          |
 | ukf_lambda           | 0.0            | (-3N, 1e6]                                                   |
 | reward               | "error"        | "error", "trace"                                             |
 
 The preset is the composition ``mrclam`` / ``relay`` (``routing="per_source"``) /
 ``ukf_se2`` (``MrclamRelayConfig.parts``) with this action codec (the
-action vector passed verbatim), observation, team reward and info.
+action vector passed verbatim), observation, team reward and info. Each keyword
+sets the part field of the same name, except ``window_steps`` (the world's and
+the composition's ``horizon``) and ``communication_cost`` (the composition's: the
+relay network's own per-hop ``hop_cost`` stays 0, so a hop is charged once); each
+is checked by its part, ``max_hops`` also against the N - 1 hops a chain can
+have, and, when an env is built (validation reads no data), ``data`` and
+``window_steps`` against the run.
 
 Randomness: per episode, the offset s from the episode's generator (its
-first draw, as before the composable core); the loss of every step, source
+first draw: the world draws from that generator itself); the loss of every step, source
 and hop is the relay network's counter-based draw from its own key (a child
 of the episode's generator), so the same seed gives the same window and the
 same losses whatever the policy and the loss probability.
@@ -176,8 +193,7 @@ world's readings and the dead reckoning are one call for all copies.
 
 from __future__ import annotations
 
-import functools
-import os
+import dataclasses
 from dataclasses import dataclass
 
 import gymnasium
@@ -185,82 +201,42 @@ import numpy as np
 
 import estimators.ukf_relay_se2 as se2
 from coloc_env.backends.ukf_se2 import UkfSe2
-from coloc_env.config import check_choice, check_range
+from coloc_env.config import BadInput, check_range
 from coloc_env.data import mrclam
 from coloc_env.networks.relay import Relay
-from coloc_env.primitives.relay import STOP_REASONS, RelayChain, RelayChainLinks
+from coloc_env.primitives.relay import STOP_REASONS
 from coloc_env.rendering import Link, Scene
-from coloc_env.scenarios.binding import PresetScenario
+from coloc_env.scenarios.binding import PresetConfig, PresetScenario, keyword
 from coloc_env.worlds.mrclam import Mrclam
 
 NUM_ROBOTS = mrclam.NUM_ROBOTS
 DISTANCE_SCALE = 10.0  # metres per unit in the observation
-GATE = mrclam.GATE_999  # chi-square(2) 0.999 quantile, the gate of ``coloc reproduce mrclam``
 
 
 @dataclass(frozen=True)
-class ReplayTables:
-    """One dataset with what every episode needs, computed once per (path, dt, noise_model, calibration_s).
-
-    ``noise`` the ``coloc_env.data.mrclam.calibrate_noise`` dict, ``noise_model`` the
-    ``coloc_env.data.mrclam.NoiseModel`` built from it, ``measurement_cov`` (M, 2, 2) its R
-    of every measurement line (from the measured range); ``first_index`` (T, N, N): index into
-    the measurement arrays of the first line (file order) in which robot i recorded robot j at
-    step t, -1 if none; ``landmark_count`` (T, N).
-    """
-
-    data: mrclam.MrclamData
-    noise: dict
-    noise_model: mrclam.NoiseModel
-    measurement_cov: np.ndarray
-    first_index: np.ndarray
-    landmark_count: np.ndarray
-    extent: tuple[float, float, float, float]
-
-
-@functools.lru_cache(maxsize=4)
-def _tables(path: str, dt: float, noise_model: str, calibration_s: float | None) -> ReplayTables:
-    d = mrclam.load_cached(path, dt)
-    model = mrclam.NoiseModel.calibrate(d, noise_model, calibration_s)
-    measurement_cov = model.measurement_cov(d.meas_range)
-    N, T = NUM_ROBOTS, d.steps
-    robot = np.flatnonzero(d.meas_subject <= N)
-    keys = (d.meas_step[robot] * N + d.meas_robot[robot]) * N + (d.meas_subject[robot] - 1)
-    unique, first = np.unique(keys, return_index=True)  # first occurrence = first in file order
-    first_index = np.full(T * N * N, -1)
-    first_index[unique] = robot[first]
-    landmark = d.meas_subject > N
-    landmark_count = np.zeros((T, N))
-    np.add.at(landmark_count, (d.meas_step[landmark], d.meas_robot[landmark]), 1.0)
-    points = np.concatenate([d.groundtruth[..., :2].reshape(-1, 2), d.landmarks])
-    lo, hi = points.min(axis=0) - 0.5, points.max(axis=0) + 0.5
-    for array in (measurement_cov, first_index, landmark_count):
-        array.flags.writeable = False
-    return ReplayTables(d, dict(model.calibration), model, measurement_cov, first_index.reshape(T, N, N),
-                        landmark_count,
-                        (float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1])))
-
-
-@dataclass(frozen=True)
-class MrclamRelayConfig:
+class MrclamRelayConfig(PresetConfig):
     """Configuration of ``mrclam_relay`` (see the module docstring for the table)."""
 
-    data: str | None = None
-    dt: float = 0.1
-    window_steps: int = 600
-    noise_model: str = "calibrated"
-    calibration_s: float | None = None
-    initial_position_std: float = 0.01
-    initial_heading_std: float = 0.01
-    gate: float | None = GATE
-    comm_range: float = float("inf")
-    max_hops: int | None = None
-    loss_at_zero: float = 0.0
-    loss_length: float = float("inf")
-    hop_cost: float = 0.0
-    hop_cost_per_m2: float = 0.0
-    ukf_lambda: float = 0.0
-    reward: str = "error"
+    preset = "mrclam_relay"
+    World, Network, Backend = Mrclam, Relay, UkfSe2
+    aliases = {"hop_cost": "communication_cost"}
+
+    data: str | None = keyword(None, "world.data")
+    dt: float = keyword(0.1, "world.dt")
+    window_steps: int = keyword(600, "world.horizon", "composition.horizon", "preset")
+    noise_model: str = keyword("calibrated", "world.noise_model")
+    calibration_s: float | None = keyword(None, "world.calibration_s")
+    initial_position_std: float = keyword(0.01, "world.initial_position_std")
+    initial_heading_std: float = keyword(0.01, "world.initial_heading_std")
+    gate: float | None = keyword(mrclam.GATE_999, "backend.gate")
+    comm_range: float = keyword(float("inf"), "network.comm_range")
+    max_hops: int | None = keyword(None, "network.max_hops", "preset")
+    loss_at_zero: float = keyword(0.0, "network.loss_at_zero")
+    loss_length: float = keyword(float("inf"), "network.loss_length")
+    communication_cost: float = keyword(0.0, "composition.communication_cost")
+    hop_cost_per_m2: float = keyword(0.0, "network.hop_cost_per_m2")
+    ukf_lambda: float = keyword(0.0, "backend.ukf_lambda")
+    reward: str = keyword("error", "composition.reward")
 
     @property
     def horizon(self) -> int:
@@ -268,139 +244,39 @@ class MrclamRelayConfig:
         return self.window_steps
 
     def parts(self) -> tuple:
-        """The (world, network, backend) configs this flat config stands for: ``mrclam`` with the same run,
-        grid and noise model (the window offset drawn per episode), ``relay`` with the same links and one next
-        hop per measuring robot (``routing="per_source"``), ``ukf_se2``. Reads no data."""
-        world = Mrclam(data=self.data, dt=self.dt, horizon=self.window_steps, noise_model=self.noise_model,
-                       calibration_s=self.calibration_s, initial_position_std=self.initial_position_std,
-                       initial_heading_std=self.initial_heading_std)
-        network = Relay(comm_range=self.comm_range, max_hops=self.max_hops, loss_at_zero=self.loss_at_zero,
-                        loss_length=self.loss_length, routing="per_source", hop_cost=self.hop_cost,
-                        hop_cost_per_m2=self.hop_cost_per_m2)
-        return world, network, UkfSe2(ukf_lambda=self.ukf_lambda, gate=self.gate)
+        """``mrclam`` (the window offset drawn per episode), ``relay`` with one next hop per measuring robot
+        (``routing="per_source"``), ``ukf_se2``. Reads no data."""
+        world, network, backend = super().parts()
+        return world, dataclasses.replace(network, routing="per_source"), backend
 
-    @property
-    def links(self) -> RelayChainLinks:
-        return RelayChainLinks(self.comm_range, self.max_hops, self.loss_at_zero, self.loss_length,
-                               self.hop_cost, self.hop_cost_per_m2)
-
-    @property
-    def path(self) -> str:
-        """The dataset folder: ``data``, else ``$COLOC_MRCLAM_DATA`` (ValueError naming ``data``)."""
-        if self.data is not None and not isinstance(self.data, (str, os.PathLike)):
-            raise ValueError(f"data must be a path to an MRCLAM dataset folder or None, got {self.data!r}")
-        return os.path.realpath(mrclam.resolve_data_path(self.data))
-
-    def tables(self) -> ReplayTables:
-        path = self.path
-        try:
-            calibration_s = None if self.calibration_s is None else float(self.calibration_s)
-            return _tables(path, float(self.dt), self.noise_model, calibration_s)
-        except ValueError as exc:
-            raise ValueError(f"data: {exc}") from exc
-
-    def validate(self) -> None:
-        N = NUM_ROBOTS
-        check_range("dt", self.dt, 0.01, 1.0)
-        check_range("window_steps", self.window_steps, 1, 10**9, integer=True)
-        check_choice("noise_model", self.noise_model, mrclam.NOISE_MODELS)
-        if self.calibration_s is not None:
-            check_range("calibration_s", self.calibration_s, 0.0, 3600.0, low_open=True)
-        check_range("initial_position_std", self.initial_position_std, 1e-6, 1e3)
-        check_range("initial_heading_std", self.initial_heading_std, 1e-6, 10.0)
-        if self.gate is not None:
-            check_range("gate", self.gate, 0.0, 1e12, low_open=True)
-        self.links.validate(N)
-        check_range("ukf_lambda", self.ukf_lambda, -3.0 * N, 1e6, low_open=True, low_label="-3N")
-        check_choice("reward", self.reward, ("error", "trace"))
-        steps = self.tables().data.steps
-        if self.window_steps > steps - 1:
-            raise ValueError(f"window_steps must be in [1, {steps - 1}] for this run of {steps} steps "
-                             f"(the last step needs the next Vicon pose), got {self.window_steps}")
-
-
-@dataclass
-class StepEvent:
-    """What happened at the last step of each copy (B copies, N robots; chains are indexed by source)."""
-
-    partner: np.ndarray  # (B, N) robot whose measurement each robot chose, -1 none
-    relay: RelayChain  # rows B * N: the chain of source m in copy b at row b * N + m
-    used: np.ndarray  # (B, N) bool: the chosen measurement was applied
-    landmarks: np.ndarray  # (B, N) landmark sightings applied
-    rejected: np.ndarray  # (B, N) observations refused by the gate
-    measured: np.ndarray  # (B, N) robots recorded
-    cost: np.ndarray  # (B,) hop cost
+    def check_preset(self) -> None:
+        """``max_hops`` <= N - 1 (a chain of N robots has at most N - 1 hops). The checks that need the run
+        (the dataset, ``window_steps`` <= T - 1) run when an env is built: validation reads no data."""
+        if self.max_hops is not None:
+            check_range("max_hops", self.max_hops, 1, NUM_ROBOTS - 1, integer=True)
 
 
 class MrclamRelayScenario(PresetScenario):
     """Batched core of ``mrclam_relay``: the binding of ``MrclamRelayConfig`` on the composable core
-    (``mrclam`` / ``relay`` with ``routing="per_source"`` / ``ukf_se2``); the module docstring has the tables."""
+    (``mrclam`` / ``relay`` with ``routing="per_source"`` / ``ukf_se2``); the module docstring has the tables.
+    The run and its window offsets are the world's (``world.data``, ``world.tables``, ``world.start``), the
+    estimates, covariance factors, chains and applied observations the backend's (``backend.estimate``,
+    ``backend.P_ii``, ``backend.joint_cov(b)``, ``backend.chains``, ``backend.used``, ...)."""
 
     name = "mrclam_relay"
     paper = "mrclam"
     Config = MrclamRelayConfig
     agent_prefix = "robot"
 
-    @classmethod
-    def composition_options(cls, config) -> dict:
-        return {"reward": config.reward}
-
     def __init__(self, config: MrclamRelayConfig, batch: int = 1):
+        try:  # the world's checks on the loaded run, under the preset's keywords
+            config.parts()[0].check_run("", horizon="window_steps")
+        except ValueError as exc:
+            raise BadInput(f"{self.name}: {exc}") from exc
         super().__init__(config, batch)
         N, B = self.num_agents, self.batch
         self.dead_reckoning = np.zeros((B, N, 3))
         self.measured = np.zeros((B, N))
-
-    # --- the parts' state, by the scenario's names ----------------------------------------
-    @property
-    def tables(self) -> ReplayTables:
-        return self.world.tables
-
-    @property
-    def data(self) -> mrclam.MrclamData:
-        return self.world.data
-
-    @property
-    def noise_model(self) -> mrclam.NoiseModel:
-        return self.world.noise_model
-
-    @property
-    def noise(self) -> dict:
-        return dict(self.tables.noise)
-
-    @property
-    def start(self) -> np.ndarray:
-        """The window offset s of each copy (B,)."""
-        return self.world.start
-
-    @property
-    def estimate(self) -> np.ndarray:
-        """Each robot's pose estimate (B, N, 3): after a step, the prediction to k + 1."""
-        return self.backend.estimate
-
-    @property
-    def P_ii(self) -> np.ndarray:
-        return self.backend.P_ii
-
-    @property
-    def phi(self) -> np.ndarray:
-        return self.backend.phi
-
-    @property
-    def sigma(self) -> np.ndarray:
-        return self.backend.sigma
-
-    @property
-    def event(self) -> StepEvent:
-        """The last step's partners, chains (by source), applied and refused observations and hop cost."""
-        backend = self.backend
-        return StepEvent(partner=backend.partner.copy(), relay=backend.chains, used=backend.used.copy(),
-                         landmarks=backend.landmarks_applied.copy(), rejected=backend.rejected.copy(),
-                         measured=self.measured.copy(), cost=self.network.cost_sent.sum(axis=-1))
-
-    def joint_cov(self, b: int) -> np.ndarray:
-        """The joint covariance (3N, 3N) of copy b that the factors stand for."""
-        return self.backend.joint_cov(b)
 
     # --- description ------------------------------------------------------------
     @property
@@ -431,9 +307,7 @@ class MrclamRelayScenario(PresetScenario):
         does. Index 1 + m: the core's per-source ``next_hop`` rule without its "nearest" entry (itself, the
         source m and a robot beyond ``comm_range`` end the chain, as N = stop does; stop stays valid)."""
         B, N = self.batch, self.num_agents
-        a = np.minimum(self.absolute_step(), self.data.steps - 1)
-        live = (self.k < self.horizon)[:, None, None]
-        partner = ((self.tables.first_index[a] >= 0) & live) | np.eye(N, dtype=bool)
+        partner = self._recorded() | np.eye(N, dtype=bool)
         _, next_hop = self.block_choice_masks()  # (B, N holders, N sources, N + 2)
         return np.concatenate([partner, next_hop[..., :N + 1].reshape(B, N, -1)], axis=-1)
 
@@ -445,7 +319,7 @@ class MrclamRelayScenario(PresetScenario):
     def reset(self, rngs, env_index=None) -> None:
         super().reset(rngs, env_index)
         idx = self._indices(env_index)
-        self.dead_reckoning[idx] = self.data.groundtruth[self.start[idx]]
+        self.dead_reckoning[idx] = self.world.data.groundtruth[self.world.start[idx]]
         self.measured[idx] = 0.0
 
     def decode_actions(self, actions) -> np.ndarray:
@@ -455,53 +329,54 @@ class MrclamRelayScenario(PresetScenario):
         relay = f"action[1:] (whom to relay each source's chain to, {N} = stop)"
         return self.check_discrete_actions(actions, ("action[0] (whose measurement to use)", *[relay] * N))
 
-    def absolute_step(self) -> np.ndarray:
-        """The data step a = s + k of each copy (B,)."""
-        return self.world.absolute_step()
-
     def advance(self, decoded) -> None:
-        self.measured = (self.tables.first_index[self.absolute_step()] >= 0).sum(axis=-1).astype(float)
+        self.measured = self._recorded().sum(axis=-1).astype(float)
         super().advance(decoded)
         u = self.readings.inputs[..., :2]  # u'[a], the noise model's odometry the backend predicted with
-        self.dead_reckoning[:] = se2.motion(self.dead_reckoning, u, self.data.dt)[0]
+        self.dead_reckoning[:] = se2.motion(self.dead_reckoning, u, self.world.dt)[0]
+
+    def communication_costs(self) -> np.ndarray:
+        """The team's cost of this step's hops (B,): ``communication_cost`` per delivered hop (the relay
+        network's message) plus ``hop_cost_per_m2`` d^2 per hop of length d (the network's ``cost_sent``)."""
+        sent = self.composition.communication_cost * self.network.messages_sent + self.network.cost_sent
+        return sent.sum(axis=-1)
 
     def compute_reward(self) -> np.ndarray:
         """The team's: minus the mean over robots of the error (or RMS) after the time update to k + 1, minus the
-        hop cost of the step's chains."""
+        communication cost of the step's chains."""
         if self.config.reward == "error":
             loss = self.position_error().mean(axis=-1)
         else:
             loss = np.sqrt(self.own_traces()).mean(axis=-1)
-        cost = self.network.cost_sent.sum(axis=-1)
-        return np.repeat((-loss - cost)[:, None], self.num_agents, axis=1)
+        return np.repeat((-loss - self.communication_costs())[:, None], self.num_agents, axis=1)
 
     # --- views -------------------------------------------------------------------------
+    def _recorded(self) -> np.ndarray:
+        """(B, N, N) robot i recorded robot j at the current data step (False after the last step)."""
+        a = np.minimum(self.world.absolute_step(), self.world.data.steps - 1)
+        return (self.world.tables.first_index[a] >= 0) & (self.k < self.horizon)[:, None, None]
+
     def truth(self) -> np.ndarray:
         """Vicon poses (B, N, 3) at the current step."""
         return self.world.poses()
 
     def position_error(self) -> np.ndarray:
         """||p_hat_i - p_i|| (B, N), metres, against Vicon, of the current estimate (after a step: k + 1)."""
-        return np.linalg.norm(self.estimate[..., :2] - self.truth()[..., :2], axis=-1)
+        return np.linalg.norm(self.backend.estimate[..., :2] - self.truth()[..., :2], axis=-1)
 
     def own_traces(self) -> np.ndarray:
         """tr of each robot's position covariance (B, N), m^2."""
-        return self.P_ii[..., 0, 0] + self.P_ii[..., 1, 1]
-
-    def distances(self) -> np.ndarray:
-        """Vicon distances between robots at the current step (B, N, N)."""
-        p = self.truth()[..., :2]
-        return np.linalg.norm(p[:, :, None, :] - p[:, None, :, :], axis=-1)
+        return self.backend.P_ii[..., 0, 0] + self.backend.P_ii[..., 1, 1]
 
     def observation(self) -> np.ndarray:
         B, N = self.batch, self.num_agents
         live = (self.k < self.horizon)[:, None]
-        a = self.absolute_step()
-        measured = (self.tables.first_index[a] >= 0) & live[..., None]
-        landmarks = np.where(live, self.tables.landmark_count[a], 0.0)
+        landmarks = np.where(live, self.world.tables.landmark_count[self.world.absolute_step()], 0.0)
+        p = self.truth()[..., :2]
+        distance = np.linalg.norm(p[:, :, None, :] - p[:, None, :, :], axis=-1)
         frac = np.broadcast_to((self.k / self.horizon)[:, None], (B, N))
-        obs = np.concatenate([np.broadcast_to(np.eye(N), (B, N, N)), measured.astype(float), landmarks[..., None],
-                              self.distances() / DISTANCE_SCALE, np.log(self.own_traces())[..., None],
+        obs = np.concatenate([np.broadcast_to(np.eye(N), (B, N, N)), self._recorded().astype(float),
+                              landmarks[..., None], distance / DISTANCE_SCALE, np.log(self.own_traces())[..., None],
                               frac[..., None]], axis=-1)
         return obs.astype(np.float32)
 
@@ -510,21 +385,21 @@ class MrclamRelayScenario(PresetScenario):
         return np.asarray(errors, float).mean(axis=(-2, -1))
 
     def state(self) -> np.ndarray:
-        log_var = np.log(np.diagonal(self.P_ii, axis1=-2, axis2=-1)).reshape(self.batch, -1)
+        log_var = np.log(np.diagonal(self.backend.P_ii, axis1=-2, axis2=-1)).reshape(self.batch, -1)
         return np.concatenate([self.observation().reshape(self.batch, -1), log_var], axis=-1).astype(np.float32)
 
     def info(self) -> dict[str, np.ndarray]:
         B, N = self.batch, self.num_agents
-        backend, chains = self.backend, self.backend.chains
-        truth = self.truth()
+        backend, chains, network = self.backend, self.backend.chains, self.network
+        truth, estimate = self.truth(), self.backend.estimate
         team = lambda values: np.repeat(np.asarray(values)[:, None], N, axis=1)  # noqa: E731
         error = self.position_error()
         return {
             "true_position": truth[..., :2].copy(),
-            "estimated_position": self.estimate[..., :2].copy(),
+            "estimated_position": estimate[..., :2].copy(),
             "position_error": error,
             "error": error.copy(),
-            "heading_error": np.abs(se2.wrap(self.estimate[..., 2] - truth[..., 2])),
+            "heading_error": np.abs(se2.wrap(estimate[..., 2] - truth[..., 2])),
             "trace": self.own_traces(),
             "dead_reckoning_error": np.linalg.norm(self.dead_reckoning[..., :2] - truth[..., :2], axis=-1),
             "measured": self.measured.copy(),
@@ -534,18 +409,18 @@ class MrclamRelayScenario(PresetScenario):
             "rejected": backend.rejected.copy(),
             "chain_length": chains.length.reshape(B, N).copy(),
             "chain_stop": chains.stop.reshape(B, N).copy(),
-            "messages_sent": self.network.messages_sent.copy(),
-            "floats_sent": self.network.floats_sent.copy(),
-            "communication": self.network.messages_sent.copy(),
-            "hops": team(self.network.messages_sent.sum(axis=-1)),
-            "hop_cost": team(self.network.cost_sent.sum(axis=-1)),
+            "messages_sent": network.messages_sent.copy(),
+            "floats_sent": network.floats_sent.copy(),
+            "communication": network.messages_sent.copy(),
+            "hops": team(network.messages_sent.sum(axis=-1)),
+            "hop_cost": team(self.communication_costs()),
             "step": team(self.k),
         }
 
     def scene(self, b: int) -> Scene:
-        N, k, start = self.num_agents, int(self.k[b]), int(self.start[b])
-        truth = self.data.groundtruth[start + k, :, :2]
-        x0, x1, y0, y1 = self.tables.extent
+        N, k, start, data = self.num_agents, int(self.k[b]), int(self.world.start[b]), self.world.data
+        truth = data.groundtruth[start + k, :, :2]
+        x0, x1, y0, y1 = self.world.tables.extent
         chains = self.backend.chains
         links, notes = [], []
         for m in range(N):
@@ -559,16 +434,15 @@ class MrclamRelayScenario(PresetScenario):
                      f"{int(self.backend.landmarks_applied[b].sum())} landmark sightings")
         centre = np.array([0.5 * (x0 + x1), 0.5 * (y0 + y1)])
         # the map holds the run's tracks and every landmark, with a margin for the ellipses
-        landmarks = np.asarray(self.data.landmarks, float)
+        landmarks = np.asarray(data.landmarks, float)
         low = np.minimum([x0, y0], landmarks.min(axis=0)) - 0.3
         high = np.maximum([x1, y1], landmarks.max(axis=0)) + 0.3
         return Scene(
-            title=(f"mrclam_relay (MRCLAM dataset)  t = {(start + k) * self.data.dt:.1f} s, "
-                   f"window step {k}/{self.horizon}"),
+            title=f"mrclam_relay (MRCLAM dataset)  t = {(start + k) * data.dt:.1f} s, window step {k}/{self.horizon}",
             truth=truth,
-            estimates=self.estimate[b, :, :2],
-            covariances=self.P_ii[b, :, :2, :2],
-            trails=np.swapaxes(self.data.groundtruth[start:start + k + 1, :, :2], 0, 1),
+            estimates=self.backend.estimate[b, :, :2],
+            covariances=self.backend.P_ii[b, :, :2, :2],
+            trails=np.swapaxes(data.groundtruth[start:start + k + 1, :, :2], 0, 1),
             node_positions=(truth - centre) / max(x1 - x0, y1 - y0),
             node_labels=self.agent_names,
             links=links,

@@ -4,10 +4,9 @@ Data: Leung K.Y.K., Halpern Y., Barfoot T.D., Liu H.H.T., "The UTIAS
 multi-robot cooperative localization and mapping dataset", IJRR
 30(8):969-974, 2011 (cite it with results on the data). Loader and noise
 model: ``coloc_env.data.mrclam`` (``coloc_env.data.mrclam.load_cached``,
-``coloc_env.data.mrclam.NoiseModel``), through the replay tables of the
-hand-wired ``mrclam_relay`` scenario (``coloc_env.scenarios.mrclam_relay._tables``,
-imported at build time, cached per data path), so the readings are exactly the
-ones that scenario applies. Nothing is simulated: the motion inputs, the
+``coloc_env.data.mrclam.NoiseModel``), through the run's replay tables
+(``replay_tables``: loaded and calibrated once per data path, ``dt``, noise model and
+calibration window, and cached). Nothing is simulated: the motion inputs, the
 measurements and the truth are the data's, on the loader's grid of ``dt``
 seconds (``dt`` is the slice length: the loader averages the odometry over
 each slice and bins every measurement to its nearest slice).
@@ -104,17 +103,65 @@ matched to that model could reach, not what any estimator must exceed on the dat
 from __future__ import annotations
 
 import dataclasses
+import functools
 import os
 from dataclasses import dataclass
 
 import numpy as np
 
+from coloc_env.config import BadInput
 from coloc_env.data import mrclam
 from coloc_env.parts import WORLDS, Block, PartConfig, check_choice, check_range
 from coloc_env.worlds.base import Readings, World
 from estimators.se2_models import RangeBearingModel, SE2Odometry
 
 NUM_ROBOTS = mrclam.NUM_ROBOTS
+
+
+@dataclass(frozen=True)
+class ReplayTables:
+    """One run with what every episode needs, computed once per (path, dt, noise_model, calibration_s).
+
+    ``noise`` the ``coloc_env.data.mrclam.calibrate_noise`` dict, ``noise_model`` the
+    ``coloc_env.data.mrclam.NoiseModel`` built from it, ``measurement_cov`` (M, 2, 2) its R
+    of every measurement line (from the measured range); ``first_index`` (T, N, N): index into
+    the measurement arrays of the first line (file order) in which robot i recorded robot j at
+    step t, -1 if none; ``landmark_count`` (T, N); ``extent`` (x0, x1, y0, y1) the box holding
+    the run's Vicon track and the landmarks, 0.5 m to spare.
+    """
+
+    data: mrclam.MrclamData
+    noise: dict
+    noise_model: mrclam.NoiseModel
+    measurement_cov: np.ndarray
+    first_index: np.ndarray
+    landmark_count: np.ndarray
+    extent: tuple[float, float, float, float]
+
+
+@functools.lru_cache(maxsize=4)
+def replay_tables(path: str, dt: float, noise_model: str, calibration_s: float | None) -> ReplayTables:
+    """The ``ReplayTables`` of the run at ``path`` (a resolved dataset folder) on the grid ``dt``, with the
+    noise model ``noise_model`` fitted on ``calibration_s`` seconds (None: the model's rule); cached."""
+    d = mrclam.load_cached(path, dt)
+    model = mrclam.NoiseModel.calibrate(d, noise_model, calibration_s)
+    measurement_cov = model.measurement_cov(d.meas_range)
+    N, T = NUM_ROBOTS, d.steps
+    robot = np.flatnonzero(d.meas_subject <= N)
+    keys = (d.meas_step[robot] * N + d.meas_robot[robot]) * N + (d.meas_subject[robot] - 1)
+    unique, first = np.unique(keys, return_index=True)  # first occurrence = first in file order
+    first_index = np.full(T * N * N, -1)
+    first_index[unique] = robot[first]
+    landmark = d.meas_subject > N
+    landmark_count = np.zeros((T, N))
+    np.add.at(landmark_count, (d.meas_step[landmark], d.meas_robot[landmark]), 1.0)
+    points = np.concatenate([d.groundtruth[..., :2].reshape(-1, 2), d.landmarks])
+    lo, hi = points.min(axis=0) - 0.5, points.max(axis=0) + 0.5
+    for array in (measurement_cov, first_index, landmark_count):
+        array.flags.writeable = False
+    return ReplayTables(d, dict(model.calibration), model, measurement_cov, first_index.reshape(T, N, N),
+                        landmark_count,
+                        (float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1])))
 
 
 @WORLDS.register
@@ -159,23 +206,36 @@ class Mrclam(PartConfig):
                              f"{self.noise_model!r} model has no measurement inflation), got {self.noise_model!r}")
         check_choice(f"{prefix}robot_sightings", self.robot_sightings, ("first", "all"))
 
-    def tables(self, prefix: str = "world."):
-        """The replay tables of the run (loaded and calibrated once per path; ValueError naming ``data``)."""
-        from coloc_env.scenarios.mrclam_relay import _tables
-
+    def tables(self, prefix: str = "world.") -> ReplayTables:
+        """The replay tables of the run (``replay_tables``: loaded and calibrated once per path; a missing or
+        malformed dataset is a ValueError naming ``data``)."""
         try:
             path = os.path.realpath(mrclam.resolve_data_path(self.data))
             calibration_s = None if self.calibration_s is None else float(self.calibration_s)
-            tables = _tables(path, float(self.dt), self.noise_model, calibration_s)
+            tables = replay_tables(path, float(self.dt), self.noise_model, calibration_s)
         except ValueError as exc:  # a missing or malformed dataset: name the field
-            raise ValueError(f"{prefix}data: {str(exc).removeprefix('data: ')}") from exc
+            raise BadInput(f"{prefix}data: {str(exc).removeprefix('data: ')}") from exc
         if self.measurement_inflation:
             return tables
-        # the same fit without the burst inflation of R: the cached tables stay the scenario's
+        # the same fit without the burst inflation of R (the cached tables keep it)
         model = mrclam.NoiseModel.from_calibration(tables.noise, tables.noise_model.kind, inflate_measurements=False)
         cov = model.measurement_cov(tables.data.meas_range)
         cov.flags.writeable = False
         return dataclasses.replace(tables, noise_model=model, measurement_cov=cov)
+
+    def check_run(self, prefix: str = "world.", horizon: str | None = None) -> ReplayTables:
+        """The checks that need the run (it is loaded): the dataset (``data``), ``horizon`` in [1, T - 1] and
+        ``start`` in [0, T - 1 - horizon] (the last step needs the next Vicon pose); BadInput naming the field
+        (``horizon``: the name to give that field in the message). Returns the tables."""
+        tables = self.tables(prefix)
+        T, K = tables.data.steps, self.horizon
+        if K > T - 1:
+            raise BadInput(f"{horizon or prefix + 'horizon'} must be in [1, {T - 1}] for this run of {T} steps "
+                           f"(the last step needs the next Vicon pose), got {K}")
+        if self.start is not None and self.start > T - 1 - K:
+            raise BadInput(f"{prefix}start must be in [0, {T - 1 - K}] for a horizon of {K} steps in this run "
+                           f"of {T} steps, got {self.start}")
+        return tables
 
     def build(self, batch: int, horizon: int) -> MrclamWorld:
         return MrclamWorld(self, batch, horizon)
@@ -186,16 +246,9 @@ class MrclamWorld(World):
 
     def __init__(self, config: Mrclam, batch: int, horizon: int):
         super().__init__(config, batch, horizon)
-        self.tables = config.tables()
+        self.tables = dataclasses.replace(config, horizon=self.horizon).check_run()
         self.data = self.tables.data
         self.noise_model = self.tables.noise_model
-        T, K = self.data.steps, self.horizon
-        if K > T - 1:
-            raise ValueError(f"world.horizon must be in [1, {T - 1}] for this run of {T} steps (the last step "
-                             f"needs the next Vicon pose), got {K}")
-        if config.start is not None and config.start > T - 1 - K:
-            raise ValueError(f"world.start must be in [0, {T - 1 - K}] for a horizon of {K} steps in this run "
-                             f"of {T} steps, got {config.start}")
         self.motion_model = SE2Odometry(self.data.dt)
         self.landmarks = np.asarray(self.data.landmarks)
         B, N = self.batch, self.num_agents

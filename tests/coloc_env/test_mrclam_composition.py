@@ -82,7 +82,7 @@ def test_ukf_se2_reproduces_the_mrclam_relay_scenario(network):
     steps, rng = 80, np.random.default_rng(5)
     scenario = MrclamRelayScenario(MrclamRelayConfig(data=DATASET6, window_steps=steps))
     scenario.reset([np.random.default_rng(11)])
-    start = int(scenario.start[0])
+    start = int(scenario.world.start[0])
     spec = coloc_env.compose(world=world(start=start, horizon=steps), network=network, backend="ukf_se2")
     env = coloc_env.parallel_env(spec)
     env.reset(seed=0)
@@ -92,20 +92,20 @@ def test_ukf_se2_reproduces_the_mrclam_relay_scenario(network):
     used = 0
     for _ in range(steps):
         choice = rng.integers(0, N, size=N)  # each robot's choice of whose measurement to use
-        a = scenario.absolute_step()[0]
-        recorded = scenario.tables.first_index[a, np.arange(N), choice] >= 0
+        a = scenario.world.absolute_step()[0]
+        recorded = scenario.world.tables.first_index[a, np.arange(N), choice] >= 0
         partner = np.where(recorded & (choice != np.arange(N)), choice, -1)
         routing = _nearest_first_routing(scenario.truth()[0, :, :2], partner)
         scenario.step(np.concatenate([choice[:, None], routing], axis=1)[None])
-        used += int(scenario.event.used.sum())
+        used += int(scenario.backend.used.sum())
         actions = {agent: np.array([choice[i]] + ([N + 1] if relay_block else []))
                    for i, agent in enumerate(env.possible_agents)}
         env.step(actions)
-        np.testing.assert_allclose(backend.estimate[0], scenario.estimate[0], rtol=0, atol=1e-9)
-        np.testing.assert_allclose(backend.P_ii[0], scenario.P_ii[0], rtol=0, atol=1e-9)
-        np.testing.assert_allclose(backend.joint_cov(0), scenario.joint_cov(0), rtol=0, atol=1e-9)
+        np.testing.assert_allclose(backend.estimate[0], scenario.backend.estimate[0], rtol=0, atol=1e-9)
+        np.testing.assert_allclose(backend.P_ii[0], scenario.backend.P_ii[0], rtol=0, atol=1e-9)
+        np.testing.assert_allclose(backend.joint_cov(0), scenario.backend.joint_cov(0), rtol=0, atol=1e-9)
     assert used > 5, "the window must hold applied robot-robot measurements for the comparison to mean anything"
-    assert scenario.event.landmarks.sum() + used > 0
+    assert scenario.backend.landmarks_applied.sum() + used > 0
 
 
 @needs_data

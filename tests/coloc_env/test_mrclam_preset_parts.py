@@ -41,8 +41,9 @@ def test_the_preset_names_its_parts_with_the_scenarios_defaults():
     for field in ("dt", "noise_model", "calibration_s", "initial_position_std", "initial_heading_std"):
         assert getattr(world, field) == getattr(config, field), field
     assert network.routing == "per_source"
-    for field in ("comm_range", "max_hops", "loss_at_zero", "loss_length", "hop_cost", "hop_cost_per_m2"):
+    for field in ("comm_range", "max_hops", "loss_at_zero", "loss_length", "hop_cost_per_m2"):
         assert getattr(network, field) == getattr(config, field), field
+    assert PRESET.communication_cost == config.communication_cost and network.hop_cost == 0.0  # charged once
     assert backend.ukf_lambda == config.ukf_lambda and backend.gate == config.gate
 
 
@@ -62,7 +63,7 @@ def _scenario_action(scenario, rng, noise=0.2):
     """A scenario action (N, 1 + N): whose measurement to use (a robot recorded at this step where there is one),
     then the routing table [holder, 1 + source] (0..N, N or itself = stop): each source's chain in a random order
     of the robots, a fraction ``noise`` of the entries replaced by random ones. A valid composition action."""
-    recorded = scenario.tables.first_index[scenario.absolute_step()[0]] >= 0  # (N, N) [observer, subject]
+    recorded = scenario.world.tables.first_index[scenario.world.absolute_step()[0]] >= 0  # (N, N) [observer, subject]
     choice = np.array([rng.choice(np.flatnonzero(row)) if row.any() else rng.integers(0, N) for row in recorded])
     routing = np.full((N, N), N)
     for m in range(N):
@@ -87,7 +88,7 @@ def _lockstep(seed, steps, scenario_fields, network_fields, inject, action_seed=
     core = env.unwrapped.scenario
     scenario = MrclamRelayScenario(MrclamRelayConfig(data=DATASET6, window_steps=steps, **scenario_fields))
     scenario.reset([np.random.default_rng(seed).spawn(3)[0]])  # the composition's world child of the seed
-    assert scenario.start[0] == core.world.start[0]
+    assert scenario.world.start[0] == core.world.start[0]
     if inject:  # the binding's network draws its losses from its own key: hand it the composition's
         scenario.network.keys[:] = core.network.keys
     rng = np.random.default_rng(action_seed)
@@ -97,20 +98,21 @@ def _lockstep(seed, steps, scenario_fields, network_fields, inject, action_seed=
         scenario.step(action[None])
         env.step({agent: action[i] for i, agent in enumerate(env.possible_agents)})
         backend = core.backend
-        np.testing.assert_allclose(backend.estimate[0], scenario.estimate[0], rtol=0, atol=1e-9)
-        np.testing.assert_allclose(backend.P_ii[0], scenario.P_ii[0], rtol=0, atol=1e-9)
-        np.testing.assert_allclose(backend.joint_cov(0), scenario.joint_cov(0), rtol=0, atol=1e-9)
+        np.testing.assert_allclose(backend.estimate[0], scenario.backend.estimate[0], rtol=0, atol=1e-9)
+        np.testing.assert_allclose(backend.P_ii[0], scenario.backend.P_ii[0], rtol=0, atol=1e-9)
+        np.testing.assert_allclose(backend.joint_cov(0), scenario.backend.joint_cov(0), rtol=0, atol=1e-9)
         info = scenario.info()
         np.testing.assert_array_equal(core.network.messages_sent[0], info["communication"][0])
-        np.testing.assert_allclose(core.network.cost_sent[0].sum(), scenario.event.cost[0], rtol=1e-12, atol=0)
-        event = scenario.event
-        stats["used"] += int(event.used.sum())
-        stops = event.relay.stop.reshape(N)
+        cost = scenario.communication_costs()
+        np.testing.assert_allclose(core.network.cost_sent[0].sum(), cost[0], rtol=1e-12, atol=0)
+        stats["used"] += int(scenario.backend.used.sum())
+        chains = scenario.backend.chains
+        stops = chains.stop.reshape(N)
         stats["stops"] += np.bincount(stops[stops >= 0], minlength=len(STOP_REASONS))
-        routes = event.relay.next_hop(N)  # [source, holder] the next hop each holder gave that source's chain
+        routes = chains.next_hop(N)  # [source, holder] the next hop each holder gave that source's chain
         for holder in range(N):
             stats["split_routes"] += len(set(routes[:, holder][routes[:, holder] >= 0].tolist())) > 1
-        stats["cost"] += float(event.cost[0])
+        stats["cost"] += float(cost[0])
     return stats
 
 
@@ -125,9 +127,10 @@ def test_the_preset_parts_equal_the_scenario_on_its_defaults():
 
 @needs_data
 def test_the_preset_parts_equal_the_scenario_given_the_networks_losses_and_hop_costs():
-    links = {"loss_at_zero": 0.3, "loss_length": 12.0, "comm_range": 6.0, "max_hops": 3, "hop_cost": 0.01,
-             "hop_cost_per_m2": 0.002}
-    stats = _lockstep(seed=9, steps=150, scenario_fields=links, network_fields=links, inject=True)
+    links = {"loss_at_zero": 0.3, "loss_length": 12.0, "comm_range": 6.0, "max_hops": 3, "hop_cost_per_m2": 0.002}
+    # the preset's per-hop communication_cost is the network's hop_cost of the plain composition
+    stats = _lockstep(seed=9, steps=150, scenario_fields={**links, "communication_cost": 0.01},
+                      network_fields={**links, "hop_cost": 0.01}, inject=True)
     for reason in ("lost", "stopped", "hop_budget"):
         assert stats["stops"][STOP_REASONS.index(reason)] > 0, (reason, stats)
     assert stats["used"] > 5 and stats["split_routes"] > 0 and stats["cost"] > 0, stats

@@ -57,13 +57,13 @@ def test_spaces_window_and_initial_state():
     scenario = env.scenario
     assert env.state().shape == env.state_space.shape and np.isfinite(env.state()).all()
     assert scenario.horizon == 30 and coloc_env.parallel_env(NAME, data=DATASET6).scenario.horizon == 600
-    start = int(scenario.start[0])
-    assert 0 <= start <= scenario.data.steps - 1 - 30
+    start = int(scenario.world.start[0])
+    assert 0 <= start <= scenario.world.data.steps - 1 - 30
     for i, agent in enumerate(env.possible_agents):
-        np.testing.assert_array_equal(infos[agent]["estimated_position"], scenario.data.groundtruth[start, i, :2])
+        np.testing.assert_array_equal(infos[agent]["estimated_position"], scenario.world.data.groundtruth[start, i, :2])
         np.testing.assert_array_equal(infos[agent]["true_position"], infos[agent]["estimated_position"])
         flags = observations[agent][N:2 * N]
-        recorded = scenario.tables.first_index[start, i] >= 0
+        recorded = scenario.world.tables.first_index[start, i] >= 0
         np.testing.assert_array_equal(flags, recorded.astype(np.float32))
     np.testing.assert_allclose(infos["robot_0"]["trace"], 2e-4)
     assert env.render().shape[2] == 3
@@ -71,14 +71,14 @@ def test_spaces_window_and_initial_state():
     seen = set()
     for s in range(8):
         env.reset(seed=s)
-        seen.add(int(scenario.start[0]))
+        seen.add(int(scenario.world.start[0]))
     assert len(seen) == 8
 
 
 def test_data_path_from_the_environment_variable(monkeypatch):
     monkeypatch.setenv(mrclam.ENV_VAR, DATASET6)
     env = coloc_env.parallel_env(NAME, window_steps=5)
-    assert env.scenario.data.steps > 7000
+    assert env.scenario.world.data.steps > 7000
     monkeypatch.delenv(mrclam.ENV_VAR)
     with pytest.raises(ValueError, match="data.*COLOC_MRCLAM_DATA"):
         coloc_env.parallel_env(NAME)
@@ -92,7 +92,8 @@ def test_data_path_from_the_environment_variable(monkeypatch):
     ({"loss_at_zero": 1.5}, "loss_at_zero"),
     ({"max_hops": 5}, "max_hops"),
     ({"comm_range": 0.0}, "comm_range"),
-    ({"hop_cost": -1.0}, "hop_cost"),
+    ({"communication_cost": -1.0}, "communication_cost"),
+    ({"hop_cost": -1.0}, "communication_cost"),  # the old name, read as communication_cost
     ({"gate": 0.0}, "gate"),
     ({"initial_position_std": 0.0}, "initial_position_std"),
     ({"calibration_s": -1.0}, "calibration_s"),
@@ -138,12 +139,12 @@ def test_same_seed_gives_identical_episodes_and_reset_continues_the_generator():
     other = play(make(window_steps=15), agents.make_policy("random", env_a, seed=5), 12)
     assert not data_equivalence(first_a, other)
     # the loss draws are counter-based from the network's key, drawn at reset
-    start, keys = env_a.scenario.start.copy(), env_a.scenario.network.keys.copy()
+    start, keys = env_a.scenario.world.start.copy(), env_a.scenario.network.keys.copy()
     env_a.reset()
     env_b.reset()
-    assert env_a.scenario.start[0] == env_b.scenario.start[0]
+    assert env_a.scenario.world.start[0] == env_b.scenario.world.start[0]
     np.testing.assert_array_equal(env_a.scenario.network.keys, env_b.scenario.network.keys)
-    assert env_a.scenario.start[0] != start[0] and not np.array_equal(env_a.scenario.network.keys, keys)
+    assert env_a.scenario.world.start[0] != start[0] and not np.array_equal(env_a.scenario.network.keys, keys)
 
 
 @pytest.mark.parametrize("noise_model", ["calibrated", "baseline"])
@@ -161,12 +162,12 @@ def test_paper_policy_without_losses_equals_ukf_ccl_under_the_reproductions_nois
     policy = agents.make_policy("paper", env)
     observations, _ = env.reset(seed=3)
     scenario = env.scenario
-    d, gate = scenario.data, scenario.config.gate
+    d, gate = scenario.world.data, scenario.config.gate
     model = mrclam.NoiseModel.calibrate(d, noise_model)  # calibration_seconds(d, noise_model) of the run
-    assert model == scenario.noise_model and model.kind == noise_model
+    assert model == scenario.world.noise_model and model.kind == noise_model
     odometry = model.odometry(d, np.arange(d.steps))  # the series run_filters integrates
     Q = model.odometry_var(odometry)
-    start = int(scenario.start[0])
+    start = int(scenario.world.start[0])
     delay = 2 if noise_model == "calibrated" else 0
     assert model.odometry_delay_steps == delay and start >= delay
     np.testing.assert_array_equal(odometry[start], d.odometry[start - delay] * np.asarray(model.odometry_scale))
@@ -193,8 +194,8 @@ def test_paper_policy_without_losses_equals_ukf_ccl_under_the_reproductions_nois
                 applied["robot"] += ok
                 assert infos[f"robot_{m}"]["chain_length"] == N  # complete chain
         x, P = se2.time_update(x, P, odometry[a], d.dt, Q[a])
-        np.testing.assert_allclose(scenario.estimate[0], x, atol=1e-9, rtol=0)
-        np.testing.assert_allclose(scenario.joint_cov(0), P, atol=1e-9, rtol=0)
+        np.testing.assert_allclose(scenario.backend.estimate[0], x, atol=1e-9, rtol=0)
+        np.testing.assert_allclose(scenario.backend.joint_cov(0), P, atol=1e-9, rtol=0)
         errors = np.linalg.norm(x[:, :2] - d.groundtruth[a + 1, :, :2], axis=-1)
         assert rewards["robot_0"] == pytest.approx(-errors.mean(), abs=1e-9)
     assert applied["robot"] > 5 and applied["landmark"] > 20
@@ -212,7 +213,7 @@ def _replay(seed, window_steps, **config):
         rejected += sum(int(infos[a]["rejected"]) for a in infos)
         applied += sum(int(infos[a]["used"]) + int(infos[a]["landmarks"]) for a in infos)
         errors.append([infos[a]["error"] for a in infos])
-    return int(env.scenario.start[0]), rejected, applied, float(np.mean(errors))
+    return int(env.scenario.world.start[0]), rejected, applied, float(np.mean(errors))
 
 
 def test_calibrated_noise_model_rejects_fewer_observations_than_the_baseline():
@@ -308,9 +309,9 @@ def test_batched_copies_equal_single_envs_and_reset_one_copy():
         for b, single in enumerate(singles):
             single.step(actions[b:b + 1])
     for b, single in enumerate(singles):
-        np.testing.assert_array_equal(batch.estimate[b], single.estimate[0])
-        np.testing.assert_array_equal(batch.sigma[b], single.sigma[0])
-    before = batch.estimate[[0, 2]].copy()
+        np.testing.assert_array_equal(batch.backend.estimate[b], single.backend.estimate[0])
+        np.testing.assert_array_equal(batch.backend.sigma[b], single.backend.sigma[0])
+    before = batch.backend.estimate[[0, 2]].copy()
     batch.reset([np.random.default_rng(9)], env_index=[1])
-    np.testing.assert_array_equal(batch.estimate[[0, 2]], before)
+    np.testing.assert_array_equal(batch.backend.estimate[[0, 2]], before)
     assert batch.k.tolist() == [12, 0, 12]

@@ -181,7 +181,7 @@ def test_lossy_link_study_lossless_is_the_paper_policy_and_losses_cut_hops():
     env = coloc_env.parallel_env("mrclam_relay", data=DATASET6, window_steps=W)
     policy = agents.make_policy("paper", env)
     observations, infos = env.reset(seed=seed)
-    assert int(env.scenario.start[0]) == study["window_start"]
+    assert int(env.scenario.world.start[0]) == study["window_start"]
     errors = [np.array([infos[f"robot_{i}"]["error"] for i in range(N)])]
     dead_reckoning = [np.zeros(N)]
     hops = 0

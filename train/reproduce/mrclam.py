@@ -273,26 +273,26 @@ def lossy_link_study(data: str, window_steps: int, seed: int, settings: dict[str
         config = cls.Config(data=data, window_steps=int(window_steps), **fields)
         scenario = cls(config, batch=1)
         lossy = config.loss_at_zero > 0 or config.loss_length < np.inf
-        whole = window_steps >= scenario.data.steps - 1
+        whole = window_steps >= scenario.world.data.steps - 1
         B = draws if lossy and whole else 1
         if B > 1:
             scenario = cls(config, batch=B)
         N, W = scenario.num_agents, scenario.horizon
         scenario.reset([np.random.default_rng(seed + b) for b in range(B)])
-        start = scenario.start.copy() if start is None else start
-        if not np.array_equal(scenario.start[:1], start[:1]):
+        start = scenario.world.start.copy() if start is None else start
+        if not np.array_equal(scenario.world.start[:1], start[:1]):
             raise RuntimeError("the settings' windows differ for one seed")
         sq = np.zeros((B, N))  # summed squared position errors
         nees = np.zeros((B, N))
         il_sq, il_nees = np.zeros(N), np.zeros(N)
-        x_il, P_il = scenario.estimate[0].copy(), scenario.joint_cov(0)
+        x_il, P_il = scenario.backend.estimate[0].copy(), scenario.backend.joint_cov(0)
         hops = chains = complete = chosen = used = 0
         blocks = np.arange(N)
         for k in range(W + 1):
             truth = scenario.truth()
-            error = scenario.estimate - truth
+            error = scenario.backend.estimate - truth
             sq += np.sum(error[..., :2] ** 2, axis=-1)
-            nees += _own_nees(error, scenario.P_ii)
+            nees += _own_nees(error, scenario.backend.P_ii)
             if first:
                 e_il = x_il - truth[0]
                 il_sq += np.sum(e_il[:, :2] ** 2, axis=-1)
@@ -300,17 +300,17 @@ def lossy_link_study(data: str, window_steps: int, seed: int, settings: dict[str
             if k == W:
                 break
             if first:
-                a = int(scenario.absolute_step()[0])
-                u = scenario.noise_model.odometry(scenario.data, np.array([a]))[0]
-                x_il, P_il = se2.time_update(x_il, P_il, u, scenario.data.dt, scenario.noise_model.odometry_var(u))
+                world = scenario.world
+                u = world.noise_model.odometry(world.data, world.absolute_step()[:1])[0]
+                x_il, P_il = se2.time_update(x_il, P_il, u, world.data.dt, world.noise_model.odometry_var(u))
             recorded = scenario.observation()[..., N:2 * N] > 0.5  # what PaperPolicy reads
             scenario.step(paper_actions(recorded))
-            relay, event = scenario.event.relay, scenario.event
+            relay = scenario.backend.chains
             hops += int(relay.hops.sum())
             chains += int(np.sum(relay.length > 0))
             complete += int(np.sum(relay.length == N))
-            chosen += int(np.sum(event.partner >= 0))
-            used += int(np.sum(event.used))
+            chosen += int(np.sum(scenario.backend.partner >= 0))
+            used += int(np.sum(scenario.backend.used))
             if progress and k % 2000 == 0:
                 progress(f"lossy links {name}: step {k}/{W}")
         rmse = np.sqrt(sq / (W + 1)).mean(axis=-1)  # (B,) mean over robots of the per-robot RMSE
