@@ -44,7 +44,8 @@ Errors: a missing path, a folder that is not a dataset (missing file), a
 malformed line (wrong number of fields, a non-number, a non-finite value,
 bytes that are not text, time going backwards), an unknown or repeated
 subject or barcode in ``Barcodes.dat`` or ``Landmark_Groundtruth.dat``, and a
-physically impossible value raise ``ValueError`` naming the file and line.
+physically impossible value raise ``coloc_env.config.BadInput`` (a ``ValueError``) naming the file
+and line.
 The physical bounds (``PHYSICAL_BOUNDS``) come from the dataset paper
 (Leung et al. 2011: five iRobot Create robots in a 15 m x 8 m indoor
 workspace, Vicon ground truth): |v| <= ``MAX_SPEED`` = 0.5 m/s (the Create's
@@ -67,6 +68,8 @@ import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from coloc_env.config import BadInput
 
 __all__ = [
     "BASELINE_CALIBRATION_S", "CALIBRATION_FRACTION", "CALIBRATION_MIN_S", "ENV_VAR", "GATE_999", "NOISE_MODELS",
@@ -166,7 +169,7 @@ class MrclamData:
     def window(self, start: int, steps: int) -> MrclamData:
         """Steps [start, start + steps) as a dataset of its own (time and steps renumbered from 0)."""
         if not 0 <= start < self.steps or steps < 1 or start + steps > self.steps:
-            raise ValueError(f"window [{start}, {start + steps}) must lie in [0, {self.steps}) with steps >= 1")
+            raise BadInput(f"window [{start}, {start + steps}) must lie in [0, {self.steps}) with steps >= 1")
         keep = (self.meas_step >= start) & (self.meas_step < start + steps)
         return MrclamData(
             path=self.path, dt=self.dt, t0=self.t0 + start * self.dt, time=self.time[:steps].copy(),
@@ -178,16 +181,16 @@ class MrclamData:
 
 
 def resolve_data_path(data: str | os.PathLike | None) -> str:
-    """``data``, else ``$COLOC_MRCLAM_DATA``; ValueError when neither is set or the path is not a folder."""
+    """``data``, else ``$COLOC_MRCLAM_DATA``; BadInput when neither is set or the path is not a folder."""
     if data is None or str(data) == "":
         data = os.environ.get(ENV_VAR, "")
         if not data:
-            raise ValueError(
+            raise BadInput(
                 f"data: no MRCLAM dataset folder given; pass data=PATH (--data DIR) or set {ENV_VAR} to a "
                 "folder such as MRCLAM_Dataset6 (download: http://asrl.utias.utoronto.ca/datasets/mrclam/)")
     path = os.fspath(data)
     if not os.path.isdir(path):
-        raise ValueError(f"data: {path!r} is not a folder (expected an MRCLAM dataset folder, e.g. MRCLAM_Dataset6)")
+        raise BadInput(f"data: {path!r} is not a folder (expected an MRCLAM dataset folder, e.g. MRCLAM_Dataset6)")
     return path
 
 
@@ -199,14 +202,14 @@ def _data_lines(path: str) -> list[tuple[int, bytes]]:
 
 
 def _refuse_row(path: str, row: int, message: str):
-    """ValueError naming ``path`` and the file line of data row ``row`` (0-based, comments and blanks skipped)."""
+    """BadInput naming ``path`` and the file line of data row ``row`` (0-based, comments and blanks skipped)."""
     number, line = _data_lines(path)[row]
-    return ValueError(f"{path}, line {number}: {message}: {line.decode('utf-8', 'replace').strip()!r}")
+    return BadInput(f"{path}, line {number}: {message}: {line.decode('utf-8', 'replace').strip()!r}")
 
 
 def _read_table(path: str, columns: int, integer_columns: tuple[int, ...] = (),
                 time_column: int | None = 0, bounds: tuple[Bound, ...] = ()) -> np.ndarray:
-    """Rows of ``columns`` finite numbers within ``bounds``; ValueError naming the file and the line otherwise.
+    """Rows of ``columns`` finite numbers within ``bounds``; BadInput naming the file and the line otherwise.
 
     Fast path: ``np.loadtxt`` and vectorized checks; on any format failure the line-by-line
     parser re-reads the file to name the offending line, and a value out of its bounds is
@@ -214,7 +217,7 @@ def _read_table(path: str, columns: int, integer_columns: tuple[int, ...] = (),
     """
     name = os.path.basename(path)
     if not os.path.isfile(path):
-        raise ValueError(f"{path}: missing file {name}: not an MRCLAM dataset folder")
+        raise BadInput(f"{path}: missing file {name}: not an MRCLAM dataset folder")
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("error")
@@ -250,41 +253,41 @@ def _read_table_lines(path: str, columns: int, integer_columns: tuple[int, ...],
         with open(path, "rb") as fh:
             lines = fh.read().splitlines()
     except OSError as exc:
-        raise ValueError(f"{path}: cannot read {name}: {exc}") from exc
+        raise BadInput(f"{path}: cannot read {name}: {exc}") from exc
     previous = -np.inf
     for number, raw in enumerate(lines, start=1):
         try:
             line = raw.decode("utf-8")
         except UnicodeDecodeError as exc:
-            raise ValueError(f"{path}, line {number}: not text (byte 0x{raw[exc.start]:02x} at column "
+            raise BadInput(f"{path}, line {number}: not text (byte 0x{raw[exc.start]:02x} at column "
                              f"{exc.start + 1}): a binary or damaged file") from exc
         data = line.split("#", 1)[0]
         control = [c for c in data if ord(c) < 32 and c not in "\t\f\v"]
         if control:
-            raise ValueError(f"{path}, line {number}: not text (control byte 0x{ord(control[0]):02x} at column "
+            raise BadInput(f"{path}, line {number}: not text (control byte 0x{ord(control[0]):02x} at column "
                              f"{data.index(control[0]) + 1}): a binary or damaged file")
         text = line.strip()
         if not text or text.startswith("#"):
             continue
         fields = text.split()
         if len(fields) != columns:
-            raise ValueError(f"{path}, line {number}: expected {columns} fields, got {len(fields)}: {text!r}")
+            raise BadInput(f"{path}, line {number}: expected {columns} fields, got {len(fields)}: {text!r}")
         try:
             values = [float(f) for f in fields]
         except ValueError as exc:
-            raise ValueError(f"{path}, line {number}: not a number: {text!r}") from exc
+            raise BadInput(f"{path}, line {number}: not a number: {text!r}") from exc
         if not all(np.isfinite(values)):
-            raise ValueError(f"{path}, line {number}: non-finite value: {text!r}")
+            raise BadInput(f"{path}, line {number}: non-finite value: {text!r}")
         for c in integer_columns:
             if values[c] != int(values[c]):
-                raise ValueError(f"{path}, line {number}: field {c + 1} must be an integer: {text!r}")
+                raise BadInput(f"{path}, line {number}: field {c + 1} must be an integer: {text!r}")
         if time_column is not None:
             if values[time_column] < previous:
-                raise ValueError(f"{path}, line {number}: time goes backwards ({values[time_column]} < {previous})")
+                raise BadInput(f"{path}, line {number}: time goes backwards ({values[time_column]} < {previous})")
             previous = values[time_column]
         rows.append(values)
     if not rows:
-        raise ValueError(f"{path}: {name} holds no data lines")
+        raise BadInput(f"{path}: {name} holds no data lines")
     return np.asarray(rows, dtype=float)
 
 
@@ -302,7 +305,7 @@ def _held_mean(t: np.ndarray, values: np.ndarray, grid: np.ndarray, dt: float) -
 def load(data: str | os.PathLike | None = None, dt: float = 0.1) -> MrclamData:
     """Parse one MRCLAM dataset folder onto the step grid of ``dt`` seconds (see the module docstring)."""
     if not (isinstance(dt, (int, float)) and np.isfinite(dt) and dt > 0):
-        raise ValueError(f"dt must be a positive number of seconds, got {dt!r}")
+        raise BadInput(f"dt must be a positive number of seconds, got {dt!r}")
     dt = float(dt)
     path = resolve_data_path(data)
     file = functools.partial(os.path.join, path)
@@ -326,7 +329,7 @@ def load(data: str | os.PathLike | None = None, dt: float = 0.1) -> MrclamData:
         barcodes[code], barcode_row[code], subject_row[subject] = subject, row, row
     if sorted(barcodes.values()) != list(range(1, NUM_SUBJECTS + 1)):
         missing = sorted(set(range(1, NUM_SUBJECTS + 1)) - set(barcodes.values()))
-        raise ValueError(f"{barcode_file}: must map each subject 1..{NUM_SUBJECTS} to one distinct barcode; "
+        raise BadInput(f"{barcode_file}: must map each subject 1..{NUM_SUBJECTS} to one distinct barcode; "
                          f"no barcode for subjects {missing}")
 
     landmark_file = file("Landmark_Groundtruth.dat")
@@ -345,7 +348,7 @@ def load(data: str | os.PathLike | None = None, dt: float = 0.1) -> MrclamData:
         landmark_std[subject - NUM_ROBOTS - 1] = row[3:5]
     if np.isnan(landmarks).any():
         missing = [int(i) + NUM_ROBOTS + 1 for i in np.flatnonzero(np.isnan(landmarks[:, 0]))]
-        raise ValueError(f"{file('Landmark_Groundtruth.dat')}: missing landmarks {missing}")
+        raise BadInput(f"{file('Landmark_Groundtruth.dat')}: missing landmarks {missing}")
 
     odometry, truth, measured = [], [], []
     for r in range(1, NUM_ROBOTS + 1):
@@ -357,7 +360,7 @@ def load(data: str | os.PathLike | None = None, dt: float = 0.1) -> MrclamData:
     t_end = min(min(o[-1, 0], g[-1, 0]) for o, g in zip(odometry, truth, strict=True))
     steps = int(np.floor((t_end - t0) / dt))
     if steps < 1:
-        raise ValueError(f"{path}: the robots' odometry and ground truth do not overlap by one step of {dt} s")
+        raise BadInput(f"{path}: the robots' odometry and ground truth do not overlap by one step of {dt} s")
     grid = t0 + dt * np.arange(steps)
 
     odo = np.empty((steps, NUM_ROBOTS, 2))
@@ -744,7 +747,7 @@ def _fit_key(d: MrclamData, noise: dict, steps: int, initial_std: float, gate: f
 
 CALIBRATION_FRACTION = 0.1  # calibration window of the calibrated model: the first 10 % of the run ...
 CALIBRATION_MIN_S = 60.0  # ... and at least 60 s
-BASELINE_CALIBRATION_S = 60.0  # the baseline model (before issue 9): the first 60 s
+BASELINE_CALIBRATION_S = 60.0  # the baseline model (constant white noise): the first 60 s
 NOISE_MODELS = ("calibrated", "baseline", "likelihood")
 
 
@@ -763,7 +766,7 @@ def calibration_seconds(d: MrclamData, kind: str = "calibrated") -> float:
 
 def _check_kind(kind) -> None:
     if kind not in NOISE_MODELS:
-        raise ValueError(f"noise_model must be one of {NOISE_MODELS}, got {kind!r}")
+        raise BadInput(f"noise_model must be one of {NOISE_MODELS}, got {kind!r}")
 
 
 @dataclass(frozen=True)
@@ -792,7 +795,7 @@ class NoiseModel:
     inflation for errors correlated over the correction horizon, range-dependent
     sigma_r, 68.27th-percentile sigma_b, burst inflation of R; ``inflate_measurements=False``
     leaves the last out, the ablation of ``coloc reproduce mrclam``).
-    ``kind="baseline"``: the model before issue 9, the same family with n = 0, s = 1,
+    ``kind="baseline"``: the simplest model, the same family with n = 0, s = 1,
     b = 0, r = 1, a = (sigma_v^2, sigma_w^2), sigma_r^2 = ``sigma_range``^2 (b_r = 0) and
     sigma_b = ``sigma_bearing`` (1.4826 x MAD, raw commands, constant white noise; these
     special values make each formula return the baseline's numbers exactly).
@@ -819,18 +822,18 @@ class NoiseModel:
         _check_kind(self.kind)
         if isinstance(self.odometry_delay_steps, bool) or int(self.odometry_delay_steps) != self.odometry_delay_steps \
                 or self.odometry_delay_steps < 0:
-            raise ValueError(f"odometry_delay_steps must be an integer >= 0, got {self.odometry_delay_steps!r}")
+            raise BadInput(f"odometry_delay_steps must be an integer >= 0, got {self.odometry_delay_steps!r}")
         for name, rule in (("odometry_scale", "finite"), ("odometry_var0", ">= 0"), ("odometry_var_gain", ">= 0"),
                            ("odometry_inflation", "> 0"), ("range_var", ">= 0")):
             value = np.asarray(getattr(self, name), float)
             bad = value < 0 if rule == ">= 0" else (value <= 0 if rule == "> 0" else np.zeros(value.shape, bool))
             if value.shape != (2,) or not np.all(np.isfinite(value)) or np.any(bad):
                 condition = "" if rule == "finite" else f" {rule}"
-                raise ValueError(f"{name} must be 2 finite numbers{condition}, got {getattr(self, name)!r}")
+                raise BadInput(f"{name} must be 2 finite numbers{condition}, got {getattr(self, name)!r}")
         if not (np.isfinite(self.range_inflation) and self.range_inflation > 0):
-            raise ValueError(f"range_inflation must be > 0, got {self.range_inflation!r}")
+            raise BadInput(f"range_inflation must be > 0, got {self.range_inflation!r}")
         if not (np.isfinite(self.bearing_var) and self.bearing_var >= 0):
-            raise ValueError(f"bearing_var must be >= 0, got {self.bearing_var!r}")
+            raise BadInput(f"bearing_var must be >= 0, got {self.bearing_var!r}")
 
     @classmethod
     def from_calibration(cls, noise: dict, kind: str = "calibrated", inflate_measurements: bool = True) -> NoiseModel:
@@ -841,7 +844,7 @@ class NoiseModel:
                        (noise["sigma_range"] ** 2, 0.0), 1.0, noise["sigma_bearing"] ** 2, calibration=noise)
         if kind == "likelihood":
             if "likelihood_scale" not in noise:
-                raise ValueError("noise_model 'likelihood' needs the calibration's likelihood_scale "
+                raise BadInput("noise_model 'likelihood' needs the calibration's likelihood_scale "
                                  "(fit_noise_scales; NoiseModel.calibrate(d, 'likelihood') fits it)")
             c_v, c_w, c_r, c_b = noise["likelihood_scale"]
             return cls(kind, int(noise["odometry_delay_steps"]), tuple(noise["odometry_scale"]),
@@ -868,7 +871,7 @@ class NoiseModel:
         """Corrected odometry u'[k] (..., N, 2) at absolute step(s) ``k`` (int or int array) of the run ``d``."""
         k = np.asarray(k)
         if k.dtype.kind not in "iu" or np.any(k < 0) or np.any(k >= d.steps):
-            raise ValueError(f"odometry: steps must be integers in [0, {d.steps}), got {k!r}")
+            raise BadInput(f"odometry: steps must be integers in [0, {d.steps}), got {k!r}")
         return d.odometry[np.maximum(k - int(self.odometry_delay_steps), 0)] * np.asarray(self.odometry_scale, float)
 
     def odometry_var(self, u) -> np.ndarray:
