@@ -92,6 +92,7 @@ draws, ``il_abs_diff_to_reproduction`` on a full run) and ``claims``
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import time
 
@@ -243,6 +244,19 @@ def _own_nees(error: np.ndarray, cov: np.ndarray) -> np.ndarray:
     return np.einsum("...a,...ab,...b->...", e, np.linalg.inv(cov), e)
 
 
+def _il_core(scenario, start: int, steps: int):
+    """IL on the study's window: a batched core (batch 1) of the scenario's ``mrclam`` world with the window
+    fixed (``start``, ``steps``), the ``ideal`` network and the ``dead_reckoning`` backend (the noise model's
+    odometry from the Vicon pose at the window start, the covariance by the same time update), reset."""
+    import coloc_env
+    from coloc_env.scenarios.composed import ComposedScenario
+
+    world = dataclasses.replace(scenario.composition.world, start=start, horizon=steps)
+    core = ComposedScenario(coloc_env.compose(world=world, network="ideal", backend="dead_reckoning"), batch=1)
+    core.reset([np.random.default_rng(0)])  # nothing is drawn: the window is fixed, the network lossless
+    return core
+
+
 def lossy_link_study(data: str, window_steps: int, seed: int, settings: dict[str, dict] | None = None,
                      draws: int = LOSS_DRAWS, progress=None) -> dict:
     """UKF-DCL of the ``mrclam_relay`` scenario under the paper policy for each link setting, and IL.
@@ -255,8 +269,9 @@ def lossy_link_study(data: str, window_steps: int, seed: int, settings: dict[str
     copies (loss realizations) when the window is the whole run, one otherwise; a lossless one runs one.
 
     The errors are taken at the window start (the Vicon pose, error 0) and after each step, against Vicon, as
-    ``run_filters`` does. IL = dead reckoning by the scenario's noise model from the window start, with the
-    covariance of the same time update. Per setting: ``rmse_position_mean`` (per-robot RMSE over the steps,
+    ``run_filters`` does. IL = the ``dead_reckoning`` backend on the scenario's world, the window fixed to
+    copy 0's (``_il_core``): the noise model's odometry from the window start, with the covariance of the
+    same time update. Per setting: ``rmse_position_mean`` (per-robot RMSE over the steps,
     mean over robots, mean over draws), ``rmse_position_draws``, ``nees_mean`` (x, y, theta; expectation 3),
     ``hops_per_step`` (delivered hops of all chains per step), ``delivered_fraction`` (delivered hops over the
     N - 1 hops of each complete chain), ``complete_fraction`` (chains that reached every robot),
@@ -285,24 +300,21 @@ def lossy_link_study(data: str, window_steps: int, seed: int, settings: dict[str
         sq = np.zeros((B, N))  # summed squared position errors
         nees = np.zeros((B, N))
         il_sq, il_nees = np.zeros(N), np.zeros(N)
-        x_il, P_il = scenario.backend.estimate[0].copy(), scenario.backend.joint_cov(0)
+        il = _il_core(scenario, int(start[0]), W) if first else None
         hops = chains = complete = chosen = used = 0
-        blocks = np.arange(N)
         for k in range(W + 1):
             truth = scenario.truth()
             error = scenario.backend.estimate - truth
             sq += np.sum(error[..., :2] ** 2, axis=-1)
             nees += _own_nees(error, scenario.backend.P_ii)
-            if first:
-                e_il = x_il - truth[0]
+            if il is not None:
+                e_il = il.backend.mean[0] - truth[0]
                 il_sq += np.sum(e_il[:, :2] ** 2, axis=-1)
-                il_nees += _own_nees(e_il, P_il.reshape(N, 3, N, 3)[blocks, :, blocks, :])
+                il_nees += _own_nees(e_il, il.backend.cov[0])
             if k == W:
                 break
-            if first:
-                world = scenario.world
-                u = world.noise_model.odometry(world.data, world.absolute_step()[:1])[0]
-                x_il, P_il = se2.time_update(x_il, P_il, u, world.data.dt, world.noise_model.odometry_var(u))
+            if il is not None:
+                il.step(np.full((1, N, 1), N))  # the world's sensing entry; dead reckoning reads the inputs only
             recorded = scenario.observation()[..., N:2 * N] > 0.5  # what PaperPolicy reads
             scenario.step(paper_actions(recorded))
             relay = scenario.backend.chains
