@@ -48,7 +48,7 @@ def test_quick_reproduce_on_dataset6(tmp_path, monkeypatch):
     assert stored["steps"] == 600
     assert metrics["max_abs_diff_dcl_ccl"] < 1e-9
     assert metrics["rmse_position"]["CCL"]["mean"] < metrics["rmse_position"]["IL"]["mean"]
-    # issue 9: the calibrated model is reported next to the baseline, and is the better-calibrated one
+    # the calibrated model is reported next to the baseline, and is the better-calibrated one
     assert {"noise_baseline", "nees_mean_baseline", "rmse_position_baseline", "observations_baseline"} <= set(stored)
     assert set(stored["nees_mean_baseline"]["CCL"]) == {f"robot{i}" for i in range(1, 6)} | {"mean"}
     assert stored["noise"]["odometry_delay_steps"] == 2

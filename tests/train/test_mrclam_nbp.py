@@ -1,4 +1,4 @@
-"""dNBP on MRCLAM (issue 9): the pseudo-fix, the slice mapping, determinism and the ordering on a short stretch."""
+"""dNBP on MRCLAM: the pseudo-fix, the slice mapping, determinism and the ordering on a short stretch."""
 
 from __future__ import annotations
 

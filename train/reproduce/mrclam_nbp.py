@@ -1,6 +1,6 @@
 """dNBP (wan2014) on real robot data: UTIAS MRCLAM, landmark-sighting robots as the "GPS-normal" UAVs.
 
-Issue 9: "dNBP with the robots that see landmarks playing the GPS-normal role".
+dNBP with the robots that see landmarks playing the GPS-normal role:
 ``estimators.dnbp`` (Wan et al. 2014, reconstructed in ``docs/wan2014.md``)
 and the least-squares baseline ``estimators.range_ls`` are driven on one
 MRCLAM dataset (``coloc_env.data.mrclam.load_cached``; cite Leung et al.,
@@ -111,7 +111,7 @@ N = mrclam.NUM_ROBOTS
 
 
 # --------------------------------------------------------------------------------------------- data -> slices
-pseudo_fix = mrclam.pseudo_fix  # moved to coloc_env.data.mrclam (shared with the mrclam world's pseudo-fixes)
+pseudo_fix = mrclam.pseudo_fix  # coloc_env.data.mrclam's (shared with the mrclam world's pseudo-fixes)
 fix_std = mrclam.fix_std
 
 
