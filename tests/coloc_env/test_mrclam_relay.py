@@ -111,6 +111,18 @@ def test_bad_config_names_the_field(kwargs, field):
         coloc_env.parallel_env(NAME, **config)
 
 
+def test_validation_reads_no_data_and_building_checks_the_run(tmp_path):
+    """The keywords are the parts' checks (no file is opened); the dataset and the window against the run are
+    checked when an env is built, under the preset's keywords."""
+    from coloc_env.scenarios.mrclam_relay import MrclamRelayConfig
+
+    MrclamRelayConfig(data=str(tmp_path / "nowhere"), window_steps=10**6).validate()
+    with pytest.raises(ValueError, match=r"^mrclam_relay: data: .*is not a folder"):
+        coloc_env.parallel_env(NAME, data=str(tmp_path / "nowhere"))
+    with pytest.raises(ValueError, match=r"^mrclam_relay: window_steps must be in \[1, \d+\] for this run"):
+        coloc_env.parallel_env(NAME, data=DATASET6, window_steps=10**6)
+
+
 def test_a_folder_that_is_not_a_dataset_names_data(tmp_path):
     with pytest.raises(ValueError, match="data: .*Barcodes.dat"):
         coloc_env.parallel_env(NAME, data=str(tmp_path))
