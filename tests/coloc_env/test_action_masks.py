@@ -293,7 +293,7 @@ def test_mrclam_relay_masks_unrecorded_partners_and_they_are_aliases_of_none():
             a, b = copy.deepcopy(scenario), copy.deepcopy(scenario)
             a.step(none[None])
             b.step(masked[None])
-            np.testing.assert_array_equal(a.estimate, b.estimate)
+            np.testing.assert_array_equal(a.backend.estimate, b.backend.estimate)
             aliases += 1
         _, _, _, _, infos = env.step({agent: actions[k] for k, agent in enumerate(env.possible_agents)})
     assert aliases > 10
