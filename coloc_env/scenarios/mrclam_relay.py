@@ -335,7 +335,7 @@ class MrclamRelayScenario(PresetScenario):
         u = self.readings.inputs[..., :2]  # u'[a], the noise model's odometry the backend predicted with
         self.dead_reckoning[:] = se2.motion(self.dead_reckoning, u, self.world.dt)[0]
 
-    def communication_costs(self) -> np.ndarray:
+    def step_cost(self) -> np.ndarray:
         """The team's cost of this step's hops (B,): ``communication_cost`` per delivered hop (the relay
         network's message) plus ``hop_cost_per_m2`` d^2 per hop of length d (the network's ``cost_sent``)."""
         sent = self.composition.communication_cost * self.network.messages_sent + self.network.cost_sent
@@ -348,7 +348,7 @@ class MrclamRelayScenario(PresetScenario):
             loss = self.position_error().mean(axis=-1)
         else:
             loss = np.sqrt(self.own_traces()).mean(axis=-1)
-        return np.repeat((-loss - self.communication_costs())[:, None], self.num_agents, axis=1)
+        return np.repeat((-loss - self.step_cost())[:, None], self.num_agents, axis=1)
 
     # --- views -------------------------------------------------------------------------
     def _recorded(self) -> np.ndarray:
@@ -413,7 +413,7 @@ class MrclamRelayScenario(PresetScenario):
             "floats_sent": network.floats_sent.copy(),
             "communication": network.messages_sent.copy(),
             "hops": team(network.messages_sent.sum(axis=-1)),
-            "hop_cost": team(self.communication_costs()),
+            "hop_cost": team(self.step_cost()),
             "step": team(self.k),
         }
 

@@ -103,7 +103,7 @@ def _lockstep(seed, steps, scenario_fields, network_fields, inject, action_seed=
         np.testing.assert_allclose(backend.joint_cov(0), scenario.backend.joint_cov(0), rtol=0, atol=1e-9)
         info = scenario.info()
         np.testing.assert_array_equal(core.network.messages_sent[0], info["communication"][0])
-        cost = scenario.communication_costs()
+        cost = scenario.step_cost()
         np.testing.assert_allclose(core.network.cost_sent[0].sum(), cost[0], rtol=1e-12, atol=0)
         stats["used"] += int(scenario.backend.used.sum())
         chains = scenario.backend.chains
