@@ -208,7 +208,7 @@ class Mrclam(PartConfig):
 
     def tables(self, prefix: str = "world.") -> ReplayTables:
         """The replay tables of the run (``replay_tables``: loaded and calibrated once per path; a missing or
-        malformed dataset is a ValueError naming ``data``)."""
+        malformed dataset is a BadInput naming ``data``)."""
         try:
             path = os.path.realpath(mrclam.resolve_data_path(self.data))
             calibration_s = None if self.calibration_s is None else float(self.calibration_s)
