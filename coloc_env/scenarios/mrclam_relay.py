@@ -169,7 +169,9 @@ Arguments (fields of ``MrclamRelayConfig``)
 
 The preset is the composition ``mrclam`` / ``relay`` (``routing="per_source"``) /
 ``ukf_se2`` (``MrclamRelayConfig.parts``) with this action codec (the
-action vector passed verbatim), observation, team reward and info. Each keyword
+action vector passed verbatim), observation, team reward and info; the observation,
+state, team reward and shared infos are the relay-chain presets' codec
+(``coloc_env.scenarios.relay_codec``, shared with ``relay_ukf``). Each keyword
 sets the part field of the same name, except ``window_steps`` (the world's and
 the composition's ``horizon``) and ``communication_cost`` (the composition's: the
 relay network's own per-hop ``hop_cost`` stays 0, so a hop is charged once); each
@@ -193,7 +195,6 @@ world's readings and the dead reckoning are one call for all copies.
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 
 import gymnasium
@@ -201,12 +202,13 @@ import numpy as np
 
 import estimators.ukf_relay_se2 as se2
 from coloc_env.backends.ukf_se2 import UkfSe2
-from coloc_env.config import BadInput, check_range
+from coloc_env.config import BadInput
 from coloc_env.data import mrclam
 from coloc_env.networks.relay import Relay
 from coloc_env.primitives.relay import STOP_REASONS
-from coloc_env.rendering import Link, Scene
-from coloc_env.scenarios.binding import PresetConfig, PresetScenario, keyword
+from coloc_env.rendering import Scene
+from coloc_env.scenarios.binding import keyword
+from coloc_env.scenarios.relay_codec import RelayTeamConfig, RelayTeamScenario, chain_links
 from coloc_env.worlds.mrclam import Mrclam
 
 NUM_ROBOTS = mrclam.NUM_ROBOTS
@@ -214,49 +216,34 @@ DISTANCE_SCALE = 10.0  # metres per unit in the observation
 
 
 @dataclass(frozen=True)
-class MrclamRelayConfig(PresetConfig):
+class MrclamRelayConfig(RelayTeamConfig):
     """Configuration of ``mrclam_relay`` (see the module docstring for the table)."""
 
     preset = "mrclam_relay"
     World, Network, Backend = Mrclam, Relay, UkfSe2
-    aliases = {"hop_cost": "communication_cost"}
+    fixed = {"network.routing": "per_source"}  # one next hop per measuring robot
+    team_label = "N"  # the robots of the run, not a keyword
 
     data: str | None = keyword(None, "world.data")
     dt: float = keyword(0.1, "world.dt")
-    window_steps: int = keyword(600, "world.horizon", "composition.horizon", "preset")
+    window_steps: int = keyword(600, "world.horizon", "composition.horizon")
     noise_model: str = keyword("calibrated", "world.noise_model")
     calibration_s: float | None = keyword(None, "world.calibration_s")
     initial_position_std: float = keyword(0.01, "world.initial_position_std")
     initial_heading_std: float = keyword(0.01, "world.initial_heading_std")
     gate: float | None = keyword(mrclam.GATE_999, "backend.gate")
-    comm_range: float = keyword(float("inf"), "network.comm_range")
-    max_hops: int | None = keyword(None, "network.max_hops", "preset")
-    loss_at_zero: float = keyword(0.0, "network.loss_at_zero")
-    loss_length: float = keyword(float("inf"), "network.loss_length")
-    communication_cost: float = keyword(0.0, "composition.communication_cost")
-    hop_cost_per_m2: float = keyword(0.0, "network.hop_cost_per_m2")
-    ukf_lambda: float = keyword(0.0, "backend.ukf_lambda")
-    reward: str = keyword("error", "composition.reward")
+
+    @property
+    def team_size(self) -> int:
+        return NUM_ROBOTS
 
     @property
     def horizon(self) -> int:
         """Steps per episode: ``window_steps``."""
         return self.window_steps
 
-    def parts(self) -> tuple:
-        """``mrclam`` (the window offset drawn per episode), ``relay`` with one next hop per measuring robot
-        (``routing="per_source"``), ``ukf_se2``. Reads no data."""
-        world, network, backend = super().parts()
-        return world, dataclasses.replace(network, routing="per_source"), backend
 
-    def check_preset(self) -> None:
-        """``max_hops`` <= N - 1 (a chain of N robots has at most N - 1 hops). The checks that need the run
-        (the dataset, ``window_steps`` <= T - 1) run when an env is built: validation reads no data."""
-        if self.max_hops is not None:
-            check_range("max_hops", self.max_hops, 1, NUM_ROBOTS - 1, integer=True)
-
-
-class MrclamRelayScenario(PresetScenario):
+class MrclamRelayScenario(RelayTeamScenario):
     """Batched core of ``mrclam_relay``: the binding of ``MrclamRelayConfig`` on the composable core
     (``mrclam`` / ``relay`` with ``routing="per_source"`` / ``ukf_se2``); the module docstring has the tables.
     The run and its window offsets are the world's (``world.data``, ``world.tables``, ``world.start``), the
@@ -278,7 +265,15 @@ class MrclamRelayScenario(PresetScenario):
         self.dead_reckoning = np.zeros((B, N, 3))
         self.measured = np.zeros((B, N))
 
-    # --- description ------------------------------------------------------------
+    distance_scale = DISTANCE_SCALE
+    agent_state_dim = 3
+
+    @property
+    def estimate(self) -> np.ndarray:
+        """Each robot's pose estimate (B, N, 3): after a step, the prediction to k + 1."""
+        return self.backend.estimate
+
+    # --- codec ---------------------------------------------------------------------------------------
     @property
     def num_agents(self) -> int:
         return NUM_ROBOTS
@@ -287,16 +282,6 @@ class MrclamRelayScenario(PresetScenario):
     def horizon(self) -> int:
         return self.config.window_steps
 
-    @property
-    def obs_dim(self) -> int:
-        return 3 * self.num_agents + 3
-
-    def observation_space(self):
-        N = self.num_agents
-        low = np.concatenate([np.zeros(2 * N + 1 + N), [-np.inf], [0.0]])
-        high = np.concatenate([np.ones(2 * N), np.full(1 + N, np.inf), [np.inf], [1.0]])
-        return gymnasium.spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
-
     def action_space(self):
         N = self.num_agents
         return gymnasium.spaces.MultiDiscrete([N] + [N + 1] * N, dtype=np.int64)
@@ -304,23 +289,10 @@ class MrclamRelayScenario(PresetScenario):
     def action_mask(self) -> np.ndarray:
         """(B, N, N + N (N + 1)) bool: the choices valid now. Index 0: the robots it recorded at this step (its
         observation's entries [N, 2N)) and itself ("none"); any other robot gives no measurement, as itself
-        does. Index 1 + m: the core's per-source ``next_hop`` rule without its "nearest" entry (itself, the
-        source m and a robot beyond ``comm_range`` end the chain, as N = stop does; stop stays valid)."""
-        B, N = self.batch, self.num_agents
-        partner = self._recorded() | np.eye(N, dtype=bool)
-        _, next_hop = self.block_choice_masks()  # (B, N holders, N sources, N + 2)
-        return np.concatenate([partner, next_hop[..., :N + 1].reshape(B, N, -1)], axis=-1)
-
-    def state_space(self):
-        dim = self.num_agents * self.obs_dim + 3 * self.num_agents
-        return gymnasium.spaces.Box(-np.inf, np.inf, shape=(dim,), dtype=np.float32)
-
-    # --- dynamics ------------------------------------------------------------------
-    def reset(self, rngs, env_index=None) -> None:
-        super().reset(rngs, env_index)
-        idx = self._indices(env_index)
-        self.dead_reckoning[idx] = self.world.data.groundtruth[self.world.start[idx]]
-        self.measured[idx] = 0.0
+        does. Index 1 + m: the ``relay`` network's per-source ``next_hop`` rule without its "nearest" entry
+        (itself, the source m and a robot beyond ``comm_range`` end the chain, as N = stop does)."""
+        _, relay = self.relay_masks()
+        return np.concatenate([self._recorded() | np.eye(self.num_agents, dtype=bool), relay], axis=-1)
 
     def decode_actions(self, actions) -> np.ndarray:
         """Actions (B, N, 1 + N) -> the parts' blocks, verbatim: the world's ``partner`` (never its "every
@@ -329,26 +301,28 @@ class MrclamRelayScenario(PresetScenario):
         relay = f"action[1:] (whom to relay each source's chain to, {N} = stop)"
         return self.check_discrete_actions(actions, ("action[0] (whose measurement to use)", *[relay] * N))
 
+    def own_features(self) -> np.ndarray:
+        """The robots each one recorded at this step (N) and its landmark sightings (1): (B, N, N + 1)."""
+        landmarks = self.world.tables.landmark_count[self.world.absolute_step()]
+        return np.concatenate([self._recorded(), np.where((self.k < self.horizon)[:, None], landmarks, 0.0)[..., None]],
+                              axis=-1)
+
+    def feature_bounds(self):
+        N = self.num_agents
+        return np.zeros(N + 1), np.concatenate([np.ones(N), [np.inf]])
+
+    # --- dynamics ------------------------------------------------------------------
+    def reset(self, rngs, env_index=None) -> None:
+        super().reset(rngs, env_index)
+        idx = self._indices(env_index)
+        self.dead_reckoning[idx] = self.world.data.groundtruth[self.world.start[idx]]
+        self.measured[idx] = 0.0
+
     def advance(self, decoded) -> None:
         self.measured = self._recorded().sum(axis=-1).astype(float)
         super().advance(decoded)
         u = self.readings.inputs[..., :2]  # u'[a], the noise model's odometry the backend predicted with
         self.dead_reckoning[:] = se2.motion(self.dead_reckoning, u, self.world.dt)[0]
-
-    def step_cost(self) -> np.ndarray:
-        """The team's cost of this step's hops (B,): ``communication_cost`` per delivered hop (the relay
-        network's message) plus ``hop_cost_per_m2`` d^2 per hop of length d (the network's ``cost_sent``)."""
-        sent = self.composition.communication_cost * self.network.messages_sent + self.network.cost_sent
-        return sent.sum(axis=-1)
-
-    def compute_reward(self) -> np.ndarray:
-        """The team's: minus the mean over robots of the error (or RMS) after the time update to k + 1, minus the
-        communication cost of the step's chains."""
-        if self.config.reward == "error":
-            loss = self.position_error().mean(axis=-1)
-        else:
-            loss = np.sqrt(self.own_traces()).mean(axis=-1)
-        return np.repeat((-loss - self.step_cost())[:, None], self.num_agents, axis=1)
 
     # --- views -------------------------------------------------------------------------
     def _recorded(self) -> np.ndarray:
@@ -360,62 +334,31 @@ class MrclamRelayScenario(PresetScenario):
         """Vicon poses (B, N, 3) at the current step."""
         return self.world.poses()
 
-    def position_error(self) -> np.ndarray:
+    def truth_xy(self) -> np.ndarray:
+        return self.truth()[..., :2]
+
+    def team_error(self) -> np.ndarray:
         """||p_hat_i - p_i|| (B, N), metres, against Vicon, of the current estimate (after a step: k + 1)."""
-        return np.linalg.norm(self.backend.estimate[..., :2] - self.truth()[..., :2], axis=-1)
+        return np.linalg.norm(self.backend.estimate[..., :2] - self.truth_xy(), axis=-1)
+
+    def position_error(self) -> np.ndarray:
+        return self.team_error()
 
     def own_traces(self) -> np.ndarray:
         """tr of each robot's position covariance (B, N), m^2."""
         return self.backend.P_ii[..., 0, 0] + self.backend.P_ii[..., 1, 1]
 
-    def observation(self) -> np.ndarray:
-        B, N = self.batch, self.num_agents
-        live = (self.k < self.horizon)[:, None]
-        landmarks = np.where(live, self.world.tables.landmark_count[self.world.absolute_step()], 0.0)
-        p = self.truth()[..., :2]
-        distance = np.linalg.norm(p[:, :, None, :] - p[:, None, :, :], axis=-1)
-        frac = np.broadcast_to((self.k / self.horizon)[:, None], (B, N))
-        obs = np.concatenate([np.broadcast_to(np.eye(N), (B, N, N)), self._recorded().astype(float),
-                              landmarks[..., None], distance / DISTANCE_SCALE, np.log(self.own_traces())[..., None],
-                              frac[..., None]], axis=-1)
-        return obs.astype(np.float32)
-
-    def episode_error(self, errors: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
-        """Mean distance error ||p_hat_i - p_i|| over the steps and robots (as ``relay_ukf``)."""
-        return np.asarray(errors, float).mean(axis=(-2, -1))
-
-    def state(self) -> np.ndarray:
-        log_var = np.log(np.diagonal(self.backend.P_ii, axis1=-2, axis2=-1)).reshape(self.batch, -1)
-        return np.concatenate([self.observation().reshape(self.batch, -1), log_var], axis=-1).astype(np.float32)
+    def own_variances(self) -> np.ndarray:
+        return np.diagonal(self.backend.P_ii, axis1=-2, axis2=-1).reshape(self.batch, -1)
 
     def info(self) -> dict[str, np.ndarray]:
         B, N = self.batch, self.num_agents
-        backend, chains, network = self.backend, self.backend.chains, self.network
-        truth, estimate = self.truth(), self.backend.estimate
-        team = lambda values: np.repeat(np.asarray(values)[:, None], N, axis=1)  # noqa: E731
-        error = self.position_error()
-        return {
-            "true_position": truth[..., :2].copy(),
-            "estimated_position": estimate[..., :2].copy(),
-            "position_error": error,
-            "error": error.copy(),
-            "heading_error": np.abs(se2.wrap(estimate[..., 2] - truth[..., 2])),
-            "trace": self.own_traces(),
-            "dead_reckoning_error": np.linalg.norm(self.dead_reckoning[..., :2] - truth[..., :2], axis=-1),
-            "measured": self.measured.copy(),
-            "partner": backend.partner.copy(),
-            "used": backend.used.copy(),
-            "landmarks": backend.landmarks_applied.copy(),
-            "rejected": backend.rejected.copy(),
-            "chain_length": chains.length.reshape(B, N).copy(),
-            "chain_stop": chains.stop.reshape(B, N).copy(),
-            "messages_sent": network.messages_sent.copy(),
-            "floats_sent": network.floats_sent.copy(),
-            "communication": network.messages_sent.copy(),
-            "hops": team(network.messages_sent.sum(axis=-1)),
-            "hop_cost": team(self.step_cost()),
-            "step": team(self.k),
-        }
+        backend, chains, truth = self.backend, self.backend.chains, self.truth()
+        return {**self.team_info(), "heading_error": np.abs(se2.wrap(backend.estimate[..., 2] - truth[..., 2])),
+                "measured": self.measured.copy(), "partner": backend.partner.copy(), "used": backend.used.copy(),
+                "landmarks": backend.landmarks_applied.copy(), "rejected": backend.rejected.copy(),
+                "chain_length": chains.length.reshape(B, N).copy(), "chain_stop": chains.stop.reshape(B, N).copy(),
+                "hops": self.team(self.network.messages_sent.sum(axis=-1))}
 
     def scene(self, b: int) -> Scene:
         N, k, start, data = self.num_agents, int(self.k[b]), int(self.world.start[b]), self.world.data
@@ -424,13 +367,11 @@ class MrclamRelayScenario(PresetScenario):
         chains = self.backend.chains
         links, notes = [], []
         for m in range(N):
-            row = b * N + m
-            hops = [int(p) for p in chains.chain[row] if p >= 0]
-            links += [Link(source=p, target=q, value=1.0, label=(f"{m}:range" if h == 0 else f"{m}:{h + 1}"))
-                      for h, (p, q) in enumerate(zip(hops[:-1], hops[1:], strict=True))]
+            hops, hop_links = chain_links(chains.chain[b * N + m], prefix=f"{m}:")
+            links += hop_links
             if hops:
-                notes.append(f"chain {' -> '.join(map(str, hops))} ({STOP_REASONS[chains.stop[row]]})")
-        notes.append(f"mean error {self.position_error()[b].mean():.3f} m, "
+                notes.append(f"chain {' -> '.join(map(str, hops))} ({STOP_REASONS[chains.stop[b * N + m]]})")
+        notes.append(f"mean error {self.team_error()[b].mean():.3f} m, "
                      f"{int(self.backend.landmarks_applied[b].sum())} landmark sightings")
         centre = np.array([0.5 * (x0 + x1), 0.5 * (y0 + y1)])
         # the map holds the run's tracks and every landmark, with a margin for the ellipses
@@ -439,16 +380,9 @@ class MrclamRelayScenario(PresetScenario):
         high = np.maximum([x1, y1], landmarks.max(axis=0)) + 0.3
         return Scene(
             title=f"mrclam_relay (MRCLAM dataset)  t = {(start + k) * data.dt:.1f} s, window step {k}/{self.horizon}",
-            truth=truth,
-            estimates=self.backend.estimate[b, :, :2],
-            covariances=self.backend.P_ii[b, :, :2, :2],
+            truth=truth, estimates=self.backend.estimate[b, :, :2], covariances=self.backend.P_ii[b, :, :2, :2],
             trails=np.swapaxes(data.groundtruth[start:start + k + 1, :, :2], 0, 1),
-            node_positions=(truth - centre) / max(x1 - x0, y1 - y0),
-            node_labels=self.agent_names,
-            links=links,
-            link_value_max=1.0,
-            link_value_name="relay hop of the last step (source:hop)",
-            extent=(float(low[0]), float(high[0]), float(low[1]), float(high[1])),
-            landmarks=landmarks,
-            notes=notes[-4:],
-        )
+            node_positions=(truth - centre) / max(x1 - x0, y1 - y0), node_labels=self.agent_names, links=links,
+            link_value_max=1.0, link_value_name="relay hop of the last step (source:hop)",
+            extent=(float(low[0]), float(high[0]), float(low[1]), float(high[1])), landmarks=landmarks,
+            notes=notes[-4:])
