@@ -93,7 +93,7 @@ def test_data_path_from_the_environment_variable(monkeypatch):
     ({"max_hops": 5}, "max_hops"),
     ({"comm_range": 0.0}, "comm_range"),
     ({"communication_cost": -1.0}, "communication_cost"),
-    ({"hop_cost": -1.0}, "communication_cost"),  # the old name, read as communication_cost
+    ({"hop_cost": -1.0}, "^mrclam_relay: hop_cost must be"),  # the old name, refused under the name written
     ({"gate": 0.0}, "gate"),
     ({"initial_position_std": 0.0}, "initial_position_std"),
     ({"calibration_s": -1.0}, "calibration_s"),
