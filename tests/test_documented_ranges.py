@@ -181,7 +181,7 @@ def names_of(target, config_cls) -> dict:
         names.update(CHEAP_PRESET.get(target[1], {}))
     else:
         names.update(CHEAP_PART.get(target[1], {}))
-    for key in ("num_uavs", "num_platforms", "num_agents"):
+    for key in ("num_platforms", "num_agents"):
         if key in names:
             names["N"] = names[key]
     if "num_neighbours" in names:

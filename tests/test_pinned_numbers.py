@@ -1,15 +1,13 @@
-"""Pinned numbers of commit 6f148d7, taken before the composable-core refactor (issue 14).
+"""Pinned numbers: what every preset and a few reproductions compute on seeded runs, through the public API.
 
-Every scenario of :data:`coloc_env.SCENARIOS` is about to move onto a new composable core. This
-file pins what the code of 6f148d7 computes today, through the public API only, so that every
-step of that refactor proves it changed nothing:
+A change that moves the code between parts (worlds, networks, backends, the presets' bindings) must leave
+these numbers as they are; each pin below says what its stream is where that is not obvious:
 
 * ``test_seeded_rollout``: per scenario, ``parallel_env(name, **OVERRIDES[name])`` reset with
   seed 3 and played for at most 25 steps (or until the episode ends) by ``paper`` and by
   ``random`` (both ``make_policy(..., seed=0)``); pinned are the number of steps, the sum of all
-  rewards, the sum over steps and agents of ``infos[a]["position_error"]`` (or ``"error"`` where
-  that key is absent, as it is in every scenario today), the sum of ``infos[a]["trace"]``
-  (``None``: no agent ever reports it) and the sum of the first agent's final observation.
+  rewards, the sum over steps and agents of ``infos[a]["position_error"]`` (``"error"`` where a preset
+  reports no position error), the sum of ``infos[a]["trace"]`` and the sum of the first agent's final observation.
 * ``test_vector_env``: per scenario, ``vector_env(name, num_envs=3, seed=5, **OVERRIDES[name])``
   reset and stepped 10 times with actions drawn, one per sub-env and step, from its
   ``action_space`` seeded with ``action_space.seed(0)``; pinned are the sum of the rewards and
@@ -20,7 +18,7 @@ step of that refactor proves it changed nothing:
 Bit-identity pins: every pin except the three marked ``deterministic`` in
 :data:`REPRODUCTION` is a pin of a random stream (the rollouts, the vector env and the seeded
 Monte Carlo reproductions). They hold only while every generator is seeded and consumed exactly
-as today: a change in what is drawn, in which order or from which generator moves them by far
+as now: a change in what is drawn, in which order or from which generator moves them by far
 more than the tolerance. The tolerance (``rel=1e-9, abs=1e-12``) only absorbs floating-point
 reassociation (a sum or a matmul done in another order or batch), not a different draw. The
 three ``deterministic`` pins (zhao2020's exact and greedy J_50, fu2017's covariance traces) use
@@ -161,14 +159,14 @@ def _wan2014_paper_policy_costs() -> float:
 def _wan2014_point_dnbp() -> float:
     from train.reproduce import wan2014
 
-    base = {"num_uavs": 6, "horizon": 4, "num_particles": 30, "num_normal": 3}
+    base = {"num_agents": 6, "horizon": 4, "num_particles": 30, "num_normal": 3}
     return float(wan2014.evaluate_point({}, base, 2, 0)["dnbp"]["err_fault"])  # 2 runs, seed 0
 
 
 def _gao2016_paper_policy_costs() -> float:
     from train.reproduce import gao2016
 
-    return float(gao2016.paper_policy_costs([0, 1], _config("nlos_horizon", horizon=300, num_uavs=2)).sum())
+    return float(gao2016.paper_policy_costs([0, 1], _config("nlos_horizon", horizon=300, num_agents=2)).sum())
 
 
 # id -> (function, kind)
@@ -185,27 +183,19 @@ REPRODUCTION = {
     "gao2016_paper_policy_costs_seeds0-1_sum": (_gao2016_paper_policy_costs, "random stream"),
 }
 
-# --- the pins (commit 6f148d7) -----------------------------------------------------------------
+# --- the pins ---------------------------------------------------------------------------------
 PINNED_ROLLOUTS = {
-    # bandwidth_fusion became a binding on the composable core (issue 14): drift / bandwidth / bandwidth_fusion with
-    # its action codec; the world draws the episode from the episode's generator in draw_episode's order and the
-    # bandwidth network draws nothing, so rewards, observations and the vector pin are 6f148d7's bit for bit. The
-    # infos now report position_error (m; the "error" pin sums it, it summed the squared error before) and trace
-    # (tr Sigma_i, m^2; None before). Paper policy T1P1, 500 episodes, seeds 1e6 + e: J_50 - 1.44 = 29.2431 +- 0.1955
-    # before and after, the per-episode costs identical.
+    # drift / bandwidth / bandwidth_fusion with the preset's action codec: the world draws the episode from the
+    # episode's generator, the bandwidth network draws nothing. "error" sums position_error (m), "trace" sums
+    # tr Sigma_i (m^2).
     "bandwidth_fusion": {
         "paper": {"steps": 25, "reward": -17.268696353831736, "error": 39.658217579576494,
                   "trace": 14.7804029124928, "obs_sum": 0.094229552894830704},
         "random": {"steps": 25, "reward": -21.09272043628452, "error": 42.829322103017724,
                    "trace": 17.675288143042007, "obs_sum": -6.0589263513684273},
     },
-    # lossy_fusion became a binding on the composable core (issue 14): the link outcomes are the
-    # bernoulli_delay network's counter-based draws (from its own child generator), no longer the last block
-    # of LossyFusionConfig.sample_episodes, so every rollout pin moved; the infos now report position_error
-    # (m; the "error" pin sums it, it summed the squared error before) and trace. The truth and measurements
-    # are the sampler's as before. Statistical check of the new stream (paper policy, 1000 episodes, seeds
-    # 5e6 + e, mean episode MSE +- SE): L = 2 165.14 +- 3.62 (before) vs 162.57 +- 3.48 (after), L = 4
-    # 369.10 +- 7.66 vs 368.11 +- 7.31: within 0.6 combined standard errors.
+    # target_cv / bernoulli_delay / prediction_compensation: the truth and measurements are the world's draws,
+    # the link outcomes the bernoulli_delay network's counter-based draws (from its own child generator).
     "lossy_fusion": {
         "paper": {"steps": 25, "reward": -3249.2816163220373, "error": 356.01476929565069,
                   "trace": 748.00516142952438, "obs_sum": 18.225183486938477},
@@ -218,28 +208,17 @@ PINNED_ROLLOUTS = {
         "random": {"steps": 25, "reward": -53.720614082882371, "error": 53.720614082882378,
                    "trace": 71.076467009166166, "obs_sum": 4.2395842671394348},
     },
-    # gps_denied_nbp became a binding on the composable core (issue 14): its infos now report the belief's
-    # "trace" (the pins above said None), and its action space is MultiDiscrete([2] * n_iter) instead of
-    # MultiBinary(n_iter), so the random policy and action_space.sample() draw other actions ("random" and
-    # the vector pin are new). The paper rollout's reward, error and observations are 6f148d7's to 1e-14;
-    # on the same actions the binding is bit-identical to the scenario it replaced (checked then, with the
-    # actions of 2 seeded episodes, in a worktree of c5d50d6). Then the observation gained entry 7, what the
-    # neighbours heard (issue 15): obs_sum moved, the rewards did not.
+    # gps_denied / broadcast / dnbp; the action space is MultiDiscrete([2] * n_iter), which the random policy
+    # and action_space.sample() draw from; "trace" sums the belief's trace.
     "gps_denied_nbp": {
         "paper": {"steps": 10, "reward": -604.3678943276825, "error": 518.1200318608358, "trace": 4785.748565134399,
                   "obs_sum": 5.9857264459133148},
         "random": {"steps": 10, "reward": -551.7500809058329, "error": 481.1705238086633, "trace": 11974.192581420139,
                    "obs_sum": 5.8648813366889954},
     },
-    # nlos_horizon became a binding on the composable core (issue 14): nlos_orbit / random_delay / afge, receiving
-    # before deciding. The packet delays are the random_delay network's counter-based draws (from its own child
-    # generator), no longer the delay block of draw_episode (the world still draws it, unused, so the truth,
-    # readings and prior are the scenario's bit for bit), so every pin moved; the infos now report position_error
-    # (m; the "error" pin sums it, it summed the squared error before); the observation's entries are clipped to
-    # the backend's finite bounds. Statistical check of the new stream (paper policy, default config, 200
-    # episodes, seeds 7e6 + e, gao2016.paper_policy_costs, mean +- SE in m^2): 8.921 +- 0.185 (before) vs
-    # 9.040 +- 0.167 (after): 0.48 combined standard errors. Then the observation gained the AHG costs of the
-    # group (issue 15): obs_sum moved, the rewards did not.
+    # nlos_orbit / random_delay / afge, receiving before deciding: the truth, readings and prior are the world's
+    # draws, the packet delays the random_delay network's counter-based draws (from its own child generator);
+    # the observation's entries are clipped to the backend's finite bounds.
     "nlos_horizon": {
         "paper": {"steps": 25, "reward": -12710.078499146035, "error": 383.99771754895926,
                   "trace": 21416.532797315038, "obs_sum": 17.500539391488928},
@@ -256,10 +235,10 @@ PINNED_ROLLOUTS = {
 
 PINNED_VECTOR = {
     "bandwidth_fusion": {"reward": -21.77453984785825, "obs_sum": -79.099833246320486},
-    "lossy_fusion": {"reward": -36945.847672462463, "obs_sum": 66.719748601317406},  # network's link draws (above)
+    "lossy_fusion": {"reward": -36945.847672462463, "obs_sum": 66.719748601317406},
     "relay_ukf": {"reward": -62.415704756975174, "obs_sum": 43.797087430953979},
-    "gps_denied_nbp": {"reward": -2558.9879417419434, "obs_sum": 91.82473330199718},  # MultiDiscrete since issue 14
-    "nlos_horizon": {"reward": -156932.33562774584, "obs_sum": 276.53796964552021},  # network's delays (above)
+    "gps_denied_nbp": {"reward": -2558.9879417419434, "obs_sum": 91.82473330199718},
+    "nlos_horizon": {"reward": -156932.33562774584, "obs_sum": 276.53796964552021},
     "mrclam_relay": {"reward": -0.73232610011473298, "obs_sum": -77.301276981830597},
 }
 
@@ -275,7 +254,7 @@ PINNED_REPRODUCTION = {
     "wang2019_IL_error_2runs_seed0_K100": 1.5412870579730336,
     "wan2014_paper_policy_costs_seeds0-1_sum": 10.415701635341382,
     "wan2014_evaluate_point_dnbp_err_fault": 6.4800918732193233,
-    "gao2016_paper_policy_costs_seeds0-1_sum": 9.3517665805268457,  # the network's delays (nlos_horizon above)
+    "gao2016_paper_policy_costs_seeds0-1_sum": 9.3517665805268457,
 }
 
 

@@ -44,10 +44,8 @@ class Scenario(abc.ABC):
     # --- static description -------------------------------------------------
     @property
     def num_agents(self) -> int:
-        """N; by default the config's ``num_agents`` (or ``num_uavs`` where the config calls it so; a scenario
-        whose agents are named otherwise overrides)."""
-        config = self.config
-        return config.num_agents if hasattr(config, "num_agents") else config.num_uavs
+        """N; by default the config's ``num_agents`` (a scenario whose agents are named otherwise overrides)."""
+        return self.config.num_agents
 
     @property
     def horizon(self) -> int:

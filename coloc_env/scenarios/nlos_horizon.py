@@ -101,11 +101,12 @@ estimator) and, at reset, over the copies being reset (each draws its whole epis
 own generator) and over time for the LOS/NLOS chains.
 
 Arguments (keywords of ``NlosHorizonConfig``, defaults = §9; each sets the field of the same name of
-the part named, ``num_uavs`` the world's ``num_agents``)
+the part named)
 --------------------------------------------------------------------
 | field               | default                      | allowed / source                                  |
 |---------------------|------------------------------|---------------------------------------------------|
-| num_uavs            | 4                            | 1..64 agents (targets) [chosen]                   |
+| num_agents          | 4                            | 1..64 agents (targets) [chosen] (older name:      |
+|                     |                              | ``num_uavs``)                                     |
 | num_neighbours      | 8                            | 1..32, J [chosen]                                 |
 | horizon             | 1000                         | 1..100000 steps (1000 s flight [paper])           |
 | period              | 1.0                          | [1e-3, 1e4], T (s) [chosen]                       |
@@ -154,12 +155,13 @@ the part named, ``num_uavs`` the world's ``num_agents``)
 | reward              | "error"                      | "error", "trace"                                  |
 | communication_cost  | 0.0                          | [0, 1e12] per packet used (m^2, the reward's unit) |
 
-``num_uavs`` .. ``p10`` and ``prior_std`` set the world's fields (``num_uavs`` its ``num_agents``),
+``num_agents`` .. ``p10`` and ``prior_std`` set the world's fields,
 ``buffer_length`` and ``delay_probs`` the network's, ``n_strongest`` .. ``smoothing`` the backend's,
 ``horizon``, ``reward`` and ``communication_cost`` the composition's (``horizon`` also the world's);
 each is checked once, by that part, and a refused value is reported under the keyword. The rules
 between parts (``n_strongest``, ``min_packets`` <= J; ``window_min`` >= D + 1) are the backend's
-``check_against``. ``packet_cost`` is accepted as the older name of ``communication_cost``.
+``check_against``. Older keywords, still accepted by ``make`` and ``parallel_env`` (give one name of a
+pair): ``num_uavs`` for ``num_agents``, ``packet_cost`` for ``communication_cost``.
 "horizon" is the episode length as in every scenario; the paper's horizon size N is called the
 *window* here (the action's first entry, the info key ``window``).
 """
@@ -196,9 +198,9 @@ class NlosHorizonConfig(PresetConfig):
 
     preset = "nlos_horizon"
     World, Network, Backend = NlosOrbit, RandomDelay, Afge
-    aliases = {"packet_cost": "communication_cost"}
+    aliases = {"num_uavs": "num_agents", "packet_cost": "communication_cost"}
 
-    num_uavs: int = _world("num_agents")
+    num_agents: int = _world("num_agents")
     num_neighbours: int = _world("num_neighbours")
     horizon: int = keyword(_W.horizon, "world.horizon", "composition.horizon")
     period: float = _world("period")

@@ -51,8 +51,8 @@ def test_alias_is_read_as_its_keyword_and_not_both(preset, alias, name):
 @pytest.mark.parametrize(("preset", "alias", "name"), ALIASES)
 def test_refused_value_under_an_older_name_is_named_as_written(preset, alias, name):
     cls = REGISTRY[preset].Config
-    bad = {"num_agents": 1, "num_uavs": 1}.get(name, -1.0)  # below every count's and every cost's range
-    if name not in ("num_agents", "num_platforms") and not name.endswith("cost"):
+    bad = 0 if name == "num_agents" else -1.0  # below every count's and every cost's range
+    if name != "num_agents" and not name.endswith("cost"):
         pytest.skip(f"{name}: no value known to be out of range for every preset")
     with pytest.raises(ValueError, match=rf"^{preset}: {alias} must be") as refused:
         build_config(cls, {alias: bad})

@@ -144,7 +144,7 @@ def _single_packet_episode(config, stamp, tau):
 
 @pytest.mark.parametrize("tau", [0, 2, 3, 4])
 def test_a_packet_counts_once_at_its_own_stamp_and_never_past_the_buffer(tau):
-    config = build_config(NlosHorizonConfig, {"num_uavs": 1, "horizon": 20})
+    config = build_config(NlosHorizonConfig, {"num_agents": 1, "horizon": 20})
     Y, y, gamma = _fused(config, _single_packet_episode(config, 7, tau))
     D = config.buffer_length
     expected = np.zeros(gamma.shape, bool)
@@ -161,7 +161,7 @@ def test_a_packet_counts_once_at_its_own_stamp_and_never_past_the_buffer(tau):
 
 
 def test_buffer_rerun_equals_filtering_every_stamp_once_with_what_is_known():
-    config = build_config(NlosHorizonConfig, {"num_uavs": 1, "horizon": 40, "delay_probs": (0.3, 0.3, 0.2, 0.1)})
+    config = build_config(NlosHorizonConfig, {"num_agents": 1, "horizon": 40, "delay_probs": (0.3, 0.3, 0.2, 0.1)})
     ep = _episode(config, np.random.default_rng(5))
     Y, y, gamma = _fused(config, ep)
     D, S = config.buffer_length, 6
@@ -178,7 +178,7 @@ def test_buffer_rerun_equals_filtering_every_stamp_once_with_what_is_known():
 
 
 def test_without_delay_the_buffer_rerun_changes_nothing():
-    config = build_config(NlosHorizonConfig, {"num_uavs": 1, "horizon": 120, "buffer_length": 0,
+    config = build_config(NlosHorizonConfig, {"num_agents": 1, "horizon": 120, "buffer_length": 0,
                                               "delay_probs": (1.0,)})
     ep = _episode(config, np.random.default_rng(6))
     Y, y, g = _fused(config, ep)
@@ -227,7 +227,7 @@ def test_smoothed_costs_forget_exponentially_and_correct_the_start_bias():
 
 def test_seeded_monte_carlo_oracle_kf_beats_blind_kf():
     """sigma_a = 1 m/s^2 (matched to the turns), pi = 0.3: knowing the mode lowers the error."""
-    config = build_config(NlosHorizonConfig, {"num_uavs": 1, "horizon": 300})
+    config = build_config(NlosHorizonConfig, {"num_agents": 1, "horizon": 300})
     runs = 6
     eps = [_episode(config, np.random.default_rng([2016, r])) for r in range(runs)]
     fused = [_fused(dataclasses.replace(config, mode_info=mode), ep)
@@ -245,7 +245,7 @@ def test_seeded_monte_carlo_oracle_kf_beats_blind_kf():
 @pytest.fixture(scope="module")
 def default_world_runs():
     """Three full default episodes (1000 s, turns included), DFIR for every N and AFGE."""
-    config = build_config(NlosHorizonConfig, {"num_uavs": 1})
+    config = build_config(NlosHorizonConfig, {"num_agents": 1})
     eps = [_episode(config, np.random.default_rng([7, r])) for r in range(3)]
     fused = [_fused(config, ep) for ep in eps]
     K = config.horizon

@@ -82,7 +82,7 @@ def test_wan2014_figures_follow_the_conventions(wan_metrics):
 
 
 def test_gao2016_fig6_legend_is_outside_the_data_area():
-    config = build_config(NlosHorizonConfig, {"num_uavs": 1})
+    config = build_config(NlosHorizonConfig, {"num_agents": 1})
     rng = np.random.default_rng(1)
     R, K, S = 3, config.horizon, 30
     res = {"afge": {"known": rng.uniform(0.1, 1, (R, K))}, "dfir": {"known": rng.uniform(0.1, 1, (R, K, S))},
@@ -247,7 +247,7 @@ def test_demo_summary_reads_claims_verdicts_and_stage_times(tmp_path, capsys):
 def test_gao2016_figure6_is_a_moving_mean_with_its_interval_band_and_follows_the_conventions():
     """Each curve is the square root of the run-mean of the per-run moving mean of the squared error, and its band
     the 95 % t-interval of that run-mean (square roots of its ends, cut at the axis where it reaches 0)."""
-    config = build_config(NlosHorizonConfig, {"num_uavs": 1})
+    config = build_config(NlosHorizonConfig, {"num_agents": 1})
     rng = np.random.default_rng(3)
     R, K = 5, config.horizon
     res = {"afge": {"known": rng.gamma(2.0, 2.0, (R, K))}, "dfir": {"known": rng.gamma(2.0, 2.0, (R, K, 10))},
@@ -269,7 +269,7 @@ def test_gao2016_figure6_is_a_moving_mean_with_its_interval_band_and_follows_the
 
 
 def test_gao2016_fig6_log_ticks_are_plain():
-    config = build_config(NlosHorizonConfig, {"num_uavs": 1})
+    config = build_config(NlosHorizonConfig, {"num_agents": 1})
     rng = np.random.default_rng(2)
     R, K = 2, config.horizon
     res = {"afge": {"known": rng.uniform(1, 4, (R, K))}, "dfir": {"known": rng.uniform(1, 4, (R, K, 10))},

@@ -27,7 +27,7 @@ CASES = {
     "bandwidth_fusion": ("zhao2020", 4, {}),
     "lossy_fusion": ("fu2017", 2, {}),
     "relay_ukf": ("wang2019", 2, {"horizon": 200}),
-    "nlos_horizon": ("gao2016", 2, {"horizon": 300, "num_uavs": 2}),
+    "nlos_horizon": ("gao2016", 2, {"horizon": 300, "num_agents": 2}),
     "gps_denied_nbp": ("wan2014", 2, {"horizon": 10, "num_particles": 50}),
 }
 

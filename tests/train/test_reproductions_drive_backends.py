@@ -254,7 +254,7 @@ def _reference_gao2016(config, index, generators, mode_info="known", lag0=False,
 
 
 def test_gao2016_compositions_give_the_estimator_functions_numbers_on_the_same_draws():
-    config = dataclasses.replace(build_config(NlosHorizonConfig, {"horizon": 60}), num_uavs=1)
+    config = dataclasses.replace(build_config(NlosHorizonConfig, {"horizon": 60}), num_agents=1)
     seed, runs = 2016, (0, 1)
     block = gao2016.monte_carlo_block(config, seed, runs)
 

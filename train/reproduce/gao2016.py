@@ -216,7 +216,7 @@ def run(out: str, runs: int = RUNS, seed: int = 0, quick: bool = False, executor
         address: str | None = None, config: NlosHorizonConfig | None = None, progress=None) -> dict:
     """Compute everything, write ``out/gao2016/``, return the metrics (plus ``claims``)."""
     config = config or build_config(NlosHorizonConfig, {})
-    config = dataclasses.replace(config, num_uavs=1)
+    config = dataclasses.replace(config, num_agents=1)
     config.validate()
     for _, changes in SETTINGS:
         dataclasses.replace(config, **changes).validate()
