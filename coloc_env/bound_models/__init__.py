@@ -55,20 +55,29 @@ def estimates_reason(backend_name: str) -> str:
             "account of what arrived bounds no estimator that fuses them")
 
 
-def with_delivered(problem, core, record, message_kind: str, shape: tuple, readings_bound):
+def with_delivered(problem, core, record, message_kind: str | None = None, shape: tuple = (), readings_bound=None):
     """``problem`` with its delivered bound set by the backend's ``delivered_kind``: ``"nothing"``, the local
     bounds; ``"readings"``, ``readings_bound(arrival, lags)`` -> (recursions, their agents), ``arrival`` the
     record's first arrival step of each ``message_kind`` message (``shape``, -1 throughout when none was sent)
-    and ``lags`` the network's longest delay; ``"estimates"``, none, with the reason. Returns ``problem``."""
+    and ``lags`` the network's longest delay, or ``readings_bound()`` where ``message_kind`` is None (a bound
+    that reads the record itself: ``ukf_ccl``'s centre, from the broadcasts); ``"estimates"``, none, with the
+    reason. A world without a ``readings_bound`` for the backend leaves its readings out, with the reason.
+    Returns ``problem``."""
     name = core.composition.backend.name
     kind = delivered_kind(name)
     if kind == "nothing":
         problem.delivered, problem.delivered_agents = problem.local, problem.local_agents
+    elif kind == "readings" and readings_bound is not None:
+        if message_kind is None:
+            problem.delivered, problem.delivered_agents = readings_bound()
+        else:
+            arrival = record.first_arrival(message_kind)
+            if arrival is None:
+                arrival = np.full(shape, -1, dtype=np.int64)
+            problem.delivered, problem.delivered_agents = readings_bound(arrival, core.network.max_delay())
     elif kind == "readings":
-        arrival = record.first_arrival(message_kind)
-        if arrival is None:
-            arrival = np.full(shape, -1, dtype=np.int64)
-        problem.delivered, problem.delivered_agents = readings_bound(arrival, core.network.max_delay())
+        problem.delivered_reason = (f"no delivered bound of {name}'s readings on the "
+                                    f"{core.composition.world.name} world")
     else:
         problem.delivered_reason = estimates_reason(name)
     return problem

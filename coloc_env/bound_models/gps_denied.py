@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from coloc_env.bound_models import centre_received, delivered_kind, estimates_reason
+from coloc_env.bound_models import centre_received, with_delivered
 from coloc_env.bounds import BoundProblem, Recursion
 from estimators.bounds import fix_information, pair_information, range_information
 
@@ -68,12 +68,9 @@ def problem(core, record) -> BoundProblem:
     local = [Recursion(p0, own[:, i], np.broadcast_to(f, (steps, 4, 4)), np.broadcast_to(q, (steps, 4, 4)),
                        np.array([[0, 1]])) for i in range(N)]
     agents = [np.array([i]) for i in range(N)]
-    result = BoundProblem(centralized, local, agents)
-    if delivered_kind(core.composition.backend.name) == "nothing":
-        result.delivered, result.delivered_agents = local, agents
-    elif central:  # every UAV reads its estimate at the centre
-        result.delivered = [Recursion(P0, centre, centralized.F, centralized.Q, positions)]
-        result.delivered_agents = [np.arange(N)]
-    else:
-        result.delivered_reason = estimates_reason(core.composition.backend.name)
-    return result
+
+    def centre_bound():  # every UAV reads its estimate at the centre
+        return [Recursion(P0, centre, centralized.F, centralized.Q, positions)], [np.arange(N)]
+
+    return with_delivered(BoundProblem(centralized, local, agents), core, record,
+                          readings_bound=centre_bound if central else None)

@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from coloc_env.bound_models import delivered_kind, estimates_reason
+from coloc_env.bound_models import with_delivered
 from coloc_env.bounds import BoundProblem, Recursion
 from estimators.bounds import range_bearing_information
 
@@ -81,9 +81,4 @@ def problem(core, record) -> BoundProblem:
     centralized = Recursion(np.kron(np.eye(N), p0), info, F, Q, positions)
     local = [Recursion(p0, own[:, i], f[:, i], q[:, i], np.array([[0, 1]])) for i in range(N)]
     agents = [np.array([i]) for i in range(N)]
-    result = BoundProblem(centralized, local, agents, model_based=True, per_episode=True)
-    if delivered_kind(core.composition.backend.name) == "nothing":
-        result.delivered, result.delivered_agents = local, agents
-    else:
-        result.delivered_reason = estimates_reason(core.composition.backend.name)
-    return result
+    return with_delivered(BoundProblem(centralized, local, agents, model_based=True, per_episode=True), core, record)

@@ -74,6 +74,20 @@ def test_estimate_messages_leave_the_delivered_bound_out_and_say_why():
     assert "carry estimates" in bound["delivered_reason"]
 
 
+def test_a_world_without_a_readings_bound_leaves_the_readings_out_and_says_why():
+    """``with_delivered`` for a backend whose messages are readings, on a world that gives no bound of them."""
+    from types import SimpleNamespace
+
+    from coloc_env.bound_models import with_delivered
+    from coloc_env.bounds import BoundProblem
+
+    core = SimpleNamespace(composition=SimpleNamespace(backend=SimpleNamespace(name="ukf_ccl"),
+                                                       world=SimpleNamespace(name="mrclam")))
+    problem = with_delivered(BoundProblem(None, [], []), core, None)
+    assert problem.delivered is None
+    assert problem.delivered_reason == "no delivered bound of ukf_ccl's readings on the mrclam world"
+
+
 def test_bad_arguments_are_named():
     with pytest.raises(ValueError, match=r"episodes must be an integer in \[1, 100000\]"):
         pcrb("target_cv/ideal/kalman", episodes=0)
