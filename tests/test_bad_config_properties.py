@@ -52,7 +52,7 @@ CHEAP_PRESET = {
     "nlos_horizon": {"horizon": 40},
 }
 CHEAP_PART = {"dnbp": {"num_particles": 40, "num_iterations": 1}, "mrclam": {"data": MRCLAM_DATA, "horizon": 8}}
-SKIP_FIELDS = {"data"}  # a path: the loader's own tests cover it (the file part of issue 17)
+SKIP_FIELDS = {"data"}  # a path: the loader's own tests cover it
 
 
 # --- field kinds -----------------------------------------------------------------------------------

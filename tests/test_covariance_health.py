@@ -1,4 +1,4 @@
-"""Long-run health of every backend that keeps a covariance (issue 17): symmetric, positive semi-definite
+"""Long-run health of every backend that keeps a covariance: symmetric, positive semi-definite
 and finite at every step of a long episode under random decisions.
 
 Each case composes a cheap world / network pair the backend runs on, steps two seeded copies for

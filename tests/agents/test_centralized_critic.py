@@ -1,4 +1,4 @@
-"""The centralized-critic recipe (issue 15 §2): the critic reads ``[own observation | state()]``, the actor only
+"""The centralized-critic recipe: the critic reads ``[own observation | state()]``, the actor only
 its own observation, in training and at evaluation (:mod:`agents.centralized_critic`)."""
 
 import os

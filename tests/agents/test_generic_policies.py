@@ -1,4 +1,4 @@
-"""Generic policies of any composition (issue 14): always, silent and the one-step-look-ahead greedy."""
+"""Generic policies of any composition: always, silent and the one-step-look-ahead greedy."""
 
 import numpy as np
 import pytest

@@ -1,4 +1,4 @@
-"""The recurrent recipe (issue 15 §2): ``ALGORITHM = "recurrent_ppo"`` trains sb3-contrib's RecurrentPPO, and both
+"""The recurrent recipe: ``ALGORITHM = "recurrent_ppo"`` trains sb3-contrib's RecurrentPPO, and both
 evaluation paths carry each agent's LSTM memory over the episode, fresh at its first step."""
 
 import os

@@ -1,4 +1,4 @@
-"""Action masks (issue 15 §2): invalid choices are masked, never punished or refused.
+"""Action masks: invalid choices are masked, never punished or refused.
 
 ``Scenario.action_mask`` (B, N, sum(nvec)) bool, ``infos[agent]["action_mask"]`` (int8) and
 ``CoLocVecEnv.action_masks()`` (what sb3_contrib's MaskablePPO reads). The rules are the tables of

@@ -1,4 +1,4 @@
-"""The composable core (issue 14): every compatible composition, its errors and its consistency checks."""
+"""The composable core: every compatible composition, its errors and its consistency checks."""
 
 import os
 import pickle

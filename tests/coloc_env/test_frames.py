@@ -1,7 +1,7 @@
 """Every preset and a few compositions render a legible, non-blank ``rgb_array`` frame.
 
 Each frame is also written to ``$COLOC_FRAMES_DIR`` (default ``/tmp/frames``) as a PNG, so that a
-person can look at them (the issue asks that someone does before a change to the renderer lands).
+person can look at them before a change to the renderer lands.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Observation spaces carry finite bounds where the quantity is bounded (one-hots, flags, fractions), and every
-observation of an episode, auto-resets included, lies inside its space (issue: PettingZoo's api_test warned that
-every entry of some presets was unbounded). Each scenario's table says which entries stay unbounded and why."""
+observation of an episode, auto-resets included, lies inside its space (PettingZoo's api_test warns about a
+space whose entries are all unbounded). Each scenario's table says which entries stay unbounded and why."""
 
 import numpy as np
 import pytest

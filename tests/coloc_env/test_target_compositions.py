@@ -1,4 +1,4 @@
-"""Target estimation in the composable core (issue 14): worlds drift / target_cv, networks bandwidth /
+"""Target estimation in the composable core: worlds drift / target_cv, networks bandwidth /
 bernoulli_delay, backends bandwidth_fusion, centralized_lmmse, prediction_compensation, kalman."""
 
 import numpy as np

@@ -1,4 +1,4 @@
-"""``coloc train`` keeps the best checkpoint on the validation seeds as model.zip (issue 15), not the last one."""
+"""``coloc train`` keeps the best checkpoint on the validation seeds as model.zip, not the last one."""
 
 import json
 import os

@@ -389,7 +389,7 @@ def test_list_ok_and_part_filters_keep_only_their_rows(capsys):
 
 
 def test_a_composition_trains_and_evaluates_by_its_name(tmp_path, capsys):
-    """``coloc train WORLD/NETWORK/BACKEND`` (issue 15's cross-combination) uses the composition's settings
+    """``coloc train WORLD/NETWORK/BACKEND`` (a cross-combination of parts) uses the composition's settings
     module (train/hyperparams/circles__broadcast__ukf_ccl.py), and ``coloc evaluate --policy all`` judges its
     model against always and silent in OUT/circles_broadcast_ukf_ccl/."""
     name, out = "circles/broadcast/ukf_ccl", str(tmp_path)

@@ -1,5 +1,5 @@
 """Bad input to the command line and to the model loader: one clear line, the right exit code, nothing computed,
-nothing lost (issue 17, "Command line and files"; issue 16, "Command line")."""
+nothing lost."""
 
 from __future__ import annotations
 
@@ -82,7 +82,7 @@ def test_check_output_folder_creates_nothing_and_accepts_a_new_nested_folder(tmp
 
 # --- Ctrl-C and result folders -------------------------------------------------------------------------------
 def test_an_interrupt_mid_reproduction_leaves_the_folder_marked_and_prints_one_line(tmp_path, capsys, monkeypatch):
-    """Ctrl-C between metrics.json and report.md (the issue's case): the folder says INCOMPLETE, exit 130."""
+    """Ctrl-C between metrics.json and report.md: the folder says INCOMPLETE, exit 130."""
     import train.reproduce.zhao2020 as zhao2020
 
     def interrupted(*args, **kwargs):

@@ -1,4 +1,5 @@
-"""The figures of issue 16 ("Figures"), built from small synthetic inputs, checked for layout properties."""
+"""The figures (reproductions, leaderboard, learning curves, studies, preset frames, bench), built from small
+synthetic inputs, checked for layout properties."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Ctrl-C during a long command, with a real SIGINT (issue 17): exit 130, one line on stderr naming the folder left
+"""Ctrl-C during a long command, with a real SIGINT: exit 130, one line on stderr naming the folder left
 marked ``INCOMPLETE``, and nothing that was in the folder before is lost.
 
 Each command runs as ``python -m train.cli`` in a subprocess (as in test_cli_bad_input.py), with a budget far larger

@@ -1,4 +1,4 @@
-"""Paired leaderboard (issue 15 §1): the paired t-interval, its verdict, the strongest realizable baseline,
+"""Paired leaderboard: the paired t-interval, its verdict, the strongest realizable baseline,
 bounds apart, reference filters and rule runners on the env's own episodes, validation-only tuning and a
 ``record`` that keeps every row when several processes write at once."""
 

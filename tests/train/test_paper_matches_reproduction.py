@@ -1,8 +1,8 @@
-"""``coloc evaluate``'s paper-policy error equals each reproduction's number on the same seeds (issue 10).
+"""``coloc evaluate``'s paper-policy error equals each reproduction's number on the same seeds.
 
 The env side is :func:`train.evaluate.run_episodes` with the ``paper`` policy on the
 evaluation seeds ``EVAL_SEED_BASE + e``. The reproduction side is each paper module's
-``paper_policy_costs``: the same episodes (drawn with the scenario's own sampler from
+``paper_policy_costs``: the same episodes (drawn by the preset's world from
 ``default_rng(seed)``, as ``env.reset(seed=...)`` draws them), run through the
 reproduction's Monte Carlo code (batched, not the env's step). The two paths sum or average
 in different orders and batch differently, so the numbers agree to rounding (1e-9

@@ -22,11 +22,11 @@ SHORT = {
     "nlos_horizon": {"horizon": 60},
     "gps_denied_nbp": {"horizon": 3, "num_particles": 20},
     "mrclam_relay": {"window_steps": 5, "data": MRCLAM_DATASET6},
-    # issue 15's cross-combination, trained by its name WORLD/NETWORK/BACKEND
+    # a cross-combination of parts, trained by its name WORLD/NETWORK/BACKEND
     "circles/broadcast/ukf_ccl": {"horizon": 5},
 }
 # A field per scenario whose change changes the agents' spaces; nlos_horizon's keeps the shape and type and
-# changes only the action space's nvec (27 horizon choices -> 17), the case a shape-and-type check lets through.
+# changes only the action space's nvec (27 window choices -> 17), the case a shape-and-type check lets through.
 # (mrclam_relay has none: its five robots are the data set's.)
 OTHER_SPACES = {
     "bandwidth_fusion": {"num_agents": 3},
