@@ -7,7 +7,7 @@ import pettingzoo
 
 import coloc_env  # registers the ids
 
-env = pettingzoo.make("parallel", "coloc/relay_ukf-v1", num_platforms=4)   # a ParallelEnv
+env = pettingzoo.make("parallel", "coloc/relay_ukf-v1", num_agents=4)   # a ParallelEnv
 aec = pettingzoo.make("aec", "coloc/relay_ukf-v1")                          # its AEC view
 ```
 

@@ -338,7 +338,7 @@ def test_relay_ukf_takes_a_ukf_lambda_inside_minus_2n():
     env = coloc_env.parallel_env("relay_ukf", ukf_lambda=-5.0, horizon=5)
     observations, _ = env.reset(seed=0)
     assert all(np.all(np.isfinite(o)) for o in observations.values())
-    with pytest.raises(ValueError, match=r"ukf_lambda must be in \(-2 num_platforms = -8.0, 1000000.0\], got -8"):
+    with pytest.raises(ValueError, match=r"ukf_lambda must be in \(-2 num_agents = -8.0, 1000000.0\], got -8"):
         coloc_env.parallel_env("relay_ukf", ukf_lambda=-8.0)
     with pytest.raises(ValueError, match=r"backend.ukf_lambda must be in \(-2 world.num_agents = -12.0, 1000000.0\]"):
         coloc_env.parallel_env(coloc_env.compose(world="circles", network="relay",

@@ -56,7 +56,7 @@ class PresetConfig:
     ``parts()`` builds the world, network and backend configs (classes ``World``, ``Network``, ``Backend``)
     from the keywords' targets, ``composition_options()`` the composition-level fields; ``validate()`` runs
     each part's own check once and reports a refused value under the keyword the user wrote
-    (``relay_ukf: num_platforms must be ...``). ``aliases`` maps older keywords to their current names
+    (``relay_ukf: num_agents must be ...``). ``aliases`` maps older keywords to their current names
     (``make`` and ``parallel_env`` accept both)."""
 
     preset: ClassVar[str]

@@ -114,7 +114,7 @@ Arguments (fields of ``RelayUKFConfig``, defaults = the paper's Sec. 4 / Table 1
 -------------------------------------------------------------------------------------
 | field                   | default      | allowed                                                   |
 |-------------------------|--------------|-----------------------------------------------------------|
-| num_platforms           | 4            | 2..16                                                     |
+| num_agents              | 4            | 2..16 (older name ``num_platforms``)                      |
 | centres                 | None         | (N, 2) metres, entries in [-1e6, 1e6]; None = the layout above |
 | start_angles            | None         | (N,) rad, entries in [-1e6, 1e6]; None = 2 pi i / N       |
 | directions              | None         | (N,) of +1 (ccw) / -1 (cw); None = platform 1 clockwise   |
@@ -149,9 +149,9 @@ Composition: this preset is a binding (``coloc_env.scenarios.binding``) on the c
 core: world ``circles`` (``num_anchors=0``, the config's layout and noise), network ``relay``
 (``routing="per_holder"``, the config's links and hop costs) and backend ``ukf_dcl``
 (``motion="displacement"``: the paper's position-only state); ``coloc_env.PRESETS["relay_ukf"]``
-is that composition. Each keyword sets the part field of the same name (``num_platforms`` sets
-the world's ``num_agents``, ``communication_cost`` the composition's); the parts check them, the
-rules that tie a part field to the team's size (``max_hops``, ``ukf_lambda``) with ``num_platforms``. The
+is that composition. Each keyword sets the part field of the same name (``communication_cost`` the
+composition's); the parts check them, the rules that tie a part field to the team's size
+(``max_hops``, ``ukf_lambda``) with ``num_agents``. The
 binding keeps the paper's action codec (index 0 is the world's sensing choice, index 1 the
 network's next hop), its observation, its team reward after the prediction, and its infos.
 Seeding: the world draws from the episode's generator itself (odometry noise, schedule, range
@@ -185,9 +185,10 @@ class RelayUKFConfig(RelayTeamConfig):
     World, Network, Backend = Circles, Relay, UkfDcl
     # no anchors; one next hop per holder; wang2019's position-only state
     fixed = {"world.num_anchors": 0, "network.routing": "per_holder", "backend.motion": "displacement"}
-    team_label = "num_platforms"
+    team_label = "num_agents"
+    aliases = {**RelayTeamConfig.aliases, "num_platforms": "num_agents"}
 
-    num_platforms: int = keyword(4, "world.num_agents")
+    num_agents: int = keyword(4, "world.num_agents")
     centres: tuple | None = keyword(None, "world.centres")
     start_angles: tuple | None = keyword(None, "world.start_angles")
     directions: tuple | None = keyword(None, "world.directions")
@@ -206,7 +207,7 @@ class RelayUKFConfig(RelayTeamConfig):
 
     @property
     def team_size(self) -> int:
-        return self.num_platforms
+        return self.num_agents
 
 
 class RelayUKFScenario(RelayTeamScenario):
@@ -250,7 +251,7 @@ class RelayUKFScenario(RelayTeamScenario):
     # --- codec ---------------------------------------------------------------------------------------
     @property
     def num_agents(self) -> int:
-        return self.config.num_platforms
+        return self.config.num_agents
 
     def action_space(self):
         N = self.num_agents

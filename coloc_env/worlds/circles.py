@@ -23,7 +23,7 @@ Arguments (``coloc_env.worlds.Circles``)
 
 | field                   | default | allowed                                           |
 |-------------------------|---------|---------------------------------------------------|
-| num_agents              | 6       | 2..16                                             |
+| num_agents              | 6       | 2..16 (also read as ``num_platforms``, wang2019's word) |
 | centres                 | None    | (N, 2) metres, entries in [-1e6, 1e6]; None = ``default_layout`` |
 | start_angles            | None    | (N,) rad, entries in [-1e6, 1e6]; None = 2 pi i / N |
 | directions              | None    | (N,) of +1 (ccw) / -1 (cw); None = platform 1 cw  |
@@ -78,6 +78,7 @@ class Circles(PartConfig):
     """Config of the ``circles`` world (see the module table)."""
 
     name = "circles"
+    aliases = {"num_platforms": "num_agents"}  # wang2019 calls the agents platforms
     estimand = "self"
     motion_kind = OdometryDisplacement.kind
     measurements = frozenset({"range", "position_fix"})

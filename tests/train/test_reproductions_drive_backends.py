@@ -38,7 +38,7 @@ def _reference_wang2019(config, copies, policy_rng):
     ``copies`` in the relay_ukf scenario's order (odometry noise, schedule, range noise), with the chains
     resolved by :class:`coloc_env.primitives.relay.RelayChainLinks` (the paper scenario's own delivery code,
     not the network the backends ask)."""
-    runs, K, N, dt = len(copies), config.horizon, config.num_platforms, config.dt
+    runs, K, N, dt = len(copies), config.horizon, config.num_agents, config.dt
     world, network, _ = config.parts()
     truth, true_heading, true_speed, true_turn = world.tracks.trajectory(K)
     odometry, range_sensor, links = world.odometry, world.range_sensor, network.links

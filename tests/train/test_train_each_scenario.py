@@ -31,7 +31,7 @@ SHORT = {
 OTHER_SPACES = {
     "bandwidth_fusion": {"num_agents": 3},
     "lossy_fusion": {"num_agents": 3},
-    "relay_ukf": {"num_platforms": 3},
+    "relay_ukf": {"num_agents": 3},
     "nlos_horizon": {"window_max": 20},
     "gps_denied_nbp": {"num_iterations": 3},
 }

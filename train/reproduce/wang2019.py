@@ -96,7 +96,7 @@ class Rig:
 
     def __init__(self, config: RelayUKFConfig, batch: int, names=ESTIMATORS):
         world, pairs = composition_parts(config)
-        self.batch, self.num_agents = batch, config.num_platforms
+        self.batch, self.num_agents = batch, config.num_agents
         self.world = None
         self.networks, self.backends = {}, {}
         for name in names:
@@ -159,7 +159,7 @@ def simulate_runs(config: RelayUKFConfig, copies: list, policy_rng: np.random.Ge
     runs = len(copies)
     rig = Rig(config, runs)
     rig.reset(copies)
-    K, N = config.horizon, config.num_platforms
+    K, N = config.horizon, config.num_agents
     il, ccl, dcl = (rig.backends[e] for e in ESTIMATORS)
     errors = np.zeros((3, K, runs, N))
     nees = np.zeros((K, runs, N))
