@@ -1629,6 +1629,32 @@ def predict(model: DnbpModel, belief: np.ndarray, accel: np.ndarray, rngs: Seque
     return np.concatenate([pos, vel], axis=-1), rule_of_thumb_bandwidth(pos)
 
 
+_POOL_ENTRIES_PER_ROW = 4  # a step's message pool starts with room for 4 messages per receiver, then doubles
+
+
+class _MessagePool:
+    """The messages of one time step: entries of M centres (2), M log-weights and one bandwidth, entry 0 a blank
+    one (centres 0, uniform weights, bandwidth 1: what an absent slot of a padded gather reads). ``add(n)``
+    appends n blank entries (growing the arrays by doubling) and returns their indices."""
+
+    def __init__(self, num_particles: int, capacity: int):
+        self.size = 1
+        self.centres = np.zeros((capacity, num_particles, 2))
+        self.log_weights = np.full((capacity, num_particles), -np.log(num_particles))
+        self.bandwidth = np.ones(capacity)
+
+    def add(self, count: int) -> np.ndarray:
+        start, self.size = self.size, self.size + count
+        capacity = len(self.bandwidth)
+        if self.size > capacity:
+            grown = max(self.size, 2 * capacity)
+            M = self.centres.shape[1]
+            self.centres = np.concatenate([self.centres, np.zeros((grown - capacity, M, 2))])
+            self.log_weights = np.concatenate([self.log_weights, np.full((grown - capacity, M), -np.log(M))])
+            self.bandwidth = np.concatenate([self.bandwidth, np.ones(grown - capacity)])
+        return np.arange(start, self.size)
+
+
 # --- Algorithm 4 -------------------------------------------------------------------------------------------------
 def step(model: DnbpModel, state: DnbpState, gps_normal: np.ndarray, gps_fix: np.ndarray, deliver: Deliver,
          ranges: np.ndarray, accel: np.ndarray, rngs: Sequence[np.random.Generator],
@@ -1674,16 +1700,17 @@ def step(model: DnbpModel, state: DnbpState, gps_normal: np.ndarray, gps_fix: np
     prior_uniform_rows = np.ascontiguousarray(state.prior_uniform, bool).reshape(B * N)
     belief_rows = belief.reshape(B * N, M, d)
 
-    # message store by receiver [b, receiver, slot] (rows b * N + receiver): slot t < N holds t's message, slot N
-    # the GPS "message" of a normal UAV; the receiver's slots are contiguous, gathered by one take per update
+    # message store: a pool of messages (entry 0 a blank one, never read as present) and, per receiver row
+    # b * N + s, the pool entry of each slot (0 = none): slot t < N holds t's message, slot N the GPS "message" of
+    # a normal UAV. Memory and writes are O(messages delivered), not O(B N^2 M) as a dense [receiver, slot] store.
     S = N + 1
-    centres = np.zeros((B * N, S, M, 2))
-    log_weights = np.full((B * N, S, M), -np.log(M))
-    bandwidth = np.ones((B * N, S))
-    have = np.zeros((B * N, S), bool)
-    centres[:, N] = np.where(gps_normal[..., None], np.nan_to_num(gps_fix), 0.0).reshape(B * N, 1, 2)
-    bandwidth[:, N] = model.gps_std
-    have[:, N] = gps_normal.reshape(B * N)
+    slot_entry = np.zeros((B * N, S), np.int64)
+    pool = _MessagePool(M, capacity=1 + int(gps_normal.sum()) + _POOL_ENTRIES_PER_ROW * B * N)
+    gps_rows = np.flatnonzero(gps_normal.reshape(B * N))
+    gps_entries = pool.add(len(gps_rows))
+    pool.centres[gps_entries] = np.nan_to_num(np.asarray(gps_fix, float).reshape(B * N, 2)[gps_rows])[:, None, :]
+    pool.bandwidth[gps_entries] = model.gps_std
+    slot_entry[gps_rows, N] = gps_entries
     kernels = _fused_kernels()
 
     def update(b_idx: np.ndarray, rows: np.ndarray) -> None:
@@ -1691,22 +1718,24 @@ def step(model: DnbpModel, state: DnbpState, gps_normal: np.ndarray, gps_fix: np
         # each receiver's present slots, in slot order, padded to the most any of these receivers holds: the
         # belief update reads only present slots, in order, so the gathered copy is O(rows x messages held), not
         # O(rows x N) (the same bits)
-        present = have[rows]
+        entries = slot_entry[rows]
+        present = entries > 0
         held = max(1, int(present.sum(axis=1).max()))
         order = np.argsort(~present, axis=1, kind="stable")[:, :held]
-        gather = (rows[:, None], order)
-        present = np.take_along_axis(present, order, axis=1)
+        entries = np.take_along_axis(entries, order, axis=1)  # padding: the blank entry 0
+        present = entries > 0
+        centres, log_weights, bandwidth = pool.centres[entries], pool.log_weights[entries], pool.bandwidth[entries]
         if kernels is None:
             new, _ = belief_update(model, prior_rows[rows], prior_bandwidth_rows[rows], prior_uniform_rows[rows],
-                                   centres[gather], log_weights[gather], bandwidth[gather], present, draws)
+                                   centres, log_weights, bandwidth, present, draws)
         else:  # belief_update's fused path, its checks included
             K_r = present.sum(axis=1)
             total = -(-model.oversampling * M // (K_r + 1)) * (K_r + 1)
             if total.max() > model.proposal_capacity:
                 raise ValueError(f"too many incoming messages for the proposal capacity {model.proposal_capacity}")
             new, _ = _belief_update_fused(kernels, model, prior_rows[rows], prior_bandwidth_rows[rows],
-                                          prior_uniform_rows[rows], centres[gather], log_weights[gather],
-                                          bandwidth[gather], present, draws, K_r, total, int(total.max()))
+                                          prior_uniform_rows[rows], centres, log_weights, bandwidth, present, draws,
+                                          K_r, total, int(total.max()))
         belief_rows[rows] = new
 
     # 1. normal UAVs: prior x GPS, fixed for the step in the modified schedule
@@ -1750,20 +1779,24 @@ def step(model: DnbpModel, state: DnbpState, gps_normal: np.ndarray, gps_fix: np
             t_rows, s_rows = b_idx * N + t_idx, b_idx * N + s_idx
             points = belief_rows[t_rows, :, :2]
             # correction with the reverse message t holds from s, fault <-> fault only
-            reverse = have[t_rows, s_idx] & both_fault[b_idx, t_idx, s_idx]
+            back = slot_entry[t_rows, s_idx]
+            reverse = (back > 0) & both_fault[b_idx, t_idx, s_idx]
             if reverse.any():
                 corr = np.full((len(b_idx), M), log_uniform)
-                rt, rs = t_rows[reverse], s_idx[reverse]
-                corr[reverse] = correction_weights(points[reverse], centres[rt, rs], log_weights[rt, rs],
-                                                   bandwidth[rt, rs], truncation)
+                back = back[reverse]
+                corr[reverse] = correction_weights(points[reverse], pool.centres[back], pool.log_weights[back],
+                                                   pool.bandwidth[back], truncation)
             else:
                 corr = None
             draws = _draw_per_copy(rngs, b_idx, B, draw_messages, model)
             c, lw, h = sample_messages(model, points, ranges[b_idx, t_idx, s_idx], corr, draws["permutation"],
                                        draws["offset"], draws["range_noise"])
             # written only after every message of this iteration is built (synchronous iteration)
-            centres[s_rows, t_idx], log_weights[s_rows, t_idx], bandwidth[s_rows, t_idx] = c, lw, h
-            have[s_rows, t_idx] = True
+            entry = slot_entry[s_rows, t_idx]
+            fresh = entry == 0
+            entry[fresh] = pool.add(int(fresh.sum()))
+            slot_entry[s_rows, t_idx] = entry
+            pool.centres[entry], pool.log_weights[entry], pool.bandwidth[entry] = c, lw, h
             heard[b_idx, t_idx, s_idx] = True
             receivers = np.flatnonzero(delivered.any(axis=1))  # np.unique(s_rows): rows b * N + s, sorted
             update(receivers // N, receivers)

@@ -171,6 +171,28 @@ def test_copy_b_of_a_batch_equals_the_copy_alone_and_seeds_reproduce(schedule):
     assert not np.array_equal(other[-1][0][2], batched[-1][0][2])
 
 
+def test_a_step_gives_the_same_bits_whatever_room_its_message_pool_starts_with(monkeypatch):
+    """The step's messages live in a pool that grows by doubling: starting it with no room for the delivered
+    messages (every one added by growing) must not change a bit of the step."""
+    model = dn.DnbpModel(num_particles=20, num_iterations=3)
+    B, N = 2, 9
+    pos, normal, adjacency, ranges, accel = _random_world(np.random.default_rng(8), B, N)
+
+    def run():
+        rngs = [np.random.default_rng(s) for s in (3, 4)]
+        state = dn.initial_state(model, rngs, "warm", pos, np.zeros((B, N, 2)), 1.0)
+        for _ in range(2):
+            state, result = dn.step(model, state, normal, pos, over(adjacency), ranges, accel, rngs)
+        return state.prior, result.received
+
+    prior, received = run()
+    assert received.sum() > 2 * B * N  # more messages than a pool started with no room holds without growing
+    monkeypatch.setattr(dn, "_POOL_ENTRIES_PER_ROW", 0)
+    grown_prior, grown_received = run()
+    np.testing.assert_array_equal(grown_prior, prior)
+    np.testing.assert_array_equal(grown_received, received)
+
+
 def test_parallel_schedule_lets_normal_uavs_absorb_messages_and_silence_is_dead_reckoning():
     model = dn.DnbpModel(num_particles=20, num_iterations=2)
     rng = np.random.default_rng(6)
