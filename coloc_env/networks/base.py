@@ -313,7 +313,6 @@ class Network:
             size = np.ones(n, dtype=int)
             hops = np.full((n, max(N - 1, 1)), np.nan)
             code = np.zeros(n, dtype=int)
-            going = np.ones(n, dtype=bool)
             first = first[rows]
             limit = self.max_hops()
             # each chain's rows of the (B, N, N) link arrays, gathered by one take per hop
@@ -323,35 +322,40 @@ class Network:
             all_usable = bool(np.all(usable))
             flat_usable = usable[0] if shared else usable.reshape(B * N, N)
             flat_loss = loss[0] if shared else loss.reshape(B * N, N)
+            act = local  # the chains still going: each hop works on these rows only
             for hop in range(N - 1):
                 if hop >= limit:  # stop reason 1: the hop budget is spent
-                    code[going] = 1
+                    code[act] = 1
                     break
-                at = base + holder
-                nearest = np.argmin(np.take(flat_rank, at, axis=0) + penalty, axis=-1)
-                target = nearest if choice is None else choice[copies, holder]
+                now = holder[act]
+                at = base[act] + now
+                rank = np.take(flat_rank, at, axis=0)
+                rank += penalty[act]
+                nearest = np.argmin(rank, axis=-1)
+                target = nearest if choice is None else choice[copies[act], now]
                 if choice is not None:
                     target = np.where(target == N + 1, nearest, target)
                 if hop == 0:  # a range's chain goes to the measured platform first; a fix's follows the choice
                     target = np.where(first >= 0, first, target)
-                valid = (target >= 0) & (target < N) & (target != holder)
+                valid = (target >= 0) & (target < N) & (target != now)
                 safe = np.where(valid, target, 0)
                 # the first of the stop reasons 2..5 that holds: no platform named, already reached, out of
                 # range, lost
-                failed = np.where(u[:, hop] < flat_loss[at, safe], 5, 0) if u is not None else np.zeros(n, int)
+                failed = np.where(u[act, hop] < flat_loss[at, safe], 5, 0) if u is not None else np.zeros(len(act), int)
                 if not all_usable:
                     failed = np.where(~flat_usable[at, safe], 4, failed)
-                failed = np.where(penalty[local, safe] == N, 3, failed)
+                failed = np.where(penalty[act, safe] == N, 3, failed)
                 failed = np.where(valid, failed, 2)
-                ok = going & (failed == 0)
-                code = np.where(going, failed, code)
-                links[:, hop + 1] = np.where(ok, target, -1)
-                penalty[local[ok], safe[ok]] = N
-                hops[:, hop] = np.where(ok, flat_distance[at, safe], np.nan)
-                size += ok
-                holder = np.where(ok, target, holder)
-                going = ok
-                if not going.any():
+                ok = failed == 0
+                code[act] = failed
+                moved, target = act[ok], safe[ok]
+                links[moved, hop + 1] = target
+                penalty[moved, target] = N
+                hops[moved, hop] = flat_distance[at[ok], target]
+                size[moved] += 1
+                holder[moved] = target
+                act = moved
+                if not len(act):
                     break
             code[size == N] = 0
             chain[rows], length[rows], hop_distance[rows], stop[rows] = links, size, hops, code

@@ -9,6 +9,7 @@ import pytest
 from coloc_env.networks.base import RelayChain
 from coloc_env.networks.broadcast import Broadcast
 from coloc_env.networks.ideal import Ideal
+from coloc_env.primitives.relay import STOP_REASONS
 
 
 def started(config, kind, B=4, N=7, seed=0):
@@ -68,3 +69,36 @@ def test_messages_to_the_centre_equal_one_broadcast_per_message(config):
     for a, b in zip(snapshot(one), snapshot(many), strict=True):
         np.testing.assert_array_equal(a, b)
     assert 0 < expected.sum() < (senders > 0).sum() or isinstance(config, Ideal)
+
+
+@pytest.mark.parametrize("config", [Broadcast(comm_range=150.0), Ideal()])
+def test_nearest_first_chains_go_to_the_nearest_unreached_platform_until_it_is_out_of_range(config):
+    """The definition, hop by hop: the nearest platform the chain has not reached (ties to the lower index), the
+    chain stopping with "out_of_range" when that one is beyond the range, "complete" when none is left."""
+    B, N, J = 3, 12, 10
+    net, rng = started(config, "chain", B, N, seed=3)
+    source = rng.integers(0, N, (B, J))
+    first = np.where(rng.random((B, J)) < 0.5, (source + rng.integers(1, N, (B, J))) % N, -1)
+    result = net.relay_each(source, first, lambda hop: 1.0, np.arange(J))
+    distance = net.distances()
+    reach = getattr(config, "comm_range", np.inf)
+    stops = set()
+    for b in range(B):
+        for j in range(J):
+            chain, holder, reached = [source[b, j]], source[b, j], {source[b, j]}
+            stop = "complete"
+            while len(chain) < N:
+                masked = np.where(np.isin(np.arange(N), list(reached)), np.inf, distance[b, holder])
+                target = first[b, j] if len(chain) == 1 and first[b, j] >= 0 else int(np.argmin(masked))
+                if distance[b, holder, target] > reach:
+                    stop = "out_of_range"
+                    break
+                chain.append(target)
+                reached.add(target)
+                holder = target
+            stops.add(stop)
+            np.testing.assert_array_equal(result.chain[b, j], chain + [-1] * (N - len(chain)))
+            assert STOP_REASONS[result.stop[b, j]] == stop
+    # the range cuts chains at different hops (finished chains leave the search while others go on)
+    assert ("out_of_range" in stops and len(set(result.length.ravel())) > 2) if reach < np.inf \
+        else stops == {"complete"}
