@@ -191,6 +191,12 @@ def build_parser() -> argparse.ArgumentParser:
     be.add_argument("--cap", type=float, default=None, metavar="SECONDS",
                     help="with --scaling: time cap per row and tree (default 120, 60 with --quick); the sizes "
                          "not reached print 'over cap'")
+    be.add_argument("--backends", nargs="+", default=None, metavar="BACKEND",
+                    help="with --scaling: only the rows of these backends (default: every backend on gps_denied)")
+    be.add_argument("--sizes", nargs="+", type=_count(2, 128), default=None, metavar="N",
+                    help="with --scaling: these numbers of agents, 2..128 (default 5 10 20 40 80)")
+    be.add_argument("--batches", nargs="+", type=_count(1, 4096), default=None, metavar="B",
+                    help="with --scaling: these numbers of copies, 1..4096 (default 8 64)")
 
     _add_study_parser(sub)
 
@@ -431,10 +437,13 @@ def cmd_bench(args) -> int:
         raise BadInput(f"--rounds {args.rounds} needs --against REF (the rounds alternate the two trees)")
     if args.cap is not None and not args.scaling:
         raise BadInput(f"--cap {args.cap} needs --scaling (it caps each row of the scaling table)")
+    for flag in ("backends", "sizes", "batches"):
+        if getattr(args, flag) is not None and not args.scaling:
+            raise BadInput(f"--{flag} needs --scaling (it selects rows or columns of the scaling table)")
     if args.against:
         _check_commit(args.against)
     if args.scaling:
-        from train.bench import run_scaling
+        from train.bench import run_scaling, scaling_compositions
 
         if args.scenarios:
             raise BadInput("--scenarios does not apply to --scaling (its rows are the backends on gps_denied)")
@@ -442,8 +451,18 @@ def cmd_bench(args) -> int:
             raise BadInput("--rounds does not apply to --scaling (each row is measured once per tree)")
         if args.cap is not None and not 1.0 <= args.cap <= 86400.0:
             raise BadInput(f"--cap must be in [1, 86400] seconds, got {args.cap}")
+        pairs = scaling_compositions()
+        if args.backends is not None:
+            known = list(dict.fromkeys(b for b, _ in pairs))
+            unknown = [b for b in args.backends if b not in known]
+            if unknown:
+                raise BadInput(f"--backends must name backends that run on gps_denied ({', '.join(known)}), "
+                               f"got {', '.join(map(repr, unknown))}")
+            pairs = [(b, net) for b, net in pairs if b in args.backends]
         with _open(args, os.path.join(args.out, "bench")):
-            run_scaling(args.out, quick=args.quick, against=args.against, cap=args.cap)
+            run_scaling(args.out, quick=args.quick, against=args.against, cap=args.cap, compositions=pairs,
+                        sizes=tuple(sorted(set(args.sizes))) if args.sizes else None,
+                        batches=tuple(sorted(set(args.batches))) if args.batches else None)
         return 0
     scenarios = args.scenarios or _runnable_scenarios(_console())
     with _open(args, os.path.join(args.out, "bench")):

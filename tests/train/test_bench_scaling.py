@@ -52,8 +52,36 @@ def test_every_backend_that_runs_on_gps_denied_has_a_row_and_the_ukfs_also_over_
     (["--scaling", "--cap", "nan"], "--cap"),
     (["--scaling", "--scenarios", "relay_ukf"], "--scenarios"),
     (["--scaling", "--against", "HEAD", "--rounds", "3"], "--rounds"),
+    (["--backends", "dnbp"], "--backends"),
+    (["--sizes", "10"], "--sizes"),
+    (["--batches", "8"], "--batches"),
+    (["--scaling", "--backends", "dnbp", "nosuch"], "--backends"),
 ])
 def test_refused_flags_name_the_flag(argv, flag, tmp_path, capsys):
     assert main(["bench", *argv, "--out", str(tmp_path)]) == 2
     assert flag in capsys.readouterr().err
     assert not os.path.exists(os.path.join(tmp_path, "bench", "scaling.json"))
+
+
+@pytest.mark.parametrize("argv,message", [
+    (["--sizes", "1"], "integer in [2, 128], got '1'"),
+    (["--sizes", "129"], "integer in [2, 128], got '129'"),
+    (["--batches", "0"], "integer in [1, 4096], got '0'"),
+])
+def test_sizes_and_batches_outside_their_range_are_refused(argv, message, tmp_path, capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        main(["bench", "--scaling", *argv, "--out", str(tmp_path)])
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err
+    assert argv[0] in err and message in err
+
+
+def test_the_selection_flags_pick_the_rows_and_columns(tmp_path):
+    assert main(["bench", "--scaling", "--quick", "--backends", "dead_reckoning", "--sizes", "6", "4", "--batches",
+                 "2", "--out", str(tmp_path)]) == 0
+    with open(os.path.join(tmp_path, "bench", "scaling.json")) as f:
+        saved = json.load(f)
+    assert saved["sizes"] == [4, 6] and saved["batches"] == [2]
+    assert {(row["backend"], row["network"], row["batch"]) for row in saved["rows"]} == {
+        ("dead_reckoning", "broadcast", 2)}
+    assert len(saved["rows"]) == 2  # one per layout
