@@ -3,12 +3,12 @@
 Wan J., Zhong L., Zhang F., "Cooperative localization of multi-UAVs via
 dynamic nonparametric belief propagation under GPS signal loss condition",
 Int. J. Distributed Sensor Networks, 2014 (seed ``003_44c6eab8acc44e0f.txt``).
-The extracted text lost every equation, so this module implements the
-reconstruction ``shared/specs/wan2014_dnbp.md`` (the "spec"); equation numbers
-are the paper's, their content is the spec's. Values are tagged **[paper]**
-(stated in the text) or **[chosen]** (the spec's choice).
+The extracted text lost every equation: equation numbers are the paper's,
+their content is reconstructed from its description. Values are tagged
+**[paper]** (stated in the text) or **[chosen]** (chosen here where the paper
+gives none).
 
-Model (spec §2-3). UAV s has state x = [p; v] in R^4; between slices
+Model. UAV s has state x = [p; v] in R^4; between slices
 
     x(k+1) = F x(k) + G a_hat(k) + w,  w ~ N(0, sigma_acc^2 G G^T)                     (1)
 
@@ -24,10 +24,10 @@ and BP messages and beliefs (eqs. 8-9)
 
 so the sender's part of (8) is B_t / m_st (Ihler et al. 2005).
 
-Nonparametric representation (spec §4). A belief is M equally weighted
-particles in R^4; a message m_ts is a 2-D Gaussian mixture of M centres,
-log-weights and one isotropic bandwidth h_ts; a GPS fix is the one-component
-message {z_s, 1, sigma_gps} (stored as M identical components).
+Nonparametric representation. A belief is M equally weighted particles in
+R^4; a message m_ts is a 2-D Gaussian mixture of M centres, log-weights and
+one isotropic bandwidth h_ts; a GPS fix is the one-component message
+{z_s, 1, sigma_gps} (stored as M identical components).
 
 * ``sample_messages`` — Algorithm 1. Weights w_i ∝ 1/m_st(p_t^i) when
   the reverse message exists on a fault<->fault link, else 1/M; stratified
@@ -44,136 +44,109 @@ message {z_s, 1, sigma_gps} (stored as M identical components).
   (bandwidth h_rho = h_rot) mixed with a defensive uniform:
   rho = (1 - eps) KDE + eps U(box) [chosen].
 * ``step`` — Algorithm 4, one time step with the message schedule of the
-  paper's Sec. 3.4 (spec §5) or the parallel schedule for the ablation.
+  paper's Sec. 3.4 or the parallel schedule for the ablation.
 
 Rule-of-thumb bandwidth [chosen form]: h_rot = sigma_hat ESS^(-1/6) with
 sigma_hat^2 the weighted variance averaged over the two axes and
 ESS = 1 / sum w_i^2 (Silverman, d = 2).
 
+Noise parameters are standard deviations (``DnbpModel``'s sigma_acc,
+sigma_gps, sigma_d; ``initial_state``'s ``velocity_std``), not the variances
+the other estimators take: the particle draws and kernel bandwidths use them
+as they are.
+
 Array conventions: B copies (runs), N UAVs, M particles. ``prior`` and
-``belief`` are (B, N, M, 4); messages are stored densely by [b, sender,
-receiver]. All arithmetic is vectorized over copies, particles and messages;
-what remains a Python loop over copies is only the drawing of random numbers,
-one block per copy and purpose from that copy's own generator, so that copy b
-of a batch is bit-identical to the same copy run alone. Large kernel
-evaluations (proposals x mixture components) are chunked to bound memory.
+``belief`` are (B, N, M, 4). A step's messages live in a pool of the
+messages delivered in it, each receiver holding a slot table (slot t: the
+message from t; slot N: its GPS fix), so memory and writes grow with the
+messages, not with B N^2 M. All arithmetic is vectorized over copies,
+particles and messages; what remains a Python loop over copies is only the
+drawing of random numbers, one block per copy and purpose from that copy's
+own generator, so that copy b of a batch is bit-identical to the same copy
+run alone. Large kernel evaluations (proposals x mixture components) are
+chunked to bound memory.
 
-Speed. ``belief_update`` (Algorithm 2, where nearly all the time goes)
-runs as two fused numba kernels, one receiver per iteration: proposals and
-importance log-weights (``_belief_weights_source``: the prior's KDE and every
-present message evaluated at each proposal, no (R, S, C, M) temporaries, no
-numpy call per step of the algorithm), then normalization, systematic
-resampling, jitter and velocity completion (``_belief_resample_source``).
-They reproduce the numpy path's arithmetic in its order: the same exponents,
-numpy's pairwise sum for the weight normalization, the flat-offset
-comparisons of ``_categorical`` (by bisection or a merge instead of a
-scan: the same counts), so they make the same draws; the particles equal the
-numpy path's to ~1e-13 m (the einsum of h_rot sums in another order). A GPS
-fix (M identical components) is evaluated once per point and added M times
-(the same sum). The other hot loops (the mixture kernel of the correction
-weights, and of a numpy-path update: the fast kernel, the velocity draw, the
-importance-weight combination) are compiled per row. Those run on threads
-above ``_PARALLEL_ELEMENTS`` kernel entries; the fused kernels run on one
-thread per call or, from 4 receivers and 2^20 kernel entries (B >= 4 of
-gps_denied_nbp), on slices of the receivers run by worker threads
-(``_split_rows``: Python threads, the kernels release the GIL; as many as the
-cores and NUMBA_NUM_THREADS, so NUMBA_NUM_THREADS=1 runs one thread), each
-slice given its first row for the flat offsets, so the bits are the whole
-call's. dn.step wall clock on the 2-core machine (issue 18): 1.25x at B = 4,
-1.35x at B = 64 idle (load ~0-1), 0.96x / 0.98x beside one busy process; B = 1
-unsplit. Algorithm 1's centres and h_rot sums are one compiled pass too
-(``_message_rows_source``): the numpy path's floats, since numpy's cos and sin
-are libm's and the sums keep einsum's and the pairwise sum's orders; numpy's
-exp, log and pow are not libm's (its AVX-512 loops round differently), so what
-needs them stays numpy. numba's own threaded form (over receivers; the truncated correction
-weights' over messages) is ``_FUSED_THREADS``, off: 1.5x idle but 2x slower
-beside one busy process (libgomp's waiting threads spin; see its note). A row (receiver) reads only its own
-inputs, so the results depend neither on the batch nor on the thread count. The numpy formulations
-stay (``compiled=False``; also used where numba is not installed) and are
-what the compiled kernels are tested against
-(``tests/estimators/test_dnbp_fast.py``): equal up to float rounding (~1e-10
+Compiled kernels. ``belief_update`` (Algorithm 2, where nearly all the time
+goes) runs as two fused numba kernels, one receiver per iteration: proposals
+and importance log-weights (``_belief_weights_source``: the prior's KDE and
+every present message evaluated at each proposal, no (R, S, C, M)
+temporaries), then normalization, systematic resampling, jitter and velocity
+completion (``_belief_resample_source``). They reproduce the numpy path's
+arithmetic in its order: the same exponents, numpy's pairwise sum for the
+weight normalization, the flat-offset comparisons of ``_categorical`` (by
+bisection or a merge instead of a scan: the same counts), so they make the
+same draws; the particles equal the numpy path's to ~1e-13 m (the einsum of
+h_rot sums in another order). A GPS fix (M identical components) is
+evaluated once per point and added M times (the same sum). The other hot
+loops (the mixture kernel of the correction weights and, on the numpy path,
+the fast kernel, the velocity draw and the importance-weight combination)
+are compiled per row and run on numba's threads above
+``_PARALLEL_ELEMENTS`` kernel entries. The fused kernels run on one thread
+per call or, from 4 receivers and 2^20 kernel entries, on slices of the
+receivers run by worker threads (``_split_rows``: Python threads, the
+kernels release the GIL; as many as the cores and NUMBA_NUM_THREADS, so
+NUMBA_NUM_THREADS=1 runs one thread), each slice given its first row for the
+flat offsets, so the bits are the whole call's. Algorithm 1's centres and
+h_rot sums are one compiled pass too (``_message_rows_source``): the numpy
+path's floats, since numpy's cos and sin are libm's and the sums keep
+einsum's and the pairwise sum's orders; numpy's exp, log and pow are not
+libm's (its AVX-512 loops round differently), so what needs them stays
+numpy. numba's own threaded form of the fused kernels (``_FUSED_THREADS``)
+is off: its waiting threads spin, which slows a machine whose other core is
+busy. A row (receiver) reads only its own inputs, so the results depend
+neither on the batch nor on the thread count. The numpy formulations stay
+(``compiled=False``; also used where numba is not installed) and are what
+the compiled kernels are tested against: equal up to float rounding (~1e-10
 in a log density at kilometre coordinates); seeded episodes agree to 1e-9.
-
-Where the time goes at B = 1 (gps_denied_nbp, M = 100, issue 18, 300 vector_env steps, wall clock): 5.8 ms per
-env step, of which the weights kernel 2.4 ms (on captured calls: the message mixtures ~45 %, the per-proposal
-arithmetic of proposals, q and the logs ~33 %, the prior's KDE ~18 %), resampling 0.65, the correction weights
-0.39, Algorithm 1 0.18, this module's Python and numpy 1.55, the env 0.67. Tried on those captured calls and
-not kept: (1) an order-independent sum for the truncated kernel (each term floor(e^d 2^s) in int64, so that
-any order, skip or thread split gives the same bits): 2.0 against 1.28 ns per term at K = 100; (2) message
-components grouped in angular sectors with bounding boxes, a point evaluating only the sectors that can
-reach the cut: 15 % of the terms evaluated (4.9 % lie within the cut) but 139-187 ns per point-message
-against 147-156 for all 100 terms, and the weights kernel 0.56-0.68 against 0.37-0.40 ms per call; (3) the
-prior's KDE as a tile of 8 points in vector lanes: 2.57 against 1.58 ns per term; (4) the exponent and
-maximum loops fused: the same bits, 1.01x; (5) each copy's draws by numba's Generator (the same numbers as
-numpy's for random, standard_normal and a row shuffle = ``permuted(axis=1)``; a call unboxes its Generator
-in ~8 us) on both threads, with Algorithm 1's pass split too: the same bits, +3 to +15 % at B = 64 within
-+-8 % noise. The exp of a vectorized sum costs ~0.34 ns per term over long arrays here, so the kernels are
-~4x off that bound mostly through per-point work; on this machine a kernel split on both vCPUs runs only
-1.2-1.65x faster than on one.
+Timings, and the alternatives measured and not kept, are in
+``docs/performance.md`` ("dNBP kernels").
 
 Kernels (``DnbpModel.kernel``). ``"exact"`` (this module's default) is the
-path above, bit for bit. ``"truncated"`` (the default of the ``dnbp`` backend
-and the ``gps_denied_nbp`` env, hence of ``coloc reproduce wan2014``, since
-issue 18; pass ``kernel="exact"`` for the exact path) is an approximation of
-the compiled belief update and correction weights (the numpy path is the
-exact one): at each point a mixture's terms more than r^2/2 below the point's
-largest exponent are left out (r = ``truncation``, 6 by default, in [1, 10];
-with equal weights: every component more than ~r bandwidths farther than the
-nearest; the exact kernel's cut is 50, r = 10), the rest summed relative to
-the largest with a branch-free polynomial exp (``_exp_small``, relative error
-< 1e-12 on [-50, 0]) in fastmath loops that LLVM vectorizes (numba without
-SVML calls libm's exp one term at a time), a GPS fix's K equal terms as
-K e^a (the exact kernel adds e^a K times, for numpy's bits); the velocity
-completion drops prior particles below e^(-r^2/2) of the largest weight the
-same way; and a proposal is left out (weight 0) as soon as its weight is certainly below
-e^(-r^2/2) / C of the best one so far (its unevaluated messages bounded by
-their peak density sum_k w_k / (2 pi h^2), q by any evaluated term / (K+1)),
-so proposals deep in one message's tail skip the other messages. Bounds: each
-left-out term is < e^(-r^2/2) of the largest (1.5e-8 at r = 6), a log density
-moves by < K e^(-r^2/2) (1.5e-6 at K = 100), the proposals left out carry
-< e^(-r^2/2) of the normalized weight together (plus float rounding: ~1e-10
-in a log density at kilometre coordinates, as in the exact fast kernel).
-Measured (r = 6, M = 100): the normalized importance weights of 180 captured
-gps_denied_nbp updates (B = 4, 30 steps) differ from the exact ones by at most
-3.2e-8 in total variation (median 4e-9); seeded 30-step episodes (seeds 0-2)
-give belief means within 1.5e-5 m of the exact path (median 1e-9 m), the same
-episode errors to 4 digits; ``coloc reproduce wan2014 --quick --runs 8``
-gives every claim the same verdict and every dNBP err_fault within 0.12
-combined standard errors of the exact path (20 of 23 points within 1e-4 m;
-one of three runs flipped the wall-clock claim "time grows with M" under a
-load of ~4 on 2 cores, a timing verdict either path can lose); the full
-``coloc reproduce wan2014`` (12 runs, its config's ``kernel``) gives every
-claim the same verdict and all 21 dNBP err_fault points within 0.38 combined
-standard errors of the exact path (15 within 0.02; 84 s exact, 44 s
-truncated, one run each on a loaded machine); the pinned
-numbers of tests/test_pinned_numbers.py hold to 1e-9 with either kernel. At r = 3 or 1 the episodes part
-by metres from the first step (1.3-3.6 m median difference of the means).
-Speed (2-core machine, load ~4.5, alternating A/B in one process): the
-weights kernel 2.5-3x, the resampling kernel 3x faster than exact (the
-correction weights about the same as the serial exact kernel); the
-gps_denied_nbp vector_env 1.8x at B = 1, 1.9x at B = 4, 2.3x at B = 16.
-cProfile at B = 1 on a quiet machine (60 steps): exact 0.70 s (weights kernel
-46 %, resampling 13 %), truncated 0.56 s (weights 28 %, resampling 7 %; the
-rest is the Python and numpy of the schedule, the messages and the env).
+path above, bit for bit. ``"truncated"`` (the default of the ``dnbp``
+backend and the ``gps_denied_nbp`` env; pass ``kernel="exact"`` for the
+exact path) is an approximation of the compiled belief update and correction
+weights (the numpy path is the exact one): at each point a mixture's terms
+more than r^2/2 below the point's largest exponent are left out
+(r = ``truncation``, 6 by default, in [1, 10]; with equal weights: every
+component more than ~r bandwidths farther than the nearest; the exact
+kernel's cut is 50, r = 10), the rest summed relative to the largest with a
+branch-free polynomial exp (``_exp_small``, relative error < 1e-12 on
+[-50, 0]) in fastmath loops that LLVM vectorizes (numba without SVML calls
+libm's exp one term at a time), a GPS fix's K equal terms as K e^a (the
+exact kernel adds e^a K times, for numpy's bits); the velocity completion
+drops prior particles below e^(-r^2/2) of the largest weight the same way;
+and a proposal is left out (weight 0) as soon as its weight is certainly
+below e^(-r^2/2) / C of the best one so far (its unevaluated messages
+bounded by their peak density sum_k w_k / (2 pi h^2), q by any evaluated
+term / (K+1)), so proposals deep in one message's tail skip the other
+messages. Bounds: each left-out term is < e^(-r^2/2) of the largest (1.5e-8
+at r = 6), a log density moves by < K e^(-r^2/2) (1.5e-6 at K = 100), the
+proposals left out carry < e^(-r^2/2) of the normalized weight together
+(plus float rounding: ~1e-10 in a log density at kilometre coordinates, as
+in the exact fast kernel). At r = 3 or 1 the episodes part by metres from
+the first step. How closely the truncated kernel follows the exact one on
+wan2014's points, and how much faster it is, is measured in
+``docs/performance.md`` ("dNBP kernels").
 
-Departures from the spec
-------------------------
+Departures from the reconstruction
+----------------------------------
 * Velocity completion draws the prior particle j by inverse-CDF sampling of
-  the same categorical law the spec describes with Gumbel-max (one uniform
-  per new particle instead of M Gumbels): the same distribution, M times
-  fewer random numbers. The defensive uniform part of rho carries no
-  velocity, so only the KDE part is used for v | p.
+  the categorical law p(j | p) ∝ exp(-||p - x_j||^2 / (2 h_rho^2)) (one
+  uniform per new particle, not M Gumbels as Gumbel-max would use): the same
+  distribution, M times fewer random numbers. The defensive uniform part of
+  rho carries no velocity, so only the KDE part is used for v | p.
 * A fault UAV's belief at the start of a step is its prior particle set
   itself (equally weighted), not a resample of it, which has the same law.
 * If every importance weight of a receiver underflows (messages that do not
   overlap at all), its belief stays as it was; this did not occur at the
-  spec's defaults, it protects against inconsistent inputs.
+  defaults, it protects against inconsistent inputs.
 * A UAV counts as broadcasting only when its broadcast reaches at least one
   eligible receiver (``coloc_env``'s medium counts the same way).
   Delivery itself is the caller's network (the ``deliver`` argument of
   ``step``); the estimator only decides who may send and who listens.
 * In the parallel schedule the reverse-message correction is still applied
-  to fault<->fault links only (spec §5 states it for every schedule).
+  to fault<->fault links only (the correction of Algorithm 1 is stated for
+  every schedule).
 * Kernel sums: exponents below -600 are clipped before ``exp`` (libm is ~10x
   slower on underflowing results), so a mixture whose every component is
   more than ~35 bandwidths away counts as density 0 there. Importance weights
@@ -190,9 +163,10 @@ Departures from the spec
   largest finite correction weight of that message.
 
 Noticed, not changed: the regularization jitter h_rot = sigma_hat ESS^(-1/6)
-(spec §4.2 step 3) uses a Gaussian reference, so a ring or two-mode belief is
-thickened by a sizeable fraction of its radius (about 40 m for a 150 m ring
-at M = 400); unimodal tracking beliefs are not affected (h_rot ~ 1 m).
+(Algorithm 2's regularised resampling) uses a Gaussian reference, so a ring
+or two-mode belief is thickened by a sizeable fraction of its radius (about
+40 m for a 150 m ring at M = 400); unimodal tracking beliefs are not
+affected (h_rot ~ 1 m).
 """
 
 from __future__ import annotations
@@ -237,7 +211,7 @@ _CHUNK_ELEMENTS = 1 << 16  # kernel entries per chunk (512 kB): stays in cache, 
 
 @dataclass(frozen=True)
 class DnbpModel:
-    """Parameters of dNBP (spec §1, §4, §5).
+    """Parameters of dNBP (the model, the representation and the schedule of the module docstring).
 
     | field              | symbol        | default | tag / meaning                                       |
     |--------------------|---------------|---------|-----------------------------------------------------|
@@ -258,6 +232,9 @@ class DnbpModel:
     |                    |               |         | the module's Kernels note)                          |
     | truncation         | r             | 6       | [chosen] [1, 10] bandwidths, the truncated kernel's |
     |                    |               |         | cut: terms below e^(-r^2/2) of the largest left out |
+
+    ``accel_noise_std``, ``gps_std`` and ``range_std`` are standard deviations (sigma), not the variances the
+    other estimators take.
     """
 
     dt: float = 1.0
@@ -375,9 +352,9 @@ def _logsumexp(a: np.ndarray, axis: int) -> np.ndarray:
 # Terms more than this below a row's largest exponent are left out of the fast kernel sums: K of them add less
 # than K e^-50 ~ 2e-20 (relative), far below float64 resolution of the sum.
 _NEGLIGIBLE = 50.0
-# Above this many kernel entries per call the compiled kernels run their rows on all cores (threads). 2^21 (was
-# 2^17): the correction weights' kernel (10^5-10^6 entries per step at M = 100) measured 1.3-2x slower threaded
-# than serial on the loaded 2-core machine at B = 1-16 (gps_denied_nbp env 35 vs 48 env-steps/s at B = 1).
+# Above this many kernel entries per call the compiled kernels run their rows on all cores (threads): high enough
+# that the correction weights' kernel (10^5-10^6 entries per step at M = 100) stays serial, where threads cost
+# more than they give on a busy 2-core machine (docs/performance.md, "dNBP kernels").
 _PARALLEL_ELEMENTS = 1 << 21
 
 _KERNELS: dict | None = None
@@ -398,6 +375,7 @@ def _compiled_kernels() -> dict | None:
     except ImportError:  # pragma: no cover - numba is a dependency; the numpy path stays for other installs
         _KERNELS = {}
         return None
+    _fused_kernels()  # compiles the row functions the kernels below call (_velocity_row)
 
     floor, negligible = _EXP_FLOOR, _NEGLIGIBLE
 
@@ -429,42 +407,9 @@ def _compiled_kernels() -> dict | None:
             out[j, p] = (math.log(total) if total > threshold else -np.inf) - log_norm[j]
 
     def velocity_rows(positions, prior, denominator, uniform, u, out):
-        # inverse-CDF draw of j ~ softmax(-||positions[r, i] - prior[r, j]||^2 / denominator[r]) per (r, i),
-        # with the flat-offset comparison of _categorical (row index r * M + i added to both sides)
-        R, M = positions.shape[0], positions.shape[1]
-        Mp = prior.shape[1]
-        for row in numba.prange(R * M):
-            r = row // M
-            i = row - r * M
-            w = np.empty(Mp)
-            top = -np.inf
-            for j in range(Mp):
-                if uniform[r]:
-                    w[j] = 0.0
-                else:
-                    dx = positions[r, i, 0] - prior[r, j, 0]
-                    dy = positions[r, i, 1] - prior[r, j, 1]
-                    w[j] = -(dx * dx + dy * dy) / denominator[r]
-                if w[j] > top:
-                    top = w[j]
-            ok = np.isfinite(top)
-            total = 0.0
-            for j in range(Mp):
-                if ok:
-                    # a weight below e^-50 of the largest moves the CDF by less than its float64 resolution
-                    value = math.exp(w[j] - top) if w[j] - top > -negligible else 0.0
-                else:
-                    value = 1.0
-                total += value
-                w[j] = total
-            offset = float(row)
-            target = u[r, i] + offset
-            count = 0
-            for j in range(Mp):
-                c = 1.0 if j == Mp - 1 else w[j] / total
-                if c + offset <= target:
-                    count += 1
-            out[r, i] = min(count, Mp - 1)
+        # _velocity_row per receiver r (the flat-offset comparison of _categorical, row index r * M + i)
+        for r in numba.prange(positions.shape[0]):
+            _velocity_row(positions[r], prior[r], denominator[r], uniform[r], u[r], r, out[r])
 
     def importance_rows(log_rho, log_m, present, valid, log_count, out):
         # log pi - log q per proposal, the arithmetic of _importance_log_weights (sums over slots in slot order)
@@ -575,7 +520,7 @@ def _inside(points: np.ndarray, box: tuple[float, float]) -> np.ndarray:
 
 def prior_logpdf(model: DnbpModel, points: np.ndarray, particles: np.ndarray, bandwidth: np.ndarray,
                  uniform: np.ndarray, exact: bool = True) -> np.ndarray:
-    """log rho(p) (spec §4.3) at points (J, P, 2) for priors with particles (J, M, 2).
+    """log rho(p) (Algorithm 3's forward message) at points (J, P, 2) for priors with particles (J, M, 2).
 
     rho = (1 - eps) KDE(h_rho) + eps U(defensive box), or U(cold box) where ``uniform``.
     """
@@ -1167,14 +1112,11 @@ def _message_rows_source(points, distance, weights, permutation, offset, range_n
 
 
 _FUSED: dict | None = None
-# The fused kernels' threaded form (over receivers; the truncated correction weights' over messages) is off: on
-# the 2-core machine it measured 2x slower than one thread (B = 4 receivers of gps_denied_nbp, load ~2.6, numba's
-# omp layer), where the per-row kernels' threads are not. Issue 18 (dn.step wall clock, truncated kernel, every
-# call threaded): 1.46x at B = 1, 1.53x at B = 4, 1.50x at B = 64 on the idle machine (load ~0.5), but 0.49x at
-# B = 4 and 0.89x at B = 64 beside one busy process (libgomp's waiting threads spin); with OMP_WAIT_POLICY=passive
-# (process-wide: torch's OpenMP too, so not set here) 1.30x / 1.54x idle and 1.04x / 0.98x beside the busy process.
-# It gives the same bits (8 seeded gps_denied_nbp rollouts; tests/estimators/test_dnbp_fast.py,
-# test_dnbp_truncated.py) for a machine where it pays.
+# The fused kernels' threaded form (over receivers; the truncated correction weights' over messages) is off:
+# libgomp's waiting threads spin, so it loses beside a busy process what it gains on an idle machine
+# (docs/performance.md, "dNBP kernels"); OMP_WAIT_POLICY=passive would help but is process-wide (torch's OpenMP
+# too), so it is not set here. It gives the same bits (tests/estimators/test_dnbp_fast.py, test_dnbp_truncated.py)
+# for a machine where it pays.
 _FUSED_THREADS = False
 # kernel entries (proposals x mixtures x components, points x components) of one call from which the threaded
 # form runs when _FUSED_THREADS is on
@@ -1307,7 +1249,7 @@ def belief_update(model: DnbpModel, prior: np.ndarray, prior_bandwidth: np.ndarr
     ``jitter`` (R, M, 2), ``velocity`` (R, M). Returns the new particles
     (R, M, 4) and a bool (R,) that is False where every weight underflowed
     (the prior is kept there). ``compiled`` (default): the fused numba kernels
-    where numba is installed (see the module's Speed note); False: the numpy
+    where numba is installed (see the module's "Compiled kernels"); False: the numpy
     path they are tested against.
     """
     R, M = prior.shape[:2]
@@ -1444,10 +1386,8 @@ def _belief_update_fused(kernels, model, prior, prior_bandwidth, prior_uniform, 
 # Slices of a fused kernel's rows run on Python threads (the kernels release the GIL): a thread waiting for work
 # sleeps (unlike libgomp's spinning threads, see _FUSED_THREADS). _SPLIT_WORKERS threads (at most the cores and
 # numba's thread count; 1: no split), the calling one included; a call is split from _SPLIT_RECEIVERS receivers
-# and _SPLIT_ELEMENTS kernel entries on, into _SPLIT_PER_WORKER slices per worker. Measured (dn.step wall clock,
-# truncated kernel, 2 cores, issue 18): 1 slice per worker 1.09x / 1.23x / 1.35x at B = 1 / 4 / 64 idle, 0.92x /
-# 0.96x / 0.98x beside one busy process; 2 per worker 0.84x / 1.00x / 1.01x idle (more wake-ups than balance);
-# from 2^20 entries B = 1 is not split (0.99x) and B = 4 1.25x.
+# and _SPLIT_ELEMENTS kernel entries on, into _SPLIT_PER_WORKER slices per worker (one: more slices mean more
+# wake-ups than balance; the split's gain and loss are in docs/performance.md, "dNBP kernels").
 _SPLIT_WORKERS: int | None = None
 _SPLIT_RECEIVERS = 4
 _SPLIT_ELEMENTS = 1 << 20
@@ -1569,7 +1509,7 @@ def _draw_per_copy(rngs: Sequence[np.random.Generator], copies: np.ndarray, batc
     return {key: np.concatenate([blk[key] for blk in blocks]) for key in blocks[0]}
 
 
-# --- schedule (spec §5) --------------------------------------------------------------------------------------
+# --- schedule (the paper's Sec. 3.4) -------------------------------------------------------------------------
 def fault_senders(fault: np.ndarray, heard_count: np.ndarray, qualified: np.ndarray, threshold: np.ndarray
                   ) -> tuple[np.ndarray, np.ndarray]:
     """Fault UAVs allowed to send at an iteration n >= 1 of the modified schedule.
@@ -1592,11 +1532,12 @@ def fault_senders(fault: np.ndarray, heard_count: np.ndarray, qualified: np.ndar
 # --- initial prior and Algorithm 3 --------------------------------------------------------------------------------
 def initial_state(model: DnbpModel, rngs: Sequence[np.random.Generator], mode: str,
                   position_mean: np.ndarray, velocity_mean: np.ndarray, velocity_std: float) -> DnbpState:
-    """The tau = 0 prior (spec §4.3).
+    """The tau = 0 prior.
 
     ``warm``: p ~ N(position_mean, sigma_gps^2 I2), v ~ N(velocity_mean, velocity_std^2 I2), M draws per UAV;
     ``cold``: p ~ U(cold box), v ~ N(velocity_mean, velocity_std^2) and the prior density is the box.
-    position_mean, velocity_mean: (B, N, 2). Each copy draws from its own generator.
+    position_mean, velocity_mean: (B, N, 2); ``velocity_std`` is a standard deviation (m/s), not a variance.
+    Each copy draws from its own generator.
     """
     if mode not in ("warm", "cold"):
         raise ValueError(f"init must be 'warm' or 'cold', got {mode!r}")

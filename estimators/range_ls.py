@@ -2,9 +2,9 @@
 
 Wan et al. 2014 compare dNBP with "the traditional cooperative localization
 method in [7], where the fault UAVs are located based on nearby normal ones
-only". The equations are lost in extraction; this module implements the
-reconstruction ``shared/specs/wan2014_dnbp.md`` §6 (tags: [paper] stated in the
-text, [chosen] the spec's choice).
+only". The equations are lost in extraction; this module reconstructs them
+from the paper's description (tags: [paper] stated in the text, [chosen]
+chosen here where the paper gives none).
 
 **DR / GPS-only** (non-cooperative): a linear Kalman filter per UAV on the
 constant-velocity model x(k+1) = F x + G a_hat + w, Q = sigma_acc^2 G G^T,
@@ -42,7 +42,7 @@ __all__ = ["LsParams", "KalmanState", "initial_state", "predict", "update_positi
 
 @dataclass(frozen=True)
 class LsParams:
-    """Parameters of the baselines (spec §1, §6).
+    """Parameters of the baselines (the gates and the Gauss-Newton iteration of the module docstring).
 
     | field          | default | tag      | meaning                                                |
     |----------------|---------|----------|--------------------------------------------------------|
@@ -179,7 +179,8 @@ def step(params: LsParams, state: KalmanState, gps_normal: np.ndarray, gps_fix: 
 
     ``state`` holds the predictions of tau. Returns (state of tau + 1,
     estimates (B, N, 2), fixed (B, N) bool: fault UAVs whose fix passed the gate).
-    ``update`` followed by ``predict`` with the linear model (F, G, Q).
+    ``update`` followed by ``predict`` with the linear model (F, G, Q). ``gps_std`` and ``range_std`` are
+    standard deviations (sigma_gps, sigma_d in m), not the variances the other estimators take.
     """
     posterior, estimate, fixed = update(params, state, gps_normal, gps_fix, adjacency, ranges, gps_std, range_std)
     return predict(posterior, accel, F, G, Q), estimate, fixed
@@ -191,7 +192,8 @@ def update(params: LsParams, state: KalmanState, gps_normal: np.ndarray, gps_fix
 
     ``state`` (any state dimension d >= 2, position first) holds the predictions of tau. Returns the
     posterior of tau, the estimates (B, N, 2) and ``fixed`` (B, N). The caller predicts with its own
-    motion model (``predict`` for the linear constant-velocity one).
+    motion model (``predict`` for the linear constant-velocity one). ``gps_std`` and ``range_std`` are standard
+    deviations (sigma_gps, sigma_d in m), not variances.
     """
     gps_normal = np.asarray(gps_normal, bool)
     B, N = gps_normal.shape

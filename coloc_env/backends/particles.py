@@ -51,8 +51,7 @@ Arguments (``coloc_env.backends.Dnbp``; defaults = ``gps_denied_nbp``'s)
 | schedule           | "modified" | "modified", "parallel" |
 | kernel             | "truncated"| "exact", "truncated": the belief update's mixture kernel |
 |                    |            | (``estimators.dnbp.KERNELS``; truncated: approximate, ~2x      |
-|                    |            | faster, within 0.12 standard errors of exact on wan2014's points;  |
-|                    |            | the default since issue 18, "exact" before)                        |
+|                    |            | faster; how close to exact: docs/performance.md, "dNBP kernels")   |
 | truncation         | 6.0        | [1, 10] bandwidths: r of the truncated kernel (terms below         |
 |                    |            | e^(-r^2/2) of the largest left out; unused by the exact kernel)    |
 
