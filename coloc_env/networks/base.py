@@ -50,6 +50,77 @@ def _self_links(n: int) -> np.ndarray:
     return eye
 
 
+
+def _resolve_chains(order, usable, all_usable, loss, u, lossy, distance, base, holder, first, choice, chosen, copies,
+                    limit, links, hops, size, code):  # pragma: no cover - compiled by numba (``_chain_kernel``)
+    """``Network.relay``'s chains, one at a time: n chains from ``holder`` (n,) (``links[:, 0]``), the first hop to
+    ``first`` where >= 0, then each holder's choice (``chosen``: ``choice[copies[c], holder]``, N + 1 = the nearest
+    unreached) or the nearest unreached platform: the first of the holder's row of ``order`` (its platforms by
+    distance) the chain has not reached. A hop fails, and the chain stops, with the first of the stop reasons
+    1 (hop budget ``limit``), 2 (no platform named), 3 (already reached), 4 (not ``usable``), 5 (lost:
+    ``u[c, hop] < loss``) that holds. Fills ``links``, ``hops`` (hop lengths), ``size`` and ``code`` in place;
+    link arrays are (rows, N) with row ``base[c] + holder``. O(hops x the reached platforms nearer than the
+    nearest unreached) per chain, not O(hops x N)."""
+    n, N = len(holder), order.shape[1]
+    reached = np.zeros(N, np.bool_)
+    for c in range(n):
+        reached[:] = False
+        now = holder[c]
+        reached[now] = True
+        for hop in range(N - 1):
+            if hop >= limit:
+                code[c] = 1
+                break
+            row = base[c] + now
+            nearest = now
+            for k in range(N):
+                if not reached[order[row, k]]:
+                    nearest = order[row, k]
+                    break
+            target = nearest
+            if chosen:
+                target = choice[copies[c], now]
+                if target == N + 1:
+                    target = nearest
+            if hop == 0 and first[c] >= 0:
+                target = first[c]
+            valid = 0 <= target < N and target != now
+            safe = target if valid else 0
+            failed = 0
+            if lossy and u[c, hop] < loss[row, safe]:
+                failed = 5
+            if not all_usable and not usable[row, safe]:
+                failed = 4
+            if reached[safe]:
+                failed = 3
+            if not valid:
+                failed = 2
+            code[c] = failed
+            if failed:
+                break
+            links[c, hop + 1] = target
+            reached[target] = True
+            hops[c, hop] = distance[row, target]
+            size[c] += 1
+            now = target
+
+
+_CHAINS = None
+
+
+def _chain_kernel():
+    """``_resolve_chains`` compiled by numba (cached on disk), or None where numba is not installed (the plain
+    function then runs, the same chains)."""
+    global _CHAINS
+    if _CHAINS is None:
+        try:
+            import numba
+        except ImportError:  # pragma: no cover - numba is a dependency
+            _CHAINS = False
+        else:
+            _CHAINS = numba.njit(cache=True, nogil=True)(_resolve_chains)
+    return _CHAINS or None
+
 class Network:
     """Batched delivery and accounting; subclasses set the link rules (``usable``, ``loss``, decisions)."""
 
@@ -298,65 +369,28 @@ class Network:
             if lossy:
                 k = self._k if np.ndim(self._k) == 0 else self._k[copies]
                 u = uniforms(self.keys[copies], (k, 1, slots[rows] if many else int(np.ravel(slot)[0])), (N,))
-            local = np.arange(n)
             holder = source[rows]
             links = np.full((n, N), -1)  # this chain's platforms, in order (the rows of ``chain``)
             links[:, 0] = holder
-            # each holder's platforms ranked by distance (ties in index order: argmin's choice), and a penalty
-            # of N on the platforms a chain reached: argmin(rank + penalty) is the nearest unreached, as the
-            # argmin of the distances masked with inf, on small integers instead of floats
-            small = np.int16 if N < 2**14 else np.int64
-            ranked = np.argsort(np.argsort(distance[:1] if shared else distance, axis=-1, kind="stable"), axis=-1,
-                                kind="stable").astype(small)
-            penalty = np.zeros((n, N), dtype=small)
-            penalty[local, holder] = N
+            # each holder's platforms by distance (ties in index order: argmin's choice): the nearest unreached is
+            # the first one of its row the chain has not reached
+            order = np.argsort(distance[:1] if shared else distance, axis=-1, kind="stable")
             size = np.ones(n, dtype=int)
             hops = np.full((n, max(N - 1, 1)), np.nan)
             code = np.zeros(n, dtype=int)
             first = first[rows]
             limit = self.max_hops()
-            # each chain's rows of the (B, N, N) link arrays, gathered by one take per hop
+            # each chain's rows of the (B, N, N) link arrays: row base + holder
             flat_distance = distance[0] if shared else distance.reshape(B * N, N)
-            flat_rank = ranked.reshape(-1, N)
             base = np.zeros(n, dtype=int) if shared else copies * N
             all_usable = bool(np.all(usable))
             flat_usable = usable[0] if shared else usable.reshape(B * N, N)
             flat_loss = loss[0] if shared else loss.reshape(B * N, N)
-            act = local  # the chains still going: each hop works on these rows only
-            for hop in range(N - 1):
-                if hop >= limit:  # stop reason 1: the hop budget is spent
-                    code[act] = 1
-                    break
-                now = holder[act]
-                at = base[act] + now
-                rank = np.take(flat_rank, at, axis=0)
-                rank += penalty[act]
-                nearest = np.argmin(rank, axis=-1)
-                target = nearest if choice is None else choice[copies[act], now]
-                if choice is not None:
-                    target = np.where(target == N + 1, nearest, target)
-                if hop == 0:  # a range's chain goes to the measured platform first; a fix's follows the choice
-                    target = np.where(first >= 0, first, target)
-                valid = (target >= 0) & (target < N) & (target != now)
-                safe = np.where(valid, target, 0)
-                # the first of the stop reasons 2..5 that holds: no platform named, already reached, out of
-                # range, lost
-                failed = np.where(u[act, hop] < flat_loss[at, safe], 5, 0) if u is not None else np.zeros(len(act), int)
-                if not all_usable:
-                    failed = np.where(~flat_usable[at, safe], 4, failed)
-                failed = np.where(penalty[act, safe] == N, 3, failed)
-                failed = np.where(valid, failed, 2)
-                ok = failed == 0
-                code[act] = failed
-                moved, target = act[ok], safe[ok]
-                links[moved, hop + 1] = target
-                penalty[moved, target] = N
-                hops[moved, hop] = flat_distance[at[ok], target]
-                size[moved] += 1
-                holder[moved] = target
-                act = moved
-                if not len(act):
-                    break
+            resolve = _chain_kernel() or _resolve_chains
+            resolve(order.reshape(-1, N), flat_usable, all_usable, flat_loss, u if u is not None else np.zeros((n, 1)),
+                    u is not None, flat_distance, base, np.ascontiguousarray(holder),
+                    np.ascontiguousarray(first), choice if choice is not None else np.zeros((1, 1), int),
+                    choice is not None, copies, min(limit, N - 1), links, hops, size, code)
             code[size == N] = 0
             chain[rows], length[rows], hop_distance[rows], stop[rows] = links, size, hops, code
             # the accounting, at each delivered hop's holder, chain by chain in order (one sum per (copy, holder):

@@ -6,9 +6,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+import coloc_env.networks.base as network_base
 from coloc_env.networks.base import RelayChain
 from coloc_env.networks.broadcast import Broadcast
 from coloc_env.networks.ideal import Ideal
+from coloc_env.networks.relay import Relay
 from coloc_env.primitives.relay import STOP_REASONS
 
 
@@ -102,3 +104,26 @@ def test_nearest_first_chains_go_to_the_nearest_unreached_platform_until_it_is_o
     # the range cuts chains at different hops (finished chains leave the search while others go on)
     assert ("out_of_range" in stops and len(set(result.length.ravel())) > 2) if reach < np.inf \
         else stops == {"complete"}
+
+
+@pytest.mark.parametrize("config", [Broadcast(comm_range=250.0, loss=0.3), Relay(comm_range=220.0, max_hops=3,
+                                                                                 loss_at_zero=0.1)])
+def test_chains_resolved_without_numba_are_the_compiled_chains(config, monkeypatch):
+    """The chain resolver runs compiled where numba is installed and as plain Python elsewhere: the same chains,
+    stop reasons and accounting."""
+    B, N, J = 3, 8, 10
+
+    def run():
+        net, rng = started(config, "chain", B, N, seed=5)
+        source = np.where(rng.random((B, J)) < 0.8, rng.integers(0, N, (B, J)), -1)
+        first = np.where(rng.random((B, J)) < 0.5, (source + rng.integers(1, N, (B, J))) % N, -1)
+        return net.relay_each(source, first, lambda hop: 1.0 + hop, np.arange(J)), snapshot(net)
+
+    compiled, compiled_counts = run()
+    monkeypatch.setattr(network_base, "_chain_kernel", lambda: None)
+    plain, plain_counts = run()
+    for name in ("chain", "length", "hop_distance", "stop"):
+        np.testing.assert_array_equal(getattr(plain, name), getattr(compiled, name))
+    for a, b in zip(plain_counts, compiled_counts, strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert len(set(compiled.stop.ravel())) >= 3  # several stop reasons met
