@@ -4,7 +4,8 @@ Wan et al. 2014 compare dNBP with "the traditional cooperative localization
 method in [7], where the fault UAVs are located based on nearby normal ones
 only". The equations are lost in extraction; this module reconstructs them
 from the paper's description (tags: [paper] stated in the text, [chosen]
-chosen here where the paper gives none).
+chosen here where the paper gives none). Its noise parameters (``*_std``, sigma_gps, sigma_d,
+sigma_acc) are standard deviations, as the paper states them.
 
 **DR / GPS-only** (non-cooperative): a linear Kalman filter per UAV on the
 constant-velocity model x(k+1) = F x + G a_hat + w, Q = sigma_acc^2 G G^T,

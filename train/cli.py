@@ -350,7 +350,8 @@ def _runnable_scenarios(console) -> list[str]:
         try:
             coloc_env.parallel_env(name).close()
         except ValueError as exc:
-            console.print(f"{name}: skipped ({exc})")
+            reason = str(exc).removeprefix(f"{name}: ")  # the preset's errors start with its name
+            console.print(f"{name}: skipped ({reason})")
             continue
         names.append(name)
     return names

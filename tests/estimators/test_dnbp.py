@@ -1,4 +1,5 @@
-"""dNBP (wan2014): the spec §11 unit tests, the schedule, the kernels and batch/seed reproducibility."""
+"""dNBP (wan2014): unit tests of its equations on small worked cases, the schedule, the kernels
+and batch/seed reproducibility."""
 
 import dataclasses
 
