@@ -35,6 +35,24 @@ are the anchors of the fault UAVs.
 | decisions     | none (the network's ``transmit`` per round) | none (the network's ``transmit``, round 0)     |
 | position cov  | the belief particles' sample covariance     | the KF posterior covariance                    |
 
+Per-step noise and velocity (both backends): a world whose noise changes from step to step supplies
+it with its readings, in ``Readings.extra``; each key present replaces, for that step, what the backend
+took from the world when it was built (absent keys: the built values). ``accel_std`` and ``velocity``
+act on the constant-velocity model only (``cv_accel`` worlds; other motion models carry their noise in
+their inputs).
+
+| extra key          | shape     | meaning                                                                   |
+|--------------------|-----------|---------------------------------------------------------------------------|
+| ``gps_std``        | (B,)      | sigma_gps (m) of this step's position fixes                               |
+| ``range_std``      | (B,)      | sigma_d (m) of this step's ranges                                         |
+| ``accel_std``      | (B,)      | sigma_acc (m/s^2) of the prediction k -> k + 1                            |
+| ``velocity``       | (B, N, 2) | a velocity reading (m/s) for k -> k + 1, taken as exact: every particle's |
+|                    |           | (the KF mean's) velocity is set to it before the step and its velocity    |
+|                    |           | variance to 0, so the prediction moves by velocity dt + dt^2/2 e          |
+
+dnbp holds one sigma per step for the whole batch (``estimators.dnbp.DnbpModel``): with B > 1 the
+per-step sigmas must agree across the copies (ValueError otherwise); range_ls takes them per copy.
+
 Arguments (``coloc_env.backends.Dnbp``; defaults = ``gps_denied_nbp``'s)
 
 | field              | default    | allowed                |
@@ -54,6 +72,10 @@ Arguments (``coloc_env.backends.Dnbp``; defaults = ``gps_denied_nbp``'s)
 |                    |            | faster; how close to exact: docs/performance.md, "dNBP kernels")   |
 | truncation         | 6.0        | [1, 10] bandwidths: r of the truncated kernel (terms below         |
 |                    |            | e^(-r^2/2) of the largest left out; unused by the exact kernel)    |
+| range_gate         | None       | None (no gate) or (0, 1e12]: before a step a range d_st is dropped |
+|                    |            | when (d_st - ||m_s - m_t||)^2 / (sigma_d^2 + v_s + v_t) exceeds it |
+|                    |            | (m, v: mean and per-axis variance of the agent's prior particles;  |
+|                    |            | 10.83 = chi-square(1) 99.9 %); dropped ranges: ``last_gated``      |
 
 The defensive box is the world's flight area, ``[-box_margin, area + box_margin + |v_nom| dt horizon]``
 per axis, as in the scenario. Warm start only: particles drawn around the world's initial belief.
@@ -70,6 +92,7 @@ Arguments (``coloc_env.backends.RangeLs``; defaults = ``estimators.range_ls.LsPa
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -102,6 +125,7 @@ class Dnbp(PartConfig):
     init: str = "warm"
     kernel: str = "truncated"
     truncation: float = 6.0
+    range_gate: float | None = None
 
     @property
     def rounds(self) -> int:
@@ -119,6 +143,8 @@ class Dnbp(PartConfig):
         check_choice(f"{prefix}init", self.init, ("warm", "cold"))
         check_choice(f"{prefix}kernel", self.kernel, dn.KERNELS)
         check_range(f"{prefix}truncation", self.truncation, *dn.TRUNCATION_RANGE)
+        if self.range_gate is not None:
+            check_range(f"{prefix}range_gate", self.range_gate, 0.0, 1e12, low_open=True)
 
     def build(self, world, network, batch: int) -> Backend:
         return DnbpBackend(self, world, network, batch)
@@ -153,6 +179,12 @@ def _world_field(world, name: str):
     if value is None:
         raise ValueError(f"backend needs a world with a {name!r} field (world {world.config.name!r} has none)")
     return value
+
+
+def _step_std(readings, key: str, built: float) -> np.ndarray:
+    """The per-step standard deviation ``readings.extra[key]`` (B,), or the backend's built value."""
+    value = readings.extra.get(key)
+    return np.full(len(readings.fix_valid), built) if value is None else np.asarray(value, float).reshape(-1)
 
 
 class DnbpBackend(Backend):
@@ -190,6 +222,8 @@ class DnbpBackend(Backend):
                              f"{world.config.name!r} moves by {motion.kind}")
         # the last step's schedule outcome (estimators.dnbp.StepResult): broadcasts, deliveries per iteration
         self.last_result = None
+        self.built_model = self.model  # the noise from the world at build: per-step readings replace it
+        self.last_gated = np.zeros((B, N, N), bool)  # [s, t]: s's range to t dropped by range_gate last step
 
     def reset(self, rngs, idx) -> None:
         idx = np.asarray(idx)
@@ -226,9 +260,40 @@ class DnbpBackend(Backend):
 
         return propagate
 
+    def _step_model(self, readings) -> dn.DnbpModel:
+        """The model of this step: the built one with the per-step sigmas of ``readings.extra`` (one per batch)."""
+        base = self.built_model
+        values = {}
+        for key, field in (("gps_std", "gps_std"), ("range_std", "range_std"), ("accel_std", "accel_noise_std")):
+            if key not in readings.extra:
+                continue
+            std = _step_std(readings, key, getattr(base, field))
+            if np.any(std != std[0]):
+                raise ValueError(f"backend dnbp: readings.extra[{key!r}] must be equal across the batch copies "
+                                 f"(one sigma per step), got {std}")
+            values[field] = float(std[0])
+        return dataclasses.replace(base, **values) if values else base
+
+    def _gate(self, readings, range_valid: np.ndarray) -> np.ndarray:
+        """``range_valid`` less the ranges that fail ``range_gate`` against the prior particles."""
+        pos = self.state.prior[..., :2]
+        mean, var = pos.mean(axis=2), pos.var(axis=2).mean(axis=-1)
+        predicted = np.linalg.norm(mean[:, :, None] - mean[:, None], axis=-1)
+        residual = np.nan_to_num(readings.range) - predicted
+        nu2 = residual**2 / (self.model.range_std**2 + var[:, :, None] + var[:, None, :])
+        keep = range_valid & (nu2 <= self.config.range_gate)
+        self.last_gated = range_valid & ~keep
+        return keep
+
     def update(self, readings, decisions) -> None:
         counter = [0]
         range_valid = np.asarray(readings.range_valid, bool)
+        self.model = self._step_model(readings)
+        velocity = readings.extra.get("velocity")
+        if velocity is not None and self.constant_velocity:
+            self.state.prior[..., 2:] = np.asarray(velocity, float)[:, :, None, :]
+        if self.config.range_gate is not None:
+            range_valid = self._gate(readings, range_valid)
 
         def deliver(senders: np.ndarray, listening: np.ndarray) -> np.ndarray:
             n = counter[0]
@@ -272,6 +337,8 @@ class RangeLsBackend(Backend):
         self.state = rl.KalmanState(np.zeros((B, N, d)), np.zeros((B, N, d, d)))
         self.estimate = np.zeros((B, N, 2))
         self.estimate_cov = np.zeros((B, N, 2, 2))
+        self.step_Q = None  # this step's process noise from readings.extra["accel_std"] (None: the world's)
+        self.last_fixed = np.zeros((B, N), bool)  # the fault agents whose LS fix passed the gate last step
 
     def reset(self, rngs, idx) -> None:
         mean, cov = self.world.initial_belief()
@@ -288,14 +355,31 @@ class RangeLsBackend(Backend):
         adjacency = delivered.transpose(0, 2, 1) & np.asarray(readings.range_valid, bool)  # [s, k]
         ranges = np.where(adjacency, np.nan_to_num(readings.range), 0.0)
         fix = np.where(normal[..., None], readings.fix, np.nan)
-        gps_std, range_std = np.sqrt(self.world.fix_noise_var()), np.sqrt(self.world.range_noise_var())
-        self.state, self.estimate, _ = rl.update(self.params, self.state, normal, fix, adjacency, ranges,
-                                                 gps_std, range_std)
+        gps_std = _step_std(readings, "gps_std", np.sqrt(self.world.fix_noise_var()))
+        range_std = _step_std(readings, "range_std", np.sqrt(self.world.range_noise_var()))
+        velocity = readings.extra.get("velocity")
+        if velocity is not None and self.linear:  # an exact velocity reading: the KF's velocity, variance 0
+            self.state.mean[..., 2:] = velocity
+            self.state.cov[..., 2:, :] = 0.0
+            self.state.cov[..., :, 2:] = 0.0
+        accel = readings.extra.get("accel_std")
+        # this step's process noise (sigma_acc^2 G) G^T per copy, for predict (None: the world's)
+        self.step_Q = None if accel is None else (
+            (np.asarray(accel, float).reshape(-1, 1, 1) ** 2 * self.G) @ self.G.T)[:, None]
+        # one update for the batch where the sigmas agree across the copies, else one per copy
+        same = np.ptp(gps_std) == 0 and np.ptp(range_std) == 0
+        for rows in [slice(None)] if same else [slice(b, b + 1) for b in range(B)]:
+            posterior, estimate, fixed = rl.update(
+                self.params, rl.KalmanState(self.state.mean[rows], self.state.cov[rows]), normal[rows], fix[rows],
+                adjacency[rows], ranges[rows], gps_std[rows][0], range_std[rows][0])
+            self.state.mean[rows], self.state.cov[rows] = posterior.mean, posterior.cov
+            self.estimate[rows], self.last_fixed[rows] = estimate, fixed
         self.estimate_cov = self.state.cov[..., :2, :2].copy()
 
     def predict(self, inputs) -> None:
         if self.linear:  # wan2014's constant-velocity KF, exactly as estimators.range_ls.step predicts
-            self.state = rl.predict(self.state, inputs, self.F, self.G, self.Q)
+            Q = self.Q if self.step_Q is None else self.step_Q
+            self.state = rl.predict(self.state, inputs, self.F, self.G, Q)
             return
         # any other motion model: the EKF time update of each agent's own Gaussian
         mean, cov = predict_joint(self.world.motion_model, self.state.mean[:, :, None, :], self.state.cov,

@@ -78,3 +78,75 @@ def test_same_seed_same_result_and_dnbp_beats_dead_reckoning_where_normal(stretc
         rmse = np.sqrt(np.mean(np.sum((est - sl.truth) ** 2, axis=-1)[sl.normal]))
         dr = np.sqrt(np.mean(np.sum((sl.dead_reckoning - sl.truth) ** 2, axis=-1)[sl.normal]))
         assert rmse < 0.5 * dr
+
+
+def _estimator_loops(sl, particles, seed):
+    """dNBP and the LS / GPS-only KF by ``estimators.dnbp.step`` / ``estimators.range_ls.step`` per slice, with the
+    slice's sigmas, velocity and range gate set by hand (the rules of the module docstring)."""
+    import dataclasses
+
+    import estimators.dnbp as dn
+    import estimators.range_ls as ls
+    from coloc_env.primitives.broadcast_medium import BroadcastMedium
+
+    def slice_model(base, t):
+        gps = float(np.max(sl.fix_std[t])) if sl.normal[t].any() else nbp.INITIAL_STD
+        rng_std = float(sl.range_std[t]) if sl.adjacency[t].any() else 0.1
+        return dataclasses.replace(base, gps_std=max(gps, 1e-3), range_std=max(rng_std, 1e-3),
+                                   accel_noise_std=max(float(sl.accel_std[t]), 1e-4))
+
+    base = dn.DnbpModel(dt=1.0, num_particles=particles, min_bandwidth=0.02, defensive_box=nbp.BOX,
+                        cold_box=nbp.BOX, gps_std=nbp.INITIAL_STD)
+    rng = np.random.default_rng(seed)
+    state = dn.initial_state(base, [rng], "warm", sl.initial[None, :, :2], np.zeros((1, nbp.N, 2)), nbp.INITIAL_STD)
+    out = {"dnbp": np.empty((len(sl), nbp.N, 2)), "ls": np.empty((len(sl), nbp.N, 2)),
+           "gps_only": np.empty((len(sl), nbp.N, 2))}
+    gated = fixes = 0
+    for t in range(len(sl)):
+        model = slice_model(base, t)
+        state.prior[..., 2:] = sl.velocity[t][None, :, None, :]
+        pos = state.prior[0, :, :, :2]
+        mean, var = pos.mean(axis=1), pos.var(axis=1).mean(axis=-1)
+        nu2 = (sl.ranges[t] - np.linalg.norm(mean[:, None] - mean[None], axis=-1)) ** 2 / (
+            model.range_std**2 + var[:, None] + var[None, :])
+        keep = sl.adjacency[t] & (nu2 <= nbp.RANGE_GATE)
+        gated += int((sl.adjacency[t] & ~keep).sum()) // 2
+        state, res = dn.step(model, state, sl.normal[t][None], sl.fix[t][None], BroadcastMedium().over(keep[None]),
+                             sl.ranges[t][None], np.zeros((1, nbp.N, 2)), [rng])
+        out["dnbp"][t] = res.estimate[0]
+    for name, cooperative in (("ls", True), ("gps_only", False)):
+        mean = np.zeros((1, nbp.N, 4))
+        mean[0, :, :2] = sl.initial[:, :2]
+        kf = ls.initial_state(mean, np.diag([nbp.INITIAL_STD**2] * 2 + [0.0, 0.0]))
+        for t in range(len(sl)):
+            model = slice_model(base, t)
+            kf.mean[..., 2:] = sl.velocity[t][None]
+            kf.cov[..., 2:, :] = 0.0
+            kf.cov[..., :, 2:] = 0.0
+            Q = model.accel_noise_std**2 * base.input_matrix @ base.input_matrix.T
+            kf, est, fixed = ls.step(ls.LsParams(cooperative=cooperative), kf, sl.normal[t][None], sl.fix[t][None],
+                                     sl.adjacency[t][None], sl.ranges[t][None], np.zeros((1, nbp.N, 2)),
+                                     base.transition, base.input_matrix, Q, model.gps_std, model.range_std)
+            out[name][t] = est[0]
+            fixes += int(fixed.sum()) if cooperative else 0
+    return out, gated, fixes
+
+
+def test_backends_give_the_estimator_functions_numbers_on_the_slices():
+    """The study's dnbp and range_ls backends over the slices equal the estimator functions stepped by hand with
+    the same per-slice sigmas, velocities and range gate (1e-9), on a stretch where the gate drops ranges and LS
+    fixes pass."""
+    if not os.path.isdir(DATASET6):
+        pytest.skip(MRCLAM_SKIP_REASON)
+    from coloc_env.data import mrclam
+
+    d = mrclam.load_cached(DATASET6)
+    sl = nbp.build_slices(d, mrclam.NoiseModel.calibrate(d), 300)
+    reference, gated, fixes = _estimator_loops(sl, 30, seed=1)
+    est, counts = nbp.run_dnbp(sl, 30, seed=1)
+    np.testing.assert_allclose(est, reference["dnbp"], rtol=0, atol=1e-9)
+    assert counts["gated_ranges"] == gated > 0
+    est_ls, ls_fixes = nbp.run_kalman(sl, True)
+    np.testing.assert_allclose(est_ls, reference["ls"], rtol=0, atol=1e-9)
+    assert ls_fixes == fixes > 0
+    np.testing.assert_allclose(nbp.run_kalman(sl, False)[0], reference["gps_only"], rtol=0, atol=1e-9)

@@ -1,11 +1,13 @@
 """dNBP (wan2014) on real robot data: UTIAS MRCLAM, landmark-sighting robots as the "GPS-normal" UAVs.
 
-dNBP with the robots that see landmarks playing the GPS-normal role:
-``estimators.dnbp`` (Wan et al. 2014, reconstructed in ``docs/wan2014.md``)
-and the least-squares baseline ``estimators.range_ls`` are driven on one
-MRCLAM dataset (``coloc_env.data.mrclam.load_cached``; cite Leung et al.,
-IJRR 2011). No Vicon data after the calibration window enters any estimator;
-Vicon is used for the noise calibration (the first 10 % of the run, the rule of
+dNBP with the robots that see landmarks playing the GPS-normal role: the
+``dnbp`` backend (``estimators.dnbp``, Wan et al. 2014, reconstructed in
+``docs/wan2014.md``) and the least-squares baseline ``range_ls``
+(``coloc_env.backends.particles``) are driven, through a lossless
+``broadcast`` network, on the slices (``SliceWorld``) of one MRCLAM dataset
+(``coloc_env.data.mrclam.load_cached``; cite Leung et al., IJRR 2011). No
+Vicon data after the calibration window enters any estimator; Vicon is used
+for the noise calibration (the first 10 % of the run, the rule of
 ``coloc_env.data.mrclam.NoiseModel``, as in ``coloc reproduce mrclam``), for
 the initial poses and for scoring.
 
@@ -31,13 +33,15 @@ Mapping of the data to dNBP's model (every choice)
   Delta p_tau = sum_k dt v'_k [cos theta_k, sin theta_k] over the 10 data steps
   (v' the calibrated, delay-corrected odometry speed, theta_k the own-nav
   heading). dNBP's constant-velocity model is fed this displacement through its
-  velocity slot: before each step the particles' velocity is set to
-  Delta p_tau / Delta t and the acceleration input is 0, so Algorithm 3 moves each
+  velocity slot: each slice's readings carry the velocity reading
+  Delta p_tau / Delta t (the backends' per-step ``velocity``), to which every
+  particle's velocity is set before the step, and the acceleration input is 0, so Algorithm 3 moves each
   particle by Delta p_tau + (Delta t^2 / 2) e, e ~ N(0, sigma_acc^2 I2). sigma_acc =
   2 sigma_Delta / Delta t^2 with sigma_Delta^2 = sum_k dt^2 sigma_v,k^2 +
   |Delta p|^2 sigma_theta^2 (calibrated speed variance of the odometry model,
   own-nav heading variance at the slice): the position random-walk std per slice.
-  dNBP takes one sigma_acc per step, so the largest over the robots is used.
+  dNBP takes one sigma_acc per step, so the largest over the robots is used
+  (the readings' per-step ``accel_std``; ``gps_std`` and ``range_std`` below likewise).
 * **GPS-normal role.** A robot that sighted a landmark in the slice (a sighting
   accepted by its own-nav gate) gets a pseudo-fix
   p = l - r [cos(theta + b), sin(theta + b)] + (D(k_tau) - D(k)) per sighting at
@@ -59,7 +63,8 @@ Mapping of the data to dNBP's model (every choice)
   range-only. sigma_d^2 = calibrated (inflated) range variance at d_st + the
   motion within the bin, (0.29 s (|v_s| + |v_t|))^2 (0.29 s: the std of a time
   offset uniform on +-0.5 s); one sigma_d per slice, the largest over its edges.
-  Range gate (``RANGE_GATE``, our addition, not the paper's): before a step a
+  Range gate (``RANGE_GATE``, the ``dnbp`` backend's ``range_gate``; our addition,
+  not the paper's): before a step a
   range is dropped when (d_st - ||mean_s - mean_t||)^2 / (sigma_d^2 + var_s +
   var_t) > 10.83 (chi-square(1) 99.9 %), means and per-axis variances of dNBP's
   OWN prior particles: misread barcodes give ranges metres off (4 of 1,441 edges
@@ -72,11 +77,11 @@ Mapping of the data to dNBP's model (every choice)
   ``num_particles`` ``PARTICLES`` (``QUICK_PARTICLES``), 5 iterations, the paper's
   modified schedule.
 
-Methods, on the same slices: ``dnbp``; ``ls`` (range_ls, the fault robot fixed
-from >= 3 normal neighbours, gated, fed to a KF with the same displacement prior
-and pseudo-fixes: the KF's velocity is set to Delta p / Delta t with zero
-variance before each step); ``gps_only`` (the same KF without cooperation: the
-spec's DR / GPS-only baseline); ``dead_reckoning`` (odometry integrated with its
+Methods, on the same slices: ``dnbp``; ``ls`` (the ``range_ls`` backend: the fault
+robot fixed from >= 3 normal neighbours, gated, fed to a KF with the same
+displacement prior and pseudo-fixes: the velocity reading sets the KF's velocity,
+with zero variance, before each step); ``gps_only`` (the same backend on the
+slices without ranges: the DR / GPS-only baseline of wan2014); ``dead_reckoning`` (odometry integrated with its
 own dead-reckoned heading, the ``IL`` of ``coloc reproduce mrclam``);
 ``own_nav`` (the heading source's position, reference). Score: position RMSE
 against Vicon pooled over (slice, robot) where the robot is faulty
@@ -89,16 +94,19 @@ from __future__ import annotations
 import dataclasses
 import os
 import time
+from types import SimpleNamespace
 
 import numpy as np
 
-import estimators.dnbp as dn
-import estimators.range_ls as ls
 import estimators.ukf_relay_se2 as se2
+from coloc_env.backends.particles import Dnbp, RangeLs
 from coloc_env.data import mrclam
-from coloc_env.primitives.broadcast_medium import BroadcastMedium
+from coloc_env.networks.broadcast import Broadcast
+from coloc_env.worlds.base import Readings, World
+from estimators.cv_models import ConstantVelocityAccel
 
 SLICE_STEPS = 10  # data steps per slice: Delta t = 1 s
+SLICE_DT = 1.0  # s: SLICE_STEPS steps of the 0.1-s data grid
 PARTICLES = 100
 QUICK_PARTICLES = 100
 QUICK_SLICES = 100
@@ -228,69 +236,111 @@ def build_slices(d: mrclam.MrclamData, model: mrclam.NoiseModel, num_slices: int
 
 
 # --------------------------------------------------------------------------------------------- estimators
-def base_model(particles: int) -> dn.DnbpModel:
-    return dn.DnbpModel(dt=SLICE_STEPS * 0.1, num_particles=particles, min_bandwidth=0.02, defensive_box=BOX,
-                        cold_box=BOX, gps_std=INITIAL_STD)
+class SliceWorld(World):
+    """The slices as a world for the ``dnbp`` and ``range_ls`` backends (one copy, k = slice index).
+
+    Motion: ``estimators.cv_models.ConstantVelocityAccel`` with Delta t = 1 s. Readings of slice k: the
+    pseudo-fixes (``fix_valid`` = normal), the median ranges of the edges (symmetric), and in ``extra``
+    (``coloc_env.backends.particles``' per-step keys) ``velocity`` = Delta p / Delta t to the next slice,
+    ``gps_std`` = the largest sigma_fix of the slice's normal robots (``INITIAL_STD`` when none),
+    ``range_std`` = the slice's sigma_d (0.1 m when it has no edge), ``accel_std`` = the slice's sigma_acc,
+    floored at 1e-3 m, 1e-3 m and 1e-4 m/s^2. ``fix_noise_var`` is ``INITIAL_STD``^2: dNBP's warm start
+    spreads the particles by sigma_gps; every step brings its own. Region: ``BOX``.
+    """
+
+    agent_prefix = "robot"
+
+    def __init__(self, sl: Slices):
+        config = SimpleNamespace(name="mrclam_slices", num_agents=N, dt=SLICE_DT, velocity_spread=INITIAL_STD,
+                                 measurements=frozenset({"range", "position_fix"}))
+        super().__init__(config, 1, len(sl))
+        self.slices = sl
+        self.motion_model = ConstantVelocityAccel(SLICE_DT, 0.0)  # sigma_acc comes with each slice's readings
+
+    def fix_noise_var(self) -> float:
+        return INITIAL_STD**2
+
+    def range_noise_var(self) -> float:
+        return 0.1**2
+
+    def draw_episode(self, rngs, idx) -> None:
+        return None  # the slices are the episode
+
+    def positions(self) -> np.ndarray:
+        return self.slices.truth[min(int(self.k[0]), len(self.slices) - 1)][None].copy()
+
+    def initial_belief(self):
+        mean = np.zeros((1, N, 4))
+        mean[0, :, :2] = self.slices.initial[:, :2]
+        cov = np.broadcast_to(np.diag([INITIAL_STD**2] * 2 + [0.0, 0.0]), (1, N, 4, 4)).copy()
+        return mean, cov
+
+    def region(self):
+        return BOX, BOX
+
+    def readings(self, sensing: np.ndarray) -> Readings:
+        sl, t = self.slices, int(self.k[0])
+        normal, adjacency = sl.normal[t], sl.adjacency[t]
+        gps = float(np.max(sl.fix_std[t])) if normal.any() else INITIAL_STD
+        range_std = float(sl.range_std[t]) if adjacency.any() else 0.1
+        extra = {"velocity": sl.velocity[t][None], "gps_std": np.array([max(gps, 1e-3)]),
+                 "range_std": np.array([max(range_std, 1e-3)]),
+                 "accel_std": np.array([max(float(sl.accel_std[t]), 1e-4)])}
+        return Readings(inputs=np.zeros((1, N, 2)), range=np.where(adjacency, sl.ranges[t], np.nan)[None],
+                        range_valid=adjacency[None].copy(), fix=sl.fix[t][None].copy(), fix_valid=normal[None].copy(),
+                        extra=extra)
 
 
-def _slice_model(base: dn.DnbpModel, sl: Slices, t: int) -> dn.DnbpModel:
-    gps = float(np.max(sl.fix_std[t])) if sl.normal[t].any() else base.gps_std
-    rng_std = float(sl.range_std[t]) if sl.adjacency[t].any() else 0.1
-    return dataclasses.replace(base, gps_std=max(gps, 1e-3), range_std=max(rng_std, 1e-3),
-                               accel_noise_std=max(float(sl.accel_std[t]), 1e-4))
+def dnbp_config(particles: int) -> Dnbp:
+    """The ``dnbp`` backend of the study: the module docstring's start, ``RANGE_GATE``, the exact kernel."""
+    return Dnbp(num_particles=particles, box_margin=0.0, min_bandwidth=0.02, kernel="exact", range_gate=RANGE_GATE)
+
+
+def _drive(sl: Slices, backend_config, rng: np.random.Generator | None, tally) -> np.ndarray:
+    """Run ``backend_config`` over the slices on a lossless ``broadcast`` network: estimates (S, N, 2);
+    ``tally(backend)`` after every step."""
+    world = SliceWorld(sl)
+    network = Broadcast().build(N, 1, backend_config.message_kind, backend_config.rounds)
+    backend = backend_config.build(world, network, 1)
+    idx = np.arange(1)
+    world.reset([None], idx)
+    network.reset([np.random.default_rng(0)], idx)  # lossless: no draw is used
+    backend.reset([rng], idx)
+    transmit = np.ones((1, N, backend_config.rounds), np.int64)
+    out = np.empty((len(sl), N, 2))
+    for t in range(len(sl)):
+        network.begin(world.k, world.positions(), transmit)
+        backend.step(world.readings(np.zeros((1, N, 0), np.int64)), np.zeros((1, N, 0)))
+        out[t] = backend.posterior_position[0]
+        tally(backend)
+        world.advance()
+    return out
 
 
 def run_dnbp(sl: Slices, particles: int, seed: int) -> tuple[np.ndarray, dict]:
-    """dNBP over the slices: estimates (S, N, 2) and message counts; generator ``default_rng(seed)``."""
-    rng = np.random.default_rng(seed)
-    base = base_model(particles)
-    init_model = dataclasses.replace(base, gps_std=INITIAL_STD)
-    state = dn.initial_state(init_model, [rng], "warm", sl.initial[None, :, :2], np.zeros((1, N, 2)), INITIAL_STD)
-    out = np.empty((len(sl), N, 2))
-    messages = broadcasts = gated = 0
-    medium = BroadcastMedium()
-    for t in range(len(sl)):
-        model = _slice_model(base, sl, t)
-        state.prior[..., 2:] = sl.velocity[t][None, :, None, :]  # the displacement through the velocity slot
-        adjacency = sl.adjacency[t]
-        if RANGE_GATE is not None and adjacency.any():
-            pos = state.prior[0, :, :, :2]
-            mean, var = pos.mean(axis=1), pos.var(axis=1).mean(axis=-1)
-            predicted = np.linalg.norm(mean[:, None] - mean[None], axis=-1)
-            nu2 = (sl.ranges[t] - predicted) ** 2 / (model.range_std**2 + var[:, None] + var[None, :])
-            keep = adjacency & (nu2 <= RANGE_GATE)
-            gated += int((adjacency & ~keep).sum()) // 2
-            adjacency = keep
-        state, res = dn.step(model, state, sl.normal[t][None], sl.fix[t][None], medium.over(adjacency[None]),
-                             sl.ranges[t][None], np.zeros((1, N, 2)), [rng])
-        out[t] = res.estimate[0]
-        messages += int(res.delivered.sum())
-        broadcasts += int(res.broadcasts.sum())
-    return out, {"messages": messages, "broadcasts": broadcasts, "gated_ranges": gated}
+    """dNBP (the ``dnbp`` backend) over the slices: estimates (S, N, 2) and message counts; generator
+    ``default_rng(seed)``."""
+    counts = {"messages": 0, "broadcasts": 0, "gated_ranges": 0}
+
+    def tally(backend):
+        counts["messages"] += int(backend.last_result.delivered.sum())
+        counts["broadcasts"] += int(backend.last_result.broadcasts.sum())
+        counts["gated_ranges"] += int(backend.last_gated.sum()) // 2  # each edge is held by both ends
+
+    return _drive(sl, dnbp_config(particles), np.random.default_rng(seed), tally), counts
 
 
 def run_kalman(sl: Slices, cooperative: bool) -> tuple[np.ndarray, int]:
-    """range_ls over the slices (cooperative: LS fixes from >= 3 normal neighbours; else GPS-only): (S, N, 2)."""
-    base = base_model(PARTICLES)
-    F, G = base.transition, base.input_matrix
-    mean = np.zeros((1, N, 4))
-    mean[0, :, :2] = sl.initial[:, :2]
-    cov = np.diag([INITIAL_STD**2] * 2 + [0.0, 0.0])
-    state = ls.initial_state(mean, cov)
-    params = ls.LsParams(cooperative=cooperative)
-    out = np.empty((len(sl), N, 2))
-    fixes = 0
-    for t in range(len(sl)):
-        model = _slice_model(base, sl, t)
-        state.mean[..., 2:] = sl.velocity[t][None]
-        state.cov[..., 2:, :] = 0.0
-        state.cov[..., :, 2:] = 0.0
-        Q = model.accel_noise_std**2 * G @ G.T
-        state, est, fixed = ls.step(params, state, sl.normal[t][None], sl.fix[t][None], sl.adjacency[t][None],
-                                    sl.ranges[t][None], np.zeros((1, N, 2)), F, G, Q, model.gps_std, model.range_std)
-        out[t] = est[0]
-        fixes += int(fixed.sum())
-    return out, fixes
+    """The ``range_ls`` backend over the slices (cooperative: LS fixes from >= 3 normal neighbours; else on the
+    slices without ranges, GPS-only): estimates (S, N, 2) and the LS fixes accepted."""
+    fixes = [0]
+
+    def tally(backend):
+        fixes[0] += int(backend.last_fixed.sum())
+
+    if not cooperative:
+        sl = dataclasses.replace(sl, adjacency=np.zeros_like(sl.adjacency))
+    return _drive(sl, RangeLs(), None, tally), fixes[0]
 
 
 def _scores(estimate: np.ndarray, sl: Slices) -> dict:
@@ -341,7 +391,7 @@ def run_nbp_study(d: mrclam.MrclamData, seed: int, quick: bool, particles: int |
     return {
         "dataset": os.path.basename(os.path.normpath(d.path)), "seed": int(seed), "quick": bool(quick),
         "slices": len(sl), "slice_s": SLICE_STEPS * d.dt, "particles": int(M),
-        "iterations": base_model(M).num_iterations,
+        "iterations": dnbp_config(M).num_iterations,
         "scores": scores, "claims": claims,
         "normal_fraction": float(sl.normal.mean()), "edges_per_slice": float(edges.mean()),
         "fault_with_edge_fraction": float((sl.adjacency.any(axis=2) & fault).sum() / max(fault.sum(), 1)),
