@@ -70,11 +70,17 @@ BATCHES = (1, 64, 1024)
 PCRB_ROW = "pcrb, one episode"  # the bound's computation (its own play of the episode and its recursion)
 
 
+WARM_UP_CALLS = 5
+
+
 def _rate(fn: Callable[[], None], min_seconds: float) -> float:
-    """Calls per second of ``fn`` over at least ``min_seconds`` (after one warm-up call and a full garbage
+    """Calls per second of ``fn`` over at least ``min_seconds`` (after warm-up calls and a full garbage
     collection: the setup of a large batch leaves a one-off collection of ~0.4 s that would otherwise land in
-    the timed window, as timeit avoids by disabling the collector)."""
-    fn()
+    the timed window, as timeit avoids by disabling the collector). Five warm-up calls, because a compiled
+    kernel (the relay chains' numba pass) is compiled at its first use, which the first step of an episode
+    may not reach (no platform measures at reset)."""
+    for _ in range(WARM_UP_CALLS):
+        fn()
     gc.collect()
     count, start = 0, time.perf_counter()
     while True:
