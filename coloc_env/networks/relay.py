@@ -53,8 +53,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from coloc_env.networks.base import Network
-from coloc_env.parts import NETWORKS, Block, PartConfig, check_choice, check_range
-from coloc_env.primitives.relay import RelayChainLinks, check_distance
+from coloc_env.parts import NETWORKS, Block, PartConfig, check_choice
+from coloc_env.primitives.relay import RelayChainLinks
 
 ROUTINGS = ("per_holder", "per_source")
 
@@ -75,20 +75,13 @@ class Relay(PartConfig):
     hop_cost_per_m2: float = 0.0
 
     def check(self, prefix: str) -> None:
-        check_distance(f"{prefix}comm_range", self.comm_range)
-        if self.max_hops is not None:
-            check_range(f"{prefix}max_hops", self.max_hops, 1, 1000, integer=True)
-        check_range(f"{prefix}loss_at_zero", self.loss_at_zero, 0.0, 1.0)
-        check_distance(f"{prefix}loss_length", self.loss_length)
+        """The hop rules' fields (``RelayChainLinks.validate``, before the team is known) and the routing."""
+        self.links.validate(None, prefix)
         check_choice(f"{prefix}routing", self.routing, ROUTINGS)
-        check_range(f"{prefix}hop_cost", self.hop_cost, 0.0, 1e12)
-        check_range(f"{prefix}hop_cost_per_m2", self.hop_cost_per_m2, 0.0, 1e12)
 
     def check_hop_budget(self, num_agents: int, prefix: str, agents: str) -> None:
         """``max_hops`` against the team: at most N - 1 hops (``agents`` names N in the message)."""
-        if self.max_hops is not None:
-            check_range(f"{prefix}max_hops", self.max_hops, 1, max(1, num_agents - 1), integer=True,
-                        high_label=f"{agents} - 1")
+        self.links.check_hop_budget(num_agents, prefix, agents)
 
     @property
     def links(self) -> RelayChainLinks:

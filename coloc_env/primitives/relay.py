@@ -92,14 +92,24 @@ class RelayChainLinks:
     hop_cost: float = 0.0
     hop_cost_per_m2: float = 0.0
 
-    def validate(self, num_platforms: int, prefix: str = "") -> None:
+    def validate(self, num_platforms: int | None = None, prefix: str = "") -> None:
+        """Every field; ``max_hops`` in [1, N - 1] for a team of ``num_platforms`` (``check_hop_budget``), in
+        [1, 1000] where the team is not known yet."""
         check_distance(f"{prefix}comm_range", self.comm_range)
         if self.max_hops is not None:
-            check_range(f"{prefix}max_hops", self.max_hops, 1, max(1, num_platforms - 1), integer=True)
+            check_range(f"{prefix}max_hops", self.max_hops, 1, 1000, integer=True)
+        if num_platforms is not None:
+            self.check_hop_budget(num_platforms, prefix, "N")
         check_range(f"{prefix}loss_at_zero", self.loss_at_zero, 0.0, 1.0)
         check_distance(f"{prefix}loss_length", self.loss_length)
         check_range(f"{prefix}hop_cost", self.hop_cost, 0.0, 1e12)
         check_range(f"{prefix}hop_cost_per_m2", self.hop_cost_per_m2, 0.0, 1e12)
+
+    def check_hop_budget(self, num_platforms: int, prefix: str, agents: str) -> None:
+        """``max_hops`` against the team: at most N - 1 hops (``agents`` names N in the message)."""
+        if self.max_hops is not None:
+            check_range(f"{prefix}max_hops", self.max_hops, 1, max(1, num_platforms - 1), integer=True,
+                        high_label=f"{agents} - 1")
 
     def loss_probability(self, distance: np.ndarray) -> np.ndarray:
         survival = (1.0 - self.loss_at_zero) * np.exp(-np.asarray(distance, float) / self.loss_length)
