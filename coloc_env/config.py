@@ -8,6 +8,7 @@ refuses unknown keys, so a typo never passes silently.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import numbers
 import re
@@ -40,12 +41,36 @@ def read_aliases(config_cls: type, kwargs: dict[str, Any], prefix: str = "") -> 
     return kwargs
 
 
+def aliases_written(config_cls: type, given, prefix: str = "") -> dict[str, str]:
+    """{``prefix + current name``: ``prefix + older name``} for each of the class's ``aliases`` among the keys
+    ``given``: the names ``refused_as_written`` puts back into an error."""
+    return {f"{prefix}{name}": f"{prefix}{alias}" for alias, name in getattr(config_cls, "aliases", {}).items()
+            if alias in given}
+
+
+@contextlib.contextmanager
+def refused_as_written(written: dict[str, str]):
+    """A ``BadInput`` raised inside is raised again with each current name of ``written`` ({current: as the user
+    wrote it}) replaced by the name the user wrote, so that a value given under an older name (a config's
+    ``aliases``) is refused under that name. A name is replaced only where it stands alone: ``num_agents``
+    not inside ``world.num_agents`` or ``num_agents_max``."""
+    try:
+        yield
+    except BadInput as exc:
+        message = str(exc)
+        for name, alias in written.items():
+            message = re.sub(rf"(?<![\w.]){re.escape(name)}(?!\w)", alias, message)
+        if message == str(exc):
+            raise
+        raise BadInput(message) from exc
+
+
 def build_config(config_cls: type[C], kwargs: dict[str, Any]) -> C:
     """Instantiate ``config_cls(**kwargs)`` after rejecting unknown keys, then validate it. A key listed in
     the class's ``aliases`` (older name -> current name) is read as its current name, and an error about
-    its value names it as the user wrote it."""
+    its value names it as the user wrote it (``refused_as_written``)."""
     names = {f.name for f in dataclasses.fields(config_cls)}
-    given = set(kwargs)
+    written = aliases_written(config_cls, kwargs)
     kwargs = read_aliases(config_cls, kwargs)
     unknown = sorted(set(kwargs) - names)
     if unknown:
@@ -55,17 +80,8 @@ def build_config(config_cls: type[C], kwargs: dict[str, Any]) -> C:
             f"unknown config key(s) {unknown} for {config_cls.__name__}; allowed keys: {sorted(names)}{also}"
         )
     config = config_cls(**kwargs)
-    try:
+    with refused_as_written(written):
         validate_fields(config)
-    except BadInput as exc:
-        # a value given under an older name is refused under the name the user wrote
-        message = str(exc)
-        for alias, name in getattr(config_cls, "aliases", {}).items():
-            if alias in given:
-                message = re.sub(rf"(?<![\w.]){re.escape(name)}(?!\w)", alias, message)
-        if message == str(exc):
-            raise
-        raise BadInput(message) from exc
     return config
 
 

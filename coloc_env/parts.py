@@ -21,7 +21,15 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from coloc_env.config import BadInput, check_choice, check_range, read_aliases, validate_fields
+from coloc_env.config import (
+    BadInput,
+    aliases_written,
+    check_choice,
+    check_range,
+    read_aliases,
+    refused_as_written,
+    validate_fields,
+)
 
 
 @dataclass(frozen=True)
@@ -72,14 +80,18 @@ class PartConfig:
 
 def make_config(cls: type, fields: dict[str, Any], kind: str) -> PartConfig:
     """``cls(**fields)`` after refusing unknown fields, then validated. A field listed in the class's
-    ``aliases`` (older name -> current name) is read as its current name."""
-    fields = read_aliases(cls, fields, f"{kind}.")
+    ``aliases`` (older name -> current name) is read as its current name, and a refused value is named as the
+    user wrote it (``world.num_platforms must be ...``), as ``coloc_env.config.build_config`` does for a preset."""
+    prefix = f"{kind}."
+    written = aliases_written(cls, fields, prefix)
+    fields = read_aliases(cls, fields, prefix)
     allowed = {f.name for f in dataclasses.fields(cls)}
     unknown = sorted(set(fields) - allowed)
     if unknown:
         raise BadInput(f"unknown {kind} field(s) {unknown} for {kind} {cls.name!r}; allowed: {sorted(allowed)}")
     config = cls(**fields)
-    config.validate()
+    with refused_as_written(written):
+        config.validate()
     return config
 
 

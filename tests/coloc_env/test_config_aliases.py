@@ -7,7 +7,9 @@ import pytest
 
 import coloc_env
 from coloc_env.networks.relay import Relay
-from coloc_env.parts import make_config
+from coloc_env.parts import BACKENDS, NETWORKS, WORLDS, make_config
+
+REGISTRIES = {"world": WORLDS, "network": NETWORKS, "backend": BACKENDS}
 
 
 @pytest.fixture
@@ -26,9 +28,36 @@ def test_a_part_alias_and_its_current_name_together_are_refused(relay_alias):
         make_config(Relay, {"loss0": 0.25, "loss_at_zero": 0.5}, "network")
 
 
-def test_a_part_alias_is_checked_like_its_current_name(relay_alias):
-    with pytest.raises(ValueError, match=r"network\.loss_at_zero must be in \[0"):
+def test_a_part_alias_is_checked_like_its_current_name_and_refused_as_written(relay_alias):
+    with pytest.raises(ValueError, match=r"^network\.loss0 must be in \[0\.0, 1\.0\], got 1\.5$"):
         coloc_env.compose(world="circles", network={"name": "relay", "loss0": 1.5}, backend="ukf_ccl")
+    with pytest.raises(ValueError, match=r"^network\.loss_at_zero must be in \[0\.0, 1\.0\], got 1\.5$"):
+        coloc_env.compose(world="circles", network={"name": "relay", "loss_at_zero": 1.5}, backend="ukf_ccl")
+
+
+@pytest.mark.parametrize(("part", "fields", "message"), [
+    # circles reads wang2019's num_platforms as num_agents: the range, and a bound it sets, under that name
+    ("world", {"name": "circles", "num_platforms": 1}, r"^world\.num_platforms must be in \[2, 16\], got 1$"),
+    ("world", {"name": "circles", "num_platforms": 3, "num_anchors": 4},
+     r"^world\.num_anchors must be in \[0, world\.num_platforms = 3\], got 4$"),
+    ("world", {"name": "circles", "num_platforms": "4"},
+     r"^world\.num_platforms must be an integer in \[2, 16\], got '4'$"),
+    # dfir reads the FIR window's older name horizon as window
+    ("backend", {"name": "dfir", "horizon": 1}, r"^backend\.horizon must be in \[2, 1000\], got 1$"),
+])
+def test_a_registered_part_alias_is_refused_under_the_name_written(part, fields, message):
+    with pytest.raises(ValueError, match=message):
+        make_config(REGISTRIES[part][fields["name"]], {k: v for k, v in fields.items() if k != "name"}, part)
+
+
+def test_compose_and_a_sweep_refuse_a_part_alias_under_the_name_written():
+    from train.study import build_cells, parse_sweep
+
+    with pytest.raises(ValueError, match=r"^world\.num_platforms must be in \[2, 16\], got 17$"):
+        coloc_env.compose(world={"name": "circles", "num_platforms": 17}, network="relay", backend="ukf_dcl")
+    with pytest.raises(ValueError, match=r"^--sweep world\.num_platforms=1 with backend ukf_dcl: "
+                                         r"world\.num_platforms must be in \[2, 16\], got 1$"):
+        build_cells("circles", "relay", ["ukf_dcl"], parse_sweep("world.num_platforms=4,1"), None)
 
 
 def test_without_the_alias_the_older_name_is_unknown():
