@@ -28,7 +28,7 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
-from coloc_env.config import BadInput, check_choice, check_range
+from coloc_env.config import BadInput, check_choice, check_range, refused_as_written
 from coloc_env.parts import BACKENDS, NETWORKS, WORLDS, PartConfig
 
 COMPOSITION_OPTIONS = ("reward", "communication_cost", "horizon")
@@ -77,14 +77,28 @@ class Composition:
 
 
 def compose(world: Any, network: Any, backend: Any, **options) -> Composition:
-    """A ``Composition`` of the three parts; ``options`` are composition-level fields only."""
+    """A ``Composition`` of the three parts; ``options`` are composition-level fields only.
+
+    A part given as a dict may hold a composition option under the name its class lists in
+    ``composition_aliases`` (``{"name": "relay", "hop_cost": c}`` sets ``communication_cost = c``); giving it
+    there and in ``options`` is refused, and a refused value is named as written (``network.hop_cost``)."""
     unknown = sorted(set(options) - set(COMPOSITION_OPTIONS))
     if unknown:
         raise BadInput(f"unknown composition option(s) {unknown}; allowed: {list(COMPOSITION_OPTIONS)} "
                          "(a part's own field goes into that part: {'name': ..., field: value})")
-    spec = Composition(world=WORLDS.resolve(world), network=NETWORKS.resolve(network),
-                       backend=BACKENDS.resolve(backend), **options)
-    spec.validate()
+    parts, written = {}, {}
+    for kind, registry, part in (("world", WORLDS, world), ("network", NETWORKS, network),
+                                 ("backend", BACKENDS, backend)):
+        parts[kind], lifted = registry.composition_options(part)
+        for option, (alias, value) in lifted.items():
+            if option in options:
+                raise BadInput(f"{kind}.{alias} is another name of {option}; give only one of them")
+            options[option] = value
+            written[option] = f"{kind}.{alias}"
+    with refused_as_written(written):
+        spec = Composition(world=WORLDS.resolve(parts["world"]), network=NETWORKS.resolve(parts["network"]),
+                           backend=BACKENDS.resolve(parts["backend"]), **options)
+        spec.validate()
     return spec
 
 

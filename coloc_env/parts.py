@@ -60,6 +60,9 @@ class PartConfig:
     name: ClassVar[str]
     kind: ClassVar[str]  # "world", "network" or "backend"
     aliases: ClassVar[dict[str, str]] = {}  # older field name -> current name, accepted by make_config
+    # a name a user may write among this part's fields for a composition-level option of another name (relay:
+    # hop_cost -> communication_cost), read by ``coloc_env.composition.compose`` from a part given as a dict
+    composition_aliases: ClassVar[dict[str, str]] = {}
 
     def check(self, prefix: str) -> None:  # pragma: no cover - interface
         """Raise ``ValueError`` naming ``prefix + field`` for a bad value."""
@@ -88,7 +91,11 @@ def make_config(cls: type, fields: dict[str, Any], kind: str) -> PartConfig:
     allowed = {f.name for f in dataclasses.fields(cls)}
     unknown = sorted(set(fields) - allowed)
     if unknown:
-        raise BadInput(f"unknown {kind} field(s) {unknown} for {kind} {cls.name!r}; allowed: {sorted(allowed)}")
+        options = [f"{prefix}{name} is the composition's {cls.composition_aliases[name]}"
+                   for name in unknown if name in cls.composition_aliases]
+        hint = f" ({'; '.join(options)}: give it to compose, or the {kind} as a dict)" if options else ""
+        raise BadInput(f"unknown {kind} field(s) {unknown} for {kind} {cls.name!r}; allowed: {sorted(allowed)}"
+                       f"{hint}")
     config = cls(**fields)
     with refused_as_written(written):
         config.validate()
@@ -123,6 +130,15 @@ class Registry(dict):
             return part
         raise BadInput(f"{self.kind} must be a name (one of {sorted(self)}), a {self.kind} config or a dict, "
                          f"got {part!r}")
+
+    def composition_options(self, part: Any) -> tuple[Any, dict[str, tuple[str, Any]]]:
+        """``part`` without the fields its class names in ``composition_aliases`` (a part given as a dict only),
+        and {composition option: (the name written, its value)} for each of them given."""
+        if not isinstance(part, dict) or not isinstance(part.get("name"), str) or part["name"] not in self:
+            return part, {}
+        lifted = self[part["name"]].composition_aliases
+        options = {option: (alias, part[alias]) for alias, option in lifted.items() if alias in part}
+        return {k: v for k, v in part.items() if k not in lifted}, options
 
     def _class(self, name: Any) -> type:
         if not isinstance(name, str) or name not in self:

@@ -14,8 +14,8 @@ A hop of length d is lost with p_loss(d) = 1 - (1 - loss_at_zero) exp(-d / loss_
 |            | source m end the chain as N = stop does; N + 1 where no other platform is in range       |
 | always     | nearest-first relay, transmit in every round                                             |
 | silent     | stop at once (the measured platform alone), transmit nothing                             |
-| accounting | one message per delivered hop, at its holder (``coloc_env.networks.base``); the hop    |
-|            | cost ``hop_cost + hop_cost_per_m2 d^2`` of every delivered hop at its holder, in         |
+| accounting | one message per delivered hop, at its holder (``coloc_env.networks.base``); the hop's    |
+|            | energy cost ``hop_cost_per_m2 d^2`` of every delivered hop at its holder, in             |
 |            | ``RelayNetwork.cost_sent`` (B, N), per step                                              |
 
 Routing. ``per_holder`` (wang2019's ``relay_ukf``: one platform measures per
@@ -25,13 +25,19 @@ starting a chain): each holder keeps a routing table, one next hop per source,
 so two chains that pass the same holder can take different routes (with one
 next hop per holder they could not both be complete).
 
-Hop cost. The price of a hop's radio energy (free-space energy grows like
-d^2), in the unit of the reward it is charged to. The network accounts it at
-the sender in ``cost_sent``, and a composition's reward subtracts it with
-``communication_cost`` per message (``coloc_env.scenarios.composed``); as
-the network sends one message per delivered hop, ``hop_cost`` and the
-composition's ``communication_cost`` charge the same thing (the relay presets
-set only the latter). The hop cost changes no estimate and no delivery.
+Hop cost. A delivered hop is one message, so its flat price is the
+composition's ``communication_cost`` (per message, subtracted from the
+reward by ``coloc_env.scenarios.composed``); the network itself prices only
+what depends on the hop's length, its radio energy ``hop_cost_per_m2 d^2``
+(free-space energy grows like d^2), accounted at the sender in ``cost_sent``
+and subtracted beside it, in the reward's unit. ``hop_cost``, the network's
+older name of the flat price, is read as the composition's
+``communication_cost`` (a price per message the network counts: for a chain,
+per delivered hop) where a relay network is given as a dict
+(``compose(network={"name": "relay", "hop_cost": c})``, ``coloc study
+--sweep network.hop_cost=...``; ``Relay.composition_aliases``); giving both
+is refused, and a refused value is named ``network.hop_cost``. Neither cost
+changes an estimate or a delivery.
 
 Arguments (``coloc_env.networks.Relay``)
 
@@ -42,8 +48,8 @@ Arguments (``coloc_env.networks.Relay``)
 | loss_at_zero    | 0.1          | [0, 1]                                                      |
 | loss_length     | inf          | (0, inf] m                                                  |
 | routing         | "per_holder" | "per_holder", "per_source" (see Routing)                    |
-| hop_cost        | 0.0          | [0, 1e12] per delivered hop (the reward's unit)             |
 | hop_cost_per_m2 | 0.0          | [0, 1e12] per delivered hop and squared metre of its length |
+| hop_cost        | (no field)   | older name of the composition's ``communication_cost`` (Hop cost) |
 """
 
 from __future__ import annotations
@@ -71,8 +77,8 @@ class Relay(PartConfig):
     loss_at_zero: float = 0.1
     loss_length: float = float("inf")
     routing: str = "per_holder"
-    hop_cost: float = 0.0
     hop_cost_per_m2: float = 0.0
+    composition_aliases = {"hop_cost": "communication_cost"}  # a hop is one message: its flat price
 
     def check(self, prefix: str) -> None:
         """The hop rules' fields (``RelayChainLinks.validate``, before the team is known) and the routing."""
@@ -85,8 +91,8 @@ class Relay(PartConfig):
 
     @property
     def links(self) -> RelayChainLinks:
-        """The hop rules: range limit, hop budget, distance loss and hop cost."""
-        return RelayChainLinks(self.comm_range, self.max_hops, self.loss_at_zero, self.loss_length, self.hop_cost,
+        """The hop rules: range limit, hop budget, distance loss and a hop's energy cost."""
+        return RelayChainLinks(self.comm_range, self.max_hops, self.loss_at_zero, self.loss_length,
                                self.hop_cost_per_m2)
 
     def build(self, num_agents: int, batch: int, message_kind: str, rounds: int = 1) -> Network:
@@ -162,10 +168,10 @@ class RelayNetwork(Network):
         return self._decisions[:, :, 0]
 
     def relay(self, source, first, floats_per_hop, slot: int = 0):
-        """``Network.relay`` with the routing entry of each copy's source, and the hop costs accounted."""
+        """``Network.relay`` with the routing entry of each copy's source, and the hops' energy costs accounted."""
         self._source = np.maximum(np.asarray(source, int), 0)
         chain = super().relay(source, first, floats_per_hop, slot)
-        if self.config.hop_cost == 0 and self.config.hop_cost_per_m2 == 0:
+        if self.config.hop_cost_per_m2 == 0:
             return chain  # free hops: cost_sent stays 0
         cost = self.links.cost(chain.hop_distance)  # (B, N - 1); 0 where no hop was delivered
         rows = np.arange(self.batch)

@@ -16,9 +16,10 @@ from holder h to target t fails, and the chain stops at h, when
 
 checked in that order. The loss probability grows with the hop length d:
 p_loss(d) = 1 - (1 - loss_at_zero) exp(-d / loss_length) (loss_length = inf:
-a constant loss_at_zero). Each delivered hop costs
-``hop_cost + hop_cost_per_m2 * d^2`` (a radio's energy grows like d^2 in
-free space).
+a constant loss_at_zero). Each delivered hop costs ``hop_cost_per_m2 * d^2``
+(a radio's energy grows like d^2 in free space); a price per hop regardless of
+its length is a price per message, which a composition charges once
+(``communication_cost``), not here.
 """
 
 from __future__ import annotations
@@ -73,7 +74,7 @@ class RelayChain:
 
 @dataclass(frozen=True)
 class RelayChainLinks:
-    """Serial relay links with a hop budget, range limit, distance-dependent loss and hop cost.
+    """Serial relay links with a hop budget, range limit, distance-dependent loss and a hop's energy cost.
 
     | field            | meaning                                                  | wang2019 |
     |------------------|----------------------------------------------------------|----------|
@@ -81,15 +82,13 @@ class RelayChainLinks:
     | max_hops         | hops per chain; None = no limit (N-1)                    | None     |
     | loss_at_zero     | packet loss probability of a zero-length hop             | 0        |
     | loss_length      | metres over which survival falls by e; inf = no growth   | inf      |
-    | hop_cost         | cost of each delivered hop                               | 0        |
-    | hop_cost_per_m2  | extra cost per squared metre of hop length               | 0        |
+    | hop_cost_per_m2  | cost of a delivered hop per squared metre of its length  | 0        |
     """
 
     comm_range: float = float("inf")
     max_hops: int | None = None
     loss_at_zero: float = 0.0
     loss_length: float = float("inf")
-    hop_cost: float = 0.0
     hop_cost_per_m2: float = 0.0
 
     def validate(self, num_platforms: int | None = None, prefix: str = "") -> None:
@@ -102,7 +101,6 @@ class RelayChainLinks:
             self.check_hop_budget(num_platforms, prefix, "N")
         check_range(f"{prefix}loss_at_zero", self.loss_at_zero, 0.0, 1.0)
         check_distance(f"{prefix}loss_length", self.loss_length)
-        check_range(f"{prefix}hop_cost", self.hop_cost, 0.0, 1e12)
         check_range(f"{prefix}hop_cost_per_m2", self.hop_cost_per_m2, 0.0, 1e12)
 
     def check_hop_budget(self, num_platforms: int, prefix: str, agents: str) -> None:
@@ -116,9 +114,9 @@ class RelayChainLinks:
         return 1.0 - survival
 
     def cost(self, distance: np.ndarray) -> np.ndarray:
-        """Cost of delivered hops of length ``distance``; nan (no hop) costs 0."""
+        """``hop_cost_per_m2 * d^2`` of delivered hops of length ``distance``; nan (no hop) costs 0."""
         distance = np.asarray(distance, float)
-        return np.where(np.isnan(distance), 0.0, self.hop_cost + self.hop_cost_per_m2 * np.nan_to_num(distance) ** 2)
+        return np.where(np.isnan(distance), 0.0, self.hop_cost_per_m2 * np.nan_to_num(distance) ** 2)
 
     def resolve(self, positions: np.ndarray, source: np.ndarray, first: np.ndarray, choice: np.ndarray,
                 uniforms: np.ndarray) -> RelayChain:

@@ -88,7 +88,7 @@ Reward (per agent, its own estimate; a shared estimate gives every agent the tea
 |          |                                                 | the backend computes it: bandwidth_fusion's Sigma_i) |
 
 both minus ``communication_cost`` per message it sent this step, and minus the cost the network itself
-charges for what the agent sent (``relay``'s ``hop_cost`` + ``hop_cost_per_m2`` d^2 per delivered hop, at
+charges for what the agent sent (``relay``'s ``hop_cost_per_m2`` d^2 per delivered hop of length d, at
 the holder that sent it; 0 for the other networks).
 
 Termination: none; truncation after ``horizon`` steps.

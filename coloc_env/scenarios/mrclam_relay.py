@@ -173,8 +173,8 @@ action vector passed verbatim), observation, team reward and info; the observati
 state, team reward and shared infos are the relay-chain presets' codec
 (``coloc_env.scenarios.relay_codec``, shared with ``relay_ukf``). Each keyword
 sets the part field of the same name, except ``window_steps`` (the world's and
-the composition's ``horizon``) and ``communication_cost`` (the composition's: the
-relay network's own per-hop ``hop_cost`` stays 0, so a hop is charged once); each
+the composition's ``horizon``) and ``communication_cost`` (the composition's: a
+delivered hop is one message of the relay network, which prices only its length); each
 is checked by its part, ``max_hops`` also against the N - 1 hops a chain can
 have, and, when an env is built (validation reads no data), ``data`` and
 ``window_steps`` against the run.

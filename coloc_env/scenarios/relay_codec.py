@@ -15,9 +15,9 @@ along chains of the ``relay`` network to a joint UKF, rewarded as one.
 | metric          | the distance error averaged over the steps and agents                                       |
 
 Communication cost: the relay network sends one message per delivered hop, at its holder, so the
-composition's per-message ``communication_cost`` is the cost of a hop; the network adds its own
-``hop_cost_per_m2`` d^2 of each delivered hop (``coloc_env.networks.relay``). Both are subtracted in
-metres, the unit of the reward's error.
+composition's per-message ``communication_cost`` is the flat cost of a hop; the network adds the hop's
+energy ``hop_cost_per_m2`` d^2 (``coloc_env.networks.relay``). Both are subtracted in metres, the unit of
+the reward's error; the ``hop_cost`` info key is their sum over the team.
 """
 
 from __future__ import annotations

@@ -147,7 +147,7 @@ UKF-DCL update (each vectorized over the copies whose chain reaches it).
 
 Composition: this preset is a binding (``coloc_env.scenarios.binding``) on the composable
 core: world ``circles`` (``num_anchors=0``, the config's layout and noise), network ``relay``
-(``routing="per_holder"``, the config's links and hop costs) and backend ``ukf_dcl``
+(``routing="per_holder"``, the config's links and ``hop_cost_per_m2``) and backend ``ukf_dcl``
 (``motion="displacement"``: the paper's position-only state); ``coloc_env.PRESETS["relay_ukf"]``
 is that composition. Each keyword sets the part field of the same name (``communication_cost`` the
 composition's); the parts check them, the rules that tie a part field to the team's size

@@ -172,8 +172,9 @@ def test_presets_are_compositions_and_build_the_same_env():
 
 
 def test_a_relays_hop_cost_is_charged_in_the_composed_reward_at_the_holder():
-    """relay's hop_cost / hop_cost_per_m2 are the network's price of a hop: a composition's reward is minus the
-    agent's error minus the cost of the hops it sent (and the same episode without a price differs by exactly that)."""
+    """A relay hop's price (its flat price, the network's older name ``hop_cost`` of the composition's
+    ``communication_cost``, and the network's ``hop_cost_per_m2`` d^2): a composition's reward is minus the agent's
+    error minus the cost of the hops it sent (and the same episode without a price differs by exactly that)."""
     def run(**fields):
         spec = coloc_env.compose(world="circles", network={"name": "relay", **fields}, backend="ukf_dcl", horizon=12)
         env = coloc_env.parallel_env(spec)
@@ -182,7 +183,8 @@ def test_a_relays_hop_cost_is_charged_in_the_composed_reward_at_the_holder():
         rows = []
         while env.agents:
             observations, rewards, _, _, infos = env.step(policy.act(observations))
-            cost = env.unwrapped.scenario.network.cost_sent[0].copy()
+            scenario = env.unwrapped.scenario
+            cost = fields.get("hop_cost", 0.0) * scenario.network.messages_sent[0] + scenario.network.cost_sent[0]
             rows.append(([rewards[a] for a in env.possible_agents], [infos[a]["error"] for a in env.possible_agents],
                          cost))
         return rows

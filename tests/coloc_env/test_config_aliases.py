@@ -63,3 +63,35 @@ def test_compose_and_a_sweep_refuse_a_part_alias_under_the_name_written():
 def test_without_the_alias_the_older_name_is_unknown():
     with pytest.raises(ValueError, match=r"unknown network field\(s\) \['loss0'\]"):
         make_config(Relay, {"loss0": 0.25}, "network")
+
+
+# relay's hop_cost: the network's older name of a hop's flat price, which is the composition's communication_cost
+RELAY = {"world": "circles", "backend": "ukf_dcl"}
+
+
+def test_a_relay_hop_cost_is_the_compositions_communication_cost():
+    spec = coloc_env.compose(**RELAY, network={"name": "relay", "hop_cost": 0.5, "max_hops": 2})
+    assert spec == coloc_env.compose(**RELAY, network={"name": "relay", "max_hops": 2}, communication_cost=0.5)
+    assert "hop_cost" not in spec.network.as_dict()
+
+
+def test_a_relay_hop_cost_is_refused_as_written_and_not_beside_communication_cost():
+    with pytest.raises(ValueError, match=r"^network\.hop_cost must be in \[0\.0, 1000000000000\.0\], got -1\.0$"):
+        coloc_env.compose(**RELAY, network={"name": "relay", "hop_cost": -1.0})
+    with pytest.raises(ValueError, match=r"^network\.hop_cost is another name of communication_cost; give only one"):
+        coloc_env.compose(**RELAY, network={"name": "relay", "hop_cost": 0.5}, communication_cost=0.5)
+    with pytest.raises(ValueError, match=r"unknown network field\(s\) \['hop_cost'\] for network 'relay'.*"
+                                         r"\(network\.hop_cost is the composition's communication_cost: give it to"):
+        Relay().replace(hop_cost=0.5)
+    with pytest.raises(ValueError, match=r"unknown network field\(s\) \['hop_cost'\] for network 'broadcast'"):
+        coloc_env.compose(**RELAY, network={"name": "broadcast", "hop_cost": 0.5})
+
+
+def test_a_sweep_over_relay_hop_cost_sets_the_communication_cost():
+    from train.study import build_cells, parse_sweep
+
+    cells = build_cells("circles", "relay", ["ukf_dcl"], parse_sweep("network.hop_cost=0,0.25"), None)
+    assert [cells["ukf_dcl", v].communication_cost for v in ("0", "0.25")] == [0, 0.25]
+    with pytest.raises(ValueError, match=r"^--sweep network\.hop_cost=-1 with backend ukf_dcl: "
+                                         r"network\.hop_cost must be in \[0\.0, "):
+        build_cells("circles", "relay", ["ukf_dcl"], parse_sweep("network.hop_cost=-1"), None)

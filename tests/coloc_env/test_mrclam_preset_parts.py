@@ -43,7 +43,7 @@ def test_the_preset_names_its_parts_with_the_scenarios_defaults():
     assert network.routing == "per_source"
     for field in ("comm_range", "max_hops", "loss_at_zero", "loss_length", "hop_cost_per_m2"):
         assert getattr(network, field) == getattr(config, field), field
-    assert PRESET.communication_cost == config.communication_cost and network.hop_cost == 0.0  # charged once
+    assert PRESET.communication_cost == config.communication_cost  # a hop's flat price: one name, the composition's
     assert backend.ukf_lambda == config.ukf_lambda and backend.gate == config.gate
 
 
@@ -75,14 +75,14 @@ def _scenario_action(scenario, rng, noise=0.2):
     return np.concatenate([choice[:, None], routing], axis=1)
 
 
-def _lockstep(seed, steps, scenario_fields, network_fields, inject, action_seed=5):
+def _lockstep(seed, steps, scenario_fields, network_fields, inject, action_seed=5, composition_fields=None):
     """Drive the scenario and the composition of the preset's parts with the same (random) scenario actions.
 
     Returns per-step statistics; asserts equality (1e-9) of the estimates and covariance factors, and equality
     of the messages per holder and the team's hop cost, at every step."""
     world = dataclasses.replace(PRESET.world, data=DATASET6, horizon=steps)
     network = dataclasses.replace(PRESET.network, **network_fields)
-    spec = coloc_env.compose(world=world, network=network, backend=PRESET.backend)
+    spec = coloc_env.compose(world=world, network=network, backend=PRESET.backend, **(composition_fields or {}))
     env = coloc_env.parallel_env(spec)
     env.reset(seed=seed)
     core = env.unwrapped.scenario
@@ -104,7 +104,7 @@ def _lockstep(seed, steps, scenario_fields, network_fields, inject, action_seed=
         info = scenario.info()
         np.testing.assert_array_equal(core.network.messages_sent[0], info["communication"][0])
         cost = scenario.step_cost()
-        np.testing.assert_allclose(core.network.cost_sent[0].sum(), cost[0], rtol=1e-12, atol=0)
+        np.testing.assert_allclose(core.communication_costs()[0].sum(), cost[0], rtol=1e-12, atol=0)
         stats["used"] += int(scenario.backend.used.sum())
         chains = scenario.backend.chains
         stops = chains.stop.reshape(N)
@@ -128,9 +128,8 @@ def test_the_preset_parts_equal_the_scenario_on_its_defaults():
 @needs_data
 def test_the_preset_parts_equal_the_scenario_given_the_networks_losses_and_hop_costs():
     links = {"loss_at_zero": 0.3, "loss_length": 12.0, "comm_range": 6.0, "max_hops": 3, "hop_cost_per_m2": 0.002}
-    # the preset's per-hop communication_cost is the network's hop_cost of the plain composition
     stats = _lockstep(seed=9, steps=150, scenario_fields={**links, "communication_cost": 0.01},
-                      network_fields={**links, "hop_cost": 0.01}, inject=True)
+                      network_fields=links, inject=True, composition_fields={"communication_cost": 0.01})
     for reason in ("lost", "stopped", "hop_budget"):
         assert stats["stops"][STOP_REASONS.index(reason)] > 0, (reason, stats)
     assert stats["used"] > 5 and stats["split_routes"] > 0 and stats["cost"] > 0, stats
@@ -149,7 +148,7 @@ def _network(routing, N=4, **fields):
 
 
 def test_per_source_routing_follows_each_sources_entry_and_accounts_hop_costs():
-    net = _network("per_source", hop_cost=0.5, hop_cost_per_m2=0.25)
+    net = _network("per_source", hop_cost_per_m2=0.25)
     assert [(b.name, b.size, b.choices) for b in net.transport_blocks()] == [("next_hop", 4, 6)]
     positions = np.array([[[0.0, 0.0], [1.0, 0.0], [3.0, 0.0], [6.0, 0.0]]])
     decisions = np.full((1, 4, 4), 4)  # [batch, holder, source]; 4 = stop
@@ -163,7 +162,7 @@ def test_per_source_routing_follows_each_sources_entry_and_accounts_hop_costs():
     b = net.relay(np.array([3]), np.array([1]), lambda hop: 1.0, slot=1)
     np.testing.assert_array_equal(b.chain[0], [3, 1, 0, 2])
     np.testing.assert_array_equal(net.messages_sent[0], [2, 2, 1, 1])
-    cost = lambda d: 0.5 + 0.25 * d**2  # noqa: E731
+    cost = lambda d: 0.25 * d**2  # noqa: E731
     expected = [cost(1) + cost(3), cost(2) + cost(1), cost(3), cost(5)]  # hops at their holders
     np.testing.assert_allclose(net.cost_sent[0], expected, rtol=1e-12)
     net.begin(np.array([1]), positions, decisions)

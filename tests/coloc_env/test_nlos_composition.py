@@ -225,7 +225,7 @@ def test_compatibility_reasons_and_bad_fields_name_the_part():
         coloc_env.compose(world="nlos_orbit", network="ideal", backend={"name": "afge", "group_size": 4})
     with pytest.raises(ValueError, match=r"backend\.window must be in \[2, 1000\]"):
         coloc_env.compose(world="nlos_orbit", network="ideal", backend={"name": "dfir", "window": 1})
-    with pytest.raises(ValueError, match=r"backend\.window must be in \[2, 1000\]"):  # its older name
+    with pytest.raises(ValueError, match=r"backend\.horizon must be in \[2, 1000\]"):  # its older name, as written
         coloc_env.compose(world="nlos_orbit", network="ideal", backend={"name": "dfir", "horizon": 1})
     with pytest.raises(ValueError, match=r"backend\.horizon is another name of backend\.window"):
         coloc_env.compose(world="nlos_orbit", network="ideal", backend={"name": "dfir", "horizon": 8, "window": 8})

@@ -223,11 +223,11 @@ def test_relay_chain_follows_choices_and_reports_each_stop_reason():
     np.testing.assert_array_equal(full.position_of(4)[0], [0, 1, 2, 3])
     budget = RelayChainLinks(max_hops=1).resolve(pos, np.zeros(B, int), np.ones(B, int), choice, np.ones((B, 3)))
     assert STOP_REASONS[budget.stop[4]] == "hop_budget" and np.all(budget.length == 2)
-    lossy = RelayChainLinks(loss_at_zero=0.1, loss_length=20.0, hop_cost=1.0, hop_cost_per_m2=0.01)
+    lossy = RelayChainLinks(loss_at_zero=0.1, loss_length=20.0, hop_cost_per_m2=0.01)
     p = lossy.loss_probability(np.array([0.0, 10.0, 100.0]))
     assert p[0] == pytest.approx(0.1) and np.all(np.diff(p) > 0) and p[-1] < 1
-    np.testing.assert_allclose(lossy.cost(np.array([10.0, np.nan])), [2.0, 0.0])
+    np.testing.assert_allclose(lossy.cost(np.array([10.0, np.nan])), [1.0, 0.0])
     for kwargs, field in (({"max_hops": 4}, "max_hops"), ({"loss_at_zero": 1.5}, "loss_at_zero"),
-                          ({"comm_range": -1.0}, "comm_range"), ({"hop_cost": -1.0}, "hop_cost")):
+                          ({"comm_range": -1.0}, "comm_range"), ({"hop_cost_per_m2": -1.0}, "hop_cost_per_m2")):
         with pytest.raises(ValueError, match=field):
             RelayChainLinks(**kwargs).validate(4)
