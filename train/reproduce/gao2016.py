@@ -1,11 +1,12 @@
-"""Reproduce Gao et al. 2016 (``nlos_horizon``): AFGE vs constant-horizon DFIR and Kalman baselines.
+"""Reproduce Gao et al. 2016 (``nlos_horizon``): AFGE vs constant-window DFIR and Kalman baselines.
 
 The paper's formulas and most numbers were lost; the contract is the reconstruction
 ``docs/gao2016.md``, and the claims checked are its §11 (qualitative: the
 absolute numbers of the paper are not comparable). One target per run, as in the paper.
 
 Monte Carlo through the composable core: every estimator is a backend (``afge`` with each likelihood,
-whose ``constant_x`` gives dfir's output for every constant horizon N = 1..30 of its stack, and
+whose ``constant_x`` gives dfir's output for every constant FIR window N = 1..30 of its stack (the
+paper's "horizon size"), and
 ``delay_kalman``, the Kalman baseline) on the setting's ``nlos_orbit`` world and ``random_delay``
 network (``drive``: one batched core per estimator, stepped over the runs with every packet kept).
 Run r of sweep setting i resets every composition of that setting with
@@ -21,8 +22,8 @@ Writes ``OUT/gao2016/metrics.json`` with exactly the keys of docs/gao2016.md §1
 posterior Cramér–Rao bound of the default setting beside its estimators (``bound_block``,
 ``train.reproduce.bound_rows``), ``report.md`` (each claim, our numbers, holds or not, decided on the
 paired per-run interval; the bound's section) and the figures
-``fig4_rmse_vs_horizon.png`` (the U-curve with AFGE as a line), ``fig6_rmse_over_time.png``,
-``horizon_over_time.png`` (chosen horizon against the turn schedule) and
+``fig4_rmse_vs_horizon.png`` (the U-curve of RMSE over the window N, with AFGE as a line),
+``fig6_rmse_over_time.png``, ``horizon_over_time.png`` (AFGE's chosen window against the turn schedule) and
 ``fig5b_packets_per_step.png``. The returned dict is the metrics plus ``claims`` (for the CLI).
 
 ``paper_policy_costs(seeds)`` gives this reproduction's per-episode number for AFGE, the env's
@@ -52,7 +53,7 @@ QUICK_RUNS = 8
 SEED_BASE = 2016
 BLOCK = 20  # runs per batched core (and per executor task); the results do not depend on it
 WARMUP = 50
-HORIZONS = tuple(range(2, 31))
+HORIZONS = tuple(range(2, 31))  # the constant FIR windows N of the DFIR sweep (Fig. 4)
 BOUND_EPISODES = 10  # seeded episodes of the bound (at most the runs): a fraction of a second each
 MATCHED_ACCEL_SIGMA = 1.0  # m/s^2, the KF matched to the turns (docs/gao2016.md §8)
 SETTINGS = (  # (name, config changes): the sweep of docs/gao2016.md §12, the default first
@@ -114,11 +115,11 @@ def drive(spec, generators: list, constant: bool = False) -> dict:
     """``spec`` stepped batched over the runs, copy r reset with ``generators[r]`` by the presets' rule
     (``train.reproduce.common.PresetComposition``: with the ``nlos_horizon`` preset's parts, the
     episode and the delays ``env.reset`` draws from that generator), every packet kept (the
-    ``always`` action: AHG picks AFGE's horizon); per step and target: ``error`` (R, K, N) squared
-    position error, ``horizon`` (R, K, N) the horizon output (0: none had an estimate), ``received``
+    ``always`` action: AHG picks AFGE's window); per step and target: ``error`` (R, K, N) squared
+    position error, ``horizon`` (R, K, N) the window of the output (0: none had an estimate), ``received``
     (R, K, N) packets arriving at k, ``fused_lag0`` (R, K, N) stamp k fused at lag 0, ``fused_final``
     (R, K - D, N) stamp k - D fused at lag D, and with ``constant`` ``constant`` (R, K, N, S): the squared
-    error of dfir with each horizon N = 1..S (``coloc_env.backends.nlos.PacketFirBackend.constant_x``)."""
+    error of dfir with each window N = 1..S (``coloc_env.backends.nlos.PacketFirBackend.constant_x``)."""
     scenario = PresetComposition(spec, batch=len(generators))
     scenario.reset(list(generators))
     backend, K = scenario.backend, scenario.horizon
@@ -259,7 +260,7 @@ def bound_block(config: NlosHorizonConfig, res: dict, best: int, seed: int, epis
     """The ``pcrb`` block: ``coloc_env.pcrb`` of the default setting's composition (``config``'s
     ``nlos_orbit`` world and ``random_delay`` network with AFGE, every packet kept: ``always``) over
     ``episodes`` seeded episodes (episode e reset with seed + e, not the runs' ``[seed, r]``), beside the
-    per-run MSE of each estimator of ``BOUND_ROWS`` and of DFIR with the best constant horizon ``best``
+    per-run MSE of each estimator of ``BOUND_ROWS`` and of DFIR with the best constant window ``best``
     (row ``dfir_best``)
     (``res`` the merged Monte Carlo, the one target's squared 2-D error after each step), the bound and the
     errors both over k >= ``warm``.
