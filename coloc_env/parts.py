@@ -74,8 +74,11 @@ class PartConfig:
         validate_fields(self, prefix, lambda: self.check(prefix))
 
     def replace(self, **changes) -> PartConfig:
-        """A validated copy with ``changes`` (unknown fields are a ``ValueError`` naming the part)."""
-        return make_config(type(self), {**dataclasses.asdict(self), **changes}, self.kind)
+        """A validated copy with ``changes`` (unknown fields are a ``ValueError`` naming the part); a change may
+        use an older name (``aliases``), which then replaces the current field and is named in an error."""
+        changed = read_aliases(type(self), changes, f"{self.kind}.")
+        kept = {k: v for k, v in dataclasses.asdict(self).items() if k not in changed}
+        return make_config(type(self), {**kept, **changes}, self.kind)
 
     def as_dict(self) -> dict[str, Any]:
         return {"name": self.name, **dataclasses.asdict(self)}

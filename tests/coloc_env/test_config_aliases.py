@@ -23,6 +23,16 @@ def test_a_part_alias_sets_the_current_field(relay_alias):
     assert spec.network == Relay(loss_at_zero=0.25)
 
 
+def test_replace_takes_an_alias_for_the_field_it_changes():
+    from coloc_env.worlds.circles import Circles
+
+    assert Circles(num_anchors=1).replace(num_platforms=4) == Circles(num_agents=4, num_anchors=1)
+    with pytest.raises(ValueError, match=r"^world\.num_platforms must be in \[2, 16\], got 1$"):
+        Circles().replace(num_platforms=1)
+    with pytest.raises(ValueError, match=r"^world\.num_platforms is another name of world\.num_agents; give only"):
+        Circles().replace(num_platforms=4, num_agents=4)
+
+
 def test_a_part_alias_and_its_current_name_together_are_refused(relay_alias):
     with pytest.raises(ValueError, match=r"^network\.loss0 is another name of network\.loss_at_zero; give only one"):
         make_config(Relay, {"loss0": 0.25, "loss_at_zero": 0.5}, "network")
