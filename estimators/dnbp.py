@@ -234,7 +234,8 @@ class DnbpModel:
     |                    |               |         | cut: terms below e^(-r^2/2) of the largest left out |
 
     ``accel_noise_std``, ``gps_std`` and ``range_std`` are standard deviations (sigma), not the variances the
-    other estimators take.
+    other estimators take. Each is one float for every copy, or a (B,) array of one value per copy (copies whose
+    noise differs, e.g. replays of different stretches of a recording); ``per_copy`` reads either.
     """
 
     dt: float = 1.0
@@ -321,6 +322,16 @@ class StepResult:
     broadcasts: np.ndarray
     received: np.ndarray
     history: list[np.ndarray] = field(default_factory=list)
+
+
+def per_copy(value, batch: int) -> np.ndarray:
+    """A sigma of ``DnbpModel`` (a float or a (B,) array) as (B,) floats, one per copy."""
+    arr = np.asarray(value, float)
+    if arr.ndim == 0:
+        return np.full(batch, float(arr))
+    if arr.shape != (batch,):
+        raise ValueError(f"a per-copy sigma must be a float or have shape ({batch},), got shape {arr.shape}")
+    return arr
 
 
 # --- densities -----------------------------------------------------------------------------------------------------
@@ -1093,7 +1104,7 @@ def _message_rows_source(points, distance, weights, permutation, offset, range_n
         d = distance[e]
         for i in range(M):
             theta = two_pi * (permutation[e, i] + offset[e, i]) / M
-            radius = d + range_std * range_noise[e, i]
+            radius = d + range_std[e] * range_noise[e, i]
             centres[e, i, 0] = points[e, i, 0] + radius * math.cos(theta)
             centres[e, i, 1] = points[e, i, 1] + radius * math.sin(theta)
         mx, my = 0.0, 0.0
@@ -1160,18 +1171,21 @@ def _fused_kernels() -> dict | None:
 # --- Algorithm 1 -------------------------------------------------------------------------------------------------
 def sample_messages(model: DnbpModel, sender_points: np.ndarray, distance: np.ndarray,
                     correction_log_weights: np.ndarray | None, permutation: np.ndarray, offset: np.ndarray,
-                    range_noise: np.ndarray, compiled: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                    range_noise: np.ndarray, compiled: bool = True, range_std: np.ndarray | None = None
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Algorithm 1 for E messages t -> s.
 
     sender_points (E, M, 2): t's belief positions; distance (E,): d_ts;
     correction_log_weights (E, M): log w_i (normalized; None = uniform);
     permutation (E, M) a permutation of 0..M-1 per row, offset (E, M) U[0,1),
-    range_noise (E, M) standard normal. Returns centres (E, M, 2),
+    range_noise (E, M) standard normal; range_std (E,) sigma_d of each
+    message (None: ``model.range_std``, one float). Returns centres (E, M, 2),
     log-weights (E, M), bandwidths (E,). ``compiled`` (default, where numba
     is installed): the centres and h_rot's sums by one compiled pass
     (``_message_rows_source``), the same floats as the numpy path (False).
     """
     E, M = sender_points.shape[:2]
+    range_std = per_copy(model.range_std if range_std is None else range_std, E)
     if correction_log_weights is None:
         correction_log_weights = np.full((E, M), -np.log(M))
     kernels = _fused_kernels() if compiled else None
@@ -1180,12 +1194,12 @@ def sample_messages(model: DnbpModel, sender_points: np.ndarray, distance: np.nd
         kernels["messages"](np.ascontiguousarray(sender_points, float), np.ascontiguousarray(distance, float),
                             np.exp(correction_log_weights), np.ascontiguousarray(permutation),
                             np.ascontiguousarray(offset, float), np.ascontiguousarray(range_noise, float),
-                            float(model.range_std), centres, var, square_sum)
+                            range_std, centres, var, square_sum)
         h_rot = np.sqrt(np.maximum(var, 0.0)) * (1.0 / square_sum) ** (-1.0 / 6.0)  # rule_of_thumb_bandwidth's
         bandwidth = np.maximum(np.sqrt(h_rot**2 + (np.pi * distance / M) ** 2), model.min_bandwidth)
         return centres, correction_log_weights, bandwidth
     theta = 2.0 * np.pi * (permutation + offset) / M
-    radius = distance[:, None] + model.range_std * range_noise
+    radius = distance[:, None] + range_std[:, None] * range_noise
     centres = sender_points + radius[..., None] * np.stack([np.cos(theta), np.sin(theta)], axis=-1)
     h_rot = rule_of_thumb_bandwidth(sender_points, np.exp(correction_log_weights))
     bandwidth = np.maximum(np.sqrt(h_rot**2 + (np.pi * distance / M) ** 2), model.min_bandwidth)
@@ -1543,11 +1557,12 @@ def initial_state(model: DnbpModel, rngs: Sequence[np.random.Generator], mode: s
         raise ValueError(f"init must be 'warm' or 'cold', got {mode!r}")
     B, N = velocity_mean.shape[:2]
     M = model.num_particles
+    gps_std = per_copy(model.gps_std, B)
     pos = np.empty((B, N, M, 2))
     vel = np.empty((B, N, M, 2))
     for b, rng in enumerate(rngs):
         if mode == "warm":
-            pos[b] = position_mean[b, :, None, :] + model.gps_std * rng.standard_normal((N, M, 2))
+            pos[b] = position_mean[b, :, None, :] + gps_std[b] * rng.standard_normal((N, M, 2))
         else:
             lo, hi = model.cold_box
             pos[b] = lo + (hi - lo) * rng.random((N, M, 2))
@@ -1562,7 +1577,8 @@ def predict(model: DnbpModel, belief: np.ndarray, accel: np.ndarray, rngs: Seque
             ) -> tuple[np.ndarray, np.ndarray]:
     """Algorithm 3: particles of rho(k+1) (B, N, M, 4) and their KDE bandwidth h_rho (B, N)."""
     B, N, M = belief.shape[:3]
-    e = np.stack([rng.standard_normal((N, M, 2)) for rng in rngs]) * model.accel_noise_std
+    e = np.stack([rng.standard_normal((N, M, 2)) for rng in rngs]) * per_copy(model.accel_noise_std, B)[:, None,
+                                                                                                      None, None]
     a = accel[:, :, None, :] + e
     dt = model.dt
     pos = belief[..., :2] + dt * belief[..., 2:] + 0.5 * dt**2 * a
@@ -1650,7 +1666,7 @@ def step(model: DnbpModel, state: DnbpState, gps_normal: np.ndarray, gps_fix: np
     gps_rows = np.flatnonzero(gps_normal.reshape(B * N))
     gps_entries = pool.add(len(gps_rows))
     pool.centres[gps_entries] = np.nan_to_num(np.asarray(gps_fix, float).reshape(B * N, 2)[gps_rows])[:, None, :]
-    pool.bandwidth[gps_entries] = model.gps_std
+    pool.bandwidth[gps_entries] = per_copy(model.gps_std, B)[gps_rows // N]
     slot_entry[gps_rows, N] = gps_entries
     kernels = _fused_kernels()
 
@@ -1731,7 +1747,8 @@ def step(model: DnbpModel, state: DnbpState, gps_normal: np.ndarray, gps_fix: np
                 corr = None
             draws = _draw_per_copy(rngs, b_idx, B, draw_messages, model)
             c, lw, h = sample_messages(model, points, ranges[b_idx, t_idx, s_idx], corr, draws["permutation"],
-                                       draws["offset"], draws["range_noise"])
+                                       draws["offset"], draws["range_noise"],
+                                       range_std=per_copy(model.range_std, B)[b_idx])
             # written only after every message of this iteration is built (synchronous iteration)
             entry = slot_entry[s_rows, t_idx]
             fresh = entry == 0

@@ -16,6 +16,7 @@ MRCLAM_DATASET6 = os.environ.get(MRCLAM_DATA_ENV) or os.path.normpath(
     os.path.join(REPO_ROOT, "..", "shared", "data", "mrclam", "MRCLAM_Dataset6"))
 MRCLAM_SKIP_REASON = (f"MRCLAM dataset 6 not found at {MRCLAM_DATASET6} (set {MRCLAM_DATA_ENV} to a MRCLAM_Dataset6 "
                       "folder from http://asrl.utias.utoronto.ca/datasets/mrclam/)")
+RECORDED_WORLDS = ("mrclam", "mrclam_slices")  # the worlds that replay the MRCLAM data (a `data` field)
 needs_mrclam = pytest.mark.skipif(not os.path.isdir(MRCLAM_DATASET6), reason=MRCLAM_SKIP_REASON)
 
 
@@ -56,4 +57,5 @@ def random_weights(rng, N=4):
     return w / w.sum(axis=1, keepdims=True)
 
 
-__all__ = ["MRCLAM_DATASET6", "MRCLAM_SKIP_REASON", "bf", "needs_mrclam", "random_selection", "random_weights"]
+__all__ = ["MRCLAM_DATASET6", "MRCLAM_SKIP_REASON", "RECORDED_WORLDS", "bf", "needs_mrclam", "random_selection",
+           "random_weights"]

@@ -33,7 +33,7 @@ from hypothesis import strategies as st
 
 import coloc_env
 from coloc_env.parts import BACKENDS, NETWORKS, WORLDS
-from tests.conftest import MRCLAM_DATASET6
+from tests.conftest import MRCLAM_DATASET6, RECORDED_WORLDS
 
 settings.register_profile("default_bad_input", max_examples=12, deadline=None, derandomize=True,
                           suppress_health_check=list(HealthCheck))
@@ -51,7 +51,8 @@ CHEAP_PRESET = {
     "mrclam_relay": {"data": MRCLAM_DATA, "window_steps": 8},
     "nlos_horizon": {"horizon": 40},
 }
-CHEAP_PART = {"dnbp": {"num_particles": 40, "num_iterations": 1}, "mrclam": {"data": MRCLAM_DATA, "horizon": 8}}
+CHEAP_PART = {"dnbp": {"num_particles": 40, "num_iterations": 1}, "mrclam": {"data": MRCLAM_DATA, "horizon": 8},
+              "mrclam_slices": {"data": MRCLAM_DATA, "horizon": 8}}
 SKIP_FIELDS = {"data"}  # a path: the loader's own tests cover it
 
 
@@ -153,7 +154,7 @@ def presets() -> list[str]:
     return [n for n in coloc_env.SCENARIOS if n != "mrclam_relay" or HAVE_MRCLAM]
 
 
-CHEAP_WORLDS = ("circles", "drift", "target_cv", "gps_denied", "nlos_orbit", "mrclam")
+CHEAP_WORLDS = ("circles", "drift", "target_cv", "gps_denied", "nlos_orbit", "mrclam", "mrclam_slices")
 CHEAP_BACKENDS = ("dead_reckoning", "kalman", "centralized_lmmse", "ukf_ccl", "ukf_dcl", "bandwidth_fusion",
                   "prediction_compensation", "range_ls", "dfir", "delay_kalman", "afge", "ukf_se2", "dnbp")
 CHEAP_NETWORKS = ("ideal", "broadcast", "relay", "bernoulli_delay", "random_delay", "bandwidth")
@@ -165,7 +166,7 @@ def partners(kind: str, name: str) -> dict[str, str]:
         return (CHEAP_WORLDS.index(row["world"]), CHEAP_BACKENDS.index(row["backend"]),
                 CHEAP_NETWORKS.index(row["network"]))
     rows = [r for r in coloc_env.compatibility() if r["ok"] and r[kind] == name
-            and (HAVE_MRCLAM or r["world"] != "mrclam")]
+            and (HAVE_MRCLAM or r["world"] not in RECORDED_WORLDS)]
     if not rows:
         return {}
     row = min(rows, key=cost)

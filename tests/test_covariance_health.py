@@ -26,7 +26,7 @@ from coloc_env.scenarios.composed import ComposedScenario
 
 REPO_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 from tests.conftest import MRCLAM_DATASET6 as DATASET6  # noqa: E402
-from tests.conftest import MRCLAM_SKIP_REASON  # noqa: E402
+from tests.conftest import MRCLAM_SKIP_REASON, RECORDED_WORLDS  # noqa: E402
 
 # backend -> (world, network): cheap parts on which it runs
 CASES = {
@@ -145,6 +145,7 @@ COMPANIONS = {
     ("circles", "num_agents", "min"): {"world": {"num_anchors": 2}},
     ("circles", "dt", "max"): {"world": {"turn_rate": 1e-4}},
     ("nlos_orbit", "p_nlos", "max"): {"world": {"p10": 0.0}},
+    ("mrclam_slices", "slice_steps", "max"): {"world": {"horizon": 10}},
     ("bernoulli_delay", "on_time_probability", "max"): {"network": {"late_probability": 0.0}},
     ("bernoulli_delay", "late_probability", "max"): {"network": {"on_time_probability": 0.0}},
     ("random_delay", "buffer_length", "min"): {"network": {"delay_probs": (0.9,)}},
@@ -199,7 +200,8 @@ def _extremes(target) -> list[tuple[str, str, object]]:
 def _stress_targets():
     from tests.test_documented_ranges import part_targets, preset_targets
 
-    return [t for t in preset_targets() + part_targets() if HAVE_MRCLAM or "mrclam" not in (t[1], *_trio(t))]
+    return [t for t in preset_targets() + part_targets()
+            if HAVE_MRCLAM or not set(RECORDED_WORLDS) & {t[1], *_trio(t)}]
 
 
 def _trio(target) -> tuple:
@@ -224,7 +226,7 @@ def _stress_venv(target, fields: dict, companions: dict | None = None):
     specs = {}
     for kind in ("world", "network", "backend"):
         spec = {"name": trio[kind]}
-        if trio[kind] == "mrclam":
+        if trio[kind] in RECORDED_WORLDS:
             spec["data"] = DATASET6
         if trio[kind] == "dnbp":
             spec.update({k: v for k, v in cheap.items() if not (kind == target[0] and k in fields)})

@@ -50,8 +50,12 @@ their inputs).
 |                    |           | (the KF mean's) velocity is set to it before the step and its velocity    |
 |                    |           | variance to 0, so the prediction moves by velocity dt + dt^2/2 e          |
 
-dnbp holds one sigma per step for the whole batch (``estimators.dnbp.DnbpModel``): with B > 1 the
-per-step sigmas must agree across the copies (ValueError otherwise); range_ls takes them per copy.
+Both take the per-step sigmas per copy: copies whose values differ (replays of different stretches of a
+recording) each use their own (``estimators.dnbp.DnbpModel`` holds a (B,) array then).
+
+The dnbp warm start draws each agent's particles around the initial belief's mean with the std
+``World.warm_start_std()`` where the world states one (a recording's known start), else sigma_gps (the
+world's ``fix_noise_var``; wan2014's last fix before the loss).
 
 Arguments (``coloc_env.backends.Dnbp``; defaults = ``gps_denied_nbp``'s)
 
@@ -230,12 +234,16 @@ class DnbpBackend(Backend):
         for b, rng in zip(idx, rngs, strict=True):
             self.rngs[b] = rng
         mean, cov = self.world.initial_belief()
+        start = self.built_model
+        spread = self.world.warm_start_std()
+        if spread is not None:
+            start = dataclasses.replace(start, gps_std=float(spread))
         if self.constant_velocity:
             velocity = mean[idx, :, 2:]
             if self.config.init == "cold":  # nothing known but the nominal velocity
                 velocity = np.broadcast_to(np.asarray(_world_field(self.world, "nominal_velocity"), float),
                                            velocity.shape)
-            fresh = dn.initial_state(self.model, list(rngs), self.config.init, mean[idx, :, :2], velocity,
+            fresh = dn.initial_state(start, list(rngs), self.config.init, mean[idx, :, :2], velocity,
                                      float(_world_field(self.world, "velocity_spread")))
         else:  # warm start: M draws from each agent's initial belief N(mean, cov)
             M = self.model.num_particles
@@ -261,17 +269,15 @@ class DnbpBackend(Backend):
         return propagate
 
     def _step_model(self, readings) -> dn.DnbpModel:
-        """The model of this step: the built one with the per-step sigmas of ``readings.extra`` (one per batch)."""
+        """The model of this step: the built one with the per-step sigmas of ``readings.extra``, one float where
+        the copies agree, else a (B,) array of each copy's."""
         base = self.built_model
         values = {}
         for key, field in (("gps_std", "gps_std"), ("range_std", "range_std"), ("accel_std", "accel_noise_std")):
             if key not in readings.extra:
                 continue
             std = _step_std(readings, key, getattr(base, field))
-            if np.any(std != std[0]):
-                raise ValueError(f"backend dnbp: readings.extra[{key!r}] must be equal across the batch copies "
-                                 f"(one sigma per step), got {std}")
-            values[field] = float(std[0])
+            values[field] = float(std[0]) if np.all(std == std[0]) else std
         return dataclasses.replace(base, **values) if values else base
 
     def _gate(self, readings, range_valid: np.ndarray) -> np.ndarray:
@@ -280,7 +286,8 @@ class DnbpBackend(Backend):
         mean, var = pos.mean(axis=2), pos.var(axis=2).mean(axis=-1)
         predicted = np.linalg.norm(mean[:, :, None] - mean[:, None], axis=-1)
         residual = np.nan_to_num(readings.range) - predicted
-        nu2 = residual**2 / (self.model.range_std**2 + var[:, :, None] + var[:, None, :])
+        range_var = dn.per_copy(self.model.range_std, self.batch)[:, None, None] ** 2
+        nu2 = residual**2 / (range_var + var[:, :, None] + var[:, None, :])
         keep = range_valid & (nu2 <= self.config.range_gate)
         self.last_gated = range_valid & ~keep
         return keep

@@ -100,6 +100,11 @@ class World:
         """Variance per axis of a position fix (m^2), where the world has fixes."""
         raise NotImplementedError
 
+    def warm_start_std(self) -> float | None:
+        """Std per axis (m) of a particle filter's warm start around the initial belief's positions; None (the
+        default): the filter's own choice (``dnbp``: sigma_gps, wan2014's last fix before the loss)."""
+        return None
+
     # --- dynamics ---------------------------------------------------------------------------
     def reset(self, rngs, idx: np.ndarray) -> None:
         """New episodes in copies ``idx``, one generator per copy: the whole episode is drawn here."""

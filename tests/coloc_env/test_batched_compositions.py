@@ -8,6 +8,7 @@ import pytest
 import coloc_env
 from coloc_env.backends.kalman import VARIANTS
 from coloc_env.data import mrclam
+from tests.conftest import RECORDED_WORLDS
 
 OK_ROWS = [r for r in coloc_env.compatibility() if r["ok"]]
 B, SEED, STEPS = 3, 20, 4
@@ -57,7 +58,7 @@ def test_copy_b_of_a_batched_composition_equals_the_single_env_seeded_s_plus_b(n
     """Copy b equals the single env reset with seed SEED + b for STEPS steps; then copy 1 alone restarts with
     its own generator (a reset of a subset of copies) while copies 0 and 2 go on, and each copy still equals
     its single env."""
-    if name.startswith("mrclam/"):  # recorded data: its default data=None reads $COLOC_MRCLAM_DATA at build time
+    if name.split("/")[0] in RECORDED_WORLDS:  # recorded data: data=None reads $COLOC_MRCLAM_DATA at build time
         monkeypatch.setenv(mrclam.ENV_VAR, request.getfixturevalue("mrclam_dataset6"))
     spec = coloc_env.compose(**SPECS[name])
     venv = coloc_env.vector_env(spec, num_envs=B, seed=SEED)

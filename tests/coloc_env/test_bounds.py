@@ -6,6 +6,7 @@ import pytest
 
 import coloc_env
 from coloc_env.bounds import pcrb
+from tests.conftest import RECORDED_WORLDS
 
 
 def _posterior_traces(spec, seed, steps=None):
@@ -99,7 +100,7 @@ def test_bad_arguments_are_named():
         pcrb("no_such_preset")
 
 
-GENERATIVE = [r for r in coloc_env.compatibility() if r["ok"] and r["world"] != "mrclam"]  # mrclam: recorded data
+GENERATIVE = [r for r in coloc_env.compatibility() if r["ok"] and r["world"] not in RECORDED_WORLDS]
 
 
 @pytest.mark.parametrize("row", GENERATIVE, ids=lambda r: f"{r['world']}/{r['network']}/{r['backend']}")

@@ -11,7 +11,7 @@ import agents
 import coloc_env
 from coloc_env.data import mrclam
 from tests.conftest import MRCLAM_DATASET6 as DATASET6  # noqa: E402
-from tests.conftest import MRCLAM_SKIP_REASON  # noqa: E402
+from tests.conftest import MRCLAM_SKIP_REASON, RECORDED_WORLDS  # noqa: E402
 
 OK_ROWS = [r for r in coloc_env.compatibility() if r["ok"]]
 
@@ -33,7 +33,7 @@ def _rollout(spec, policy_name, seed, steps):
 
 @pytest.mark.parametrize("row", OK_ROWS, ids=lambda r: f"{r['world']}/{r['network']}/{r['backend']}")
 def test_every_compatible_composition_passes_the_api_and_runs(row, monkeypatch):
-    if row["world"] == "mrclam":  # recorded data: its default data=None reads $COLOC_MRCLAM_DATA at build time
+    if row["world"] in RECORDED_WORLDS:  # recorded data: its default data=None reads $COLOC_MRCLAM_DATA at build time
         if not os.path.isdir(DATASET6):
             pytest.skip(MRCLAM_SKIP_REASON)
         monkeypatch.setenv(mrclam.ENV_VAR, DATASET6)
@@ -56,11 +56,14 @@ def test_the_matrix_has_the_rows_the_issue_names():
 
 BOTH_UKFS = sorted({r["world"] for r in OK_ROWS if r["network"] == "ideal" and r["backend"] == "ukf_dcl"}
                    & {r["world"] for r in OK_ROWS if r["network"] == "ideal" and r["backend"] == "ukf_ccl"})
-UKF_STEPS = {"circles": 150}  # the others are slower per step (every pair ranges): fewer steps
+# the others are slower per step (every pair ranges): fewer; the robots of mrclam_slices move under a metre in 12 s
+UKF_STEPS = {"circles": 150, "mrclam_slices": 40}
 
 
 @pytest.mark.parametrize("world", BOTH_UKFS)
-def test_ukf_dcl_over_an_ideal_network_equals_ukf_ccl(world):
+def test_ukf_dcl_over_an_ideal_network_equals_ukf_ccl(world, request, monkeypatch):
+    if world in RECORDED_WORLDS:
+        monkeypatch.setenv(mrclam.ENV_VAR, request.getfixturevalue("mrclam_dataset6"))
     steps = UKF_STEPS.get(world, 12)
     runs = {b: _rollout(coloc_env.compose(world=world, network="ideal", backend=b), "always", 4, steps)
             for b in ("ukf_ccl", "ukf_dcl")}

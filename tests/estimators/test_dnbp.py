@@ -172,6 +172,32 @@ def test_copy_b_of_a_batch_equals_the_copy_alone_and_seeds_reproduce(schedule):
     assert not np.array_equal(other[-1][0][2], batched[-1][0][2])
 
 
+def test_per_copy_sigmas_give_each_copy_what_its_own_floats_give():
+    """A model holding (B,) arrays of sigma_gps, sigma_d and sigma_acc: copy b equals the copy alone with a model
+    of copy b's floats, bit for bit (warm start, every iteration's messages, the prediction)."""
+    base = dn.DnbpModel(num_particles=24, num_iterations=3)
+    B, N = 3, 6
+    pos, normal, adjacency, ranges, accel = _random_world(np.random.default_rng(4), B, N)
+    sigmas = {"gps_std": np.array([3.0, 0.7, 5.0]), "range_std": np.array([2.0, 0.4, 6.0]),
+              "accel_noise_std": np.array([0.3, 0.05, 1.2])}
+
+    def run(model, copies):
+        rngs = [np.random.default_rng(10 + b) for b in copies]
+        state = dn.initial_state(model, rngs, "warm", pos[copies], np.zeros((len(copies), N, 2)), 1.0)
+        for _ in range(2):
+            state, _ = dn.step(model, state, normal[copies], pos[copies], over(adjacency[copies]), ranges[copies],
+                               accel[copies], rngs)
+        return state
+
+    batched = run(dataclasses.replace(base, **sigmas), np.arange(B))
+    for b in range(B):
+        alone = run(dataclasses.replace(base, **{k: float(v[b]) for k, v in sigmas.items()}), np.array([b]))
+        np.testing.assert_array_equal(batched.prior[b], alone.prior[0])
+        np.testing.assert_array_equal(batched.belief[b], alone.belief[0])
+    with pytest.raises(ValueError, match=r"a per-copy sigma must be a float or have shape \(3,\), got shape \(2,\)"):
+        dn.per_copy(np.ones(2), 3)
+
+
 def test_a_step_gives_the_same_bits_whatever_room_its_message_pool_starts_with(monkeypatch):
     """The step's messages live in a pool that grows by doubling: starting it with no room for the delivered
     messages (every one added by growing) must not change a bit of the step."""
