@@ -160,10 +160,11 @@ def linearized_fix(anchors: np.ndarray, ranges: np.ndarray, mask: np.ndarray) ->
 
 
 def _gate(p, JtJ, rms, p_pred, C_pp, range_std, params):
+    """range_std (J,): sigma_d of each fix's copy."""
     det = JtJ[:, 0, 0] * JtJ[:, 1, 1] - JtJ[:, 0, 1] ** 2
     ok = det > 1e-12
     safe = np.where(ok[:, None, None], JtJ, np.eye(2))
-    cov = range_std**2 * np.linalg.inv(safe)
+    cov = range_std[:, None, None] ** 2 * np.linalg.inv(safe)
     nu = p - p_pred
     S = C_pp + cov
     chi2 = np.einsum("ji,ji->j", nu, np.linalg.solve(S, nu[..., None])[..., 0])
@@ -174,8 +175,8 @@ def _gate(p, JtJ, rms, p_pred, C_pp, range_std, params):
 
 
 def step(params: LsParams, state: KalmanState, gps_normal: np.ndarray, gps_fix: np.ndarray, adjacency: np.ndarray,
-         ranges: np.ndarray, accel: np.ndarray, F: np.ndarray, G: np.ndarray, Q: np.ndarray, gps_std: float,
-         range_std: float) -> tuple[KalmanState, np.ndarray, np.ndarray]:
+         ranges: np.ndarray, accel: np.ndarray, F: np.ndarray, G: np.ndarray, Q: np.ndarray,
+         gps_std: float | np.ndarray, range_std: float | np.ndarray) -> tuple[KalmanState, np.ndarray, np.ndarray]:
     """One step tau for B copies: GPS updates, LS fixes of fault UAVs, outputs, then prediction to tau + 1.
 
     ``state`` holds the predictions of tau. Returns (state of tau + 1,
@@ -187,18 +188,31 @@ def step(params: LsParams, state: KalmanState, gps_normal: np.ndarray, gps_fix: 
     return predict(posterior, accel, F, G, Q), estimate, fixed
 
 
+def _per_copy(name: str, value, batch: int) -> np.ndarray:
+    """A sigma given as a float or as (B,) floats, as (B,) floats."""
+    arr = np.asarray(value, float)
+    if arr.ndim == 0:
+        return np.full(batch, float(arr))
+    if arr.shape != (batch,):
+        raise ValueError(f"{name} must be a float or have shape ({batch},), got shape {arr.shape}")
+    return arr
+
+
 def update(params: LsParams, state: KalmanState, gps_normal: np.ndarray, gps_fix: np.ndarray, adjacency: np.ndarray,
-           ranges: np.ndarray, gps_std: float, range_std: float) -> tuple[KalmanState, np.ndarray, np.ndarray]:
+           ranges: np.ndarray, gps_std: float | np.ndarray, range_std: float | np.ndarray
+           ) -> tuple[KalmanState, np.ndarray, np.ndarray]:
     """The measurement half of ``step``: GPS updates, then the gated LS fixes of fault UAVs.
 
     ``state`` (any state dimension d >= 2, position first) holds the predictions of tau. Returns the
     posterior of tau, the estimates (B, N, 2) and ``fixed`` (B, N). The caller predicts with its own
     motion model (``predict`` for the linear constant-velocity one). ``gps_std`` and ``range_std`` are standard
-    deviations (sigma_gps, sigma_d in m), not variances.
+    deviations (sigma_gps, sigma_d in m), not variances: one float for every copy or a (B,) array of each
+    copy's.
     """
     gps_normal = np.asarray(gps_normal, bool)
     B, N = gps_normal.shape
-    R_gps = np.broadcast_to(gps_std**2 * np.eye(2), (B, N, 2, 2))
+    gps_std, range_std = _per_copy("gps_std", gps_std, B), _per_copy("range_std", range_std, B)
+    R_gps = np.broadcast_to(gps_std[:, None, None, None] ** 2 * np.eye(2), (B, N, 2, 2))
     posterior = update_position(state, np.nan_to_num(gps_fix), R_gps, gps_normal)
     estimate = posterior.mean[..., :2].copy()
     fixed = np.zeros((B, N), bool)
@@ -216,12 +230,12 @@ def update(params: LsParams, state: KalmanState, gps_normal: np.ndarray, gps_fix
         p_pred = state.mean[b_idx, s_idx, :2]
         C_pp = state.cov[b_idx, s_idx, :2, :2]
         p, JtJ, rms = gauss_newton(p_pred, anchors, d, mask, params.max_iterations, params.tolerance)
-        accept, cov = _gate(p, JtJ, rms, p_pred, C_pp, range_std, params)
+        accept, cov = _gate(p, JtJ, rms, p_pred, C_pp, range_std[b_idx], params)
         retry = ~accept
         if retry.any():
             p2, JtJ2, rms2 = gauss_newton(linearized_fix(anchors[retry], d[retry], mask[retry]), anchors[retry],
                                           d[retry], mask[retry], params.max_iterations, params.tolerance)
-            accept2, cov2 = _gate(p2, JtJ2, rms2, p_pred[retry], C_pp[retry], range_std, params)
+            accept2, cov2 = _gate(p2, JtJ2, rms2, p_pred[retry], C_pp[retry], range_std[b_idx][retry], params)
             p[retry], cov[retry], accept[retry] = p2, cov2, accept2
         fb, fs = b_idx[accept], s_idx[accept]
         fixed[fb, fs] = True

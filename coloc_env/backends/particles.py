@@ -51,11 +51,13 @@ their inputs).
 |                    |           | variance to 0, so the prediction moves by velocity dt + dt^2/2 e          |
 
 Both take the per-step sigmas per copy: copies whose values differ (replays of different stretches of a
-recording) each use their own (``estimators.dnbp.DnbpModel`` holds a (B,) array then).
+recording) each use their own, in one call for the batch (``estimators.dnbp.DnbpModel`` holds a (B,) array
+then; ``estimators.range_ls.update`` takes (B,) arrays).
 
-The dnbp warm start draws each agent's particles around the initial belief's mean with the std
-``World.warm_start_std()`` where the world states one (a recording's known start), else sigma_gps (the
-world's ``fix_noise_var``; wan2014's last fix before the loss).
+On a ``cv_accel`` world the dnbp warm start draws each agent's particles around the initial belief's mean
+with the std ``World.warm_start_std()`` where the world states one (a recording's known start), else
+sigma_gps (the world's ``fix_noise_var``; wan2014's last fix before the loss); on other motion models it
+draws from the initial belief N(mean, cov).
 
 Arguments (``coloc_env.backends.Dnbp``; defaults = ``gps_denied_nbp``'s)
 
@@ -373,14 +375,9 @@ class RangeLsBackend(Backend):
         # this step's process noise (sigma_acc^2 G) G^T per copy, for predict (None: the world's)
         self.step_Q = None if accel is None else (
             (np.asarray(accel, float).reshape(-1, 1, 1) ** 2 * self.G) @ self.G.T)[:, None]
-        # one update for the batch where the sigmas agree across the copies, else one per copy
-        same = np.ptp(gps_std) == 0 and np.ptp(range_std) == 0
-        for rows in [slice(None)] if same else [slice(b, b + 1) for b in range(B)]:
-            posterior, estimate, fixed = rl.update(
-                self.params, rl.KalmanState(self.state.mean[rows], self.state.cov[rows]), normal[rows], fix[rows],
-                adjacency[rows], ranges[rows], gps_std[rows][0], range_std[rows][0])
-            self.state.mean[rows], self.state.cov[rows] = posterior.mean, posterior.cov
-            self.estimate[rows], self.last_fixed[rows] = estimate, fixed
+        posterior, self.estimate, self.last_fixed = rl.update(self.params, self.state, normal, fix, adjacency, ranges,
+                                                              gps_std, range_std)  # each copy's sigmas
+        self.state.mean[:], self.state.cov[:] = posterior.mean, posterior.cov
         self.estimate_cov = self.state.cov[..., :2, :2].copy()
 
     def predict(self, inputs) -> None:

@@ -39,8 +39,8 @@ command logged ``odometry_delay_steps`` earlier, scaled). ``range``/``range_vali
 (B, N, N): [m, n] the range of the first line (file order) in which robot m recorded
 robot n at a, where the sensing choice of m selects n (with ``robot_sightings="all"`` the
 ``obs_*`` lists below hold every such line, the matrices still the first). ``fix``/``fix_valid`` (B, N):
-the landmark pseudo-fix of ``coloc reproduce mrclam_nbp`` (``coloc_env.data.mrclam.pseudo_fix``,
-the rule of ``train.reproduce.mrclam_nbp`` at a single step): each robot runs its own
+the landmark pseudo-fix of the ``mrclam_slices`` world (``coloc_env.data.mrclam.pseudo_fix``,
+the rule of ``coloc_env.worlds.mrclam_slices`` at a single step): each robot runs its own
 navigation filter, a UKF on (x, y, theta) from its odometry and its own landmark sightings
 only (``coloc_env.data.mrclam.own_nav_update`` / ``own_nav_predict``, started at the
 episode's initial belief, chi-square(2) 99.9 % gate; no robot-robot data, no Vicon after

@@ -1,6 +1,7 @@
 """Baselines of wan2014: Gauss-Newton / linearized LS fixes, the gate, and the Kalman filters."""
 
 import numpy as np
+import pytest
 
 import estimators.range_ls as rl
 from coloc_env.primitives.cv_uav import ConstantVelocityUAVs
@@ -59,3 +60,14 @@ def test_kalman_update_is_symmetric_and_shrinks_the_covariance():
     np.testing.assert_allclose(post.cov[0, 0, :2, :2], np.eye(2) * 400 / 104)
     np.testing.assert_array_equal(post.mean[0, 1], state.mean[0, 1])
     np.testing.assert_array_equal(post.cov, np.swapaxes(post.cov, -1, -2))
+
+
+def test_a_per_copy_sigma_has_one_value_per_copy():
+    state = _state(np.zeros((2, 2)), 1.0)
+    args = (rl.LsParams(), state, np.ones((1, 2), bool), np.zeros((1, 2, 2)), np.zeros((1, 2, 2), bool),
+            np.zeros((1, 2, 2)))
+    as_float = rl.update(*args, 3.0, 2.0)[0]
+    as_array = rl.update(*args, np.array([3.0]), np.array([2.0]))[0]
+    np.testing.assert_array_equal(as_float.cov, as_array.cov)
+    with pytest.raises(ValueError, match=r"gps_std must be a float or have shape \(1,\), got shape \(2,\)"):
+        rl.update(*args, np.ones(2), 2.0)
