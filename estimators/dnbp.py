@@ -180,6 +180,7 @@ import numpy as np
 
 from estimators.compiled import renamed as _renamed
 from estimators.cv_models import ConstantVelocityAccel
+from estimators.models import per_copy
 
 __all__ = [
     "Deliver",
@@ -235,7 +236,8 @@ class DnbpModel:
 
     ``accel_noise_std``, ``gps_std`` and ``range_std`` are standard deviations (sigma), not the variances the
     other estimators take. Each is one float for every copy, or a (B,) array of one value per copy (copies whose
-    noise differs, e.g. replays of different stretches of a recording); ``per_copy`` reads either.
+    noise differs, e.g. replays of different stretches of a recording); ``estimators.models.per_copy`` reads
+    either.
     """
 
     dt: float = 1.0
@@ -322,16 +324,6 @@ class StepResult:
     broadcasts: np.ndarray
     received: np.ndarray
     history: list[np.ndarray] = field(default_factory=list)
-
-
-def per_copy(value, batch: int) -> np.ndarray:
-    """A sigma of ``DnbpModel`` (a float or a (B,) array) as (B,) floats, one per copy."""
-    arr = np.asarray(value, float)
-    if arr.ndim == 0:
-        return np.full(batch, float(arr))
-    if arr.shape != (batch,):
-        raise ValueError(f"a per-copy sigma must be a float or have shape ({batch},), got shape {arr.shape}")
-    return arr
 
 
 # --- densities -----------------------------------------------------------------------------------------------------
@@ -1185,7 +1177,7 @@ def sample_messages(model: DnbpModel, sender_points: np.ndarray, distance: np.nd
     (``_message_rows_source``), the same floats as the numpy path (False).
     """
     E, M = sender_points.shape[:2]
-    range_std = per_copy(model.range_std if range_std is None else range_std, E)
+    range_std = per_copy("range_std", model.range_std if range_std is None else range_std, E)
     if correction_log_weights is None:
         correction_log_weights = np.full((E, M), -np.log(M))
     kernels = _fused_kernels() if compiled else None
@@ -1557,7 +1549,7 @@ def initial_state(model: DnbpModel, rngs: Sequence[np.random.Generator], mode: s
         raise ValueError(f"init must be 'warm' or 'cold', got {mode!r}")
     B, N = velocity_mean.shape[:2]
     M = model.num_particles
-    gps_std = per_copy(model.gps_std, B)
+    gps_std = per_copy("gps_std", model.gps_std, B)
     pos = np.empty((B, N, M, 2))
     vel = np.empty((B, N, M, 2))
     for b, rng in enumerate(rngs):
@@ -1577,8 +1569,8 @@ def predict(model: DnbpModel, belief: np.ndarray, accel: np.ndarray, rngs: Seque
             ) -> tuple[np.ndarray, np.ndarray]:
     """Algorithm 3: particles of rho(k+1) (B, N, M, 4) and their KDE bandwidth h_rho (B, N)."""
     B, N, M = belief.shape[:3]
-    e = np.stack([rng.standard_normal((N, M, 2)) for rng in rngs]) * per_copy(model.accel_noise_std, B)[:, None,
-                                                                                                      None, None]
+    sigma = per_copy("accel_noise_std", model.accel_noise_std, B)[:, None, None, None]
+    e = np.stack([rng.standard_normal((N, M, 2)) for rng in rngs]) * sigma
     a = accel[:, :, None, :] + e
     dt = model.dt
     pos = belief[..., :2] + dt * belief[..., 2:] + 0.5 * dt**2 * a
@@ -1666,7 +1658,7 @@ def step(model: DnbpModel, state: DnbpState, gps_normal: np.ndarray, gps_fix: np
     gps_rows = np.flatnonzero(gps_normal.reshape(B * N))
     gps_entries = pool.add(len(gps_rows))
     pool.centres[gps_entries] = np.nan_to_num(np.asarray(gps_fix, float).reshape(B * N, 2)[gps_rows])[:, None, :]
-    pool.bandwidth[gps_entries] = per_copy(model.gps_std, B)[gps_rows // N]
+    pool.bandwidth[gps_entries] = per_copy("gps_std", model.gps_std, B)[gps_rows // N]
     slot_entry[gps_rows, N] = gps_entries
     kernels = _fused_kernels()
 
@@ -1748,7 +1740,7 @@ def step(model: DnbpModel, state: DnbpState, gps_normal: np.ndarray, gps_fix: np
             draws = _draw_per_copy(rngs, b_idx, B, draw_messages, model)
             c, lw, h = sample_messages(model, points, ranges[b_idx, t_idx, s_idx], corr, draws["permutation"],
                                        draws["offset"], draws["range_noise"],
-                                       range_std=per_copy(model.range_std, B)[b_idx])
+                                       range_std=per_copy("range_std", model.range_std, B)[b_idx])
             # written only after every message of this iteration is built (synchronous iteration)
             entry = slot_entry[s_rows, t_idx]
             fresh = entry == 0

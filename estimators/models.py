@@ -17,7 +17,8 @@ covariances, the package's convention (``estimators``).
 
 ``predict_joint`` is the time update of a joint Gaussian over N agents
 (the EKF form P <- F P F^T + Q, exact for the linear models); it is shared by
-every Kalman-type backend.
+every Kalman-type backend. ``per_copy`` reads a noise parameter given as one
+value for every copy or one per copy.
 """
 
 from __future__ import annotations
@@ -70,6 +71,17 @@ class OdometryDisplacement:
     @staticmethod
     def position(state: np.ndarray) -> np.ndarray:
         return state[..., :2]
+
+
+def per_copy(name: str, value, batch: int) -> np.ndarray:
+    """A parameter given as a float (every copy) or as (B,) floats (one per copy), as (B,) floats; ValueError
+    naming ``name`` for any other shape."""
+    arr = np.asarray(value, float)
+    if arr.ndim == 0:
+        return np.full(batch, float(arr))
+    if arr.shape != (batch,):
+        raise ValueError(f"{name} must be a float or have shape ({batch},), got shape {arr.shape}")
+    return arr
 
 
 def symmetric_root_draw(rng: np.random.Generator, cov: np.ndarray, shape) -> np.ndarray:

@@ -37,6 +37,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from estimators.models import per_copy
+
 __all__ = ["LsParams", "KalmanState", "initial_state", "predict", "update_position", "gauss_newton",
            "linearized_fix", "step"]
 
@@ -188,16 +190,6 @@ def step(params: LsParams, state: KalmanState, gps_normal: np.ndarray, gps_fix: 
     return predict(posterior, accel, F, G, Q), estimate, fixed
 
 
-def _per_copy(name: str, value, batch: int) -> np.ndarray:
-    """A sigma given as a float or as (B,) floats, as (B,) floats."""
-    arr = np.asarray(value, float)
-    if arr.ndim == 0:
-        return np.full(batch, float(arr))
-    if arr.shape != (batch,):
-        raise ValueError(f"{name} must be a float or have shape ({batch},), got shape {arr.shape}")
-    return arr
-
-
 def update(params: LsParams, state: KalmanState, gps_normal: np.ndarray, gps_fix: np.ndarray, adjacency: np.ndarray,
            ranges: np.ndarray, gps_std: float | np.ndarray, range_std: float | np.ndarray
            ) -> tuple[KalmanState, np.ndarray, np.ndarray]:
@@ -211,7 +203,7 @@ def update(params: LsParams, state: KalmanState, gps_normal: np.ndarray, gps_fix
     """
     gps_normal = np.asarray(gps_normal, bool)
     B, N = gps_normal.shape
-    gps_std, range_std = _per_copy("gps_std", gps_std, B), _per_copy("range_std", range_std, B)
+    gps_std, range_std = per_copy("gps_std", gps_std, B), per_copy("range_std", range_std, B)
     R_gps = np.broadcast_to(gps_std[:, None, None, None] ** 2 * np.eye(2), (B, N, 2, 2))
     posterior = update_position(state, np.nan_to_num(gps_fix), R_gps, gps_normal)
     estimate = posterior.mean[..., :2].copy()

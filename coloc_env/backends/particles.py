@@ -109,7 +109,7 @@ from coloc_env.backends.base import Backend
 from coloc_env.config import MIN_STD
 from coloc_env.parts import BACKENDS, PartConfig, check_choice, check_range
 from estimators.kalman import symmetrize
-from estimators.models import predict_joint
+from estimators.models import per_copy, predict_joint
 
 
 @BACKENDS.register
@@ -288,7 +288,7 @@ class DnbpBackend(Backend):
         mean, var = pos.mean(axis=2), pos.var(axis=2).mean(axis=-1)
         predicted = np.linalg.norm(mean[:, :, None] - mean[:, None], axis=-1)
         residual = np.nan_to_num(readings.range) - predicted
-        range_var = dn.per_copy(self.model.range_std, self.batch)[:, None, None] ** 2
+        range_var = per_copy("range_std", self.model.range_std, self.batch)[:, None, None] ** 2
         nu2 = residual**2 / (range_var + var[:, :, None] + var[:, None, :])
         keep = range_valid & (nu2 <= self.config.range_gate)
         self.last_gated = range_valid & ~keep

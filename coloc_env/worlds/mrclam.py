@@ -164,6 +164,26 @@ def replay_tables(path: str, dt: float, noise_model: str, calibration_s: float |
                         (float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1])))
 
 
+def check_recording(prefix: str, data, noise_model: str, calibration_s) -> None:
+    """The fields of a world that replays a recorded run: ``data`` (a dataset folder or None), ``noise_model``
+    and ``calibration_s``; ValueError naming the field and its range."""
+    if data is not None and not isinstance(data, (str, os.PathLike)):
+        raise ValueError(f"{prefix}data must be a path to an MRCLAM dataset folder or None, got {data!r}")
+    check_choice(f"{prefix}noise_model", noise_model, mrclam.NOISE_MODELS)
+    if calibration_s is not None:
+        check_range(f"{prefix}calibration_s", calibration_s, 0.0, 3600.0, low_open=True)
+
+
+def recording_tables(data, dt: float, noise_model: str, calibration_s, prefix: str = "world.") -> ReplayTables:
+    """``replay_tables`` of the run ``data`` names (None: ``$COLOC_MRCLAM_DATA``); a missing or malformed dataset
+    is a BadInput naming ``data``."""
+    try:
+        path = os.path.realpath(mrclam.resolve_data_path(data))
+        return replay_tables(path, float(dt), noise_model, None if calibration_s is None else float(calibration_s))
+    except ValueError as exc:  # a missing or malformed dataset: name the field
+        raise BadInput(f"{prefix}data: {str(exc).removeprefix('data: ')}") from exc
+
+
 @WORLDS.register
 @dataclass(frozen=True)
 class Mrclam(PartConfig):
@@ -188,16 +208,12 @@ class Mrclam(PartConfig):
     robot_sightings: str = "first"
 
     def check(self, prefix: str) -> None:
-        if self.data is not None and not isinstance(self.data, (str, os.PathLike)):
-            raise ValueError(f"{prefix}data must be a path to an MRCLAM dataset folder or None, got {self.data!r}")
+        check_recording(prefix, self.data, self.noise_model, self.calibration_s)
         check_range(f"{prefix}num_agents", self.num_agents, 2, NUM_ROBOTS, integer=True)
         check_range(f"{prefix}dt", self.dt, 0.01, 1.0)
         check_range(f"{prefix}horizon", self.horizon, 1, 10**9, integer=True)
         if self.start is not None:
             check_range(f"{prefix}start", self.start, 0, 10**9, integer=True)
-        check_choice(f"{prefix}noise_model", self.noise_model, mrclam.NOISE_MODELS)
-        if self.calibration_s is not None:
-            check_range(f"{prefix}calibration_s", self.calibration_s, 0.0, 3600.0, low_open=True)
         check_range(f"{prefix}initial_position_std", self.initial_position_std, 1e-6, 1e3)
         check_range(f"{prefix}initial_heading_std", self.initial_heading_std, 1e-6, 10.0)
         check_choice(f"{prefix}measurement_inflation", self.measurement_inflation, (True, False))
@@ -209,12 +225,7 @@ class Mrclam(PartConfig):
     def tables(self, prefix: str = "world.") -> ReplayTables:
         """The replay tables of the run (``replay_tables``: loaded and calibrated once per path; a missing or
         malformed dataset is a BadInput naming ``data``)."""
-        try:
-            path = os.path.realpath(mrclam.resolve_data_path(self.data))
-            calibration_s = None if self.calibration_s is None else float(self.calibration_s)
-            tables = replay_tables(path, float(self.dt), self.noise_model, calibration_s)
-        except ValueError as exc:  # a missing or malformed dataset: name the field
-            raise BadInput(f"{prefix}data: {str(exc).removeprefix('data: ')}") from exc
+        tables = recording_tables(self.data, self.dt, self.noise_model, self.calibration_s, prefix)
         if self.measurement_inflation:
             return tables
         # the same fit without the burst inflation of R (the cached tables keep it)

@@ -116,7 +116,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -125,7 +124,7 @@ from coloc_env.config import BadInput, as_array, check_entries
 from coloc_env.data import mrclam
 from coloc_env.parts import WORLDS, PartConfig, check_choice, check_range
 from coloc_env.worlds.base import Readings, World
-from coloc_env.worlds.mrclam import replay_tables
+from coloc_env.worlds.mrclam import check_recording, recording_tables, replay_tables
 from estimators.cv_models import ConstantVelocityAccel
 
 NUM_ROBOTS = mrclam.NUM_ROBOTS
@@ -316,16 +315,12 @@ class MrclamSlices(PartConfig):
         return self.initial_std
 
     def check(self, prefix: str) -> None:
-        if self.data is not None and not isinstance(self.data, (str, os.PathLike)):
-            raise ValueError(f"{prefix}data must be a path to an MRCLAM dataset folder or None, got {self.data!r}")
+        check_recording(prefix, self.data, self.noise_model, self.calibration_s)
         check_range(f"{prefix}num_agents", self.num_agents, 2, NUM_ROBOTS, integer=True)
         check_range(f"{prefix}slice_steps", self.slice_steps, 1, 600, integer=True)
         check_range(f"{prefix}horizon", self.horizon, 1, 10**9, integer=True)
         if self.start is not None:
             check_range(f"{prefix}start", self.start, 0, 10**9, integer=True)
-        check_choice(f"{prefix}noise_model", self.noise_model, mrclam.NOISE_MODELS)
-        if self.calibration_s is not None:
-            check_range(f"{prefix}calibration_s", self.calibration_s, 0.0, 3600.0, low_open=True)
         check_range(f"{prefix}initial_std", self.initial_std, 1e-6, 1e3)
         check_choice(f"{prefix}ranges", self.ranges, (True, False))
         if self.region is not None:
@@ -337,13 +332,9 @@ class MrclamSlices(PartConfig):
     def tables(self, prefix: str = "world.") -> tuple:
         """The run's ``coloc_env.worlds.mrclam.ReplayTables`` and its ``Slices`` (``slice_table``); a missing or
         malformed dataset is a BadInput naming ``data``."""
-        try:
-            path = os.path.realpath(mrclam.resolve_data_path(self.data))
-            calibration_s = None if self.calibration_s is None else float(self.calibration_s)
-            replay = replay_tables(path, GRID_DT, self.noise_model, calibration_s)
-            return replay, slice_table(path, int(self.slice_steps), self.noise_model, calibration_s)
-        except ValueError as exc:
-            raise BadInput(f"{prefix}data: {str(exc).removeprefix('data: ')}") from exc
+        replay = recording_tables(self.data, GRID_DT, self.noise_model, self.calibration_s, prefix)
+        calibration_s = None if self.calibration_s is None else float(self.calibration_s)
+        return replay, slice_table(replay.data.path, int(self.slice_steps), self.noise_model, calibration_s)
 
     def build(self, batch: int, horizon: int) -> MrclamSlicesWorld:
         return MrclamSlicesWorld(self, batch, horizon)

@@ -194,8 +194,8 @@ def test_per_copy_sigmas_give_each_copy_what_its_own_floats_give():
         alone = run(dataclasses.replace(base, **{k: float(v[b]) for k, v in sigmas.items()}), np.array([b]))
         np.testing.assert_array_equal(batched.prior[b], alone.prior[0])
         np.testing.assert_array_equal(batched.belief[b], alone.belief[0])
-    with pytest.raises(ValueError, match=r"a per-copy sigma must be a float or have shape \(3,\), got shape \(2,\)"):
-        dn.per_copy(np.ones(2), 3)
+    with pytest.raises(ValueError, match=r"gps_std must be a float or have shape \(3,\), got shape \(2,\)"):
+        run(dataclasses.replace(base, gps_std=np.ones(2)), np.arange(B))
 
 
 def test_a_step_gives_the_same_bits_whatever_room_its_message_pool_starts_with(monkeypatch):
