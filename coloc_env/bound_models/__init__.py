@@ -1,7 +1,7 @@
 """Bound models: for each world, the estimation problem its filters face, as ``coloc_env.bounds.pcrb`` needs it.
 
 One module per world (``target`` for ``drift`` and ``target_cv``, ``circles``, ``gps_denied``,
-``nlos_orbit``, ``mrclam``); each docstring states the problem: the state, the prior
+``nlos_orbit``, ``mrclam``, ``mrclam_slices``); each docstring states the problem: the state, the prior
 J0 = P0^-1 (the filters' initial covariance), the motion as the filters know it (input
 noise as process noise), the readings as taken. Each module's ``problem(core, record)``
 returns a ``coloc_env.bounds.BoundProblem`` from the world's drawn episode (its
@@ -38,7 +38,7 @@ SHARED_AT_LEADER = frozenset({"kalman", "centralized_lmmse", "ukf_ccl"})
 CENTRE = 0  # the fusion centre of the ``central`` message kind (coloc_env.networks.base.CENTRE)
 NOTHING_SENT = frozenset({"dead_reckoning"})
 MODULES = {"drift": "target", "target_cv": "target", "circles": "circles", "gps_denied": "gps_denied",
-           "nlos_orbit": "nlos_orbit", "mrclam": "mrclam"}
+           "nlos_orbit": "nlos_orbit", "mrclam": "mrclam", "mrclam_slices": "mrclam_slices"}
 
 
 def delivered_kind(backend_name: str) -> str:

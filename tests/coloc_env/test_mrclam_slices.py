@@ -148,3 +148,19 @@ def test_the_table_is_cached_and_read_only(run):
     assert slice_table(os.path.realpath(path), 10, "calibrated", None) is sl
     with pytest.raises(ValueError, match="read-only"):
         sl.fix[0, 0, 0] = 1.0
+
+
+def test_the_model_based_bound_gains_from_the_ranges_only(run):
+    """Over the same episodes the centralized bound is below each robot's local one (the ranges add information)
+    and, without ranges, equals it; the local bound does not depend on the ranges."""
+    path = run[0]
+
+    def bounds(ranges):
+        world = {"name": "mrclam_slices", "data": path, "horizon": 20, "ranges": ranges}
+        return coloc_env.pcrb(coloc_env.compose(world, "broadcast", "dead_reckoning"), episodes=2, seed=0)
+
+    ranged, quiet = bounds(True), bounds(False)
+    assert ranged["model_based"] and np.all(ranged["centralized"] <= ranged["local"] * (1 + 1e-9))
+    assert np.any(ranged["centralized"] < 0.99 * ranged["local"])
+    np.testing.assert_allclose(quiet["centralized"], quiet["local"], rtol=1e-9, atol=0)
+    np.testing.assert_allclose(quiet["local"], ranged["local"], rtol=1e-12, atol=0)
