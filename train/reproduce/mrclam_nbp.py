@@ -2,7 +2,8 @@
 
 The ``dnbp`` backend (``estimators.dnbp``, Wan et al. 2014, reconstructed in
 ``docs/wan2014.md``) and the least-squares baseline ``range_ls``
-(``coloc_env.backends.particles``) are driven, through a lossless
+(``coloc_env.backends.particles``) are driven by the composed core
+(``coloc_env.scenarios.composed.ComposedScenario``), through a lossless
 ``broadcast`` network, on the ``mrclam_slices`` world
 (``coloc_env.worlds.mrclam_slices``: one MRCLAM dataset in 1-s slices, the
 robots that sighted a landmark in a slice GPS-normal with a pseudo-fix, the
@@ -63,7 +64,9 @@ import estimators.ukf_relay_se2 as se2
 from coloc_env.backends.particles import Dnbp, RangeLs
 from coloc_env.composition import compose
 from coloc_env.data import mrclam
+from coloc_env.env import build_scenario
 from coloc_env.networks.broadcast import Broadcast
+from coloc_env.scenarios.composed import ComposedScenario
 from coloc_env.worlds.mrclam_slices import MrclamSlices, Slices
 
 PARTICLES = 100
@@ -110,27 +113,31 @@ def dnbp_config(particles: int) -> Dnbp:
     return Dnbp(num_particles=particles, box_margin=0.0, min_bandwidth=0.02, kernel="exact", range_gate=RANGE_GATE)
 
 
+class _StudyCore(ComposedScenario):
+    """The composed core with the backend's generator given (``backend_rng``: the study's stream,
+    ``default_rng(seed)``) instead of a child of the episode's; the world (a fixed start) and the lossless
+    network draw nothing from theirs."""
+
+    backend_rng: np.random.Generator | None = None
+
+    def part_generators(self, rng: np.random.Generator) -> tuple:
+        return rng, rng, self.backend_rng
+
+
 def _drive(world_config: MrclamSlices, backend_config, rng: np.random.Generator | None, tally) -> np.ndarray:
-    """Run ``backend_config`` over the world's episode (one copy) on a lossless ``broadcast`` network: estimates
-    (S, N, 2); ``tally(backend)`` after every step. Each step is the composed core's: readings of slice k, the
-    network's step, the backend's update (the estimate scored at k) and prediction, then the world moves."""
+    """Run ``backend_config`` over the world's episode (one copy) on a lossless ``broadcast`` network through the
+    composed core (``ComposedScenario.step``, every robot transmitting in every round: the ``always`` action):
+    estimates (S, N, 2), the backend's generator ``rng``; ``tally(backend)`` after every step."""
     spec = compose(world=world_config, network=Broadcast(), backend=backend_config)
-    S = spec.episode_steps
-    world = spec.world.build(1, S)
-    network = spec.network.build(N, 1, spec.backend.message_kind, spec.backend.rounds)
-    backend = spec.backend.build(world, network, 1)
-    idx = np.arange(1)
-    world.reset([np.random.default_rng(0)], idx)  # a fixed start: no draw is used
-    network.reset([np.random.default_rng(0)], idx)  # lossless: no draw is used
-    backend.reset([rng], idx)
-    transmit = np.ones((1, N, spec.backend.rounds), np.int64)
-    out = np.empty((S, N, 2))
-    for t in range(S):
-        network.begin(world.k, world.positions(), transmit)
-        backend.step(world.readings(np.zeros((1, N, 0), np.int64)), np.zeros((1, N, 0)))
-        out[t] = backend.posterior_position[0]
-        tally(backend)
-        world.advance()
+    core = build_scenario(_StudyCore, 1, spec)
+    core.backend_rng = rng
+    core.reset([np.random.default_rng(0)])
+    always = np.broadcast_to(core.action_vector("maximum"), (1, N, len(core.action_vector("maximum"))))
+    out = np.empty((core.horizon, N, 2))
+    for t in range(core.horizon):
+        core.step(always)
+        out[t] = core.backend.posterior_position[0]
+        tally(core.backend)
     return out
 
 
