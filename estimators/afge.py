@@ -646,6 +646,84 @@ def _assemble(P11, P12, P22, shape) -> np.ndarray:
     return out
 
 
+def _joseph_predict(y11, y12, y22, v, T, b1, b2, iq):
+    """``information_predict`` on the 2x2 blocks ``y11, y12, y22`` (4-tuples (a, b, c, d) =
+    [[a, b], [c, d]]) of Y and the 4-tuple y, with ``b1, b2`` = T^2/2, T and ``iq`` = 1/q: the
+    blocks (p11a, p11b, p11d), (p12a, p12b, p12c, p12d), (p22a, p22b, p22d) of the symmetric
+    result and its vector. Written once for arrays (the numpy form, elementwise over any leading
+    shape) and for floats (the compiled kernel jits this function), so both round alike.
+
+    The Joseph form ``L M L^T + K Q^-1 K^T`` is evaluated as ``N - E K^T`` with
+    ``N = L M = M - K U^T`` (U = M B, so B^T M = U^T) and ``E = N B - K Q^-1``: since
+    ``L^T = I - B K^T``, ``N L^T = N - (N B) K^T``, and the two are equal in exact arithmetic.
+    E is zero in exact arithmetic; computed, it carries the rounding error of N along B, and
+    ``N - E K^T`` removes it as the congruence does (``N`` alone is the short form, whose
+    rounding made Y indefinite at T = 1e4 s). The upper triangle is formed once and mirrored.
+    """
+    y11a, y11b, y11c, y11d = y11
+    y12a, y12b, y12c, y12d = y12
+    y22a, y22b, y22c, y22d = y22
+    # M = A^-T Y A^-1: M11 = Y11, M12 = Y12 - T Y11, M22 = Y22 - T Y12 - T Y12^T + T^2 Y11
+    m11a, m11b, m11c, m11d = y11a, y11b, y11c, y11d
+    m12a, m12b = y12a - T * y11a, y12b - T * y11b
+    m12c, m12d = y12c - T * y11c, y12d - T * y11d
+    m22a = y22a - T * y12a - T * y12a + (T * T) * y11a
+    m22b = y22b - T * y12b - T * y12c + (T * T) * y11b
+    m22c = y22c - T * y12c - T * y12b + (T * T) * y11c
+    m22d = y22d - T * y12d - T * y12d + (T * T) * y11d
+    # U = M B = [U1; U2], W = Q^-1 + B^T U, K = U W^-1 = [G1; G2]
+    u1a, u1b = b1 * m11a + b2 * m12a, b1 * m11b + b2 * m12b
+    u1c, u1d = b1 * m11c + b2 * m12c, b1 * m11d + b2 * m12d
+    u2a, u2b = b1 * m12a + b2 * m22a, b1 * m12c + b2 * m22b
+    u2c, u2d = b1 * m12b + b2 * m22c, b1 * m12d + b2 * m22d
+    wa = b1 * u1a + b2 * u2a + iq
+    wb = b1 * u1b + b2 * u2b
+    wc = b1 * u1c + b2 * u2c
+    wd = b1 * u1d + b2 * u2d + iq
+    r = 1.0 / (wa * wd - wb * wc)  # one division: W^-1 = adj(W) / det W
+    ia, ib, ic, id_ = wd * r, -wb * r, -wc * r, wa * r
+    g1a, g1b = u1a * ia + u1b * ic, u1a * ib + u1b * id_
+    g1c, g1d = u1c * ia + u1d * ic, u1c * ib + u1d * id_
+    g2a, g2b = u2a * ia + u2b * ic, u2a * ib + u2b * id_
+    g2c, g2d = u2c * ia + u2d * ic, u2c * ib + u2d * id_
+    # the rows n_r of N = L M = M - K U^T
+    n0a, n0b = m11a - (g1a * u1a + g1b * u1b), m11b - (g1a * u1c + g1b * u1d)
+    n0c, n0d = m12a - (g1a * u2a + g1b * u2b), m12b - (g1a * u2c + g1b * u2d)
+    n1a, n1b = m11c - (g1c * u1a + g1d * u1b), m11d - (g1c * u1c + g1d * u1d)
+    n1c, n1d = m12c - (g1c * u2a + g1d * u2b), m12d - (g1c * u2c + g1d * u2d)
+    n2a, n2b = m12a - (g2a * u1a + g2b * u1b), m12c - (g2a * u1c + g2b * u1d)
+    n2c, n2d = m22a - (g2a * u2a + g2b * u2b), m22b - (g2a * u2c + g2b * u2d)
+    n3a, n3b = m12b - (g2c * u1a + g2d * u1b), m12d - (g2c * u1c + g2d * u1d)
+    n3c, n3d = m22c - (g2c * u2a + g2d * u2b), m22d - (g2c * u2c + g2d * u2d)
+    # N L^T = N - (N B) K^T, so Y = N + K Q^-1 K^T - (N B) K^T = N - (N B - K Q^-1) K^T: e_r, the rows of
+    # N B - K Q^-1 (zero in exact arithmetic), carry the rounding of N that the congruence corrects
+    e0a, e0b = b1 * n0a + b2 * n0c - iq * g1a, b1 * n0b + b2 * n0d - iq * g1b
+    e1a, e1b = b1 * n1a + b2 * n1c - iq * g1c, b1 * n1b + b2 * n1d - iq * g1d
+    e2a, e2b = b1 * n2a + b2 * n2c - iq * g2a, b1 * n2b + b2 * n2d - iq * g2b
+    e3a, e3b = b1 * n3a + b2 * n3c - iq * g2c, b1 * n3b + b2 * n3d - iq * g2d
+    # Y[r, s] = N[r, s] - e_r . K_s, r <= s
+    p00 = n0a - (e0a * g1a + e0b * g1b)
+    p01 = n0b - (e0a * g1c + e0b * g1d)
+    p02 = n0c - (e0a * g2a + e0b * g2b)
+    p03 = n0d - (e0a * g2c + e0b * g2d)
+    p11 = n1b - (e1a * g1c + e1b * g1d)
+    p12 = n1c - (e1a * g2a + e1b * g2b)
+    p13 = n1d - (e1a * g2c + e1b * g2d)
+    p22 = n2c - (e2a * g2a + e2b * g2b)
+    p23 = n2d - (e2a * g2c + e2b * g2d)
+    p33 = n3d - (e3a * g2c + e3b * g2d)
+    # y <- L A^-T y
+    v10, v11 = v[0], v[1]
+    v20, v21 = v[2] - T * v10, v[3] - T * v11
+    c0, c1 = b1 * v10 + b2 * v20, b1 * v11 + b2 * v21
+    y = (v10 - (g1a * c0 + g1b * c1), v11 - (g1c * c0 + g1d * c1),
+         v20 - (g2a * c0 + g2b * c1), v21 - (g2c * c0 + g2d * c1))
+    return (p00, p01, p11), (p02, p03, p12, p13), (p22, p23, p33), y
+
+
+_joseph_predict_arrays = _joseph_predict  # the numpy form's: ``_compiled`` rebinds the name to its jitted form
+
+
 def information_predict(motion: MotionModel, info: np.ndarray, vector: np.ndarray, accel_var=None):
     """Information-form prediction valid for singular Y (§6) [reconstructed], in Joseph form.
 
@@ -654,49 +732,31 @@ def information_predict(motion: MotionModel, info: np.ndarray, vector: np.ndarra
     ``W = Q^-1 + B^T M B``: only a 2x2 matrix is inverted, and it is positive definite whatever
     Y is. The information is formed in Joseph form,
     ``Y <- L M L^T + K Q^-1 K^T``, ``L = I - K B^T``, algebraically equal to ``M - K B^T M``
-    (expand and use ``B^T M B = W - Q^-1``) but a sum of two congruences of PSD matrices, so it
-    stays PSD to rounding. The short form subtracts two nearly equal matrices when the process
+    (expand and use ``B^T M B = W - Q^-1``), evaluated as ``_joseph_predict`` says. The short
+    form ``M - K B^T M`` subtracts two nearly equal matrices when the process
     noise wipes out most of the information along B (a long period T with anisotropic fused fixes:
     at T = 1e4 s, sigma_a = 0.3 m/s^2 the position noise of one step is 1.5e7 m): there its
     rounding error exceeded the small eigenvalues of Y, Y went indefinite and P = Y^-1 had
-    negative variances. Written on the 2x2 blocks of the CV model
-    (A = [[I, T I], [0, I]], B = [[T^2/2 I], [T I]]). ``accel_var``
+    negative variances; the Joseph correction keeps Y PSD to rounding there
+    (tests/estimators/test_afge_health.py holds it at T = 1e3 and 1e4 s). Written on the 2x2 blocks
+    of the CV model
+    (A = [[I, T I], [0, I]], B = [[T^2/2 I], [T I]]) in ``_joseph_predict``, which the compiled
+    kernel shares. ``accel_var``
     (scalar or broadcastable to the leading shape of ``info`` without the last two axes)
     overrides sigma_a^2, e.g. per batch element.
     """
     T = float(motion.period)
-    b1, b2 = 0.5 * T * T, T
     q = motion.accel_sigma**2 if accel_var is None else np.asarray(accel_var, float)
-    Y11, Y12, Y22 = _blk(info, 0, 0), _blk(info, 0, 2), _blk(info, 2, 2)
-    M11 = Y11
-    M12 = _lin((1.0, Y12), (-T, Y11))
-    M22 = _lin((1.0, Y22), (-T, Y12), (-T, _tr(Y12)), (T * T, Y11))
-    U1 = _lin((b1, M11), (b2, M12))  # top block of M B
-    U2 = _lin((b1, _tr(M12)), (b2, M22))  # bottom block of M B
-    W = _lin((b1, U1), (b2, U2))
-    W = (W[0] + 1.0 / q, W[1], W[2], W[3] + 1.0 / q)  # Q^-1 + B^T M B
-    Wi = _inv(W)
-    G1, G2 = _mul(U1, Wi), _mul(U2, Wi)  # K = [G1; G2]
-    # L = I - K B^T = [[I - b1 G1, -b2 G1], [-b1 G2, I - b2 G2]]; N = L M
-    L11 = (1.0 - b1 * G1[0], -b1 * G1[1], -b1 * G1[2], 1.0 - b1 * G1[3])
-    L12 = (-b2 * G1[0], -b2 * G1[1], -b2 * G1[2], -b2 * G1[3])
-    L21 = (-b1 * G2[0], -b1 * G2[1], -b1 * G2[2], -b1 * G2[3])
-    L22 = (1.0 - b2 * G2[0], -b2 * G2[1], -b2 * G2[2], 1.0 - b2 * G2[3])
-    M21 = _tr(M12)
-    N11 = _lin((1.0, _mul(L11, M11)), (1.0, _mul(L12, M21)))
-    N12 = _lin((1.0, _mul(L11, M12)), (1.0, _mul(L12, M22)))
-    N21 = _lin((1.0, _mul(L21, M11)), (1.0, _mul(L22, M21)))
-    N22 = _lin((1.0, _mul(L21, M12)), (1.0, _mul(L22, M22)))
-    iq = 1.0 / q
-    P11 = _lin((1.0, _mul_t(N11, L11)), (1.0, _mul_t(N12, L12)), (iq, _mul_t(G1, G1)))
-    P12 = _lin((1.0, _mul_t(N11, L21)), (1.0, _mul_t(N12, L22)), (iq, _mul_t(G1, G2)))
-    P22 = _lin((1.0, _mul_t(N21, L21)), (1.0, _mul_t(N22, L22)), (iq, _mul_t(G2, G2)))
-    v1 = (vector[..., 0], vector[..., 1])
-    v2 = (vector[..., 2] - T * v1[0], vector[..., 3] - T * v1[1])
-    c = (b1 * v1[0] + b2 * v2[0], b1 * v1[1] + b2 * v2[1])
-    g1c, g2c = _vec(G1, c), _vec(G2, c)
-    y = np.stack([v1[0] - g1c[0], v1[1] - g1c[1], v2[0] - g2c[0], v2[1] - g2c[1]], axis=-1)
-    return _assemble(P11, P12, P22, info.shape[:-2]), y
+    v = (vector[..., 0], vector[..., 1], vector[..., 2], vector[..., 3])
+    P11, P12, P22, y = _joseph_predict_arrays(_blk(info, 0, 0), _blk(info, 0, 2), _blk(info, 2, 2), v, T,
+                                              0.5 * T * T, T, 1.0 / q)
+    out = np.empty(info.shape)
+    out[..., 0, 0], out[..., 1, 1], out[..., 2, 2], out[..., 3, 3] = P11[0], P11[2], P22[0], P22[2]
+    out[..., 0, 1] = out[..., 1, 0] = P11[1]
+    out[..., 2, 3] = out[..., 3, 2] = P22[1]
+    for i, (r, c) in enumerate(((0, 2), (0, 3), (1, 2), (1, 3))):
+        out[..., r, c] = out[..., c, r] = P12[i]
+    return out, np.stack(y, axis=-1)
 
 
 def empty_stack(batch_shape: tuple, size: int) -> HorizonStack:
@@ -848,35 +908,33 @@ _prange = range  # numba.prange once numba is imported (the kernel's loop over e
 _PARALLEL_ELEMENTS = 4096  # (copy, agent) elements from which threads pay for themselves
 
 
-def _kmul(a, b):
-    """a @ b on 2x2 blocks as 4-tuples (``_mul``; jitted for the kernels)."""
-    return (a[0] * b[0] + a[1] * b[2], a[0] * b[1] + a[1] * b[3], a[2] * b[0] + a[3] * b[2], a[2] * b[1] + a[3] * b[3])
-
-
-def _kmul_t(a, b):
-    """a @ b^T on 2x2 blocks as 4-tuples (``_mul_t``; jitted for the kernels)."""
-    return (a[0] * b[0] + a[1] * b[1], a[0] * b[2] + a[1] * b[3], a[2] * b[0] + a[3] * b[1], a[2] * b[2] + a[3] * b[3])
-
-
-def _add2(a, b):
-    """a + b on 4-tuples, in ``_lin``'s order."""
-    return (a[0] + b[0], a[1] + b[1], a[2] + b[2], a[3] + b[3])
-
-
-def _add3(a, b, c, d):
-    """a + b + c d on 4-tuples, in ``_lin``'s order."""
-    return (a[0] + b[0] + c * d[0], a[1] + b[1] + c * d[1], a[2] + b[2] + c * d[2], a[3] + b[3] + c * d[3])
+def _predict_slots(Y, vec, S, T, b1, b2, iq):  # pragma: no cover - compiled by numba
+    """``_joseph_predict`` of every slot j of an entry-major stack (``Y[e, j]``, entry e = 4 r + c;
+    ``vec[r, j]``), in place."""
+    for j in range(S):
+        P11, P12, P22, y = _joseph_predict((Y[0, j], Y[1, j], Y[4, j], Y[5, j]), (Y[2, j], Y[3, j], Y[6, j], Y[7, j]),
+                                           (Y[10, j], Y[11, j], Y[14, j], Y[15, j]),
+                                           (vec[0, j], vec[1, j], vec[2, j], vec[3, j]), T, b1, b2, iq)
+        Y[0, j], Y[5, j], Y[10, j], Y[15, j] = P11[0], P11[2], P22[0], P22[2]
+        Y[1, j] = Y[4, j] = P11[1]
+        Y[11, j] = Y[14, j] = P22[1]
+        Y[2, j] = Y[8, j] = P12[0]
+        Y[3, j] = Y[12, j] = P12[1]
+        Y[6, j] = Y[9, j] = P12[2]
+        Y[7, j] = Y[13, j] = P12[3]
+        vec[0, j], vec[1, j], vec[2, j], vec[3, j] = y
 
 
 def _buffer_kernel_source(final_info, final_vector, final_stamps, buffer_info, buffer_vector, buffer_success,
                           k, shift, inv_q, T, min_stamps, out_info, out_vector, out_stamps, out_x, out_P,
                           out_valid):  # pragma: no cover - compiled by numba; the numpy path is the reference
     """Per element m: the D+1 ``stack_advance`` calls of ``buffer_step``, then
-    ``stack_estimates``, with the same formulas in the same order on the 2x2 blocks.
+    ``stack_estimates``, with the same formulas in the same order on the 2x2 blocks (the predict
+    is ``_joseph_predict`` itself), so its numbers are the numpy form's.
 
-    Every slot of the stack lives in 16 + 4 + 1 numbers that never leave the element's
-    row, so the stack of all horizons is advanced without the (M, S, 4, 4) temporaries the
-    numpy form allocates for every block product (most of its time at B = 1024).
+    An element's stack is held entry-major (``Y[e, j]`` is entry e = 4 r + c of slot j's
+    information matrix, ``vec[r, j]``) in arrays local to the element, a ring whose shift
+    moves no data, and no (M, S, 4, 4) temporary is allocated as in the numpy form.
     """
     M, S = final_stamps.shape[0], final_stamps.shape[1]
     D1 = buffer_success.shape[1]
@@ -885,106 +943,57 @@ def _buffer_kernel_source(final_info, final_vector, final_stamps, buffer_info, b
     tol = INVERTIBLE_TOL
     for m in _prange(M):
         # a ring: logical slot j lives at (head + j) % S, so the shift moves no data
-        info = final_info[m].copy()
-        vec = final_vector[m].copy()
+        Y = np.empty((16, S))
+        vec = np.empty((4, S))
+        for j in range(S):
+            for e in range(16):
+                Y[e, j] = final_info[m, j, e // 4, e % 4]
+            for r in range(4):
+                vec[r, j] = final_vector[m, j, r]
         st = final_stamps[m].copy()
+        iq = inv_q[m]  # 1 / q, as 1.0 / q in the numpy form
         head = 0
         for i in range(D1):
             stamp = k[m] - D + i
             if stamp >= 0:
                 if shift:
                     head = head - 1 if head > 0 else S - 1
-                    info[head] = 0.0
-                    vec[head] = 0.0
+                    for e in range(16):
+                        Y[e, head] = 0.0
+                    for r in range(4):
+                        vec[r, head] = 0.0
                     st[head] = 0
                 if stamp > 0:
-                    for j in range(S):
-                        Y = info[j]
-                        y11a, y11b, y11c, y11d = Y[0, 0], Y[0, 1], Y[1, 0], Y[1, 1]
-                        y12a, y12b, y12c, y12d = Y[0, 2], Y[0, 3], Y[1, 2], Y[1, 3]
-                        y22a, y22b, y22c, y22d = Y[2, 2], Y[2, 3], Y[3, 2], Y[3, 3]
-                        m11a, m11b, m11c, m11d = y11a, y11b, y11c, y11d
-                        m12a, m12b = y12a - T * y11a, y12b - T * y11b
-                        m12c, m12d = y12c - T * y11c, y12d - T * y11d
-                        # M22 = Y22 - T Y12 - T Y12^T + T^2 Y11 (the sum in _lin's order)
-                        m22a = y22a - T * y12a - T * y12a + (T * T) * y11a
-                        m22b = y22b - T * y12b - T * y12c + (T * T) * y11b
-                        m22c = y22c - T * y12c - T * y12b + (T * T) * y11c
-                        m22d = y22d - T * y12d - T * y12d + (T * T) * y11d
-                        u1a, u1b = b1 * m11a + b2 * m12a, b1 * m11b + b2 * m12b
-                        u1c, u1d = b1 * m11c + b2 * m12c, b1 * m11d + b2 * m12d
-                        u2a, u2b = b1 * m12a + b2 * m22a, b1 * m12c + b2 * m22b
-                        u2c, u2d = b1 * m12b + b2 * m22c, b1 * m12d + b2 * m22d
-                        wa = b1 * u1a + b2 * u2a + inv_q[m]
-                        wb = b1 * u1b + b2 * u2b
-                        wc = b1 * u1c + b2 * u2c
-                        wd = b1 * u1d + b2 * u2d + inv_q[m]
-                        det = wa * wd - wb * wc
-                        ia, ib, ic, id_ = wd / det, -wb / det, -wc / det, wa / det
-                        g1a, g1b = u1a * ia + u1b * ic, u1a * ib + u1b * id_
-                        g1c, g1d = u1c * ia + u1d * ic, u1c * ib + u1d * id_
-                        g2a, g2b = u2a * ia + u2b * ic, u2a * ib + u2b * id_
-                        g2c, g2d = u2c * ia + u2d * ic, u2c * ib + u2d * id_
-                        # Joseph form (information_predict): Y = L M L^T + K Q^-1 K^T, L = I - K B^T
-                        L11 = (1.0 - b1 * g1a, -b1 * g1b, -b1 * g1c, 1.0 - b1 * g1d)
-                        L12 = (-b2 * g1a, -b2 * g1b, -b2 * g1c, -b2 * g1d)
-                        L21 = (-b1 * g2a, -b1 * g2b, -b1 * g2c, -b1 * g2d)
-                        L22 = (1.0 - b2 * g2a, -b2 * g2b, -b2 * g2c, 1.0 - b2 * g2d)
-                        M11 = (m11a, m11b, m11c, m11d)
-                        M12 = (m12a, m12b, m12c, m12d)
-                        M21 = (m12a, m12c, m12b, m12d)
-                        M22 = (m22a, m22b, m22c, m22d)
-                        G1 = (g1a, g1b, g1c, g1d)
-                        G2 = (g2a, g2b, g2c, g2d)
-                        N11 = _add2(_kmul(L11, M11), _kmul(L12, M21))
-                        N12 = _add2(_kmul(L11, M12), _kmul(L12, M22))
-                        N21 = _add2(_kmul(L21, M11), _kmul(L22, M21))
-                        N22 = _add2(_kmul(L21, M12), _kmul(L22, M22))
-                        iq = inv_q[m]  # 1 / q, as 1.0 / q in the numpy form
-                        P11 = _add3(_kmul_t(N11, L11), _kmul_t(N12, L12), iq, _kmul_t(G1, G1))
-                        P12 = _add3(_kmul_t(N11, L21), _kmul_t(N12, L22), iq, _kmul_t(G1, G2))
-                        P22 = _add3(_kmul_t(N21, L21), _kmul_t(N22, L22), iq, _kmul_t(G2, G2))
-                        p11a, p11b, p11c, p11d = P11
-                        p12a, p12b, p12c, p12d = P12
-                        p22a, p22b, p22c, p22d = P22
-                        v = vec[j]
-                        v10, v11 = v[0], v[1]
-                        v20, v21 = v[2] - T * v10, v[3] - T * v11
-                        c0, c1 = b1 * v10 + b2 * v20, b1 * v11 + b2 * v21
-                        v[0] = v10 - (g1a * c0 + g1b * c1)
-                        v[1] = v11 - (g1c * c0 + g1d * c1)
-                        v[2] = v20 - (g2a * c0 + g2b * c1)
-                        v[3] = v21 - (g2c * c0 + g2d * c1)
-                        Y[0, 0], Y[1, 1] = p11a, p11d
-                        Y[0, 1] = Y[1, 0] = 0.5 * (p11b + p11c)
-                        Y[2, 2], Y[3, 3] = p22a, p22d
-                        Y[2, 3] = Y[3, 2] = 0.5 * (p22b + p22c)
-                        Y[0, 2] = Y[2, 0] = p12a
-                        Y[0, 3] = Y[3, 0] = p12b
-                        Y[1, 2] = Y[2, 1] = p12c
-                        Y[1, 3] = Y[3, 1] = p12d
+                    _predict_slots(Y, vec, S, T, b1, b2, iq)
+                f0, f1, f4, f5 = buffer_info[m, i, 0, 0], buffer_info[m, i, 0, 1], buffer_info[m, i, 1, 0], \
+                    buffer_info[m, i, 1, 1]
+                g0, g1 = buffer_vector[m, i, 0], buffer_vector[m, i, 1]
+                s = buffer_success[m, i]
                 for j in range(S):
-                    for r in range(2):
-                        for c in range(2):
-                            info[j, r, c] += buffer_info[m, i, r, c]
-                        vec[j, r] += buffer_vector[m, i, r]
-                    st[j] += buffer_success[m, i]
+                    Y[0, j] += f0
+                    Y[1, j] += f1
+                    Y[4, j] += f4
+                    Y[5, j] += f5
+                    vec[0, j] += g0
+                    vec[1, j] += g1
+                    st[j] += s
             if i == 0:
                 for j in range(S):
-                    slot = (head + j) % S
-                    out_info[m, j] = info[slot]
-                    out_vector[m, j] = vec[slot]
+                    slot = head + j if head + j < S else head + j - S
+                    for e in range(16):
+                        out_info[m, j, e // 4, e % 4] = Y[e, slot]
+                    for r in range(4):
+                        out_vector[m, j, r] = vec[r, slot]
                     out_stamps[m, j] = st[slot]
         for j in range(S):
-            slot = (head + j) % S
+            slot = head + j if head + j < S else head + j - S
             valid = st[slot] >= min_stamps
             out_valid[m, j] = valid
-            Y = info[slot]
             if valid:
-                y11a, y11b, y11c, y11d = Y[0, 0], Y[0, 1], Y[1, 0], Y[1, 1]
-                y12a, y12b, y12c, y12d = Y[0, 2], Y[0, 3], Y[1, 2], Y[1, 3]
-                y22a, y22b, y22c, y22d = Y[2, 2], Y[2, 3], Y[3, 2], Y[3, 3]
-                ya, yb, yc, yd = vec[slot, 0], vec[slot, 1], vec[slot, 2], vec[slot, 3]
+                y11a, y11b, y11c, y11d = Y[0, slot], Y[1, slot], Y[4, slot], Y[5, slot]
+                y12a, y12b, y12c, y12d = Y[2, slot], Y[3, slot], Y[6, slot], Y[7, slot]
+                y22a, y22b, y22c, y22d = Y[10, slot], Y[11, slot], Y[14, slot], Y[15, slot]
+                ya, yb, yc, yd = vec[0, slot], vec[1, slot], vec[2, slot], vec[3, slot]
             else:
                 y11a, y11b, y11c, y11d = 1.0, 0.0, 0.0, 1.0
                 y12a, y12b, y12c, y12d = 0.0, 0.0, 0.0, 0.0
@@ -1052,15 +1061,20 @@ def _compiled(name: str):
         else:
             _prange = numba.prange
             options = {"cache": True, "nogil": True, "boundscheck": False}
-            global _numpy_sum, _kmul, _kmul_t, _add2, _add3
+            global _numpy_sum, _joseph_predict, _predict_slots
             _numpy_sum = numba.njit(**options)(_numpy_sum)
-            _kmul, _kmul_t = numba.njit(**options)(_kmul), numba.njit(**options)(_kmul_t)
-            _add2, _add3 = numba.njit(**options)(_add2), numba.njit(**options)(_add3)
+            # the buffer kernel's divisors are positive definite determinants or guarded: numpy's error model
+            # drops the zero-division branch of every division
+            buffer = {**options, "error_model": "numpy"}
+            _joseph_predict = numba.njit(inline="always", **buffer)(_joseph_predict)
+            _predict_slots = numba.njit(**buffer)(_predict_slots)
             # the threaded form compiles a renamed copy: with the same name it shares the serial form's
             # disk-cache entry, and one of them loads the other's code (estimators.compiled.renamed)
-            _KERNELS = {key: [numba.njit(**options)(fn), numba.njit(parallel=True, **options)(renamed(fn, "_threaded"))]
-                        for key, fn in (("buffer", _buffer_kernel_source), ("fuse", _fuse_kernel_source),
-                                        ("costs", _costs_kernel_source), ("fixes", _fixes_kernel_source))}
+            _KERNELS = {key: [numba.njit(**opts)(fn), numba.njit(parallel=True, **opts)(renamed(fn, "_threaded"))]
+                        for key, fn, opts in (("buffer", _buffer_kernel_source, buffer),
+                                              ("fuse", _fuse_kernel_source, options),
+                                              ("costs", _costs_kernel_source, options),
+                                              ("fixes", _fixes_kernel_source, options))}
     return _KERNELS.get(name)
 
 

@@ -126,6 +126,27 @@ def test_a_copy_of_the_batch_equals_the_env_alone():
     np.testing.assert_allclose(scenario.backend.posterior_position[1], estimates[-1], rtol=0, atol=1e-12)
 
 
+def test_constant_windows_keeps_every_windows_output_without_changing_the_estimate():
+    """``constant_windows`` adds dfir's output for every window N = 1..S; the estimate is the same with it off, and
+    the output of dfir with window N equals the column N of afge's ``constant_x`` (the same stack and packets)."""
+    runs = {}
+    for name, fields in (("afge", {}), ("afge", {"constant_windows": True}), ("dfir", {"window": 7})):
+        spec = coloc_env.compose(world="nlos_orbit", network="random_delay", backend={"name": name, **fields},
+                                 horizon=25)
+        scenario = ComposedScenario(spec, batch=2)
+        scenario.reset([np.random.default_rng(s) for s in (3, 8)])
+        action = np.tile(scenario.action_vector("maximum"), (2, scenario.num_agents, 1))
+        for _ in range(25):
+            scenario.step(action)
+        runs[name, bool(fields.get("constant_windows"))] = scenario.backend
+    off, on, dfir = runs["afge", False], runs["afge", True], runs["dfir", False]
+    assert off.constant_x.shape[2] == 0 and on.constant_x.shape[2] == on.S
+    np.testing.assert_array_equal(on.posterior_position, off.posterior_position)
+    np.testing.assert_array_equal(on.constant_x[:, :, 7 - 1], dfir.out_x)
+    with pytest.raises(ValueError, match=r"backend\.constant_windows must be True or False, got 1"):
+        coloc_env.compose(world="nlos_orbit", network="ideal", backend={"name": "afge", "constant_windows": 1})
+
+
 def test_the_same_seed_gives_afge_and_dfir_the_same_truth_and_packets():
     outs = [_composition_run(coloc_env.compose(world="nlos_orbit", network="random_delay", backend=b, horizon=15),
                              2, 15) for b in ("afge", "dfir")]

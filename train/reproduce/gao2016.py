@@ -119,10 +119,13 @@ def drive(spec, generators: list, constant: bool = False) -> dict:
     position error, ``horizon`` (R, K, N) the window of the output (0: none had an estimate), ``received``
     (R, K, N) packets arriving at k, ``fused_lag0`` (R, K, N) stamp k fused at lag 0, ``fused_final``
     (R, K - D, N) stamp k - D fused at lag D, and with ``constant`` ``constant`` (R, K, N, S): the squared
-    error of dfir with each window N = 1..S (``coloc_env.backends.nlos.PacketFirBackend.constant_x``)."""
+    error of dfir with each window N = 1..S (``coloc_env.backends.nlos.PacketFirBackend.constant_x``; the
+    backend's ``constant_windows`` on)."""
     scenario = PresetComposition(spec, batch=len(generators))
     scenario.reset(list(generators))
     backend, K = scenario.backend, scenario.horizon
+    if constant and not backend.constant_windows:
+        raise ValueError("drive(constant=True) needs a backend with constant_windows=True")
     action = scenario.action_vector("maximum")
     actions = np.array(np.broadcast_to(action, (len(generators), scenario.num_agents, len(action))))
     keys = ("error", "horizon", "received", "fused_lag0", "fused_final") + (("constant",) if constant else ())
@@ -163,7 +166,7 @@ def monte_carlo_block(config: NlosHorizonConfig, seed: int, run_indices: tuple) 
 
     for label, i, mode_info, lag0 in VARIANTS:
         predictive = dataclasses.replace(afge, mode_info=mode_info, likelihood="predictive")
-        res = run(_compose(config, i, predictive, lag0), i, constant=True)
+        res = run(_compose(config, i, dataclasses.replace(predictive, constant_windows=True), lag0), i, constant=True)
         first = first or res
         runs["afge"][label], dfir[label] = res["error"], res["constant"]
         if label == "known":
