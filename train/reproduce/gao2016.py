@@ -125,7 +125,7 @@ def drive(spec, generators: list, constant: bool = False) -> dict:
     scenario.reset(list(generators))
     backend, K = scenario.backend, scenario.horizon
     if constant and not backend.constant_windows:
-        raise ValueError("drive(constant=True) needs a backend with constant_windows=True")
+        raise RuntimeError("drive(constant=True) needs a backend with constant_windows=True")
     action = scenario.action_vector("maximum")
     actions = np.array(np.broadcast_to(action, (len(generators), scenario.num_agents, len(action))))
     keys = ("error", "horizon", "received", "fused_lag0", "fused_final") + (("constant",) if constant else ())
