@@ -246,11 +246,6 @@ class BandwidthFusionScenario(PresetScenario):
         """The receivers' budget (the network's)."""
         return self.network.links
 
-    @property
-    def truth(self) -> np.ndarray:
-        """The true state now (B, n): x(k+1) after step k, x(0) at reset."""
-        return self.world.target_state()
-
     # --- description ------------------------------------------------------------
     @property
     def action_dim(self) -> int:
@@ -360,9 +355,14 @@ class BandwidthFusionScenario(PresetScenario):
         return Scenario.episode_error(self, errors, weights)
 
     # --- views -------------------------------------------------------------------
+    def true_position(self) -> np.ndarray:
+        """The whole true state now, once per node (B, N, n): x(k+1) after step k, x(0) at reset (the
+        episode's x(0..K) is ``world.truth``)."""
+        return np.broadcast_to(self.world.target_state()[:, None, :], (self.batch, self.num_agents, self.n)).copy()
+
     def _squared_error(self) -> np.ndarray:
         """||xhat_i(k+1) - x(k+1)||^2 (B, N) (x(0) and xhat(0) at reset)."""
-        return np.sum((self.fusion.estimate - self.truth[:, None, :]) ** 2, axis=-1)
+        return np.sum((self.fusion.estimate - self.world.target_state()[:, None, :]) ** 2, axis=-1)
 
     def observation(self) -> np.ndarray:
         B, N = self.batch, self.num_agents
@@ -382,7 +382,7 @@ class BandwidthFusionScenario(PresetScenario):
         exact = bf.node_traces(self.fusion.error_cov, N)
         received = self.links.components_received(self.selection)
         return {
-            "true_position": np.broadcast_to(self.truth[:, None, :], (B, N, self.n)).copy(),
+            "true_position": self.true_position(),
             "estimated_position": self.fusion.estimate.copy(),
             "position_error": np.sqrt(error),
             "error": error,
@@ -398,7 +398,7 @@ class BandwidthFusionScenario(PresetScenario):
         }
 
     def scene(self, b: int) -> Scene:
-        N, k, truth = self.num_agents, int(self.k[b]), self.truth[b, :2]
+        N, k, truth = self.num_agents, int(self.k[b]), self.world.target_state()[b, :2]
         node_cov = bf.node_covariances(self.fusion.error_cov[b], N)[:, :2, :2]
         spread = max(1.0, 3.0 * float(np.sqrt(node_cov.diagonal(axis1=-2, axis2=-1).max())))
         received = self.selection[b]  # [i, kk]: what receiver i took from its neighbour kk

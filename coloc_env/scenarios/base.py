@@ -98,6 +98,11 @@ class Scenario(abc.ABC):
     def info(self) -> dict[str, np.ndarray]: ...
 
     @abc.abstractmethod
+    def true_position(self) -> np.ndarray:
+        """Every agent's ``infos[agent]["true_position"]`` at once: (B, N, d), the truth at the time of the
+        current estimate, in the same d and unit as that info key."""
+
+    @abc.abstractmethod
     def scene(self, b: int) -> Scene: ...
 
     def action_mask(self) -> np.ndarray | None:

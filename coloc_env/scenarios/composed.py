@@ -93,11 +93,11 @@ the holder that sent it; 0 for the other networks).
 
 Termination: none; truncation after ``horizon`` steps.
 
-``infos[agent]``: ``true_position`` (its own position, or the target's), ``estimated_position``
-(its estimate of time k: the posterior, or a predictor's xhat(k)), ``position_error`` (m), ``error``
-(the reward's error term: m for ``self``, the world's unit for ``target``), ``trace``
-(m^2, the position block of its covariance, nan without one), ``messages_sent``,
-``floats_sent``, ``communication`` (= messages_sent), ``step``.
+``infos[agent]``: ``true_position`` (its own position, or the target's; ``true_position()`` gives
+every agent's at once, (B, N, 2)), ``estimated_position`` (its estimate of time k: the posterior, or a
+predictor's xhat(k)), ``position_error`` (m), ``error`` (the reward's error term: m for ``self``, the
+world's unit for ``target``), ``trace`` (m^2, the position block of its covariance, nan without one),
+``messages_sent``, ``floats_sent``, ``communication`` (= messages_sent), ``step``.
 """
 
 from __future__ import annotations
@@ -415,6 +415,13 @@ class ComposedScenario(Scenario):
         p = self.world.target_position(offset) if state is None else state[:, list(self.world.position_index)]
         return np.repeat(p[:, None, :], self.num_agents, axis=1)
 
+    def true_position(self) -> np.ndarray:
+        """The truth at the time of the current estimate, one row per agent (B, N, d), a new array: what
+        ``infos[agent]["true_position"]`` reports (its own position, d = 2, or the target's position
+        components, repeated for every agent). The whole episode's truth is the world's
+        (``world.truth``, where the world keeps one; its docstring gives the shape)."""
+        return self._truth.copy()
+
     def position_error(self) -> np.ndarray:
         return np.linalg.norm(self.backend.posterior_position - self._truth, axis=-1)
 
@@ -466,7 +473,7 @@ class ComposedScenario(Scenario):
         trace = self.posterior_traces()
         error = self.position_error()
         return {
-            "true_position": self._truth.copy(),
+            "true_position": self.true_position(),
             "estimated_position": self.backend.posterior_position.copy(),
             "position_error": error,
             "error": self.target_error() if self.estimand == "target" else error.copy(),

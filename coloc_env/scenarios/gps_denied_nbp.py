@@ -324,7 +324,7 @@ class GpsDeniedNbpScenario(PresetScenario):
         B, N = self.batch, self.num_agents
         error = self.position_error()
         return {
-            "true_position": self._truth.copy(),
+            "true_position": self.true_position(),
             "estimated_position": self.backend.posterior_position.copy(),
             "position_error": error,
             "error": error.copy(),

@@ -208,11 +208,6 @@ class LossyFusionScenario(PresetScenario):
         return self.backend.fusion
 
     @property
-    def truth(self) -> np.ndarray:
-        """The episode's target states x(0..K) (B, K + 1, 6)."""
-        return self.world.truth
-
-    @property
     def z(self) -> np.ndarray:
         """Every UAV's measurement of every slot (B, K, L, 3)."""
         return self.world.observations
@@ -279,6 +274,12 @@ class LossyFusionScenario(PresetScenario):
         self._since_arrival = np.where(arrived, 0.0, self._since_arrival + 1.0)
 
     # --- views -------------------------------------------------------------------
+    def true_position(self) -> np.ndarray:
+        """The target's true position H x(k) at the slot of the current estimate, once per UAV (B, L, 3) (the
+        episode's states x(0..K) are ``world.truth``)."""
+        truth = self._truth_state @ self.H.T
+        return np.broadcast_to(truth[:, None], (self.batch, self.num_agents, 3)).copy()
+
     def _fused_error(self) -> np.ndarray:
         return self.target_error()[:, 0]
 
@@ -317,7 +318,7 @@ class LossyFusionScenario(PresetScenario):
     def info(self) -> dict[str, np.ndarray]:
         B, L = self.batch, self.num_agents
         fusion = self.fusion
-        truth = self._truth_state @ self.H.T
+        truth = self.true_position()
         fused = self.backend.posterior_state[:, 0] @ self.H.T
         local = np.concatenate([fusion.fused[:, None], self.local], axis=1) @ self.H.T
         error = self._fused_error()
@@ -325,14 +326,14 @@ class LossyFusionScenario(PresetScenario):
         zeros = np.zeros((B, 1))
         team = lambda values: np.broadcast_to(np.asarray(values)[:, None], (B, L)).copy()  # noqa: E731
         return {
-            "true_position": np.broadcast_to(truth[:, None], (B, L, 3)).copy(),
+            "true_position": truth,
             "estimated_position": np.broadcast_to(fused[:, None], (B, L, 3)).copy(),
             "position_error": team(np.sqrt(error)),
             "error": team(error),
             "trace": team(claimed),
             "claimed_trace": team(claimed),
             "local_estimate": local,
-            "local_error": np.sum((local - truth[:, None]) ** 2, axis=-1),
+            "local_error": np.sum((local - truth) ** 2, axis=-1),
             "messages_sent": self.network.messages_sent.copy(),
             "floats_sent": self.network.floats_sent.copy(),
             "communication": self.network.messages_sent.copy(),
@@ -368,7 +369,7 @@ class LossyFusionScenario(PresetScenario):
             truth=truth_xy[None],
             estimates=estimates,
             covariances=covs,
-            trails=self.truth[b, start:max(k, 1), :][:, xy][None],
+            trails=self.world.truth[b, start:max(k, 1), :][:, xy][None],
             node_positions=ring_layout(L),
             node_labels=self.agent_names,
             estimate_labels=[f"{self.agent_names[0]} (fused)"] + [f"{a} (own filter)" for a in self.agent_names[1:]],

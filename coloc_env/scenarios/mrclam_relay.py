@@ -330,16 +330,13 @@ class MrclamRelayScenario(RelayTeamScenario):
         a = np.minimum(self.world.absolute_step(), self.world.data.steps - 1)
         return (self.world.tables.first_index[a] >= 0) & (self.k < self.horizon)[:, None, None]
 
-    def truth(self) -> np.ndarray:
-        """Vicon poses (B, N, 3) at the current step."""
-        return self.world.poses()
-
-    def truth_xy(self) -> np.ndarray:
-        return self.truth()[..., :2]
+    def true_position(self) -> np.ndarray:
+        """Vicon positions (B, N, 2) at the current step (the poses, with headings: ``world.poses()``)."""
+        return self.world.positions()
 
     def team_error(self) -> np.ndarray:
         """||p_hat_i - p_i|| (B, N), metres, against Vicon, of the current estimate (after a step: k + 1)."""
-        return np.linalg.norm(self.backend.estimate[..., :2] - self.truth_xy(), axis=-1)
+        return np.linalg.norm(self.backend.estimate[..., :2] - self.world.poses()[..., :2], axis=-1)
 
     def position_error(self) -> np.ndarray:
         return self.team_error()
@@ -353,7 +350,7 @@ class MrclamRelayScenario(RelayTeamScenario):
 
     def info(self) -> dict[str, np.ndarray]:
         B, N = self.batch, self.num_agents
-        backend, chains, truth = self.backend, self.backend.chains, self.truth()
+        backend, chains, truth = self.backend, self.backend.chains, self.world.poses()
         return {**self.team_info(), "heading_error": np.abs(se2.wrap(backend.estimate[..., 2] - truth[..., 2])),
                 "measured": self.measured.copy(), "partner": backend.partner.copy(), "used": backend.used.copy(),
                 "landmarks": backend.landmarks_applied.copy(), "rejected": backend.rejected.copy(),

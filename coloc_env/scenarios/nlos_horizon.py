@@ -274,11 +274,6 @@ class NlosHorizonScenario(PresetScenario):
         self._observation_space = gymnasium.spaces.Box(np.r_[low, 0.0].astype(np.float32),
                                                        np.r_[high, 1.0].astype(np.float32), dtype=np.float32)
 
-    @property
-    def truth(self) -> np.ndarray:
-        """True states (B, K + 1, N, 4) of the episode's targets, stamps 0..K."""
-        return self.world.truth
-
     # --- description ------------------------------------------------------------
     @property
     def obs_dim(self) -> int:
@@ -350,7 +345,7 @@ class NlosHorizonScenario(PresetScenario):
         nlos = (w.modes[rows, now] == 1) & in_range
         error = np.sum((be.posterior_position - self._truth) ** 2, axis=-1)
         return {
-            "true_position": self._truth.copy(),
+            "true_position": self.true_position(),
             "estimated_position": be.posterior_position.copy(),
             "position_error": np.sqrt(error),
             "error": error,

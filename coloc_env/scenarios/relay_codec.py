@@ -72,7 +72,7 @@ class RelayTeamConfig(PresetConfig):
 class RelayTeamScenario(PresetScenario):
     """Batched core of a relay-chain preset (module table). A subclass gives ``own_features`` and
     ``feature_bounds`` (its observation's entries after the one-hot), ``team_error``, ``own_traces``,
-    ``own_variances`` and ``truth_xy``, its ``estimate`` (B, N, >= 2: position first), and keeps
+    ``own_variances`` and ``true_position``, its ``estimate`` (B, N, >= 2: position first), and keeps
     ``dead_reckoning`` (B, N, >= 2)."""
 
     distance_scale: ClassVar[float]  # metres per unit of the observation's distances
@@ -100,8 +100,8 @@ class RelayTeamScenario(PresetScenario):
         """The diagonal of every agent's covariance (B, N agent_state_dim), for ``state``."""
         raise NotImplementedError
 
-    def truth_xy(self) -> np.ndarray:  # pragma: no cover - interface
-        """True positions (B, N, 2) at the current estimate's time."""
+    def true_position(self) -> np.ndarray:  # pragma: no cover - interface
+        """True positions (B, N, 2) at the current estimate's time (after a step: k + 1), a new array."""
         raise NotImplementedError
 
     def observed_distances(self) -> np.ndarray:
@@ -167,9 +167,9 @@ class RelayTeamScenario(PresetScenario):
     def team_info(self) -> dict[str, np.ndarray]:
         """The infos both presets report: positions, errors (m), ``trace`` (m^2), dead reckoning's error,
         the messages and floats each agent sent, the team's ``hop_cost``, ``step``."""
-        truth, error = self.truth_xy(), self.team_error()
+        truth, error = self.true_position(), self.team_error()
         return {
-            "true_position": truth.copy(),
+            "true_position": truth,
             "estimated_position": self.estimate[..., :2].copy(),
             "position_error": error,
             "error": error.copy(),

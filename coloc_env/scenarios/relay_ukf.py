@@ -291,8 +291,8 @@ class RelayUKFScenario(RelayTeamScenario):
         self.dead_reckoning, _ = ukf.time_update(self.dead_reckoning, None, speed, heading, self.config.dt, 0.0)
 
     # --- views ---------------------------------------------------------------------------------------
-    def truth_xy(self) -> np.ndarray:
-        return np.broadcast_to(self.world.positions(), (self.batch, self.num_agents, 2))
+    def true_position(self) -> np.ndarray:
+        return self.world.positions().copy()
 
     def team_error(self) -> np.ndarray:
         """||xhat_i(k+1) - x_i(k+1)|| (B, N), metres: the current estimate after a step's prediction."""

@@ -148,6 +148,9 @@ class Circles(PartConfig):
 
 
 class CirclesWorld(World):
+    """``truth`` (K+1, N, 2): the platforms' true positions at steps 0..K, the same for every copy (the
+    tracks draw nothing; the copies differ in their odometry, schedule and range noise)."""
+
     agent_prefix = "platform"
 
     def __init__(self, config: Circles, batch: int, horizon: int):

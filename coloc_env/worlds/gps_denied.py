@@ -188,6 +188,9 @@ def sample_episode(config: GpsDenied, rng: np.random.Generator, horizon: int | N
 
 
 class GpsDeniedWorld(World):
+    """B copies of the episode (the ``Episode`` fields with a leading batch axis): ``truth`` (B, T, N, 4)
+    [p; v] at steps 0..T-1, T = horizon; ``positions()`` is time k's slice (the last one after the horizon)."""
+
     symmetric_ranges = True
     agent_prefix = "uav"
 

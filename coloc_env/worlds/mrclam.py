@@ -253,6 +253,9 @@ class Mrclam(PartConfig):
 
 
 class MrclamWorld(World):
+    """The run replayed from each copy's window start ``start`` (B,): the truth is the run's Vicon poses,
+    ``data.groundtruth`` (steps, N, 3) [x, y, heading]; ``poses()`` (B, N, 3) at the current data step."""
+
     agent_prefix = "robot"
 
     def __init__(self, config: Mrclam, batch: int, horizon: int):

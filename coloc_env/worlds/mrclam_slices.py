@@ -341,6 +341,9 @@ class MrclamSlices(PartConfig):
 
 
 class MrclamSlicesWorld(World):
+    """The run's slices replayed from each copy's first slice ``start`` (B,): the truth is the slices' Vicon
+    positions, ``slices.truth`` (S, N, 2); ``positions()`` (B, N, 2) at the current slice."""
+
     agent_prefix = "robot"
     symmetric_ranges = True
 

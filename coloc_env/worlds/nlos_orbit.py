@@ -300,6 +300,9 @@ def draw_episode(config: NlosOrbit, rng: np.random.Generator, horizon: int | Non
 
 
 class NlosOrbitWorld(World):
+    """B copies of the episode (the ``Episode`` fields with a leading batch axis): ``truth`` (B, K+1, N, 4)
+    [p_x, p_y, v_x, v_y] of the targets at stamps 0..K; ``positions()`` is stamp k's positions."""
+
     agent_prefix = "uav"
 
     def __init__(self, config: NlosOrbit, batch: int, horizon: int):

@@ -101,7 +101,7 @@ def test_env_with_paper_policy_equals_the_estimator(tables):
     # the episode reset(seed=7) draws: the drift world's draw_episode on the episode's generator
     episode = draw_episode(scenario.config.parts()[0], np.random.default_rng(7))
     truth = episode["initial_state"]
-    np.testing.assert_array_equal(scenario.truth[0], truth)
+    np.testing.assert_array_equal(scenario.true_position()[0], np.tile(truth, (scenario.num_agents, 1)))
     noise_v, noise_w = episode["measurement_noise"], episode["process_noise"]
     model = scenario.config.fusion_model()
     state = bf.initial_state(model, np.full(3, 10.0), np.diag([0.19, 0.09, 0.08]))

@@ -106,7 +106,7 @@ def test_env_with_paper_policy_equals_the_estimator(num_agents, seed):
     observations, infos = env.reset(seed=seed)
     scenario = env.scenario
     # the network's link draws, fixed at reset: the filter sees what the env's network delivers
-    truth, z, outcome = scenario.truth[0].copy(), scenario.z[0].copy(), scenario.link_outcomes()[0]
+    truth, z, outcome = scenario.world.truth[0].copy(), scenario.z[0].copy(), scenario.link_outcomes()[0]
     estimates, covariances = lf.distributed_filter(scenario.model, X0, P0, z, outcome)
     H = scenario.H
     k = 0

@@ -95,7 +95,7 @@ def test_ukf_se2_reproduces_the_mrclam_relay_scenario(network):
         a = scenario.world.absolute_step()[0]
         recorded = scenario.world.tables.first_index[a, np.arange(N), choice] >= 0
         partner = np.where(recorded & (choice != np.arange(N)), choice, -1)
-        routing = _nearest_first_routing(scenario.truth()[0, :, :2], partner)
+        routing = _nearest_first_routing(scenario.true_position()[0], partner)
         scenario.step(np.concatenate([choice[:, None], routing], axis=1)[None])
         used += int(scenario.backend.used.sum())
         actions = {agent: np.array([choice[i]] + ([N + 1] if relay_block else []))

@@ -260,7 +260,7 @@ def test_relay_choices_truncate_the_chain_and_hop_costs_enter_the_reward():
     actions[f"robot_{n}"][1 + m] = third
     actions[f"robot_{third}"][1 + m] = m  # back to m: a revisit ends the chain
     actions[f"robot_{third}"][1 + n] = m  # another source's entry: not used
-    positions = scenario.truth()[0, :, :2]
+    positions = scenario.true_position()[0]
     observations, rewards, _, _, infos = env.step(actions)
     assert infos[f"robot_{m}"]["partner"] == n and infos[f"robot_{m}"]["chain_length"] == 3
     assert STOP_REASONS[int(infos[f"robot_{m}"]["chain_stop"])] == "revisit"

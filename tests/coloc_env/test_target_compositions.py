@@ -95,7 +95,7 @@ def test_the_bandwidth_fusion_preset_is_drift_bandwidth_bandwidth_fusion():
         for key in ("messages_sent", "floats_sent"):
             np.testing.assert_array_equal(_stack([preset_info], key, env)[0], _stack([info], key, env)[0])
         np.testing.assert_array_equal([rewards[a] for a in env.possible_agents],
-                                      -np.sum((preset.fusion.estimate[0] - preset.truth[0]) ** 2, axis=-1))
+                                      -np.sum((preset.fusion.estimate[0] - preset.true_position()[0]) ** 2, axis=-1))
         k += 1
     # every receiver took exactly its budget: 5 components a step, counted at the senders
     assert np.all(_stack([preset_info], "components_received", env) == 5)

@@ -81,10 +81,10 @@ def test_seed_method_reseeds_copies_and_none_draws_fresh_entropy():
     b = coloc_env.vector_env(NAME, num_envs=3)
     b.seed(7)
     np.testing.assert_array_equal(a.reset(), b.reset())
-    np.testing.assert_array_equal(a.scenario.truth, b.scenario.truth)
+    np.testing.assert_array_equal(a.scenario.world.truth, b.scenario.world.truth)
     c = coloc_env.vector_env(NAME, num_envs=3)
     c.reset()
-    assert not np.array_equal(a.scenario.truth, c.scenario.truth)
+    assert not np.array_equal(a.scenario.world.truth, c.scenario.world.truth)
 
 
 def test_vector_env_spaces_and_errors():

@@ -25,7 +25,7 @@ def episodes(runs, seed, **kwargs):
     its network's link ``outcome`` to the leader (runs, K, L), and the position rows H."""
     scenario = LossyFusionScenario(build_config(LossyFusionConfig, kwargs), batch=runs)
     scenario.reset(np.random.default_rng(seed).spawn(runs))
-    sim = {"truth": scenario.truth[:, :scenario.horizon], "z": scenario.z, "outcome": scenario.link_outcomes()}
+    sim = {"truth": scenario.world.truth[:, :scenario.horizon], "z": scenario.z, "outcome": scenario.link_outcomes()}
     return scenario.model, sim, scenario.H
 
 

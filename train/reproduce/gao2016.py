@@ -133,7 +133,7 @@ def drive(spec, generators: list, constant: bool = False) -> dict:
     n_min = backend.config.min_packets
     for k in range(K):
         scenario.step(actions)
-        truth = scenario._truth
+        truth = scenario.true_position()
         out["error"].append(np.sum((backend.posterior_position - truth) ** 2, axis=-1))
         out["horizon"].append(np.where(backend.valid_used, backend.window_used, 0))
         out["received"].append(backend.packets_arrived)
@@ -660,7 +660,7 @@ def composition_errors(backend: dict, seeds, world: dict | None = None, network:
     for k in range(horizon):
         scenario.step(actions)
         if k >= warmup:
-            e = scenario.backend.posterior_position - scenario._truth
+            e = scenario.backend.posterior_position - scenario.true_position()
             P = scenario.backend.posterior_position_cov
             squared.append(np.sum(e**2, axis=-1))
             nees.append(np.einsum("...a,...ab,...b->...", e, np.linalg.inv(P), e))

@@ -303,7 +303,7 @@ def lossy_link_study(data: str, window_steps: int, seed: int, settings: dict[str
         il = _il_core(scenario, int(start[0]), W) if first else None
         hops = chains = complete = chosen = used = 0
         for k in range(W + 1):
-            truth = scenario.truth()
+            truth = scenario.world.poses()
             error = scenario.backend.estimate - truth
             sq += np.sum(error[..., :2] ** 2, axis=-1)
             nees += _own_nees(error, scenario.backend.P_ii)
