@@ -100,6 +100,7 @@ fields of ``SignalModel``), each said so in its docstring; ``run_kalman``'s ``ac
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -325,7 +326,7 @@ def packet_fixes(signal: SignalModel, sender_position, rss, aoa, m, compiled: bo
     kernels = _kernels("fixes", compiled)
     if kernels is not None:
         shape = np.broadcast_shapes(np.shape(sender_position)[:-1], np.shape(rss), np.shape(aoa), np.shape(m))
-        P = int(np.prod(shape, dtype=np.int64))
+        P = math.prod(shape)
         sender = _flat(sender_position, shape, (2,), float)
         flat = [_flat(a, shape, (), float) for a in (rss, aoa, m)]
         constants = (signal.sigma_db**2, signal.nlos_sigma_db**2, signal.nlos_bias_db**2, signal.sigma_theta**2,
@@ -451,7 +452,7 @@ def fuse_packets(signal: SignalModel, rss, aoa, nav, modes, delays, lags, keep, 
         return Y, y, gamma, used
     batch = np.broadcast_shapes(np.shape(rss)[:-1], lags.shape, np.shape(keep)[:-1])
     J = np.shape(rss)[-1]
-    M = int(np.prod(batch, dtype=np.int64))
+    M = math.prod(batch)
 
     def flat(a, tail, dtype):
         return _flat(a, batch, tail, dtype)
@@ -1095,8 +1096,10 @@ def _for_size(kernels, elements: int):
 def _flat(a, batch: tuple, tail: tuple, dtype) -> np.ndarray:
     """``a`` broadcast to (*batch, *tail) as a C-ordered (prod(batch), *tail) array of ``dtype``: the kernels'
     row layout."""
-    rows = int(np.prod(batch, dtype=np.int64))
-    return np.ascontiguousarray(np.broadcast_to(a, (*batch, *tail)), dtype).reshape(rows, *tail)
+    rows, shape = math.prod(batch), (*batch, *tail)
+    if isinstance(a, np.ndarray) and a.shape == shape and a.dtype == dtype and a.flags.c_contiguous:
+        return a.reshape(rows, *tail)  # the common case, without broadcast_to's cost at small B
+    return np.ascontiguousarray(np.broadcast_to(a, shape), dtype).reshape(rows, *tail)
 
 
 def buffer_estimates(motion: MotionModel, final: HorizonStack, k, buffer_info, buffer_vector, buffer_success,
@@ -1115,7 +1118,7 @@ def buffer_estimates(motion: MotionModel, final: HorizonStack, k, buffer_info, b
         return (final, *stack_estimates(current, min_stamps))
     batch, S = final.stamps.shape[:-1], final.stamps.shape[-1]
     D1 = np.shape(buffer_success)[-1]
-    M = int(np.prod(batch, dtype=np.int64))
+    M = math.prod(batch)
     q = motion.accel_sigma**2 if accel_var is None else np.asarray(accel_var, float)
     inv_q = _flat(1.0 / q, batch, (), float)
     info = _flat(final.info, batch, (S, 4, 4), float)
@@ -1194,7 +1197,7 @@ def _predictive_costs(motion: MotionModel, prev_x, prev_P, prev_valid, z, R, com
     if kernels is not None:
         batch = np.broadcast_shapes(np.shape(prev_valid)[:-1], np.shape(z)[:-1], np.shape(R)[:-2])
         S = np.shape(prev_valid)[-1]
-        M = int(np.prod(batch, dtype=np.int64))
+        M = math.prod(batch)
         flat = [_flat(a, batch, tail, dtype) for a, tail, dtype in ((prev_x, (S, 4), float), (prev_P, (S, 4, 4), float),
                                                                      (prev_valid, (S,), bool), (z, (2,), float),
                                                                      (R, (2, 2), float))]
