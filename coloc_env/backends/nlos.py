@@ -83,8 +83,8 @@ Arguments (``coloc_env.backends.Afge``; defaults = ``nlos_horizon``'s, docs/gao2
 
 With ``constant_windows`` every backend here keeps ``constant_x`` (B, N, S, 4): the output dfir with
 window N would give, for every N = 1..S of its stack (the window's estimate, else the prediction of that
-output at k - 1), so one run gives the whole constant-window curve. It is off by default: at B = 1024
-it costs about a tenth of a step.
+output at k - 1), so one run gives the whole constant-window curve. It is off by default: it updates a
+(B, N, S, 4) array every step (its cost: docs/performance.md).
 
 ``delay_kalman`` is the Kalman baseline on the same fused packets: one window that never drops a stamp,
 started from the world's prior (``estimators.afge.prior_stack``), the last D stamps re-filtered from
@@ -273,8 +273,7 @@ class PacketFirBackend(Backend):
         self.out_P = self.pred_P.copy()
         # constant-window outputs (``constant_windows``): what dfir with window N would output, for every
         # N = 1..S of the stack
-        self.constant_windows = bool(config.constant_windows)
-        shape = (B, N, self.S, 4) if self.constant_windows else (B, N, 0, 4)
+        shape = (B, N, self.S, 4) if config.constant_windows else (B, N, 0, 4)
         self.constant_x, self.constant_pred = np.zeros(shape), np.zeros(shape)
         self.slots = np.broadcast_to(np.arange(J), (B, N, J)).copy()
         self.mask = np.ones((B, N, J), bool)  # the keep mask of the last update (the pending filter's)
@@ -402,7 +401,7 @@ class PacketFirBackend(Backend):
         valid_w, x_w, P_w = t["valid"][at], t["x"][at], t["P"][at]
         self.out_x = np.where(valid_w[..., None], x_w, self.pred_x)
         self.out_P = np.where(valid_w[..., None, None], P_w, self.pred_P)
-        if self.constant_windows:
+        if self.config.constant_windows:
             self.constant_x = np.where(t["valid"][..., None], t["x"], self.constant_pred)
         self.window_used, self.valid_used = np.asarray(window, np.int64), valid_w
         lags = t["lags"]
@@ -445,7 +444,7 @@ class PacketFirBackend(Backend):
         A = self.motion.transition
         self.pred_x = self.out_x @ A.T
         self.pred_P = A @ self.out_P @ A.T + self.motion.process_cov
-        if self.constant_windows:
+        if self.config.constant_windows:
             self.constant_pred = self.constant_x @ A.T
 
     def position(self) -> np.ndarray:

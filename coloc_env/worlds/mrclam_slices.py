@@ -122,7 +122,7 @@ import numpy as np
 
 from coloc_env.config import BadInput, as_array, check_entries
 from coloc_env.data import mrclam
-from coloc_env.parts import WORLDS, PartConfig, check_choice, check_range
+from coloc_env.parts import WORLDS, PartConfig, check_flag, check_range
 from coloc_env.worlds.base import Readings, World
 from coloc_env.worlds.mrclam import check_recording, recording_tables, replay_tables
 from estimators.cv_models import ConstantVelocityAccel
@@ -322,7 +322,7 @@ class MrclamSlices(PartConfig):
         if self.start is not None:
             check_range(f"{prefix}start", self.start, 0, 10**9, integer=True)
         check_range(f"{prefix}initial_std", self.initial_std, 1e-6, 1e3)
-        check_choice(f"{prefix}ranges", self.ranges, (True, False))
+        check_flag(f"{prefix}ranges", self.ranges)
         if self.region is not None:
             box = as_array(f"{prefix}region", self.region, shape=(2,))
             check_entries(f"{prefix}region", box, -1e4, 1e4)

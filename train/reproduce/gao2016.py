@@ -124,7 +124,7 @@ def drive(spec, generators: list, constant: bool = False) -> dict:
     scenario = PresetComposition(spec, batch=len(generators))
     scenario.reset(list(generators))
     backend, K = scenario.backend, scenario.horizon
-    if constant and not backend.constant_windows:
+    if constant and not backend.config.constant_windows:
         raise RuntimeError("drive(constant=True) needs a backend with constant_windows=True")
     action = scenario.action_vector("maximum")
     actions = np.array(np.broadcast_to(action, (len(generators), scenario.num_agents, len(action))))
