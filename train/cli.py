@@ -609,9 +609,12 @@ def main(argv: list[str] | None = None) -> int:
     | 130    | Ctrl-C: one line naming the folders left marked ``INCOMPLETE``                         |
 
     Called as the ``coloc`` script (``argv`` None), a second Ctrl-C after the message is ignored, so the
-    process always ends with its line and its status.
+    process always ends with its line and its status, and a Ctrl-C that Python would drop is delivered again
+    (``redeliver_ignored_interrupt``).
     """
     as_script = argv is None
+    if as_script:
+        sys.unraisablehook = redeliver_ignored_interrupt
     argv = sys.argv[1:] if argv is None else list(argv)
     command = next((a for a in argv if not a.startswith("-")), "")
     try:
@@ -644,6 +647,24 @@ def main(argv: list[str] | None = None) -> int:
             import signal
 
             signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def redeliver_ignored_interrupt(unraisable) -> None:
+    """``sys.unraisablehook`` of the script: a Ctrl-C whose KeyboardInterrupt was raised inside a callback whose
+    exceptions Python ignores (a weakref's, such as the import system's module-lock cleanup) would be lost and
+    the command would run on; it is delivered again to the main thread (``_thread.interrupt_main``) from a timer
+    thread 10 ms later, once the callback has returned (delivered from inside it, it would be ignored again;
+    should it land in such a callback again, this hook delivers it once more). Every other unraisable exception
+    goes to Python's default hook."""
+    if unraisable.exc_type is not None and issubclass(unraisable.exc_type, KeyboardInterrupt):
+        import _thread
+        import threading
+
+        timer = threading.Timer(0.01, _thread.interrupt_main)
+        timer.daemon = True
+        timer.start()
+        return
+    sys.__unraisablehook__(unraisable)
 
 
 def _interrupted(command: str, args, as_script: bool) -> int:

@@ -165,3 +165,37 @@ def test_a_study_folder_that_cannot_be_created_is_refused_before_any_episode(tmp
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith("coloc study: error: ") and "is a file, not a folder" in err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["study"]
+
+
+def test_a_ctrl_c_python_ignores_in_a_callback_is_delivered_again(monkeypatch):
+    """A KeyboardInterrupt raised in a weakref callback is "ignored" by Python (as when SIGINT lands in the import
+    system's module-lock cleanup); the script's hook delivers it again, so the command still ends."""
+    import weakref
+
+    from train.cli import redeliver_ignored_interrupt
+
+    monkeypatch.setattr(sys, "unraisablehook", redeliver_ignored_interrupt)
+
+    class Target:
+        pass
+
+    def interrupted(_):
+        raise KeyboardInterrupt
+
+    target = Target()
+    ref = weakref.ref(target, interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        del target  # the callback runs here and its KeyboardInterrupt is ignored ...
+        for _ in range(1000):  # ... and delivered again on a later bytecode
+            time.sleep(0.001)
+    assert ref() is None
+
+
+def test_other_ignored_exceptions_go_to_pythons_hook(monkeypatch):
+    from train.cli import redeliver_ignored_interrupt
+
+    seen = []
+    monkeypatch.setattr(sys, "__unraisablehook__", seen.append)
+    unraisable = type("Unraisable", (), {"exc_type": RuntimeError})()
+    redeliver_ignored_interrupt(unraisable)
+    assert seen == [unraisable]
