@@ -34,7 +34,7 @@ $(STAMP): $(PY) pyproject.toml
 install: $(STAMP)
 
 # The demo's stages run in two lanes, one per core, each single-threaded (train/demo.py: the stages, their
-# reduced budgets, DEMO_RUNS, and why); its stage times go to results/.demo_times, each lane's output to
+# reduced budgets, each preset's DEMO_RUN in train/hyperparams, and why); its stage times go to results/.demo_times, each lane's output to
 # results/.demo_lane<N>.log, and the summary (train/demo_summary.py) ends it.
 demo: $(STAMP)
 	$(PY) -m train.demo --out results --coloc $(VENV)/bin/coloc

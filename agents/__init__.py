@@ -18,47 +18,52 @@ Three lists per scenario:
 
 from __future__ import annotations
 
+import importlib
 import inspect
 import os
+from types import ModuleType
 
-from agents import bandwidth_fusion, generic, gps_denied_nbp, lossy_fusion, mrclam_relay, nlos_horizon, relay_ukf
+from agents import generic
 from agents.base import FixedActionPolicy, Policy, RandomPolicy
 from coloc_env.config import BadInput, check_seed
+from coloc_env.scenarios import REGISTRY
 
-SCENARIO_POLICIES = {"bandwidth_fusion": {**bandwidth_fusion.POLICIES, **generic.PRESET_FIXED["bandwidth_fusion"]},
-                     "lossy_fusion": lossy_fusion.POLICIES, "relay_ukf": relay_ukf.POLICIES,
-                     "nlos_horizon": nlos_horizon.POLICIES, "gps_denied_nbp": gps_denied_nbp.POLICIES,
-                     "mrclam_relay": mrclam_relay.POLICIES}
-BOUND_POLICIES = {"nlos_horizon": nlos_horizon.BOUNDS}
-ALIASES = {"nlos_horizon": nlos_horizon.ALIASES}  # old name -> current name, accepted by make_policy only
-
-# The strongest realizable baselines with the agents' information. lossy_fusion's are the
-# leader-alone Kalman filter and the centralized filter (A), estimators rather than env policies:
-# ``train.evaluate.REFERENCE_FILTERS`` runs them on the same episodes; its informed filter is a bound.
-STRONGEST_BASELINES = {
-    "bandwidth_fusion": ("oracle_static",),
-    "lossy_fusion": (),
-    "relay_ukf": ("paper", "no_relay"),
-    "nlos_horizon": ("best_constant",),
-    "gps_denied_nbp": ("paper", "threshold"),
-    "mrclam_relay": ("paper",),
-}
 COMPOSITION_BASELINES = ("always", "silent")
+
+
+def policy_module(scenario: str) -> ModuleType | None:
+    """The module of a preset's policies (its declared ``policy_module``); None for a composition's name.
+
+    The module has ``POLICIES`` (name -> factory, the realizable policies), ``STRONGEST_BASELINES`` (the
+    realizable policies a learned one with the same information must beat; empty where the baselines are reference
+    filters rather than env policies: lossy_fusion's, run by ``train.evaluate.REFERENCE_FILTERS``), and
+    optionally ``BOUNDS`` (the ``bound_*`` policies) and ``ALIASES`` (old name -> current name, accepted by
+    ``make_policy`` only)."""
+    if scenario not in REGISTRY:
+        return None
+    return importlib.import_module(REGISTRY[scenario].policy_module)
+
+
+def _policies(scenario: str) -> dict:
+    module = policy_module(scenario)
+    return generic.POLICIES if module is None else module.POLICIES
+
+
+def _bounds(scenario: str) -> dict:
+    return getattr(policy_module(scenario), "BOUNDS", {})
 
 
 def available_policies(scenario: str) -> list[str]:
     """Realizable policy names for a preset, or for a composition's name ``world/network/backend``
     (``random`` first; ``always`` and ``silent`` included; no bound)."""
-    if scenario in SCENARIO_POLICIES:
-        return ["random", *SCENARIO_POLICIES[scenario]]
-    return ["random", *generic.POLICIES]
+    return ["random", *_policies(scenario)]
 
 
 def duplicates(scenario: str) -> dict[str, str]:
     """Names that build the same policy as an earlier name of ``available_policies`` (``always`` is
     ``paper`` where the paper already sends everything): name -> the earlier name. Evaluating them again
     would repeat the same episodes."""
-    table = SCENARIO_POLICIES.get(scenario, generic.POLICIES)
+    table = _policies(scenario)
     baselines = strongest_baselines(scenario)
     names = sorted(available_policies(scenario)[1:], key=lambda n: n not in baselines)  # a baseline keeps its name
     first, same = {}, {}
@@ -73,14 +78,13 @@ def duplicates(scenario: str) -> dict[str, str]:
 
 def bound_policies(scenario: str) -> list[str]:
     """The ``bound_*`` policies of ``scenario`` (what the agents cannot have); empty where it has none."""
-    return list(BOUND_POLICIES.get(scenario, {}))
+    return list(_bounds(scenario))
 
 
 def strongest_baselines(scenario: str) -> tuple[str, ...]:
     """The realizable policies a learned one must beat on ``scenario`` (a composition: ``always``, ``silent``)."""
-    if scenario in SCENARIO_POLICIES:
-        return STRONGEST_BASELINES[scenario]
-    return COMPOSITION_BASELINES
+    module = policy_module(scenario)
+    return COMPOSITION_BASELINES if module is None else tuple(module.STRONGEST_BASELINES)
 
 
 def make_policy(name: str, env, seed: int | None = None, **kwargs) -> Policy:
@@ -105,8 +109,8 @@ def make_policy(name: str, env, seed: int | None = None, **kwargs) -> Policy:
     base, colon, variant = name.partition(":")
     if colon and not variant.strip():
         raise BadInput(f"policy {name!r}: the variant after ':' is empty")
-    base = ALIASES.get(scenario, {}).get(base, base)
-    table = {**SCENARIO_POLICIES.get(scenario, generic.POLICIES), **BOUND_POLICIES.get(scenario, {})}
+    base = getattr(policy_module(scenario), "ALIASES", {}).get(base, base)
+    table = {**_policies(scenario), **_bounds(scenario)}
     if base not in table:
         raise BadInput(f"unknown policy {name!r} for {scenario}; available: {available_policies(scenario)}, "
                        f"bounds: {bound_policies(scenario)} or a .zip")
@@ -120,4 +124,4 @@ def make_policy(name: str, env, seed: int | None = None, **kwargs) -> Policy:
 
 
 __all__ = ["FixedActionPolicy", "Policy", "RandomPolicy", "available_policies", "bound_policies", "duplicates",
-           "make_policy", "strongest_baselines"]
+           "make_policy", "policy_module", "strongest_baselines"]

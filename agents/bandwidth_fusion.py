@@ -205,4 +205,40 @@ class OracleStaticPolicy(FixedActionPolicy):
         super().__init__(env, scenario.encode_actions(self.result.selection, paper_weights(self.result.weights)))
 
 
-POLICIES = {"paper": PaperPolicy, "greedy": GreedyPolicy, "oracle_static": OracleStaticPolicy}
+# --- always / silent ---------------------------------------------------------------------------------------
+def _bandwidth_fusion_fixed(env, fewest: bool) -> FixedActionPolicy:
+    """Every (neighbour, component) score at -1 (``fewest``) or +1: the env decodes it to the feasible selection
+    with the fewest / most components (ties: the first in the budget's order), without listing the selections.
+    Fusion weights: the paper's P1 where it applies (4 UAVs), else equal weights (zero logits)."""
+    scenario = env.unwrapped.scenario
+    if scenario.name != "bandwidth_fusion":
+        raise BadInput(f"this policy is for bandwidth_fusion, not {scenario.name}")
+    N, n = scenario.num_agents, scenario.n
+    scores = (N - 1) * n
+    actions = np.zeros((N, scenario.action_space().shape[0]))
+    if N == 4:
+        first = scenario.links.selection_at(np.zeros(N, dtype=np.int64))  # any feasible selection
+        actions[:, scores:] = scenario.encode_actions(first, paper_weights("P1"))[:, scores:]
+    actions[:, :scores] = -1.0 if fewest else 1.0
+    return FixedActionPolicy(env, actions)
+
+
+def always(env) -> FixedActionPolicy:
+    """bandwidth_fusion: every receiver takes the feasible selection with the most components (the first
+    such in the budget's order), the paper's weights P1."""
+    return _bandwidth_fusion_fixed(env, fewest=False)
+
+
+def silent(env) -> FixedActionPolicy:
+    """bandwidth_fusion: every receiver takes the feasible selection with the fewest components, weights P1.
+
+    The budget sets how little a receiver may take (``min_per_link`` per link; with the default
+    ``exact_budget`` every feasible selection takes exactly ``budget`` components), so "silent" is the
+    least the budget allows, not nothing; at the paper's setting it sends as much as ``always``.
+    """
+    return _bandwidth_fusion_fixed(env, fewest=True)
+
+
+POLICIES = {"paper": PaperPolicy, "greedy": GreedyPolicy, "oracle_static": OracleStaticPolicy, "always": always,
+            "silent": silent}
+STRONGEST_BASELINES = ("oracle_static",)

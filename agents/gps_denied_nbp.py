@@ -98,3 +98,4 @@ class ThresholdPolicy(Policy):
 
 
 POLICIES = {"paper": PaperPolicy, "always": PaperPolicy, "silent": SilentPolicy, "threshold": ThresholdPolicy}
+STRONGEST_BASELINES = ("paper", "threshold")

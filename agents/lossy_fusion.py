@@ -51,3 +51,7 @@ class SilentPolicy(FixedActionPolicy):
 
 
 POLICIES = {"paper": PaperPolicy, "always": PaperPolicy, "silent": SilentPolicy}
+# The strongest baselines are the leader-alone Kalman filter and the centralized filter (A), estimators rather
+# than env policies: ``train.evaluate.REFERENCE_FILTERS`` runs them on the same episodes (its informed filter is
+# a bound).
+STRONGEST_BASELINES = ()

@@ -82,3 +82,4 @@ class NoRelayPolicy(PaperPolicy):
 # ``always`` (every transport decision at its maximum: the complete chain) is ``paper``; ``silent``
 # (nothing relayed: the measurement still updates m and n) is ``no_relay``.
 POLICIES = {"paper": PaperPolicy, "always": PaperPolicy, "silent": NoRelayPolicy, "no_relay": NoRelayPolicy}
+STRONGEST_BASELINES = ("paper",)

@@ -184,5 +184,6 @@ class SilentPolicy(_EpisodePolicy):
 
 POLICIES = {"paper": PaperPolicy, "constant": ConstantPolicy, "best_constant": BestConstantPolicy,
             "always": ConstantPolicy, "silent": SilentPolicy}
+STRONGEST_BASELINES = ("best_constant",)
 BOUNDS = {"bound_hindsight_constant": OracleConstantPolicy}
 ALIASES = {"oracle_constant": "bound_hindsight_constant"}  # the old name, used by tests and older scripts

@@ -120,3 +120,4 @@ class NearestLocalPolicy(Policy):
 # (nothing relayed: the measurement still updates m and n) is ``no_relay``.
 POLICIES = {"paper": PaperPolicy, "always": PaperPolicy, "silent": NoRelayPolicy, "no_relay": NoRelayPolicy,
             "nearest_local": NearestLocalPolicy}
+STRONGEST_BASELINES = ("paper", "no_relay")

@@ -27,10 +27,12 @@ from coloc_env.parts import BACKENDS as _BACKENDS
 from coloc_env.parts import NETWORKS as _NETWORKS
 from coloc_env.parts import WORLDS as _WORLDS
 from coloc_env.presets import PRESETS
+from coloc_env.registry import register_presets as _register_presets
 from coloc_env.scenarios import REGISTRY
 from coloc_env.scenarios.composed import ComposedScenario
 
-SCENARIOS: tuple[str, ...] = tuple(PRESETS)
+_register_presets()  # every preset as coloc/<preset>-v<N> in PettingZoo's registry (coloc_env.registry)
+
 WORLDS: tuple[str, ...] = tuple(_WORLDS)
 NETWORKS: tuple[str, ...] = tuple(_NETWORKS)
 BACKENDS: tuple[str, ...] = tuple(_BACKENDS)
@@ -57,7 +59,7 @@ def scenario_class(name: str):
         composition_named(name)
         return ComposedScenario
     if not isinstance(name, str) or name not in REGISTRY:
-        raise ValueError(f"unknown scenario {name!r}; available: {list(SCENARIOS)}, a composition's name "
+        raise ValueError(f"unknown scenario {name!r}; available: {list(REGISTRY)}, a composition's name "
                          "WORLD/NETWORK/BACKEND (coloc list) or a coloc_env.compose(...)")
     return REGISTRY[name]
 
@@ -109,9 +111,10 @@ def env(name, render_mode: str | None = None, max_cycles: int | None = None, **c
     return parallel_to_aec(parallel_env(name, render_mode=render_mode, max_cycles=max_cycles, **config))
 
 
-from coloc_env.registry import register_presets as _register_presets  # noqa: E402
-
-_register_presets()  # every preset as coloc/<preset>-v<N> in PettingZoo's registry (coloc_env.registry)
+def __getattr__(name: str):
+    if name == "SCENARIOS":  # the registered presets' names, in registry order (a preset registered later included)
+        return tuple(REGISTRY)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 __all__ = ["BACKENDS", "NETWORKS", "PRESETS", "SCENARIOS", "WORLDS", "CoLocParallelEnv", "Composition",
            "backends", "compatibility", "compose", "composition_named", "env", "is_composition_name", "make_core",

@@ -3,8 +3,8 @@
 ``max_cycles`` is PettingZoo's name for the episode length (its
 ``max_cycles_test`` and the SISL/butterfly environments use it): every env
 here accepts it and writes it into the field that sets the episode length,
-the preset's ``horizon`` (``window_steps`` for mrclam_relay, the replayed
-window) or a composition's ``horizon`` (``with_max_cycles``).
+the preset's declared ``episode_length_field`` (``horizon``; ``window_steps`` for
+mrclam_relay, the replayed window) or a composition's ``horizon`` (``with_max_cycles``).
 """
 
 from __future__ import annotations
@@ -20,14 +20,13 @@ from coloc_env.config import BadInput, build_config, check_range, check_seed
 from coloc_env.rendering import Renderer
 from coloc_env.scenarios.base import Scenario
 
-# The config field that sets the episode length, where it is not ``horizon``.
-EPISODE_LENGTH_FIELDS = {"mrclam_relay": "window_steps"}
 MAX_CYCLES_LIMIT = 1_000_000_000
 
 
 def episode_length_field(scenario_cls: type[Scenario]) -> str:
-    """The name of the config field of ``scenario_cls`` that ``max_cycles`` sets."""
-    return EPISODE_LENGTH_FIELDS.get(getattr(scenario_cls, "name", ""), "horizon")
+    """The name of the config field of ``scenario_cls`` that ``max_cycles`` sets: a preset's declared
+    ``episode_length_field``, ``horizon`` otherwise."""
+    return getattr(scenario_cls, "episode_length_field", "horizon")
 
 
 def with_max_cycles(scenario_cls: type[Scenario], composition, config: dict, max_cycles: int | None):

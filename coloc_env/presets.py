@@ -37,16 +37,42 @@ How exactly the parts reproduce each preset (tests/coloc_env):
 
 from __future__ import annotations
 
+from collections.abc import Iterator, Mapping
+
 from coloc_env.composition import Composition
 from coloc_env.scenarios import REGISTRY
 from coloc_env.scenarios.binding import PresetScenario
 
 
-def _preset(name: str) -> Composition:
-    cls = REGISTRY[name]
+def _preset(cls: type) -> Composition:
     if not issubclass(cls, PresetScenario):
-        raise TypeError(f"scenario {name!r} is not a binding on the composable core")
+        raise TypeError(f"scenario {cls.name!r} is not a binding on the composable core")
     return cls.compose(cls.Config())
 
 
-PRESETS: dict[str, Composition] = {name: _preset(name) for name in REGISTRY}
+class Presets(Mapping):
+    """Name -> the preset's Composition, for every preset registered (``coloc_env.scenarios.REGISTRY``); each
+    Composition is built once per registered class, when first asked for."""
+
+    def __init__(self):
+        self._built: dict[type, Composition] = {}
+
+    def __getitem__(self, name: str) -> Composition:
+        cls = REGISTRY[name]
+        if cls not in self._built:
+            self._built[cls] = _preset(cls)
+        return self._built[cls]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(list(REGISTRY))
+
+    def __len__(self) -> int:
+        return len(REGISTRY)
+
+    def __repr__(self) -> str:
+        return f"Presets({list(self)})"
+
+
+PRESETS = Presets()
+for _name in REGISTRY:  # the presets' compositions are built (and validated) on import, as a check of their defaults
+    PRESETS[_name]

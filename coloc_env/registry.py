@@ -16,66 +16,72 @@ Keywords go to the preset's config (its dataclass fields, as for
 keyword is a `ValueError`. An id without a version (`"coloc/relay_ukf"`)
 resolves to the latest one.
 
-Versions: `VERSIONS[preset]` is the version a preset is registered under. It
-bumps whenever the preset's spaces or dynamics change (a different
-observation or action space, or different observations, rewards or errors for
-the same seed and actions). `tests/coloc_env/test_registry.py` pins each
-version's spaces and a short seeded rollout's fingerprint (`fingerprint`), so a
-change without a bump fails there. To bump: add 1 to the preset's entry in
-`VERSIONS`, then add the new id's pin to the test's `PINS` (the failing test
-prints the line to add), keeping the old ids' pins as they were.
+Versions: a preset's class declares the version it is registered under (its
+``version``; ``VERSIONS`` maps each preset to it). It bumps whenever the
+preset's spaces or dynamics change (a different observation or action space,
+or different observations, rewards or errors for the same seed and actions).
+`tests/coloc_env/test_registry.py` pins each version's spaces and a short
+seeded rollout's fingerprint (`fingerprint`), so a change without a bump fails
+there. To bump: add 1 to the preset's ``version``, then add the new id's pin to
+the test's `PINS` (the failing test prints the line to add), keeping the old
+ids' pins as they were. A preset registered after import (``register_preset``)
+gets its ids then; ``unregister_preset`` removes them.
 Compositions keep their `WORLD/NETWORK/BACKEND` names and are not registered.
 """
 
 from __future__ import annotations
 
-import functools
-
 import numpy as np
+import pettingzoo
+
+from coloc_env import envs
+from coloc_env.scenarios import REGISTRY
 
 NAMESPACE = "coloc"
 
-#: the version each preset is registered under (`coloc/<preset>-v<N>`)
-VERSIONS: dict[str, int] = {
-    "bandwidth_fusion": 1,
-    "lossy_fusion": 1,
-    "relay_ukf": 1,
-    "gps_denied_nbp": 1,
-    "nlos_horizon": 1,
-    "mrclam_relay": 1,
-}
+
+def __getattr__(name: str):
+    if name == "VERSIONS":  # preset -> the version it is registered under (its class's ``version``)
+        return {preset: cls.version for preset, cls in REGISTRY.items()}
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def env_id(preset: str) -> str:
     """The registered id of a preset at its current version, e.g. `coloc/relay_ukf-v1`."""
-    if preset not in VERSIONS:
-        raise ValueError(f"unknown preset {preset!r}; registered presets: {sorted(VERSIONS)}")
-    return f"{NAMESPACE}/{preset}-v{VERSIONS[preset]}"
+    if not isinstance(preset, str) or preset not in REGISTRY:
+        raise ValueError(f"unknown preset {preset!r}; registered presets: {sorted(REGISTRY)}")
+    return f"{NAMESPACE}/{preset}-v{REGISTRY[preset].version}"
 
 
 def env_ids() -> tuple[str, ...]:
     """Every preset's registered id, in `coloc_env.SCENARIOS` order."""
-    from coloc_env.presets import PRESETS
+    return tuple(env_id(name) for name in REGISTRY)
 
-    return tuple(env_id(name) for name in PRESETS)
+
+def _register_ids(scenario_cls) -> None:
+    """Register a preset with PettingZoo's `"parallel"` and `"aec"` registries (once: an id already registered is
+    left as it is, so re-importing `coloc_env` warns about nothing)."""
+    constructors = envs.constructors(scenario_cls.name)
+    makers = {"parallel": constructors[0], "aec": constructors[2]}
+    for kind, registry in (("parallel", pettingzoo.parallel_registry), ("aec", pettingzoo.aec_registry)):
+        if env_id(scenario_cls.name) not in registry:
+            pettingzoo.register(kind, env_id(scenario_cls.name), entry_point=makers[kind])
+
+
+def _unregister_ids(scenario_cls) -> None:
+    ident = f"{NAMESPACE}/{scenario_cls.name}-v{scenario_cls.version}"
+    for registry in (pettingzoo.parallel_registry, pettingzoo.aec_registry):
+        registry.pop(ident, None)
 
 
 def register_presets() -> None:
-    """Register every preset with PettingZoo's `"parallel"` and `"aec"` registries (once: an id already
-    registered is left as it is, so re-importing `coloc_env` warns about nothing)."""
-    import pettingzoo
+    """Register every preset registered so far with PettingZoo (ids already there are left as they are). Importing
+    this module does it, and registers each preset that registers later."""
+    for scenario_cls in list(REGISTRY.values()):
+        _register_ids(scenario_cls)
 
-    import coloc_env
-    from coloc_env.presets import PRESETS
 
-    missing = sorted(set(PRESETS) ^ set(VERSIONS))
-    if missing:
-        raise RuntimeError(f"coloc_env.registry.VERSIONS and PRESETS disagree on {missing}")
-    for name in PRESETS:
-        for kind, maker in (("parallel", coloc_env.parallel_env), ("aec", coloc_env.env)):
-            registry = pettingzoo.aec_registry if kind == "aec" else pettingzoo.parallel_registry
-            if env_id(name) not in registry:
-                pettingzoo.register(kind, env_id(name), entry_point=functools.partial(maker, name))
+REGISTRY.subscribe(_register_ids, _unregister_ids)
 
 
 def _space_text(space) -> str:

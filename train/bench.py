@@ -64,6 +64,7 @@ from collections.abc import Callable
 import numpy as np
 
 from coloc_env.config import BadInput
+from train import hyperparams
 from train.io import save_figure, write_json, write_text
 
 BATCHES = (1, 64, 1024)
@@ -158,14 +159,17 @@ def _gps_denied_nbp_particle_rows(min_seconds: float, batch: int | None = None, 
     return rows
 
 
-# Scenarios too expensive per step for the default batches (dNBP: an M x M kernel per message).
-SCENARIO_BATCHES: dict[str, tuple[int, ...]] = {"gps_denied_nbp": (1, 4, 64)}
+# Scenarios too expensive per step for the default batches (dNBP: an M x M kernel per message): each preset's
+# ``BENCH_BATCHES`` in train/hyperparams/<preset>.py.
+SCENARIO_BATCHES: dict[str, tuple[int, ...]] = {name: tuple(batches) for name, batches
+                                                in hyperparams.presets_declaring("BENCH_BATCHES").items()}
 # Extra rows a scenario reports (name -> fn(min_seconds) -> rows).
 EXTRA_BENCHES: dict[str, Callable[[float], list[dict]]] = {"gps_denied_nbp": _gps_denied_nbp_particle_rows}
 # Scenarios whose work per copy depends on the episode (dNBP: how many messages arrive, how many proposals the
 # truncated kernel prunes): a vector_env of B copies plays episodes 0..B-1, so its rows at B = 1 and B = 4 time
-# different work. These also get a row with every copy playing episode 0 (ONE_EPISODE), where only B changes.
-ONE_EPISODE_ROWS = ("gps_denied_nbp",)
+# different work. These also get a row with every copy playing episode 0 (ONE_EPISODE), where only B changes
+# (a preset's ``BENCH_ONE_EPISODE`` in train/hyperparams/<preset>.py).
+ONE_EPISODE_ROWS = tuple(name for name, on in hyperparams.presets_declaring("BENCH_ONE_EPISODE").items() if on)
 ONE_EPISODE = "vector_env, one episode"
 # what one_episode_rate and _rate's sources need where --against runs them in a reference tree's process
 _ONE_EPISODE_PREAMBLE = "from __future__ import annotations\nimport gc\nimport time\n\nimport numpy as np\n\n"

@@ -12,13 +12,6 @@ PAPERS = {"fu2017": "lossy_fusion", "zhao2020": "bandwidth_fusion", "wang2019": 
 SCENARIO_TO_PAPER = {v: k for k, v in PAPERS.items()}
 
 
-# The unit of each preset's episode metric (Scenario.episode_error) and what its "communication" info counts;
-# compositions report the mean position error in metres and the messages sent.
-METRIC_UNITS = {"bandwidth_fusion": "m^2", "lossy_fusion": "m^2", "nlos_horizon": "m^2", "relay_ukf": "m",
-                "gps_denied_nbp": "m", "mrclam_relay": "m"}
-COMMUNICATION_UNITS = {"bandwidth_fusion": "components received", "lossy_fusion": "messages transmitted",
-                       "nlos_horizon": "packets", "relay_ukf": "relays", "gps_denied_nbp": "broadcasts",
-                       "mrclam_relay": "messages delivered"}
 INTERRUPTED = 130  # the shell's exit status of a process ended by SIGINT (128 + 2)
 INTERNAL_ERROR = 1  # a failure that is not the input's: a one-line report and a request to report it
 BAD_INPUT = 2  # argparse's status for a bad flag; the same for every refused input
@@ -371,13 +364,14 @@ def _policies_for(scenario: str, policy: str, models: str) -> list[str]:
 
 def _evaluation_line(scenario: str, policy: str, result: dict, episodes: int, path: str) -> str:
     """One printed result, every number with its unit; the initial term only where the scenario's cost has one."""
-    unit = METRIC_UNITS.get(scenario, "m")
+    from train.leaderboard import communication, metric
+
+    unit = metric(scenario)[1]
     line = (f"{scenario} {policy}: mean realized cost {result['mean_cost']:.3f} +- {result['ci95']:.3f} {unit} "
             f"(95 %, {episodes} episodes)")
     if result["initial_cost"] != 0:
         line += f"; with the initial term {result['initial_cost']:.2f} {unit}: {result['paper_cost']:.3f} {unit}"
-    communication = COMMUNICATION_UNITS.get(scenario, "messages sent")
-    return line + f"; communication {result['communication_per_step']:.2f} {communication} per step -> {path}"
+    return line + f"; communication {result['communication_per_step']:.2f} {communication(scenario)} per step -> {path}"
 
 
 def cmd_evaluate(args) -> int:

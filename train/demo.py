@@ -7,8 +7,9 @@ of a BLAS sum). Each stage is a ``coloc`` command; its output goes to ``OUT/.dem
 process prints one line as each stage starts and ends. Each stage also appends ``START END STAGE``
 (Unix seconds) to ``OUT/.demo_times``, which ``train.demo_summary`` reads, then prints the summary.
 
-The lanes are balanced by the stage times of a quiet 2-core machine (the training budgets of
-``DEMO_RUNS`` are reduced: one seed, a few rollouts; the full budgets are in docs/learning.md;
+The lanes are balanced by the stage times of a quiet 2-core machine (the training budgets, each preset's
+``DEMO_RUN`` in train/hyperparams/<preset>.py, are reduced: one seed, a few rollouts; the full budgets are in
+docs/learning.md;
 so are the evaluation episodes of the two slow scenarios). Stages of one lane run in order;
 a failed stage stops its lane (the other lane goes on), and the run ends with status 1 and the tail of
 the failed stage's log. ``coloc evaluate`` merges its rows under a lock (``train.leaderboard.record``),
@@ -24,21 +25,15 @@ import sys
 import threading
 import time
 
-# scenario -> (training timesteps, evaluation episodes)
-DEMO_RUNS = {
-    "bandwidth_fusion": (20_000, 100),
-    "lossy_fusion": (40_000, 100),
-    "relay_ukf": (20_000, 20),
-    "nlos_horizon": (20_000, 6),
-    "gps_denied_nbp": (4_800, 6),
-}
+from train import hyperparams
+
 TIMES = ".demo_times"
 SINGLE_THREAD = {name: "1" for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
                                          "NUMBA_NUM_THREADS")}
 
 
 def _scenario_stages(scenario: str, out: str) -> list[tuple[str, list[str]]]:
-    steps, episodes = DEMO_RUNS[scenario]
+    steps, episodes = hyperparams.setting(scenario, "DEMO_RUN")  # (training timesteps, evaluation episodes)
     models = os.path.join(out, "train")
     return [
         (f"train {scenario} ({steps} timesteps)",
@@ -49,8 +44,9 @@ def _scenario_stages(scenario: str, out: str) -> list[tuple[str, list[str]]]:
 
 
 def lanes(out: str) -> list[list[tuple[str, list[str]]]]:
-    """The two lanes: (stage name, ``coloc`` arguments) in the order each lane runs them."""
-    return [
+    """The two lanes: (stage name, ``coloc`` arguments) in the order each lane runs them. A preset with a
+    ``DEMO_RUN`` that the balanced lanes below do not name is trained and evaluated at the end of the first."""
+    balanced = [
         [("reproduce all --quick", ["reproduce", "all", "--quick", "--out", out]),
          *_scenario_stages("bandwidth_fusion", out), *_scenario_stages("relay_ukf", out)],
         [*_scenario_stages("nlos_horizon", out),
@@ -58,6 +54,11 @@ def lanes(out: str) -> list[list[tuple[str, list[str]]]]:
           ["evaluate", "nlos_horizon", "--policy", "constant:6", "--episodes", "6", "--out", out]),
          *_scenario_stages("gps_denied_nbp", out), *_scenario_stages("lossy_fusion", out)],
     ]
+    named = {arguments[1] for lane in balanced for _, arguments in lane if arguments[0] == "train"}
+    for scenario in hyperparams.presets_declaring("DEMO_RUN"):
+        if scenario not in named:
+            balanced[0] += _scenario_stages(scenario, out)
+    return balanced
 
 
 def _clock(seconds: float) -> str:

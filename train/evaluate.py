@@ -78,22 +78,24 @@ def baselines(scenario: str) -> tuple[str, ...]:
     return (*agents.strongest_baselines(scenario), *(n for n in reference_rows(scenario) if not is_bound(n)))
 
 
-# Variants worth a row of their own under ``--policy all``: gps_denied_nbp's threshold rule at 5 m used 40 %
-# fewer broadcasts than the paper's schedule at an error not distinguishable from it on the validation seeds
-# (agents/gps_denied_nbp.py), the comparison for any policy that claims the paper's error with fewer broadcasts.
-EXTRA_ROWS = {"gps_denied_nbp": ("threshold:5",)}
+def extra_rows(scenario: str) -> tuple[str, ...]:
+    """Variants worth a row of their own under ``--policy all``: a preset's ``EVALUATE_EXTRA_ROWS`` in
+    train/hyperparams/<preset>.py (none by default)."""
+    from train import hyperparams
+
+    return tuple(hyperparams.setting(scenario, "EVALUATE_EXTRA_ROWS", ()))
 
 
 def all_rows(scenario: str) -> list[str]:
     """What ``coloc evaluate S --policy all`` runs besides trained models: the realizable policies (and
-    ``EXTRA_ROWS``), the bounds and the reference filters. A name that builds the same policy as an
+    ``extra_rows``), the bounds and the reference filters. A name that builds the same policy as an
     earlier one (``agents.duplicates``: ``always`` = ``paper`` on relay_ukf) is left out; the leaderboard
     names it beside the row it equals."""
     import agents
 
     same = agents.duplicates(scenario)
     realizable = [n for n in agents.available_policies(scenario) if n not in same]
-    return [*realizable, *EXTRA_ROWS.get(scenario, ()), *agents.bound_policies(scenario), *reference_rows(scenario)]
+    return [*realizable, *extra_rows(scenario), *agents.bound_policies(scenario), *reference_rows(scenario)]
 
 
 # --- bounds and consistency of a row -----------------------------------------------------------------------

@@ -35,31 +35,10 @@ from train.io import read_json, save_figure, write_json, write_text
 LOCK_NAME = ".leaderboard.lock"
 STOCHASTIC = " (stochastic)"  # suffix of a model evaluated with sampled actions (``evaluate --stochastic``)
 
-# The episode metric (Scenario.episode_error) of each preset, its unit, and what "communication" counts.
-METRICS = {
-    "bandwidth_fusion": ("J_K: squared estimation error summed over the steps and receivers", "m^2"),
-    "lossy_fusion": ("fused position MSE averaged over the slots", "m^2"),
-    "relay_ukf": ("distance error averaged over the steps and platforms", "m"),
-    "nlos_horizon": ("squared position error averaged over k >= 50 and the UAVs", "m^2"),
-    "gps_denied_nbp": ("position error of the GPS-fault UAVs averaged over their (step, UAV)", "m"),
-    "mrclam_relay": ("distance error against Vicon averaged over the steps and robots", "m"),
-}
+# A composition's episode metric and unit, and what its "communication" counts (a preset declares its own on its
+# scenario class: ``metric``, ``metric_unit``, ``communication``).
 COMPOSITION_METRIC = ("position error averaged over the steps and agents", "m")
-COMMUNICATION = {"bandwidth_fusion": "components received", "lossy_fusion": "messages transmitted",
-                 "nlos_horizon": "packets", "relay_ukf": "relays", "gps_denied_nbp": "broadcasts",
-                 "mrclam_relay": "messages delivered"}  # the words of train/cli.py's COMMUNICATION_UNITS
-
-# The learned policies' target per scenario: (what it says, the largest |paired error difference| relative to the
-# baseline's mean that counts as matching it, the communication saving a match needs).
-TARGETS = {
-    "bandwidth_fusion": ("beat the strongest baseline, or match it with 30 % less communication", 0.02, 0.30),
-    "lossy_fusion": ("beat the strongest baseline, or match it with 30 % less communication", 0.02, 0.30),
-    "relay_ukf": ("beat the strongest baseline, or match it with 30 % fewer hops", 0.02, 0.30),
-    "nlos_horizon": ("beat the strongest baseline, or match it with 30 % fewer packets", 0.02, 0.30),
-    "mrclam_relay": ("beat the strongest baseline, or match it with 30 % less communication", 0.02, 0.30),
-    "gps_denied_nbp": ("the strongest baseline's error (within 5 %) with 30 % fewer broadcasts, or lower error",
-                       0.05, 0.30),
-}
+COMPOSITION_COMMUNICATION = "messages sent"
 
 # A composition's target (a combination of parts no paper ran): the error-communication trade-off against
 # always and silent.
@@ -73,9 +52,34 @@ KINDS = {"random": "uniform random actions (seeded)", "always": "every transport
          "silent": "the least communication the scenario allows"}
 
 
+def _preset_class(scenario: str):
+    from coloc_env.scenarios import REGISTRY
+
+    return REGISTRY.get(scenario)
+
+
 def metric(scenario: str) -> tuple[str, str]:
-    """(what the episode metric is, its unit) for a preset or a composition."""
-    return METRICS.get(scenario, COMPOSITION_METRIC)
+    """(what the episode metric is, its unit) for a preset (its class's ``metric``, ``metric_unit``) or a
+    composition."""
+    cls = _preset_class(scenario)
+    return COMPOSITION_METRIC if cls is None else (cls.metric, cls.metric_unit)
+
+
+def communication(scenario: str) -> str:
+    """What the ``communication`` info of a preset (its class's ``communication``) or a composition counts."""
+    cls = _preset_class(scenario)
+    return COMPOSITION_COMMUNICATION if cls is None else cls.communication
+
+
+def target(scenario: str) -> tuple[str, float, float]:
+    """The learned policies' target: (what it says, the largest |paired error difference| relative to the
+    baseline's mean that counts as matching it, the communication saving a match needs); a preset's
+    ``LEADERBOARD_TARGET`` in train/hyperparams/<preset>.py, ``COMPOSITION_TARGET`` for a composition."""
+    from train import hyperparams
+
+    if _preset_class(scenario) is None:
+        return COMPOSITION_TARGET
+    return hyperparams.setting(scenario, "LEADERBOARD_TARGET", COMPOSITION_TARGET)
 
 
 # --- recording ---------------------------------------------------------------------------------------
@@ -277,7 +281,7 @@ def comparison(scenario: str, row: dict, baseline: dict | None) -> dict | None:
     diff = paired(row, baseline)
     if diff is None:
         return None
-    _, tolerance, saving = TARGETS.get(scenario, COMPOSITION_TARGET)
+    _, tolerance, saving = target(scenario)
     within = abs(diff["low"]) <= tolerance * abs(diff["reference_mean"]) and \
         abs(diff["high"]) <= tolerance * abs(diff["reference_mean"])
     base_comm = baseline["communication_per_step"]
@@ -320,7 +324,7 @@ def target_verdict(scenario: str, table: dict) -> str | None:
     models = sorted(n for n in table if n.endswith(".zip"))  # deterministic models; sampled ones are shown only
     if not models:
         return None
-    text = TARGETS.get(scenario, COMPOSITION_TARGET)[0]
+    text = target(scenario)[0]
     baseline = strongest_baseline(scenario, table)
     from train.evaluate import baselines
 
@@ -340,7 +344,7 @@ def target_verdict(scenario: str, table: dict) -> str | None:
                   else f", ~{result['episodes_needed']} episodes would resolve a difference this size")
         part = (f"{seed}: {result['verdict']} (paired difference {result['mean']:+.4g} {unit}, 95 % "
                 f"[{result['low']:+.4g}, {result['high']:+.4g}]{needed})")
-        if scenario not in TARGETS and "always" in table and "silent" in table:
+        if _preset_class(scenario) is None and "always" in table and "silent" in table:
             mixed = tradeoff_comparison(table[name], table["always"], table["silent"])
             if mixed is not None:
                 ok = ok or mixed["verdict"] == "beats"
@@ -585,7 +589,7 @@ def _difference_cells(scenario: str, row: dict, baseline: dict | None) -> tuple[
 
 def _table(scenario: str, entries: list[dict], baseline: dict | None, show_initial: bool) -> list[str]:
     _, unit = metric(scenario)
-    comm = COMMUNICATION.get(scenario, "messages sent")
+    comm = communication(scenario)
     versus = baseline["policy"] if baseline else "the strongest baseline"
     header = (f"| row | what it is | mean error [{unit}] | 95 % CI [{unit}] | paired difference vs {versus} "
               f"[{unit}] | its 95 % CI [{unit}] | verdict (paired) |"

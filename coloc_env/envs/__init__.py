@@ -12,12 +12,17 @@ Every module ``coloc_env.envs.<preset>`` has
 * ``env(...)``: the AEC view wrapped in PettingZoo's ``OrderEnforcingWrapper``;
 
 ``max_cycles`` is the episode length (PettingZoo's keyword, checked by
-``pettingzoo.test.max_cycles_test``): the preset's ``horizon``, or
-``window_steps`` for ``mrclam_relay`` (``coloc_env.env.with_max_cycles``).
+``pettingzoo.test.max_cycles_test``): the preset's ``episode_length_field``
+(``horizon``, or ``window_steps`` for ``mrclam_relay``; ``coloc_env.env.with_max_cycles``).
+
+The modules are made here, one per registered preset (``coloc_env.scenarios.REGISTRY``), when this package
+is imported or a preset registers later; a preset needs no file in this package.
 """
 
 from __future__ import annotations
 
+import sys
+import types
 from collections.abc import Callable
 
 from pettingzoo.utils.conversions import parallel_to_aec_wrapper
@@ -25,8 +30,6 @@ from pettingzoo.utils.wrappers import OrderEnforcingWrapper
 
 from coloc_env.env import CoLocParallelEnv
 from coloc_env.scenarios import REGISTRY
-
-PRESET_MODULES = ("bandwidth_fusion", "lossy_fusion", "relay_ukf", "gps_denied_nbp", "nlos_horizon", "mrclam_relay")
 
 
 def constructors(name: str) -> tuple[Callable[..., CoLocParallelEnv], Callable, Callable]:
@@ -51,6 +54,33 @@ def constructors(name: str) -> tuple[Callable[..., CoLocParallelEnv], Callable, 
         function.__qualname__ = function.__name__
         function.__module__ = f"coloc_env.envs.{name}"
     return parallel_env, raw_env, env
+
+
+def _add_module(scenario_cls) -> None:
+    """The module ``coloc_env.envs.<name>`` of a registered preset, importable and an attribute of this package."""
+    name = scenario_cls.name
+    module = types.ModuleType(f"{__name__}.{name}", f"``{name}`` as a PettingZoo environment module: "
+                              f"``parallel_env``, ``raw_env`` and ``env``.\n\n``max_cycles`` sets "
+                              f"``{scenario_cls.episode_length_field}``. See ``coloc_env.envs``.\n")
+    module.parallel_env, module.raw_env, module.env = constructors(name)
+    module.__all__ = ["env", "parallel_env", "raw_env"]
+    sys.modules[module.__name__] = module
+    setattr(sys.modules[__name__], name, module)
+
+
+def _remove_module(scenario_cls) -> None:
+    sys.modules.pop(f"{__name__}.{scenario_cls.name}", None)
+    if scenario_cls.name in globals():
+        del globals()[scenario_cls.name]
+
+
+REGISTRY.subscribe(_add_module, _remove_module)
+
+
+def __getattr__(name: str):
+    if name == "PRESET_MODULES":  # the presets that have a module here: every registered one
+        return tuple(REGISTRY)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 __all__ = ["PRESET_MODULES", "constructors"]

@@ -1,13 +1,17 @@
-"""Scenario registry: one module per paper setting."""
+"""Scenario registry: one module per paper setting.
 
-from coloc_env.scenarios.bandwidth_fusion import BandwidthFusionScenario
-from coloc_env.scenarios.gps_denied_nbp import GpsDeniedNbpScenario
-from coloc_env.scenarios.lossy_fusion import LossyFusionScenario
-from coloc_env.scenarios.mrclam_relay import MrclamRelayScenario
-from coloc_env.scenarios.nlos_horizon import NlosHorizonScenario
-from coloc_env.scenarios.relay_ukf import RelayUKFScenario
+Every module of this package is imported here, and each preset registers itself with
+``coloc_env.scenarios.binding.register_preset``; ``REGISTRY`` is that registry (name -> scenario class).
+A new preset is a new module: no list here is edited. The order of ``REGISTRY`` (and of
+``coloc_env.SCENARIOS``) follows the tuple below, then the remaining presets alphabetically.
+"""
 
-REGISTRY = {cls.name: cls for cls in (BandwidthFusionScenario, LossyFusionScenario, RelayUKFScenario,
-                                          GpsDeniedNbpScenario, NlosHorizonScenario, MrclamRelayScenario)}
+from coloc_env.parts_discovery import import_parts
+from coloc_env.scenarios.binding import PRESET_SCENARIOS
+
+import_parts(__name__, __path__, ("bandwidth_fusion", "lossy_fusion", "relay_ukf", "gps_denied_nbp", "nlos_horizon",
+                                   "mrclam_relay"))
+
+REGISTRY = PRESET_SCENARIOS
 
 __all__ = ["REGISTRY"]

@@ -158,7 +158,7 @@ from coloc_env.networks.bandwidth import ScoredBandwidth
 from coloc_env.primitives import BandwidthBudget
 from coloc_env.rendering import Link, Scene, ring_layout
 from coloc_env.scenarios.base import Scenario
-from coloc_env.scenarios.binding import PresetConfig, PresetScenario, keyword
+from coloc_env.scenarios.binding import PresetConfig, PresetScenario, keyword, register_preset
 from coloc_env.worlds.drift import Drift
 from estimators.bandwidth_fusion import paper_selection, paper_weights  # noqa: F401 - the paper's tables, here too
 
@@ -211,6 +211,7 @@ class BandwidthFusionConfig(PresetConfig):
         return fusion_model(*self.parts()[0].models(), self.num_agents)
 
 
+@register_preset
 class BandwidthFusionScenario(PresetScenario):
     """Batched core of ``bandwidth_fusion``: the binding of ``BandwidthFusionConfig`` on the composable core
     (``drift`` / ``bandwidth`` / ``bandwidth_fusion``); the module docstring has the table."""
@@ -218,6 +219,11 @@ class BandwidthFusionScenario(PresetScenario):
     name = "bandwidth_fusion"
     paper = "zhao2020"
     Config = BandwidthFusionConfig
+    version = 1
+    metric = "J_K: squared estimation error summed over the steps and receivers"
+    metric_unit = "m^2"
+    communication = "components received"
+    policy_module = "agents.bandwidth_fusion"
 
     def __init__(self, config: BandwidthFusionConfig, batch: int = 1):
         super().__init__(config, batch)

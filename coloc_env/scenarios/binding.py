@@ -127,11 +127,34 @@ class PresetConfig:
 
 class PresetScenario(ComposedScenario):
     """Batched core of a preset: its flat config (``self.config``) bound to the composition of its parts
-    (``self.composition``)."""
+    (``self.composition``).
+
+    A preset declares, once, on its class, what the rest of coloc reads about it (``register_preset`` checks
+    the declarations when the preset registers):
+
+    | declaration            | what it is                                                                  |
+    |------------------------|-----------------------------------------------------------------------------|
+    | ``name``               | the preset's name (``coloc_env.SCENARIOS``, ``coloc_env.envs.<name>``)      |
+    | ``paper``              | the paper key (``zhao2020``), or the data set's name                        |
+    | ``Config``             | its flat config (a ``PresetConfig``)                                        |
+    | ``version``            | the version of its PettingZoo id ``coloc/<name>-v<version>``                |
+    | ``metric``             | what its episode metric (``episode_error``) measures, in words              |
+    | ``metric_unit``        | the metric's unit (``"m"`` or ``"m^2"``)                                     |
+    | ``communication``      | what its ``communication`` info counts (``"relays"``)                       |
+    | ``episode_length_field``| the config field that ``max_cycles`` sets (``"horizon"`` by default)       |
+    | ``policy_module``      | the module of its policies (``agents.<name>``: ``POLICIES``, optionally     |
+    |                        | ``BOUNDS``, ``ALIASES``; ``STRONGEST_BASELINES``)                            |
+    """
 
     name: ClassVar[str]
     paper: ClassVar[str]
     Config: ClassVar[type]
+    version: ClassVar[int]
+    metric: ClassVar[str]
+    metric_unit: ClassVar[str]
+    communication: ClassVar[str]
+    episode_length_field: ClassVar[str] = "horizon"
+    policy_module: ClassVar[str]
 
     @classmethod
     def compose(cls, config):
@@ -156,3 +179,74 @@ class PresetScenario(ComposedScenario):
         if isinstance(config, PresetConfig):
             return {k: v for k, v in config.composition_options().items() if k != "horizon"}
         return {}
+
+
+# The declarations ``register_preset`` requires of a preset class: name -> (type, what it is).
+DECLARATIONS: dict[str, tuple[type, str]] = {
+    "name": (str, "the preset's name"), "paper": (str, "the paper key"), "Config": (type, "the flat config class"),
+    "version": (int, "the PettingZoo id's version, an integer >= 1"),
+    "metric": (str, "what the episode metric measures"), "metric_unit": (str, "the metric's unit"),
+    "communication": (str, "what the communication info counts"),
+    "episode_length_field": (str, "the config field max_cycles sets"),
+    "policy_module": (str, "the module of the preset's policies"),
+}
+
+
+class PresetRegistry(dict):
+    """Name -> preset scenario class, in registration order, filled by ``register`` (``register_preset``).
+
+    ``subscribe(on_register, on_unregister)`` lets a view of the presets follow the registry (the PettingZoo
+    ids, the ``coloc_env.envs`` modules): ``on_register`` is called for every preset registered so far and then
+    for each new one, ``on_unregister`` for each preset ``unregister`` removes."""
+
+    def __init__(self):
+        super().__init__()
+        self._subscribers: list[tuple] = []
+
+    @staticmethod
+    def check(cls: type) -> None:
+        """TypeError naming the preset and the field where a declaration is missing or of the wrong type."""
+        label = getattr(cls, "name", cls.__name__)
+        if not (isinstance(cls, type) and issubclass(cls, PresetScenario)):
+            raise TypeError(f"preset {label!r}: a preset is a PresetScenario subclass, got {cls!r}")
+        for field, (kind, what) in DECLARATIONS.items():
+            if not any(field in vars(k) for k in cls.__mro__ if issubclass(k, PresetScenario)):  # not the core's
+                raise TypeError(f"preset {label!r} declares no {field} ({what})")
+            value = getattr(cls, field)
+            if not isinstance(value, kind) or isinstance(value, bool) or (kind is str and not value.strip()):
+                raise TypeError(f"preset {label!r}: {field} must be {what}, got {value!r}")
+        if cls.version < 1:
+            raise TypeError(f"preset {label!r}: version must be an integer >= 1, got {cls.version!r}")
+        fields = {f.name for f in dataclasses.fields(cls.Config)} if dataclasses.is_dataclass(cls.Config) else set()
+        if cls.episode_length_field not in fields:
+            raise TypeError(f"preset {label!r}: episode_length_field {cls.episode_length_field!r} is not a field of "
+                            f"{cls.Config.__name__}")
+
+    def register(self, cls: type) -> type:
+        """Register the preset class ``cls`` under ``cls.name`` (a decorator); a missing declaration or a name
+        registered twice is an error naming the preset."""
+        self.check(cls)
+        if cls.name in self:
+            raise ValueError(f"preset {cls.name!r} registered twice")
+        self[cls.name] = cls
+        for on_register, _ in self._subscribers:
+            on_register(cls)
+        return cls
+
+    def unregister(self, name: str) -> None:
+        """Remove the preset ``name`` (and its views: ids, ``coloc_env.envs`` module); a test's clean-up."""
+        if name not in self:
+            raise ValueError(f"unknown preset {name!r}; registered presets: {sorted(self)}")
+        cls = self.pop(name)
+        for _, on_unregister in self._subscribers:
+            on_unregister(cls)
+
+    def subscribe(self, on_register, on_unregister) -> None:
+        self._subscribers.append((on_register, on_unregister))
+        for cls in list(self.values()):
+            on_register(cls)
+
+
+PRESET_SCENARIOS = PresetRegistry()
+register_preset = PRESET_SCENARIOS.register
+unregister_preset = PRESET_SCENARIOS.unregister

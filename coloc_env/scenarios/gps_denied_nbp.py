@@ -150,7 +150,7 @@ from coloc_env.backends.particles import Dnbp
 from coloc_env.config import check_range
 from coloc_env.networks.broadcast import Broadcast
 from coloc_env.rendering import Scene
-from coloc_env.scenarios.binding import PresetConfig, PresetScenario, keyword
+from coloc_env.scenarios.binding import PresetConfig, PresetScenario, keyword, register_preset
 from coloc_env.worlds.gps_denied import GpsDenied
 
 OBS_DIM = 8
@@ -220,6 +220,7 @@ def bimodality(points: np.ndarray, centred: np.ndarray | None = None) -> np.ndar
     return np.minimum(np.where(m2 > 1e-18, (skew**2 + 1.0) / np.maximum(kurt, 1e-12), 1.0 / 3.0), 1.0)
 
 
+@register_preset
 class GpsDeniedNbpScenario(PresetScenario):
     """``gps_denied_nbp`` as a binding: ``gps_denied`` / ``broadcast`` / ``dnbp`` with the paper's per-iteration
     broadcast codec, observation, reward and infos (module docstring)."""
@@ -227,6 +228,11 @@ class GpsDeniedNbpScenario(PresetScenario):
     name = "gps_denied_nbp"
     paper = "wan2014"
     Config = GpsDeniedNbpConfig
+    version = 1
+    metric = "position error of the GPS-fault UAVs averaged over their (step, UAV)"
+    metric_unit = "m"
+    communication = "broadcasts"
+    policy_module = "agents.gps_denied_nbp"
     metric_weight_key = "fault"
 
     def __init__(self, config: GpsDeniedNbpConfig, batch: int = 1):

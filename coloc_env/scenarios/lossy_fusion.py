@@ -149,7 +149,7 @@ from coloc_env.backends.fusion import PredictionCompensation
 from coloc_env.networks.bernoulli_delay import BernoulliDelay
 from coloc_env.parts import check_flag
 from coloc_env.rendering import Link, Scene, ring_layout
-from coloc_env.scenarios.binding import PresetConfig, PresetScenario, keyword
+from coloc_env.scenarios.binding import PresetConfig, PresetScenario, keyword, register_preset
 from coloc_env.worlds.target_cv import TargetCv
 
 AGE_SCALE = 10.0
@@ -182,6 +182,7 @@ class LossyFusionConfig(PresetConfig):
         check_flag("time_stamps", self.time_stamps)
 
 
+@register_preset
 class LossyFusionScenario(PresetScenario):
     """Batched core of ``lossy_fusion``: the binding of ``LossyFusionConfig`` on the composable core
     (``target_cv`` / ``bernoulli_delay`` / ``prediction_compensation``); the module docstring has the table."""
@@ -189,6 +190,11 @@ class LossyFusionScenario(PresetScenario):
     name = "lossy_fusion"
     paper = "fu2017"
     Config = LossyFusionConfig
+    version = 1
+    metric = "fused position MSE averaged over the slots"
+    metric_unit = "m^2"
+    communication = "messages transmitted"
+    policy_module = "agents.lossy_fusion"
 
     def __init__(self, config: LossyFusionConfig, batch: int = 1):
         super().__init__(config, batch)

@@ -207,7 +207,7 @@ from coloc_env.data import mrclam
 from coloc_env.networks.relay import Relay
 from coloc_env.primitives.relay import STOP_REASONS
 from coloc_env.rendering import Scene
-from coloc_env.scenarios.binding import keyword
+from coloc_env.scenarios.binding import keyword, register_preset
 from coloc_env.scenarios.relay_codec import RelayTeamConfig, RelayTeamScenario, chain_links
 from coloc_env.worlds.mrclam import Mrclam
 
@@ -243,6 +243,7 @@ class MrclamRelayConfig(RelayTeamConfig):
         return self.window_steps
 
 
+@register_preset
 class MrclamRelayScenario(RelayTeamScenario):
     """Batched core of ``mrclam_relay``: the binding of ``MrclamRelayConfig`` on the composable core
     (``mrclam`` / ``relay`` with ``routing="per_source"`` / ``ukf_se2``); the module docstring has the tables.
@@ -253,6 +254,12 @@ class MrclamRelayScenario(RelayTeamScenario):
     name = "mrclam_relay"
     paper = "mrclam"
     Config = MrclamRelayConfig
+    version = 1
+    metric = "distance error against Vicon averaged over the steps and robots"
+    metric_unit = "m"
+    communication = "messages delivered"
+    episode_length_field = "window_steps"
+    policy_module = "agents.mrclam_relay"
     agent_prefix = "robot"
 
     def __init__(self, config: MrclamRelayConfig, batch: int = 1):

@@ -176,7 +176,7 @@ import numpy as np
 from coloc_env.backends.nlos import Afge
 from coloc_env.networks.random_delay import RandomDelay
 from coloc_env.rendering import Link, Scene
-from coloc_env.scenarios.binding import PresetConfig, PresetScenario, keyword
+from coloc_env.scenarios.binding import PresetConfig, PresetScenario, keyword, register_preset
 from coloc_env.worlds.nlos_orbit import NlosOrbit
 
 _W, _B = NlosOrbit(), Afge()  # the parts' defaults are the preset's
@@ -253,6 +253,7 @@ class NlosHorizonConfig(PresetConfig):
         backend.check_against(self.num_neighbours, network.buffer_length, {name: name for name in names})
 
 
+@register_preset
 class NlosHorizonScenario(PresetScenario):
     """Batched core of ``nlos_horizon``: the binding of ``NlosHorizonConfig`` on the composable core
     (``nlos_orbit`` / ``random_delay`` / ``afge``, receiving before deciding); the module docstring has the
@@ -261,6 +262,11 @@ class NlosHorizonScenario(PresetScenario):
     name = "nlos_horizon"
     paper = "gao2016"
     Config = NlosHorizonConfig
+    version = 1
+    metric = "squared position error averaged over k >= 50 and the UAVs"
+    metric_unit = "m^2"
+    communication = "packets"
+    policy_module = "agents.nlos_horizon"
 
     def __init__(self, config: NlosHorizonConfig, batch: int = 1):
         super().__init__(config, batch)

@@ -170,7 +170,7 @@ from coloc_env.backends.ukf import UkfDcl
 from coloc_env.networks.relay import Relay
 from coloc_env.primitives.relay import STOP_REASONS, RelayChain
 from coloc_env.rendering import Scene
-from coloc_env.scenarios.binding import keyword
+from coloc_env.scenarios.binding import keyword, register_preset
 from coloc_env.scenarios.relay_codec import RelayTeamConfig, RelayTeamScenario, chain_links
 from coloc_env.worlds.circles import Circles
 
@@ -210,6 +210,7 @@ class RelayUKFConfig(RelayTeamConfig):
         return self.num_agents
 
 
+@register_preset
 class RelayUKFScenario(RelayTeamScenario):
     """``relay_ukf`` as a binding: ``circles`` / ``relay`` / ``ukf_dcl`` with the paper's action codec,
     observation, team reward and infos (module docstring)."""
@@ -217,6 +218,11 @@ class RelayUKFScenario(RelayTeamScenario):
     name = "relay_ukf"
     paper = "wang2019"
     Config = RelayUKFConfig
+    version = 1
+    metric = "distance error averaged over the steps and platforms"
+    metric_unit = "m"
+    communication = "relays"
+    policy_module = "agents.relay_ukf"
     agent_prefix = "platform"
     metric_error_key = "posterior_error"
     distance_scale = DISTANCE_SCALE

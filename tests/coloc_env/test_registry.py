@@ -70,7 +70,7 @@ def test_pinned_spaces_and_rollout_match_the_registered_version(name):
     line = f'"{id_}": ({spaces!r},\n    {digest!r}),'
     assert id_ in PINS, f"{id_} has no pin; add to PINS:\n{line}"
     pinned_spaces, pinned_digest = PINS[id_]
-    hint = (f"{name}'s spaces or dynamics changed: add 1 to VERSIONS[{name!r}] in coloc_env/registry.py and "
+    hint = (f"{name}'s spaces or dynamics changed: add 1 to the version of {name!r}'s scenario class and "
             f"add the new id's pin to PINS (keep the old ones):\n{line}")
     assert spaces == pinned_spaces, hint
     np.testing.assert_allclose(digest, pinned_digest, rtol=1e-7, atol=1e-9, err_msg=hint)

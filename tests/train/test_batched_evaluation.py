@@ -24,7 +24,7 @@ def _cases():
     for scenario in SMALL:
         names = agents.available_policies(scenario) + agents.bound_policies(scenario)
         marks = [needs_mrclam] if scenario == "mrclam_relay" else []
-        for name in [*names, *ev.EXTRA_ROWS.get(scenario, ())]:
+        for name in [*names, *ev.extra_rows(scenario)]:
             yield pytest.param(scenario, name, marks=marks)
 
 

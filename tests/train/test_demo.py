@@ -3,12 +3,12 @@ stage stops only its own lane. The stages are replaced by a stub command here (t
 
 import sys
 
-from train import demo
+from train import demo, hyperparams
 
 
 def test_every_scenario_is_trained_and_evaluated_once_after_its_training():
     stages = [arguments for lane in demo.lanes("out") for _, arguments in lane]
-    for scenario in demo.DEMO_RUNS:
+    for scenario in hyperparams.presets_declaring("DEMO_RUN"):
         trains = [i for i, a in enumerate(stages) if a[:2] == ["train", scenario]]
         evaluates = [i for i, a in enumerate(stages) if a[:2] == ["evaluate", scenario] and "all" in a]
         assert len(trains) == 1 and len(evaluates) == 1 and trains[0] < evaluates[0], scenario

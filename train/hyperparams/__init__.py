@@ -5,7 +5,13 @@ optionally ``TIMESTEPS``, ``ALGORITHM``: ``"ppo"`` (stable-baselines3's PPO, the
 ``"decentralized"`` (the default: the critic sees what the actor sees) or ``"centralized"`` (the critic also sees
 the copy's ``state()``; ``agents.centralized_critic``)), and ``CURVE_EPISODES``: how many validation episodes
 score each learning-curve point, the best of which becomes ``model.zip`` (default
-``train.training.CURVE_EPISODES``)."""
+``train.training.CURVE_EPISODES``).
+
+A preset's module also holds what only ``train`` needs of it: ``LEADERBOARD_TARGET`` (the leaderboard's target for
+a learned policy, ``train.leaderboard.target``), and optionally ``DEMO_RUN`` (``make demo``'s budget,
+``train.demo``), ``EVALUATE_EXTRA_ROWS`` (``coloc evaluate --policy all``'s extra rows,
+``train.evaluate.extra_rows``), ``BENCH_BATCHES`` and ``BENCH_ONE_EPISODE`` (``coloc bench``'s batch sizes and
+one-episode row, ``train.bench``). They are found by the preset's name (``setting``, ``presets_declaring``)."""
 
 import copy
 import importlib
@@ -83,3 +89,21 @@ def critic(scenario: str) -> str:
     from agents.centralized_critic import CRITICS
 
     return _setting_choice(scenario, "CRITIC", CRITICS, "decentralized")
+
+
+def setting(scenario: str, field: str, default=None):
+    """``field`` of ``scenario``'s module, ``default`` where the module sets none or the scenario has no module."""
+    try:
+        settings = module(scenario)
+    except ValueError:
+        return default
+    return getattr(settings, field, default)
+
+
+def presets_declaring(field: str) -> dict:
+    """Preset name -> its module's ``field``, for every registered preset whose module sets it (registry order)."""
+    import coloc_env
+
+    missing = object()
+    values = {name: setting(name, field, missing) for name in coloc_env.SCENARIOS}
+    return {name: value for name, value in values.items() if value is not missing}

@@ -27,3 +27,10 @@ NUM_COPIES = 8
 # docs/learning_history.md has the curves). docs/learning.md's table is `coloc train bandwidth_fusion` at
 # these defaults.
 TIMESTEPS = 1_500_000
+
+# The leaderboard's target for a learned policy: (what it says, the largest |paired error difference| relative to
+# the baseline's mean that counts as matching it, the communication saving a match needs).
+LEADERBOARD_TARGET = ("beat the strongest baseline, or match it with 30 % less communication", 0.02, 0.30)
+
+# ``make demo`` (train.demo): (training timesteps, evaluation episodes), reduced from the budgets above.
+DEMO_RUN = (20_000, 100)

@@ -54,3 +54,22 @@ HYPERPARAMS = {
 
 NUM_COPIES = 4
 TIMESTEPS = 300_000  # docs/learning.md's budget: `coloc train gps_denied_nbp` at its defaults reproduces the table
+
+# The leaderboard's target for a learned policy: (what it says, the largest |paired error difference| relative to
+# the baseline's mean that counts as matching it, the communication saving a match needs).
+LEADERBOARD_TARGET = (("the strongest baseline's error (within 5 %) with 30 % fewer broadcasts, or lower "
+                      "error"), 0.05, 0.30)
+
+# ``make demo`` (train.demo): (training timesteps, evaluation episodes), reduced from the budgets above.
+DEMO_RUN = (4_800, 6)
+
+# ``coloc bench``: its batch sizes (dNBP's M x M kernel per message is too expensive per step for B = 1024), and
+# a row with every copy playing episode 0 (the work per copy depends on the episode: how many messages arrive,
+# how many proposals the truncated kernel prunes).
+BENCH_BATCHES = (1, 4, 64)
+BENCH_ONE_EPISODE = True
+
+# ``coloc evaluate --policy all``'s extra row: the threshold rule at 5 m used 40 % fewer broadcasts than the paper's
+# schedule at an error not distinguishable from it on the validation seeds (agents/gps_denied_nbp.py), the
+# comparison for any policy that claims the paper's error with fewer broadcasts.
+EVALUATE_EXTRA_ROWS = ("threshold:5",)

@@ -29,3 +29,10 @@ HYPERPARAMS = {
 
 NUM_COPIES = 16
 TIMESTEPS = 1_200_000  # docs/learning.md's budget: `coloc train lossy_fusion` at its defaults reproduces the table
+
+# The leaderboard's target for a learned policy: (what it says, the largest |paired error difference| relative to
+# the baseline's mean that counts as matching it, the communication saving a match needs).
+LEADERBOARD_TARGET = ("beat the strongest baseline, or match it with 30 % less communication", 0.02, 0.30)
+
+# ``make demo`` (train.demo): (training timesteps, evaluation episodes), reduced from the budgets above.
+DEMO_RUN = (40_000, 100)

@@ -35,3 +35,10 @@ HYPERPARAMS = {
 
 NUM_COPIES = 4
 TIMESTEPS = 500_000
+
+# The leaderboard's target for a learned policy: (what it says, the largest |paired error difference| relative to
+# the baseline's mean that counts as matching it, the communication saving a match needs).
+LEADERBOARD_TARGET = ("beat the strongest baseline, or match it with 30 % fewer packets", 0.02, 0.30)
+
+# ``make demo`` (train.demo): (training timesteps, evaluation episodes), reduced from the budgets above.
+DEMO_RUN = (20_000, 6)

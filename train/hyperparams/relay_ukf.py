@@ -47,3 +47,10 @@ HYPERPARAMS = ppo(n_steps=128, batch_size=256, gamma=0.99, ent_coef=0.01)
 ALGORITHM = "maskable_ppo"
 NUM_COPIES = 4
 TIMESTEPS = 600_000  # docs/learning.md's budget: `coloc train relay_ukf` at its defaults reproduces the table
+
+# The leaderboard's target for a learned policy: (what it says, the largest |paired error difference| relative to
+# the baseline's mean that counts as matching it, the communication saving a match needs).
+LEADERBOARD_TARGET = ("beat the strongest baseline, or match it with 30 % fewer hops", 0.02, 0.30)
+
+# ``make demo`` (train.demo): (training timesteps, evaluation episodes), reduced from the budgets above.
+DEMO_RUN = (20_000, 20)
