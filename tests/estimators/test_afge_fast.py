@@ -13,6 +13,7 @@ import pytest
 
 import coloc_env
 import estimators.afge as af
+import estimators.afge_kernels as afk
 
 pytest.importorskip("numba")
 
@@ -152,7 +153,7 @@ def _rollout(steps=40, batch=4):
 
 def test_nlos_horizon_rollout_with_random_actions_equals_the_numpy_path(monkeypatch):
     fast = _rollout()
-    monkeypatch.setattr(af, "_KERNELS", {})  # as where numba is not installed: the numpy reference
+    monkeypatch.setattr(afk, "compiled_kernels", dict)  # as where numba is not installed: the numpy reference
     slow = _rollout()
     for a, b in zip(fast, slow, strict=True):
         a, b = np.asarray(a, float), np.asarray(b, float)
@@ -167,7 +168,7 @@ def test_compiled_without_numba_and_an_unknown_weighting_are_refused(monkeypatch
     with pytest.raises(ValueError, match="weighting must be one of"):
         af.fuse_packets(af.SignalModel(), np.zeros(3), np.zeros(3), np.zeros((3, 2)), np.zeros(3, bool),
                         np.zeros(3, int), 0, np.ones(3, bool), 2, weighting="nearest")
-    monkeypatch.setattr(af, "_KERNELS", {})
+    monkeypatch.setattr(afk, "compiled_kernels", dict)
     with pytest.raises(ValueError, match="compiled=True needs numba"):
         af.buffer_estimates(motion, af.empty_stack((2,), 4), 0, Y, y, gamma, compiled=True)
 
@@ -176,6 +177,6 @@ def test_compiled_without_numba_and_an_unknown_weighting_are_refused(monkeypatch
 def test_threaded_kernels_have_their_own_cache_entry(name):
     """numba files cached code by function name and signature, not by ``parallel``: a threaded form compiled
     from the serial function itself shared its entry and ran serial (estimators.compiled.renamed)."""
-    serial, threaded = af._compiled(name)
+    serial, threaded = afk.compiled(name)
     assert threaded.py_func.__name__ == serial.py_func.__name__ + "_threaded"
     assert threaded.targetoptions.get("parallel") and not serial.targetoptions.get("parallel")

@@ -19,10 +19,11 @@ import pytest
 import agents
 import coloc_env
 import estimators.afge as af
+import estimators.afge_kernels as afk
 from coloc_env.scenarios.composed import ComposedScenario
 from tests.test_covariance_health import _check_health, _covariances
 
-COMPILED = [False, pytest.param(True, marks=pytest.mark.skipif(af._compiled("buffer") is None,
+COMPILED = [False, pytest.param(True, marks=pytest.mark.skipif(afk.compiled("buffer") is None,
                                                               reason="numba not installed"))]
 NOISE_AT_MAXIMUM = {"accel_sigma": 1e3, "sigma_nav": 1e4, "sigma_db": 100.0, "sigma_theta_deg": 180.0,
                     "nlos_sigma_db": 100.0, "nlos_sigma_deg": 180.0}
