@@ -51,6 +51,17 @@ class Backend:
     def reset(self, rngs, idx: np.ndarray) -> None:  # pragma: no cover - interface
         raise NotImplementedError
 
+    def start(self, idx: np.ndarray) -> None:
+        """After ``reset`` of the copies ``idx``: their posterior (what the infos report before the first step)
+        is the initial belief the backend now holds, its covariance included (``position_cov``)."""
+        cov = self.position_cov()
+        if cov is None:
+            return
+        if self.posterior_position_cov is None:
+            self.posterior_position_cov = np.array(cov, dtype=float)
+        else:
+            self.posterior_position_cov[idx] = cov[idx]
+
     def step(self, readings, decisions: np.ndarray) -> None:
         self.update(readings, decisions)
         self.posterior_position = self.position().copy()

@@ -271,6 +271,7 @@ class ComposedScenario(Scenario):
         self.world.reset([g[0] for g in generators], idx)
         self.network.reset([g[1] for g in generators], idx)
         self.backend.reset([g[2] for g in generators], idx)
+        self.backend.start(idx)
         self.k[idx] = 0
         if self.estimand == "target":
             state = self.world.target_state()
