@@ -250,7 +250,7 @@ ORBIT_LIMITS = {"orbit_radius": 1e7, "orbit_wobble_rate": 10.0}
 MIN_STD = 1e-3
 
 
-def check_range(name: str, value: Any, low: float, high: float, integer: bool = False,
+def check_range(name: str, value: Any, low: float | None, high: float, integer: bool = False,
                 low_open: bool = False, high_open: bool = False, low_label: str | None = None,
                 high_label: str | None = None) -> None:
     """``low <= value <= high`` (``low < value`` if ``low_open``, ``value < high`` if ``high_open``), or
@@ -261,9 +261,13 @@ def check_range(name: str, value: Any, low: float, high: float, integer: bool = 
     closed range includes it (``high=inf``, ``high_open`` False: an unlimited distance). ``low`` and
     ``high`` are in the field's own unit (a ``*_deg`` field is checked in degrees). ``low_label`` /
     ``high_label`` name a bound another field sets (``high_label="num_agents"`` reads ``[0, num_agents =
-    3]``), so that the message names the field whose value moved it."""
-    lo = f"{low_label} = {low}" if low_label else f"{low}"
+    3]``), so that the message names the field whose value moved it; ``low=None`` with a ``low_label`` is a
+    bound not known yet (checked where it is): the message names it alone (``(-2 num_agents, 1000000.0]``) and
+    only NaN, a non-number and the high bound are refused here."""
+    lo = (f"{low_label} = {low}" if low is not None else low_label) if low_label else f"{low}"
     hi = f"{high_label} = {high}" if high_label else f"{high}"
+    if low is None:
+        low = -np.inf
     interval = f"{'(' if low_open else '['}{lo}, {hi}{')' if high_open else ']'}"
     if integer and not is_integer(value):
         raise BadInput(f"{name} must be an integer in {interval}, got {value!r}")

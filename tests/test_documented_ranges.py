@@ -345,6 +345,21 @@ def test_relay_ukf_takes_a_ukf_lambda_inside_minus_2n():
                                                  backend={"name": "ukf_dcl", "ukf_lambda": -12.0}))
 
 
+@pytest.mark.parametrize("value", [float("nan"), float("inf"), 1e308, "abc", -9.0])
+@pytest.mark.parametrize("backend", ["ukf_ccl", "ukf_dcl"])
+def test_a_refused_ukf_lambda_names_the_tables_range(value, backend):
+    """Every refusal of ``ukf_lambda`` states the table's (-2N, 1e6]: a value refused before the team is known
+    names N, one refused against the team gives N's value too; never another range."""
+    with pytest.raises(ValueError, match=r"^relay_ukf: ukf_lambda must be (a number )?in \(-2 num_agents( = -8.0)?, "
+                                         r"1000000.0\], got"):
+        coloc_env.parallel_env("relay_ukf", ukf_lambda=value)
+    with pytest.raises(ValueError, match=r"^backend.ukf_lambda must be (a number )?in \(-2 world.num_agents"
+                                         r"( = -12.0)?, 1000000.0\], got"):
+        low = -13.0 if value == -9.0 else value  # circles: 6 agents, -2N = -12
+        coloc_env.parallel_env(coloc_env.compose(world="circles", network="relay",
+                                                 backend={"name": backend, "ukf_lambda": low}))
+
+
 @pytest.mark.parametrize("value", [1.0, 2.0, 0.0])
 def test_smoothing_states_its_open_interval(value):
     with pytest.raises(ValueError, match=r"^nlos_horizon: smoothing must be in \(0.0, 1.0\), got"):

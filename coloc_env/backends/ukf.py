@@ -88,9 +88,18 @@ def dcl_floats(hop: int, d: int = 2) -> float:
     return 2 + 4 * d + r * d * (d + 1) / 2 + d * d * r * (r - 1) / 2 + r * d
 
 
-def check_spread(ukf_lambda, num_agents: int, prefix: str, agents: str) -> None:
-    """The joint UKF's lambda against the team: (-2N, 1e6] (N the agents, named ``agents`` in the message)."""
-    check_range(f"{prefix}ukf_lambda", ukf_lambda, -2.0 * num_agents, 1e6, low_open=True, low_label=f"-2 {agents}")
+def check_spread(ukf_lambda, num_agents: int | None, prefix: str, agents: str) -> None:
+    """The joint UKF's lambda against the team: (-2N, 1e6] (N the agents, named ``agents`` in the message).
+    With ``num_agents`` None (a part's own check, before the team is known) the same message, without N's
+    value: NaN, a non-number and the high bound are refused there, the low bound at build."""
+    low = None if num_agents is None else -2.0 * num_agents
+    check_range(f"{prefix}ukf_lambda", ukf_lambda, low, 1e6, low_open=True, low_label=f"-2 {agents}")
+
+
+def team_label(prefix: str) -> str:
+    """What names the team's size N in a part's message: a composition's backend (``prefix`` "backend.") reads it
+    from ``world.num_agents``; a preset's keyword is ``num_agents``."""
+    return "world.num_agents" if prefix == "backend." else "num_agents"
 
 
 @BACKENDS.register
@@ -105,7 +114,7 @@ class UkfCcl(PartConfig):
     motion: str = "heading"
 
     def check(self, prefix: str) -> None:
-        check_range(f"{prefix}ukf_lambda", self.ukf_lambda, -np.inf, 1e6, low_open=True)  # > -2N: at build
+        check_spread(self.ukf_lambda, None, prefix, team_label(prefix))  # > -2N: at build
         check_choice(f"{prefix}motion", self.motion, MOTIONS)
 
     def check_spread(self, num_agents: int, prefix: str, agents: str) -> None:
@@ -128,7 +137,7 @@ class UkfDcl(PartConfig):
     motion: str = "heading"
 
     def check(self, prefix: str) -> None:
-        check_range(f"{prefix}ukf_lambda", self.ukf_lambda, -np.inf, 1e6, low_open=True)  # > -2N: at build
+        check_spread(self.ukf_lambda, None, prefix, team_label(prefix))  # > -2N: at build
         check_choice(f"{prefix}truncation", self.truncation, ("consistent", "paper"))
         check_choice(f"{prefix}motion", self.motion, MOTIONS)
 
