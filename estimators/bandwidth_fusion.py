@@ -63,6 +63,23 @@ The bound (19) is the paper's; it holds because for a convex combination
 Cov(sum_j p_j a_j) <= sum_j p_j E[a_j a_j^T] and (a + b)(a + b)^T <= 2 a a^T + 2 b b^T,
 and sum_j p_ij^2 <= sum_j p_ij for the noise term. A test checks M_i >= Sigma_ii.
 
+The bound's positive semi-definiteness. Eq. (19) is eq. (15) at the gain (18):
+with S_j = C M_j C^T + V_j/2 and L_j = A M_j C^T S_j^-1 (so L_j S_j = A M_j C^T),
+
+    (A - L_j C) M_j (A - L_j C)^T + L_j (V_j/2) L_j^T
+        = A M_j A^T - L_j C M_j A^T - A M_j C^T L_j^T + L_j S_j L_j^T
+        = A M_j A^T - A M_j C^T S_j^-1 C M_j A^T,
+
+the bracket of (19) (eq. 15 carries p_ij L_j V_j L_j^T = 2 p_ij L_j (V_j/2) L_j^T). The right-hand
+side is a difference of two matrices of the size of A M_j A^T; where a node's bound is large
+against V_j/2 (a component it keeps compensating from its own prediction while it weights its
+neighbours: M_i grows by up to 2 per step, about 1e14 after 50 steps of the paper's model)
+the difference is V_j/2-sized and is lost to rounding, a unit in the last place of 1e14
+(0.016) either side: a negative diagonal in a receiver's M_i, the log of which the
+``bandwidth_fusion`` observation takes. ``bound_step`` therefore forms the left-hand side: a
+congruence of M_j plus a congruence of V_j/2, each positive semi-definite as computed, so
+M_i(k+1) >= W on the diagonal whatever the weights and selections.
+
 The paper's simulation (Sec. 2, N = 4, n = 3) fixes the selections T1..T3 and
 the weights P1..P3 by hand: ``paper_selection`` and ``paper_weights``.
 """
@@ -253,15 +270,20 @@ def bound_step(
     """The bound recursion (19), M_i(k+1) from M(k), with the optimal gains (18) inside.
 
     ``gain`` (and ``innovation`` S_j) may pass what eq. (18) computed for
-    ``bound``: then A M_j C^T S_j^-1 C M_j A^T = L_j S_j L_j^T needs no second
-    solve. With diagonal T, T X T = X * (s s^T), which is how the products are formed.
+    ``bound``: the gain is not solved again. Each sender's corrected term
+    A M_j A^T - A M_j C^T S_j^-1 C M_j A^T is formed as eq. (15) writes it at the gain (18),
+    (A - L_j C) M_j (A - L_j C)^T + L_j (V_j / 2) L_j^T: the same matrix, positive semi-definite as
+    computed (module docstring). With diagonal T, T X T = X * (s s^T), which is how the products are formed.
     """
-    A = model.transition
+    A, C = model.transition, model.measurement
     S = _innovation_covariance(model, bound) if innovation is None else innovation
     if gain is None:
         gain = gains(model, bound, S)
     AMA = _sandwich(A, bound, A)
-    corrected = AMA - _sandwich(gain, S, gain)  # A M_j A^T - A M_j C^T S_j^-1 C M_j A^T
+    # A M_j A^T - A M_j C^T S_j^-1 C M_j A^T in the form of eq. (15) at the gain (18), a sum of two PSD terms
+    # (module docstring, "The bound's positive semi-definiteness"): never the difference of two large matrices
+    closed = A - (gain if _is_identity(C) else gain @ C)  # A - L_j C
+    corrected = _sandwich(closed, bound, closed) + _sandwich(gain, 0.5 * model.measurement_noise, gain)
     sel = selection.astype(float)
     unsel = 1.0 - sel
     weighted_sel = weights[..., None, None] * sel[..., :, None] * sel[..., None, :]  # p_ij s s^T

@@ -189,3 +189,22 @@ def test_invalid_selection_and_weights_are_refused():
     with pytest.raises(ValueError, match="leading time axis"):
         bf.expected_cost(bf.FusionModel(np.eye(3), np.zeros(3), np.eye(3), np.eye(3), np.stack([np.eye(3)] * 4)),
                          M0, paper_selection("T1"), paper_weights("P1"), 5, time_varying=True)
+
+
+@pytest.mark.parametrize("m", [0.19, 1e6, 0.19 * 2.0**49, 3e14, 1e16])
+def test_a_sender_s_corrected_bound_is_its_closed_form_however_large_its_bound(paper_model, m):
+    """A = C = I, diagonal M_j: the bracket of eq. (19) is, per component, m - m^2 / (m + v/2) =
+    m (v/2) / (m + v/2), about v/2 once m >> v (a node whose compensated components grew for 50 steps:
+    about 1e14). Receiver 0 takes component 0 from node 1 only, with weight 1: M_0(k+1)[0, 0] =
+    2 m (v/2) / (m + v/2) + W[0, 0], to 1e-9, never the rounding of a difference of two 1e14 numbers."""
+    N, n = 4, 3
+    bound = np.broadcast_to(M0, (N, n, n)).copy()
+    bound[1, 0, 0] = m
+    selection = np.zeros((N, N, n), bool)
+    selection[np.arange(N), np.arange(N)] = True
+    selection[0, 1, 0] = True
+    weights = np.eye(N)
+    weights[0] = [0.0, 1.0, 0.0, 0.0]
+    half_v = 0.5 * paper_model.measurement_noise[1, 0, 0]
+    expected = 2.0 * m * half_v / (m + half_v) + paper_model.process_noise[0, 0]
+    assert bf.bound_step(paper_model, bound, selection, weights)[0, 0, 0] == pytest.approx(expected, rel=1e-9)
