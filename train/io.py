@@ -4,6 +4,13 @@ A result *folder* holds several files written one after the other, so it cannot 
 replaced atomically as a whole; ``result_folder`` marks it instead: an
 ``INCOMPLETE`` file is written before the first result and removed after the last,
 so a folder interrupted half way (Ctrl-C, a crash) says so.
+
+A write goes to a temporary file ``.tmp-<random><name>`` beside its target, renamed over the
+target when complete; an error or Ctrl-C removes it, but a process killed outright (SIGKILL, a
+power cut) leaves it behind. ``result_folder`` removes such leftovers (``TEMPORARY_PREFIX``
+files directly in the folder) when a run starts writing into it: one command writes a
+result folder at a time (they share its ``INCOMPLETE`` marker), so every temporary there
+at the start is a dead writer's.
 """
 
 from __future__ import annotations
@@ -20,11 +27,13 @@ import numpy as np
 
 from coloc_env.config import BadInput
 
+TEMPORARY_PREFIX = ".tmp-"  # an atomic write's file before its rename (module docstring)
+
 
 def _atomic(path: str, write) -> None:
     directory = os.path.dirname(os.path.abspath(path))
     os.makedirs(directory, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=directory, prefix=".tmp-", suffix=os.path.basename(path))
+    fd, tmp = tempfile.mkstemp(dir=directory, prefix=TEMPORARY_PREFIX, suffix=os.path.basename(path))
     try:
         with os.fdopen(fd, "wb") as fh:
             write(fh)
@@ -131,7 +140,8 @@ def check_output_folder(folder: str | os.PathLike) -> str:
 
 @contextlib.contextmanager
 def result_folder(folder: str, command: str) -> Iterator[str]:
-    """Write into ``folder`` under an ``INCOMPLETE`` marker, removed only when the block finishes.
+    """Write into ``folder`` under an ``INCOMPLETE`` marker, removed only when the block finishes; the
+    temporaries a killed run left there are removed first (``clear_stale_temporaries``).
 
     The marker (written atomically first) names the command and when it started; an
     interrupt or an error leaves it in place, beside whatever was written so far. When
@@ -142,6 +152,7 @@ def result_folder(folder: str, command: str) -> Iterator[str]:
     existing = _nearest_existing(folder)
     marker = os.path.join(folder, INCOMPLETE)
     had_marker = os.path.exists(marker)
+    clear_stale_temporaries(folder)
     started = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
     write_text(marker, f"{command}\nstarted {started} and has not finished: the files beside this one may be "
                        "partial or from an earlier run. Run the command again to complete this folder.\n")
@@ -156,6 +167,21 @@ def result_folder(folder: str, command: str) -> Iterator[str]:
                 current = os.path.dirname(current)
         raise
     os.unlink(marker)
+
+
+def clear_stale_temporaries(folder: str) -> list[str]:
+    """Remove the temporaries (``TEMPORARY_PREFIX`` files) that killed writers left directly in ``folder``;
+    returns their names. Subfolders and every other file are left alone; a folder that does not exist
+    holds none."""
+    if not os.path.isdir(folder):
+        return []
+    removed = []
+    for entry in os.scandir(folder):
+        if entry.name.startswith(TEMPORARY_PREFIX) and entry.is_file(follow_symlinks=False):
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(entry.path)
+                removed.append(entry.name)
+    return sorted(removed)
 
 
 def read_json(path: str, default: Any = None) -> Any:

@@ -199,3 +199,40 @@ def test_other_ignored_exceptions_go_to_pythons_hook(monkeypatch):
     unraisable = type("Unraisable", (), {"exc_type": RuntimeError})()
     redeliver_ignored_interrupt(unraisable)
     assert seen == [unraisable]
+
+
+WRITER = """
+import sys, time
+from train.io import _atomic
+
+def write(fh):
+    fh.write(b"half a figure")
+    fh.flush()
+    time.sleep(600)  # killed here, mid-write
+
+_atomic(sys.argv[1], write)
+"""
+
+
+def test_a_rerun_clears_the_temporary_a_killed_writer_left(tmp_path):
+    """A writer killed with SIGKILL mid-write leaves its ``.tmp-...`` file (no handler runs); the next run into the
+    same result folder removes it, and only it: the results, other dotfiles and subfolders stay."""
+    from train.io import result_folder, write_text
+
+    folder = tmp_path / "zhao2020"
+    folder.mkdir()
+    (folder / ".keep").write_text("")
+    (folder / "sub").mkdir()
+    (folder / "sub" / ".tmp-other").write_text("")  # a subfolder's own business
+    child = subprocess.Popen([sys.executable, "-c", WRITER, str(folder / "trajectories.png")], cwd=REPO_ROOT)
+    deadline = time.monotonic() + STARTUP_TIMEOUT
+    while not list(folder.glob(".tmp-*")) and time.monotonic() < deadline and child.poll() is None:
+        time.sleep(0.05)
+    child.send_signal(signal.SIGKILL)
+    child.wait(EXIT_TIMEOUT)
+    left = list(folder.glob(".tmp-*"))
+    assert [p.name.endswith("trajectories.png") for p in left] == [True]  # what the kill left behind
+    with result_folder(str(folder), "coloc reproduce zhao2020"):
+        write_text(str(folder / "trajectories.png"), "the figure")
+    assert sorted(p.name for p in folder.iterdir()) == [".keep", "sub", "trajectories.png"]
+    assert (folder / "sub" / ".tmp-other").exists()
