@@ -105,6 +105,10 @@ def make_config(cls: type, fields: dict[str, Any], kind: str) -> PartConfig:
     return config
 
 
+# what a backend's messages carry (its ``message_content``, coloc_env.backends.base)
+MESSAGE_CONTENTS = ("readings", "estimates", "nothing")
+
+
 class Registry(dict):
     """Name -> config class of one kind of part, filled by the ``register`` decorator."""
 
@@ -115,6 +119,13 @@ class Registry(dict):
     def register(self, cls: type) -> type:
         if cls.name in self:
             raise ValueError(f"{self.kind} {cls.name!r} registered twice")
+        if self.kind == "backend":  # what the bounds read of a backend (coloc_env.backends.base)
+            if getattr(cls, "message_content", None) not in MESSAGE_CONTENTS:
+                raise ValueError(f"backend {cls.name!r} must declare message_content, one of "
+                                 f"{list(MESSAGE_CONTENTS)}, got {getattr(cls, 'message_content', None)!r}")
+            if not isinstance(getattr(cls, "shared_estimate", None), bool):
+                raise ValueError(f"backend {cls.name!r} must declare shared_estimate (True or False), got "
+                                 f"{getattr(cls, 'shared_estimate', None)!r}")
         cls.kind = self.kind
         self[cls.name] = cls
         return cls

@@ -55,7 +55,7 @@ def test_the_env_imports_neither_the_policies_nor_the_command_line():
     assert not offenders("coloc_env", lambda name: under(name, "agents", "train"))
 
 
-@pytest.mark.parametrize("part", ["worlds", "networks", "backends", "primitives", "bound_models"])
+@pytest.mark.parametrize("part", ["worlds", "networks", "backends", "primitives", os.path.join("bounds", "models")])
 def test_parts_import_no_preset(part):
     found = offenders(os.path.join("coloc_env", part),
                       lambda name: under(name, "coloc_env.scenarios", "coloc_env.presets", "coloc_env.envs"))

@@ -153,7 +153,7 @@ def attach_bounds(result: dict, scenario: str, seed_base: int, trace: dict, boun
     from scipy import stats
 
     import coloc_env
-    from coloc_env.bound_models import MODULES
+    from coloc_env.bounds.models import has_bound_model
 
     out = dict(result)
     chunks = trace.get("squared")
@@ -175,7 +175,7 @@ def attach_bounds(result: dict, scenario: str, seed_base: int, trace: dict, boun
     out.update(pcrb_centralized=None, pcrb_local=None, pcrb_delivered=None, efficiency=None, pcrb_model_based=None)
     spec = (coloc_env.composition_named(scenario) if coloc_env.is_composition_name(scenario)
             else coloc_env.PRESETS.get(scenario))
-    if not bounds or spec is None or spec.world.name not in MODULES:
+    if not bounds or spec is None or not has_bound_model(spec.world.name):
         return out
     actions = np.concatenate(trace["actions"], axis=0)  # (E, K, N, ...)
     names = coloc_env.make_core(scenario, batch=1, **env_config).agent_names

@@ -742,9 +742,9 @@ def run_study(world: str, network: str, backends: str | Sequence[str], sweep: st
                 progress(total, total)
 
         # 3. the bounds of each cell on its episodes (coloc_env.pcrb), then metrics, report, figure
-        from coloc_env.bound_models import MODULES
+        from coloc_env.bounds.models import has_bound_model
 
-        bounds = {cell: cell_bounds(cells[cell], policy, episodes, seed) if world in MODULES else None
+        bounds = {cell: cell_bounds(cells[cell], policy, episodes, seed) if has_bound_model(world) else None
                   for cell in order}
         spec0 = cells[order[0]]
         sweep_config = None if parsed is None else {"part": parsed[0], "field": parsed[1], "values": parsed[3],

@@ -9,6 +9,10 @@ can say in words why a combination cannot run:
 | motion_kinds       | the ``estimators.models`` kinds it can run on                          |
 | requires           | groups of measurement kinds; the world must offer one kind of each group  |
 | message_kind       | what it sends over the network (``coloc_env.networks.base``)            |
+| message_content    | what a message carries: ``"readings"`` (the sender's reading of the step it |
+|                    | is stamped with), ``"estimates"`` (a summary of everything the sender held), |
+|                    | ``"nothing"`` (it sends none); ``coloc_env.bounds`` reads it               |
+| shared_estimate    | True where every agent reports the centre's (agent 0's) estimate          |
 
 At each step the composition hands it the world's ``coloc_env.worlds.base.Readings``
 of time k and the decoded backend decisions; the backend updates (asking the

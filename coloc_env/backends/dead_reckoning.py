@@ -35,6 +35,8 @@ class DeadReckoning(PartConfig):
     motion_kinds = frozenset({"odometry_displacement", "cv_accel", "se2_odometry", "cv_white_accel"})
     requires = ()
     message_kind = "none"
+    message_content = "nothing"
+    shared_estimate = False
 
     def check(self, prefix: str) -> None:
         return None

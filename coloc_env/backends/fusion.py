@@ -321,6 +321,8 @@ class BandwidthFusion(PartConfig):
     motion_kinds = LINEAR
     requires = NEEDS_LINEAR
     message_kind = "components"
+    message_content = "estimates"
+    shared_estimate = False
     weight_logit_scale: float = 4.0
 
     def check(self, prefix: str) -> None:
@@ -424,6 +426,8 @@ class CentralizedLmmse(PartConfig):
     motion_kinds = LINEAR
     requires = NEEDS_LINEAR
     message_kind = "packets"
+    message_content = "readings"
+    shared_estimate = True
     gain: str = "optimal"
     moments: str = "derived"
 
@@ -493,6 +497,8 @@ class PredictionCompensation(PartConfig):
     motion_kinds = LINEAR
     requires = NEEDS_LINEAR
     message_kind = "packets"
+    message_content = "estimates"
+    shared_estimate = True
     weight_logit_scale: float = 3.0
     reading: str = "current"
     forward_spread: bool = True

@@ -76,6 +76,8 @@ class Kalman(PartConfig):
     motion_kinds = LINEAR
     requires = NEEDS_LINEAR
     message_kind = "packets"
+    message_content = "readings"
+    shared_estimate = True
     variant: str = "naive"
 
     def check(self, prefix: str) -> None:

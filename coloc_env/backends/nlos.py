@@ -129,6 +129,8 @@ class _PacketFirConfig(PartConfig):
     estimand = "self"
     motion_kinds = frozenset({"cv_white_accel"})
     message_kind = "packets"
+    message_content = "readings"
+    shared_estimate = False
     n_strongest: int = 4
     min_packets: int = 1
     weighting: str = "distance"

@@ -120,6 +120,8 @@ class Dnbp(PartConfig):
     motion_kinds = frozenset({"cv_accel", "odometry_displacement", "se2_odometry"})
     requires = (frozenset({"range"}),)
     message_kind = "broadcast"
+    message_content = "estimates"
+    shared_estimate = False
     num_particles: int = 100
     num_iterations: int = 5
     oversampling: int = 2
@@ -164,6 +166,8 @@ class RangeLs(PartConfig):
     motion_kinds = frozenset({"cv_accel", "odometry_displacement", "se2_odometry"})
     requires = (frozenset({"range"}), frozenset({"position_fix"}))
     message_kind = "broadcast"
+    message_content = "estimates"
+    shared_estimate = False
     rounds = 1
     min_anchors: int = 3
     max_rms: float = 3.0

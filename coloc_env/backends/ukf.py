@@ -110,6 +110,8 @@ class UkfCcl(PartConfig):
     motion_kinds = frozenset({"odometry_displacement", "cv_accel"})
     requires = (frozenset({"range"}),)
     message_kind = "central"
+    message_content = "readings"
+    shared_estimate = True
     ukf_lambda: float = 0.0
     motion: str = "heading"
 
@@ -132,6 +134,8 @@ class UkfDcl(PartConfig):
     motion_kinds = frozenset({"odometry_displacement", "cv_accel"})
     requires = (frozenset({"range"}),)
     message_kind = "chain"
+    message_content = "estimates"
+    shared_estimate = False
     ukf_lambda: float = 0.0
     truncation: str = "consistent"
     motion: str = "heading"

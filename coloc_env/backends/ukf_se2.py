@@ -102,6 +102,8 @@ class UkfSe2(PartConfig):
     motion_kinds = frozenset({"se2_odometry"})
     requires = (frozenset({"landmark_range_bearing"}),)
     message_kind = "chain"
+    message_content = "estimates"
+    shared_estimate = False
     ukf_lambda: float = 0.0
     gate: float | None = GATE_999
     landmark_updates: str = "local"

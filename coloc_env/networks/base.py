@@ -24,11 +24,23 @@ packets are counted per receiving agent in ``node_messages`` / ``node_floats``.
 Packet loss is drawn by ``coloc_env.draws`` from a key the network draws
 from its own generator at reset: the value for (step, round, sender,
 receiver) does not depend on the batch, so a copy equals itself run alone.
+
+Every delivery call (``DELIVERY_CALLS``: ``broadcast``, ``packets``,
+``node_packets``, ``relay``, ``relay_each``, ``messages_to``) reports what it
+delivered to the network's ``observer`` where one is set (None by default: then
+a call costs one attribute test more): ``observer.delivery(network, call,
+arguments, result)`` after the call, ``arguments`` the call's arguments by the
+names of ``Network``'s signature. A subclass's own delivery methods report the
+same way (``Network.__init_subclass__`` wraps them), and a call made inside
+another (a subclass's ``relay`` calling the base's, ``relay_each`` calling
+``relay``) is reported once, as the outermost call. ``coloc_env.bounds``
+records a play through it.
 """
 
 from __future__ import annotations
 
 import functools
+import inspect
 from typing import ClassVar
 
 import numpy as np
@@ -38,6 +50,8 @@ from coloc_env.parts import Block
 from coloc_env.primitives.relay import RelayChain
 
 MESSAGE_KINDS = ("none", "broadcast", "chain", "central", "packets")
+# the calls that deliver messages, each reported to ``Network.observer`` (module docstring)
+DELIVERY_CALLS = ("broadcast", "packets", "node_packets", "relay", "relay_each", "messages_to")
 CENTRE = 0  # the fusion centre of ``central`` backends
 NODE_STREAM = 3  # counter of world-node packets; broadcast uses 0, relay 1, packets 2
 
@@ -121,10 +135,45 @@ def _chain_kernel():
             _CHAINS = numba.njit(cache=True, nogil=True)(_resolve_chains)
     return _CHAINS or None
 
+def _reported(method, signature: inspect.Signature):
+    """``method`` (a delivery call) reporting to the network's observer after it returns (module docstring);
+    ``signature`` the base class's, whose parameter names key the reported arguments."""
+    name = method.__name__
+
+    @functools.wraps(method)
+    def call(self, *args, **kwargs):
+        if self.observer is None or self._delivering:
+            return method(self, *args, **kwargs)
+        self._delivering = True
+        try:
+            result = method(self, *args, **kwargs)
+        finally:
+            self._delivering = False
+        bound = signature.bind(self, *args, **kwargs)
+        bound.apply_defaults()
+        arguments = dict(bound.arguments)
+        del arguments["self"]
+        self.observer.delivery(self, name, arguments, result)
+        return result
+
+    call.reports_delivery = True
+    return call
+
+
 class Network:
     """Batched delivery and accounting; subclasses set the link rules (``usable``, ``loss``, decisions)."""
 
     carries: ClassVar[frozenset] = frozenset(MESSAGE_KINDS)
+    # who is told of every delivery (``observer.delivery(network, call, arguments, result)``); None: nobody
+    observer = None
+    _delivering = False  # inside a reported call (a nested one is not reported again)
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        for name in DELIVERY_CALLS:
+            method = cls.__dict__.get(name)
+            if method is not None and not getattr(method, "reports_delivery", False):
+                setattr(cls, name, _reported(method, _BASE_SIGNATURES[name]))
 
     def __init__(self, config, num_agents: int, batch: int, message_kind: str, rounds: int = 1):
         self.config = config
@@ -458,3 +507,8 @@ class Network:
     def observation_features(self) -> np.ndarray:
         """(B, N, f) the link state each agent senses; none by default."""
         return np.zeros((self.batch, self.num_agents, 0))
+
+
+_BASE_SIGNATURES = {name: inspect.signature(getattr(Network, name)) for name in DELIVERY_CALLS}
+for _name in DELIVERY_CALLS:
+    setattr(Network, _name, _reported(getattr(Network, _name), _BASE_SIGNATURES[_name]))

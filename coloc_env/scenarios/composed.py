@@ -169,6 +169,27 @@ class ComposedScenario(Scenario):
         self._received = np.zeros((B, N, N))
         self._reward = np.zeros((B, N))
         self.readings = None
+        # who is told of each step's readings and deliveries (``observe``); None: nobody
+        self.observer = None
+        # a callable f(readings) run in the backend's place (``observe``); None: the backend runs
+        self.stand_in = None
+
+    def observe(self, observer, stand_in=None) -> None:
+        """Tell ``observer`` what each step reads and carries (None: stop): ``observer.readings(k, readings)``
+        with every ``world.readings`` call the core makes (k the world's step), and the network's deliveries
+        (``coloc_env.networks.base``, ``Network.observer``). ``stand_in`` f(readings), where given, runs in the
+        backend's place, once per step, with the step's readings (a play that needs only what the world reads
+        and the network carries: the world's readings never depend on the backend)."""
+        self.observer = observer
+        self.network.observer = observer
+        self.stand_in = stand_in
+
+    def _read(self, sensing) -> object:
+        """The world's readings of its step under ``sensing``, reported to the observer."""
+        readings = self.world.readings(sensing)
+        if self.observer is not None:
+            self.observer.readings(self.world.k, readings)
+        return readings
 
     @classmethod
     def compose(cls, config):
@@ -295,9 +316,12 @@ class ComposedScenario(Scenario):
         net = self.network
         done_step = _network_record(net)
         none = np.zeros((B, N, 0), np.int64)
-        self.readings = self.world.readings(none)
+        self.readings = self._read(none)
         net.begin(self.world.k, self.world.positions().copy(), none)
-        self.backend.receive(self.readings, idx)
+        if self.stand_in is None:
+            self.backend.receive(self.readings, idx)
+        else:
+            self.stand_in(self.readings)
         coming = _network_record(net)
         if self._ahead_record is None:
             self._ahead_record = coming
@@ -372,9 +396,12 @@ class ComposedScenario(Scenario):
             readings = self.readings
             _restore_network_record(self.network, self._ahead_record)
         else:
-            readings = self.readings = self.world.readings(sensing)
+            readings = self.readings = self._read(sensing)
             self.network.begin(self.world.k, truth, transport)
-        self.backend.step(readings, decisions)
+        if self.stand_in is None:
+            self.backend.step(readings, decisions)
+        elif not self.receives_ahead:  # a stand-in that received ahead has run for this step
+            self.stand_in(readings)
         if self.estimand == "target":
             self._truth_state = self.world.target_state()  # a gather: already a copy
             self._truth = self._target_truth(state=self._truth_state)

@@ -42,7 +42,7 @@ Arguments (``coloc_env.worlds.Circles``)
 | initial_position_std    | 0.1     | [1e-6, 1e6] m: the prior the agents start with    |
 | heading_noise           | True    | False: the model the backends assume omits the integrated-heading term of Q |
 
-Estimation problem (what ``coloc_env.pcrb`` bounds; details in ``coloc_env.bound_models.circles``): the
+Estimation problem (what ``coloc_env.pcrb`` bounds; details in ``coloc_env.bounds.models.circles``): the
 state is every platform's (x, y, heading); the prior is exact (the filters start at the true pose); the
 motion is driven by the odometry readings, their speed and turn-rate noise entering as process noise, so
 the heading error is a random walk shared by every later step; the readings are the ranges each step's

@@ -44,7 +44,7 @@ Arguments (``coloc_env.worlds.Drift``; defaults = the paper's Sec. 2)
 | horizon            | 50                     | 1..100000 steps (the composition's default)     |
 | formation_radius   | 10.0                   | [0, 1e6] m: the agents' fixed ring              |
 
-Estimation problem (what ``coloc_env.pcrb`` bounds; details in ``coloc_env.bound_models.target``): the
+Estimation problem (what ``coloc_env.pcrb`` bounds; details in ``coloc_env.bounds.models.target``): the
 state is the drift state x; the prior is the world's initial covariance; the motion x(k+1) = A x + b + w
 is linear with Gaussian w; every agent reads C x + v at every step. Linear and Gaussian, so the bound is
 the covariance of the Kalman filter with the same information.

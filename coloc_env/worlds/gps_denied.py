@@ -54,7 +54,7 @@ Arguments (``coloc_env.worlds.GpsDenied``; defaults = ``gps_denied_nbp``'s)
 | p_fault_to_normal  | 0.02      | [0, 1]                                       |
 | num_normal         | None      | None (Markov chain) or 0..N fixed normal UAVs |
 
-Estimation problem (what ``coloc_env.pcrb`` bounds; details in ``coloc_env.bound_models.gps_denied``):
+Estimation problem (what ``coloc_env.pcrb`` bounds; details in ``coloc_env.bounds.models.gps_denied``):
 the state is every UAV's [p; v]; the prior is the filters' initial belief; the motion takes the
 accelerometer reading as its input, its noise as process noise; the readings are a GPS fix for each UAV
 whose receiver is normal at the step and one range per pair within ``comm_range``. A UAV with a noisy fix

@@ -93,7 +93,7 @@ Arguments (``coloc_env.worlds.Mrclam``)
 |                      |              | ``mrclam_relay`` scenario's rule); "all": every line, as          |
 |                      |              | ``coloc reproduce mrclam`` applies them                           |
 
-Estimation problem (what ``coloc_env.pcrb`` bounds; details in ``coloc_env.bound_models.mrclam``):
+Estimation problem (what ``coloc_env.pcrb`` bounds; details in ``coloc_env.bounds.models.mrclam``):
 recorded data have no generative model, so the bound is **model-based**: the PCRB of the noise model the
 filters assume (``noise_model``), along the recorded Vicon trajectory with the sightings the robots took;
 the state is every robot's pose, the prior the filters' initial covariance. It says what an estimator

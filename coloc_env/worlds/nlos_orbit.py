@@ -81,7 +81,7 @@ Arguments (``coloc_env.worlds.NlosOrbit``; defaults = ``nlos_horizon``'s, docs/g
 | sensors             | ("rss", "aoa")               | a non-empty subset of ("rss", "aoa")             |
 | report_mode         | True                         | the LOS/NLOS flag travels with each packet (mode_info "known") |
 
-Estimation problem (what ``coloc_env.pcrb`` bounds; details in ``coloc_env.bound_models.nlos_orbit``):
+Estimation problem (what ``coloc_env.pcrb`` bounds; details in ``coloc_env.bounds.models.nlos_orbit``):
 each target's [p; v] alone; the prior is ``prior_std``; the motion is the filters' white-acceleration
 model (the truth's turn schedule is smoother than that model); the readings are the RSS/AOA of every
 neighbour inside the receive-search area with the LOS/NLOS mode known (a genie bound: an estimator that

@@ -45,7 +45,7 @@ Arguments (``coloc_env.worlds.TargetCv``; defaults = the paper's Sec. 4)
 | horizon            | 100                              | 1..100000 steps (the composition's default) |
 | formation_radius   | 10.0                             | [0, 1e6] m: the agents' fixed ring       |
 
-Estimation problem (what ``coloc_env.pcrb`` bounds; details in ``coloc_env.bound_models.target``): the
+Estimation problem (what ``coloc_env.pcrb`` bounds; details in ``coloc_env.bounds.models.target``): the
 state is the target's [x, vx, y, vy, z, vz]; the prior is the world's initial covariance; the motion is
 constant velocity with white acceleration (a rank-3 process noise); every agent reads the target's
 position with Gaussian noise at every step. Linear and Gaussian, so the bound is the covariance of the

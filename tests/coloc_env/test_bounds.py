@@ -46,13 +46,11 @@ def test_delivered_bound_equals_the_informed_kalman_filter_over_bernoulli_delay(
                                   "nlos_orbit/random_delay/dfir", "gps_denied/relay/dead_reckoning",
                                   "circles/relay/ukf_ccl", "gps_denied/broadcast/ukf_ccl"])
 def test_more_information_gives_a_smaller_bound_at_every_step(name):
-    from coloc_env.bound_models import SHARED_AT_LEADER
-
     bound = pcrb(coloc_env.composition_named(name, horizon=30), episodes=4, seed=0)
     tol = 1e-9
     # a shared estimate's delivered bound is the fusing agent's (agent 0): below its own local bound, not
     # necessarily below another agent's (whose own fixes may not reach the centre)
-    receivers = [0] if name.split("/")[2] in SHARED_AT_LEADER else slice(None)
+    receivers = [0] if coloc_env.parts.BACKENDS[name.split("/")[2]].shared_estimate else slice(None)
     assert np.all(bound["local"][:, receivers] >= bound["delivered"][:, receivers] * (1 - tol))
     assert np.all(bound["delivered"] >= bound["centralized"] * (1 - tol))
 
@@ -79,10 +77,10 @@ def test_a_world_without_a_readings_bound_leaves_the_readings_out_and_says_why()
     """``with_delivered`` for a backend whose messages are readings, on a world that gives no bound of them."""
     from types import SimpleNamespace
 
-    from coloc_env.bound_models import with_delivered
-    from coloc_env.bounds import BoundProblem
+    from coloc_env.bounds.problem import BoundProblem, with_delivered
 
-    core = SimpleNamespace(composition=SimpleNamespace(backend=SimpleNamespace(name="ukf_ccl"),
+    backend = SimpleNamespace(name="ukf_ccl", message_content="readings")
+    core = SimpleNamespace(composition=SimpleNamespace(backend=backend,
                                                        world=SimpleNamespace(name="mrclam")))
     problem = with_delivered(BoundProblem(None, [], []), core, None)
     assert problem.delivered is None

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 import coloc_env
-from coloc_env.bound_models import circles
-from coloc_env.bounds import _record_play, pcrb
+from coloc_env.bounds import pcrb, record_play
+from coloc_env.bounds.models import circles
 
 
 def _recursions(problem):
@@ -19,7 +19,7 @@ def test_with_exact_headings_the_heading_state_gives_the_position_only_bound():
                              "ukf_ccl", horizon=40)
     for seed in (0, 1):
         core = coloc_env.make_core(spec, batch=1)
-        record = _record_play(core, np.random.default_rng(seed), "always", None)
+        record = record_play(core, np.random.default_rng(seed), "always", None)
         with_heading = circles.problem(core, record, heading_state=True)
         positions = circles.problem(core, record, heading_state=False)
         assert with_heading.centralized.P0.shape == (18, 18) and positions.centralized.P0.shape == (12, 12)
@@ -29,7 +29,7 @@ def test_with_exact_headings_the_heading_state_gives_the_position_only_bound():
 
 def test_the_position_only_state_is_refused_where_the_heading_is_noisy():
     core = coloc_env.make_core(coloc_env.compose("circles", "ideal", "dead_reckoning", horizon=3), batch=1)
-    record = _record_play(core, np.random.default_rng(0), "always", None)
+    record = record_play(core, np.random.default_rng(0), "always", None)
     with pytest.raises(ValueError, match="heading_state=False needs turn_rate_noise_std = 0"):
         circles.problem(core, record, heading_state=False)
 

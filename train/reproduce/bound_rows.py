@@ -1,6 +1,6 @@
 """The posterior Cramér–Rao bound beside a reproduction's rows: its ``pcrb`` block and report section.
 
-A reproduction whose world has a bound model (``coloc_env.bound_models``) computes
+A reproduction whose world has a bound model (``coloc_env.bounds.models``) computes
 ``coloc_env.pcrb`` over seeded episodes of its composition and hands this module the bound and,
 per estimator row it reports as a position error, the per-run mean squared 2-D position error
 (m^2, the bound's coordinates: the world's ``position_index``, over the same steps as the bound).

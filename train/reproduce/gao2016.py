@@ -269,7 +269,7 @@ def bound_block(config: NlosHorizonConfig, res: dict, best: int, seed: int, epis
     errors both over k >= ``warm``.
 
     The ``nlos_orbit`` bound is a genie bound on the filters' white-acceleration model: every RSS/AOA reading
-    measured, with each link's LOS/NLOS mode known (coloc_env/bound_models/nlos_orbit.py). The rows that infer
+    measured, with each link's LOS/NLOS mode known (coloc_env/bounds/models/nlos_orbit.py). The rows that infer
     the mode (``mean``, ``blind``) or drop late packets (``lag0``) use less than it; the truth flies a turn
     schedule, not the model, so an estimator can fall below the bound where the truth is smoother than the
     model (straight legs); its efficiency is >= 1 only up to that and to Monte Carlo noise.

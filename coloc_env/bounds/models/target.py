@@ -28,9 +28,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from coloc_env.bound_models import SHARED_AT_LEADER, with_delivered
-from coloc_env.bounds import BoundProblem, Recursion, delivered_recursion
+from coloc_env.bounds.problem import BoundProblem, ReadingInformation, Recursion, delivered_recursion, with_delivered
 from estimators.bounds import linear_information
+
+# the worlds this module is the bound model of (coloc_env.bounds.models reads it)
+WORLDS = ("drift", "target_cv")
 
 
 def problem(core, record) -> BoundProblem:
@@ -50,7 +52,7 @@ def problem(core, record) -> BoundProblem:
     centralized = Recursion(P0, np.broadcast_to(own.sum(axis=0), (K, n, n)), F, Q, positions)
     local = [Recursion(P0, np.broadcast_to(own[i], (K, n, n)), F, Q, one) for i in range(N)]
     agents = [np.array([i]) for i in range(N)]
-    shared = core.composition.backend.name in SHARED_AT_LEADER  # every agent reports the leader's estimate
+    shared = core.composition.backend.shared_estimate  # every agent reports the leader's estimate
     sender_info = np.broadcast_to(own, (K, N, n, n))
 
     def readings_bound(arrival, lags):  # arrival (K, N, N) [t, s]: each receiver's own z at once, the packets' later
@@ -61,5 +63,10 @@ def problem(core, record) -> BoundProblem:
             delivered.append(delivered_recursion(P0, F, Q, sender_info, at_s, lags, one))
         return delivered, ([np.arange(N)] if shared else agents)
 
-    return with_delivered(BoundProblem(centralized, local, agents), core, record, "packets", (K, N, N),
-                          readings_bound)
+    readings = ReadingInformation(n)
+    everything = np.arange(n)
+    for k in range(K):
+        for i in range(N):  # z_i(k), agent i's own
+            readings.add(k, i, -1, everything, own[i])
+    problem = BoundProblem(centralized, local, agents, readings=readings)
+    return with_delivered(problem, core, record, "packets", (K, N, N), readings_bound)

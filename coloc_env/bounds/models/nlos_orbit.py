@@ -29,11 +29,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from coloc_env.bound_models import with_delivered
-from coloc_env.bounds import BoundProblem, Recursion, delivered_recursion
+from coloc_env.bounds.problem import BoundProblem, ReadingInformation, Recursion, delivered_recursion, with_delivered
 from coloc_env.primitives.flight import OrbitParameters
 from coloc_env.worlds.nlos_orbit import ORBIT_FIELDS
 from estimators.bounds import rss_aoa_information
+
+# the worlds this module is the bound model of (coloc_env.bounds.models reads it)
+WORLDS = ("nlos_orbit",)
 
 
 def reading_information(world, K: int) -> np.ndarray:
@@ -88,5 +90,10 @@ def problem(core, record) -> BoundProblem:
         return [delivered_recursion(p0, F, Q, per_reading[:, i], arrival[:, i], lags, np.array([[0, 1]]))
                 for i in range(N)], agents
 
-    return with_delivered(BoundProblem(centralized, local, agents), core, record, "node_packets", (K, N, J),
-                          readings_bound)
+    readings = ReadingInformation(4 * N)
+    for k in range(K):
+        for i in range(N):
+            for j in range(J):  # neighbour j's reading of target i (a world node's: tagged with the target)
+                readings.add(k, i, -1, np.arange(4 * i, 4 * i + 4), per_reading[k, i, j])
+    return with_delivered(BoundProblem(centralized, local, agents, readings=readings), core, record, "node_packets",
+                          (K, N, J), readings_bound)

@@ -26,9 +26,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from coloc_env.bound_models import with_delivered
-from coloc_env.bounds import BoundProblem, Recursion
+from coloc_env.bounds.problem import BoundProblem, ReadingInformation, Recursion, with_delivered
 from estimators.bounds import fix_information, pair_information, range_information
+
+# the worlds this module is the bound model of (coloc_env.bounds.models reads it)
+WORLDS = ("mrclam_slices",)
 
 
 def problem(core, record) -> BoundProblem:
@@ -39,6 +41,7 @@ def problem(core, record) -> BoundProblem:
     p0 = world.config.initial_std**2 * np.eye(2)
     info = np.zeros((K, n, n))
     own = np.zeros((K, N, 2, 2))
+    readings = ReadingInformation(n)
     q = np.zeros((max(K - 1, 0), 2, 2))
     for k in range(K):
         r = record.readings[k]
@@ -47,14 +50,19 @@ def problem(core, record) -> BoundProblem:
         own[k] = r.fix_valid[0][:, None, None] * fix_information(float(r.extra["gps_std"][0]) ** 2)
         for i in range(N):
             info[k, 2 * i:2 * i + 2, 2 * i:2 * i + 2] = own[k, i]
+            if r.fix_valid[0][i]:
+                readings.add(k, i, -1, np.arange(2 * i, 2 * i + 2), own[k, i])
         variance = float(r.extra["range_std"][0]) ** 2
         for a, b in zip(*np.nonzero(np.triu(r.range_valid[0], 1)), strict=True):
             idx = np.r_[2 * a:2 * a + 2, 2 * b:2 * b + 2]
-            info[k][np.ix_(idx, idx)] += pair_information(range_information(truth[k, a], truth[k, b], variance))
+            block = pair_information(range_information(truth[k, a], truth[k, b], variance))
+            info[k][np.ix_(idx, idx)] += block
+            readings.add(k, a, b, idx, block)
     steps = max(K - 1, 0)
     Q = np.stack([np.kron(np.eye(N), q[k]) for k in range(steps)]) if steps else np.zeros((0, n, n))
     positions = np.array([[2 * i, 2 * i + 1] for i in range(N)])
     centralized = Recursion(np.kron(np.eye(N), p0), info, None, Q, positions)
     local = [Recursion(p0, own[:, i], None, q, np.array([[0, 1]])) for i in range(N)]
     agents = [np.array([i]) for i in range(N)]
-    return with_delivered(BoundProblem(centralized, local, agents, model_based=True, per_episode=True), core, record)
+    return with_delivered(BoundProblem(centralized, local, agents, model_based=True, per_episode=True,
+                                       readings=readings), core, record)

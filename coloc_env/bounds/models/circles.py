@@ -61,9 +61,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from coloc_env.bound_models import centre_received, with_delivered
-from coloc_env.bounds import BoundProblem, Recursion
+from coloc_env.bounds.problem import BoundProblem, ReadingInformation, Recursion, centre_received, with_delivered
 from estimators.bounds import fix_information, pair_information, range_information
+
+# the worlds this module is the bound model of (coloc_env.bounds.models reads it)
+WORLDS = ("circles",)
 
 
 def motion(world, steps: int, heading_state: bool) -> tuple[np.ndarray, np.ndarray]:
@@ -113,9 +115,12 @@ def problem(core, record, heading_state: bool | None = None) -> BoundProblem:
     own = np.zeros((K, N, d, d))
     own[:, :c.num_anchors, :2, :2] = fix_information(c.fix_noise_std**2)
     info = _block_diagonal(own)
+    readings = ReadingInformation(n)
     central = core.composition.backend.name == "ukf_ccl"  # the centre's information, for its delivered bound
     centre = np.zeros((K, n, n)) if central else None
     for step in range(K):
+        for i in range(c.num_anchors):  # the anchors' fixes
+            readings.add(step, i, -1, np.arange(d * i, d * i + d), own[step, i])
         valid = record.readings[step].range_valid[0]
         pairs = list(zip(*np.nonzero(valid), strict=True))
         if central:
@@ -129,6 +134,7 @@ def problem(core, record, heading_state: bool | None = None) -> BoundProblem:
                                                        c.range_noise_var))
             idx = np.r_[d * m:d * m + 2, d * j:d * j + 2]
             info[step][np.ix_(idx, idx)] += block
+            readings.add(step, m, j, idx, block)
             if central and got_range[r]:
                 centre[step][np.ix_(idx, idx)] += block
     positions = d * np.arange(N)[:, None] + np.arange(2)[None, :]
@@ -139,5 +145,5 @@ def problem(core, record, heading_state: bool | None = None) -> BoundProblem:
     def centre_bound():  # every platform reads its estimate at the centre
         return [Recursion(P0, centre, F, Q, positions)], [np.arange(N)]
 
-    return with_delivered(BoundProblem(centralized, local, agents), core, record,
+    return with_delivered(BoundProblem(centralized, local, agents, readings=readings), core, record,
                           readings_bound=centre_bound if central else None)

@@ -24,9 +24,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from coloc_env.bound_models import centre_received, with_delivered
-from coloc_env.bounds import BoundProblem, Recursion
+from coloc_env.bounds.problem import BoundProblem, ReadingInformation, Recursion, centre_received, with_delivered
 from estimators.bounds import fix_information, pair_information, range_information
+
+# the worlds this module is the bound model of (coloc_env.bounds.models reads it)
+WORLDS = ("gps_denied",)
 
 
 def problem(core, record) -> BoundProblem:
@@ -45,11 +47,14 @@ def problem(core, record) -> BoundProblem:
     info = np.zeros((K, n, n))
     for i in range(N):
         info[:, 4 * i:4 * i + 4, 4 * i:4 * i + 4] = own[:, i]
+    readings = ReadingInformation(n)
     central = core.composition.backend.name == "ukf_ccl"  # the centre's information, for its delivered bound
     centre = np.zeros((K, n, n)) if central else None
     for step in range(K):
         pairs = list(zip(*np.nonzero(np.triu(world.adjacency[0, step], 1)), strict=True))  # one per unordered pair
         p = world.truth[0, step, :, :2]
+        for i in np.flatnonzero(normal[step]):  # the GPS fixes
+            readings.add(step, i, -1, np.arange(4 * i, 4 * i + 4), own[step, i])
         if central:
             fixes = np.flatnonzero(normal[step])
             got_range, got_fix = centre_received(record, step, pairs, fixes, N)
@@ -60,6 +65,7 @@ def problem(core, record) -> BoundProblem:
             idx = np.r_[4 * a:4 * a + 2, 4 * b:4 * b + 2]
             block = pair_information(range_information(p[a], p[b], c.range_std**2))
             info[step][np.ix_(idx, idx)] += block
+            readings.add(step, a, b, idx, block)
             if central and got_range[r]:
                 centre[step][np.ix_(idx, idx)] += block
     steps = max(K - 1, 0)
@@ -72,5 +78,5 @@ def problem(core, record) -> BoundProblem:
     def centre_bound():  # every UAV reads its estimate at the centre
         return [Recursion(P0, centre, centralized.F, centralized.Q, positions)], [np.arange(N)]
 
-    return with_delivered(BoundProblem(centralized, local, agents), core, record,
+    return with_delivered(BoundProblem(centralized, local, agents, readings=readings), core, record,
                           readings_bound=centre_bound if central else None)

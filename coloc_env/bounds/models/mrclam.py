@@ -35,9 +35,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from coloc_env.bound_models import with_delivered
-from coloc_env.bounds import BoundProblem, Recursion
+from coloc_env.bounds.problem import BoundProblem, ReadingInformation, Recursion, with_delivered
 from estimators.bounds import range_bearing_information
+
+# the worlds this module is the bound model of (coloc_env.bounds.models reads it)
+WORLDS = ("mrclam",)
 
 
 def problem(core, record) -> BoundProblem:
@@ -62,6 +64,7 @@ def problem(core, record) -> BoundProblem:
             Q[k, 3 * i:3 * i + 3, 3 * i:3 * i + 3] = q[k, i]
     info = np.zeros((K, n, n))
     own = np.zeros((K, N, 3, 3))
+    readings = ReadingInformation(n)
     for k in range(K):
         extra = record.readings[k].extra
         observer, subject = extra["obs_observer"][0], extra["obs_subject"][0]
@@ -72,13 +75,16 @@ def problem(core, record) -> BoundProblem:
                 block = range_bearing_information(poses[k, m], target[j], R[j])[:3, :3]
                 own[k, m] += block
                 info[k, 3 * m:3 * m + 3, 3 * m:3 * m + 3] += block
+                readings.add(k, m, -1, np.arange(3 * m, 3 * m + 3), block)
             else:
                 s = int(subject[j])
                 block = range_bearing_information(poses[k, m], poses[k, s, :2], R[j])
                 idx = np.r_[3 * m:3 * m + 3, 3 * s:3 * s + 2]
                 info[k][np.ix_(idx, idx)] += block
+                readings.add(k, m, s, idx, block)
     positions = np.array([[3 * i, 3 * i + 1] for i in range(N)])
     centralized = Recursion(np.kron(np.eye(N), p0), info, F, Q, positions)
     local = [Recursion(p0, own[:, i], f[:, i], q[:, i], np.array([[0, 1]])) for i in range(N)]
     agents = [np.array([i]) for i in range(N)]
-    return with_delivered(BoundProblem(centralized, local, agents, model_based=True, per_episode=True), core, record)
+    return with_delivered(BoundProblem(centralized, local, agents, model_based=True, per_episode=True,
+                                       readings=readings), core, record)
