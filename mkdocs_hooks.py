@@ -2,7 +2,9 @@
 
 ``on_config`` drops from the navigation every page that does not exist, so that pages other parts of the
 project add later (their entries are already in ``nav``) never break a build; an empty section is dropped
-too. ``[text] [id]`` (a space between) is not a cross-reference (``_AdjacentReferenceIds``). Everything
+too. ``on_page_markdown`` fills the marker ``<!-- registered parts -->`` of the parts page with one section per
+kind of part listing every registered part's module (``parts_reference``), so a new part appears without an
+edit of the page. ``[text] [id]`` (a space between) is not a cross-reference (``_AdjacentReferenceIds``). Everything
 else stays strict: a broken link or reference in an existing page fails ``make docs``.
 """
 
@@ -29,6 +31,39 @@ def _existing(nav, docs_dir: str):
         elif "://" in target or os.path.isfile(os.path.join(docs_dir, target)):
             kept.append({title: target})
     return kept
+
+
+PARTS_MARKER = "<!-- registered parts -->"
+KIND_TITLES = (("world", "Worlds", "worlds"), ("network", "Networks", "networks"), ("backend", "Backends", "backends"))
+
+
+def _module_block(module: str) -> list[str]:
+    return [f"::: {module}", "    options:", "      members: false", "      heading_level: 3", ""]
+
+
+def parts_reference() -> str:
+    """The parts page's sections: per kind, its package, its base module and each registered part's module
+    (``coloc_env.parts``' registries, in name order; a module holding several parts once)."""
+    from coloc_env.parts import BACKENDS, NETWORKS, WORLDS
+
+    registries = {"world": WORLDS, "network": NETWORKS, "backend": BACKENDS}
+    lines = []
+    for kind, title, package in KIND_TITLES:
+        modules = [f"coloc_env.{package}", f"coloc_env.{package}.base"]
+        for name in sorted(registries[kind]):
+            module = registries[kind][name].__module__
+            if module not in modules:
+                modules.append(module)
+        lines += [f"## {title}", ""]
+        for module in modules:
+            lines += _module_block(module)
+    return "\n".join(lines)
+
+
+def on_page_markdown(markdown, page, config, files):
+    if PARTS_MARKER in markdown:
+        return markdown.replace(PARTS_MARKER, parts_reference())
+    return markdown
 
 
 def on_config(config):

@@ -16,6 +16,7 @@ integers in ``[0, choices)`` (a discrete block) or, with ``choices=None``,
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -105,8 +106,90 @@ def make_config(cls: type, fields: dict[str, Any], kind: str) -> PartConfig:
     return config
 
 
-# what a backend's messages carry (its ``message_content``, coloc_env.backends.base)
+# What moves over a network (a backend's ``message_kind``, a network's ``carries``; coloc_env.networks.base).
+MESSAGE_KINDS = ("none", "broadcast", "chain", "central", "packets", "components")
+# What a backend's messages carry (its ``message_content``, coloc_env.backends.base).
 MESSAGE_CONTENTS = ("readings", "estimates", "nothing")
+ESTIMANDS = ("self", "target")
+
+
+@dataclasses.dataclass(frozen=True)
+class NoBound:
+    """A world's ``bound_model`` where coloc_env.bounds has no model of it: why not, in words."""
+
+    reason: str
+
+
+@dataclasses.dataclass(frozen=True)
+class Declaration:
+    """One class-level declaration every part of a kind makes: what the core, the bounds, ``compatibility()``,
+    the docs and the CLI read of the part instead of a table elsewhere. ``valid(value)`` says whether a value is
+    allowed; ``allowed`` says the same in words for the error."""
+
+    name: str
+    meaning: str
+    allowed: str
+    valid: Callable[[Any], bool]
+
+
+def _names(value) -> bool:
+    return isinstance(value, frozenset) and all(isinstance(v, str) and v for v in value)
+
+
+def _text(value) -> bool:
+    return isinstance(value, str) and bool(value.strip())
+
+
+CONTRACTS: dict[str, tuple[Declaration, ...]] = {
+    "world": (
+        Declaration("estimand", "what its agents estimate: their own positions or a shared state",
+                    f"one of {list(ESTIMANDS)}", lambda v: v in ESTIMANDS),
+        Declaration("motion_kind", "the estimators.models kind its truth follows", "a model kind's name", _text),
+        Declaration("measurements", "the measurement kinds its readings offer", "a frozenset of kind names",
+                    _names),
+        Declaration("anchors", "who has absolute position information, in words", "a non-empty text", _text),
+        Declaration("bound_model", "the module of coloc_env.bounds.models that gives its posterior Cramér-Rao "
+                    "bound, or NoBound(why it has none)", "a module name or NoBound(a non-empty text)",
+                    lambda v: _text(v) or (isinstance(v, NoBound) and _text(v.reason))),
+    ),
+    "network": (
+        Declaration("carries", "the message kinds it can carry", f"a non-empty frozenset of {list(MESSAGE_KINDS)}",
+                    lambda v: _names(v) and bool(v) and v <= set(MESSAGE_KINDS)),
+    ),
+    "backend": (
+        Declaration("estimand", "what it estimates", f"one of {list(ESTIMANDS)}", lambda v: v in ESTIMANDS),
+        Declaration("motion_kinds", "the estimators.models kinds it can run on", "a non-empty frozenset of kind "
+                    "names", lambda v: _names(v) and bool(v)),
+        Declaration("requires", "groups of measurement kinds; the world must offer one kind of each group",
+                    "a tuple of non-empty frozensets of kind names",
+                    lambda v: isinstance(v, tuple) and all(_names(g) and g for g in v)),
+        Declaration("message_kind", "what it sends over the network", f"one of {list(MESSAGE_KINDS)}",
+                    lambda v: v in MESSAGE_KINDS),
+        Declaration("message_content", "what a message carries (the bounds' information sets)",
+                    f"one of {list(MESSAGE_CONTENTS)}", lambda v: v in MESSAGE_CONTENTS),
+        Declaration("shared_estimate", "whether every agent reports the centre's (agent 0's) estimate",
+                    "True or False", lambda v: isinstance(v, bool)),
+    ),
+}
+_MISSING = object()
+
+
+def check_declarations(kind: str, cls: type) -> None:
+    """The part class ``cls`` makes every declaration of its kind's contract (``CONTRACTS``), each allowed; else
+    a ``ValueError`` naming the part and the declaration. Run when a part registers. A declaration may be a
+    property of the config's fields (afge's ``requires`` grows with ``mode_info``): it is checked on the
+    part's defaults."""
+    defaults = None
+    for declaration in CONTRACTS[kind]:
+        value = getattr(cls, declaration.name, _MISSING)
+        if isinstance(value, property):
+            defaults = cls() if defaults is None else defaults
+            value = getattr(defaults, declaration.name)
+        if value is _MISSING:
+            raise ValueError(f"{kind} {cls.name!r} must declare {declaration.name} ({declaration.meaning}): "
+                             f"{declaration.allowed}")
+        if not declaration.valid(value):
+            raise ValueError(f"{kind} {cls.name!r}: {declaration.name} must be {declaration.allowed}, got {value!r}")
 
 
 class Registry(dict):
@@ -117,18 +200,22 @@ class Registry(dict):
         self.kind = kind
 
     def register(self, cls: type) -> type:
+        """Add a part class (a decorator): its ``name`` is new and it makes every declaration of its kind's
+        contract (``check_declarations``), else a ``ValueError`` naming the part and what is wrong."""
+        if not _text(getattr(cls, "name", None)):
+            raise ValueError(f"a {self.kind} must declare its name, got {getattr(cls, 'name', None)!r}")
         if cls.name in self:
             raise ValueError(f"{self.kind} {cls.name!r} registered twice")
-        if self.kind == "backend":  # what the bounds read of a backend (coloc_env.backends.base)
-            if getattr(cls, "message_content", None) not in MESSAGE_CONTENTS:
-                raise ValueError(f"backend {cls.name!r} must declare message_content, one of "
-                                 f"{list(MESSAGE_CONTENTS)}, got {getattr(cls, 'message_content', None)!r}")
-            if not isinstance(getattr(cls, "shared_estimate", None), bool):
-                raise ValueError(f"backend {cls.name!r} must declare shared_estimate (True or False), got "
-                                 f"{getattr(cls, 'shared_estimate', None)!r}")
+        check_declarations(self.kind, cls)
         cls.kind = self.kind
         self[cls.name] = cls
         return cls
+
+    def unregister(self, name: str) -> None:
+        """Remove a part added by ``register`` (a test's toy part), so that the registry is as before."""
+        if name not in self:
+            raise ValueError(f"no {self.kind} {name!r} registered; registered: {sorted(self)}")
+        del self[name]
 
     def resolve(self, part: Any) -> PartConfig:
         """A validated config from a name, a config object or a dict ``{"name": ..., field: value}``."""
@@ -170,5 +257,6 @@ def check_flag(name: str, value: Any) -> None:
         raise BadInput(f"{name} must be True or False, got {value!r}")
 
 
-__all__ = ["BACKENDS", "NETWORKS", "WORLDS", "Block", "PartConfig", "Registry", "check_choice", "check_flag",
-           "check_range", "make_config"]
+__all__ = ["BACKENDS", "CONTRACTS", "MESSAGE_CONTENTS", "MESSAGE_KINDS", "NETWORKS", "WORLDS", "Block", "Declaration",
+           "NoBound", "PartConfig", "Registry", "check_choice", "check_declarations", "check_flag", "check_range",
+           "make_config"]

@@ -1,7 +1,8 @@
 """The network of a composition: who can send what to whom, what arrives, and what it cost.
 
-A backend never decides delivery: it asks its network. Three message patterns
-(a backend's *message kind*) cover the papers:
+A backend never decides delivery: it asks its network. Six message patterns
+(a backend's *message kind*, ``coloc_env.parts.MESSAGE_KINDS``; a network's config declares the ones it
+``carries``) cover the papers:
 
 | kind        | what moves                                                        | network call           |
 |-------------|-------------------------------------------------------------------|------------------------|
@@ -13,6 +14,8 @@ A backend never decides delivery: it asks its network. Three message patterns
 |             | each arrives after a delay of 0..D steps or is lost (fu2017, gao2016) |                      |
 |             | from a world node (gao2016's orbiting neighbours, no agents) to an | ``Network.node_packets`` |
 |             | agent: the same rule, J nodes per agent                           |                        |
+| ``components`` | each receiver's selection of components of each sender's estimate, | ``Network.packets`` with |
+|             | one message per link (zhao2020)                                   | per-link floats         |
 
 Every network accounts at the sender, in one unit for every backend: a
 *message* is one transmission (a broadcast heard by several neighbours is one
@@ -41,7 +44,6 @@ from __future__ import annotations
 
 import functools
 import inspect
-from typing import ClassVar
 
 import numpy as np
 
@@ -49,7 +51,6 @@ from coloc_env.draws import draw_keys, uniforms
 from coloc_env.parts import Block
 from coloc_env.primitives.relay import RelayChain
 
-MESSAGE_KINDS = ("none", "broadcast", "chain", "central", "packets")
 # the calls that deliver messages, each reported to ``Network.observer`` (module docstring)
 DELIVERY_CALLS = ("broadcast", "packets", "node_packets", "relay", "relay_each", "messages_to")
 CENTRE = 0  # the fusion centre of ``central`` backends
@@ -163,7 +164,6 @@ def _reported(method, signature: inspect.Signature):
 class Network:
     """Batched delivery and accounting; subclasses set the link rules (``usable``, ``loss``, decisions)."""
 
-    carries: ClassVar[frozenset] = frozenset(MESSAGE_KINDS)
     # who is told of every delivery (``observer.delivery(network, call, arguments, result)``); None: nobody
     observer = None
     _delivering = False  # inside a reported call (a nested one is not reported again)

@@ -162,7 +162,7 @@ class ComposedScenario(Scenario):
         self._n_network = sum(blk.size for blk in self.network.transport_blocks())
         self._action_space = self._build_action_space()
         B, N = self.batch, self.num_agents
-        self.estimand = getattr(spec.world, "estimand", "self")
+        self.estimand = spec.world.estimand
         self.k = np.zeros(B, dtype=int)
         self._truth = np.zeros((B, N, 2))
         self._truth_state = np.zeros((B, getattr(self.world, "state_dim", 0)))

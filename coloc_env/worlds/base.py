@@ -56,6 +56,7 @@ class World:
     | motion_kind       | the ``estimators.models`` kind the truth follows                  |
     | measurements      | the measurement kinds it provides (``range``, ``position_fix``, ...) |
     | anchors           | in words: who has absolute position information                      |
+    | bound_model       | the ``coloc_env.bounds.models`` module of its bound, or ``NoBound(why)`` |
     """
 
     agent_prefix: ClassVar[str] = "uav"

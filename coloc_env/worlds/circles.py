@@ -78,6 +78,7 @@ class Circles(PartConfig):
     """Config of the ``circles`` world (see the module table)."""
 
     name = "circles"
+    bound_model = "circles"  # coloc_env.bounds.models.circles
     aliases = {"num_platforms": "num_agents"}  # wang2019 calls the agents platforms
     estimand = "self"
     motion_kind = OdometryDisplacement.kind

@@ -196,6 +196,7 @@ class Drift(PartConfig):
     """Config of the ``drift`` world (see the module table)."""
 
     name = "drift"
+    bound_model = "target"  # coloc_env.bounds.models.target
     estimand = "target"
     motion_kind = LinearGaussian.kind
     measurements = frozenset({"linear_observation"})

@@ -83,6 +83,7 @@ class GpsDenied(PartConfig):
     """Config of the ``gps_denied`` world (see the module table)."""
 
     name = "gps_denied"
+    bound_model = "gps_denied"  # coloc_env.bounds.models.gps_denied
     estimand = "self"
     motion_kind = ConstantVelocityAccel.kind
     measurements = frozenset({"range", "position_fix"})

@@ -190,6 +190,7 @@ class Mrclam(PartConfig):
     """Config of the ``mrclam`` world (see the module tables). Validation reads no data."""
 
     name = "mrclam"
+    bound_model = "mrclam"  # coloc_env.bounds.models.mrclam
     estimand = "self"
     motion_kind = SE2Odometry.kind
     measurements = frozenset({"range", "bearing", "landmark_range_bearing", "position_fix"})

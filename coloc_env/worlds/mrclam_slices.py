@@ -289,6 +289,7 @@ class MrclamSlices(PartConfig):
     """Config of the ``mrclam_slices`` world (see the module tables). Validation reads no data."""
 
     name = "mrclam_slices"
+    bound_model = "mrclam_slices"  # coloc_env.bounds.models.mrclam_slices
     estimand = "self"
     motion_kind = ConstantVelocityAccel.kind
     measurements = frozenset({"range", "position_fix"})

@@ -113,6 +113,7 @@ class NlosOrbit(PartConfig):
     """Config of the ``nlos_orbit`` world (see the module table)."""
 
     name = "nlos_orbit"
+    bound_model = "nlos_orbit"  # coloc_env.bounds.models.nlos_orbit
     estimand = "self"
     motion_kind = ConstantVelocityWhiteAccel.kind
     anchors = "orbiting neighbours with navigation estimates (J world nodes per agent, not agents)"

@@ -76,6 +76,7 @@ class TargetCv(PartConfig):
     """Config of the ``target_cv`` world (see the module table)."""
 
     name = "target_cv"
+    bound_model = "target"  # coloc_env.bounds.models.target
     estimand = "target"
     motion_kind = LinearGaussian.kind
     measurements = frozenset({"linear_observation"})
