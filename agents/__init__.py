@@ -23,7 +23,7 @@ import inspect
 import os
 from types import ModuleType
 
-from agents import generic
+from agents import event_triggered, generic
 from agents.base import FixedActionPolicy, Policy, RandomPolicy
 from coloc_env.config import BadInput, check_seed
 from coloc_env.scenarios import REGISTRY
@@ -46,7 +46,18 @@ def policy_module(scenario: str) -> ModuleType | None:
 
 def _policies(scenario: str) -> dict:
     module = policy_module(scenario)
-    return generic.POLICIES if module is None else module.POLICIES
+    return _composition_policies(scenario) if module is None else module.POLICIES
+
+
+def _composition_policies(scenario: str) -> dict:
+    """A composition's policies by name: the generic ones, and the event-triggered families
+    (``agents.event_triggered``) where its network has a transport decision."""
+    import coloc_env
+
+    if coloc_env.is_composition_name(scenario) and \
+            event_triggered.has_transport_decision(coloc_env.composition_named(scenario)):
+        return {**generic.POLICIES, **event_triggered.POLICIES}
+    return generic.POLICIES
 
 
 def _bounds(scenario: str) -> dict:
@@ -115,9 +126,13 @@ def make_policy(name: str, env, seed: int | None = None, **kwargs) -> Policy:
         raise BadInput(f"unknown policy {name!r} for {scenario}; available: {available_policies(scenario)}, "
                        f"bounds: {bound_policies(scenario)} or a .zip")
     if variant:
-        if "tables" not in inspect.signature(table[base]).parameters:
+        parameters = inspect.signature(table[base]).parameters
+        if "variant" in parameters:  # the knob of a family (periodic:4)
+            kwargs["variant"] = variant
+        elif "tables" in parameters:
+            kwargs["tables"] = variant
+        else:
             raise BadInput(f"policy {base!r} of {scenario} takes no variant, got {name!r}")
-        kwargs["tables"] = variant
     if "seed" in inspect.signature(table[base]).parameters:  # stochastic scenario policies take their own seed
         kwargs.setdefault("seed", seed)
     return table[base](env, **kwargs)

@@ -192,6 +192,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="with --scaling: these numbers of copies, 1..4096 (default 8 64)")
 
     _add_study_parser(sub)
+    _add_frontier_parser(sub)
 
     ls = sub.add_parser("list", help="worlds, networks, backends, presets and the compatibility table",
                         formatter_class=_HelpFormatter,
@@ -254,6 +255,33 @@ def _add_study_parser(sub) -> None:
     st.add_argument("--name", default=None,
                     help="NAME (default: WORLD_NETWORK, plus _PART.FIELD with a sweep, e.g. "
                          "circles_relay_network.loss_at_zero)")
+
+
+FRONTIER_EPILOG = """\
+Writes OUT/frontier/NAME/ (NAME: the scenario, with / as __): metrics.json, report.md, frontier.png.
+Every point plays the same episodes (seed S + e): always, silent, random, paper where the scenario has one,
+and every event-triggered family over its knob grid (chosen on validation episodes), which form the baseline
+frontier; greedy (privileged) and the models under --models are judged against it at their own message rate.
+Example: coloc frontier circles/broadcast/ukf_ccl --episodes 30
+"""
+
+
+def _add_frontier_parser(sub) -> None:
+    fr = sub.add_parser("frontier", help="error against messages: every policy family, the baseline frontier, "
+                                         "the bounds", description="See train/frontier.py.",
+                        epilog=FRONTIER_EPILOG, formatter_class=_HelpFormatter)
+    fr.add_argument("scenario", help="a preset or a composition world/network/backend")
+    fr.add_argument("--models", default=None, metavar="DIR", help="trained .zip models under DIR, judged against "
+                                                                  "the frontier")
+    fr.add_argument("--episodes", type=_count(2, MAX_RUNS), default=30,
+                    help=f"paired episodes per point, 2..{MAX_RUNS}")
+    fr.add_argument("--quick", action="store_true", help="a first look: three knobs per family")
+    fr.add_argument("--seed", type=_seed, default=None,
+                    help="S: episode e is seeded S + e (default: the evaluation seeds 10^6 + e)")
+    fr.add_argument("--executor", choices=["local", "ray"], default="local",
+                    help="ray: each point is one Ray task, with the same numbers as local")
+    fr.add_argument("--address", default=None, help="Ray cluster address (default: a local Ray)")
+    fr.add_argument("--out", type=_out_folder, default="results", help="writes OUT/frontier/NAME/")
 
 
 def _console():
@@ -501,6 +529,34 @@ def cmd_study(args) -> int:
     return 0
 
 
+def cmd_frontier(args) -> int:
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+    from train.frontier import FIGURE, hull_by_rate, run_frontier
+    from train.io import check_output_folder
+
+    _check_scenario(args.scenario)
+    check_output_folder(args.out)
+    console = _console()
+    with Progress(TextColumn("frontier {task.description}"), BarColumn(), MofNCompleteColumn(),
+                  TimeRemainingColumn(), console=console, transient=True) as bar:
+        task = bar.add_task(args.scenario, total=None)
+        metrics, folder = run_frontier(
+            args.scenario, episodes=args.episodes, seed=args.seed, models=args.models, quick=args.quick,
+            executor=args.executor,
+            address=args.address, out=args.out,
+            progress=lambda done, total: bar.update(task, completed=done, total=total),
+            mark=lambda folder: _open(args, folder))
+    console.print(f"wrote {folder}/ (metrics.json, report.md, {FIGURE})", soft_wrap=True)
+    console.print(f"  baseline frontier: {', '.join(metrics['frontier'])}", highlight=False, soft_wrap=True)
+    for label, name in hull_by_rate(metrics).items():
+        console.print(f"  {label} message rates: {name}", highlight=False, soft_wrap=True)
+    for name, result in metrics["judged"].items():
+        console.print(f"  {name}: {result['verdict']} against the frontier ({result['mean']:+.4g} {metrics['unit']}, "
+                      f"95 % [{result['low']:+.4g}, {result['high']:+.4g}])", highlight=False, soft_wrap=True)
+    return 0
+
+
 def cmd_list(args) -> int:
     """Print the parts, the presets (with their registered env ids) and one line per (world, network,
     backend): ok, or why not; ``--ok`` keeps the compatible rows, ``--world`` / ``--network`` / ``--backend``
@@ -620,7 +676,7 @@ def main(argv: list[str] | None = None) -> int:
         args.argv, args.open_folders = argv, []
         command = args.command
         handlers = {"reproduce": cmd_reproduce, "train": cmd_train, "evaluate": cmd_evaluate, "bench": cmd_bench,
-                    "study": cmd_study, "list": cmd_list}
+                    "study": cmd_study, "frontier": cmd_frontier, "list": cmd_list}
         try:
             with _wide_output_when_not_a_terminal():
                 return handlers[args.command](args)

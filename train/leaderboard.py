@@ -318,6 +318,77 @@ def tradeoff_comparison(row: dict, always: dict, silent: dict) -> dict | None:
     return dict(diff, verdict=verdict(diff), probability=p)
 
 
+def baseline_frontier(points) -> list[int]:
+    """The vertices of the baseline frontier of ``points`` [(messages per step, mean cost), ...], as indices in
+    order of increasing messages.
+
+    At a message rate m the frontier is the lowest expected cost a time-share of the points reaches with at most
+    m messages per step: playing point a in a fraction 1 - w of the episodes and point b in the rest gives the
+    expected (messages, cost) (1 - w) (m_a, c_a) + w (m_b, c_b), so every time-share lies in the convex hull of
+    the points, and the least cost at messages <= m is the lower convex hull from the point of fewest messages
+    up to the point of least cost, flat after it (a time-share that sends more than the least-cost point sends
+    does no better than it). Ties in messages keep the lower cost; ties in cost the fewer messages."""
+    pts = [(float(m), float(c), i) for i, (m, c) in enumerate(points) if math.isfinite(m) and math.isfinite(c)]
+    if not pts:
+        return []
+    pts.sort()
+    best = min(pts, key=lambda p: (p[1], p[0]))
+    pts = [p for p in pts if p[0] <= best[0]]
+    hull: list[tuple[float, float, int]] = []
+    for p in pts:  # Andrew's monotone chain, lower half: drop a vertex that lies on or above the new chord
+        if hull and hull[-1][0] == p[0]:
+            continue  # the same messages, a higher cost (sorted): never on the lower hull
+        while len(hull) >= 2:
+            (m1, c1, _), (m2, c2, _) = hull[-2], hull[-1]
+            if (m2 - m1) * (p[1] - c1) - (c2 - c1) * (p[0] - m1) <= 0:
+                hull.pop()
+            else:
+                break
+        hull.append(p)
+    return [p[2] for p in hull]
+
+
+def frontier_mix(rows_: list[dict], messages: float) -> tuple[dict, dict, float] | None:
+    """The time-share of the baseline frontier of ``rows_`` at ``messages`` per step: (row a, row b, w), the
+    frontier there being (1 - w) a + w b (w in [0, 1]; a = b at a vertex, below the fewest messages of any
+    row (the frontier's first vertex: the row is compared with what sends more) and beyond the least-cost
+    vertex). None without rows."""
+    vertices = [rows_[i] for i in baseline_frontier([(r["communication_per_step"], r["mean_cost"]) for r in rows_])]
+    if not vertices:
+        return None
+    if messages <= vertices[0]["communication_per_step"]:
+        return vertices[0], vertices[0], 0.0
+    for a, b in zip(vertices[:-1], vertices[1:], strict=True):
+        ma, mb = a["communication_per_step"], b["communication_per_step"]
+        if messages <= mb:
+            return a, b, float((messages - ma) / (mb - ma))
+    return vertices[-1], vertices[-1], 0.0
+
+
+def frontier_comparison(row: dict, baseline_rows: list[dict]) -> dict | None:
+    """The row's paired difference against the baseline frontier at the row's own message rate.
+
+    The frontier (``baseline_frontier``) at m = the row's messages per step is the time-share (1 - w) a + w b of
+    two baseline rows (``frontier_mix``); its cost in episode e is (1 - w) cost_e(a) + w cost_e(b), which
+    ``tradeoff_comparison`` generalizes from always/silent to every baseline. The rows must share the
+    seeds. Returns ``paired_difference``'s dict with ``verdict`` (the same words as ``verdict``), ``mix``
+    ((a's policy, b's policy, w)) and ``frontier_cost`` (the frontier's mean cost at m); None where a row lacks
+    per-episode costs, the seeds differ or no baseline is given."""
+    candidates = [r for r in baseline_rows if _episodes(r) is not None and r.get("seed_base") == row.get("seed_base")]
+    if _episodes(row) is None or not candidates:
+        return None
+    mix = frontier_mix(candidates, row["communication_per_step"])
+    if mix is None:
+        return None
+    a, b, w = mix
+    n = min(len(_episodes(r)) for r in (row, a, b))
+    if n < 2:
+        return None
+    frontier = (1.0 - w) * np.asarray(_episodes(a)[:n], float) + w * np.asarray(_episodes(b)[:n], float)
+    diff = paired_difference(_episodes(row)[:n], frontier)
+    return dict(diff, verdict=verdict(diff), mix=(a["policy"], b["policy"], w), frontier_cost=float(frontier.mean()))
+
+
 def target_verdict(scenario: str, table: dict) -> str | None:
     """One line: the target, judged per trained model against the strongest realizable baseline on paired
     episodes; "met" only when every trained model beats it (or matches it with the communication saving)."""

@@ -1,0 +1,88 @@
+"""The baseline frontier (the lower convex hull of the baselines' points, flat after its least error), the
+judge against it, and ``coloc frontier``'s files."""
+
+import json
+
+import numpy as np
+import pytest
+
+from train.cli import main
+from train.evaluate import evaluate_policy
+from train.leaderboard import baseline_frontier, frontier_comparison, frontier_mix
+
+SMALL = "drift/broadcast/kalman"
+
+
+def test_the_frontier_is_the_lower_hull_up_to_the_least_error():
+    points = [(0, 10), (1, 5), (2, 4.9), (3, 2), (4, 3), (2, 8)]
+    assert baseline_frontier(points) == [0, 1, 3]  # (2, 4.9) lies above the chord (1, 5)-(3, 2); (4, 3) after it
+    assert baseline_frontier([(0, 10), (1, 5), (2, 1), (3, 2)]) == [0, 1, 2]
+    assert baseline_frontier([(1, 3), (1, 2), (0, 9)]) == [2, 1]  # equal messages: the lower cost only
+
+
+def row(name, messages, costs):
+    return {"policy": name, "communication_per_step": messages, "mean_cost": float(np.mean(costs)),
+            "per_episode_cost": list(costs), "seed_base": 0}
+
+
+def test_the_frontier_at_a_rate_between_two_vertices_is_their_time_share():
+    rng = np.random.default_rng(0)
+    a, b = row("silent", 0.0, 10 + rng.normal(size=50)), row("always", 4.0, 2 + rng.normal(size=50))
+    first, second, w = frontier_mix([a, b], 1.0)
+    assert (first["policy"], second["policy"]) == ("silent", "always") and w == pytest.approx(0.25)
+    assert frontier_mix([a, b], 9.0)[:2] == (b, b)  # flat beyond the least error
+
+
+@pytest.fixture(scope="module")
+def played():
+    """always, silent and periodic:2 of the small composition on the same 40 seeded episodes."""
+    return {name: evaluate_policy(SMALL, name, 40, seed_base=5, bounds=False)
+            for name in ("always", "silent", "periodic:2")}
+
+
+def test_a_row_equal_to_a_vertex_is_not_beaten_by_it(played):
+    baselines = [played["always"], played["silent"]]
+    result = frontier_comparison(dict(played["always"], policy="copy of always"), baselines)
+    assert result["verdict"] == "equal to rounding" and result["mean"] == 0.0
+
+
+def test_a_time_shared_mix_of_two_vertices_lands_on_the_frontier(played):
+    """Per episode, play always with probability 0.3 and silent otherwise (a seeded draw): the mix's messages and
+    cost are those of a point of the chord, and the judge finds no difference its interval could resolve."""
+    always, silent = played["always"], played["silent"]
+    pick = np.random.default_rng(11).random(40) < 0.3
+    costs = np.where(pick, always["per_episode_cost"], silent["per_episode_cost"])
+    comms = np.where(pick, always["per_episode_communication"], silent["per_episode_communication"])
+    mixed = {"policy": "mix", "per_episode_cost": list(costs), "communication_per_step": float(comms.mean()),
+             "mean_cost": float(costs.mean()), "seed_base": always["seed_base"]}
+    result = frontier_comparison(mixed, [always, silent])
+    assert result["low"] <= 0.0 <= result["high"], result
+
+
+def test_periodic_against_always_and_silent_is_judged_at_its_own_rate(played):
+    result = frontier_comparison(played["periodic:2"], [played["always"], played["silent"]])
+    assert result["mix"][:2] == ("silent", "always")
+    assert result["mix"][2] == pytest.approx(played["periodic:2"]["communication_per_step"]
+                                             / played["always"]["communication_per_step"])
+
+
+def test_the_command_writes_metrics_report_and_figure(tmp_path):
+    assert main(["frontier", SMALL, "--quick", "--episodes", "3", "--seed", "0", "--out", str(tmp_path)]) == 0
+    folder = tmp_path / "frontier" / "drift__broadcast__kalman"
+    metrics = json.loads((folder / "metrics.json").read_text())
+    assert {"frontier.png", "report.md", "metrics.json"} <= {p.name for p in folder.iterdir()}
+    names = {p["policy"] for p in metrics["points"]}
+    assert {"always", "silent", "random", "periodic:1", "periodic:inf", "uncertainty:0", "uncertainty:inf"} <= names
+    assert metrics["frontier"][0] in ("silent", "periodic:inf", "uncertainty:inf")  # the fewest messages first
+    by_name = {p["policy"]: p for p in metrics["points"]}
+    assert by_name["periodic:1"]["per_episode_cost"] == by_name["always"]["per_episode_cost"]
+    assert by_name["periodic:inf"]["messages_per_agent_step"] == 0.0
+    assert all(p["pcrb_centralized"] is not None for p in metrics["points"])
+    assert "greedy" in metrics["judged"]  # privileged: judged, never a vertex
+    assert "greedy" not in metrics["frontier"]
+
+
+def test_bad_input_is_refused_before_anything_is_written(tmp_path):
+    assert main(["frontier", "drift/broadcast/nope", "--out", str(tmp_path)]) == 2
+    assert main(["frontier", SMALL, "--models", str(tmp_path / "none"), "--out", str(tmp_path)]) == 2
+    assert not (tmp_path / "frontier").exists()
