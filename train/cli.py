@@ -406,8 +406,8 @@ def cmd_evaluate(args) -> int:
     from rich.progress import Progress
 
     from train.evaluate import evaluate_policy
-    from train.io import check_output_folder
-    from train.leaderboard import record
+    from train.io import check_output_folder, read_json
+    from train.leaderboard import frontier_verdict, record
 
     console = _console()
     check_output_folder(args.out)
@@ -423,6 +423,12 @@ def cmd_evaluate(args) -> int:
                                          stochastic=args.stochastic and policy.endswith(".zip"))
             path = record(result, args.out, _result_key(scenario))
             console.print(_evaluation_line(scenario, policy, result, args.episodes, path), highlight=False)
+            against = frontier_verdict(scenario, read_json(path), result["policy"])
+            if against is not None:
+                console.print(f"  against the baseline frontier at its message rate (the fixed policies evaluated so "
+                              f"far): {against['verdict']} ({against['mean']:+.4g} "
+                              f"{METRIC_UNITS.get(scenario, 'm')}, 95 % [{against['low']:+.4g}, "
+                              f"{against['high']:+.4g}])", highlight=False)
     return 0
 
 

@@ -13,9 +13,10 @@ episodes (episode e: ``reset(seed=S + e)``, S = ``--seed``, by default the evalu
 
 The knob grids (``--quick``: three of each) are fixed before the evaluation episodes are played:
 ``periodic`` over ``PERIODS`` (up to the horizon), ``uncertainty`` over thresholds read from ``always``
-and ``silent`` on validation episodes (``train.evaluate.VALIDATION_SEED_BASE``): geometrically spaced
-between the 5th percentile of the covariance traces ``always`` keeps and the 95th of those ``silent`` lets
-grow, plus 0 (= ``always``) and inf (= ``silent``). Nothing is tuned on the evaluation seeds.
+and ``silent`` on validation episodes (``train.evaluate.VALIDATION_SEED_BASE``): the 5th to 95th
+percentiles, evenly spaced in probability, of the covariance traces ``always`` and ``silent`` keep
+together (where the rule's decisions change), plus 0 (= ``always``) and inf (= ``silent``). Nothing is
+tuned on the evaluation seeds.
 
 The **baseline frontier** (``train.leaderboard.baseline_frontier``): at a message rate m, the lowest mean
 error a time-share of baselines reaches with at most m messages per step; the lower convex hull of the
@@ -89,11 +90,10 @@ def knob_grids(scenario: str, horizon: int, quick: bool = False) -> dict[str, li
     if "periodic" in available:
         grids["periodic"] = [str(p) for p in (QUICK_PERIODS if quick else PERIODS) if p <= horizon] + ["inf"]
     if "uncertainty" in available:
-        low = np.percentile(_trace_values(scenario, "maximum", GRID_EPISODES, VALIDATION_SEED_BASE), 5)
-        high = np.percentile(_trace_values(scenario, "minimum", GRID_EPISODES, VALIDATION_SEED_BASE), 95)
-        low, high = max(float(low), 1e-9), max(float(high), 2 * max(float(low), 1e-9))
-        levels = np.geomspace(low, high, QUICK_LEVELS if quick else UNCERTAINTY_LEVELS)
-        grids["uncertainty"] = ["0"] + [f"{v:.4g}" for v in levels] + ["inf"]
+        pooled = np.concatenate([_trace_values(scenario, which, GRID_EPISODES, VALIDATION_SEED_BASE)
+                                 for which in ("maximum", "minimum")])
+        levels = np.quantile(pooled, np.linspace(0.05, 0.95, QUICK_LEVELS if quick else UNCERTAINTY_LEVELS))
+        grids["uncertainty"] = ["0"] + sorted({f"{v:.4g}" for v in levels}, key=float) + ["inf"]
     return grids
 
 
@@ -246,10 +246,10 @@ def figure(metrics: dict):
             right.axhline(float(np.mean(values)), color="black", linestyle=style,
                           label=f"√{key.replace('pcrb_', 'pcrb ')}")
     comm = metrics["communication"]
-    left.set_xlabel(f"{comm} per agent-step")
+    left.set_xlabel(f"{comm} (per agent-step)")
     left.set_ylabel(f"{metrics['metric']} ({metrics['unit']})")
     left.set_title("error against communication")
-    right.set_xlabel(f"{comm} per agent-step")
+    right.set_xlabel(f"{comm} (per agent-step)")
     right.set_ylabel("position RMSE (m)")
     right.set_title("RMSE and bounds (— under a point: its √pcrb delivered)")
     handles, _ = left.get_legend_handles_labels()

@@ -389,6 +389,29 @@ def frontier_comparison(row: dict, baseline_rows: list[dict]) -> dict | None:
     return dict(diff, verdict=verdict(diff), mix=(a["policy"], b["policy"], w), frontier_cost=float(frontier.mean()))
 
 
+PRIVILEGED = ("greedy",)  # realizable in name only: it copies the core (a look-ahead no agent can run)
+
+
+def frontier_baselines(scenario: str, table: dict) -> list[dict]:
+    """The rows of ``table`` the baseline frontier is drawn through: every realizable fixed policy (a name of
+    ``agents.available_policies``, a family at any knob) and the realizable reference filters, never a trained
+    model, a bound or a privileged policy (``PRIVILEGED``)."""
+    import agents
+    from train.evaluate import baselines
+
+    realizable = {name.partition(":")[0] for name in agents.available_policies(scenario)} - set(PRIVILEGED)
+    return [r for name, r in table.items()
+            if not _is_model(name) and not _is_bound(name)
+            and (name.partition(":")[0] in realizable or name in baselines(scenario))]
+
+
+def frontier_verdict(scenario: str, table: dict, name: str) -> dict | None:
+    """``frontier_comparison`` of row ``name`` against the frontier of the table's other baselines (a baseline
+    row is judged against the frontier of the others, so that a vertex is not compared with itself)."""
+    others = [r for r in frontier_baselines(scenario, table) if r["policy"] != name]
+    return frontier_comparison(table[name], others) if others else None
+
+
 def target_verdict(scenario: str, table: dict) -> str | None:
     """One line: the target, judged per trained model against the strongest realizable baseline on paired
     episodes; "met" only when every trained model beats it (or matches it with the communication saving)."""
@@ -422,6 +445,12 @@ def target_verdict(scenario: str, table: dict) -> str | None:
                 part += (f", against always and silent mixed to send as many messages (always in "
                          f"{100 * mixed['probability']:.0f} % of episodes): {mixed['verdict']} "
                          f"({mixed['mean']:+.4g} {unit}, 95 % [{mixed['low']:+.4g}, {mixed['high']:+.4g}])")
+        against = frontier_verdict(scenario, table, name)
+        if against is not None:
+            a, b, w = against["mix"]
+            at = a if a == b else f"{a} and {b} time-shared ({100 * w:.0f} % {b})"
+            part += (f"; against the baseline frontier at its message rate ({at}): {against['verdict']} "
+                     f"({against['mean']:+.4g} {unit}, 95 % [{against['low']:+.4g}, {against['high']:+.4g}])")
         met = met and ok
         parts.append(part)
     candidates = [n for n in baselines(scenario) if n in table]
@@ -658,14 +687,24 @@ def _difference_cells(scenario: str, row: dict, baseline: dict | None) -> tuple[
                                  else "; no number of episodes resolves a zero difference"))
 
 
-def _table(scenario: str, entries: list[dict], baseline: dict | None, show_initial: bool) -> list[str]:
+def _frontier_cell(scenario: str, table: dict | None, row: dict) -> str:
+    if table is None or row["policy"] not in table:
+        return ""
+    result = frontier_verdict(scenario, table, row["policy"])
+    if result is None:
+        return ""
+    return f"{result['verdict']} ({result['mean']:+.3g}, 95 % [{result['low']:+.3g}, {result['high']:+.3g}])"
+
+
+def _table(scenario: str, entries: list[dict], baseline: dict | None, show_initial: bool,
+           table: dict | None = None) -> list[str]:
     _, unit = metric(scenario)
     comm = communication(scenario)
     versus = baseline["policy"] if baseline else "the strongest baseline"
     header = (f"| row | what it is | mean error [{unit}] | 95 % CI [{unit}] | paired difference vs {versus} "
               f"[{unit}] | its 95 % CI [{unit}] | verdict (paired) |"
               + (f" with the initial term [{unit}] |" if show_initial else "")
-              + f" communication [{comm} / step] | episodes [n] |")
+              + f" communication [{comm} / step] | vs the baseline frontier at its rate [{unit}] | episodes [n] |")
     lines = [header, "|" + "---|" * (header.count("|") - 1)]
     for r in entries:
         name = r["policy"] + (f" (seed means {r['spread'][0]:.4g}..{r['spread'][1]:.4g} {unit})" if "spread" in r
@@ -673,7 +712,8 @@ def _table(scenario: str, entries: list[dict], baseline: dict | None, show_initi
         diff, interval, text = _difference_cells(scenario, r, baseline)
         initial = f" {r['paper_cost']:.4g} |" if show_initial else ""
         lines.append(f"| {name} | {_kind(scenario, r, baseline)} | {r['mean_cost']:.4g} | ±{r['ci95']:.3g} | {diff} | "
-                     f"{interval} | {text} |{initial} {r['communication_per_step']:.3g} | {r['episodes']} |")
+                     f"{interval} | {text} |{initial} {r['communication_per_step']:.3g} | "
+                     f"{_frontier_cell(scenario, table, r)} | {r['episodes']} |")
     return lines
 
 
@@ -718,14 +758,14 @@ def markdown(out: str) -> str:
         baseline = strongest_baseline(scenario, table)
         show_initial = any(r.get("initial_cost", 0) for r in table.values())
         lines += [f"## {key} (`{scenario}`)", "", f"Episode metric: {name} [{unit}].", ""]
-        lines += _table(scenario, rows(table), baseline, show_initial)
+        lines += _table(scenario, rows(table), baseline, show_initial, table)
         lines.append("")
         lines += _bounds_table(rows(table))
         bounds = bound_rows(table)
         if bounds:
             lines += ["Bounds (not realizable: hindsight, the truth or information the agents lack; never a "
                       "baseline):", ""]
-            lines += _table(scenario, bounds, baseline, show_initial)
+            lines += _table(scenario, bounds, baseline, show_initial, table)
             lines.append("")
         for pair in identical_rows(table):
             lines += [identical_note(scenario, pair), ""]

@@ -6,6 +6,7 @@ import json
 import numpy as np
 import pytest
 
+from train import frontier, plotting
 from train.cli import main
 from train.evaluate import evaluate_policy
 from train.leaderboard import baseline_frontier, frontier_comparison, frontier_mix
@@ -80,6 +81,7 @@ def test_the_command_writes_metrics_report_and_figure(tmp_path):
     assert all(p["pcrb_centralized"] is not None for p in metrics["points"])
     assert "greedy" in metrics["judged"]  # privileged: judged, never a vertex
     assert "greedy" not in metrics["frontier"]
+    assert plotting.figure_problems(frontier.figure(metrics)) == []
 
 
 def test_bad_input_is_refused_before_anything_is_written(tmp_path):
