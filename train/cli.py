@@ -407,7 +407,7 @@ def cmd_evaluate(args) -> int:
 
     from train.evaluate import evaluate_policy
     from train.io import check_output_folder, read_json
-    from train.leaderboard import frontier_verdict, record
+    from train.leaderboard import frontier_verdict, metric, record
 
     console = _console()
     check_output_folder(args.out)
@@ -427,7 +427,7 @@ def cmd_evaluate(args) -> int:
             if against is not None:
                 console.print(f"  against the baseline frontier at its message rate (the fixed policies evaluated so "
                               f"far): {against['verdict']} ({against['mean']:+.4g} "
-                              f"{METRIC_UNITS.get(scenario, 'm')}, 95 % [{against['low']:+.4g}, "
+                              f"{metric(scenario)[1]}, 95 % [{against['low']:+.4g}, "
                               f"{against['high']:+.4g}])", highlight=False)
     return 0
 

@@ -137,7 +137,7 @@ def _messages_per_agent(row: dict, num_agents: int) -> float:
 def summarize(scenario: str, plan: list[dict], results: list[dict], num_agents: int, episodes: int,
               seed: int) -> dict:
     """metrics.json: the points, the frontier and each judged point's comparison."""
-    from train.leaderboard import COMMUNICATION, baseline_frontier, frontier_comparison, metric
+    from train.leaderboard import baseline_frontier, communication, frontier_comparison, metric
 
     points = []
     for cell, row in zip(plan, results, strict=True):
@@ -157,7 +157,7 @@ def summarize(scenario: str, plan: list[dict], results: list[dict], num_agents: 
                                                               "frontier_cost", "episodes")}
     what, unit = metric(scenario)
     return {"scenario": scenario, "metric": what, "unit": unit,
-            "communication": COMMUNICATION.get(scenario, "messages"), "num_agents": num_agents,
+            "communication": communication(scenario), "num_agents": num_agents,
             "episodes": episodes, "seed_base": seed, "episode_seeds": f"{seed} + e, e = 0..{episodes - 1}",
             "points": points, "frontier": [baseline_rows[i]["policy"] for i in vertices], "judged": judged}
 
