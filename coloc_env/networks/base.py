@@ -24,6 +24,46 @@ carried (the backend states its payload). ``messages_sent`` and
 ``floats_sent`` are per agent and step; world nodes are no agents, so their
 packets are counted per receiving agent in ``node_messages`` / ``node_floats``.
 
+Per-link accounting. Beside ``messages_sent`` (whose meaning each call keeps:
+it is what ``communication_cost`` prices, so no reward moves), every network
+counts per sender and step, (B, N) floats reset by ``begin``, what it tried
+and what arrived, the same way for every network (no network overrides these
+rules; the kinds each carries are in its own table):
+
+| call (kinds) | ``messages_sent``          | ``transmissions``          | ``link_attempts``    | ``link_deliveries``  |
+|--------------|----------------------------|----------------------------|----------------------|----------------------|
+| broadcast    | one per round in which its | one per round the sender   | its listeners within | those that received  |
+| (broadcast)  | transmission reached       | wants to send, decides to  | range: the           | it                   |
+|              | someone                    | transmit and has a         | (transmission,       |                      |
+|              |                            | listener besides itself,   | in-range receiver)   |                      |
+|              |                            | in range or not            | pairs                |                      |
+| messages_to  | one per delivered message  | one per message            | the centre, if in    | delivered messages   |
+| (central)    |                            | transmitted (the centre    | range                |                      |
+|              |                            | sends none)                |                      |                      |
+| packets      | one per sender and call    | one per sender that        | its named receivers  | those whose packet   |
+| (packets,    | with a receiver in range,  | transmits to named         | within range         | arrives (delay >= 0: |
+| components)  | delivered or not (per link | receivers (per named link  |                      | on time or late)     |
+|              | with per-link payloads)    | with per-link payloads)    |                      |                      |
+| relay        | one per delivered hop, at  | one per hop attempted, at  | = transmissions (a   | delivered hops       |
+| (chain)      | its holder                 | its holder: the delivered  | hop has one          |                      |
+|              |                            | ones and the lost hop that | receiver)            |                      |
+|              |                            | ends a chain (any other    |                      |                      |
+|              |                            | stop sends no hop)         |                      |                      |
+| node_packets | none (world nodes are no   | none                       | none                 | none                 |
+|              | agents: ``node_messages``) |                            |                      |                      |
+
+``collisions`` counts link attempts lost to a collision or to a receiver
+that was transmitting: 0 on every network here (none models a shared
+medium). So link_deliveries <= link_attempts, messages_sent <= transmissions
+for ``broadcast`` and ``packets``, and link_deliveries / link_attempts is a
+link's delivery rate. A step's counts are part of the network's record that
+``coloc_env.scenarios.composed`` reports in ``infos[agent]`` under the same names.
+
+Observation. ``observation_size`` / ``observation_features`` are what an
+agent observes of its own links after a step (``gilbert_elliott``'s
+acknowledgements); the composed observation appends them after the world's
+features. 0 features by default: no other network adds any.
+
 Packet loss is drawn by ``coloc_env.draws`` from a key the network draws
 from its own generator at reset: the value for (step, round, sender,
 receiver) does not depend on the batch, so a copy equals itself run alone.
@@ -44,6 +84,7 @@ from __future__ import annotations
 
 import functools
 import inspect
+from typing import ClassVar
 
 import numpy as np
 
@@ -164,6 +205,9 @@ def _reported(method, signature: inspect.Signature):
 class Network:
     """Batched delivery and accounting; subclasses set the link rules (``usable``, ``loss``, decisions)."""
 
+    # loss_probability reads each copy's link state at this step besides the distance (``gilbert_elliott``): it is
+    # then asked with the full (B, N, N) distances only (no copy stands for others, no gathered links)
+    loss_reads_links: ClassVar[bool] = False
     # who is told of every delivery (``observer.delivery(network, call, arguments, result)``); None: nobody
     observer = None
     _delivering = False  # inside a reported call (a nested one is not reported again)
@@ -188,6 +232,10 @@ class Network:
         self.delivered = np.zeros((B, N, N), dtype=bool)  # union over this step's rounds, for the renderer
         self.node_messages = np.zeros((B, N))  # world-node packets sent to each agent this step
         self.node_floats = np.zeros((B, N))
+        self.transmissions = np.zeros((B, N))  # the per-link accounting of the module's table
+        self.link_attempts = np.zeros((B, N))
+        self.link_deliveries = np.zeros((B, N))
+        self.collisions = np.zeros((B, N))
         self.last_chain: RelayChain | None = None
         self._positions = np.zeros((B, N, 2))
         self._decisions = np.zeros((B, N, 0), dtype=np.int64)
@@ -262,6 +310,10 @@ class Network:
         self.delivered = np.zeros((B, N, N), dtype=bool)
         self.node_messages = np.zeros((B, N))
         self.node_floats = np.zeros((B, N))
+        self.transmissions = np.zeros((B, N))
+        self.link_attempts = np.zeros((B, N))
+        self.link_deliveries = np.zeros((B, N))
+        self.collisions = np.zeros((B, N))
         self.last_chain = None
 
     def distances(self) -> np.ndarray:
@@ -296,12 +348,16 @@ class Network:
         N = self.num_agents
         distance = self.distances()
         want = (np.asarray(senders, bool) & self.transmits(slot))[:, :, None] & np.asarray(listening, bool)
-        want &= ~_self_links(N) & self.usable(distance)
+        want &= ~_self_links(N)
+        self.transmissions += want.any(axis=-1)
+        want &= self.usable(distance)
+        self.link_attempts += want.sum(axis=-1)
         loss = self.loss_probability(distance)
         if (loss <= 0.0).all():  # lossless: every uniform passes u >= 0, none needs drawing (counter-based draws)
             delivered = want
         else:
             delivered = want & (uniforms(self.keys, (self._k, 0, slot), (N, N)) >= loss)
+        self.link_deliveries += delivered.sum(axis=-1)
         sent = delivered.any(axis=-1)
         self.messages_sent += sent
         self.floats_sent += floats * sent
@@ -325,13 +381,17 @@ class Network:
         distance = self.distances() if self._reads_distance else None
         want = (np.asarray(senders, bool) & self.transmits(slot))[:, :, None] & np.asarray(listening, bool)
         want &= ~_self_links(N)
+        per_link = isinstance(floats, np.ndarray) and floats.ndim == 3
+        self.transmissions += want.sum(axis=-1) if per_link else want.any(axis=-1)
         if self._own_usable:
             want &= self.usable(distance)
+        self.link_attempts += want.sum(axis=-1)
         if self._plain_delays and (self._base_rules or not np.any(self.loss_probability(distance) > 0)):
             delay = np.where(want, 0, -1).astype(np.int64)  # lossless and on time: no draw decides anything
         else:
             delay = np.where(want, self._link_delays(distance, slot), -1).astype(np.int64)
-        if isinstance(floats, np.ndarray) and floats.ndim == 3:
+        self.link_deliveries += (delay >= 0).sum(axis=-1)
+        if per_link:
             self.messages_sent += want.sum(axis=-1)
             self.floats_sent += np.where(want, floats, 0.0).sum(axis=-1)
         else:
@@ -407,7 +467,7 @@ class Network:
             distance = self.distances()
             choice = self.next_hop_choice()
             # the link rules are elementwise: copies that share one distance matrix share their results
-            shared = distance.strides[0] == 0
+            shared = distance.strides[0] == 0 and not self.loss_reads_links
             usable = self.usable(distance[:1] if shared else distance)
             loss = self.loss_probability(distance[:1] if shared else distance)
             lossy = bool(np.any(loss > 0))
@@ -452,6 +512,13 @@ class Network:
             self.floats_sent += np.bincount(where, np.array([floats_per_hop(j) for j in range(N - 1)], float)[h],
                                             minlength=B * N).reshape(B, N)
             self.delivered[copies[c], holders, links[c, h + 1]] = True
+            # a hop attempted is a delivered one or the lost one that stopped its chain (stop reason 5), at its holder
+            hops_sent = np.bincount(where, minlength=B * N)
+            lost = np.flatnonzero(code == 5)
+            hops_lost = np.bincount(copies[lost] * N + links[lost, size[lost] - 1], minlength=B * N)
+            self.transmissions += (hops_sent + hops_lost).reshape(B, N)
+            self.link_attempts += (hops_sent + hops_lost).reshape(B, N)
+            self.link_deliveries += hops_sent.reshape(B, N)
         shape = (B, J) if many else (B,)
         result = RelayChain(chain=chain.reshape(*shape, N), length=length.reshape(shape),
                             hop_distance=hop_distance.reshape(*shape, -1), stop=stop.reshape(shape))
@@ -484,28 +551,49 @@ class Network:
         slots = np.broadcast_to(np.asarray(slots, int), (J,))
         rows = np.arange(B)[:, None]
         sender = np.maximum(senders, 0)
-        distance = self.distances()[rows, sender, receiver]  # (B, J)
-        want = (senders >= 0) & (senders != receiver) & self.usable(distance)
+        want = (senders >= 0) & (senders != receiver)
         if not want.any():
             return want
         for value in np.unique(slots):  # the transmit decision read at each message's slot
             at = slots == value
             want[:, at] &= self.transmits(int(value))[rows, sender[:, at]]
-        loss = self.loss_probability(distance)
+        self.transmissions += self._per_sender(want, sender)
+        distance = self.distances()[rows, sender, receiver]  # (B, J)
+        want &= self.usable(distance)
+        self.link_attempts += self._per_sender(want, sender)
+        loss = self.loss_probability(self.distances())[rows, sender, receiver] if self.loss_reads_links \
+            else self.loss_probability(distance)
         if not (loss <= 0.0).all():
             u = np.empty((B, J))
             for j, value in enumerate(slots):
                 u[:, j] = uniforms(self.keys, (self._k, 0, int(value)), (N, N))[rows[:, 0], sender[:, j], receiver]
             want &= u >= loss
         b, j = np.nonzero(want)
-        where = b * N + sender[b, j]
-        self.messages_sent += np.bincount(where, minlength=B * N).reshape(B, N)
-        self.floats_sent += floats * np.bincount(where, minlength=B * N).reshape(B, N)
+        sent = self._per_sender(want, sender)
+        self.messages_sent += sent
+        self.floats_sent += floats * sent
+        self.link_deliveries += sent
         self.delivered[b, sender[b, j], receiver] = True
         return want
 
+    def _per_sender(self, mask: np.ndarray, sender: np.ndarray) -> np.ndarray:
+        """(B, N) how many of the (B, J) messages ``mask`` each sender (``sender`` (B, J)) sent."""
+        B, N = self.batch, self.num_agents
+        b, j = np.nonzero(mask)
+        return np.bincount(b * N + sender[b, j], minlength=B * N).reshape(B, N).astype(float)
+
+    def observation_size(self) -> int:
+        """f, the features each agent observes of the network (``observation_features``); 0 by default."""
+        return 0
+
+    def observation_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """(low, high) (f,) of the features: [0, 1] by default (acknowledgements)."""
+        f = self.observation_size()
+        return np.zeros(f), np.ones(f)
+
     def observation_features(self) -> np.ndarray:
-        """(B, N, f) the link state each agent senses; none by default."""
+        """(B, N, f) what each agent observes of its own links (after the step: its acknowledgements); none by
+        default. No agent observes another's link state or this step's decisions."""
         return np.zeros((self.batch, self.num_agents, 0))
 
 

@@ -105,6 +105,10 @@ Termination: none; truncation after ``horizon`` steps (the paper's 50).
 |                        | receiver that takes a component of it                                   |
 | ``floats_sent``        | their floats: the components its receivers took from it                 |
 | ``weights``            | the node's row p_i. of fusion weights (N,), absolute order              |
+| ``transmissions``,     | the network's per-link counts (``coloc_env.networks.base``'s table):    |
+| ``link_attempts``,     | each link carrying a component is one transmission, attempt and         |
+| ``link_deliveries``,   | delivery; ``collisions`` 0)                                             |
+| ``collisions``         |                                                                         |
 | ``step``               | k + 1 (0 at reset)                                                      |
 
 Batching: every step of B copies is one set of numpy calls (stacked matmul
@@ -398,6 +402,7 @@ class BandwidthFusionScenario(PresetScenario):
             "components_received": received,
             "communication": received.astype(float),
             "messages_sent": self.network.messages_sent.copy(),
+            **self.link_counts(),
             "floats_sent": self.network.floats_sent.copy(),
             "weights": self.backend.weights.copy(),
             "step": np.broadcast_to(self.k[:, None], (B, N)).copy(),

@@ -75,7 +75,10 @@ Observation (per agent, ``Box(float32)``; both estimands)
 | ``[N+1, 2N+1)``   | 1 for each agent it received a message from last step           | [0, 1]      |
 | ``[2N+1, 3N+1)``  | distance to each agent / 100 m (link-layer knowledge), 0 itself | [0, inf)    |
 | ``[3N+1]``        | step fraction k / horizon                                      | [0, 1]      |
-| then              | the world's features, then the backend's                       | their own   |
+| then              | the world's features, then the network's                       | their own   |
+|                   | (``Network.observation_features``: ``gilbert_elliott``'s       | ([0, 1] for |
+|                   | ``ack`` (N,), 1 for each agent its own message of the last     | ``ack``)    |
+|                   | step reached; none for the other networks), then the backend's |             |
 
 Reward (per agent, its own estimate; a shared estimate gives every agent the team's)
 ------------------------------------------------------------------------------------
@@ -97,7 +100,9 @@ Termination: none; truncation after ``horizon`` steps.
 every agent's at once, (B, N, 2)), ``estimated_position`` (its estimate of time k: the posterior, or a
 predictor's xhat(k)), ``position_error`` (m), ``error`` (the reward's error term: m for ``self``, the
 world's unit for ``target``), ``trace`` (m^2, the position block of its covariance, nan without one),
-``messages_sent``, ``floats_sent``, ``communication`` (= messages_sent), ``step``.
+``messages_sent``, ``floats_sent``, ``communication`` (= messages_sent), the per-link accounting
+``transmissions``, ``link_attempts``, ``link_deliveries``, ``collisions`` (per sender: the table of
+``coloc_env.networks.base``), ``step``.
 """
 
 from __future__ import annotations
@@ -114,7 +119,9 @@ from coloc_env.scenarios.base import Scenario
 LOG_TRACE_BOUND = 50.0
 DISTANCE_SCALE = 100.0
 # what a network records of one step's sending (the infos report it); RelayChain last_chain apart
-_RECORD_ARRAYS = ("messages_sent", "floats_sent", "delivered", "cost_sent", "node_messages", "node_floats")
+LINK_COUNTS = ("transmissions", "link_attempts", "link_deliveries", "collisions")  # coloc_env.networks.base
+_RECORD_ARRAYS = ("messages_sent", "floats_sent", "delivered", "cost_sent", "node_messages", "node_floats",
+                  *LINK_COUNTS)
 
 
 def _network_record(network) -> dict:
@@ -221,14 +228,16 @@ class ComposedScenario(Scenario):
 
     @property
     def obs_dim(self) -> int:
-        return 3 * self.num_agents + 2 + self.world.feature_bounds()[0].size + self.backend.feature_bounds()[0].size
+        return 3 * self.num_agents + 2 + self.world.feature_bounds()[0].size + self.network.observation_size() \
+            + self.backend.feature_bounds()[0].size
 
     def observation_space(self):
         N = self.num_agents
         wl, wh = self.world.feature_bounds()
+        nl, nh = self.network.observation_bounds()
         bl, bh = self.backend.feature_bounds()
-        low = np.concatenate([np.zeros(N), [-LOG_TRACE_BOUND], np.zeros(N), np.zeros(N), [0.0], wl, bl])
-        high = np.concatenate([np.ones(N), [LOG_TRACE_BOUND], np.ones(N), np.full(N, np.inf), [1.0], wh, bh])
+        low = np.concatenate([np.zeros(N), [-LOG_TRACE_BOUND], np.zeros(N), np.zeros(N), [0.0], wl, nl, bl])
+        high = np.concatenate([np.ones(N), [LOG_TRACE_BOUND], np.ones(N), np.full(N, np.inf), [1.0], wh, nh, bh])
         return gymnasium.spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
 
     def state_space(self):
@@ -484,7 +493,8 @@ class ComposedScenario(Scenario):
         distance = np.sqrt(dx * dx + dy * dy) / DISTANCE_SCALE  # the norm over (x, y), on (B, N, N) planes
         frac = np.broadcast_to((self.k / self.horizon)[:, None], (B, N))
         obs = np.concatenate([identity, log_trace[..., None], self._received.astype(float), distance, frac[..., None],
-                              self.world.observation_features(), self.backend.observation_features()], axis=-1)
+                              self.world.observation_features(), self.network.observation_features(),
+                              self.backend.observation_features()], axis=-1)
         return obs.astype(np.float32)
 
     def reward(self) -> np.ndarray:
@@ -509,8 +519,15 @@ class ComposedScenario(Scenario):
             "messages_sent": self.network.messages_sent.copy(),
             "floats_sent": self.network.floats_sent.copy(),
             "communication": self.network.messages_sent.copy(),
+            **self.link_counts(),
             "step": np.repeat(self.k[:, None], N, axis=1),
         }
+
+    def link_counts(self) -> dict[str, np.ndarray]:
+        """The network's per-link accounting of this step, (B, N) per sender, copies (``transmissions``,
+        ``link_attempts``, ``link_deliveries``, ``collisions``: ``coloc_env.networks.base``'s table); every
+        scenario's infos report them under these names."""
+        return {name: np.array(getattr(self.network, name), float) for name in LINK_COUNTS}
 
     def episode_error(self, errors: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
         """The mean position error over the steps and agents (m)."""

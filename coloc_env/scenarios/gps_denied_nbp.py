@@ -79,7 +79,9 @@ belief particles' sample covariance), ``fault`` (GPS faulty at tau), ``broadcast
 step, as the schedule counts them), ``communication`` (= broadcasts: what ``coloc
 evaluate`` counts), ``messages_sent`` (the network's count at the sender: one per
 broadcast that reached a listener), ``floats_sent`` (3 M + 1 floats per message),
-``messages_received`` (directed: the messages this UAV took), ``neighbours``, ``step``.
+``messages_received`` (directed: the messages this UAV took), ``neighbours``, the network's
+per-link counts ``transmissions``, ``link_attempts``, ``link_deliveries``, ``collisions`` (the table
+of ``coloc_env.networks.base``), ``step``.
 At reset the estimate is the tau = 0 prior mean.
 
 Composition: a binding (``coloc_env.scenarios.binding``) of world ``gps_denied``,
@@ -339,6 +341,7 @@ class GpsDeniedNbpScenario(PresetScenario):
             "broadcasts": self.broadcasts.copy(),
             "communication": self.broadcasts.astype(float),
             "messages_sent": self.network.messages_sent.copy(),
+            **self.link_counts(),
             "floats_sent": self.network.floats_sent.copy(),
             "messages_received": self.delivered.sum(axis=(1, 2)),
             "neighbours": self._slice(self.world.adjacency, np.maximum(self.k - 1, 0)).sum(axis=-1),

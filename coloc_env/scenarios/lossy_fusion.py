@@ -106,7 +106,8 @@ the packet the leader holds from this follower; 0 for the leader),
 ``link_outcome`` (this slot's draw of the link to the leader: 0 on time, 1 late,
 2 lost), ``delivered``
 (what arrived: 0 on time, 1 late packet, 2 nothing), ``fusion_weight``
-(a_i), ``step``.
+(a_i), the network's per-link counts ``transmissions``, ``link_attempts``, ``link_deliveries``,
+``collisions`` (the table of ``coloc_env.networks.base``), ``step``.
 
 Arguments (fields of ``LossyFusionConfig``, defaults = the paper)
 ---------------------------------------------------------------------
@@ -341,6 +342,7 @@ class LossyFusionScenario(PresetScenario):
             "local_estimate": local,
             "local_error": np.sum((local - truth) ** 2, axis=-1),
             "messages_sent": self.network.messages_sent.copy(),
+            **self.link_counts(),
             "floats_sent": self.network.floats_sent.copy(),
             "communication": self.network.messages_sent.copy(),
             "packet_age": np.concatenate([zeros, fusion.held_age.astype(float)], axis=1),

@@ -138,7 +138,8 @@ the gate), ``chain_length`` (robots its chain reached, 0 without a chain),
 ``chain_stop`` (index into ``coloc_env.primitives.relay.STOP_REASONS``, -1
 without a chain), ``communication`` (hops it delivered this step over all
 chains; summed over agents = hops), ``hops`` and ``hop_cost`` (the team's, this
-step: hops delivered and C), ``step``.
+step: hops delivered and C), the network's per-link counts ``transmissions``, ``link_attempts``,
+``link_deliveries``, ``collisions`` (the table of ``coloc_env.networks.base``), ``step``.
 
 Arguments (fields of ``MrclamRelayConfig``)
 ------------------------------------------------

@@ -91,8 +91,8 @@ Termination: none; truncation after ``horizon`` steps (the paper's 1000 s flight
 reset), ``valid`` (DFIR_N had an estimate), ``packets_received`` (packets arriving at k),
 ``communication`` (packets used: of those arriving at k, how many were fused),
 ``nlos_fraction`` (NLOS links among the neighbours in the RSA at k, the time of the output),
-``messages_sent`` / ``floats_sent`` (0: the packets come from world nodes, not from agents),
-``step``.
+``messages_sent`` / ``floats_sent`` and the per-link counts ``transmissions``, ``link_attempts``,
+``link_deliveries``, ``collisions`` (0: the packets come from world nodes, not from agents), ``step``.
 
 Batching: B copies x N agents step in one set of numpy calls; the fused observations of
 the D + 1 buffer stamps, the D + 1 stack advances over all windows and the AHG costs are
@@ -357,6 +357,7 @@ class NlosHorizonScenario(PresetScenario):
             "error": error,
             "trace": np.trace(be.posterior_position_cov, axis1=-2, axis2=-1),
             "messages_sent": self.network.messages_sent.copy(),
+            **self.link_counts(),
             "floats_sent": self.network.floats_sent.copy(),
             "window": be.window_used.copy(),
             "valid": be.valid_used.copy(),

@@ -176,6 +176,7 @@ class RelayTeamScenario(PresetScenario):
             "trace": self.own_traces(),
             "dead_reckoning_error": np.linalg.norm(self.dead_reckoning[..., :2] - truth, axis=-1),
             "messages_sent": self.network.messages_sent.copy(),
+            **self.link_counts(),
             "floats_sent": self.network.floats_sent.copy(),
             "communication": self.network.messages_sent.copy(),
             "hop_cost": self.team(self.step_cost()),

@@ -108,7 +108,9 @@ step, 0 or 1; summed over agents = hops), ``messages_sent`` (= ``communication``
 per delivered hop, at its holder) and ``floats_sent`` (that hop's payload, ``coloc_env.backends.ukf.dcl_floats``:
 10 + 5 r + 2 r (r - 1) floats with r platforms reached), ``hops`` and ``hop_cost`` (the team's, this
 step: the hop costs the reward subtracts), ``chain_stop`` (index into
-``coloc_env.primitives.relay.STOP_REASONS``, -1 without a measurement), ``step``.
+``coloc_env.primitives.relay.STOP_REASONS``, -1 without a measurement), the network's per-link counts
+``transmissions``, ``link_attempts`` (hops it sent, the lost one included), ``link_deliveries``, ``collisions``
+(the table of ``coloc_env.networks.base``), ``step``.
 
 Arguments (fields of ``RelayUKFConfig``, defaults = the paper's Sec. 4 / Table 1)
 -------------------------------------------------------------------------------------

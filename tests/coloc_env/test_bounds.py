@@ -104,9 +104,11 @@ GENERATIVE = [r for r in coloc_env.compatibility() if r["ok"] and r["world"] not
 @pytest.mark.parametrize("row", GENERATIVE, ids=lambda r: f"{r['world']}/{r['network']}/{r['backend']}")
 def test_every_backend_mse_is_above_the_centralized_bound(row):
     """Over 4 seeded episodes of 14 steps (steps >= 10 averaged), policy always: MSE >= pcrb_centralized - 3 SE,
-    and >= pcrb_delivered - 3 SE where the composition defines it."""
+    and >= pcrb_delivered - 3 SE where the composition defines it. Over ``gilbert_elliott`` 8 episodes: its bursts
+    make an episode's error heavy-tailed (a few episodes in a long burst carry the mean), so 4 episodes' spread
+    understates the standard error."""
     spec = coloc_env.compose(row["world"], row["network"], row["backend"], horizon=14)
-    episodes, seed = 4, 100
+    episodes, seed = (8 if row["network"] == "gilbert_elliott" else 4), 100
     per_episode = []
     for e in range(episodes):
         core = coloc_env.make_core(spec, batch=1)
