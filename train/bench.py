@@ -804,12 +804,13 @@ def run_against(out: str, ref: str, quick: bool = False, scenarios: list[str] | 
 # --- coloc bench --scaling ---------------------------------------------------------------------------------------
 # env-steps/s of vector_env(compose(gps_denied with N agents, network, backend), B copies) against N: every
 # composition of the gps_denied world the current tree can run (and the UKFs over ``ideal`` too, where UKF-DCL
-# computes UKF-CCL's numbers), at a fixed start square and at a fixed density.
+# computes UKF-CCL's numbers, and over ``gilbert_elliott``, bursty loss beside broadcast's: what its link chains
+# cost), at a fixed start square and at a fixed density.
 SCALING_SIZES = (5, 10, 20, 40, 80)
 SCALING_BATCHES = (8, 64)
 SCALING_DENSITY = 40.0  # UAVs per km^2: the default 500 m square at N = 10
 SCALING_LAYOUTS = ("fixed area", "fixed density")
-SCALING_EXTRA_NETWORKS = {"ukf_ccl": ("ideal",), "ukf_dcl": ("ideal",)}
+SCALING_EXTRA_NETWORKS = {"ukf_ccl": ("ideal", "gilbert_elliott"), "ukf_dcl": ("ideal", "gilbert_elliott")}
 SCALING_CAP_S = 120.0  # per row and tree: the sizes not measured within it print "over cap"
 SCALING_QUICK = {"sizes": (5, 10), "batches": (8,), "min_seconds": 0.05, "cap": 60.0}
 _SCALING_PREAMBLE = "from __future__ import annotations\nimport gc\nimport json\nimport time\n\nimport numpy as np\n\n"
@@ -831,7 +832,7 @@ def scaling_world(num_agents: int, layout: str) -> dict:
 
 def scaling_compositions() -> list[tuple[str, str]]:
     """(backend, network) of every row: each backend that runs on gps_denied over broadcast, in the registry's
-    order, then the UKFs over ideal."""
+    order, then the UKFs over ideal and over gilbert_elliott (``SCALING_EXTRA_NETWORKS``)."""
     import coloc_env
 
     ok = [r["backend"] for r in coloc_env.compatibility() if r["world"] == "gps_denied"

@@ -19,6 +19,8 @@ state from the chain's stationary distribution. Everything else is ``broadcast``
 | state      | hidden from the agents; a sender observes it only through its acknowledgements            |
 | observation| ``ack`` (N,) per agent (``kind`` broadcast, central, packets, chain): 1 for each receiver  |
 |            | that its message (a hop of a chain) reached in the last step, 0 otherwise (0 at reset)    |
+| statistics | ``slot_probabilities``: (1 - L within range, 0) per link, what an estimator that assumes  |
+|            | i.i.d. slots (fu2017's ``kalman``, ``centralized_lmmse``) is told: not the bursts         |
 
 Closed forms (pi_B = p / (p + r), pi_G = 1 - pi_B, lambda = 1 - p - r, one message per link and step)
 
@@ -55,7 +57,7 @@ Arguments (``coloc_env.networks.GilbertElliott``)
 | p_good_to_bad | 0.05    | [0, 1] per step; p_good_to_bad + p_bad_to_good > 0                         |
 | p_bad_to_good | 0.2     | [0, 1] per step (mean burst 1 / p_bad_to_good steps); the sum > 0          |
 
-The defaults: pi_B = 0.2, mean burst 5 steps, L = 0.18, rho = 0.54.
+The defaults: pi_B = 0.2, mean burst 5 steps, L = 0.18, P11 = 0.1296, rho = 0.66, mean loss run 3.57 steps.
 """
 
 from __future__ import annotations

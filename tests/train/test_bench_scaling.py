@@ -40,10 +40,11 @@ def test_the_growth_exponent_is_the_log_log_slope_of_time_per_step():
     assert growth_exponent((10, 20), (100.0, None)) is None
 
 
-def test_every_backend_that_runs_on_gps_denied_has_a_row_and_the_ukfs_also_over_ideal():
+def test_every_backend_that_runs_on_gps_denied_has_a_row_and_the_ukfs_also_over_ideal_and_gilbert_elliott():
     pairs = scaling_compositions()
     assert {"dead_reckoning", "range_ls", "dnbp", "ukf_ccl", "ukf_dcl"} <= {b for b, _ in pairs}
     assert ("ukf_ccl", "ideal") in pairs and ("ukf_dcl", "ideal") in pairs
+    assert ("ukf_ccl", "gilbert_elliott") in pairs and ("ukf_dcl", "gilbert_elliott") in pairs
 
 
 @pytest.mark.parametrize("argv,flag", [
