@@ -23,12 +23,28 @@ import inspect
 import os
 from types import ModuleType
 
-from agents import event_triggered, generic
+from agents import contention, event_triggered, generic
 from agents.base import FixedActionPolicy, Policy, RandomPolicy
 from coloc_env.config import BadInput, check_seed
 from coloc_env.scenarios import REGISTRY
 
 COMPOSITION_BASELINES = ("always", "silent")
+# the policies a composition gets from its network: every composition over ``contention`` schedules its slots
+NETWORK_POLICIES = {"contention": (contention.POLICIES, contention.BASELINES)}
+
+
+def _name(scenario) -> str:
+    """A scenario's name: a preset's, a composition name, or a ``Composition``'s."""
+    return scenario.name if hasattr(scenario, "network") else scenario
+
+
+def _network(scenario) -> str | None:
+    """The network of a composition (a ``Composition``, or its name ``world/network/backend``); None for a preset."""
+    network = getattr(scenario, "network", None)
+    if network is not None:
+        return network.name
+    parts = scenario.split("/") if isinstance(scenario, str) else []
+    return parts[1] if len(parts) == 3 else None
 
 
 def policy_module(scenario: str) -> ModuleType | None:
@@ -39,14 +55,18 @@ def policy_module(scenario: str) -> ModuleType | None:
     filters rather than env policies: lossy_fusion's, run by ``train.evaluate.REFERENCE_FILTERS``), and
     optionally ``BOUNDS`` (the ``bound_*`` policies) and ``ALIASES`` (old name -> current name, accepted by
     ``make_policy`` only)."""
+    scenario = _name(scenario)
     if scenario not in REGISTRY:
         return None
     return importlib.import_module(REGISTRY[scenario].policy_module)
 
 
-def _policies(scenario: str) -> dict:
+def _policies(scenario) -> dict:
+    """The realizable policies of a preset, or of a composition: the generic ones and its network's."""
     module = policy_module(scenario)
-    return _composition_policies(scenario) if module is None else module.POLICIES
+    if module is not None:
+        return module.POLICIES
+    return {**_composition_policies(_name(scenario)), **NETWORK_POLICIES.get(_network(scenario), ({}, ()))[0]}
 
 
 def _composition_policies(scenario: str) -> dict:
@@ -60,13 +80,14 @@ def _composition_policies(scenario: str) -> dict:
     return generic.POLICIES
 
 
-def _bounds(scenario: str) -> dict:
+def _bounds(scenario) -> dict:
     return getattr(policy_module(scenario), "BOUNDS", {})
 
 
-def available_policies(scenario: str) -> list[str]:
-    """Realizable policy names for a preset, or for a composition's name ``world/network/backend``
-    (``random`` first; ``always`` and ``silent`` included; no bound)."""
+def available_policies(scenario) -> list[str]:
+    """Realizable policy names for a preset, or for a composition (a ``Composition`` or its name
+    ``world/network/backend``: ``always``, ``silent``, ``greedy`` and its network's, e.g. ``round_robin`` and
+    ``aloha`` over ``contention``); ``random`` first, no bound."""
     return ["random", *_policies(scenario)]
 
 
@@ -93,14 +114,18 @@ def bound_policies(scenario: str) -> list[str]:
 
 
 def strongest_baselines(scenario: str) -> tuple[str, ...]:
-    """The realizable policies a learned one must beat on ``scenario`` (a composition: ``always``, ``silent``)."""
+    """The realizable policies a learned one must beat on ``scenario`` (a composition: ``always``, ``silent`` and
+    its network's baselines)."""
     module = policy_module(scenario)
-    return COMPOSITION_BASELINES if module is None else tuple(module.STRONGEST_BASELINES)
+    if module is None:
+        return COMPOSITION_BASELINES + NETWORK_POLICIES.get(_network(scenario), ({}, ()))[1]
+    return tuple(module.STRONGEST_BASELINES)
 
 
 def make_policy(name: str, env, seed: int | None = None, **kwargs) -> Policy:
     """A policy for ``env`` by name: ``paper`` (``paper:T2P3`` for other tables where the
-    scenario has them), ``random``, ``always``, ``silent``, ``greedy``, ``oracle_*``, a scenario's
+    scenario has them), ``random``, ``always``, ``silent``, ``greedy``, ``round_robin`` and ``aloha`` (``aloha:p``)
+    over ``contention``, ``oracle_*``, a scenario's
     ``bound_*``, or a path to a trained ``.zip``. A name that is not a string, a variant (``:X``) the policy
     does not take or cannot read, a seed that is not None or an integer in [0, 2**63 - 1], or an ``env``
     that is not a coloc env is a ``ValueError`` saying which."""
@@ -121,9 +146,11 @@ def make_policy(name: str, env, seed: int | None = None, **kwargs) -> Policy:
     if colon and not variant.strip():
         raise BadInput(f"policy {name!r}: the variant after ':' is empty")
     base = getattr(policy_module(scenario), "ALIASES", {}).get(base, base)
-    table = {**_policies(scenario), **_bounds(scenario)}
+    composition = getattr(env.unwrapped.scenario, "composition", None)
+    which = composition if composition is not None and composition.preset is None else scenario
+    table = {**_policies(which), **_bounds(scenario)}
     if base not in table:
-        raise BadInput(f"unknown policy {name!r} for {scenario}; available: {available_policies(scenario)}, "
+        raise BadInput(f"unknown policy {name!r} for {scenario}; available: {available_policies(which)}, "
                        f"bounds: {bound_policies(scenario)} or a .zip")
     if variant:
         parameters = inspect.signature(table[base]).parameters

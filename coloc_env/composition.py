@@ -120,7 +120,9 @@ def incompatibility(world: PartConfig, network: PartConfig, backend: PartConfig)
             return (f"{backend.name} needs {_kinds(group)} measurements; world {world.name} has "
                     f"{_kinds(world.measurements) or 'none'}")
     if backend.message_kind != "none" and backend.message_kind not in network.carries:
-        return f"{backend.name} sends {backend.message_kind} messages; network {network.name} cannot carry them"
+        why = getattr(network, "refuses", {}).get(backend.message_kind)
+        return (f"{backend.name} sends {backend.message_kind} messages; network {network.name} cannot carry them"
+                + (f" ({why})" if why else ""))
     return ""
 
 

@@ -11,9 +11,11 @@ import_parts(__name__, __path__, ("ideal", "bernoulli_delay", "bandwidth", "rela
 from coloc_env.networks.bandwidth import Bandwidth  # noqa: E402
 from coloc_env.networks.bernoulli_delay import BernoulliDelay  # noqa: E402
 from coloc_env.networks.broadcast import Broadcast  # noqa: E402
+from coloc_env.networks.contention import Contention  # noqa: E402
 from coloc_env.networks.gilbert_elliott import GilbertElliott  # noqa: E402
 from coloc_env.networks.ideal import Ideal  # noqa: E402
 from coloc_env.networks.random_delay import RandomDelay  # noqa: E402
 from coloc_env.networks.relay import Relay  # noqa: E402
 
-__all__ = ["NETWORKS", "Bandwidth", "BernoulliDelay", "Broadcast", "GilbertElliott", "Ideal", "RandomDelay", "Relay"]
+__all__ = ["NETWORKS", "Bandwidth", "BernoulliDelay", "Broadcast", "Contention", "GilbertElliott", "Ideal", "RandomDelay",
+           "Relay"]
