@@ -14,6 +14,7 @@ actions.
 | gps_denied_nbp     | wan2014   | gps_denied   | broadcast        | dnbp                      |
 | nlos_horizon       | gao2016   | nlos_orbit   | random_delay     | afge                      |
 | mrclam_relay       | MRCLAM    | mrclam       | relay            | ukf_se2                   |
+| contention_localization | -    | gps_denied   | contention       | ukf_ccl                   |
 
 How exactly the parts reproduce each preset (tests/coloc_env):
 

@@ -67,6 +67,7 @@ OVERRIDES = {
     "gps_denied_nbp": {"num_particles": 50, "horizon": 10},
     "nlos_horizon": {"horizon": 60},
     "mrclam_relay": {"data": DATASET6, "window_steps": 30},
+    "contention_localization": {},
 }
 
 
@@ -231,6 +232,13 @@ PINNED_ROLLOUTS = {
         "random": {"steps": 25, "reward": -1.3734166102313323, "error": 1.3734166102313321,
                    "trace": 0.05865494495909393, "obs_sum": -4.0507316589355469},
     },
+    # gps_denied / contention / ukf_ccl; "paper" is round_robin; the medium has no draws (the decisions decide)
+    "contention_localization": {
+        "paper": {"steps": 25, "reward": -1870.9519567919222, "error": 1870.9519567919222,
+                  "trace": 106033.93463019808, "obs_sum": 29.765554010868073},
+        "random": {"steps": 25, "reward": -3977.6768720289192, "error": 3977.6768720289192,
+                   "trace": 200451.9321992613, "obs_sum": 31.657252371311188},
+    },
 }
 
 PINNED_VECTOR = {
@@ -240,6 +248,7 @@ PINNED_VECTOR = {
     "gps_denied_nbp": {"reward": -2558.9879417419434, "obs_sum": 91.82473330199718},
     "nlos_horizon": {"reward": -156932.33562774584, "obs_sum": 276.53796964552021},
     "mrclam_relay": {"reward": -0.73232610011473298, "obs_sum": -77.301276981830597},
+    "contention_localization": {"reward": -2783.2435924112797, "obs_sum": 1026.9490673542023},
 }
 
 PINNED_REPRODUCTION = {

@@ -159,12 +159,62 @@ def _gps_denied_nbp_particle_rows(min_seconds: float, batch: int | None = None, 
     return rows
 
 
+CONTENTION_BENCH = {"num_agents": 40, "batch": 8, "backend": "range_ls"}
+
+
+def _contention_rows(min_seconds: float) -> list[dict]:
+    """A ``contention`` step against a ``broadcast`` step in one run: gps_denied with N = 40 UAVs at the scaling
+    rows' density (``scaling_world``), B = 8 copies, one slot, the same backend (``range_ls``: its update is
+    cheap, so the rows show the network's own cost; a UKF's step would hide it) and the same actions, one UAV
+    transmitting per step (k mod N), with which the two networks deliver the same messages (nothing collides):
+    the same backend work, and ``time_over_broadcast`` is the contention step's time over the broadcast one's.
+    A second pair plays ``always`` (every UAV transmits: on contention everything collides, so the backend
+    fuses less there)."""
+    import coloc_env
+
+    N, B, backend = CONTENTION_BENCH["num_agents"], CONTENTION_BENCH["batch"], CONTENTION_BENCH["backend"]
+    world = scaling_world(N, "fixed density")
+    rows = []
+    for schedule in ("one UAV per step", "always"):
+        rates = {}
+        for network in ("broadcast", {"name": "contention", "slots": 1}):
+            venv = coloc_env.vector_env(coloc_env.compose(world=world, network=network, backend=backend),
+                                        num_envs=B, seed=0)
+            core = venv.scenario
+            base = np.broadcast_to(core.action_vector("minimum" if schedule != "always" else "maximum"), (B, N, 1))
+            box = {"k": 0}
+            actions = [base.copy() for _ in range(N)]
+            if schedule != "always":
+                for k in range(N):
+                    actions[k][:, k % N] = 1
+
+            actions = [a.reshape(B * N, 1) for a in actions]  # the vec env's sub-envs: copies x agents
+
+            def step(venv=venv, box=box, actions=actions) -> None:  # it resets a finished copy itself
+                venv.step(actions[box["k"] % N])
+                box["k"] += 1
+
+            venv.reset()
+            name = network if isinstance(network, str) else network["name"]
+            rates[name] = _rate(step, min_seconds)
+            venv.close()
+        for name, rate in rates.items():
+            row = {"scenario": "contention_localization",
+                   "what": f"gps_denied/{name}/{backend} N = {N}, 1 slot, {schedule}", "batch": B,
+                   "env_steps_per_s": rate * B, "agent_steps_per_s": rate * B * N}
+            if name == "contention":
+                row["time_over_broadcast"] = rates["broadcast"] / rate
+            rows.append(row)
+    return rows
+
+
 # Scenarios too expensive per step for the default batches (dNBP: an M x M kernel per message): each preset's
 # ``BENCH_BATCHES`` in train/hyperparams/<preset>.py.
 SCENARIO_BATCHES: dict[str, tuple[int, ...]] = {name: tuple(batches) for name, batches
                                                 in hyperparams.presets_declaring("BENCH_BATCHES").items()}
 # Extra rows a scenario reports (name -> fn(min_seconds) -> rows).
-EXTRA_BENCHES: dict[str, Callable[[float], list[dict]]] = {"gps_denied_nbp": _gps_denied_nbp_particle_rows}
+EXTRA_BENCHES: dict[str, Callable[[float], list[dict]]] = {"gps_denied_nbp": _gps_denied_nbp_particle_rows,
+                                                           "contention_localization": _contention_rows}
 # Scenarios whose work per copy depends on the episode (dNBP: how many messages arrive, how many proposals the
 # truncated kernel prunes): a vector_env of B copies plays episodes 0..B-1, so its rows at B = 1 and B = 4 time
 # different work. These also get a row with every copy playing episode 0 (ONE_EPISODE), where only B changes
@@ -246,6 +296,10 @@ BACKEND_CALLS: dict[str, dict[tuple[str, str], tuple[tuple[str, ...], bool]]] = 
                   ("estimators.ukf_relay", "fix_updates"): (("estimate", "cov"), False),
                   ("estimators.ukf_relay", "dcl_update"): ((), False),
                   ("coloc_env.backends.ukf", "predict_joint"): ((), False)},
+    # ukf_ccl at the centre: the same joint-UKF updates as relay_ukf's, without the chains
+    "contention_localization": {("estimators.ukf_relay", "range_updates"): (("estimate", "cov"), False),
+                                ("estimators.ukf_relay", "fix_updates"): (("estimate", "cov"), False),
+                                ("coloc_env.backends.ukf", "predict_joint"): ((), False)},
     "mrclam_relay": {("estimators.ukf_relay_se2", "dcl_update_rows"): (("estimate", "P_ii", "phi", "sigma"), False),
                      ("estimators.ukf_relay_se2", "time_update_batch"): (("estimate", "P_ii", "phi"), True)},
     # The afge backend's estimator math. Every one returns new arrays and writes into none of its arguments, and
@@ -646,6 +700,9 @@ def run(out: str, quick: bool = False, scenarios: list[str] | None = None) -> li
                       f"{row['agent_steps_per_s']:,.0f}", "" if overhead is None else f"{overhead:.2f}x")
     console.print(table)
     for row in rows:
+        if "time_over_broadcast" in row:
+            console.print(f"{row['scenario']} {row['what']} (B = {row['batch']}): a contention step takes "
+                          f"{row['time_over_broadcast']:.2f}x a broadcast step")
         if "time_per_fault_uav_step_s" in row:
             console.print(f"{row['scenario']} {row['what']} (B = {row['batch']}): "
                           f"{1e3 * row['time_per_fault_uav_step_s']:.1f} ms per fault-UAV step")

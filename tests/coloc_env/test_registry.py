@@ -38,6 +38,10 @@ PINS = {
         "5 agents; observation Box(shape=(18,), dtype=float32, low=[-inf, 0.0], high=[1.0, inf]); "
         "action MultiDiscrete([5, 6, 6, 6, 6, 6])",
         [-165.5488801568281, -0.07537058304313216, 0.07537058304313216]),
+    "coloc/contention_localization-v1": (
+        "10 agents; observation Box(shape=(34,), dtype=float32, low=[-50.0, 0.0], high=[1.0, 50.0, inf]); "
+        "action MultiDiscrete([2])",
+        [1893.805515833199, -271.27224529005156, 271.27224529005156]),
 }
 
 DATA_PRESETS = {"mrclam_relay"}  # presets that replay recorded data: built with data=MRCLAM_DATASET6
