@@ -230,7 +230,7 @@ def test_episode_metrics_follow_each_paper():
 
 
 @pytest.mark.parametrize("name", ["bandwidth_fusion", "lossy_fusion", "relay_ukf", "nlos_horizon", "gps_denied_nbp",
-                                  "mrclam_relay"])
+                                  "mrclam_relay", "contention_localization"])
 def test_every_scenario_has_a_raw_estimator_benchmark(name, request, monkeypatch):
     import coloc_env
     from train.bench import ESTIMATOR_STEPS

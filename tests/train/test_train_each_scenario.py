@@ -22,6 +22,7 @@ SHORT = {
     "nlos_horizon": {"horizon": 60},
     "gps_denied_nbp": {"horizon": 3, "num_particles": 20},
     "mrclam_relay": {"window_steps": 5, "data": MRCLAM_DATASET6},
+    "contention_localization": {"horizon": 5},
     # a cross-combination of parts, trained by its name WORLD/NETWORK/BACKEND
     "circles/broadcast/ukf_ccl": {"horizon": 5},
 }
@@ -34,6 +35,7 @@ OTHER_SPACES = {
     "relay_ukf": {"num_agents": 3},
     "nlos_horizon": {"window_max": 20},
     "gps_denied_nbp": {"num_iterations": 3},
+    "contention_localization": {"slots": 2},
 }
 
 
