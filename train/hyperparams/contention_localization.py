@@ -19,3 +19,10 @@ HYPERPARAMS = ppo(n_steps=60, batch_size=600, gamma=0.9, ent_coef=0.01)
 
 NUM_COPIES = 8
 TIMESTEPS = 200_000
+
+# The leaderboard's target for a learned policy: (what it says, the largest |paired error difference| relative to
+# the baseline's mean that counts as matching it, the communication saving a match needs).
+LEADERBOARD_TARGET = ("beat the strongest baseline, or match it with 30 % fewer frames", 0.02, 0.30)
+
+# ``coloc bench``: its batch sizes (the joint UKF over 10 UAVs at B = 1024 would take minutes per row).
+BENCH_BATCHES = (1, 8, 64)
