@@ -157,7 +157,8 @@ def presets() -> list[str]:
 CHEAP_WORLDS = ("circles", "drift", "target_cv", "gps_denied", "nlos_orbit", "mrclam", "mrclam_slices")
 CHEAP_BACKENDS = ("dead_reckoning", "kalman", "centralized_lmmse", "ukf_ccl", "ukf_dcl", "bandwidth_fusion",
                   "prediction_compensation", "range_ls", "dfir", "delay_kalman", "afge", "ukf_se2", "dnbp")
-CHEAP_NETWORKS = ("ideal", "broadcast", "relay", "bernoulli_delay", "random_delay", "bandwidth", "gilbert_elliott", "contention")
+CHEAP_NETWORKS = ("ideal", "broadcast", "relay", "bernoulli_delay", "random_delay", "bandwidth", "gilbert_elliott",
+                  "contention")
 
 
 def partners(kind: str, name: str) -> dict[str, str]:

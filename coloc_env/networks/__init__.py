@@ -17,5 +17,5 @@ from coloc_env.networks.ideal import Ideal  # noqa: E402
 from coloc_env.networks.random_delay import RandomDelay  # noqa: E402
 from coloc_env.networks.relay import Relay  # noqa: E402
 
-__all__ = ["NETWORKS", "Bandwidth", "BernoulliDelay", "Broadcast", "Contention", "GilbertElliott", "Ideal", "RandomDelay",
-           "Relay"]
+__all__ = ["NETWORKS", "Bandwidth", "BernoulliDelay", "Broadcast", "Contention", "GilbertElliott", "Ideal",
+           "RandomDelay", "Relay"]
