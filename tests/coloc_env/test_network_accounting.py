@@ -134,7 +134,9 @@ def test_every_preset_reports_the_link_counts_in_its_infos(name):
         for key in ("transmissions", "link_attempts", "link_deliveries", "collisions"):
             assert np.ndim(info[key]) == 0, key
         assert 0 <= info["link_deliveries"] <= info["link_attempts"]
-        assert info["collisions"] == 0
+        assert info["link_deliveries"] + info["collisions"] <= info["link_attempts"]
+        if coloc_env.PRESETS[name].network.name != "contention":  # the only network where frames collide
+            assert info["collisions"] == 0
 
 
 def test_a_composition_reports_them_and_the_receive_ahead_path_keeps_the_steps_apart():
