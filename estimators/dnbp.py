@@ -128,8 +128,43 @@ the first step. How closely the truncated kernel follows the exact one on
 wan2014's points, and how much faster it is, is measured in
 ``docs/performance.md`` ("dNBP kernels").
 
+Messages of fault senders (``DnbpModel.fault_message_power`` alpha, [chosen]).
+On the loopy graph of the fault UAVs, a fault sender's belief already holds
+what its receiver holds: the rings of the GPS-normal UAVs both hear, and the
+receiver's own earlier messages relayed through a third UAV (Algorithm 1's
+reverse-message correction removes only the direct echo). Taken at full
+weight over the iterations, this information is counted again and again and
+the beliefs grow overconfident (docs/consistency.md, "wan2014: dNBP and
+range_ls covariances": with alpha = 1, one iteration, i.e. no fault -> fault
+message, reads a mean NEES of 1.5, five read 5.3). A message of a GPS-faulty
+sender therefore enters every product as m^alpha, a fractional BP message
+(Wiegerinck and Heskes 2003, "Fractional belief propagation"), the
+geometric-mixture fusion of covariance intersection with weight alpha. It is
+done on the message's kernel: a ring's radial profile is about Gaussian with
+variance h^2 + sigma_d^2 + sigma_t^2 (kernel, range noise, the sender's
+position variance), and raising it to alpha multiplies that variance by
+1/alpha, so
+
+    h'^2 = h^2 + (1/alpha - 1) (h^2 + sigma_d^2 + sigma_t^2)              (``temper_bandwidth``)
+
+(the ring's angular profile is widened too, which leaves a uniform ring as
+it is). The reverse-message correction then divides by the tempered message,
+as fractional BP does. alpha = 1 is the paper's algorithm; the default 0.5
+was measured, with 0.25 and 1, in docs/consistency.md.
+
+Reported covariance (``coloc_env.backends.particles.DnbpBackend.position_cov``):
+the covariance of the density the belief particles stand for. A belief that
+Algorithm 2 resampled is M draws of the regularized posterior
+sum_j w_j N(p; p_j, h_rot^2 I2) (the jitter is its kernel), so the particles'
+sample covariance estimates its covariance, kernel included:
+Cov = (1/M) sum_i (p_i - p_bar)(p_i - p_bar)^T. A belief that is its prior's
+particle set (a fault UAV that heard nobody) stands for the prior's KDE,
+whose covariance adds the kernel: Cov + h_rho^2 I2.
+
 Departures from the reconstruction
 ----------------------------------
+* A GPS-faulty sender's message is tempered (alpha above); the paper's
+  algorithm is alpha = 1.
 * Velocity completion draws the prior particle j by inverse-CDF sampling of
   the categorical law p(j | p) ∝ exp(-||p - x_j||^2 / (2 h_rho^2)) (one
   uniform per new particle, not M Gumbels as Gumbel-max would use): the same
@@ -191,6 +226,7 @@ __all__ = [
     "mixture_logpdf",
     "prior_logpdf",
     "sample_messages",
+    "temper_bandwidth",
     "belief_update",
     "fault_senders",
     "initial_state",
@@ -233,6 +269,9 @@ class DnbpModel:
     |                    |               |         | the module's Kernels note)                          |
     | truncation         | r             | 6       | [chosen] [1, 10] bandwidths, the truncated kernel's |
     |                    |               |         | cut: terms below e^(-r^2/2) of the largest left out |
+    | fault_message_power| alpha         | 0.5     | [chosen] (0, 1]: a GPS-faulty sender's message      |
+    |                    |               |         | enters as m^alpha (fractional BP; the module's      |
+    |                    |               |         | "Messages of fault senders"); 1 = the paper's       |
 
     ``accel_noise_std``, ``gps_std`` and ``range_std`` are standard deviations (sigma), not the variances the
     other estimators take. Each is one float for every copy, or a (B,) array of one value per copy (copies whose
@@ -255,6 +294,7 @@ class DnbpModel:
     schedule: str = "modified"
     kernel: str = "exact"
     truncation: float = 6.0
+    fault_message_power: float = 0.5
 
     def __post_init__(self):
         if self.schedule not in ("modified", "parallel"):
@@ -268,6 +308,8 @@ class DnbpModel:
             low, high = getattr(self, name)
             if not high > low:
                 raise ValueError(f"{name} must be (low, high) with high > low, got {(low, high)}")
+        if not 0.0 < self.fault_message_power <= 1.0:
+            raise ValueError(f"fault_message_power must be in (0, 1], got {self.fault_message_power!r}")
         if self.num_particles < 2 or self.num_iterations < 1 or self.oversampling < 1:
             raise ValueError("num_particles >= 2, num_iterations >= 1 and oversampling >= 1 are required")
 
@@ -1198,6 +1240,21 @@ def sample_messages(model: DnbpModel, sender_points: np.ndarray, distance: np.nd
     return centres, correction_log_weights, bandwidth
 
 
+def temper_bandwidth(bandwidth: np.ndarray, sender_points: np.ndarray, correction_log_weights: np.ndarray | None,
+                     tempered: np.ndarray, alpha: float, range_std: np.ndarray) -> np.ndarray:
+    """The bandwidths (E,) of E messages with those where ``tempered`` (E,) raised to the power alpha (the module's
+    "Messages of fault senders"): h'^2 = h^2 + (1/alpha - 1) (h^2 + sigma_d^2 + sigma_t^2), so the ring's radial
+    variance h^2 + sigma_d^2 + sigma_t^2 grows by 1/alpha, as for a Gaussian profile raised to alpha.
+    sender_points (E, M, 2), correction_log_weights (E, M) or None (uniform), range_std (E,) sigma_d;
+    sigma_t^2 is the sender's weighted position variance averaged over the two axes (h_rot's sigma_hat^2)."""
+    E, M = sender_points.shape[:2]
+    weights = np.full((E, M), 1.0 / M) if correction_log_weights is None else np.exp(correction_log_weights)
+    mean = np.einsum("em,emd->ed", weights, sender_points)
+    spread = np.einsum("em,emd->e", weights, (sender_points - mean[:, None, :]) ** 2) / 2.0
+    radial = bandwidth**2 + np.asarray(range_std, float) ** 2 + spread
+    return np.where(tempered, np.sqrt(bandwidth**2 + (1.0 / alpha - 1.0) * radial), bandwidth)
+
+
 def correction_weights(sender_points: np.ndarray, reverse_centres: np.ndarray, reverse_log_weights: np.ndarray,
                        reverse_bandwidth: np.ndarray, truncation: float = 0.0) -> np.ndarray:
     """log w_i ∝ -log m_st(p_t^i), normalized (Alg. 1 step 1, Ihler's double-counting correction).
@@ -1741,6 +1798,9 @@ def step(model: DnbpModel, state: DnbpState, gps_normal: np.ndarray, gps_fix: np
             c, lw, h = sample_messages(model, points, ranges[b_idx, t_idx, s_idx], corr, draws["permutation"],
                                        draws["offset"], draws["range_noise"],
                                        range_std=per_copy("range_std", model.range_std, B)[b_idx])
+            if model.fault_message_power < 1.0:
+                h = temper_bandwidth(h, points, corr, fault[b_idx, t_idx], model.fault_message_power,
+                                     per_copy("range_std", model.range_std, B)[b_idx])
             # written only after every message of this iteration is built (synchronous iteration)
             entry = slot_entry[s_rows, t_idx]
             fresh = entry == 0

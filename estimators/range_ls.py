@@ -21,8 +21,27 @@ the linearised solution 2 (a_k - a_1)^T p = d_1^2 - d_k^2 + ||a_k||^2 - ||a_1||^
 Gate [chosen]: residual RMS <= 3 sigma_d, sqrt(tr sigma_d^2 (J^T J)^-1) <= 10
 sigma_d and nu^T (C_pp + sigma_d^2 (J^T J)^-1)^-1 nu <= 13.8 with nu = p - p_pred.
 An accepted fix is the output and a position pseudo-measurement of the KF
-with covariance sigma_d^2 (J^T J)^-1; otherwise the output is the dead-
-reckoning estimate. No fault-to-fault cooperation.
+with covariance C_fix (below); otherwise the output is the dead-reckoning
+estimate (the KF's). No fault-to-fault cooperation.
+
+Reported covariance (``update``'s ``estimate_cov``): the covariance of the
+estimate that is output. Where that is the KF mean it is the KF posterior
+P_pp; where it is a fix it is the fix's Gauss-Newton covariance at the
+solution p, with the anchors' own uncertainty in each range's variance:
+
+    C_fix = (sum_k u_k u_k^T / s_k^2)^-1,  s_k^2 = sigma_d^2 + u_k^T C_k u_k,  u_k = (p - a_k) / ||p - a_k||
+
+(C_k: anchor k's KF posterior position covariance, the 2 x 2 block its
+broadcast carries with its estimate). The residual d_k - ||p - a_k|| linearised
+at p is nu_k - u_k^T e_k (range noise nu_k, anchor error e_k, independent across
+anchors), so s_k^2 is its variance and C_fix the covariance of the weighted
+Gauss-Newton solution. sigma_d^2 (J^T J)^-1 (C_k = 0) leaves the anchors'
+error out: the fixes were about 4 times overconfident with it (docs/consistency.md,
+"wan2014: dNBP and range_ls covariances"). The KF posterior after fusing the fix
+is not the fix's covariance: the output is the fix, not the fused mean. C_fix
+is also the KF's pseudo-measurement covariance [chosen; it treats successive
+fixes as independent, while an anchor's error persists from step to step].
+The gate keeps sigma_d^2 (J^T J)^-1, as the reconstruction states it.
 
 Arrays carry a leading batch axis B and the UAV axis N; everything is
 vectorized: each fault UAV's normal neighbours are gathered into a list
@@ -40,7 +59,7 @@ import numpy as np
 from estimators.models import per_copy
 
 __all__ = ["LsParams", "KalmanState", "initial_state", "predict", "update_position", "gauss_newton",
-           "linearized_fix", "step"]
+           "fix_covariance", "linearized_fix", "step", "update"]
 
 
 @dataclass(frozen=True)
@@ -145,6 +164,17 @@ def gauss_newton(start: np.ndarray, anchors: np.ndarray, ranges: np.ndarray, mas
     return p, JtJ, rms
 
 
+def fix_covariance(p: np.ndarray, anchors: np.ndarray, anchor_cov: np.ndarray, mask: np.ndarray,
+                   range_std: np.ndarray) -> np.ndarray:
+    """C_fix = (sum_k u_k u_k^T / s_k^2)^-1 with s_k^2 = sigma_d^2 + u_k^T C_k u_k (the module's "Reported
+    covariance") for J fixes: p (J, 2), anchors (J, K, 2), anchor_cov (J, K, 2, 2), mask (J, K), range_std (J,)
+    sigma_d. The fixes must have two independent directions (J^T J nonsingular, as the gate requires)."""
+    u, _ = _normal_matrix(p, anchors, np.zeros(mask.shape), mask)
+    var = np.asarray(range_std, float)[:, None] ** 2 + np.einsum("jki,jkil,jkl->jk", u, anchor_cov, u)
+    info = np.einsum("jki,jkl,jk->jil", u, u, np.where(mask, 1.0 / var, 0.0))
+    return _sym(np.linalg.inv(info))
+
+
 def linearized_fix(anchors: np.ndarray, ranges: np.ndarray, mask: np.ndarray) -> np.ndarray:
     """Linear LS: subtract the first anchor's squared-range equation from the others (J, 2)."""
     first = np.argmax(mask, axis=-1)
@@ -186,17 +216,20 @@ def step(params: LsParams, state: KalmanState, gps_normal: np.ndarray, gps_fix: 
     ``update`` followed by ``predict`` with the linear model (F, G, Q). ``gps_std`` and ``range_std`` are
     standard deviations (sigma_gps, sigma_d in m), not the variances the other estimators take.
     """
-    posterior, estimate, fixed = update(params, state, gps_normal, gps_fix, adjacency, ranges, gps_std, range_std)
+    posterior, estimate, _, fixed = update(params, state, gps_normal, gps_fix, adjacency, ranges, gps_std,
+                                           range_std)
     return predict(posterior, accel, F, G, Q), estimate, fixed
 
 
 def update(params: LsParams, state: KalmanState, gps_normal: np.ndarray, gps_fix: np.ndarray, adjacency: np.ndarray,
            ranges: np.ndarray, gps_std: float | np.ndarray, range_std: float | np.ndarray
-           ) -> tuple[KalmanState, np.ndarray, np.ndarray]:
+           ) -> tuple[KalmanState, np.ndarray, np.ndarray, np.ndarray]:
     """The measurement half of ``step``: GPS updates, then the gated LS fixes of fault UAVs.
 
     ``state`` (any state dimension d >= 2, position first) holds the predictions of tau. Returns the
-    posterior of tau, the estimates (B, N, 2) and ``fixed`` (B, N). The caller predicts with its own
+    posterior of tau, the estimates (B, N, 2), their covariance ``estimate_cov`` (B, N, 2, 2: C_fix where
+    ``fixed``, else the posterior's position block; the module's "Reported covariance") and ``fixed``
+    (B, N). The caller predicts with its own
     motion model (``predict`` for the linear constant-velocity one). ``gps_std`` and ``range_std`` are standard
     deviations (sigma_gps, sigma_d in m), not variances: one float for every copy or a (B,) array of each
     copy's.
@@ -207,6 +240,7 @@ def update(params: LsParams, state: KalmanState, gps_normal: np.ndarray, gps_fix
     R_gps = np.broadcast_to(gps_std[:, None, None, None] ** 2 * np.eye(2), (B, N, 2, 2))
     posterior = update_position(state, np.nan_to_num(gps_fix), R_gps, gps_normal)
     estimate = posterior.mean[..., :2].copy()
+    fix_cov = None
     fixed = np.zeros((B, N), bool)
     anchors_ok = adjacency & gps_normal[:, None, :]  # [b, s, k]: k is a normal neighbour of s
     candidates = ~gps_normal & (anchors_ok.sum(axis=-1) >= params.min_anchors)
@@ -233,7 +267,12 @@ def update(params: LsParams, state: KalmanState, gps_normal: np.ndarray, gps_fix
         fixed[fb, fs] = True
         z = np.zeros((B, N, 2))
         R = np.broadcast_to(np.eye(2), (B, N, 2, 2)).copy()
-        z[fb, fs], R[fb, fs] = p[accept], cov[accept]
+        anchor_cov = posterior.cov[b_idx[accept][:, None], order[accept], :2, :2]
+        fix_cov = fix_covariance(p[accept], anchors[accept], anchor_cov, mask[accept], range_std[fb])
+        z[fb, fs], R[fb, fs] = p[accept], fix_cov
         posterior = update_position(posterior, z, R, fixed)
         estimate[fb, fs] = p[accept]
-    return posterior, estimate, fixed
+    estimate_cov = posterior.cov[..., :2, :2].copy()
+    if fix_cov is not None:
+        estimate_cov[fixed] = fix_cov
+    return posterior, estimate, estimate_cov, fixed

@@ -16,8 +16,10 @@ fix when normal; a fault UAV with at least ``min_anchors`` GPS-normal
 neighbours whose estimate it received computes a Gauss-Newton fix against
 their KF estimates and its ranges, gated, then used as a pseudo-measurement.
 Per step one broadcast round (slot 0): every GPS-normal UAV broadcasts its
-KF position estimate (2 floats) to everyone; the delivered links with a range
-are the anchors of the fault UAVs.
+KF position estimate and its 2 x 2 covariance (5 floats) to everyone; the
+delivered links with a range are the anchors of the fault UAVs. The
+covariance enters each range's variance in the fix's covariance
+(``estimators.range_ls``, "Reported covariance").
 
 | quantity      | dnbp                                        | range_ls                                       |
 |---------------|---------------------------------------------|------------------------------------------------|
@@ -25,15 +27,19 @@ are the anchors of the fault UAVs.
 | motion kinds  | ``cv_accel``                                | ``cv_accel``                                   |
 | needs         | ``range``                                   | ``range`` and ``position_fix``                 |
 | messages      | ``broadcast``, ``num_iterations`` rounds    | ``broadcast``, 1 round                         |
-| payload       | M centres (2), M log-weights, 1 bandwidth:  | a KF position estimate: 2 floats               |
-|               | 3 M + 1 floats per message                  |                                                |
+| payload       | M centres (2), M log-weights, 1 bandwidth:  | a KF position estimate and its covariance:     |
+|               | 3 M + 1 floats per message                  | 2 + 3 = 5 floats                               |
 | lost message  | not heard in that iteration: the receiver's | that anchor cannot serve this step             |
 |               | belief is not updated with it, and the      |                                                |
 |               | schedule counts the sender as not heard     |                                                |
 | under-determined | a fault UAV that hears nobody keeps its  | fewer than ``min_anchors`` anchors, or a fix   |
 |               | prior (prediction only, dead reckoning)     | that fails the gate: the KF prediction         |
 | decisions     | none (the network's ``transmit`` per round) | none (the network's ``transmit``, round 0)     |
-| position cov  | the belief particles' sample covariance     | the KF posterior covariance                    |
+| position cov  | the covariance of the density the belief    | a fix's Gauss-Newton covariance with the       |
+|               | particles stand for: their sample           | anchors' uncertainty where the output is a     |
+|               | covariance (+ h_rho^2 I2 where the belief   | fix, else the KF posterior covariance          |
+|               | is its prior's particles; ``estimators.     | (``estimators.range_ls``, "Reported            |
+|               | dnbp``, "Reported covariance")              | covariance")                                   |
 
 Per-step noise and velocity (both backends): a world whose noise changes from step to step supplies
 it with its readings, in ``Readings.extra``; each key present replaces, for that step, what the backend
@@ -78,6 +84,8 @@ Arguments (``coloc_env.backends.Dnbp``; defaults = ``gps_denied_nbp``'s)
 |                    |            | faster; how close to exact: docs/performance.md, "dNBP kernels")   |
 | truncation         | 6.0        | [1, 10] bandwidths: r of the truncated kernel (terms below         |
 |                    |            | e^(-r^2/2) of the largest left out; unused by the exact kernel)    |
+| fault_message_power| 0.5        | (0, 1]: alpha, a GPS-faulty sender's message enters as m^alpha    |
+|                    |            | (``estimators.dnbp``, "Messages of fault senders"); 1 = wan2014's  |
 | range_gate         | None       | None (no gate) or (0, 1e12]: before a step a range d_st is dropped |
 |                    |            | when (d_st - ||m_s - m_t||)^2 / (sigma_d^2 + v_s + v_t) exceeds it |
 |                    |            | (m, v: mean and per-axis variance of the agent's prior particles;  |
@@ -134,6 +142,7 @@ class Dnbp(PartConfig):
     kernel: str = "truncated"
     truncation: float = 6.0
     range_gate: float | None = None
+    fault_message_power: float = 0.5
 
     @property
     def rounds(self) -> int:
@@ -151,6 +160,7 @@ class Dnbp(PartConfig):
         check_choice(f"{prefix}init", self.init, ("warm", "cold"))
         check_choice(f"{prefix}kernel", self.kernel, dn.KERNELS)
         check_range(f"{prefix}truncation", self.truncation, *dn.TRUNCATION_RANGE)
+        check_range(f"{prefix}fault_message_power", self.fault_message_power, 0.0, 1.0, low_open=True)
         if self.range_gate is not None:
             check_range(f"{prefix}range_gate", self.range_gate, 0.0, 1e12, low_open=True)
 
@@ -219,7 +229,7 @@ class DnbpBackend(Backend):
             defensive_weight=config.defensive_weight, defensive_box=(episode[0] - m, episode[1] + m),
             cold_box=(start[0] - m, start[1] + m), min_bandwidth=config.min_bandwidth,
             initial_threshold=config.initial_threshold, schedule=config.schedule, kernel=config.kernel,
-            truncation=float(config.truncation))
+            truncation=float(config.truncation), fault_message_power=float(config.fault_message_power))
         d = motion.state_dim
         particles = np.zeros((B, N, M, d))
         self.state = dn.DnbpState(prior=particles, prior_bandwidth=np.ones((B, N)),
@@ -234,6 +244,8 @@ class DnbpBackend(Backend):
         self.last_result = None
         self.built_model = self.model  # the noise from the world at build: per-step readings replace it
         self.last_gated = np.zeros((B, N, N), bool)  # [s, t]: s's range to t dropped by range_gate last step
+        # h_rho of each belief that is its prior's particle set (0 where Algorithm 2 resampled it): position_cov
+        self.belief_kernel = np.zeros((B, N))
 
     def reset(self, rngs, idx) -> None:
         idx = np.asarray(idx)
@@ -262,6 +274,7 @@ class DnbpBackend(Backend):
         for name in ("prior", "prior_bandwidth", "prior_uniform", "belief", "estimate"):
             getattr(self.state, name)[idx] = getattr(fresh, name)
         self.posterior_position[idx] = fresh.estimate
+        self.belief_kernel[idx] = fresh.prior_bandwidth
 
     def _propagate(self, inputs):
         motion = self.world.motion_model
@@ -318,8 +331,12 @@ class DnbpBackend(Backend):
         held = range_valid.transpose(0, 2, 1)
         ranges = np.where(held, np.nan_to_num(readings.range).transpose(0, 2, 1), 0.0)
         propagate = None if self.constant_velocity else self._propagate(readings.inputs)
+        prior_bandwidth = self.state.prior_bandwidth.copy()
         self.state, self.last_result = dn.step(self.model, self.state, readings.fix_valid, readings.fix, deliver,
                                                ranges, readings.inputs, self.rngs, propagate=propagate)
+        # Algorithm 2 resampled the beliefs of the GPS-normal UAVs and of those that heard a message
+        resampled = np.asarray(readings.fix_valid, bool) | (self.last_result.received > 0)
+        self.belief_kernel = np.where(resampled, 0.0, prior_bandwidth)
 
     def predict(self, inputs) -> None:
         return None  # dn.step has propagated the beliefs to k + 1 already (with the same readings' inputs)
@@ -328,9 +345,14 @@ class DnbpBackend(Backend):
         return self.state.estimate
 
     def position_cov(self) -> np.ndarray:
+        """The covariance of the density the belief particles stand for (``estimators.dnbp``, "Reported
+        covariance"): their sample covariance (1/M) sum_i (p_i - p_bar)(p_i - p_bar)^T, plus h_rho^2 I2 where the
+        belief is its prior's particle set (the prior's KDE kernel; a resampled belief's particles carry their
+        kernel as jitter already)."""
         points = self.state.belief[..., :2]
         centred = points - points.mean(axis=2, keepdims=True)
-        return np.einsum("bnmi,bnmj->bnij", centred, centred) / points.shape[2]
+        cov = np.einsum("bnmi,bnmj->bnij", centred, centred) / points.shape[2]
+        return cov + (self.belief_kernel**2)[..., None, None] * np.eye(2)
 
     def particles(self, b: int) -> np.ndarray:
         return self.state.belief[b, :, :, :2]
@@ -364,7 +386,7 @@ class RangeLsBackend(Backend):
         B, N = self.batch, self.num_agents
         normal = np.asarray(readings.fix_valid, bool)
         listening = np.broadcast_to(~np.eye(N, dtype=bool), (B, N, N))
-        delivered = self.network.broadcast(normal, listening, 2.0, slot=0)  # [k, s]: k's estimate reached s
+        delivered = self.network.broadcast(normal, listening, 5.0, slot=0)  # [k, s]: k's estimate reached s
         adjacency = delivered.transpose(0, 2, 1) & np.asarray(readings.range_valid, bool)  # [s, k]
         ranges = np.where(adjacency, np.nan_to_num(readings.range), 0.0)
         fix = np.where(normal[..., None], readings.fix, np.nan)
@@ -379,10 +401,9 @@ class RangeLsBackend(Backend):
         # this step's process noise (sigma_acc^2 G) G^T per copy, for predict (None: the world's)
         self.step_Q = None if accel is None else (
             (np.asarray(accel, float).reshape(-1, 1, 1) ** 2 * self.G) @ self.G.T)[:, None]
-        posterior, self.estimate, self.last_fixed = rl.update(self.params, self.state, normal, fix, adjacency, ranges,
-                                                              gps_std, range_std)  # each copy's sigmas
+        posterior, self.estimate, self.estimate_cov, self.last_fixed = rl.update(
+            self.params, self.state, normal, fix, adjacency, ranges, gps_std, range_std)  # each copy's sigmas
         self.state.mean[:], self.state.cov[:] = posterior.mean, posterior.cov
-        self.estimate_cov = self.state.cov[..., :2, :2].copy()
 
     def predict(self, inputs) -> None:
         if self.linear:  # wan2014's constant-velocity KF, exactly as estimators.range_ls.step predicts

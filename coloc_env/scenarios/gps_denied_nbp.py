@@ -58,8 +58,10 @@ last step's errors.
 
 Reward (metres, the unit of ``error``: a distance)
 --------------------------------------------------
-e_s = ||p_hat_s - p_s|| of the belief mean at tau; sigma_s = sqrt(tr Cov_s), the RMS
-of the belief particles' positions (the ``trace`` info key is tr Cov_s, m^2); F_tau the
+e_s = ||p_hat_s - p_s|| of the belief mean at tau; sigma_s = sqrt(tr Cov_s), Cov_s the
+backend's position covariance (the belief particles' sample covariance, plus the prior's
+KDE kernel where the belief is its prior: ``estimators.dnbp``, "Reported covariance"; the
+``trace`` info key is tr Cov_s, m^2); F_tau the
 UAVs whose GPS is faulty at tau; lambda = ``communication_cost``.
 
 | ``reward=`` | ``team_reward=True`` (every UAV)                   | ``team_reward=False`` (each UAV s) |
@@ -75,7 +77,7 @@ Termination: none; truncation after ``horizon`` steps (T = 30 [chosen]).
 
 ``infos[agent]``: ``true_position``, ``estimated_position`` (belief mean),
 ``position_error`` and ``error`` (the same distance, metres), ``trace`` (m^2, of the
-belief particles' sample covariance), ``fault`` (GPS faulty at tau), ``broadcasts`` (this
+position covariance Cov_s), ``fault`` (GPS faulty at tau), ``broadcasts`` (this
 step, as the schedule counts them), ``communication`` (= broadcasts: what ``coloc
 evaluate`` counts), ``messages_sent`` (the network's count at the sender: one per
 broadcast that reached a listener), ``floats_sent`` (3 M + 1 floats per message),
@@ -129,6 +131,9 @@ Arguments (fields of ``GpsDeniedNbpConfig``, defaults = docs/wan2014.md section 
 | kernel             | "truncated" | "exact", "truncated"      | belief-update mixture kernel [chosen]; the   |
 |                    |             |                           | truncated one approximates (estimators.dnbp) |
 | truncation         | 6.0         | [1, 10] bandwidths        | r of the truncated kernel [chosen]           |
+| fault_message_power| 0.5         | (0, 1]                    | alpha: a fault sender's message enters as    |
+|                    |             |                           | m^alpha [chosen] (estimators.dnbp); 1 = the  |
+|                    |             |                           | paper's                                      |
 | reward             | "error"     | "error", "trace"          | the reward table; the older "team" and "own" |
 |                    |             |                           | are read as "error" with team_reward True /  |
 |                    |             |                           | False                                        |
@@ -191,6 +196,7 @@ class GpsDeniedNbpConfig(PresetConfig):
     schedule: str = keyword("modified", "backend.schedule")
     kernel: str = keyword("truncated", "backend.kernel")
     truncation: float = keyword(6.0, "backend.truncation")
+    fault_message_power: float = keyword(0.5, "backend.fault_message_power")
     reward: str = keyword("error", "composition.reward")
     team_reward: bool = keyword(True, "preset")
     communication_cost: float = keyword(0.0, "composition.communication_cost")
@@ -230,7 +236,7 @@ class GpsDeniedNbpScenario(PresetScenario):
     name = "gps_denied_nbp"
     paper = "wan2014"
     Config = GpsDeniedNbpConfig
-    version = 1
+    version = 2
     metric = "position error of the GPS-fault UAVs averaged over their (step, UAV)"
     metric_unit = "m"
     communication = "broadcasts"

@@ -30,6 +30,12 @@ PINS = {
         "10 agents; observation Box(shape=(8,), dtype=float32, low=[0.0], high=[1.0, inf]); "
         "action MultiDiscrete([2, 2, 2, 2, 2])",
         [239.23559740185738, -217.28506213996212, 199.7501488348018]),
+    # v2: a GPS-faulty UAV's messages tempered (fault_message_power 0.5), the covariance of a prior-only belief
+    # with its KDE kernel
+    "coloc/gps_denied_nbp-v2": (
+        "10 agents; observation Box(shape=(8,), dtype=float32, low=[0.0], high=[1.0, inf]); "
+        "action MultiDiscrete([2, 2, 2, 2, 2])",
+        [242.56109911203384, -228.83581136378413, 205.52552344671284]),
     "coloc/nlos_horizon-v1": (
         "4 agents; observation Box(shape=(41,), dtype=float32, low=[-50.0, -20.0, -1.0, 0.0], high=[1.0, 20.0, 50.0]); "
         "action MultiDiscrete([27, 2, 2, 2, 2, 2, 2, 2, 2])",

@@ -252,3 +252,32 @@ def test_deliver_is_the_callers_network_and_may_not_exceed_the_schedule():
     _, lost = dn.step(model, state, normal, pos, lambda s, listening: np.zeros_like(listening), ranges, accel,
                       [np.random.default_rng(1)])
     assert not lost.delivered.any() and lost.broadcasts.sum() == 0
+
+
+def test_a_tempered_message_has_its_radial_variance_divided_by_alpha():
+    """temper_bandwidth: the ring of a fault sender's message, sampled from its mixture, has 1/alpha times the
+    radial variance of the untempered ring (a Gaussian profile raised to alpha); untempered rows are unchanged."""
+    model = dn.DnbpModel(num_particles=400, range_std=2.0)
+    M, d, alpha = model.num_particles, 150.0, 0.5
+    rng = np.random.default_rng(4)
+    sender = 3.0 * rng.standard_normal((2, M, 2))  # a sender with a 3 m position spread
+    draws = dn.draw_messages(rng, 2, model)
+    centres, log_w, h = dn.sample_messages(model, sender, np.full(2, d), None, **draws)
+    tempered = dn.temper_bandwidth(h, sender, None, np.array([True, False]), alpha, np.full(2, model.range_std))
+    assert tempered[1] == h[1] and tempered[0] > h[0]
+    np.testing.assert_array_equal(dn.temper_bandwidth(h, sender, None, np.array([True, True]), 1.0,
+                                                      np.full(2, model.range_std)), h)
+
+    def radial_variance(bandwidth):
+        pick = rng.integers(0, M, 200_000)
+        points = centres[0, pick] + bandwidth * rng.standard_normal((200_000, 2))
+        return np.linalg.norm(points - sender[0].mean(axis=0), axis=-1).var()
+
+    assert radial_variance(tempered[0]) / radial_variance(h[0]) == pytest.approx(1.0 / alpha, rel=0.1)
+
+
+def test_fault_message_power_is_checked():
+    with pytest.raises(ValueError, match=r"fault_message_power must be in \(0, 1\]"):
+        dn.DnbpModel(fault_message_power=0.0)
+    with pytest.raises(ValueError, match=r"fault_message_power must be in \(0, 1\]"):
+        dn.DnbpModel(fault_message_power=1.5)

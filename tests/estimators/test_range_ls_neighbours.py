@@ -28,7 +28,7 @@ def _update(normal, mean_p, fix, adjacency, ranges):
 def test_uavs_out_of_everyones_range_change_nothing():
     N, far = 12, 30
     p, normal, mean_p, fix, adjacency, ranges = _arrays(np.random.default_rng(7), N)
-    post, estimate, fixed = _update(normal, mean_p, fix, adjacency, ranges)
+    post, estimate, cov, fixed = _update(normal, mean_p, fix, adjacency, ranges)
     # 30 more GPS-normal UAVs 1e5 m away: nobody's neighbour (a wider padding of every neighbour list)
     q = 1e5 + np.random.default_rng(8).uniform(0.0, 400.0, (far, 2))
     total = N + far
@@ -36,10 +36,11 @@ def test_uavs_out_of_everyones_range_change_nothing():
     wide_adjacency[:N, :N] = adjacency
     wide_ranges = np.zeros((total, total))
     wide_ranges[:N, :N] = ranges
-    post_w, estimate_w, fixed_w = _update(np.r_[normal, np.ones(far, bool)], np.vstack([mean_p, q]),
+    post_w, estimate_w, cov_w, fixed_w = _update(np.r_[normal, np.ones(far, bool)], np.vstack([mean_p, q]),
                                           np.vstack([fix, q]), wide_adjacency, wide_ranges)
     assert fixed.any()
     np.testing.assert_array_equal(fixed_w[:, :N], fixed)
     np.testing.assert_allclose(estimate_w[:, :N], estimate, atol=1e-9, rtol=0)
+    np.testing.assert_allclose(cov_w[:, :N], cov, atol=1e-9, rtol=0)
     np.testing.assert_allclose(post_w.cov[:, :N], post.cov, atol=1e-9, rtol=0)
     np.testing.assert_allclose(post_w.mean[:, :N], post.mean, atol=1e-9, rtol=0)
