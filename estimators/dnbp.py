@@ -134,12 +134,13 @@ what its receiver holds: the rings of the GPS-normal UAVs both hear, and the
 receiver's own earlier messages relayed through a third UAV (Algorithm 1's
 reverse-message correction removes only the direct echo). Taken at full
 weight over the iterations, this information is counted again and again and
-the beliefs grow overconfident (docs/consistency.md, "wan2014: dNBP and
-range_ls covariances": with alpha = 1, one iteration, i.e. no fault -> fault
-message, reads a mean NEES of 1.5, five read 5.3). A message of a GPS-faulty
-sender therefore enters every product as m^alpha, a fractional BP message
-(Wiegerinck and Heskes 2003, "Fractional belief propagation"), the
-geometric-mixture fusion of covariance intersection with weight alpha. It is
+the beliefs grow overconfident (measured in docs/consistency.md, "wan2014:
+dNBP and range_ls covariances", against one iteration, which sends no
+fault -> fault message). A message of a GPS-faulty sender therefore enters
+every product as m^alpha, a fractional BP message (Wiegerinck and Heskes
+2003, "Fractional belief propagation"; for Gaussians, the information of the
+message scaled by alpha, as covariance intersection weighs a source whose
+correlation with the others is unknown). It is
 done on the message's kernel: a ring's radial profile is about Gaussian with
 variance h^2 + sigma_d^2 + sigma_t^2 (kernel, range noise, the sender's
 position variance), and raising it to alpha multiplies that variance by

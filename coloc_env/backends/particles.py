@@ -419,4 +419,7 @@ class RangeLsBackend(Backend):
         return self.estimate
 
     def position_cov(self) -> np.ndarray:
+        """The covariance of the estimate that is output (``estimators.range_ls``, "Reported covariance"): a
+        fix's C_fix = (sum_k u_k u_k^T / (sigma_d^2 + u_k^T C_k u_k))^-1 where the output is a fix (the KF
+        posterior fused it, but the output is the fix), else the KF posterior's position block."""
         return self.estimate_cov
