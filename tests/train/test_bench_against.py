@@ -8,6 +8,7 @@ import subprocess
 import pytest
 
 from train import bench
+from train.bench import against, throughput
 
 pytestmark = pytest.mark.skipif(shutil.which("git") is None or subprocess.run(
     ["git", "-C", os.path.dirname(bench.__file__), "rev-parse", "HEAD"], capture_output=True).returncode != 0,
@@ -15,7 +16,7 @@ pytestmark = pytest.mark.skipif(shutil.which("git") is None or subprocess.run(
 
 
 def test_against_head_measures_both_trees_in_subprocesses_and_joins_the_rows(tmp_path, monkeypatch):
-    monkeypatch.setattr(bench, "SCENARIO_BATCHES", {"lossy_fusion": (1,)})
+    monkeypatch.setattr(throughput, "SCENARIO_BATCHES", {"lossy_fusion": (1,)})
     rows = bench.run_against(str(tmp_path), "HEAD", scenarios=["lossy_fusion"], min_seconds=0.01, extras=False,
                              rounds=1)
     whats = {(r["what"], r["batch"]) for r in rows}
@@ -30,7 +31,7 @@ def test_against_head_measures_both_trees_in_subprocesses_and_joins_the_rows(tmp
 
 def test_the_reference_tree_is_what_its_subprocess_imports(tmp_path):
     commit = bench.export_commit("HEAD", str(tmp_path))
-    assert (tmp_path / "train" / "bench.py").exists() and len(commit) == 40
+    assert (tmp_path / "train" / "__init__.py").exists() and len(commit) == 40
     failed = bench.bench_tree(str(tmp_path), "no_such_scenario", 0.01, (1,), extras=False)
     assert "error" in failed and "no_such_scenario" in failed["error"]
 
@@ -40,7 +41,7 @@ def test_rounds_keep_each_rows_best_rate():
              {"scenario": "s", "what": "w", "batch": 2, "env_steps_per_s": 9.0}]
     second = [{"scenario": "s", "what": "w", "batch": 1, "env_steps_per_s": 5.0},
               {"scenario": "s", "what": "w", "batch": 2, "env_steps_per_s": 1.0}]
-    assert {r["batch"]: r["env_steps_per_s"] for r in bench._best([first, second])} == {1: 5.0, 2: 9.0}
+    assert {r["batch"]: r["env_steps_per_s"] for r in against._best([first, second])} == {1: 5.0, 2: 9.0}
 
 
 def test_compare_rows_joins_on_scenario_what_and_batch():
@@ -92,14 +93,19 @@ def test_the_one_episode_row_plays_the_same_episode_in_every_copy():
 def test_a_reference_tree_without_the_one_episode_row_gets_it_from_the_driver(tmp_path, monkeypatch):
     """``--against`` an older commit: the driver measures the row with this tree's one_episode_rate in that tree."""
     bench.export_commit("HEAD", str(tmp_path))
-    with open(bench.__file__) as f:  # this bench, less its row
-        source = f.read()
+    older = tmp_path / "train" / "bench"  # this bench, less its row
+    shutil.rmtree(older, ignore_errors=True)
+    shutil.copytree(os.path.dirname(bench.__file__), older, ignore=shutil.ignore_patterns("__pycache__"))
+    source = (older / "throughput.py").read_text()
     row_line = source[source.index("ONE_EPISODE_ROWS = "):]
-    older = source.replace(row_line[:row_line.index("\n") + 1], "").replace(
-        "if name in ONE_EPISODE_ROWS:", "if False:")
-    assert "ONE_EPISODE_ROWS =" not in older and older.count("if False:") == 1
-    (tmp_path / "train" / "bench.py").write_text(older)
-    monkeypatch.setattr(bench, "ONE_EPISODE_ROWS", ("lossy_fusion",))
+    source = source.replace(row_line[:row_line.index("\n") + 1], "")
+    source = source.replace("if name in ONE_EPISODE_ROWS:", "if False:")
+    assert "ONE_EPISODE_ROWS =" not in source and source.count("if False:") == 1
+    (older / "throughput.py").write_text(source)
+    package = (older / "__init__.py").read_text()
+    package = package.replace("    ONE_EPISODE_ROWS,\n", "").replace('"ONE_EPISODE_ROWS", ', "")
+    (older / "__init__.py").write_text(package)
+    monkeypatch.setattr(throughput, "ONE_EPISODE_ROWS", ("lossy_fusion",))
     result = bench.bench_tree(str(tmp_path), "lossy_fusion", 0.01, (1, 2), extras=False)
     rows = {(r["what"], r["batch"]): r for r in result["rows"]}
     agents = bench.ActionSource("lossy_fusion").num_agents
@@ -107,7 +113,7 @@ def test_a_reference_tree_without_the_one_episode_row_gets_it_from_the_driver(tm
         row = rows[(bench.ONE_EPISODE, batch)]
         assert row["env_steps_per_s"] > 0
         assert row["agent_steps_per_s"] == pytest.approx(row["env_steps_per_s"] * agents)
-    monkeypatch.setattr(bench, "SCENARIO_BATCHES", {})
+    monkeypatch.setattr(throughput, "SCENARIO_BATCHES", {})
     current = {(r["what"], r["batch"]) for r in bench.bench_scenario("lossy_fusion", 0.01, (1,))}
     assert (bench.ONE_EPISODE, 1) in current and ("vector_env", 1) in current
 

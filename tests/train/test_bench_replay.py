@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from train import bench
+from train.bench import replay
 
 # (preset, copies, steps): small batches; nlos_horizon's steps cross its D = 3 buffer, lossy_fusion's and
 # bandwidth_fusion's take a little of their episodes
@@ -126,7 +127,7 @@ def test_recorded_arguments_are_copies_that_keep_their_layout():
     stack = af.empty_stack((2, 3), 4)
     motion = af.MotionModel()
     lags = np.broadcast_to(np.arange(4)[None, None, :], (2, 3, 4))
-    copied_stack, copied_motion, copied_lags = bench._copied((stack, motion, lags))
+    copied_stack, copied_motion, copied_lags = replay._copied((stack, motion, lags))
     stack.info[:] = 7.0
     assert copied_stack is not stack and not np.any(copied_stack.info == 7.0)
     assert copied_motion is motion

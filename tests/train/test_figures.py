@@ -514,7 +514,7 @@ def test_wang2019_fig7_carries_interval_bars_over_the_runs_and_names_the_coincid
 
 
 def test_bench_throughput_figure_follows_the_conventions_with_one_colour_per_series(monkeypatch, tmp_path):
-    from train import bench
+    from train.bench import throughput
 
     rows = [{"scenario": s, "what": w, "batch": b, "env_steps_per_s": 100.0 * b ** 0.7 * (k + 1)}
             for s in ("bandwidth_fusion", "relay_ukf") for k, w in enumerate(("vector_env", "estimator step"))
@@ -522,8 +522,8 @@ def test_bench_throughput_figure_follows_the_conventions_with_one_colour_per_ser
     rows += [{"scenario": "relay_ukf", "what": f"dNBP step, M = {m}", "batch": 4, "env_steps_per_s": 1e4 / m}
              for m in (50, 100)]
     drawn = {}
-    monkeypatch.setattr(bench, "save_figure", lambda path, fig: drawn.setdefault("fig", fig))
-    bench._figure(rows, str(tmp_path / "throughput.png"))
+    monkeypatch.setattr(throughput, "save_figure", lambda path, fig: drawn.setdefault("fig", fig))
+    throughput._figure(rows, str(tmp_path / "throughput.png"))
     fig = drawn["fig"]
     assert plotting.figure_problems(fig) == []
     colours = {}
@@ -537,9 +537,9 @@ def test_bench_throughput_figure_follows_the_conventions_with_one_colour_per_ser
 def test_bench_scaling_figure_follows_the_conventions(monkeypatch):
     """coloc bench --scaling's log-log figure: units on both axes, the sizes as plain x ticks, plain y ticks, the
     legend below the panels."""
-    from train import bench
+    from train.bench import scaling
 
-    saved = _capture(monkeypatch, bench)
+    saved = _capture(monkeypatch, scaling)
     sizes = (5, 10, 20, 40, 80)
     rows = [{"layout": layout, "batch": 8, "backend": backend, "network": "broadcast",
              "current": {"env_steps_per_s": [rate / n ** slope for n in sizes], "exponent": slope},
@@ -547,7 +547,7 @@ def test_bench_scaling_figure_follows_the_conventions(monkeypatch):
                            "exponent": slope}}
             for layout in ("fixed area", "fixed density")
             for backend, rate, slope in (("ukf_ccl", 2e4, 2.5), ("range_ls", 5e4, 1.0))]
-    bench._scaling_figure(rows, sizes, "REF", "scaling.png")
+    scaling._scaling_figure(rows, sizes, "REF", "scaling.png")
     fig = saved["fig"]
     assert plotting.figure_problems(fig) == []
     for ax in fig.axes:

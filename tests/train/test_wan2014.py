@@ -94,7 +94,7 @@ def test_train_smoke_then_the_model_plays_the_env(tmp_path):
 
 
 def test_bench_reports_time_per_fault_uav_step():
-    from train.bench import ESTIMATOR_STEPS, _gps_denied_nbp_particle_rows
+    from train.bench.throughput import ESTIMATOR_STEPS, _gps_denied_nbp_particle_rows
 
     ESTIMATOR_STEPS["gps_denied_nbp"](2)()
     rows = _gps_denied_nbp_particle_rows(0.1, batch=1, steps=1)
