@@ -89,6 +89,7 @@ from typing import ClassVar
 import numpy as np
 
 from coloc_env.draws import draw_keys, uniforms
+from coloc_env.networks import chains
 from coloc_env.parts import Block
 from coloc_env.primitives.relay import RelayChain
 
@@ -105,77 +106,6 @@ def _self_links(n: int) -> np.ndarray:
     eye.flags.writeable = False
     return eye
 
-
-
-def _resolve_chains(order, usable, all_usable, loss, u, lossy, distance, base, holder, first, choice, chosen, copies,
-                    limit, links, hops, size, code):  # pragma: no cover - compiled by numba (``_chain_kernel``)
-    """``Network.relay``'s chains, one at a time: n chains from ``holder`` (n,) (``links[:, 0]``), the first hop to
-    ``first`` where >= 0, then each holder's choice (``chosen``: ``choice[copies[c], holder]``, N + 1 = the nearest
-    unreached) or the nearest unreached platform: the first of the holder's row of ``order`` (its platforms by
-    distance) the chain has not reached. A hop fails, and the chain stops, with the first of the stop reasons
-    1 (hop budget ``limit``), 2 (no platform named), 3 (already reached), 4 (not ``usable``), 5 (lost:
-    ``u[c, hop] < loss``) that holds. Fills ``links``, ``hops`` (hop lengths), ``size`` and ``code`` in place;
-    link arrays are (rows, N) with row ``base[c] + holder``. O(hops x the reached platforms nearer than the
-    nearest unreached) per chain, not O(hops x N)."""
-    n, N = len(holder), order.shape[1]
-    reached = np.zeros(N, np.bool_)
-    for c in range(n):
-        reached[:] = False
-        now = holder[c]
-        reached[now] = True
-        for hop in range(N - 1):
-            if hop >= limit:
-                code[c] = 1
-                break
-            row = base[c] + now
-            nearest = now
-            for k in range(N):
-                if not reached[order[row, k]]:
-                    nearest = order[row, k]
-                    break
-            target = nearest
-            if chosen:
-                target = choice[copies[c], now]
-                if target == N + 1:
-                    target = nearest
-            if hop == 0 and first[c] >= 0:
-                target = first[c]
-            valid = 0 <= target < N and target != now
-            safe = target if valid else 0
-            failed = 0
-            if lossy and u[c, hop] < loss[row, safe]:
-                failed = 5
-            if not all_usable and not usable[row, safe]:
-                failed = 4
-            if reached[safe]:
-                failed = 3
-            if not valid:
-                failed = 2
-            code[c] = failed
-            if failed:
-                break
-            links[c, hop + 1] = target
-            reached[target] = True
-            hops[c, hop] = distance[row, target]
-            size[c] += 1
-            now = target
-
-
-_CHAINS = None
-
-
-def _chain_kernel():
-    """``_resolve_chains`` compiled by numba (cached on disk), or None where numba is not installed (the plain
-    function then runs, the same chains)."""
-    global _CHAINS
-    if _CHAINS is None:
-        try:
-            import numba
-        except ImportError:  # pragma: no cover - numba is a dependency
-            _CHAINS = False
-        else:
-            _CHAINS = numba.njit(cache=True, nogil=True)(_resolve_chains)
-    return _CHAINS or None
 
 def _reported(method, signature: inspect.Signature):
     """``method`` (a delivery call) reporting to the network's observer after it returns (module docstring);
@@ -495,7 +425,7 @@ class Network:
             all_usable = bool(np.all(usable))
             flat_usable = usable[0] if shared else usable.reshape(B * N, N)
             flat_loss = loss[0] if shared else loss.reshape(B * N, N)
-            resolve = _chain_kernel() or _resolve_chains
+            resolve = chains.compiled_resolver() or chains.resolve_chains
             resolve(order.reshape(-1, N), flat_usable, all_usable, flat_loss, u if u is not None else np.zeros((n, 1)),
                     u is not None, flat_distance, base, np.ascontiguousarray(holder),
                     np.ascontiguousarray(first), choice if choice is not None else np.zeros((1, 1), int),

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import coloc_env.networks.base as network_base
+from coloc_env.networks import chains
 from coloc_env.networks.base import RelayChain
 from coloc_env.networks.broadcast import Broadcast
 from coloc_env.networks.ideal import Ideal
@@ -120,7 +120,7 @@ def test_chains_resolved_without_numba_are_the_compiled_chains(config, monkeypat
         return net.relay_each(source, first, lambda hop: 1.0 + hop, np.arange(J)), snapshot(net)
 
     compiled, compiled_counts = run()
-    monkeypatch.setattr(network_base, "_chain_kernel", lambda: None)
+    monkeypatch.setattr(chains, "compiled_resolver", lambda: None)
     plain, plain_counts = run()
     for name in ("chain", "length", "hop_distance", "stop"):
         np.testing.assert_array_equal(getattr(plain, name), getattr(compiled, name))
