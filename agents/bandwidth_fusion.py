@@ -53,14 +53,6 @@ class PaperPolicy(FixedActionPolicy):
         super().__init__(env, scenario.encode_actions(paper_selection(t_name), paper_weights(p_name)))
 
 
-def decode_tables(scenario, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Actions (B, N, A) of the ``bandwidth_fusion`` core -> the receiver-relative selections (B, N, N-1, n) and
-    absolute weights (B, N, N) it decodes them to (the network's selection, the backend's fusion weights)."""
-    blocks = scenario.decode_actions(actions)
-    selection = scenario.links.selection_at(blocks[..., 0].astype(np.int64))
-    return selection, scenario.backend.decode_weights(blocks[..., 1:])
-
-
 def advance_tables(scenario, selection: np.ndarray, weights: np.ndarray) -> None:
     """One step of every copy of the ``bandwidth_fusion`` core under receiver-relative selections (B, N, N-1, n)
     and absolute weights (B, N, N), without the action encoding (so any selection the budget admits and any

@@ -105,12 +105,6 @@ class GreedyPolicy(Policy):
             return None
         return float(trace[0].sum() + trial.config.communication_cost * trial.network.messages_sent[0].sum())
 
-    @staticmethod
-    def _messages(core, actions: np.ndarray) -> float:
-        trial = copy.deepcopy(core)
-        trial.step(actions[None])
-        return float(trial.network.messages_sent[0].sum())
-
     def act(self, observations: dict) -> dict:
         core = self.env.unwrapped.scenario
         actions = np.tile(self.start, (core.num_agents, 1))

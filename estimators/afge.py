@@ -169,10 +169,6 @@ class MotionModel:
         return np.block([[np.eye(2), self.period * np.eye(2)], [np.zeros((2, 2)), np.eye(2)]])
 
     @cached_property
-    def transition_inv(self) -> np.ndarray:
-        return np.block([[np.eye(2), -self.period * np.eye(2)], [np.zeros((2, 2)), np.eye(2)]])
-
-    @cached_property
     def noise_input(self) -> np.ndarray:
         """B = [[T^2/2 I_2], [T I_2]]."""
         return np.vstack([0.5 * self.period**2 * np.eye(2), self.period * np.eye(2)])

@@ -9,3 +9,11 @@ def play(env, policy, seed):
         observations, rewards, terms, truncs, infos = env.step(policy.act(observations))
         history.append((observations, rewards, infos))
     return history
+
+
+def decode_tables(scenario, actions):
+    """Actions (B, N, A) of the ``bandwidth_fusion`` core -> the receiver-relative selections (B, N, N-1, n) and
+    absolute weights (B, N, N) it decodes them to (the network's selection, the backend's fusion weights)."""
+    blocks = scenario.decode_actions(actions)
+    selection = scenario.links.selection_at(blocks[..., 0].astype("int64"))
+    return selection, scenario.backend.decode_weights(blocks[..., 1:])

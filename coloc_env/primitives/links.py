@@ -18,7 +18,6 @@ scores (``BandwidthBudget.best_selection``) in O(N S budget) per receiver.
 
 from __future__ import annotations
 
-import itertools
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -195,20 +194,6 @@ class BandwidthBudget:
             raise ValueError(f"budget: {self.size} feasible selections, more than {MAX_ENUMERATED} to list; "
                              "use index_of / selection_at / best_selection")
         return self.selection_at(np.arange(self.size))
-
-    def enumerated_feasible(self) -> np.ndarray:
-        """The reference listing (the product of all links' subsets, filtered): ``feasible``, slowly.
-
-        Kept to check the codec against (exponential in N: only for small networks).
-        """
-        subsets = [np.array(bits, dtype=bool) for bits in itertools.product((0, 1), repeat=self.dim)]
-        subsets = [s for s in subsets if self.min_per_link <= s.sum() <= self.max_per_link]
-        options = []
-        for combo in itertools.product(subsets, repeat=self.num_nodes - 1):
-            total = sum(int(s.sum()) for s in combo)
-            if total == self.budget or (not self.exact_budget and total <= self.budget):
-                options.append(np.stack(combo))
-        return np.stack(options) if options else np.zeros((0, self.num_nodes - 1, self.dim), bool)
 
     # --- the best selection for additive scores ------------------------------------------------------
     def best_selection(self, scores: np.ndarray) -> np.ndarray:

@@ -42,10 +42,6 @@ class BoundedRandomDelay:
     def lost(self) -> float:
         return max(0.0, 1.0 - float(np.sum(self.probabilities)))
 
-    @property
-    def lost_code(self) -> int:
-        return self.buffer_length + 1
-
     def sample(self, rng: np.random.Generator, size: tuple) -> np.ndarray:
         """Delays (int16) of shape ``size``: 0..D, or D + 1 for a lost packet; one uniform each."""
         return self.from_uniforms(rng.random(size))

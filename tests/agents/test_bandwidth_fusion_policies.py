@@ -6,8 +6,9 @@ import pytest
 import agents
 import coloc_env
 import estimators.bandwidth_fusion as bf
-from agents.bandwidth_fusion import advance_tables, coordinate_descent, decode_tables, greedy_selection
+from agents.bandwidth_fusion import advance_tables, coordinate_descent, greedy_selection
 from estimators.bandwidth_fusion import paper_selection, paper_weights
+from tests.helpers import decode_tables
 
 NAME = "bandwidth_fusion"
 M0 = np.diag([0.19, 0.09, 0.08])

@@ -13,10 +13,10 @@ from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test
 import agents
 import coloc_env
 import estimators.bandwidth_fusion as bf
-from agents.bandwidth_fusion import advance_tables, decode_tables
+from agents.bandwidth_fusion import advance_tables
 from coloc_env.worlds.drift import draw_episode
 from estimators.bandwidth_fusion import paper_selection, paper_weights
-from tests.helpers import play
+from tests.helpers import decode_tables, play
 
 NAME = "bandwidth_fusion"
 # The known-harmless warnings of pettingzoo.test: unbounded observation entries (positions, log-variances,
