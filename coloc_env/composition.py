@@ -79,9 +79,9 @@ class Composition:
 def compose(world: Any, network: Any, backend: Any, **options) -> Composition:
     """A ``Composition`` of the three parts; ``options`` are composition-level fields only.
 
-    A part given as a dict may hold a composition option under the name its class lists in
-    ``composition_aliases`` (``{"name": "relay", "hop_cost": c}`` sets ``communication_cost = c``); giving it
-    there and in ``options`` is refused, and a refused value is named as written (``network.hop_cost``)."""
+    A part given as a dict may hold a composition option under the name its class's ``aliases`` maps to
+    ``"composition.<option>"`` (``{"name": "relay", "hop_cost": c}`` sets ``communication_cost = c``); giving
+    it there and in ``options`` is refused, and a refused value is named as written (``network.hop_cost``)."""
     unknown = sorted(set(options) - set(COMPOSITION_OPTIONS))
     if unknown:
         raise BadInput(f"unknown composition option(s) {unknown}; allowed: {list(COMPOSITION_OPTIONS)} "

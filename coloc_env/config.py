@@ -29,23 +29,32 @@ class BadInput(ValueError):
     estimator's numerics is a bug, not bad input."""
 
 
-def read_aliases(config_cls: type, kwargs: dict[str, Any], prefix: str = "") -> dict[str, Any]:
-    """A copy of ``kwargs`` with each key listed in the class's ``aliases`` (older name -> current name)
-    renamed to its current name; giving both names is a ``BadInput`` (names shown as ``prefix + name``)."""
-    kwargs = dict(kwargs)
+COMPOSITION_ALIAS = "composition."  # an alias's target for a composition-level option (relay: hop_cost)
+
+
+def read_aliases(config_cls: type, given: dict[str, Any], prefix: str = ""):
+    """The one reading of older names: a config class (a preset's flat config or a part) declares them in its
+    ``aliases``, older name -> current name, or -> ``"composition.<option>"`` for a part's name of a
+    composition-level option (relay's ``hop_cost``, the composition's ``communication_cost``).
+
+    Returns ``(fields, written, lifted)``: ``given`` with each older name of a field renamed to its current
+    name (a composition option's older name stays as written: it is no field of the class); ``written``,
+    {``prefix + current``: ``prefix + older``} for each older name given, the names ``refused_as_written``
+    puts back into an error; ``lifted``, {option: (older name, value)} for each composition option given under
+    a part's name (``coloc_env.composition.compose`` moves it to the composition). Giving both an older name
+    and its current one is a ``BadInput`` (names shown as ``prefix + name``)."""
+    fields, written, lifted = dict(given), {}, {}
     for alias, name in getattr(config_cls, "aliases", {}).items():
-        if alias in kwargs:
-            if name in kwargs:
-                raise BadInput(f"{prefix}{alias} is another name of {prefix}{name}; give only one of them")
-            kwargs[name] = kwargs.pop(alias)
-    return kwargs
-
-
-def aliases_written(config_cls: type, given, prefix: str = "") -> dict[str, str]:
-    """{``prefix + current name``: ``prefix + older name``} for each of the class's ``aliases`` among the keys
-    ``given``: the names ``refused_as_written`` puts back into an error."""
-    return {f"{prefix}{name}": f"{prefix}{alias}" for alias, name in getattr(config_cls, "aliases", {}).items()
-            if alias in given}
+        if alias not in given:
+            continue
+        if name.startswith(COMPOSITION_ALIAS):
+            lifted[name[len(COMPOSITION_ALIAS):]] = (alias, given[alias])
+            continue
+        if name in given:
+            raise BadInput(f"{prefix}{alias} is another name of {prefix}{name}; give only one of them")
+        fields[name] = fields.pop(alias)
+        written[f"{prefix}{name}"] = f"{prefix}{alias}"
+    return fields, written, lifted
 
 
 @contextlib.contextmanager
@@ -70,8 +79,7 @@ def build_config(config_cls: type[C], kwargs: dict[str, Any]) -> C:
     the class's ``aliases`` (older name -> current name) is read as its current name, and an error about
     its value names it as the user wrote it (``refused_as_written``)."""
     names = {f.name for f in dataclasses.fields(config_cls)}
-    written = aliases_written(config_cls, kwargs)
-    kwargs = read_aliases(config_cls, kwargs)
+    kwargs, written, _ = read_aliases(config_cls, kwargs)
     unknown = sorted(set(kwargs) - names)
     if unknown:
         aliases = getattr(config_cls, "aliases", {})

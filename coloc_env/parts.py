@@ -24,7 +24,6 @@ import numpy as np
 
 from coloc_env.config import (
     BadInput,
-    aliases_written,
     check_choice,
     check_range,
     read_aliases,
@@ -60,10 +59,10 @@ class PartConfig:
 
     name: ClassVar[str]
     kind: ClassVar[str]  # "world", "network" or "backend"
-    aliases: ClassVar[dict[str, str]] = {}  # older field name -> current name, accepted by make_config
-    # a name a user may write among this part's fields for a composition-level option of another name (relay:
-    # hop_cost -> communication_cost), read by ``coloc_env.composition.compose`` from a part given as a dict
-    composition_aliases: ClassVar[dict[str, str]] = {}
+    # older field name -> current name, accepted by make_config, or -> "composition.<option>": a name a user may
+    # write among this part's fields for a composition-level option (relay: hop_cost -> communication_cost), read
+    # by ``coloc_env.composition.compose`` from a part given as a dict (``coloc_env.config.read_aliases``)
+    aliases: ClassVar[dict[str, str]] = {}
 
     def check(self, prefix: str) -> None:  # pragma: no cover - interface
         """Raise ``ValueError`` naming ``prefix + field`` for a bad value."""
@@ -77,7 +76,7 @@ class PartConfig:
     def replace(self, **changes) -> PartConfig:
         """A validated copy with ``changes`` (unknown fields are a ``ValueError`` naming the part); a change may
         use an older name (``aliases``), which then replaces the current field and is named in an error."""
-        changed = read_aliases(type(self), changes, f"{self.kind}.")
+        changed, _, _ = read_aliases(type(self), changes, f"{self.kind}.")
         kept = {k: v for k, v in dataclasses.asdict(self).items() if k not in changed}
         return make_config(type(self), {**kept, **changes}, self.kind)
 
@@ -90,13 +89,11 @@ def make_config(cls: type, fields: dict[str, Any], kind: str) -> PartConfig:
     ``aliases`` (older name -> current name) is read as its current name, and a refused value is named as the
     user wrote it (``world.num_platforms must be ...``), as ``coloc_env.config.build_config`` does for a preset."""
     prefix = f"{kind}."
-    written = aliases_written(cls, fields, prefix)
-    fields = read_aliases(cls, fields, prefix)
+    fields, written, lifted = read_aliases(cls, fields, prefix)
     allowed = {f.name for f in dataclasses.fields(cls)}
     unknown = sorted(set(fields) - allowed)
     if unknown:
-        options = [f"{prefix}{name} is the composition's {cls.composition_aliases[name]}"
-                   for name in unknown if name in cls.composition_aliases]
+        options = [f"{prefix}{alias} is the composition's {option}" for option, (alias, _) in lifted.items()]
         hint = f" ({'; '.join(options)}: give it to compose, or the {kind} as a dict)" if options else ""
         raise BadInput(f"unknown {kind} field(s) {unknown} for {kind} {cls.name!r}; allowed: {sorted(allowed)}"
                        f"{hint}")
@@ -233,13 +230,13 @@ class Registry(dict):
                          f"got {part!r}")
 
     def composition_options(self, part: Any) -> tuple[Any, dict[str, tuple[str, Any]]]:
-        """``part`` without the fields its class names in ``composition_aliases`` (a part given as a dict only),
-        and {composition option: (the name written, its value)} for each of them given."""
+        """``part`` without the composition options its class names among its ``aliases`` (a part given as a dict
+        only), and {composition option: (the name written, its value)} for each of them given."""
         if not isinstance(part, dict) or not isinstance(part.get("name"), str) or part["name"] not in self:
             return part, {}
-        lifted = self[part["name"]].composition_aliases
-        options = {option: (alias, part[alias]) for alias, option in lifted.items() if alias in part}
-        return {k: v for k, v in part.items() if k not in lifted}, options
+        _, _, options = read_aliases(self[part["name"]], part, f"{self.kind}.")
+        written = {alias for alias, _ in options.values()}
+        return {k: v for k, v in part.items() if k not in written}, options
 
     def _class(self, name: Any) -> type:
         if not isinstance(name, str) or name not in self:

@@ -35,7 +35,7 @@ older name of the flat price, is read as the composition's
 ``communication_cost`` (a price per message the network counts: for a chain,
 per delivered hop) where a relay network is given as a dict
 (``compose(network={"name": "relay", "hop_cost": c})``, ``coloc study
---sweep network.hop_cost=...``; ``Relay.composition_aliases``); giving both
+--sweep network.hop_cost=...``; ``Relay.aliases``); giving both
 is refused, and a refused value is named ``network.hop_cost``. Neither cost
 changes an estimate or a delivery.
 
@@ -78,7 +78,7 @@ class Relay(PartConfig):
     loss_length: float = float("inf")
     routing: str = "per_holder"
     hop_cost_per_m2: float = 0.0
-    composition_aliases = {"hop_cost": "communication_cost"}  # a hop is one message: its flat price
+    aliases = {"hop_cost": "composition.communication_cost"}  # a hop is one message: its flat price
 
     def check(self, prefix: str) -> None:
         """The hop rules' fields (``RelayChainLinks.validate``, before the team is known) and the routing."""
