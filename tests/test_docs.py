@@ -164,7 +164,7 @@ def test_readme_is_short():
                          ids=lambda p: os.path.relpath(p, REPO_ROOT))
 def test_current_results_carry_no_history(path):
     """The README and the pages of current results hold current numbers with their commands: no commit hashes,
-    no dates of runs, no session talk (the dated runs are in docs/learning_history.md)."""
+    no dates of runs, no session talk (dated run logs stay out of the documentation)."""
     for number, line in enumerate(read(path).splitlines(), 1):
         where = f"{os.path.relpath(path, REPO_ROOT)}:{number}"
         assert not COMMIT_HASH.search(line), f"{where} names a commit: {COMMIT_HASH.search(line).group()!r}"

@@ -23,9 +23,8 @@ HYPERPARAMS = {
 }
 
 NUM_COPIES = 8
-# A budget at which every seed's validation curve has levelled off (a third of it leaves them still falling;
-# docs/learning_history.md has the curves). docs/learning.md's table is `coloc train bandwidth_fusion` at
-# these defaults.
+# A budget at which every seed's validation curve has levelled off (a third of it leaves them still falling).
+# docs/learning.md's table is `coloc train bandwidth_fusion` at these defaults.
 TIMESTEPS = 1_500_000
 
 # The leaderboard's target for a learned policy: (what it says, the largest |paired error difference| relative to
