@@ -21,6 +21,7 @@ from __future__ import annotations
 import importlib
 import inspect
 import os
+import warnings
 from types import ModuleType
 
 from agents import contention, event_triggered, generic
@@ -167,3 +168,16 @@ def make_policy(name: str, env, seed: int | None = None, **kwargs) -> Policy:
 
 __all__ = ["FixedActionPolicy", "Policy", "RandomPolicy", "available_policies", "bound_policies", "duplicates",
            "make_policy", "policy_module", "strongest_baselines"]
+
+
+def __getattr__(name: str):
+    """The per-preset tables this module held before each preset's policy module declared them (deprecated)."""
+    tables = {"SCENARIO_POLICIES": lambda m: m.POLICIES, "BOUND_POLICIES": lambda m: getattr(m, "BOUNDS", None),
+              "ALIASES": lambda m: getattr(m, "ALIASES", None),
+              "STRONGEST_BASELINES": lambda m: tuple(m.STRONGEST_BASELINES)}
+    if name not in tables:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    warnings.warn(f"agents.{name} is deprecated: each preset's policy module declares it (agents.policy_module)",
+                  DeprecationWarning, stacklevel=2)
+    values = {scenario: tables[name](policy_module(scenario)) for scenario in REGISTRY}
+    return {scenario: value for scenario, value in values.items() if value is not None}

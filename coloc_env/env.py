@@ -251,3 +251,16 @@ class CoLocParallelEnv(ParallelEnv):
 
     def close(self):
         self._renderer.close()
+
+
+def __getattr__(name: str):
+    """The table of episode-length fields this module held before each preset declared its own (deprecated)."""
+    if name != "EPISODE_LENGTH_FIELDS":
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    import warnings
+
+    from coloc_env.scenarios import REGISTRY
+
+    warnings.warn("coloc_env.env.EPISODE_LENGTH_FIELDS is deprecated: a preset's class declares "
+                  "episode_length_field", DeprecationWarning, stacklevel=2)
+    return {n: cls.episode_length_field for n, cls in REGISTRY.items() if cls.episode_length_field != "horizon"}

@@ -740,3 +740,17 @@ def _interrupted(command: str, args, as_script: bool) -> int:
 
 if __name__ == "__main__":
     sys.exit(main())
+
+
+def __getattr__(name: str):
+    """The per-preset unit tables this module held before each preset declared them (deprecated)."""
+    if name not in ("METRIC_UNITS", "COMMUNICATION_UNITS"):
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    import warnings
+
+    from coloc_env.scenarios import REGISTRY
+
+    warnings.warn(f"train.cli.{name} is deprecated: a preset's class declares metric_unit and communication",
+                  DeprecationWarning, stacklevel=2)
+    field = "metric_unit" if name == "METRIC_UNITS" else "communication"
+    return {scenario: getattr(cls, field) for scenario, cls in REGISTRY.items()}

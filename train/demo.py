@@ -124,3 +124,14 @@ def main(argv=None) -> int:
 
 if __name__ == "__main__":
     sys.exit(main())
+
+
+def __getattr__(name: str):
+    """The table of demo budgets this module held before each preset's hyperparameters declared them (deprecated)."""
+    if name != "DEMO_RUNS":
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    import warnings
+
+    warnings.warn("train.demo.DEMO_RUNS is deprecated: DEMO_RUN in train/hyperparams/<preset>.py",
+                  DeprecationWarning, stacklevel=2)
+    return hyperparams.presets_declaring("DEMO_RUN")

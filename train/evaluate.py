@@ -521,3 +521,16 @@ def threshold_sweep(spreads, episodes: int, seed_base: int = VALIDATION_SEED_BAS
         name = "paper" if math.isinf(spread) else f"threshold:{spread:g}"
         out[float(spread)] = run_rule_batched("gps_denied_nbp", name, rule, episodes, seed_base, **env_config)
     return out
+
+
+def __getattr__(name: str):
+    """The table of extra rows this module held before each preset's hyperparameters declared them (deprecated)."""
+    if name != "EXTRA_ROWS":
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    import warnings
+
+    from train import hyperparams
+
+    warnings.warn("train.evaluate.EXTRA_ROWS is deprecated: EVALUATE_EXTRA_ROWS in train/hyperparams/<preset>.py",
+                  DeprecationWarning, stacklevel=2)
+    return hyperparams.presets_declaring("EVALUATE_EXTRA_ROWS")

@@ -776,3 +776,17 @@ def markdown(out: str) -> str:
         if target:
             lines += [target, ""]
     return "\n".join(lines)
+
+
+def __getattr__(name: str):
+    """The per-preset tables this module held before each preset declared them (deprecated)."""
+    if name not in ("METRICS", "COMMUNICATION", "TARGETS"):
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    import warnings
+
+    from coloc_env.scenarios import REGISTRY
+
+    warnings.warn(f"train.leaderboard.{name} is deprecated: metric() and communication() read the preset's class, "
+                  "target() its train/hyperparams module", DeprecationWarning, stacklevel=2)
+    read = {"METRICS": metric, "COMMUNICATION": communication, "TARGETS": target}[name]
+    return {scenario: read(scenario) for scenario in REGISTRY}

@@ -125,3 +125,20 @@ def test_bad_declarations_are_refused_with_their_field():
         register_preset(type("Bad", (ToyScenario,), {"name": "bad", "episode_length_field": "steps"}))
     with pytest.raises(TypeError, match="a preset is a PresetScenario subclass"):
         register_preset(type("Bad", (), {"name": "bad"}))
+
+
+@pytest.mark.parametrize("module,name,expected", [
+    ("train.cli", "METRIC_UNITS", {"bandwidth_fusion": "m^2", "lossy_fusion": "m^2", "relay_ukf": "m",
+                                   "gps_denied_nbp": "m", "nlos_horizon": "m^2", "mrclam_relay": "m"}),
+    ("coloc_env.env", "EPISODE_LENGTH_FIELDS", {"mrclam_relay": "window_steps"}),
+    ("agents", "STRONGEST_BASELINES", {"bandwidth_fusion": ("oracle_static",), "lossy_fusion": (),
+                                       "relay_ukf": ("paper", "no_relay"), "gps_denied_nbp": ("paper", "threshold"),
+                                       "nlos_horizon": ("best_constant",), "mrclam_relay": ("paper",)}),
+    ("train.demo", "DEMO_RUNS", {"bandwidth_fusion": (20_000, 100), "lossy_fusion": (40_000, 100),
+                                 "relay_ukf": (20_000, 20), "gps_denied_nbp": (4_800, 6), "nlos_horizon": (20_000, 6)}),
+    ("train.evaluate", "EXTRA_ROWS", {"gps_denied_nbp": ("threshold:5",)}),
+])
+def test_the_tables_the_declarations_replaced_still_read_with_a_deprecation_warning(module, name, expected):
+    with pytest.warns(DeprecationWarning, match=name):
+        table = getattr(importlib.import_module(module), name)
+    assert table == expected
