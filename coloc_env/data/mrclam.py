@@ -676,7 +676,7 @@ def _likelihood_costs(d: MrclamData, noise: dict, scales: np.ndarray, steps: int
 
 
 def fit_noise_scales(d: MrclamData, noise: dict, steps: int, initial_std: float = 0.01,
-                     gate: float = GATE_999) -> dict:
+                     gate: float = GATE_999, cache_dir: str | os.PathLike | None = None) -> dict:
     """Maximum-likelihood scales of the white noise model on the calibration window (steps [0, ``steps``)).
 
     The per-step shapes of ``noise`` (``calibrate_noise``: corrected odometry, variances a + b u'^2,
@@ -695,11 +695,37 @@ def fit_noise_scales(d: MrclamData, noise: dict, steps: int, initial_std: float 
     Each scale stays within a factor ``LIKELIHOOD_BOX`` of its start: on a window too short to identify a
     scale (30 s of dataset 6: the ranges add little to the bearings there) the likelihood keeps improving
     slowly towards that scale's bound.
+
+    Cached: in the process, and on disk (``coloc_env.data.fit_cache``: ``cache_dir``, else
+    ``$COLOC_FIT_CACHE``, else the user's cache folder; ``"off"`` fits every time) under ``_fit_key``, a
+    digest of the window's data, the noise shapes, the settings and the fit's code (``FIT_CODE_VERSION``
+    and the source of the fit's functions), so a later process reads the fit instead of running it.
     """
+    from coloc_env.data import fit_cache
+
     steps = max(2, min(int(steps), d.steps))
     key = _fit_key(d, noise, steps, initial_std, gate)
     if key in _FITS:
         return dict(_FITS[key])
+    fit = fit_cache.cached("mrclam-likelihood", key, lambda: _search_scales(d, noise, steps, initial_std, gate),
+                           functools.partial(_sound_fit, steps=steps), cache_dir)
+    if len(_FITS) >= 8:
+        _FITS.clear()
+    _FITS[key] = dict(fit)
+    return dict(fit)
+
+
+def _sound_fit(fit, steps: int) -> bool:
+    """Whether a stored fit has ``fit_noise_scales``' fields with usable values (4 finite positive scales)."""
+    scale = np.asarray(fit["likelihood_scale"], float)
+    return (scale.shape == (4,) and bool(np.all(np.isfinite(scale) & (scale > 0)))
+            and np.isfinite(float(fit["likelihood_cost"])) and len(fit["likelihood_start"]) == 4
+            and int(fit["likelihood_passes"]) >= 1 and int(fit["likelihood_steps"]) == steps
+            and isinstance(fit["likelihood_converged"], bool))
+
+
+def _search_scales(d: MrclamData, noise: dict, steps: int, initial_std: float, gate: float) -> dict:
+    """``fit_noise_scales``' compass search (its docstring), uncached."""
     start = np.array([*noise["odometry_inflation"], *noise["measurement_inflation"]], float)
     grid = np.concatenate([np.zeros((1, 4)), np.eye(4), -np.eye(4)])  # the centre and one move along each axis
     centre = np.log(start)
@@ -719,10 +745,7 @@ def fit_noise_scales(d: MrclamData, noise: dict, steps: int, initial_std: float 
             centre = candidates[j]
     fit = {"likelihood_scale": [float(c) for c in np.exp(centre)], "likelihood_cost": best / (steps * NUM_ROBOTS),
            "likelihood_start": [float(c) for c in start], "likelihood_passes": passes,
-           "likelihood_steps": int(steps), "likelihood_converged": settled}
-    if len(_FITS) >= 8:
-        _FITS.clear()
-    _FITS[key] = dict(fit)
+           "likelihood_steps": int(steps), "likelihood_converged": bool(settled)}
     return fit
 
 
@@ -742,7 +765,29 @@ def _fit_key(d: MrclamData, noise: dict, steps: int, initial_std: float, gate: f
              "range_var", "sigma_bearing_p68", "measurement_inflation")
     h.update(repr(([noise[n] for n in names], d.dt, int(steps), float(initial_std), float(gate),
                    LIKELIHOOD_FACTORS, LIKELIHOOD_MOVES, LIKELIHOOD_BOX)).encode())
+    h.update(_fit_code_version().encode())
     return h.hexdigest()
+
+
+# The fit's code version, part of every fit's key: bump it when a change outside the functions whose source
+# _fit_code_version reads (the UKF-CCL updates of estimators.ukf_relay_se2, the calibration's shapes) changes a fit.
+FIT_CODE_VERSION = 1
+
+
+@functools.lru_cache(maxsize=1)
+def _fit_code_version() -> str:
+    """``FIT_CODE_VERSION`` and a digest of the source of the fit's own functions (their file may be absent in an
+    installation without sources: the version alone then)."""
+    import hashlib
+    import inspect
+
+    h = hashlib.sha256(str(FIT_CODE_VERSION).encode())
+    for function in (_likelihood_costs, _search_scales):
+        try:
+            h.update(inspect.getsource(function).encode())
+        except (OSError, TypeError):
+            h.update(function.__qualname__.encode())
+    return f"fit code {FIT_CODE_VERSION} {h.hexdigest()}"
 
 
 CALIBRATION_FRACTION = 0.1  # calibration window of the calibrated model: the first 10 % of the run ...
@@ -858,13 +903,15 @@ class NoiseModel:
 
     @classmethod
     def calibrate(cls, d: MrclamData, kind: str = "calibrated", seconds: float | None = None,
-                  gate: float = GATE_999) -> NoiseModel:
-        """Fit on the start of ``d`` (``seconds``, default ``calibration_seconds`` of ``kind``) and build."""
+                  gate: float = GATE_999, cache_dir: str | os.PathLike | None = None) -> NoiseModel:
+        """Fit on the start of ``d`` (``seconds``, default ``calibration_seconds`` of ``kind``) and build
+        (``cache_dir``: where ``fit_noise_scales`` caches a ``"likelihood"`` fit)."""
         _check_kind(kind)
         seconds = calibration_seconds(d, kind) if seconds is None else seconds
         noise = calibrate_noise(d, seconds, gate=gate)
         if kind == "likelihood":
-            noise.update(fit_noise_scales(d, noise, int(round(noise["calibration_s"] / d.dt)), gate=gate))
+            noise.update(fit_noise_scales(d, noise, int(round(noise["calibration_s"] / d.dt)), gate=gate,
+                                          cache_dir=cache_dir))
         return cls.from_calibration(noise, kind)
 
     def odometry(self, d: MrclamData, k) -> np.ndarray:
