@@ -81,8 +81,8 @@ def _config(name: str, **overrides):
 
 
 # --- what is computed --------------------------------------------------------------------------
-def seeded_rollout(name: str, policy_name: str) -> dict:
-    env = coloc_env.parallel_env(name, **OVERRIDES[name])
+def seeded_rollout(name: str, policy_name: str, **config) -> dict:
+    env = coloc_env.parallel_env(name, **OVERRIDES[name], **config)
     policy = agents.make_policy(policy_name, env, seed=POLICY_SEED)
     first = env.possible_agents[0]
     observations, _ = env.reset(seed=RESET_SEED)
@@ -102,8 +102,8 @@ def seeded_rollout(name: str, policy_name: str) -> dict:
     return {"steps": steps, "reward": reward, "error": error, "trace": trace, "obs_sum": obs_sum}
 
 
-def vector_rollout(name: str) -> dict:
-    venv = coloc_env.vector_env(name, num_envs=VEC_COPIES, seed=VEC_SEED, **OVERRIDES[name])
+def vector_rollout(name: str, **config) -> dict:
+    venv = coloc_env.vector_env(name, num_envs=VEC_COPIES, seed=VEC_SEED, **OVERRIDES[name], **config)
     venv.action_space.seed(VEC_ACTION_SEED)
     observation = venv.reset()
     reward = 0.0
@@ -226,11 +226,12 @@ PINNED_ROLLOUTS = {
         "random": {"steps": 25, "reward": -15415.544588529767, "error": 554.20384274637775,
                    "trace": 23771.313393904766, "obs_sum": 21.448304407298565},
     },
+    # its default noise model, "likelihood" (the calibrated model's numbers: PINNED_MRCLAM_CALIBRATED)
     "mrclam_relay": {
-        "paper": {"steps": 25, "reward": -1.4354103416799124, "error": 1.4354103416799122,
-                  "trace": 0.057701297776787661, "obs_sum": -4.1268091201782227},
-        "random": {"steps": 25, "reward": -1.3734166102313323, "error": 1.3734166102313321,
-                   "trace": 0.05865494495909393, "obs_sum": -4.0507316589355469},
+        "paper": {"steps": 25, "reward": -2.0469074545795491, "error": 2.0469074545795496,
+                  "trace": 0.12929362583600221, "obs_sum": -3.2232460975646973},
+        "random": {"steps": 25, "reward": -1.8835560719774556, "error": 1.8835560719774558,
+                   "trace": 0.1338183160661747, "obs_sum": -3.0858011245727539},
     },
     # gps_denied / contention / ukf_ccl; "paper" is round_robin; the medium has no draws (the decisions decide)
     "contention_localization": {
@@ -247,8 +248,18 @@ PINNED_VECTOR = {
     "relay_ukf": {"reward": -62.415704756975174, "obs_sum": 43.797087430953979},
     "gps_denied_nbp": {"reward": -2156.5431070327759, "obs_sum": 91.824733301997185},
     "nlos_horizon": {"reward": -156932.33562774584, "obs_sum": 276.53796964552021},
-    "mrclam_relay": {"reward": -0.73232610011473298, "obs_sum": -77.301276981830597},
+    "mrclam_relay": {"reward": -0.74640592327341437, "obs_sum": -66.275801002979279},
     "contention_localization": {"reward": -2783.2435924112797, "obs_sum": 1026.9490673542023},
+}
+
+# mrclam_relay with the noise model it defaulted to before "likelihood" (coloc/mrclam_relay-v1's): the same
+# numbers as then, bit for bit up to REL
+PINNED_MRCLAM_CALIBRATED = {
+    "paper": {"steps": 25, "reward": -1.4354103416799124, "error": 1.4354103416799122,
+              "trace": 0.057701297776787661, "obs_sum": -4.1268091201782227},
+    "random": {"steps": 25, "reward": -1.3734166102313323, "error": 1.3734166102313321,
+               "trace": 0.05865494495909393, "obs_sum": -4.0507316589355469},
+    "vector": {"reward": -0.73232610011473298, "obs_sum": -77.301276981830597},
 }
 
 PINNED_REPRODUCTION = {
@@ -288,6 +299,14 @@ def test_seeded_rollout(name):
 def test_vector_env(name):
     _needs_data(name)
     _assert_pinned(vector_rollout(name), PINNED_VECTOR[name])
+
+
+def test_mrclam_relay_with_the_calibrated_model_keeps_its_numbers():
+    _needs_data("mrclam_relay")
+    for policy_name in ("paper", "random"):
+        _assert_pinned(seeded_rollout("mrclam_relay", policy_name, noise_model="calibrated"),
+                       PINNED_MRCLAM_CALIBRATED[policy_name])
+    _assert_pinned(vector_rollout("mrclam_relay", noise_model="calibrated"), PINNED_MRCLAM_CALIBRATED["vector"])
 
 
 @pytest.mark.parametrize("case", list(REPRODUCTION), ids=list(REPRODUCTION))

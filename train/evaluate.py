@@ -100,10 +100,32 @@ def all_rows(scenario: str) -> list[str]:
 
 # --- bounds and consistency of a row -----------------------------------------------------------------------
 NEES_DOF = 2  # the position block
+POSE_NEES_DOF = 3  # an SE(2) backend's pose [x, y, heading]
 
 
-def _trace_step(trace: dict, actions: np.ndarray, info: dict, cov) -> None:
-    """One step of every copy: actions (B, N, ...), squared errors (B, N) of the 2-D position, NEES (B, N) or None.
+def reported_covariances(scenario, copies=None) -> tuple:
+    """What the NEES of a step read: the covariance (B, N, 2, 2) of the infos' estimated position (None without
+    one) and, for an SE(2) backend, (estimate, truth, covariance) of the pose at the same time (None otherwise);
+    the scenario's ``reported_position_cov`` / ``reported_pose`` (``coloc_env.scenarios.composed``). ``copies``
+    keeps those copies of the batch."""
+    cov = scenario.reported_position_cov() if hasattr(scenario, "reported_position_cov") \
+        else scenario.backend.posterior_position_cov
+    pose = scenario.reported_pose() if hasattr(scenario, "reported_pose") else None
+    if copies is not None:
+        cov = None if cov is None else cov[copies]
+        pose = None if pose is None else tuple(a[copies] for a in pose)
+    return cov, pose
+
+
+def _nees(error: np.ndarray, cov) -> np.ndarray:
+    solved = np.einsum("...ij,...j->...i", np.linalg.pinv(np.asarray(cov, float)), error)
+    return np.einsum("...i,...i->...", error, solved)
+
+
+def _trace_step(trace: dict, actions: np.ndarray, info: dict, cov, pose=None) -> None:
+    """One step of every copy: actions (B, N, ...), squared errors (B, N) of the 2-D position, NEES (B, N) or None,
+    and with ``pose`` = (estimate, truth, covariance) of an SE(2) backend the pose NEES (B, N) (heading error
+    wrapped to (-pi, pi]); ``pose_nees`` is None when a step has none.
 
     The 2-D position: the first two components of estimated_position - true_position, the plane the bound's and
     the backends' position covariance describe (a preset reporting a 3-D target position, lossy_fusion and
@@ -114,8 +136,14 @@ def _trace_step(trace: dict, actions: np.ndarray, info: dict, cov) -> None:
     if cov is None:
         trace["nees"] = None
     elif trace.get("nees", []) is not None:
-        solved = np.einsum("...ij,...j->...i", np.linalg.pinv(np.asarray(cov, float)), error)
-        trace.setdefault("nees", []).append(np.einsum("...i,...i->...", error, solved))
+        trace.setdefault("nees", []).append(_nees(error, cov))
+    if pose is None:
+        trace["pose_nees"] = None
+    elif trace.get("pose_nees", []) is not None:
+        estimate, truth, pose_cov = (np.asarray(a, float) for a in pose)
+        pose_error = estimate - truth
+        pose_error[..., 2] = (pose_error[..., 2] + np.pi) % (2 * np.pi) - np.pi
+        trace.setdefault("pose_nees", []).append(_nees(pose_error, pose_cov))
 
 
 def _merge_trace(into: dict, part: dict) -> None:
@@ -147,7 +175,8 @@ def attach_bounds(result: dict, scenario: str, seed_base: int, trace: dict, boun
                   **env_config) -> dict:
     """The row plus ``rmse`` (m, sqrt of the mean squared 2-D position error, ``_trace_step``), ``nees`` with
     ``nees_band`` (the chi^2(2E)/E 95 % band of a per-step NEES averaged over the E episodes) and ``nees_in_band``
-    (the share of (step, agent) in it), and, with ``bounds``, ``coloc_env.pcrb`` on the very episodes and actions
+    (the share of (step, agent) in it), for an SE(2) backend ``pose_nees``, ``pose_nees_band`` (chi^2(3E)/E) and
+    ``pose_nees_in_band`` likewise, and, with ``bounds``, ``coloc_env.pcrb`` on the very episodes and actions
     played: ``pcrb_centralized``, ``pcrb_local``, ``pcrb_delivered`` (sqrt of the mean over steps and agents, m;
     None where not defined), ``efficiency`` = rmse / pcrb_centralized and ``pcrb_model_based``."""
     from scipy import stats
@@ -162,16 +191,18 @@ def attach_bounds(result: dict, scenario: str, seed_base: int, trace: dict, boun
     squared = np.concatenate(chunks, axis=0)  # (E, K, N)
     rmse = float(np.sqrt(squared.mean()))
     out["rmse"] = rmse
-    nees = trace.get("nees")
     E = squared.shape[0]
-    if nees is None:
-        out.update(nees=None, nees_band=None, nees_in_band=None)
-    else:
+    for key, dof in (("nees", NEES_DOF), ("pose_nees", POSE_NEES_DOF)):
+        nees = trace.get(key)
+        if nees is None:
+            if key == "nees":  # the pose NEES columns only where a backend estimates poses
+                out.update(nees=None, nees_band=None, nees_in_band=None)
+            continue
         per_step = np.concatenate(nees, axis=0)  # (E, K, N)
-        low, high = (float(stats.chi2.ppf(q, E * NEES_DOF) / E) for q in (0.025, 0.975))
+        low, high = (float(stats.chi2.ppf(q, E * dof) / E) for q in (0.025, 0.975))
         mean_step = per_step.mean(axis=0)
-        out.update(nees=float(per_step.mean()), nees_band=[low, high],
-                   nees_in_band=float(np.mean((mean_step >= low) & (mean_step <= high))))
+        out.update({key: float(per_step.mean()), f"{key}_band": [low, high],
+                    f"{key}_in_band": float(np.mean((mean_step >= low) & (mean_step <= high)))})
     out.update(pcrb_centralized=None, pcrb_local=None, pcrb_delivered=None, efficiency=None, pcrb_model_based=None)
     spec = (coloc_env.composition_named(scenario) if coloc_env.is_composition_name(scenario)
             else coloc_env.PRESETS.get(scenario))
@@ -325,7 +356,7 @@ def run_episodes(scenario: str, policy_name: str, episodes: int, seed_base: int 
                 info = {key: np.array([[infos[a][key] for a in order]], float)
                         for key in ("position_error", "estimated_position", "true_position")}
                 _trace_step(episode_trace, np.array([[np.asarray(chosen[a], float) for a in order]]), info,
-                            env.scenario.backend.posterior_position_cov)
+                            *reported_covariances(env.scenario))
             errors.append([float(infos[a][error_key]) for a in env.possible_agents])
             if weight_key:
                 weights.append([float(infos[a][weight_key]) for a in env.possible_agents])
@@ -355,7 +386,7 @@ def _run_core(scenario: str, episodes: int, seed_base: int, choose, env_config: 
         core.step(actions)
         info = core.info()
         if trace is not None:
-            _trace_step(trace, np.asarray(actions, float), info, core.backend.posterior_position_cov)
+            _trace_step(trace, np.asarray(actions, float), info, *reported_covariances(core))
         errors.append(info[core.metric_error_key])
         if core.metric_weight_key:
             weights.append(info[core.metric_weight_key])

@@ -732,12 +732,22 @@ def _bounds_table(entries: list[dict]) -> list[str]:
              + ("; model-based: recorded data" if model_based else "") + ") and consistency:", "",
              "| row | RMSE [m] | sqrt PCRB centralized / delivered / local [m] | efficiency RMSE / sqrt PCRB_c | "
              "NEES (2 if consistent) | per-step NEES in its chi^2 95 % band |", "|---|---|---|---|---|---|"]
+    poses = any(r.get("pose_nees") is not None for r in entries)
+    if poses:  # an SE(2) backend: its pose NEES (3 degrees of freedom) beside the position's
+        lines[-2] = lines[-2] + " pose NEES (3 if consistent) | per-step pose NEES in its band |"
+        lines[-1] = lines[-1] + "---|---|"
+
+    def in_band(r, key):
+        band = r.get(f"{key}_band")
+        return "-" if band is None else f"{100 * r[f'{key}_in_band']:.0f} % in [{band[0]:.3g}, {band[1]:.3g}]"
+
     for r in entries:
-        band = r.get("nees_band")
-        inside = "-" if band is None else f"{100 * r['nees_in_band']:.0f} % in [{band[0]:.3g}, {band[1]:.3g}]"
         bounds = " / ".join(number(r.get(f"pcrb_{k}")) for k in ("centralized", "delivered", "local"))
-        lines.append(f"| {r['policy']} | {number(r['rmse'])} | {bounds} | {number(r.get('efficiency'), 3)} | "
-                     f"{number(r.get('nees'), 3)} | {inside} |")
+        line = (f"| {r['policy']} | {number(r['rmse'])} | {bounds} | {number(r.get('efficiency'), 3)} | "
+                f"{number(r.get('nees'), 3)} | {in_band(r, 'nees')} |")
+        if poses:
+            line += f" {number(r.get('pose_nees'), 3)} | {in_band(r, 'pose_nees')} |"
+        lines.append(line)
     return [*lines, ""]
 
 

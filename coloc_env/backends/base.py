@@ -48,6 +48,9 @@ class Backend:
         B, N = self.batch, self.num_agents
         self.posterior_position = np.zeros((B, N, 2))
         self.posterior_position_cov: np.ndarray | None = None
+        # an SE(2) backend's whole pose [x, y, heading] and its covariance at the same time (``pose``)
+        self.posterior_pose: np.ndarray | None = None
+        self.posterior_pose_cov: np.ndarray | None = None
 
     def decision_blocks(self) -> list[Block]:
         return []
@@ -59,18 +62,26 @@ class Backend:
         """After ``reset`` of the copies ``idx``: their posterior (what the infos report before the first step)
         is the initial belief the backend now holds, its covariance included (``position_cov``)."""
         cov = self.position_cov()
-        if cov is None:
-            return
-        if self.posterior_position_cov is None:
-            self.posterior_position_cov = np.array(cov, dtype=float)
-        else:
-            self.posterior_position_cov[idx] = cov[idx]
+        if cov is not None:
+            if self.posterior_position_cov is None:
+                self.posterior_position_cov = np.array(cov, dtype=float)
+            else:
+                self.posterior_position_cov[idx] = cov[idx]
+        pose = self.pose()
+        if pose is not None:
+            if self.posterior_pose is None:
+                self.posterior_pose, self.posterior_pose_cov = np.array(pose[0], float), np.array(pose[1], float)
+            else:
+                self.posterior_pose[idx], self.posterior_pose_cov[idx] = pose[0][idx], pose[1][idx]
 
     def step(self, readings, decisions: np.ndarray) -> None:
         self.update(readings, decisions)
         self.posterior_position = self.position().copy()
         cov = self.position_cov()
         self.posterior_position_cov = None if cov is None else cov.copy()
+        pose = self.pose()
+        if pose is not None:
+            self.posterior_pose, self.posterior_pose_cov = pose[0].copy(), pose[1].copy()
         self.predict(readings.inputs)
 
     def update(self, readings, decisions: np.ndarray) -> None:  # pragma: no cover - interface
@@ -90,6 +101,11 @@ class Backend:
 
     def position_cov(self) -> np.ndarray | None:
         """Current per-agent position covariance (B, N, 2, 2); None where the backend has none."""
+        return None
+
+    def pose(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """An SE(2) backend's current pose estimates (B, N, 3) [x, y, heading] and their covariances (B, N, 3, 3);
+        None where the backend estimates positions only."""
         return None
 
     def observation_features(self) -> np.ndarray:

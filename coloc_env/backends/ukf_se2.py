@@ -245,6 +245,9 @@ class UkfSe2Backend(Backend):
     def position_cov(self) -> np.ndarray:
         return self.P_ii[..., :2, :2]
 
+    def pose(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.estimate, self.P_ii
+
     def joint_cov(self, b: int) -> np.ndarray:
         """The joint covariance (3N, 3N) of copy b that the factors stand for."""
         return self._factors(b).joint()

@@ -172,6 +172,7 @@ class ComposedScenario(Scenario):
         self.estimand = spec.world.estimand
         self.k = np.zeros(B, dtype=int)
         self._truth = np.zeros((B, N, 2))
+        self._truth_pose: np.ndarray | None = None  # the poses [x, y, heading] of a world that keeps headings
         self._truth_state = np.zeros((B, getattr(self.world, "state_dim", 0)))
         self._received = np.zeros((B, N, N))
         self._reward = np.zeros((B, N))
@@ -309,6 +310,11 @@ class ComposedScenario(Scenario):
             self._truth[idx] = self._target_truth(state=state)[idx]
         else:
             self._truth[idx] = self.world.positions()[idx]
+        poses = getattr(self.world, "poses", None)
+        if poses is not None:
+            if self._truth_pose is None:
+                self._truth_pose = np.array(poses(), float)
+            self._truth_pose[idx] = poses()[idx]
         self._received[idx] = 0.0
         self._reward[idx] = 0.0
         if self.receives_ahead:
@@ -401,6 +407,8 @@ class ComposedScenario(Scenario):
         transport = decoded[..., nw:nw + nn].astype(np.int64)
         decisions = decoded[..., nw + nn:]
         truth = self.world.positions().copy()
+        poses = getattr(self.world, "poses", None)
+        self._truth_pose = None if poses is None else poses().copy()
         if self.receives_ahead:  # read, carried and received before the agents decided
             readings = self.readings
             _restore_network_record(self.network, self._ahead_record)
@@ -461,6 +469,20 @@ class ComposedScenario(Scenario):
 
     def position_error(self) -> np.ndarray:
         return np.linalg.norm(self.backend.posterior_position - self._truth, axis=-1)
+
+    def reported_position_cov(self) -> np.ndarray | None:
+        """The covariance (B, N, 2, 2) of the infos' ``estimated_position`` against their ``true_position`` (the
+        posterior's, at the truth's time); None where the backend keeps none. What ``coloc evaluate``'s position
+        NEES reads."""
+        return self.backend.posterior_position_cov
+
+    def reported_pose(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """An SE(2) backend's pose at the infos' time: (estimate (B, N, 3), truth (B, N, 3), covariance (B, N, 3, 3));
+        None where the backend estimates positions only or the world keeps no headings. What ``coloc
+        evaluate``'s pose NEES (3 degrees of freedom) reads."""
+        if self.backend.posterior_pose is None or self._truth_pose is None:
+            return None
+        return self.backend.posterior_pose, self._truth_pose, self.backend.posterior_pose_cov
 
     def target_error(self) -> np.ndarray:
         """The world's error of each agent's estimate of the target state (the unit its docstring states)."""

@@ -164,6 +164,11 @@ class RelayTeamScenario(PresetScenario):
         """A per-copy value (B,) repeated for every agent (B, N)."""
         return np.repeat(np.asarray(values)[:, None], self.num_agents, axis=1)
 
+    def reported_position_cov(self) -> np.ndarray | None:
+        """The covariance (B, N, 2, 2) of the infos' ``estimated_position``: the current estimate's (after a step,
+        the prediction to k + 1, as the estimate and the truth the infos report)."""
+        return self.backend.position_cov()
+
     def team_info(self) -> dict[str, np.ndarray]:
         """The infos both presets report: positions, errors (m), ``trace`` (m^2), dead reckoning's error,
         the messages and floats each agent sent, the team's ``hop_cost``, ``step``."""

@@ -80,15 +80,16 @@ Arguments (``coloc_env.worlds.Mrclam``)
 | dt                   | 0.1          | [0.01, 1] s: the slice length of the loader's grid                |
 | horizon              | 600          | 1..T-1-start steps (checked against the run at build time)        |
 | start                | None         | None = drawn per episode; 0..T-1-horizon = a fixed first step     |
-| noise_model          | "calibrated" | "calibrated", "baseline", "likelihood"                            |
+| noise_model          | "likelihood" | "likelihood", "calibrated", "baseline"                            |
 |                      |              | (``coloc_env.data.mrclam.NoiseModel``; "likelihood" is the  |
-|                      |              | consistent one, its fit runs filters for seconds at build)        |
+|                      |              | consistent one: its fit runs filters for 17-24 s at the first     |
+|                      |              | build and is cached on disk, ``coloc_env.data.fit_cache``)        |
 | calibration_s        | None         | (0, 3600] s of the run's start the noise is fitted on; None = the model's rule |
 | initial_position_std | 0.01         | [1e-6, 1000] m (smaller: P(0) not numerically definite)           |
 | initial_heading_std  | 0.01         | [1e-6, 10] rad                                                    |
 | measurement_inflation | True        | True, False: False leaves the calibrated model's burst inflation  |
 |                      |              | of R out (the ablation of ``coloc reproduce mrclam``); needs      |
-|                      |              | ``noise_model="calibrated"`` (the baseline has none)              |
+|                      |              | ``noise_model="calibrated"`` (the others have none)               |
 | robot_sightings      | "first"      | "first": robot m's sighting of robot n counts once per step (the  |
 |                      |              | ``mrclam_relay`` scenario's rule); "all": every line, as          |
 |                      |              | ``coloc reproduce mrclam`` applies them                           |
@@ -201,7 +202,7 @@ class Mrclam(PartConfig):
     dt: float = 0.1
     horizon: int = 600
     start: int | None = None
-    noise_model: str = "calibrated"
+    noise_model: str = "likelihood"
     calibration_s: float | None = None
     initial_position_std: float = 0.01
     initial_heading_std: float = 0.01

@@ -289,7 +289,10 @@ def _episode(seed, **config):
 
 
 def test_lossy_links_cut_chains_and_cost_accuracy():
-    """Same seeds: same windows, actions and loss draws, so each lossy chain is a prefix of the lossless one."""
+    """Same seeds: same windows, actions and loss draws, so each lossy chain is a prefix of the lossless one. The
+    filter knows it has less (its trace grows). Its error over these 6 s windows is not compared: the paired
+    differences (lossy - lossless mean error) of 8 seeds have either sign under both noise models (-0.5 to
+    +1.6 mm against a mean of 18 mm), so which mean is larger is noise."""
     ideal = [_episode(seed) for seed in range(4)]
     lossy = [_episode(seed, loss_at_zero=0.7) for seed in range(4)]
     for (_, _, length, stop), (_, _, cut, cut_stop) in zip(ideal, lossy, strict=True):
@@ -300,7 +303,6 @@ def test_lossy_links_cut_chains_and_cost_accuracy():
     hops = lambda runs: sum(np.maximum(r[2] - 1, 0).sum() for r in runs)  # noqa: E731
     assert hops(lossy) < 0.5 * hops(ideal)
     assert np.mean([r[1] for r in lossy]) > np.mean([r[1] for r in ideal])  # the filter knows it has less
-    assert np.mean([r[0] for r in lossy]) > np.mean([r[0] for r in ideal])  # and it is less accurate
 
 
 def test_batched_copies_equal_single_envs_and_reset_one_copy():

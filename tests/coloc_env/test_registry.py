@@ -48,6 +48,11 @@ PINS = {
         "10 agents; observation Box(shape=(34,), dtype=float32, low=[-50.0, 0.0], high=[1.0, 50.0, inf]); "
         "action MultiDiscrete([2])",
         [1893.805515833199, -271.27224529005156, 271.27224529005156]),
+    # v2: noise_model="likelihood" by default (v1: "calibrated"), the filter's covariance in the observation moved
+    "coloc/mrclam_relay-v2": (
+        "5 agents; observation Box(shape=(18,), dtype=float32, low=[-inf, 0.0], high=[1.0, inf]); "
+        "action MultiDiscrete([5, 6, 6, 6, 6, 6])",
+        [-157.2531400292646, -0.07803140656694496, 0.07803140656694496]),
 }
 
 DATA_PRESETS = {"mrclam_relay"}  # presets that replay recorded data: built with data=MRCLAM_DATASET6

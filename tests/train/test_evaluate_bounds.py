@@ -38,3 +38,29 @@ def test_the_leaderboard_shows_the_bounds_table(tmp_path):
     assert "Estimation bounds (posterior Cramér-Rao" in text
     line = next(line for line in text.splitlines() if line.startswith("| paper |") and "%" in line)
     assert f"{row['rmse']:.4g}" in line and f"{row['efficiency']:.3g}" in line
+
+
+@pytest.mark.parametrize("runner", ["run_policy_batched", "run_episodes"])
+def test_an_se2_backend_gets_a_pose_nees_at_least_its_position_nees(runner, mrclam_dataset6):
+    """mrclam_relay (ukf_se2): beside the position NEES (2 degrees of freedom) the pose NEES (3) with its
+    chi^2(3E)/E band. For one covariance, the Mahalanobis distance of the whole pose is at least that of its
+    position block (a Schur complement), so each (step, agent) pose NEES >= its position NEES: both read the
+    same estimate at the same time."""
+    from scipy import stats
+
+    import train.evaluate as ev
+
+    trace = {}
+    config = {"data": mrclam_dataset6, "window_steps": 20}
+    row = getattr(ev, runner)("mrclam_relay", "paper", 2, trace=trace, **config)
+    position, pose = (np.concatenate(trace[key], axis=0) for key in ("nees", "pose_nees"))  # (E, K, N) each
+    assert pose.shape == position.shape and np.all(pose >= position - 1e-9) and np.any(pose > position + 1e-6)
+    out = ev.attach_bounds(row, "mrclam_relay", EVAL_SEED_BASE, trace, bounds=False, **config)
+    assert out["pose_nees"] == pytest.approx(pose.mean(), rel=1e-12)
+    assert out["pose_nees_band"] == pytest.approx([stats.chi2.ppf(q, 6) / 2 for q in (0.025, 0.975)], rel=1e-12)
+    assert out["pose_nees"] >= out["nees"]
+
+
+def test_a_position_backend_gets_no_pose_nees():
+    row = evaluate_policy("circles/ideal/ukf_ccl", "always", 2, bounds=False)
+    assert row["nees"] is not None and "pose_nees" not in row

@@ -178,7 +178,8 @@ def test_lossy_link_study_lossless_is_the_paper_policy_and_losses_cut_hops():
     study = mrclam.lossy_link_study(DATASET6, W, seed)
     links = study["settings"]
     assert set(links) == set(mrclam.link_settings()) | {"IL"}
-    env = coloc_env.parallel_env("mrclam_relay", data=DATASET6, window_steps=W)
+    # the study's noise model (train.reproduce.mrclam.lossy_link_study: the moment rules)
+    env = coloc_env.parallel_env("mrclam_relay", data=DATASET6, window_steps=W, noise_model="calibrated")
     policy = agents.make_policy("paper", env)
     observations, infos = env.reset(seed=seed)
     assert int(env.scenario.world.start[0]) == study["window_start"]

@@ -24,6 +24,9 @@ all its agents; agent-steps = env-steps x N):
 * peers            for relay_ukf, filterpy's ``UnscentedKalmanFilter`` doing one
   full-chain range update one copy at a time (``PEERS``), beside our
   ``dcl_update`` doing the same update for the B copies at once;
+* ``construction, warm fit cache``  mrclam_relay only: seconds to build the env at its defaults in a fresh
+  process once the likelihood fit is in the disk cache (``coloc_env.data.fit_cache``), the best of 3
+  (``construction_s``; the row's rate is its inverse);
 * ``pcrb, one episode``  ``coloc_env.pcrb`` of one episode (its play, backend idle where it
   may be, and the recursion), in env-steps per second, beside the backend's step;
 * ``vmas``          VMAS's batched ``simple_spread`` with 4 agents on the CPU at

@@ -3,7 +3,10 @@ draws them (``run``); the package docstring lists the rows."""
 
 from __future__ import annotations
 
+import json
 import os
+import subprocess
+import sys
 import time
 from collections.abc import Callable
 
@@ -141,8 +144,43 @@ def _contention_rows(min_seconds: float) -> list[dict]:
     return rows
 
 
+# A fresh process building mrclam_relay at its defaults once the likelihood fit is cached on disk: the data's
+# load, the moment rules' calibration and the cached fit's read (coloc_env.data.fit_cache), without the imports.
+_CONSTRUCTION_DRIVER = """
+import json, time
+import coloc_env
+from coloc_env.data import fit_cache
+start = time.perf_counter()
+env = coloc_env.parallel_env("mrclam_relay")
+env.reset(seed=0)
+print(json.dumps({"seconds": time.perf_counter() - start, "stats": dict(fit_cache.STATS)}))
+"""
+CONSTRUCTION_ROW = "construction, warm fit cache"
+CONSTRUCTION_RUNS = 3
+REPOSITORY = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+
+def _mrclam_relay_construction_rows(min_seconds: float) -> list[dict]:
+    """``CONSTRUCTION_ROW``: the best of ``CONSTRUCTION_RUNS`` fresh processes' construction time (``construction_s``,
+    and its inverse as the row's rate), after this process built the env (so the fit is in the disk cache); each
+    process's cache counts (``fit_cache.STATS``) say whether it read the fit (``fits_read``) or ran it."""
+    import coloc_env
+
+    coloc_env.parallel_env("mrclam_relay").reset(seed=0)  # warms the disk cache if it was cold
+    best, read = np.inf, True
+    for _ in range(CONSTRUCTION_RUNS):
+        done = subprocess.run([sys.executable, "-c", _CONSTRUCTION_DRIVER], capture_output=True, text=True,
+                              check=True, cwd=REPOSITORY)
+        report = json.loads(done.stdout.strip().splitlines()[-1])
+        best = min(best, report["seconds"])
+        read = read and report["stats"].get("computed", 0) == 0
+    return [{"scenario": "mrclam_relay", "what": CONSTRUCTION_ROW, "batch": 1, "env_steps_per_s": 1.0 / best,
+             "agent_steps_per_s": 1.0 / best, "construction_s": best, "fits_read": read}]
+
+
 EXTRA_BENCHES: dict[str, Callable[[float], list[dict]]] = {"gps_denied_nbp": _gps_denied_nbp_particle_rows,
-                                                           "contention_localization": _contention_rows}
+                                                           "contention_localization": _contention_rows,
+                                                           "mrclam_relay": _mrclam_relay_construction_rows}
 # Scenarios whose work per copy depends on the episode (dNBP: how many messages arrive, how many proposals the
 # truncated kernel prunes): a vector_env of B copies plays episodes 0..B-1, so its rows at B = 1 and B = 4 time
 # different work. These also get a row with every copy playing episode 0 (ONE_EPISODE), where only B changes
@@ -329,6 +367,9 @@ def run(out: str, quick: bool = False, scenarios: list[str] | None = None) -> li
                       f"{row['agent_steps_per_s']:,.0f}", "" if overhead is None else f"{overhead:.2f}x")
     console.print(table)
     for row in rows:
+        if "construction_s" in row:
+            console.print(f"{row['scenario']} {row['what']}: {row['construction_s']:.2f} s per construction in a "
+                          f"fresh process ({'the fit read from the disk cache' if row['fits_read'] else 'FITTED'})")
         if "time_over_broadcast" in row:
             console.print(f"{row['scenario']} {row['what']} (B = {row['batch']}): a contention step takes "
                           f"{row['time_over_broadcast']:.2f}x a broadcast step")
