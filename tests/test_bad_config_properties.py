@@ -46,12 +46,15 @@ HAVE_MRCLAM = os.path.isdir(MRCLAM_DATA)
 STEPS = 3
 
 # Cheap settings of the other fields, so that an episode of a few steps is quick (never the field under test).
+# MRCLAM: the moment rules' noise model, which fits nothing; the default "likelihood" would run its fit (seconds to
+# minutes, cached per window) for every probed calibration_s and dt.
 CHEAP_PRESET = {
     "gps_denied_nbp": {"num_particles": 40, "num_iterations": 1},
-    "mrclam_relay": {"data": MRCLAM_DATA, "window_steps": 8},
+    "mrclam_relay": {"data": MRCLAM_DATA, "window_steps": 8, "noise_model": "calibrated"},
     "nlos_horizon": {"horizon": 40},
 }
-CHEAP_PART = {"dnbp": {"num_particles": 40, "num_iterations": 1}, "mrclam": {"data": MRCLAM_DATA, "horizon": 8},
+CHEAP_PART = {"dnbp": {"num_particles": 40, "num_iterations": 1},
+              "mrclam": {"data": MRCLAM_DATA, "horizon": 8, "noise_model": "calibrated"},
               "mrclam_slices": {"data": MRCLAM_DATA, "horizon": 8}}
 SKIP_FIELDS = {"data"}  # a path: the loader's own tests cover it
 
@@ -362,10 +365,13 @@ def _validated(target, field, value):
     from coloc_env.config import build_config
     from coloc_env.parts import make_config
     cls = config_class(target)
+    # the data, and the noise model a field may need (MRCLAM's measurement_inflation=False: "calibrated")
+    kept = ("data", "noise_model")
     if target[0] == "preset":
-        return build_config(cls, {**{k: v for k, v in CHEAP_PRESET.get(target[1], {}).items() if k == "data"},
+        return build_config(cls, {**{k: v for k, v in CHEAP_PRESET.get(target[1], {}).items() if k in kept},
                                   field: value})
-    return make_config(cls, {field: value}, target[0])
+    return make_config(cls, {**{k: v for k, v in CHEAP_PART.get(target[1], {}).items() if k == "noise_model"},
+                             field: value}, target[0])
 
 
 BOOL_FIELDS = [(t, name) for t in TARGETS for name, kind, _, _ in fields_of(config_class(t)) if kind == "bool"]

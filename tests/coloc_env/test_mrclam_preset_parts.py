@@ -54,7 +54,7 @@ def test_the_preset_is_picklable_and_lists_without_the_data(tmp_path, monkeypatc
     assert pickle.loads(pickle.dumps(PRESET)) == PRESET
     assert main(["list"]) == 0
     line = next(x for x in capsys.readouterr().out.splitlines() if x.strip().startswith("mrclam_relay"))
-    assert line.split()[1:] == ["mrclam", "/", "relay", "/", "ukf_se2", "(coloc/mrclam_relay-v1)"]
+    assert line.split()[1:] == ["mrclam", "/", "relay", "/", "ukf_se2", "(coloc/mrclam_relay-v2)"]
     with pytest.raises(ValueError, match=mrclam.ENV_VAR):  # the data is read when an env is built, not before
         coloc_env.parallel_env(PRESET)
 
