@@ -1,8 +1,8 @@
 """Posterior Cramér–Rao bounds of a composition over the seeded episodes an evaluation plays.
 
 The package: ``record`` (the play and its record), ``models`` (one bound model per world model),
-``problem`` (recursions, the bound problem, the delivered bound of reading messages), ``compute``
-(``pcrb``).
+``problem`` (recursions, the bound problem, the delivered bound of reading messages),
+``information_set`` (the delivered bound of estimate messages), ``compute`` (``pcrb``).
 
 >>> import coloc_env
 >>> bounds = coloc_env.pcrb("target_cv/bernoulli_delay/kalman", episodes=8, seed=0)
@@ -29,20 +29,23 @@ agent):
 | ``local``      | each agent with only its own readings: own motion inputs, own fixes, readings |
 |                | of known anchors (no communication); a range to another agent is not its own  |
 |                | information without that agent's position                                    |
-| ``delivered``  | per receiver: its own readings plus every reading another agent's packet       |
-|                | carried to it, counted at the step it was *measured* from the step it arrives  |
-|                | (a lag-augmented state [x(k), ..., x(k - D)], D the network's longest delay)   |
+| ``delivered``  | per receiver: its own readings plus every reading the messages that reached  |
+|                | it carried, counted at the step it was *measured* from the step it arrives   |
 
-``delivered`` is defined where a packet carries its sender's reading of the step it is
-stamped with (the ``kalman`` and ``centralized_lmmse`` backends' packets of z_i(k), whose
-leader's bound is every agent's since every agent reports the leader's estimate; the
-``nlos_orbit`` neighbours' RSS/AOA packets to ``afge`` and ``dfir``; ``ukf_ccl``'s ranges and
-fixes to its centre, agent 0, whose estimates every agent reads), and for backends that
-send nothing (``dead_reckoning``: delivered = local). It is left out where a message
-carries an estimate (``prediction_compensation``, ``bandwidth_fusion``, ``dnbp``'s
-beliefs, ``ukf_dcl``'s and ``ukf_se2``'s relayed location information, ``range_ls``): an
-estimate summarizes the sender's whole history, and what that is worth to the receiver
-depends on what the sender itself received, so a per-reading account would be no bound.
+What a message carries is the backend's declaration (``message_content``,
+``coloc_env.backends.base``). Where a packet carries its sender's reading of the step it is
+stamped with (``"readings"``: the ``kalman`` and ``centralized_lmmse`` backends' packets of
+z_i(k), whose leader's bound is every agent's since every agent reports the leader's estimate;
+the ``nlos_orbit`` neighbours' RSS/AOA packets to ``afge`` and ``dfir``; ``ukf_ccl``'s ranges and
+fixes to its centre, agent 0, whose estimates every agent reads) the world's bound model gives
+the lag-augmented recursion [x(k), ..., x(k - D)], D the network's longest delay
+(``problem.delivered_recursion``); for backends that send nothing (``"nothing"``:
+``dead_reckoning``) delivered = local; where a message carries an estimate (``"estimates"``:
+``prediction_compensation``, ``bandwidth_fusion``, ``dnbp``'s beliefs, ``ukf_dcl``'s and
+``ukf_se2``'s relayed location information, ``range_ls``) it is the information-set bound
+(``information_set``): each message credited with every reading its sender held, the receiver's
+bound given the union (``"delivered_capped"`` in the result: the share of those readings credited
+earlier than they arrived, beyond the lag cap).
 By construction local >= delivered >= centralized (each adds information to the one before),
 for the receiver's own columns; where the delivered bound is a fusing agent's (a shared estimate), another
 agent's local bound can be below it (its own fixes need not reach the centre).

@@ -40,6 +40,11 @@ def has_bound_model(world_name: str) -> bool:
     return world_name in MODELS
 
 
+def generative_worlds() -> list[str]:
+    """The worlds whose bound is a bound of their generative model (not ``MODEL_BASED``: recorded data)."""
+    return sorted(world for world, module in MODELS.items() if not getattr(module, "MODEL_BASED", False))
+
+
 def _model(core):
     name = core.composition.world.name
     if name not in MODELS:

@@ -48,8 +48,8 @@ the estimate).
 |             | platform carries no information on its own without that platform's position           |
 | delivered   | ``dead_reckoning`` (sends nothing): = local; ``ukf_ccl``: the centre's (every          |
 |             | odometry, the ranges and fixes whose message reached agent 0), every platform's; the  |
-|             | other backends' messages carry estimates or relayed location information (left out,   |
-|             | ``coloc_env.bounds``)                                                               |
+|             | other backends' messages carry estimates or relayed location information: each       |
+|             | platform's information set (``coloc_env.bounds.information_set``)                   |
 
 It bounds estimators that use the odometry as inputs and do not know the circles (one that
 knew the tracks would need no readings at all); it is a Cramér–Rao bound at the truth, so it holds for
@@ -116,7 +116,8 @@ def problem(core, record, heading_state: bool | None = None) -> BoundProblem:
     own[:, :c.num_anchors, :2, :2] = fix_information(c.fix_noise_std**2)
     info = _block_diagonal(own)
     readings = ReadingInformation(n)
-    central = core.composition.backend.name == "ukf_ccl"  # the centre's information, for its delivered bound
+    # the centre's information, for the delivered bound of a backend that sends its readings there (ukf_ccl)
+    central = core.composition.backend.message_kind == "central"
     centre = np.zeros((K, n, n)) if central else None
     for step in range(K):
         for i in range(c.num_anchors):  # the anchors' fixes

@@ -17,7 +17,8 @@ Estimation problem (the one the ``ukf_ccl`` / ``dnbp`` / ``range_ls`` / ``dead_r
 | local       | each UAV's own accelerometer and own fixes                                             |
 | delivered   | ``dead_reckoning``: = local; ``ukf_ccl``: the centre's (every accelerometer, the      |
 |             | ranges and fixes whose message reached agent 0), every UAV's; the other backends'      |
-|             | messages carry beliefs or estimates (left out, ``coloc_env.bounds``)                |
+|             | messages carry beliefs or estimates: each UAV's information set                        |
+|             | (``coloc_env.bounds.information_set``)                                                 |
 """
 
 from __future__ import annotations
@@ -48,7 +49,8 @@ def problem(core, record) -> BoundProblem:
     for i in range(N):
         info[:, 4 * i:4 * i + 4, 4 * i:4 * i + 4] = own[:, i]
     readings = ReadingInformation(n)
-    central = core.composition.backend.name == "ukf_ccl"  # the centre's information, for its delivered bound
+    # the centre's information, for the delivered bound of a backend that sends its readings there (ukf_ccl)
+    central = core.composition.backend.message_kind == "central"
     centre = np.zeros((K, n, n)) if central else None
     for step in range(K):
         pairs = list(zip(*np.nonzero(np.triu(world.adjacency[0, step], 1)), strict=True))  # one per unordered pair

@@ -27,8 +27,9 @@ the "MSE >= bound" check.
 | centralized | all of them                                                                            |
 | local       | each robot's own odometry and its own landmark sightings (the landmark pseudo-fixes    |
 |             | are these sightings again and are not counted twice)                                   |
-| delivered   | ``dead_reckoning``: = local; ``ukf_se2``'s relay chains carry location information     |
-|             | (left out, ``coloc_env.bounds``)                                                    |
+| delivered   | ``dead_reckoning``: = local; ``ukf_se2``'s relay chains, dNBP's and least squares'     |
+|             | broadcasts carry estimates: each robot's information set                               |
+|             | (``coloc_env.bounds.information_set``), per episode                                    |
 """
 
 from __future__ import annotations
@@ -39,6 +40,7 @@ from coloc_env.bounds.problem import BoundProblem, ReadingInformation, Recursion
 from estimators.bounds import range_bearing_information
 
 # the worlds this module is the bound model of (coloc_env.bounds.models reads it)
+MODEL_BASED = True  # recorded data: the bound of the model, not of the data (docstring)
 WORLDS = ("mrclam",)
 
 

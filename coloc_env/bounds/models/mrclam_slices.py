@@ -18,18 +18,20 @@ says what an estimator matched to that model could reach, not what any estimator
 |             | range per edge ([[B, -B], [-B, B]], B = u u^T / sigma_d,k^2 at the Vicon positions)    |
 | centralized | all of them                                                                            |
 | local       | each robot's own motion and pseudo-fixes                                               |
-| delivered   | ``dead_reckoning``: = local; the other backends' messages carry beliefs or estimates,  |
-|             | or (``ukf_ccl``) readings this module does not follow (left out, with the reason)      |
+| delivered   | ``dead_reckoning``: = local; ``ukf_ccl``: the centre's (the pseudo-fixes and ranges    |
+|             | whose message reached agent 0), every robot's; the other backends' messages carry      |
+|             | beliefs or estimates: each robot's information set (``coloc_env.bounds.information_set``) |
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from coloc_env.bounds.problem import BoundProblem, ReadingInformation, Recursion, with_delivered
+from coloc_env.bounds.problem import BoundProblem, ReadingInformation, Recursion, centre_received, with_delivered
 from estimators.bounds import fix_information, pair_information, range_information
 
 # the worlds this module is the bound model of (coloc_env.bounds.models reads it)
+MODEL_BASED = True  # recorded data: the bound of the model, not of the data (docstring)
 WORLDS = ("mrclam_slices",)
 
 
@@ -42,6 +44,8 @@ def problem(core, record) -> BoundProblem:
     info = np.zeros((K, n, n))
     own = np.zeros((K, N, 2, 2))
     readings = ReadingInformation(n)
+    central = core.composition.backend.message_kind == "central"  # the centre's information, for ukf_ccl
+    centre = np.zeros((K, n, n)) if central else None
     q = np.zeros((max(K - 1, 0), 2, 2))
     for k in range(K):
         r = record.readings[k]
@@ -53,16 +57,30 @@ def problem(core, record) -> BoundProblem:
             if r.fix_valid[0][i]:
                 readings.add(k, i, -1, np.arange(2 * i, 2 * i + 2), own[k, i])
         variance = float(r.extra["range_std"][0]) ** 2
-        for a, b in zip(*np.nonzero(np.triu(r.range_valid[0], 1)), strict=True):
+        pairs = list(zip(*np.nonzero(np.triu(r.range_valid[0], 1)), strict=True))  # in the backend's order
+        if central:
+            fixes = np.flatnonzero(r.fix_valid[0])
+            got_range, got_fix = centre_received(record, k, pairs, fixes, N)
+            for i, got in zip(fixes, got_fix, strict=True):
+                if got:
+                    centre[k, 2 * i:2 * i + 2, 2 * i:2 * i + 2] += own[k, i]
+        for j, (a, b) in enumerate(pairs):
             idx = np.r_[2 * a:2 * a + 2, 2 * b:2 * b + 2]
             block = pair_information(range_information(truth[k, a], truth[k, b], variance))
             info[k][np.ix_(idx, idx)] += block
             readings.add(k, a, b, idx, block)
+            if central and got_range[j]:
+                centre[k][np.ix_(idx, idx)] += block
     steps = max(K - 1, 0)
     Q = np.stack([np.kron(np.eye(N), q[k]) for k in range(steps)]) if steps else np.zeros((0, n, n))
     positions = np.array([[2 * i, 2 * i + 1] for i in range(N)])
     centralized = Recursion(np.kron(np.eye(N), p0), info, None, Q, positions)
     local = [Recursion(p0, own[:, i], None, q, np.array([[0, 1]])) for i in range(N)]
     agents = [np.array([i]) for i in range(N)]
+
+    def centre_bound():  # every robot reads its estimate at the centre (ukf_ccl)
+        return [Recursion(centralized.P0, centre, None, Q, positions)], [np.arange(N)]
+
     return with_delivered(BoundProblem(centralized, local, agents, model_based=True, per_episode=True,
-                                       readings=readings), core, record)
+                                       readings=readings), core, record,
+                          readings_bound=centre_bound if central else None)

@@ -15,7 +15,9 @@ Estimation problem (every agent estimates one shared state x, n = 6 or the drift
 | delivered   | (``kalman``, ``centralized_lmmse``: followers' packets of z_i(k) to the leader) the   |
 |             | receiver's own z plus each packet's z_t(k) from the step it arrived, as a reading of   |
 |             | x(k) (a lag-augmented state); every agent reports the leader's estimate, so the       |
-|             | leader's delivered bound is every agent's                                              |
+|             | leader's delivered bound is every agent's; ``prediction_compensation`` (the leader's,  |
+|             | shared) and ``bandwidth_fusion`` (each agent's) carry estimates: the information set   |
+|             | (``coloc_env.bounds.information_set``)                                                 |
 | position    | the world's ``position_index`` components (the ``position_error`` coordinates), the  |
 |             | same bound for every agent                                                             |
 
