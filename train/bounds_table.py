@@ -15,6 +15,9 @@ core, ``train.study.run_cell``), ``coloc_env.pcrb`` on the same episodes, and on
 | nees            | the mean 2-D position NEES (2 where the covariance is honest; "-" without one)       |
 | in band         | the share of (step, agent) whose NEES averaged over the E episodes lies in the       |
 |                 | chi^2(2E)/E 95 % band (``train.study.nees_metrics``)                                 |
+| capped          | for an information-set bound, the share of the delivered readings that arrived more  |
+|                 | than ``lag_cap`` steps after they were taken (credited earlier: the bound is lower   |
+|                 | than the exact one there); "-" for the other delivered bounds                        |
 
 Each row is kept as ``OUT/rows/WORLD_NETWORK_BACKEND.json`` (with its settings; a rerun with the same settings
 reuses it, so an interrupted run resumes), the table is written to ``OUT/bounds_table.md`` and
@@ -74,13 +77,14 @@ def _number(value, digits: int = 3) -> str:
 
 
 def table(rows: list[dict]) -> str:
-    lines = ["| composition | RMSE (m) | centralized | delivered | local | eff_c | eff_d | NEES | in band |",
-             "|---|---|---|---|---|---|---|---|---|"]
+    lines = ["| composition | RMSE (m) | centralized | delivered | local | eff_c | eff_d | NEES | in band | capped |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         band = "-" if r["nees_in_band"] is None else f"{100 * r['nees_in_band']:.0f} %"
+        capped = "-" if r.get("delivered_capped") is None else f"{100 * r['delivered_capped']:.0f} %"
         lines.append(f"| `{r['name']}` | {_number(r['rmse'])} | {_number(r['centralized'])} | "
                      f"{_number(r['delivered'])} | {_number(r['local'])} | {_number(r['eff_c'])} | "
-                     f"{_number(r['eff_d'])} | {_number(r['nees'])} | {band} |")
+                     f"{_number(r['eff_d'])} | {_number(r['nees'])} | {band} | {capped} |")
     return "\n".join(lines) + "\n"
 
 

@@ -152,8 +152,8 @@ def with_delivered(problem: BoundProblem, core, record, message_kind: str | None
     ``readings_bound(arrival, lags)`` -> (recursions, their agents), ``arrival`` the record's first arrival
     step of each ``message_kind`` message (``shape``, -1 throughout when none was sent) and ``lags`` the
     network's longest delay, or ``readings_bound()`` where ``message_kind`` is None (a bound that reads the
-    record itself: ``ukf_ccl``'s centre, from the broadcasts); ``"estimates"``, none, with the reason. A world
-    without a
+    record itself: ``ukf_ccl``'s centre, from the broadcasts); ``"estimates"``, none here, with the reason
+    (``pcrb`` sets the information-set bound, ``coloc_env.bounds.information_set``). A world without a
     ``readings_bound`` for the backend leaves its readings out, with the reason. Returns ``problem``."""
     backend = core.composition.backend
     content = backend.message_content
@@ -171,7 +171,7 @@ def with_delivered(problem: BoundProblem, core, record, message_kind: str | None
         problem.delivered_reason = (f"no delivered bound of {backend.name}'s readings on the "
                                     f"{core.composition.world.name} world")
     else:
-        problem.delivered_reason = (f"{backend.name}'s messages carry estimates (the sender's whole history), not "
-                                    "readings: a per-reading account of what arrived bounds no estimator that fuses "
-                                    "them")
+        problem.delivered_reason = (f"{backend.name}'s messages carry estimates: their delivered bound is the "
+                                    "information-set bound (coloc_env.bounds.information_set), which pcrb computes "
+                                    "from the record and the readings")
     return problem

@@ -40,7 +40,8 @@ def test_reproduce_wang2019_writes_metrics_report_and_figures(tmp_path):
     bounds = metrics["pcrb"]
     assert sorted(bounds) == ["default", "no_turn_rate_noise"]
     for block in bounds.values():
-        assert block["local"] > block["centralized"] > 0 and block["delivered"] is None
+        # the preset's ukf_dcl relays estimates: its delivered bound is the information-set bound
+        assert block["local"] > block["delivered"] >= block["centralized"] > 0
         assert sorted(block["rows"]) == ["CCL", "DCL", "IL"] and block["episodes"] == 3
         assert block["rows"]["CCL"]["mse"] == pytest.approx(block["rows"]["DCL"]["mse"], rel=1e-9)
         # IL reads no range, the bound every range: dead reckoning is far above it

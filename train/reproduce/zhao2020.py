@@ -256,12 +256,14 @@ def bound_block(config: BandwidthFusionConfig, mc: dict, seed: int) -> dict:
     The ``drift`` world is linear and Gaussian and every node reads at every step, so the bound (the
     covariance of the Kalman filter with every node's readings; ``local``: with its own) is the same for
     every episode: the bound of one seeded episode is the bound of this reproduction's runs, although
-    those are seeded ``default_rng([seed, r])`` and not ``pcrb``'s seed + e. ``delivered`` is not defined
-    (the fusion's messages carry estimates). Every pair's estimator uses no more than every node's
-    readings, so its efficiency is >= 1 up to Monte Carlo noise.
+    those are seeded ``default_rng([seed, r])`` and not ``pcrb``'s seed + e. ``delivered`` is left out: the
+    fusion's information-set bound depends on which components each pair's selection delivers, and the
+    bound's play (policy ``always``) is none of the pairs'. Every pair's estimator uses no more than every
+    node's readings, so its efficiency is >= 1 up to Monte Carlo noise.
     """
     flat = {f.name: getattr(config, f.name) for f in dataclasses.fields(config)}
     bounds = coloc_env.pcrb("bandwidth_fusion", episodes=1, seed=seed, **flat)
+    bounds.pop("delivered", None)  # not the pairs' deliveries (docstring)
     note = ("zhao2020: the drift world's bound does not depend on the episode (linear-Gaussian, every node reads "
             "at every step): one seeded episode gives the bound of the runs; x, y components, k = 1..K")
     return pcrb_block(bounds, {pair: mc[pair]["per_run_mse_xy"] for pair in PAIRS}, 1, seed, False, note)
