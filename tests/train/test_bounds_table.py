@@ -31,6 +31,8 @@ def test_a_run_writes_its_rows_and_the_table_and_a_rerun_reuses_them(tmp_path, c
     assert "0 computed" in capsys.readouterr().out
     assert bounds_table.main(["--episodes", "3", "--only", name, "--out", out]) == 0  # other settings: computed
     assert "1 computed" in capsys.readouterr().out
+    assert bounds_table.main(["--episodes", "3", "--only", name, "--out", out, "--fresh"]) == 0
+    assert "1 computed" in capsys.readouterr().out
 
 
 def test_the_generated_part_of_a_doc_is_replaced_and_a_doc_without_markers_refused(tmp_path):
