@@ -1,19 +1,17 @@
 """The bounds package records a play through the core's hooks, never by patching live objects."""
 
 import ast
-import dataclasses
 import importlib
 import pathlib
 import sys
 import warnings
 
 import numpy as np
-import pytest
 
 import coloc_env
 from coloc_env.bounds import record_play
 from coloc_env.networks.base import DELIVERY_CALLS, Network
-from coloc_env.parts import BACKENDS, PartConfig, Registry
+from coloc_env.parts import BACKENDS
 
 PACKAGE = pathlib.Path(coloc_env.__file__).parent / "bounds"
 
@@ -132,19 +130,3 @@ def test_the_old_bound_models_path_warns_and_still_imports():
                for w in caught)
     assert circles is importlib.import_module("coloc_env.bounds.models.circles")
     assert old.SHARED_AT_LEADER == {name for name, cls in BACKENDS.items() if cls.shared_estimate}
-
-
-def test_a_backend_must_say_what_its_messages_carry():
-    @dataclasses.dataclass(frozen=True)
-    class Mute(PartConfig):
-        name = "mute_for_test"
-        message_kind = "none"
-
-    registry = Registry("backend")
-    with pytest.raises(ValueError, match=r"backend 'mute_for_test' must declare message_content, one of"):
-        registry.register(Mute)
-    Mute.message_content = "nothing"
-    with pytest.raises(ValueError, match=r"backend 'mute_for_test' must declare shared_estimate \(True or False\)"):
-        registry.register(Mute)
-    Mute.shared_estimate = False
-    assert registry.register(Mute) is Mute
