@@ -120,6 +120,10 @@ STRESS_STEPS = int(os.environ.get("COLOC_STRESS_STEPS", "50"))
 # Ends whose cost grows with the value far beyond the rest (a particle filter at 5000 particles: ~20 s per step
 # on one core) run COSTLY_STEPS steps under `make stress` and are left out of `make test`.
 COSTLY = {("num_particles", "max")}
+# Ends of a recorded world's calibration window that need a new likelihood fit of the MRCLAM noise model (minutes;
+# the fits of the default window ship with the tests): `make stress` only.
+NEW_FIT = {("mrclam", "calibration_s", "max"), ("mrclam", "dt", "min"), ("mrclam_relay", "calibration_s", "max"),
+           ("mrclam_relay", "dt", "min")}
 COSTLY_STEPS = 2
 STRESS = os.environ.get("COLOC_STRESS") == "1"
 # A documented end that a rule between two fields refuses with the other field's default runs with the other
@@ -243,7 +247,8 @@ def _stress_cases():
         for label, field, value in _extremes(target):
             end = label.rsplit("=", 1)[1]
             case_id = f"{'/'.join(target)}:{label}"
-            marks = [] if STRESS or (field, end) not in COSTLY else [pytest.mark.skip(
+            costly = (field, end) in COSTLY or (target[1], field, end) in NEW_FIT
+            marks = [] if STRESS or not costly else [pytest.mark.skip(
                 reason=f"{field} at its {end}: `make stress` only (COLOC_STRESS=1)")]
             cases.append(pytest.param(target, field, value, end, id=case_id, marks=marks))
     return cases

@@ -41,6 +41,7 @@ import numpy as np
 
 import coloc_env
 from coloc_env.bounds.models import generative_worlds
+from coloc_env.config import BadInput
 from train.io import write_json, write_text
 from train.study import cell_metrics, run_cell
 
@@ -99,7 +100,7 @@ def replace_generated(path: str, text: str) -> None:
     with open(path) as fh:
         content = fh.read()
     if BEGIN not in content or END not in content:
-        raise ValueError(f"{path}: no {BEGIN} ... {END} markers to replace")
+        raise BadInput(f"{path}: no {BEGIN} ... {END} markers to replace")
     head, rest = content.split(BEGIN, 1)
     _, tail = rest.split(END, 1)
     write_text(path, f"{head}{BEGIN}\n{text}{END}{tail}")
