@@ -39,9 +39,11 @@ install: $(STAMP)
 demo: $(STAMP)
 	$(PY) -m train.demo --out results --coloc $(VENV)/bin/coloc
 
+# Two pytest workers, one per core, each with single-threaded BLAS and torch: a worker's BLAS threads would
+# otherwise compete with the other worker for the same two cores.
 test: $(STAMP)
 	$(VENV)/bin/ruff check .
-	MPLBACKEND=Agg $(PY) -m pytest -q -n 2
+	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 MPLBACKEND=Agg $(PY) -m pytest -q -n 2
 
 # The documentation site (mkdocs.yml) into site/, strictly: a warning (a broken link or reference) is an error.
 # tests/test_docs.py runs the same build in `make test`. NO_MKDOCS_2_WARNING=1 is Material's own switch for its

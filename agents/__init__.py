@@ -21,12 +21,11 @@ from __future__ import annotations
 import importlib
 import inspect
 import os
-import warnings
 from types import ModuleType
 
 from agents import contention, event_triggered, generic
 from agents.base import FixedActionPolicy, Policy, RandomPolicy
-from coloc_env.config import BadInput, check_seed
+from coloc_env.config import BadInput, check_seed, module_names
 from coloc_env.scenarios import REGISTRY
 
 COMPOSITION_BASELINES = ("always", "silent")
@@ -170,14 +169,15 @@ __all__ = ["FixedActionPolicy", "Policy", "RandomPolicy", "available_policies", 
            "make_policy", "policy_module", "strongest_baselines"]
 
 
-def __getattr__(name: str):
-    """The per-preset tables this module held before each preset's policy module declared them (deprecated)."""
-    tables = {"SCENARIO_POLICIES": lambda m: m.POLICIES, "BOUND_POLICIES": lambda m: getattr(m, "BOUNDS", None),
-              "ALIASES": lambda m: getattr(m, "ALIASES", None),
-              "STRONGEST_BASELINES": lambda m: tuple(m.STRONGEST_BASELINES)}
-    if name not in tables:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    warnings.warn(f"agents.{name} is deprecated: each preset's policy module declares it (agents.policy_module)",
-                  DeprecationWarning, stacklevel=2)
-    values = {scenario: tables[name](policy_module(scenario)) for scenario in REGISTRY}
+def _per_preset(read) -> dict:
+    values = {scenario: read(policy_module(scenario)) for scenario in REGISTRY}
     return {scenario: value for scenario, value in values.items() if value is not None}
+
+
+# the per-preset tables this module held before each preset's policy module declared them
+_TABLES = {"SCENARIO_POLICIES": lambda m: m.POLICIES, "BOUND_POLICIES": lambda m: getattr(m, "BOUNDS", None),
+           "ALIASES": lambda m: getattr(m, "ALIASES", None),
+           "STRONGEST_BASELINES": lambda m: tuple(m.STRONGEST_BASELINES)}
+__getattr__ = module_names(__name__, {name: (lambda read=read: _per_preset(read)) for name, read in _TABLES.items()},
+                           deprecated=dict.fromkeys(_TABLES, "each preset's policy module declares it "
+                                                             "(agents.policy_module)"))

@@ -307,3 +307,22 @@ def check_choice(name: str, value: Any, choices: tuple) -> None:
         ok = False
     if not ok:
         raise BadInput(f"{name} must be one of {choices}, got {value!r}")
+
+
+def module_names(module: str, names: dict[str, Any], deprecated: dict[str, str] | None = None, stacklevel: int = 2):
+    """A module-level ``__getattr__`` (PEP 562) for ``module`` that computes each of ``names`` on access
+    (``names[name]()``: a table read from the registries, so it is never stale). A name in ``deprecated`` also
+    warns ``"{module}.{name} is deprecated: {reason}"`` (DeprecationWarning, pointed at the caller's line).
+    Any other name is the usual AttributeError. ``stacklevel`` 3 where the module's own ``__getattr__`` calls the
+    returned function (to import this module lazily)."""
+    import warnings
+
+    def __getattr__(name: str):
+        if name not in names:
+            raise AttributeError(f"module {module!r} has no attribute {name!r}")
+        if deprecated and name in deprecated:
+            warnings.warn(f"{module}.{name} is deprecated: {deprecated[name]}", DeprecationWarning,
+                          stacklevel=stacklevel)
+        return names[name]()
+
+    return __getattr__

@@ -16,7 +16,7 @@ import gymnasium
 import numpy as np
 from pettingzoo import ParallelEnv
 
-from coloc_env.config import BadInput, build_config, check_range, check_seed
+from coloc_env.config import BadInput, build_config, check_range, check_seed, module_names
 from coloc_env.rendering import Renderer
 from coloc_env.scenarios.base import Scenario
 
@@ -253,14 +253,12 @@ class CoLocParallelEnv(ParallelEnv):
         self._renderer.close()
 
 
-def __getattr__(name: str):
-    """The table of episode-length fields this module held before each preset declared its own (deprecated)."""
-    if name != "EPISODE_LENGTH_FIELDS":
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    import warnings
-
+def _episode_length_fields() -> dict[str, str]:
     from coloc_env.scenarios import REGISTRY
 
-    warnings.warn("coloc_env.env.EPISODE_LENGTH_FIELDS is deprecated: a preset's class declares "
-                  "episode_length_field", DeprecationWarning, stacklevel=2)
     return {n: cls.episode_length_field for n, cls in REGISTRY.items() if cls.episode_length_field != "horizon"}
+
+
+# the table of episode-length fields this module held before each preset declared its own
+__getattr__ = module_names(__name__, {"EPISODE_LENGTH_FIELDS": _episode_length_fields},
+                           deprecated={"EPISODE_LENGTH_FIELDS": "a preset's class declares episode_length_field"})

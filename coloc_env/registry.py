@@ -35,17 +35,14 @@ import numpy as np
 import pettingzoo
 
 from coloc_env import envs
+from coloc_env.config import module_names
 from coloc_env.scenarios import REGISTRY
 
 NAMESPACE = "coloc"
 
 
-def __getattr__(name: str):
-    if name == "VERSIONS":  # preset -> the version it is registered under (its class's ``version``)
-        return {preset: cls.version for preset, cls in REGISTRY.items()}
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
+# preset -> the version it is registered under (its class's ``version``)
+__getattr__ = module_names(__name__, {"VERSIONS": lambda: {preset: cls.version for preset, cls in REGISTRY.items()}})
 def env_id(preset: str) -> str:
     """The registered id of a preset at its current version, e.g. `coloc/relay_ukf-v1`."""
     if not isinstance(preset, str) or preset not in REGISTRY:

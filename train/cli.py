@@ -742,15 +742,18 @@ if __name__ == "__main__":
     sys.exit(main())
 
 
-def __getattr__(name: str):
-    """The per-preset unit tables this module held before each preset declared them (deprecated)."""
-    if name not in ("METRIC_UNITS", "COMMUNICATION_UNITS"):
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    import warnings
-
+def _preset_fields(field: str) -> dict:
     from coloc_env.scenarios import REGISTRY
 
-    warnings.warn(f"train.cli.{name} is deprecated: a preset's class declares metric_unit and communication",
-                  DeprecationWarning, stacklevel=2)
-    field = "metric_unit" if name == "METRIC_UNITS" else "communication"
     return {scenario: getattr(cls, field) for scenario, cls in REGISTRY.items()}
+
+
+def __getattr__(name: str):
+    """The per-preset unit tables this module held before each preset declared them (deprecated)."""
+    from coloc_env.config import module_names  # imported here: `coloc --help` imports no part
+
+    return module_names(__name__, {"METRIC_UNITS": lambda: _preset_fields("metric_unit"),
+                                   "COMMUNICATION_UNITS": lambda: _preset_fields("communication")},
+                        deprecated=dict.fromkeys(("METRIC_UNITS", "COMMUNICATION_UNITS"),
+                                                 "a preset's class declares metric_unit and communication"),
+                        stacklevel=3)(name)

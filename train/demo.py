@@ -127,11 +127,9 @@ if __name__ == "__main__":
 
 
 def __getattr__(name: str):
-    """The table of demo budgets this module held before each preset's hyperparameters declared them (deprecated)."""
-    if name != "DEMO_RUNS":
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    import warnings
+    """The table of demo budgets this module held before each preset's hyperparameters declared them
+    (deprecated)."""
+    from coloc_env.config import module_names  # imported here: `coloc --help` imports no part
 
-    warnings.warn("train.demo.DEMO_RUNS is deprecated: DEMO_RUN in train/hyperparams/<preset>.py",
-                  DeprecationWarning, stacklevel=2)
-    return hyperparams.presets_declaring("DEMO_RUN")
+    return module_names(__name__, {"DEMO_RUNS": lambda: hyperparams.presets_declaring("DEMO_RUN")},
+                        deprecated={"DEMO_RUNS": "DEMO_RUN in train/hyperparams/<preset>.py"}, stacklevel=3)(name)

@@ -39,7 +39,7 @@ import math
 
 import numpy as np
 
-from coloc_env.config import BadInput
+from coloc_env.config import BadInput, module_names
 
 EVAL_SEED_BASE = 10**6
 VALIDATION_SEED_BASE = 2 * 10**6
@@ -554,14 +554,12 @@ def threshold_sweep(spreads, episodes: int, seed_base: int = VALIDATION_SEED_BAS
     return out
 
 
-def __getattr__(name: str):
-    """The table of extra rows this module held before each preset's hyperparameters declared them (deprecated)."""
-    if name != "EXTRA_ROWS":
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    import warnings
-
+def _extra_rows() -> dict:
     from train import hyperparams
 
-    warnings.warn("train.evaluate.EXTRA_ROWS is deprecated: EVALUATE_EXTRA_ROWS in train/hyperparams/<preset>.py",
-                  DeprecationWarning, stacklevel=2)
     return hyperparams.presets_declaring("EVALUATE_EXTRA_ROWS")
+
+
+# the table of extra rows this module held before each preset's hyperparameters declared them
+__getattr__ = module_names(__name__, {"EXTRA_ROWS": _extra_rows},
+                           deprecated={"EXTRA_ROWS": "EVALUATE_EXTRA_ROWS in train/hyperparams/<preset>.py"})

@@ -29,7 +29,7 @@ import os
 
 import numpy as np
 
-from coloc_env.config import BadInput
+from coloc_env.config import BadInput, module_names
 from train.io import read_json, save_figure, write_json, write_text
 
 LOCK_NAME = ".leaderboard.lock"
@@ -788,15 +788,15 @@ def markdown(out: str) -> str:
     return "\n".join(lines)
 
 
-def __getattr__(name: str):
-    """The per-preset tables this module held before each preset declared them (deprecated)."""
-    if name not in ("METRICS", "COMMUNICATION", "TARGETS"):
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    import warnings
-
+def _per_preset(read) -> dict:
     from coloc_env.scenarios import REGISTRY
 
-    warnings.warn(f"train.leaderboard.{name} is deprecated: metric() and communication() read the preset's class, "
-                  "target() its train/hyperparams module", DeprecationWarning, stacklevel=2)
-    read = {"METRICS": metric, "COMMUNICATION": communication, "TARGETS": target}[name]
     return {scenario: read(scenario) for scenario in REGISTRY}
+
+
+# the per-preset tables this module held before each preset declared them
+__getattr__ = module_names(
+    __name__, {"METRICS": lambda: _per_preset(metric), "COMMUNICATION": lambda: _per_preset(communication),
+               "TARGETS": lambda: _per_preset(target)},
+    deprecated=dict.fromkeys(("METRICS", "COMMUNICATION", "TARGETS"), "metric() and communication() read the "
+                             "preset's class, target() its train/hyperparams module"))

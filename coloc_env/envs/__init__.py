@@ -28,6 +28,7 @@ from collections.abc import Callable
 from pettingzoo.utils.conversions import parallel_to_aec_wrapper
 from pettingzoo.utils.wrappers import OrderEnforcingWrapper
 
+from coloc_env.config import module_names
 from coloc_env.env import CoLocParallelEnv
 from coloc_env.scenarios import REGISTRY
 
@@ -77,10 +78,6 @@ def _remove_module(scenario_cls) -> None:
 REGISTRY.subscribe(_add_module, _remove_module)
 
 
-def __getattr__(name: str):
-    if name == "PRESET_MODULES":  # the presets that have a module here: every registered one
-        return tuple(REGISTRY)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
+# the presets that have a module here: every registered one
+__getattr__ = module_names(__name__, {"PRESET_MODULES": lambda: tuple(REGISTRY)})
 __all__ = ["PRESET_MODULES", "constructors"]

@@ -69,7 +69,7 @@ import numpy as np
 from coloc_env.config import BadInput
 from coloc_env.draws import uniforms
 from coloc_env.networks.base import NODE_STREAM, Network
-from coloc_env.networks.broadcast import BroadcastNetwork
+from coloc_env.networks.broadcast import Broadcast, BroadcastNetwork
 from coloc_env.parts import NETWORKS, PartConfig, check_range
 from coloc_env.primitives.relay import check_distance
 
@@ -84,7 +84,7 @@ class GilbertElliott(PartConfig):
     """Config of the ``gilbert_elliott`` network (see the module table)."""
 
     name = "gilbert_elliott"
-    carries = frozenset({"broadcast", "chain", "central", "packets"})
+    carries = Broadcast.carries  # broadcast whose losses come in bursts: the same message kinds
     comm_range: float = 200.0
     loss_good: float = 0.0
     loss_bad: float = 0.9

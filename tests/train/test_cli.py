@@ -388,15 +388,25 @@ def test_list_ok_and_part_filters_keep_only_their_rows(capsys):
     assert "--world must be one of drift" in capsys.readouterr().err
 
 
-def test_a_composition_trains_and_evaluates_by_its_name(tmp_path, capsys):
+def test_a_composition_trains_and_evaluates_by_its_name(tmp_path, capsys, monkeypatch):
     """``coloc train WORLD/NETWORK/BACKEND`` (a cross-combination of parts) uses the composition's settings
     module (train/hyperparams/circles__broadcast__ukf_ccl.py), and ``coloc evaluate --policy all`` judges its
-    model against always and silent in OUT/circles_broadcast_ukf_ccl/."""
+    model against always and silent in OUT/circles_broadcast_ukf_ccl/. ``all`` is every row of
+    ``train.evaluate.all_rows`` plus the models found; the rows played here are always, silent and random (the
+    event-triggered families and greedy, which take minutes on 800-step episodes, are played by their own
+    tests: tests/agents/test_event_triggered.py, tests/train/test_frontier.py)."""
+    import train.evaluate
+    from train.cli import _policies_for
+
     name, out = "circles/broadcast/ukf_ccl", str(tmp_path)
     assert main(["train", name, "--timesteps", "64", "--curve-points", "0", "--out", out]) == 0
     model = os.path.join(out, *name.split("/"), "seed0", "model.zip")
     meta = read_json(os.path.join(os.path.dirname(model), "model.json"))
     assert meta["scenario"] == name and meta["env_config"] == {"reward": "trace", "communication_cost": 0.5}
+    every_row = train.evaluate.all_rows(name)
+    assert {"always", "silent", "random", "greedy", "periodic", "uncertainty"} <= set(every_row)
+    assert _policies_for(name, "all", out) == every_row + [model]
+    monkeypatch.setattr(train.evaluate, "all_rows", lambda scenario: ["always", "silent", "random"])
     assert main(["evaluate", name, "--policy", "all", "--models", out, "--episodes", "2", "--out", out]) == 0
     table = read_json(os.path.join(out, "circles_broadcast_ukf_ccl", "leaderboard.json"))
     assert {"always", "silent", "random", model} <= set(table)

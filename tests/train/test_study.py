@@ -310,3 +310,20 @@ def test_study_rows_carry_the_bounds_efficiency_and_the_nees_band(tmp_path):
     report = (tmp_path / "study" / "drift_bernoulli_delay" / "report.md").read_text()
     assert "## RMSE (m) and efficiency" in report and "## Posterior Cramér-Rao bounds" in report
     assert "% in band" in report
+
+
+def test_sweeps_over_the_shared_medium_and_the_bursty_links(tmp_path):
+    """``--sweep`` reaches the new channels' fields: under ``always`` every agent but the centre (which only
+    listens) sends in every slot, so twice the slots charge exactly twice the frames and change nothing else; a
+    bad state that loses every frame delivers a subset of what a lossless one does (the same counter-based
+    draws), so its delivered bound cannot be lower."""
+    slots, _ = run_study("circles", "contention", "ukf_ccl", sweep="network.slots=1,2", episodes=2, horizon=4,
+                         batched=True, out=str(tmp_path / "contention"))
+    one, two = slots["backends"]["ukf_ccl"]["1"], slots["backends"]["ukf_ccl"]["2"]
+    assert two["messages_per_step"] == pytest.approx(2 * one["messages_per_step"], rel=1e-12)
+    assert two["per_episode_error"] == one["per_episode_error"]
+    bursts, _ = run_study("circles", "gilbert_elliott", "ukf_ccl", sweep="network.loss_bad=0,1", episodes=2,
+                          horizon=4, batched=True, out=str(tmp_path / "bursts"))
+    lossless, lossy = bursts["backends"]["ukf_ccl"]["0"], bursts["backends"]["ukf_ccl"]["1"]
+    assert lossy["pcrb_delivered"] >= lossless["pcrb_delivered"] - 1e-12
+    assert lossy["messages_per_step"] <= lossless["messages_per_step"]

@@ -54,8 +54,7 @@ actions that drive the rows), ``peers`` (VMAS and filterpy), ``against`` (``--ag
 (``--scaling``) and ``measure`` (``per_second``, the rate every row reports).
 """
 
-import warnings
-
+from coloc_env.config import module_names
 from train.bench.against import bench_tree, compare_rows, export_commit, repository_root, run_against
 from train.bench.measure import BATCHES, per_second
 from train.bench.peers import PEERS, bench_vmas
@@ -86,8 +85,6 @@ __all__ = ["BACKEND_CALLS", "BATCHES", "ESTIMATOR_STEPS", "ONE_EPISODE", "ONE_EP
            "scaling_compositions", "scaling_row", "scaling_world"]
 
 
-def __getattr__(name: str):
-    if name == "_rate":  # the name of ``per_second`` when train.bench was one module
-        warnings.warn("train.bench._rate is train.bench.measure.per_second", DeprecationWarning, stacklevel=2)
-        return per_second
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+# the name of ``per_second`` when train.bench was one module
+__getattr__ = module_names(__name__, {"_rate": lambda: per_second},
+                           deprecated={"_rate": "it is train.bench.measure.per_second"})

@@ -264,9 +264,10 @@ def bench_scenario(name: str, min_seconds: float, batches=BATCHES) -> list[dict]
             label, factory, ours, our_factory = PEERS[name]
             add(ours, batch, per_second(our_factory(batch), min_seconds))
             add(label, batch, per_second(factory(batch), min_seconds))
-    # the posterior Cramér-Rao bound of one episode (coloc_env.pcrb: the play and the recursion), per env-step
+    # the posterior Cramér-Rao bound of one episode (coloc_env.pcrb: the play and the recursion), per env-step;
+    # one warm-up call: a whole episode reaches every compiled kernel it uses, and each call takes seconds
     steps = coloc_env.make_core(name, batch=1).horizon
-    add(PCRB_ROW, 1, steps * per_second(lambda: coloc_env.pcrb(name, episodes=1, seed=0), min_seconds))
+    add(PCRB_ROW, 1, steps * per_second(lambda: coloc_env.pcrb(name, episodes=1, seed=0), min_seconds, warm_up=1))
     if name in EXTRA_BENCHES:
         rows += EXTRA_BENCHES[name](min_seconds)
     return rows
