@@ -82,6 +82,7 @@ records a play through it.
 
 from __future__ import annotations
 
+import copy
 import functools
 import inspect
 from typing import ClassVar
@@ -245,6 +246,37 @@ class Network:
         self.link_deliveries = np.zeros((B, N))
         self.collisions = np.zeros((B, N))
         self.last_chain = None
+
+    # --- the step's record ---------------------------------------------------------------
+    # the (B, ...) arrays that describe one step's sending (the infos report them); a subclass that keeps more
+    # (relay's ``cost_sent``) names them too
+    STEP_RECORD = ("messages_sent", "floats_sent", "delivered", "node_messages", "node_floats", "transmissions",
+                   "link_attempts", "link_deliveries", "collisions")
+
+    def step_record(self) -> dict:
+        """A copy of what this step sent (``STEP_RECORD`` and the last relay chain): a core that receives
+        ahead (``coloc_env.scenarios.composed``) keeps one step's record while the network runs the next."""
+        record = {name: np.array(getattr(self, name)) for name in self.STEP_RECORD}
+        record["last_chain"] = copy.deepcopy(self.last_chain)
+        return record
+
+    def restore_step_record(self, record: dict) -> None:
+        """Make ``record`` (``step_record``'s) the step's record again."""
+        for name, value in record.items():
+            setattr(self, name, copy.deepcopy(value) if name == "last_chain" else value.copy())
+
+    def clear_step_record(self, idx: np.ndarray) -> None:
+        """No sending in the copies ``idx``: a copy that starts anew reports no messages and no chain, not
+        those of the episode before."""
+        for name in self.STEP_RECORD:
+            getattr(self, name)[idx] = 0
+        if self.last_chain is not None:
+            self.last_chain.clear(idx)
+
+    def sending_cost(self) -> np.ndarray:
+        """(B, N) what the network itself charged each sender this step, beside the composition's
+        ``communication_cost`` per message: 0 here (``relay`` charges its hops' energy)."""
+        return np.zeros((self.batch, self.num_agents))
 
     def distances(self) -> np.ndarray:
         """(B, N, N) distances between the agents at this step (read only: computed once per step and shared

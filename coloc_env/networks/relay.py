@@ -100,6 +100,8 @@ class Relay(PartConfig):
 
 
 class RelayNetwork(Network):
+    STEP_RECORD = (*Network.STEP_RECORD, "cost_sent")
+
     def __init__(self, config: Relay, num_agents, batch, message_kind, rounds=1):
         super().__init__(config, num_agents, batch, message_kind, rounds)
         config.check_hop_budget(num_agents, "network.", "world.num_agents")
@@ -157,6 +159,10 @@ class RelayNetwork(Network):
     def begin(self, k, positions, decisions) -> None:
         super().begin(k, positions, decisions)
         self.cost_sent = np.zeros_like(self.cost_sent)
+
+    def sending_cost(self) -> np.ndarray:
+        """The hops' energy each holder spent this step (``cost_sent``: the module table)."""
+        return self.cost_sent
 
     def next_hop_choice(self):
         """(B, N) each holder's next hop for the chain being resolved: its only entry (``per_holder``), or its

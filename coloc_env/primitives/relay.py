@@ -63,6 +63,13 @@ class RelayChain:
         target[copy, self.chain[copy, position]] = self.chain[copy, position + 1]
         return target
 
+    def clear(self, idx: np.ndarray) -> None:
+        """No chain in the copies ``idx`` (a copy that starts anew reports none)."""
+        self.chain[idx] = -1
+        self.length[idx] = 0
+        self.hop_distance[idx] = np.nan
+        self.stop[idx] = -1
+
     def position_of(self, num_platforms: int) -> np.ndarray:
         """(B, N): each platform's place in the chain (0 = source), -1 if not reached."""
         B = self.chain.shape[0]

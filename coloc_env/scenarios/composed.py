@@ -107,7 +107,6 @@ world's unit for ``target``), ``trace`` (m^2, the position block of its covarian
 
 from __future__ import annotations
 
-import copy
 import functools
 
 import gymnasium
@@ -118,22 +117,7 @@ from coloc_env.scenarios.base import Scenario
 
 LOG_TRACE_BOUND = 50.0
 DISTANCE_SCALE = 100.0
-# what a network records of one step's sending (the infos report it); RelayChain last_chain apart
 LINK_COUNTS = ("transmissions", "link_attempts", "link_deliveries", "collisions")  # coloc_env.networks.base
-_RECORD_ARRAYS = ("messages_sent", "floats_sent", "delivered", "cost_sent", "node_messages", "node_floats",
-                  *LINK_COUNTS)
-
-
-def _network_record(network) -> dict:
-    record = {name: np.array(getattr(network, name)) for name in _RECORD_ARRAYS
-              if getattr(network, name, None) is not None}
-    record["last_chain"] = copy.deepcopy(network.last_chain)
-    return record
-
-
-def _restore_network_record(network, record: dict) -> None:
-    for name, value in record.items():
-        setattr(network, name, copy.deepcopy(value) if name == "last_chain" else value.copy())
 
 
 class ComposedScenario(Scenario):
@@ -319,7 +303,7 @@ class ComposedScenario(Scenario):
         self._reward[idx] = 0.0
         if self.receives_ahead:
             self._receive_ahead(idx)
-        self._clear_step_record(idx)
+        self.network.clear_step_record(idx)
 
     def _receive_ahead(self, idx: np.ndarray) -> None:
         """Readings of the copies ``idx`` at their time k, and the network's step-k delivery of them, to the
@@ -329,7 +313,7 @@ class ComposedScenario(Scenario):
         the backend takes only ``idx``'s."""
         B, N = self.batch, self.num_agents
         net = self.network
-        done_step = _network_record(net)
+        done_step = net.step_record()
         none = np.zeros((B, N, 0), np.int64)
         self.readings = self._read(none)
         net.begin(self.world.k, self.world.positions().copy(), none)
@@ -337,28 +321,14 @@ class ComposedScenario(Scenario):
             self.backend.receive(self.readings, idx)
         else:
             self.stand_in(self.readings)
-        coming = _network_record(net)
+        coming = net.step_record()
         if self._ahead_record is None:
             self._ahead_record = coming
         else:
             for name, value in coming.items():
                 if name != "last_chain":
                     self._ahead_record[name][idx] = value[idx]
-        _restore_network_record(net, done_step)
-
-    def _clear_step_record(self, idx: np.ndarray) -> None:
-        """What the network recorded of the last step, cleared for the copies that start anew (their infos at
-        reset report no messages and no chain, not those of the episode before)."""
-        net = self.network
-        for name in _RECORD_ARRAYS:
-            if getattr(net, name, None) is not None:
-                getattr(net, name)[idx] = 0
-        chain = net.last_chain
-        if chain is not None:
-            chain.chain[idx] = -1
-            chain.length[idx] = 0
-            chain.hop_distance[idx] = np.nan
-            chain.stop[idx] = -1
+        net.restore_step_record(done_step)
 
     def part_generators(self, rng: np.random.Generator) -> tuple:
         """The generators of the world, the network and the backend for one copy's episode.
@@ -411,7 +381,7 @@ class ComposedScenario(Scenario):
         self._truth_pose = None if poses is None else poses().copy()
         if self.receives_ahead:  # read, carried and received before the agents decided
             readings = self.readings
-            _restore_network_record(self.network, self._ahead_record)
+            self.network.restore_step_record(self._ahead_record)
         else:
             readings = self.readings = self._read(sensing)
             self.network.begin(self.world.k, truth, transport)
@@ -449,9 +419,7 @@ class ComposedScenario(Scenario):
     def communication_costs(self) -> np.ndarray:
         """What each agent's sending cost this step (B, N): ``communication_cost`` per message it sent, plus the
         cost the network itself charged it (``relay``'s hop costs; 0 for the other networks)."""
-        cost = self.composition.communication_cost * self.network.messages_sent
-        network_cost = getattr(self.network, "cost_sent", None)  # relay hop costs, where the network sets them
-        return cost if network_cost is None else cost + network_cost
+        return self.composition.communication_cost * self.network.messages_sent + self.network.sending_cost()
 
     # --- views -------------------------------------------------------------------------
     def _target_truth(self, offset: int = 0, state: np.ndarray | None = None) -> np.ndarray:
