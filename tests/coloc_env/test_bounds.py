@@ -99,28 +99,15 @@ def test_bad_arguments_are_named():
 
 
 GENERATIVE = [r for r in coloc_env.compatibility() if r["ok"] and r["world"] not in RECORDED_WORLDS]
-# Known defect, kept visible (strict: the mark fails once it is fixed): on circles over contention, range_ls's MSE
-# lies below its information-set delivered bound (0.386 against 0.469 m^2, 4 episodes), so that bound misses
-# information range_ls uses there.
-KNOWN_BOUND_DEFECTS = {"circles/contention/range_ls"}
+CONFIRM_EPISODES = 64
 
 
-@pytest.mark.parametrize("row", [
-    pytest.param(r, marks=pytest.mark.xfail(strict=True, reason="the delivered bound of range_ls over contention"))
-    if f"{r['world']}/{r['network']}/{r['backend']}" in KNOWN_BOUND_DEFECTS else r for r in GENERATIVE],
-    ids=lambda r: f"{r['world']}/{r['network']}/{r['backend']}")
-def test_every_backend_mse_is_above_the_centralized_bound(row):
-    """Over 4 seeded episodes of 14 steps (steps >= 10 averaged), policy always: MSE >= pcrb_centralized - 3 SE
-    and >= pcrb_delivered - 3 SE, which every composition defines (the readings' delivered bound where messages
-    carry readings, the information-set bound where they carry estimates). Over ``gilbert_elliott`` 8 episodes:
-    its bursts make an episode's error heavy-tailed (a few episodes in a long burst carry the mean), so 4
-    episodes' spread understates the standard error."""
-    spec = coloc_env.compose(row["world"], row["network"], row["backend"], horizon=14)
-    episodes, seed = (8 if row["network"] == "gilbert_elliott" else 4), 100
+def _mse_per_episode(spec, seeds) -> np.ndarray:
+    """(E,) each seeded episode's MSE over steps >= 10 (all agents), policy always, one copy per episode."""
     per_episode = []
-    for e in range(episodes):
+    for s in seeds:
         core = coloc_env.make_core(spec, batch=1)
-        core.reset([np.random.default_rng(seed + e)])
+        core.reset([np.random.default_rng(s)])
         action = np.asarray(core.action_vector("maximum"), float)
         errors = []
         for k in range(core.horizon):
@@ -128,13 +115,63 @@ def test_every_backend_mse_is_above_the_centralized_bound(row):
             if k >= 10:
                 errors.append(core.info()["position_error"][0] ** 2)
         per_episode.append(np.mean(errors))
-    per_episode = np.array(per_episode)
+    return np.array(per_episode)
+
+
+def _below_bounds(spec, episodes: int, seed: int) -> list:
+    """The bounds that the MSE of episodes seed..seed+E-1 lies more than 3 standard errors below (empty: none)."""
+    per_episode = _mse_per_episode(spec, range(seed, seed + episodes))
     bounds = pcrb(spec, episodes=episodes, seed=seed)
-    se = per_episode.std(ddof=1) / np.sqrt(episodes)
     assert "delivered" in bounds, bounds.get("delivered_reason")
-    for key in ("centralized", "delivered"):
-        bound = bounds[key][10:].mean()
-        assert per_episode.mean() >= bound - 3 * se, (key, per_episode.mean(), bound, se)
+    se = per_episode.std(ddof=1) / np.sqrt(episodes)
+    return [(key, per_episode.mean(), bounds[key][10:].mean(), se) for key in ("centralized", "delivered")
+            if per_episode.mean() < bounds[key][10:].mean() - 3 * se]
+
+
+@pytest.mark.parametrize("row", GENERATIVE, ids=lambda r: f"{r['world']}/{r['network']}/{r['backend']}")
+def test_every_backend_mse_is_above_the_centralized_bound(row):
+    """Over 4 seeded episodes of 14 steps (steps >= 10 averaged), policy always: MSE >= pcrb_centralized - 3 SE
+    and >= pcrb_delivered - 3 SE, which every composition defines (the readings' delivered bound where messages
+    carry readings, the information-set bound where they carry estimates). Over ``gilbert_elliott`` 8 episodes:
+    its bursts make an episode's error heavy-tailed (a few episodes in a long burst carry the mean), so 4
+    episodes' spread understates the standard error.
+
+    A row that fails that screen is decided on ``CONFIRM_EPISODES`` episodes (the first ones among them). An
+    episode's MSE is skewed (its coefficient of variation 0.5-1.2 here), and 4 low draws have a small spread
+    too, so for an estimator that attains its bound the screen alone fails often: ``range_ls`` on
+    ``circles/contention``, the per-agent Kalman filter whose MSE is its local bound (the test below), fails it
+    in 8.7 % of groups of 4 episodes (resampled from 4000), screen and confirmation together in 0.2 %; an
+    estimator 30 % below its bound fails both in 33 %, as the screen alone does (docs/bounds.md, "Checks")."""
+    spec = coloc_env.compose(row["world"], row["network"], row["backend"], horizon=14)
+    episodes, seed = (8 if row["network"] == "gilbert_elliott" else 4), 100
+    if _below_bounds(spec, episodes, seed):
+        below = _below_bounds(spec, CONFIRM_EPISODES, seed)
+        assert not below, below
+
+
+def test_range_ls_over_contention_receives_nothing_and_attains_its_local_bound():
+    """Under always every platform transmits in the one slot and every frame collides: nothing is delivered, and
+    ``range_ls`` on ``circles`` (one range a step, never the 3 anchors its least-squares fix needs) is each
+    platform's Kalman filter on its odometry and, for an anchor, its fixes: the problem the local bound solves.
+    Its MSE equals that bound within Monte Carlo error, which the delivered bound is too (to 1e-12)."""
+    spec = coloc_env.compose("circles", "contention", "range_ls", horizon=14)
+    bounds = pcrb(spec, episodes=4, seed=100)
+    np.testing.assert_allclose(bounds["delivered"], bounds["local"], rtol=1e-12)
+    E = 2000
+    core = coloc_env.make_core(spec, batch=E)
+    core.reset([np.random.default_rng(100 + e) for e in range(E)])
+    action = np.asarray(core.action_vector("maximum"), float)
+    errors, fixes = [], 0
+    for _ in range(core.horizon):
+        core.advance(np.broadcast_to(action, (E, core.num_agents, action.size)).copy())
+        assert not core.network.delivered.any()
+        fixes += int(core.backend.last_fixed.sum())
+        errors.append(core.info()["position_error"] ** 2)
+    assert fixes == 0
+    per_episode = np.mean(errors[10:], axis=(0, 2))
+    ratio = per_episode.mean() / bounds["delivered"][10:].mean()
+    se = per_episode.std(ddof=1) / np.sqrt(E) / bounds["delivered"][10:].mean()
+    assert abs(ratio - 1.0) < 3 * se, (ratio, se)
 
 
 def test_a_callable_policy_plays_the_same_episodes_as_the_named_one():
