@@ -12,21 +12,36 @@ family                   knob               agent i sends at step k when        
 ``periodic:P``           P in {1, 2, ...}   (k - i) mod P = 0 (staggered by index:      P = 1        P = inf
                          or ``inf``         round robin when P = N)
 ``uncertainty:tau``      tau in [0, inf]    tr P_i >= tau, tr P_i its own position      tau = 0      tau = inf
-                         (m^2)              covariance trace (observation entry N:
+                         (m^2)              covariance trace (feature ``log_trace``:
                                             log tr P_i, clipped to [-50, 50])
+``send_on_delta:delta``  delta in [0, inf]  ||xhat_i,k - xhat_i,ref|| >= delta, the     delta = 0    delta = inf
+                         (m)                displacement of its own estimate since its
+                                            reference transmission (feature
+                                            ``displacement``, in units of 100 m)
+``value:tau``            tau in [0, inf]    v_i,k >= tau, v_i,k the expected trace      tau = 0      tau = inf
+                         (m^2)              reduction its message would bring (feature
+                                            ``message_value``, ``Backend.message_value``)
 =======================  =================  ==========================================  ===========  ============
 
-The rules read only the agent's own observation (its index one-hot, ``[0, N)``; log tr P_i, ``[N]``; the
-step fraction k / horizon, ``[3N + 1]``; the composed observation table of
-``coloc_env.scenarios.composed``) and the composition's static description (which action entries are
-transport, the horizon): never ``info`` nor the env's state. They are the baselines a learned
-communication policy must beat at its own message rate (``train.frontier``): Trimpe and D'Andrea (2014)
-trigger on the estimator's variance (``uncertainty``); periodic transmission is the time-triggered
+The reference transmission of ``send_on_delta`` and ``value`` is the agent's last transmission that was
+delivered (acknowledged to it, where the network gives acknowledgements) or, without acknowledgements, its
+last transmission; before any, the start of the episode (the composed observation's table). At knob 0 a
+rule sends at every step and at inf never, whatever it observes, so the ends are ``always`` and
+``silent`` exactly.
+
+The rules read only the agent's own observation, by the feature names of the composed observation
+(``ComposedScenario.feature_index``: its index one-hot ``index``, ``log_trace``, ``step_fraction`` k /
+horizon, ``displacement``, ``message_value``; the table of ``coloc_env.scenarios.composed``) and the
+composition's static description (which action entries are transport, the horizon): never ``info`` nor
+the env's state. They are the baselines a learned communication policy must beat at its own message rate
+(``train.frontier``): Trimpe and D'Andrea (2014) trigger on the estimator's variance (``uncertainty``);
+send-on-delta (Miskowicz 2006) on the change of what was last sent; value-of-information scheduling (Wu et
+al. 2013) on what the message would tell the receivers; periodic transmission is the time-triggered
 reference every event-triggered scheme is compared with.
 
 Applies to plain compositions whose network has a transport decision (a block whose maximum and minimum
-differ: ``transmit``, a relay's ``next_hop``, a bandwidth ``selection``); ``uncertainty`` also needs a
-backend with a covariance. Elsewhere the factories raise ``ValueError`` saying why.
+differ: ``transmit``, a relay's ``next_hop``, a bandwidth ``selection``); ``uncertainty`` and ``value``
+also need a backend with a covariance. Elsewhere the factories raise ``ValueError`` saying why.
 """
 
 from __future__ import annotations
@@ -84,13 +99,15 @@ class TransmitRule(Policy):
         self.horizon = int(scenario.horizon)
         self.actions = {True: send, False: quiet}
         self.order = list(env.possible_agents)
+        self.index = {name: scenario.feature_index(name) for name in ("index", "log_trace", "step_fraction")}
 
     def agent_index(self, observation: np.ndarray) -> int:
-        return int(np.argmax(observation[: self.num_agents]))
+        start = self.index["index"]
+        return int(np.argmax(observation[start:start + self.num_agents]))
 
     def step_index(self, observation: np.ndarray) -> int:
         """k from the observed step fraction k / horizon."""
-        return int(round(float(observation[3 * self.num_agents + 1]) * self.horizon))
+        return int(round(float(observation[self.index["step_fraction"]]) * self.horizon))
 
     def sends(self, observation: np.ndarray) -> bool:  # pragma: no cover - interface
         raise NotImplementedError
@@ -120,16 +137,62 @@ class Uncertainty(TransmitRule):
 
     def __init__(self, env, knob: float):
         super().__init__(env, knob)
-        from coloc_env.backends.base import Backend
-
-        backend = env.unwrapped.scenario.backend
-        if type(backend).position_cov is Backend.position_cov:
-            raise BadInput(f"policy 'uncertainty' reads the agent's own covariance; backend "
-                           f"{env.unwrapped.scenario.composition.backend.name} keeps none")
+        _needs_covariance(env, "uncertainty")
         self.log_threshold = math.log(self.knob) if self.knob > 0 else -math.inf
 
     def sends(self, observation):
-        return float(observation[self.num_agents]) >= self.log_threshold
+        return float(observation[self.index["log_trace"]]) >= self.log_threshold
+
+
+def _needs_covariance(env, family: str) -> None:
+    """A ``BadInput`` where the composition's backend keeps no position covariance (what ``family`` reads)."""
+    from coloc_env.backends.base import Backend
+
+    backend = env.unwrapped.scenario.backend
+    if type(backend).position_cov is Backend.position_cov and not hasattr(backend, "local_position_cov"):
+        raise BadInput(f"policy {family!r} reads the agent's own covariance; backend "
+                       f"{env.unwrapped.scenario.composition.backend.name} keeps none")
+
+
+class SendOnDelta(TransmitRule):
+    """``send_on_delta:delta``: an agent sends when its own estimate has moved by at least delta (m) since its
+    reference transmission (the module table); delta = 0 sends always, delta = inf never."""
+
+    family = "send_on_delta"
+
+    def __init__(self, env, knob: float):
+        super().__init__(env, knob)
+        from coloc_env.scenarios.composed import DISTANCE_SCALE
+
+        self.index["displacement"] = env.unwrapped.scenario.feature_index("displacement")
+        self.threshold = self.knob / DISTANCE_SCALE  # the feature is in units of DISTANCE_SCALE metres
+
+    def sends(self, observation):
+        if self.knob == 0.0 or math.isinf(self.knob):
+            return self.knob == 0.0
+        return float(observation[self.index["displacement"]]) >= self.threshold
+
+
+class Value(TransmitRule):
+    """``value:tau``: an agent sends when the value of its message (the expected reduction of its receivers'
+    position covariance trace, m^2: ``Backend.message_value``) is at least tau; tau = 0 sends always, inf never."""
+
+    family = "value"
+
+    def __init__(self, env, knob: float):
+        super().__init__(env, knob)
+        _needs_covariance(env, "value")
+        scenario = env.unwrapped.scenario
+        if scenario.backend.position_process_noise() is None:
+            raise BadInput(f"policy 'value' reads the message value the backend declares; backend "
+                           f"{scenario.composition.backend.name} on world {scenario.composition.world.name} "
+                           f"declares none (no position process noise: Backend.position_process_noise)")
+        self.index["message_value"] = env.unwrapped.scenario.feature_index("message_value")
+
+    def sends(self, observation):
+        if self.knob == 0.0 or math.isinf(self.knob):
+            return self.knob == 0.0
+        return float(observation[self.index["message_value"]]) >= self.knob
 
 
 def has_transport_decision(spec) -> bool:
@@ -151,9 +214,20 @@ def uncertainty(env, variant: str | None = None) -> Uncertainty:
     return Uncertainty(env, _parse_knob("uncertainty", variant, 1.0, 0.0, integer=False))
 
 
-POLICIES = {"periodic": periodic, "uncertainty": uncertainty}
-# each family's knob at its two ends: (the one that plays ``always``, the one that plays ``silent``)
-EXTREMES = {"periodic": ("1", "inf"), "uncertainty": ("0", "inf")}
+def send_on_delta(env, variant: str | None = None) -> SendOnDelta:
+    """``send_on_delta:delta`` (delta in m, default 1)."""
+    return SendOnDelta(env, _parse_knob("send_on_delta", variant, 1.0, 0.0, integer=False))
 
-__all__ = ["EXTREMES", "POLICIES", "Periodic", "TransmitRule", "Uncertainty", "has_transport_decision", "periodic",
-           "uncertainty"]
+
+def value(env, variant: str | None = None) -> Value:
+    """``value:tau`` (tau in m^2, default 1)."""
+    return Value(env, _parse_knob("value", variant, 1.0, 0.0, integer=False))
+
+
+POLICIES = {"periodic": periodic, "uncertainty": uncertainty, "send_on_delta": send_on_delta, "value": value}
+# each family's knob at its two ends: (the one that plays ``always``, the one that plays ``silent``)
+EXTREMES = {"periodic": ("1", "inf"), "uncertainty": ("0", "inf"), "send_on_delta": ("0", "inf"),
+            "value": ("0", "inf")}
+
+__all__ = ["EXTREMES", "POLICIES", "Periodic", "SendOnDelta", "TransmitRule", "Uncertainty", "Value",
+           "has_transport_decision", "periodic", "send_on_delta", "uncertainty", "value"]

@@ -12,7 +12,12 @@ value}``. The other keywords are composition-level:
 |---------------------|-----------|----------------------------------------------------------------------|
 | reward              | "error"   | "error": minus the agent's own position error (m) after this step's |
 |                     |           | update; "trace": minus sqrt(tr P_ii) (m), the backend's own RMS      |
-| communication_cost  | 0.0       | >= 0, subtracted per message the agent sent this step                |
+| communication_cost  | 0.0       | [0, 1e12], subtracted per message the agent sent this step           |
+| cost_range          | None      | None, or (lo, hi) with 0 <= lo <= hi <= 1e12: each copy draws its    |
+|                     |           | episode's communication cost at reset, log-uniform on [lo, hi] when  |
+|                     |           | lo > 0 (log c uniform on [log lo, log hi]), uniform on [0, hi] when  |
+|                     |           | lo = 0 (a log-uniform law has no mass at 0); it replaces             |
+|                     |           | ``communication_cost`` in the reward, the observation and the infos |
 | horizon             | None      | steps per episode; None = the world's                                |
 
 A ``Composition`` is frozen and picklable (it travels to Ray workers)
@@ -28,10 +33,13 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 from coloc_env.config import BadInput, check_choice, check_range, refused_as_written
 from coloc_env.parts import BACKENDS, NETWORKS, WORLDS, PartConfig
 
-COMPOSITION_OPTIONS = ("reward", "communication_cost", "horizon")
+COMPOSITION_OPTIONS = ("reward", "communication_cost", "cost_range", "horizon")
+COST_LIMIT = 1e12  # the largest communication cost (communication_cost, cost_range's bounds)
 
 
 @dataclass(frozen=True)
@@ -46,6 +54,11 @@ class Composition:
     horizon: int | None = None
     preset: str | None = None
     preset_config: tuple = field(default=(), compare=True)
+    cost_range: tuple[float, float] | None = None
+
+    def __post_init__(self):
+        if isinstance(self.cost_range, list):  # a list from a config file: the frozen Composition keeps a tuple
+            object.__setattr__(self, "cost_range", tuple(self.cost_range))
 
     def validate(self) -> None:
         for part in (self.world, self.network, self.backend):
@@ -58,7 +71,8 @@ class Composition:
     def check_options(self, prefix: str = "") -> None:
         """The composition-level fields: a ``ValueError`` naming ``prefix + field`` and its range."""
         check_choice(f"{prefix}reward", self.reward, ("error", "trace"))
-        check_range(f"{prefix}communication_cost", self.communication_cost, 0.0, 1e12)
+        check_range(f"{prefix}communication_cost", self.communication_cost, 0.0, COST_LIMIT)
+        check_cost_range(f"{prefix}cost_range", self.cost_range)
         if self.horizon is not None:
             check_range(f"{prefix}horizon", self.horizon, 1, 1_000_000, integer=True)
 
@@ -74,6 +88,32 @@ class Composition:
         new = dataclasses.replace(self, **changes)
         new.validate()
         return new
+
+
+def check_cost_range(name: str, value: Any) -> None:
+    """``value`` is None or a pair (lo, hi) of numbers with 0 <= lo <= hi <= ``COST_LIMIT``; else a ``ValueError``
+    naming ``name`` and the allowed range."""
+    if value is None:
+        return
+    allowed = f"None or a pair (lo, hi) with 0 <= lo <= hi <= {COST_LIMIT:g}"
+    if not isinstance(value, tuple) or len(value) != 2:
+        raise BadInput(f"{name} must be {allowed}, got {value!r}")
+    check_range(f"{name}[0] (lo)", value[0], 0.0, COST_LIMIT)
+    check_range(f"{name}[1] (hi)", value[1], 0.0, COST_LIMIT)
+    if float(value[0]) > float(value[1]):
+        raise BadInput(f"{name} must be {allowed}, got lo = {value[0]!r} > hi = {value[1]!r}")
+
+
+def draw_costs(cost_range: tuple[float, float], rngs: list) -> np.ndarray:
+    """One communication cost per copy from ``cost_range`` (lo, hi) (the module's table): log-uniform on [lo, hi]
+    for lo > 0, uniform on [0, hi] for lo = 0; one uniform from each copy's generator in ``rngs``."""
+    lo, hi = float(cost_range[0]), float(cost_range[1])
+    u = np.array([rng.random() for rng in rngs], float)
+    if lo == hi:
+        return np.full(len(rngs), lo)
+    if lo > 0.0:
+        return np.clip(np.exp(np.log(lo) + u * (np.log(hi) - np.log(lo))), lo, hi)
+    return u * hi
 
 
 def compose(world: Any, network: Any, backend: Any, **options) -> Composition:

@@ -17,7 +17,8 @@ def is_composition_name(name) -> bool:
 
 def composition_named(name: str, **options) -> Composition:
     """The composition of the parts ``WORLD/NETWORK/BACKEND`` names, each at its defaults, with composition-level
-    ``options`` (``reward``, ``communication_cost``, ``horizon``); a ValueError says which name or option is wrong."""
+    ``options`` (``reward``, ``communication_cost``, ``cost_range``, ``horizon``); a ValueError says which name or
+    option is wrong."""
     parts = name.split("/")
     if len(parts) != 3 or not all(parts):
         raise ValueError(f"a composition name is WORLD/NETWORK/BACKEND (e.g. circles/broadcast/ukf_ccl), got {name!r}")

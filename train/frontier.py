@@ -12,11 +12,13 @@ episodes (episode e: ``reset(seed=S + e)``, S = ``--seed``, by default the evalu
 | models          | every ``*.zip`` under ``--models DIR``: judged against the frontier                      |
 
 The knob grids (``--quick``: three of each) are fixed before the evaluation episodes are played:
-``periodic`` over ``PERIODS`` (up to the horizon), ``uncertainty`` over thresholds read from ``always``
-and ``silent`` on validation episodes (``train.evaluate.VALIDATION_SEED_BASE``): the 5th to 95th
-percentiles, evenly spaced in probability, of the covariance traces ``always`` and ``silent`` keep
-together (where the rule's decisions change), plus 0 (= ``always``) and inf (= ``silent``). Nothing is
-tuned on the evaluation seeds.
+``periodic`` over ``PERIODS`` (up to the horizon); ``uncertainty``, ``send_on_delta`` and ``value`` over
+thresholds read from ``always`` and ``silent`` on validation episodes
+(``train.evaluate.VALIDATION_SEED_BASE``): the 5th to 95th percentiles, evenly spaced in probability, of
+what the rule compares with its knob, pooled over both (the covariance traces, m^2; the observed
+displacements since the reference transmission, m; the observed message values, m^2: where the rule's
+decisions change, from near ``always`` to near ``silent``), plus 0 (= ``always``) and inf (= ``silent``).
+Nothing is tuned on the evaluation seeds.
 
 The **baseline frontier** (``train.leaderboard.baseline_frontier``): at a message rate m, the lowest mean
 error a time-share of baselines reaches with at most m messages per step; the lower convex hull of the
@@ -50,9 +52,9 @@ from coloc_env.config import BadInput
 
 PERIODS = (1, 2, 3, 4, 6, 8, 12, 16, 24, 32, 48, 64, 128)
 QUICK_PERIODS = (1, 2, 4)
-UNCERTAINTY_LEVELS = 8  # thresholds between the two percentiles, plus 0 and inf
+UNCERTAINTY_LEVELS = 8  # a threshold family's thresholds between the two percentiles, plus 0 and inf
 QUICK_LEVELS = 3
-GRID_EPISODES = 4  # validation episodes of always and silent that place the uncertainty thresholds
+GRID_EPISODES = 4  # validation episodes of always and silent that place the thresholds
 MAX_EPISODES = 100_000
 FIGURE = "frontier.png"
 BASELINE_NAMES = ("always", "silent", "random", "paper")
@@ -79,6 +81,32 @@ def _trace_values(scenario: str, which: str, episodes: int, seed_base: int) -> n
     return values[np.isfinite(values)]
 
 
+def _observed_values(scenario: str, which: str, feature: str, episodes: int, seed_base: int) -> np.ndarray:
+    """Every (step, agent) value of the observation feature ``feature`` at decision time (``displacement`` in m,
+    ``message_value`` in m^2) under ``always`` ("maximum") or ``silent`` ("minimum") over ``episodes`` episodes
+    seeded ``seed_base + e``, on the batched core."""
+    import coloc_env
+    from coloc_env.scenarios.composed import DISTANCE_SCALE
+
+    core = coloc_env.make_core(scenario, batch=episodes)
+    core.reset([np.random.default_rng(seed_base + e) for e in range(episodes)])
+    index = core.feature_index(feature)
+    scale = DISTANCE_SCALE if feature == "displacement" else 1.0
+    action = np.tile(core.action_vector(which), (episodes, core.num_agents, 1))
+    values = []
+    while not core.done().all():
+        values.append(np.asarray(core.observation()[..., index], float).ravel() * scale)
+        core.step(action)
+    values = np.concatenate(values)
+    return values[np.isfinite(values)]
+
+
+def _threshold_grid(pooled: np.ndarray, quick: bool) -> list[str]:
+    """0, the 5th to 95th percentiles of ``pooled`` (``QUICK_LEVELS`` or ``UNCERTAINTY_LEVELS`` of them), inf."""
+    levels = np.quantile(pooled, np.linspace(0.05, 0.95, QUICK_LEVELS if quick else UNCERTAINTY_LEVELS))
+    return ["0"] + sorted({f"{v:.4g}" for v in levels if v > 0}, key=float) + ["inf"]
+
+
 def knob_grids(scenario: str, horizon: int, quick: bool = False) -> dict[str, list[str]]:
     """Each applicable family's knobs (as the text after the colon), chosen without the evaluation seeds;
     ``quick``: ``QUICK_PERIODS`` and ``QUICK_LEVELS`` thresholds, for a first look."""
@@ -92,8 +120,12 @@ def knob_grids(scenario: str, horizon: int, quick: bool = False) -> dict[str, li
     if "uncertainty" in available:
         pooled = np.concatenate([_trace_values(scenario, which, GRID_EPISODES, VALIDATION_SEED_BASE)
                                  for which in ("maximum", "minimum")])
-        levels = np.quantile(pooled, np.linspace(0.05, 0.95, QUICK_LEVELS if quick else UNCERTAINTY_LEVELS))
-        grids["uncertainty"] = ["0"] + sorted({f"{v:.4g}" for v in levels}, key=float) + ["inf"]
+        grids["uncertainty"] = _threshold_grid(pooled, quick)
+    for family, feature in (("send_on_delta", "displacement"), ("value", "message_value")):
+        if family in available:
+            pooled = np.concatenate([_observed_values(scenario, which, feature, GRID_EPISODES, VALIDATION_SEED_BASE)
+                                     for which in ("maximum", "minimum")])
+            grids[family] = _threshold_grid(pooled, quick)
     return grids
 
 

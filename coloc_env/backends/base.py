@@ -14,6 +14,11 @@ can say in words why a combination cannot run:
 |                    | ``"nothing"`` (it sends none); ``coloc_env.bounds`` reads it               |
 | shared_estimate    | True where every agent reports the centre's (agent 0's) estimate          |
 
+Its runtime (``Backend``) may override what the composed observation reads of it: ``position_cov``
+(the agent's own position covariance; None: it keeps none), ``position_process_noise`` and
+``message_value`` (the value of transmitting now, the ``value:tau`` policies' feature; the method's
+docstring gives the equation and its approximation).
+
 At each step the composition hands it the world's ``coloc_env.worlds.base.Readings``
 of time k and the decoded backend decisions; the backend updates (asking the
 network for every delivery), keeps the posterior of time k (what the infos
@@ -102,6 +107,63 @@ class Backend:
     def position_cov(self) -> np.ndarray | None:
         """Current per-agent position covariance (B, N, 2, 2); None where the backend has none."""
         return None
+
+    def local_covariance(self) -> np.ndarray | None:
+        """The position covariance (B, N, 2, 2) each agent holds itself: ``local_position_cov`` where the backend
+        has one (its exact covariance is not local: bandwidth_fusion's bound M_i), else ``position_cov``; None
+        where it keeps none. What the composed observation's log tr P and ``message_value`` read."""
+        local = getattr(self, "local_position_cov", None)
+        return local() if local is not None else self.position_cov()
+
+    def position_process_noise(self, inputs: np.ndarray | None = None) -> np.ndarray | None:
+        """Q_pos, the per-step process noise of the estimated position (m^2): (B, N, 2, 2), or (2, 2) for every
+        agent; None where the backend declares no value of a message (then ``message_value`` is None).
+
+        By default the position block of the world's motion model's noise covariance (``covar``, the model the
+        backend runs on through the model interface): for a ``target`` estimand the two components
+        ``world.position_index`` names; for ``self`` each agent's at its current estimate (the position, and the
+        heading of an SE(2) backend's pose) under ``inputs`` (B, N, u), the readings' motion inputs of the step
+        just done (None: zero inputs). None where the world has no motion model. A backend that runs on another
+        model than the world's overrides it."""
+        model = getattr(self.world, "motion_model", None)
+        if model is None or not hasattr(model, "covar"):
+            return None
+        index = getattr(self.world, "position_index", None)
+        if getattr(self.config, "estimand", "self") == "target" and index is not None:
+            Q = np.asarray(model.covar(), float)
+            return Q[np.ix_(list(index), list(index))]
+        B, N = self.batch, self.num_agents
+        state = np.zeros((B, N, int(model.state_dim)))
+        state[..., :2] = self.posterior_position
+        if self.posterior_pose is not None and state.shape[-1] == 3:
+            state = np.array(self.posterior_pose, float)
+        u = np.zeros((B, N, int(getattr(model, "input_dim", 0)))) if inputs is None else np.asarray(inputs, float)
+        return np.asarray(model.covar(state, u), float)[..., :2, :2]
+
+    def message_value(self, reference_cov: np.ndarray, steps: np.ndarray, inputs: np.ndarray | None = None,
+                      cov: np.ndarray | None = None) -> np.ndarray | None:
+        """The value (m^2) of each agent transmitting now (B, N), from what the agent holds itself; None where the
+        backend declares none (it keeps no covariance, or ``position_process_noise`` is None).
+
+        The approximation: the receivers' knowledge of the sender's position is the sender's covariance at its
+        reference transmission (its last one delivered, or its last one sent where the network gives no
+        acknowledgements; the episode's start before any), ``reference_cov`` P_ref (B, N, 2, 2), propagated open
+        loop by the per-step position process noise Q_pos (``position_process_noise``) over the ``steps`` (B, N)
+        since then; transmitting now would bring it to the sender's own P_i,k. The value is the expected
+        reduction of its trace:
+
+            v_i,k = max(0, tr(P_ref + (k - k_ref) Q_pos) - tr(P_i,k)).
+
+        It ignores what the receivers learned otherwise (their own readings of the sender, other senders) and, for
+        a model with a velocity, the growth of the position uncertainty through the velocity's (so it is a lower
+        estimate there). ``inputs``: as ``position_process_noise`` reads them; ``cov``: P_i,k where the caller holds
+        it (``local_covariance``). A backend with a better model of its receivers overrides this method."""
+        cov = self.local_covariance() if cov is None else cov
+        Q = self.position_process_noise(inputs)
+        if cov is None or Q is None:
+            return None
+        grown = np.trace(reference_cov, axis1=-2, axis2=-1) + np.asarray(steps, float) * np.trace(Q, axis1=-2, axis2=-1)
+        return np.maximum(grown - np.trace(cov, axis1=-2, axis2=-1), 0.0)
 
     def pose(self) -> tuple[np.ndarray, np.ndarray] | None:
         """An SE(2) backend's current pose estimates (B, N, 3) [x, y, heading] and their covariances (B, N, 3, 3);

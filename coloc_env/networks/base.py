@@ -60,9 +60,10 @@ link's delivery rate. A step's counts are part of the network's record that
 ``coloc_env.scenarios.composed`` reports in ``infos[agent]`` under the same names.
 
 Observation. ``observation_size`` / ``observation_features`` are what an
-agent observes of its own links after a step (``gilbert_elliott``'s
-acknowledgements); the composed observation appends them after the world's
-features. 0 features by default: no other network adds any.
+agent observes of its own links after a step (``gilbert_elliott``'s and
+``contention``'s acknowledgements); the composed observation appends them after the world's
+features. 0 features by default. ``acknowledged`` says, per agent, whether those acknowledgements
+report its transmission of the step reached anyone (None where the network gives none).
 
 Packet loss is drawn by ``coloc_env.draws`` from a key the network draws
 from its own generator at reset: the value for (step, round, sender,
@@ -557,6 +558,12 @@ class Network:
         """(B, N, f) what each agent observes of its own links (after the step: its acknowledgements); none by
         default. No agent observes another's link state or this step's decisions."""
         return np.zeros((self.batch, self.num_agents, 0))
+
+    def acknowledged(self) -> np.ndarray | None:
+        """(B, N) bool: whether each agent's acknowledgements of this step (its ``observation_features``) report its
+        transmission reached at least one receiver; None (the default) where the network gives no
+        acknowledgements. The composed observation's since-last-transmission features read it."""
+        return None
 
 
 _BASE_SIGNATURES = {name: inspect.signature(getattr(Network, name)) for name in DELIVERY_CALLS}

@@ -160,6 +160,10 @@ class ContentionNetwork(Network):
     def observation_features(self) -> np.ndarray:
         return self.ack.copy()
 
+    def acknowledged(self) -> np.ndarray | None:
+        """(B, N): some slot's ``ack`` of this step is positive; None off the medium (no ``ack``)."""
+        return (self.ack > 0).any(axis=-1) if self.observation_size() else None
+
     def usable(self, distance):
         return np.asarray(distance) <= self.config.comm_range
 

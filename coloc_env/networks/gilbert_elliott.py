@@ -205,3 +205,7 @@ class GilbertElliottNetwork(BroadcastNetwork):
         if not self.observation_size():
             return super().observation_features()
         return self.delivered.astype(float)
+
+    def acknowledged(self) -> np.ndarray | None:
+        """(B, N): its ``ack`` of this step names a receiver; None where the message kind has no ``ack``."""
+        return self.delivered.any(axis=-1) if self.observation_size() else None

@@ -155,6 +155,9 @@ class PresetScenario(ComposedScenario):
     communication: ClassVar[str]
     episode_length_field: ClassVar[str] = "horizon"
     policy_module: ClassVar[str]
+    # the composed observation's own features (covariance_known, displacement, ...) are a composition's; a preset
+    # observes what its registered version does
+    own_features: ClassVar[tuple[str, ...]] = ()
 
     @classmethod
     def compose(cls, config):

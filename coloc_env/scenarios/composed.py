@@ -67,18 +67,51 @@ Observation (per agent, ``Box(float32)``; both estimands)
 ---------------------------------------------------------
 | index             | meaning                                                        | bounds      |
 |-------------------|----------------------------------------------------------------|-------------|
-| ``[0, N)``        | one-hot of the agent's own index                               | [0, 1]      |
-| ``[N]``           | log tr of its own estimate's position covariance (m^2: its own | [-50, 50]   |
-|                   | position, or the target's position components), clipped; 0     |             |
-|                   | without a covariance; the local one where the backend's exact  |             |
-|                   | covariance is not (bandwidth_fusion: the bound M_i, eq. 19)     |             |
-| ``[N+1, 2N+1)``   | 1 for each agent it received a message from last step           | [0, 1]      |
-| ``[2N+1, 3N+1)``  | distance to each agent / 100 m (link-layer knowledge), 0 itself | [0, inf)    |
-| ``[3N+1]``        | step fraction k / horizon                                      | [0, 1]      |
+| ``[0, N)``        | ``index``: one-hot of the agent's own index                    | [0, 1]      |
+| ``[N]``           | ``log_trace``: log tr of the position covariance the agent     | [-50, 50]   |
+|                   | holds (m^2: its own position, or the target's position         |             |
+|                   | components), clipped; the local one where the backend's exact  |             |
+|                   | covariance is not (bandwidth_fusion: the bound M_i, eq. 19);   |             |
+|                   | 0 without a covariance (``covariance_known`` tells the two     |             |
+|                   | apart from tr P = 1 m^2)                                        |             |
+| ``[N+1, 2N+1)``   | ``received``: 1 for each agent it received a message from last | [0, 1]      |
+|                   | step                                                           |             |
+| ``[2N+1, 3N+1)``  | ``distance``: to each agent / 100 m (link-layer knowledge), 0  | [0, inf)    |
+|                   | itself                                                         |             |
+| ``[3N+1]``        | ``step_fraction``: k / horizon                                 | [0, 1]      |
+| ``[3N+2]``        | ``covariance_known``: 1 where the backend keeps the position   | [0, 1]      |
+|                   | covariance the agent holds, else 0                             |             |
+| ``[3N+3]``        | ``displacement``: ||xhat_i,k - xhat_i,ref|| / 100 m (the same   | [0, inf)    |
+|                   | scale as the distances), its position estimate (the infos'     |             |
+|                   | ``estimated_position``: its own, or the target's position      |             |
+|                   | components) now against the one at its reference transmission |             |
+| ``[3N+4]``        | ``steps_since``: (k - k_ref) / horizon, the steps since its    | [0, 1]      |
+|                   | reference transmission                                         |             |
+| ``[3N+5]``        | ``message_value``: the value of transmitting now, m^2, 0 where  | [0, inf)    |
+|                   | the backend declares none (``Backend.message_value``:          |             |
+|                   | max(0, tr(P_ref + (k - k_ref) Q_pos) - tr(P_i,k)))              |             |
+| ``[3N+6]``        | ``communication_cost``: its copy's cost per message this       | [0, inf)    |
+|                   | episode (``communication_cost``, or the draw from              |             |
+|                   | ``cost_range``)                                                |             |
 | then              | the world's features, then the network's                       | their own   |
 |                   | (``Network.observation_features``: ``gilbert_elliott``'s       | ([0, 1] for |
 |                   | ``ack`` (N,), 1 for each agent its own message of the last     | ``ack``)    |
-|                   | step reached; none for the other networks), then the backend's |             |
+|                   | step reached; ``contention``'s per-slot ``ack``; none for the  |             |
+|                   | other networks), then the backend's                            |             |
+
+``ComposedScenario.feature_index(name)`` gives each named feature's index (a block's first); a realizable
+policy reads features by these names (``agents.event_triggered``). A preset binding observes what its
+registered version does (``own_features`` empty: no ``[3N+2, 3N+7)`` block where it uses this table).
+
+Since the last transmission. Each agent's *reference transmission* is its last transmission that was
+delivered or, where the network gives no acknowledgements (``Network.acknowledged`` is None), its last
+transmission: after step k the core reads the network's per-agent ``transmissions`` (> 0: it transmitted;
+``coloc_env.networks.base``) and, where the network acknowledges, whether its acknowledgements of the step
+name a receiver; each agent so renewed takes its estimate of time k (``estimated_position``), the
+covariance it holds now (the ``log_trace`` one) and k + 1 (the step its next observation is at) as its
+reference (x_ref, P_ref, k_ref). Before any, the reference is the agent's belief at reset (k_ref = 0). Only
+what the agent itself holds enters: its own estimate and covariance, its own decisions and its own
+acknowledgements. A copy's reset renews only its own agents' references.
 
 Reward (per agent, its own estimate; a shared estimate gives every agent the team's)
 ------------------------------------------------------------------------------------
@@ -90,7 +123,8 @@ Reward (per agent, its own estimate; a shared estimate gives every agent the tea
 |          | (m^2, the paper's metric; see the world)        | covariance over the same components (exact where  |
 |          |                                                 | the backend computes it: bandwidth_fusion's Sigma_i) |
 
-both minus ``communication_cost`` per message it sent this step, and minus the cost the network itself
+both minus its copy's communication cost (``communication_cost``, or under ``cost_range`` the cost the copy drew
+at reset: ``coloc_env.composition``) per message it sent this step, and minus the cost the network itself
 charges for what the agent sent (``relay``'s ``hop_cost_per_m2`` d^2 per delivered hop of length d, at
 the holder that sent it; 0 for the other networks).
 
@@ -102,7 +136,7 @@ predictor's xhat(k)), ``position_error`` (m), ``error`` (the reward's error term
 world's unit for ``target``), ``trace`` (m^2, the position block of its covariance, nan without one),
 ``messages_sent``, ``floats_sent``, ``communication`` (= messages_sent), the per-link accounting
 ``transmissions``, ``link_attempts``, ``link_deliveries``, ``collisions`` (per sender: the table of
-``coloc_env.networks.base``), ``step``.
+``coloc_env.networks.base``), ``communication_cost`` (its copy's cost per message this episode), ``step``.
 """
 
 from __future__ import annotations
@@ -112,12 +146,26 @@ import functools
 import gymnasium
 import numpy as np
 
+from coloc_env.composition import draw_costs
 from coloc_env.rendering import Link, Scene
 from coloc_env.scenarios.base import Scenario
 
 LOG_TRACE_BOUND = 50.0
 DISTANCE_SCALE = 100.0
+# the agent's own features after the step fraction, in this order (the module's observation table)
+# the spawn key, under the world's generator's seed sequence, of a copy's episode cost: far above any child a world
+# spawns itself
+COST_STREAM = 2**32 - 1
+OWN_FEATURES = ("covariance_known", "displacement", "steps_since", "message_value", "communication_cost")
 LINK_COUNTS = ("transmissions", "link_attempts", "link_deliveries", "collisions")  # coloc_env.networks.base
+
+
+def cost_generator(world_rng: np.random.Generator) -> np.random.Generator:
+    """The generator of a copy's episode cost (``cost_range``): a child of the world's generator's seed sequence
+    under the spawn key ``COST_STREAM``, built without spawning (no part's generator, nor the episode's, moves)."""
+    seq = world_rng.bit_generator.seed_seq
+    return np.random.Generator(type(world_rng.bit_generator)(np.random.SeedSequence(
+        seq.entropy, spawn_key=(*seq.spawn_key, COST_STREAM), pool_size=seq.pool_size)))
 
 
 class ComposedScenario(Scenario):
@@ -126,6 +174,9 @@ class ComposedScenario(Scenario):
     name = "composed"
     paper = "-"
     Config = None
+    # the agent's own features after the step fraction (the module's observation table); a preset binding keeps
+    # the observation of its registered version
+    own_features: tuple[str, ...] = OWN_FEATURES
 
     def __init__(self, config, batch: int = 1):
         super().__init__(config, batch)
@@ -160,6 +211,13 @@ class ComposedScenario(Scenario):
         self._truth_state = np.zeros((B, getattr(self.world, "state_dim", 0)))
         self._received = np.zeros((B, N, N))
         self._reward = np.zeros((B, N))
+        # each copy's communication cost this episode (``cost_range``: drawn at reset)
+        self.costs = np.full(B, float(spec.communication_cost))
+        # each agent's reference transmission (the module's "Since the last transmission"): its estimate, the
+        # covariance it held and the step k after it
+        self._ref_position = np.zeros((B, N, 2))
+        self._ref_cov = np.zeros((B, N, 2, 2))
+        self._ref_k = np.zeros((B, N), dtype=int)
         self.readings = None
         # who is told of each step's readings and deliveries (``observe``); None: nobody
         self.observer = None
@@ -213,16 +271,34 @@ class ComposedScenario(Scenario):
 
     @property
     def obs_dim(self) -> int:
-        return 3 * self.num_agents + 2 + self.world.feature_bounds()[0].size + self.network.observation_size() \
-            + self.backend.feature_bounds()[0].size
+        return 3 * self.num_agents + 2 + len(self.own_features) + self.world.feature_bounds()[0].size \
+            + self.network.observation_size() + self.backend.feature_bounds()[0].size
+
+    def feature_index(self, name: str) -> int:
+        """The index in an agent's observation of the feature ``name`` (the module's observation table): the first
+        index of a block (``index``, ``received``, ``distance``: N entries each), or of a single feature
+        (``log_trace``, ``step_fraction``, and those of ``own_features``). What a realizable policy reads by name
+        (``agents.event_triggered``). A ``ValueError`` for a feature this scenario's observation lacks."""
+        N = self.num_agents
+        fixed = {"index": 0, "log_trace": N, "received": N + 1, "distance": 2 * N + 1, "step_fraction": 3 * N + 1}
+        if name in fixed:
+            return fixed[name]
+        if name in self.own_features:
+            return 3 * N + 2 + self.own_features.index(name)
+        raise ValueError(f"{self.name}'s observation has no feature {name!r}; it has {[*fixed, *self.own_features]}")
 
     def observation_space(self):
         N = self.num_agents
         wl, wh = self.world.feature_bounds()
         nl, nh = self.network.observation_bounds()
         bl, bh = self.backend.feature_bounds()
-        low = np.concatenate([np.zeros(N), [-LOG_TRACE_BOUND], np.zeros(N), np.zeros(N), [0.0], wl, nl, bl])
-        high = np.concatenate([np.ones(N), [LOG_TRACE_BOUND], np.ones(N), np.full(N, np.inf), [1.0], wh, nh, bh])
+        own_low = {"covariance_known": 0.0, "displacement": 0.0, "steps_since": 0.0, "message_value": 0.0,
+                   "communication_cost": 0.0}
+        own_high = {"covariance_known": 1.0, "displacement": np.inf, "steps_since": 1.0, "message_value": np.inf,
+                    "communication_cost": np.inf}
+        ol, oh = [own_low[f] for f in self.own_features], [own_high[f] for f in self.own_features]
+        low = np.concatenate([np.zeros(N), [-LOG_TRACE_BOUND], np.zeros(N), np.zeros(N), [0.0], ol, wl, nl, bl])
+        high = np.concatenate([np.ones(N), [LOG_TRACE_BOUND], np.ones(N), np.full(N, np.inf), [1.0], oh, wh, nh, bh])
         return gymnasium.spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
 
     def state_space(self):
@@ -283,6 +359,9 @@ class ComposedScenario(Scenario):
         if len(rngs) != len(idx):
             raise ValueError(f"reset needs one generator per copy: {len(idx)} copies, {len(rngs)} generators")
         generators = [self.part_generators(rng) for rng in rngs]
+        cost_range = self.composition.cost_range
+        if cost_range is not None:  # before the parts draw: its own generator, so no part's draw moves
+            self.costs[idx] = draw_costs(cost_range, [cost_generator(g[0]) for g in generators])
         self.world.reset([g[0] for g in generators], idx)
         self.network.reset([g[1] for g in generators], idx)
         self.backend.reset([g[2] for g in generators], idx)
@@ -301,9 +380,34 @@ class ComposedScenario(Scenario):
             self._truth_pose[idx] = poses()[idx]
         self._received[idx] = 0.0
         self._reward[idx] = 0.0
+        if self.own_features:
+            self._set_reference(np.isin(np.arange(self.batch), idx)[:, None] & np.ones(self.num_agents, bool))
         if self.receives_ahead:
             self._receive_ahead(idx)
         self.network.clear_step_record(idx)
+
+    def _set_reference(self, which: np.ndarray) -> None:
+        """Make the current estimate, the covariance the agent holds and its step the reference of the agents
+        ``which`` (B, N) bool (a reset, or a transmission delivered / sent: ``_record_transmissions``)."""
+        b, i = np.nonzero(which)
+        self._ref_position[b, i] = self.backend.posterior_position[b, i]
+        cov = self.backend.local_covariance()
+        if cov is not None:
+            self._ref_cov[b, i] = cov[b, i]
+        self._ref_k[b, i] = self.k[b]
+
+    def _record_transmissions(self) -> None:
+        """After step k's transport is known (the network's record) and the backend's update: an agent whose
+        transmission was delivered (acknowledged to it, where the network gives acknowledgements) or, without
+        acknowledgements, that transmitted (``transmissions`` > 0) takes its state now as its reference."""
+        if not self.own_features:  # a preset binding's observation has none of them
+            return
+        sent = np.asarray(self.network.transmissions) > 0
+        acknowledged = self.network.acknowledged()
+        if acknowledged is not None:
+            sent = sent & acknowledged
+        if sent.any():
+            self._set_reference(sent)
 
     def _receive_ahead(self, idx: np.ndarray) -> None:
         """Readings of the copies ``idx`` at their time k, and the network's step-k delivery of them, to the
@@ -397,6 +501,7 @@ class ComposedScenario(Scenario):
         self._received = self.network.delivered.transpose(0, 2, 1)  # [s, t]: s heard t
         self.world.advance()
         self.k = self.k + 1
+        self._record_transmissions()  # before a receive-ahead call replaces the network's record
         if self.receives_ahead:
             live = np.flatnonzero(self.k < self.horizon)
             if live.size:
@@ -417,9 +522,10 @@ class ComposedScenario(Scenario):
         return -loss - self.communication_costs()
 
     def communication_costs(self) -> np.ndarray:
-        """What each agent's sending cost this step (B, N): ``communication_cost`` per message it sent, plus the
-        cost the network itself charged it (``relay``'s hop costs; 0 for the other networks)."""
-        return self.composition.communication_cost * self.network.messages_sent + self.network.sending_cost()
+        """What each agent's sending cost this step (B, N): its copy's communication cost (``communication_cost``, or
+        the episode's draw from ``cost_range``) per message it sent, plus the cost the network itself charged it
+        (``Network.sending_cost``: ``relay``'s hop costs; 0 for the other networks)."""
+        return self.costs[:, None] * self.network.messages_sent + self.network.sending_cost()
 
     # --- views -------------------------------------------------------------------------
     def _target_truth(self, offset: int = 0, state: np.ndarray | None = None) -> np.ndarray:
@@ -472,7 +578,7 @@ class ComposedScenario(Scenario):
         B, N = self.batch, self.num_agents
         identity = np.broadcast_to(np.eye(N), (B, N, N))
         # what the agent itself can compute (a backend whose exact covariance is not local says so)
-        cov = getattr(self.backend, "local_position_cov", self.backend.position_cov)()
+        cov = self.backend.local_covariance()
         if cov is None:
             log_trace = np.zeros((B, N))
         else:
@@ -482,10 +588,33 @@ class ComposedScenario(Scenario):
         dx, dy = p[:, :, None, 0] - p[:, None, :, 0], p[:, :, None, 1] - p[:, None, :, 1]
         distance = np.sqrt(dx * dx + dy * dy) / DISTANCE_SCALE  # the norm over (x, y), on (B, N, N) planes
         frac = np.broadcast_to((self.k / self.horizon)[:, None], (B, N))
+        own = self.own_observation(cov) if self.own_features else np.zeros((B, N, 0))
         obs = np.concatenate([identity, log_trace[..., None], self._received.astype(float), distance, frac[..., None],
-                              self.world.observation_features(), self.network.observation_features(),
+                              own, self.world.observation_features(), self.network.observation_features(),
                               self.backend.observation_features()], axis=-1)
         return obs.astype(np.float32)
+
+    def own_observation(self, cov: np.ndarray | None = None) -> np.ndarray:
+        """(B, N, len(own_features)): the features of ``own_features`` (the module's observation table), from what
+        each agent holds itself: whether it keeps a covariance, the displacement of its estimate and the steps since
+        its reference transmission, the value of transmitting now (``Backend.message_value``) and its copy's
+        communication cost. ``cov``: the covariance the agent holds (``Backend.local_covariance``), where the caller
+        has it."""
+        B, N = self.batch, self.num_agents
+        cov = self.backend.local_covariance() if cov is None else cov
+        known = np.full((B, N), 0.0 if cov is None else 1.0)
+        d = self.backend.posterior_position - self._ref_position
+        displacement = np.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1]) / DISTANCE_SCALE
+        steps = self.k[:, None] - self._ref_k
+        value = None
+        if cov is not None:
+            inputs = None if self.readings is None else getattr(self.readings, "inputs", None)
+            value = self.backend.message_value(self._ref_cov, steps, inputs, cov)
+        features = {"covariance_known": known, "displacement": displacement,
+                    "steps_since": steps / self.horizon,
+                    "message_value": np.zeros((B, N)) if value is None else value,
+                    "communication_cost": np.broadcast_to(self.costs[:, None], (B, N))}
+        return np.stack([features[name] for name in self.own_features], axis=-1)
 
     def reward(self) -> np.ndarray:
         return self._reward.copy()
@@ -510,6 +639,7 @@ class ComposedScenario(Scenario):
             "floats_sent": self.network.floats_sent.copy(),
             "communication": self.network.messages_sent.copy(),
             **self.link_counts(),
+            "communication_cost": np.repeat(self.costs[:, None], N, axis=1),
             "step": np.repeat(self.k[:, None], N, axis=1),
         }
 

@@ -76,8 +76,27 @@ def test_uncertainty_sends_less_as_its_threshold_grows():
     assert messages[0] > messages[2] > messages[-1] == 0
 
 
+@pytest.mark.parametrize(("family", "knobs"), [("send_on_delta", ("0", "0.5", "2", "5", "20", "inf")),
+                                               ("value", ("0", "0.5", "2", "5", "20", "inf"))])
+def test_send_on_delta_and_value_send_less_as_their_knob_grows(family, knobs):
+    """Over 4 seeded episodes of the small composition, a higher knob never sends more on average, and the ends and
+    a middle knob are strictly apart (no tolerance needed on this grid: the means are compared as they are)."""
+    messages = [np.mean([play(SMALL, f"{family}:{knob}", seed=s)[2] for s in range(4)]) for knob in knobs]
+    assert all(a >= b for a, b in zip(messages[:-1], messages[1:], strict=True)), messages
+    assert messages[0] > messages[1] > messages[-1] == 0, messages
+
+
+def test_value_refuses_a_backend_without_a_message_value(monkeypatch):
+    env = coloc_env.parallel_env(SMALL)
+    monkeypatch.setattr(env.unwrapped.scenario.backend, "position_process_noise", lambda inputs=None: None)
+    with pytest.raises(ValueError, match="policy 'value' reads the message value the backend declares; backend "
+                                         "kalman on world drift declares none"):
+        agents.make_policy("value:1", env)
+
+
 @pytest.mark.parametrize("name", ["periodic:0", "periodic:2.5", "periodic:-1", "periodic:x", "uncertainty:-1",
-                                  "uncertainty:nan", "uncertainty:abc"])
+                                  "uncertainty:nan", "uncertainty:abc", "send_on_delta:-0.5", "send_on_delta:nan",
+                                  "value:-1", "value:x"])
 def test_a_bad_knob_is_refused_naming_the_family(name):
     env = coloc_env.parallel_env(SMALL)
     family = name.split(":")[0]
@@ -86,7 +105,7 @@ def test_a_bad_knob_is_refused_naming_the_family(name):
 
 
 def test_families_are_listed_where_the_network_has_a_transport_decision():
-    assert {"periodic", "uncertainty"} <= set(agents.available_policies(SMALL))
+    assert {"periodic", "uncertainty", "send_on_delta", "value"} <= set(agents.available_policies(SMALL))
     assert "periodic" not in agents.available_policies("drift/ideal/kalman")
     env = coloc_env.parallel_env("drift/ideal/kalman")
     with pytest.raises(ValueError, match="unknown policy 'periodic' for drift/ideal/kalman"):
@@ -112,7 +131,7 @@ def test_a_family_acts_on_the_observation_alone(data):
     """Built on the env, then cut off from it (only the spaces left): the same observation gives the same
     action, whatever the env's state, so the rule reads nothing but what the agent observes."""
     env = coloc_env.parallel_env(COVARIANCE)
-    name = data.draw(st.sampled_from(["periodic:3", "uncertainty:1.5"]))
+    name = data.draw(st.sampled_from(["periodic:3", "uncertainty:1.5", "send_on_delta:2", "value:1.5"]))
     policy = agents.make_policy(name, env)
     space = env.observation_space(env.possible_agents[0])
     low, high = np.maximum(space.low, -50.0), np.minimum(space.high, 50.0)

@@ -182,7 +182,7 @@ def test_acknowledgements_are_observed_one_step_later_and_cleared_at_reset():
     core = env.unwrapped.scenario
     observations, _ = env.reset(seed=0)
     N = core.num_agents
-    ack = slice(3 * N + 2 + core.world.feature_bounds()[0].size, None)
+    ack = slice(3 * N + 2 + len(core.own_features) + core.world.feature_bounds()[0].size, None)
     assert all(np.all(o[ack] == 0) for o in observations.values()) and observations["platform_1"][ack].size == 3
     actions = np.tile(core.action_vector("minimum"), (N, 1))
     start = sum(b.size for b, part in zip(core.blocks, core.block_parts, strict=True) if part == "world")

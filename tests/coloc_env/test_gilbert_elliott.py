@@ -111,7 +111,9 @@ def _random_action(core, rng):
 def test_with_no_bad_state_it_is_broadcast_with_loss_good_message_for_message(world, backend):
     """p_good_to_bad = 0: every link starts and stays good; the same seeds give the same deliveries, counts,
     estimates and observations (but the acknowledgements) as ``broadcast`` with ``loss = loss_good``; central
-    messages, broadcasts, chains (circles: the copies share one distance matrix) and packets."""
+    messages, broadcasts, chains (circles: the copies share one distance matrix) and packets. The since-last-
+    transmission features differ on purpose: over gilbert_elliott a reference is a transmission acknowledged,
+    over broadcast one sent."""
     extra = {"num_particles": 30, "num_iterations": 1} if backend == "dnbp" else {}
     parts = dict(world=world, backend={"name": backend, **extra}, horizon=6)
     ge = coloc_env.compose(network={"name": "gilbert_elliott", "comm_range": 150.0, "loss_good": 0.35,
@@ -128,8 +130,11 @@ def test_with_no_bad_state_it_is_broadcast_with_loss_good_message_for_message(wo
         np.testing.assert_array_equal(delivered_a, delivered_b)
         for name, value in info_b.items():
             np.testing.assert_array_equal(info_a[name], value, err_msg=name)
-        cut = 3 * N + 2 + core_ge.world.feature_bounds()[0].size
-        np.testing.assert_array_equal(obs_a[..., :cut], obs_b[..., :cut])
+        since = [core_ge.feature_index(name) for name in ("displacement", "steps_since", "message_value")]
+        same = np.ones(obs_a.shape[-1], bool)
+        same[since] = False
+        cut = 3 * N + 2 + len(core_ge.own_features) + core_ge.world.feature_bounds()[0].size
+        np.testing.assert_array_equal(obs_a[..., :cut][..., same[:cut]], obs_b[..., :cut][..., same[:cut]])
         np.testing.assert_array_equal(obs_a[..., cut + ack:], obs_b[..., cut:])
         np.testing.assert_array_equal(obs_a[..., cut:cut + ack], delivered_a)  # the ack: the sender's row
         lossy |= bool((info_a["link_deliveries"] < info_a["link_attempts"]).any())
@@ -184,7 +189,7 @@ def test_the_sender_observes_its_deliveries_one_step_later():
     core = ComposedScenario(spec, batch=2)
     core.reset([np.random.default_rng(b) for b in range(2)])
     N = core.num_agents
-    cut = 3 * N + 2 + core.world.feature_bounds()[0].size
+    cut = 3 * N + 2 + len(core.own_features) + core.world.feature_bounds()[0].size
     space = core.observation_space()
     assert core.obs_dim == space.shape[0] == core.observation().shape[-1]
     np.testing.assert_array_equal(core.observation()[..., cut:cut + N], 0.0)  # nothing sent yet

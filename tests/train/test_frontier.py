@@ -73,8 +73,12 @@ def test_the_command_writes_metrics_report_and_figure(tmp_path):
     metrics = json.loads((folder / "metrics.json").read_text())
     assert {"frontier.png", "report.md", "metrics.json"} <= {p.name for p in folder.iterdir()}
     names = {p["policy"] for p in metrics["points"]}
-    assert {"always", "silent", "random", "periodic:1", "periodic:inf", "uncertainty:0", "uncertainty:inf"} <= names
-    assert metrics["frontier"][0] in ("silent", "periodic:inf", "uncertainty:inf")  # the fewest messages first
+    assert {"always", "silent", "random", "periodic:1", "periodic:inf", "uncertainty:0", "uncertainty:inf",
+            "send_on_delta:0", "send_on_delta:inf", "value:0", "value:inf"} <= names
+    for family in ("uncertainty", "send_on_delta", "value"):  # thresholds between the ends (near-always to near-silent)
+        assert sum(name.startswith(f"{family}:") for name in names) > 2, family
+    silences = ("silent", "periodic:inf", "uncertainty:inf", "send_on_delta:inf", "value:inf")
+    assert metrics["frontier"][0] in silences  # the fewest messages first
     by_name = {p["policy"]: p for p in metrics["points"]}
     assert by_name["periodic:1"]["per_episode_cost"] == by_name["always"]["per_episode_cost"]
     assert by_name["periodic:inf"]["messages_per_agent_step"] == 0.0

@@ -25,7 +25,7 @@ The last messages of ``always`` are the least valuable: halving them costs 0.168
   ``always``'s error with fewer messages, or a lower error than a fixed schedule at the same message rate.
 * A measurement's effect on the covariance fades over tens of steps of dead reckoning: gamma 0.98, GAE 0.95.
 * 6 agents x 8 copies = 48 sub-envs, n_steps 64 -> 3,072 transitions per update (batches of 384).
-* Networks (64, 64): the observation has 3N + 2 + features = 21 numbers.
+* Networks (64, 64): the observation has 3N + 7 + features = 26 numbers.
 """
 
 from train.hyperparams import ppo
