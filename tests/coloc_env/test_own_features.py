@@ -172,6 +172,14 @@ def test_a_degenerate_range_is_the_fixed_cost():
     np.testing.assert_allclose(ranged[1], fixed[1], rtol=0, atol=1e-12)
     np.testing.assert_array_equal(ranged[0], fixed[0])
     assert np.all(fixed[2] == 0.3) and fixed[1].sum() < rollout(SMALL, 2)[1].sum()  # the cost is charged
+    index = core_of(SMALL).feature_index("communication_cost")
+    np.testing.assert_array_equal(fixed[0][..., index], np.float32(0.3))  # the fixed cost is observed too
+
+
+def test_the_range_ends_are_accepted():
+    for value in ((0.0, 0.0), (0.0, 1e12), (1e12, 1e12), [0.5, 2.0]):
+        spec = coloc_env.compose("drift", "broadcast", "kalman", cost_range=value)
+        assert spec.cost_range == tuple(value)
 
 
 @pytest.mark.parametrize(("value", "match"), [
