@@ -15,10 +15,14 @@ The knob grids (``--quick``: three of each) are fixed before the evaluation epis
 ``periodic`` over ``PERIODS`` (up to the horizon); ``uncertainty``, ``send_on_delta`` and ``value`` over
 thresholds read from ``always`` and ``silent`` on validation episodes
 (``train.evaluate.VALIDATION_SEED_BASE``): the 5th to 95th percentiles, evenly spaced in probability, of
-what the rule compares with its knob, pooled over both (the covariance traces, m^2; the observed
-displacements since the reference transmission, m; the observed message values, m^2: where the rule's
-decisions change, from near ``always`` to near ``silent``), plus 0 (= ``always``) and inf (= ``silent``).
-Nothing is tuned on the evaluation seeds.
+what the rule compares with its knob (where its decisions change, from near ``always`` to near
+``silent``), plus 0 (= ``always``) and inf (= ``silent``): ``uncertainty`` the covariance traces (m^2) of
+both pooled. ``send_on_delta`` and ``value`` compare what grows since the reference transmission and is 0
+right after one (under ``always`` it is 0 at nearly every decision), so their thresholds come from
+``silent`` on the same validation episodes: for each s of ``PERIODS`` (``QUICK_PERIODS``) within the
+horizon, the median over the agents and episodes of the positive displacements (m) or message values (m^2)
+s steps into the episode, what an agent accumulates in s steps without sending, so that a threshold there
+sends about every s steps. Nothing is tuned on the evaluation seeds.
 
 The **baseline frontier** (``train.leaderboard.baseline_frontier``): at a message rate m, the lowest mean
 error a time-share of baselines reaches with at most m messages per step; the lower convex hull of the
@@ -81,10 +85,10 @@ def _trace_values(scenario: str, which: str, episodes: int, seed_base: int) -> n
     return values[np.isfinite(values)]
 
 
-def _observed_values(scenario: str, which: str, feature: str, episodes: int, seed_base: int) -> np.ndarray:
-    """Every (step, agent) value of the observation feature ``feature`` at decision time (``displacement`` in m,
-    ``message_value`` in m^2) under ``always`` ("maximum") or ``silent`` ("minimum") over ``episodes`` episodes
-    seeded ``seed_base + e``, on the batched core."""
+def _silent_values(scenario: str, feature: str, episodes: int, seed_base: int) -> np.ndarray:
+    """(K + 1, episodes, N): the observation feature ``feature`` at each step k of ``silent`` (``displacement``
+    in m, ``message_value`` in m^2) over ``episodes`` episodes seeded ``seed_base + e``, on the batched core. Under
+    ``silent`` no agent transmits, so step k is k steps after each agent's reference (the episode's start)."""
     import coloc_env
     from coloc_env.scenarios.composed import DISTANCE_SCALE
 
@@ -92,19 +96,31 @@ def _observed_values(scenario: str, which: str, feature: str, episodes: int, see
     core.reset([np.random.default_rng(seed_base + e) for e in range(episodes)])
     index = core.feature_index(feature)
     scale = DISTANCE_SCALE if feature == "displacement" else 1.0
-    action = np.tile(core.action_vector(which), (episodes, core.num_agents, 1))
-    values = []
+    action = np.tile(core.action_vector("minimum"), (episodes, core.num_agents, 1))
+    values = [np.asarray(core.observation()[..., index], float) * scale]
     while not core.done().all():
-        values.append(np.asarray(core.observation()[..., index], float).ravel() * scale)
         core.step(action)
-    values = np.concatenate(values)
-    return values[np.isfinite(values)]
+        values.append(np.asarray(core.observation()[..., index], float) * scale)
+    return np.array(values)
 
 
 def _threshold_grid(pooled: np.ndarray, quick: bool) -> list[str]:
     """0, the 5th to 95th percentiles of ``pooled`` (``QUICK_LEVELS`` or ``UNCERTAINTY_LEVELS`` of them), inf."""
     levels = np.quantile(pooled, np.linspace(0.05, 0.95, QUICK_LEVELS if quick else UNCERTAINTY_LEVELS))
     return ["0"] + sorted({f"{v:.4g}" for v in levels if v > 0}, key=float) + ["inf"]
+
+
+def _steps_grid(values: np.ndarray, steps: tuple[int, ...]) -> list[str]:
+    """0, then for each s of ``steps`` within the episode the median of the positive values (K + 1, ...) at step s
+    (what an agent accumulates over s steps without transmitting: a threshold there sends about every s steps),
+    then inf."""
+    levels = []
+    for s in steps:
+        if s < len(values):
+            at = values[s][np.isfinite(values[s]) & (values[s] > 0)]
+            if at.size:
+                levels.append(float(np.median(at)))
+    return ["0"] + sorted({f"{v:.4g}" for v in levels}, key=float) + ["inf"]
 
 
 def knob_grids(scenario: str, horizon: int, quick: bool = False) -> dict[str, list[str]]:
@@ -123,9 +139,8 @@ def knob_grids(scenario: str, horizon: int, quick: bool = False) -> dict[str, li
         grids["uncertainty"] = _threshold_grid(pooled, quick)
     for family, feature in (("send_on_delta", "displacement"), ("value", "message_value")):
         if family in available:
-            pooled = np.concatenate([_observed_values(scenario, which, feature, GRID_EPISODES, VALIDATION_SEED_BASE)
-                                     for which in ("maximum", "minimum")])
-            grids[family] = _threshold_grid(pooled, quick)
+            values = _silent_values(scenario, feature, GRID_EPISODES, VALIDATION_SEED_BASE)
+            grids[family] = _steps_grid(values, QUICK_PERIODS if quick else PERIODS)
     return grids
 
 

@@ -152,10 +152,10 @@ from coloc_env.scenarios.base import Scenario
 
 LOG_TRACE_BOUND = 50.0
 DISTANCE_SCALE = 100.0
-# the agent's own features after the step fraction, in this order (the module's observation table)
 # the spawn key, under the world's generator's seed sequence, of a copy's episode cost: far above any child a world
 # spawns itself
 COST_STREAM = 2**32 - 1
+# the agent's own features after the step fraction, in this order (the module's observation table)
 OWN_FEATURES = ("covariance_known", "displacement", "steps_since", "message_value", "communication_cost")
 LINK_COUNTS = ("transmissions", "link_attempts", "link_deliveries", "collisions")  # coloc_env.networks.base
 
