@@ -28,7 +28,9 @@ all its agents; agent-steps = env-steps x N):
   process once the likelihood fit is in the disk cache (``coloc_env.data.fit_cache``), the best of 3
   (``construction_s``; the row's rate is its inverse);
 * ``pcrb, one episode``  ``coloc_env.pcrb`` of one episode (its play, backend idle where it
-  may be, and the recursion), in env-steps per second, beside the backend's step;
+  may be, and the recursion), in env-steps per second, beside the backend's step; where messages carry
+  estimates it includes the backend's own run (its deliveries define the information sets) and the sets'
+  forward passes of the information-set delivered bound (docs/bounds.md, its cost before and after);
 * ``vmas``          VMAS's batched ``simple_spread`` with 4 agents on the CPU at
   the same B, when ``vmas`` is installed (``pip install 'coloc[bench]'``).
 
