@@ -151,7 +151,9 @@ position variance), and raising it to alpha multiplies that variance by
 (the ring's angular profile is widened too, which leaves a uniform ring as
 it is). The reverse-message correction then divides by the tempered message,
 as fractional BP does. alpha = 1 is the paper's algorithm; the default 0.5
-was measured, with 0.25 and 1, in docs/consistency.md.
+was measured, with 0.35, 0.25 and 1, in docs/consistency.md (smaller alphas
+leave the fault UAVs' lost-track tail and widen the rest, at a cost in
+accuracy).
 
 Reported covariance (``coloc_env.backends.particles.DnbpBackend.position_cov``):
 the covariance of the density the belief particles stand for. A belief that

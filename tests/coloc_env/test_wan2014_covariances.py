@@ -5,6 +5,7 @@ in the chi^2(2 E) / E 95 % band; docs/consistency.md, "wan2014: dNBP and range_l
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 import coloc_env
 from train.study import nees_metrics, run_cell
@@ -74,3 +75,45 @@ def test_dnbp_cov_of_a_resampled_belief_is_its_particles_sample_covariance():
     assert not np.allclose(backend.state.belief[..., :2], prior)
     np.testing.assert_allclose(backend.posterior_position_cov, _sample_cov(backend.state.belief[..., :2]),
                                rtol=1e-12, atol=0)
+
+
+
+def test_dnbp_consistency_reads_what_coloc_evaluate_reads():
+    """``train.dnbp_consistency.play`` and ``coloc evaluate``'s path (the ``paper`` policy on the batched core,
+    ``attach_bounds``) on the same validation episodes: the same episode metric, NEES and band share."""
+    from train import dnbp_consistency as dc
+    from train.evaluate import VALIDATION_SEED_BASE, attach_bounds, run_policy_batched
+
+    config = {"horizon": 6, "num_particles": 40}
+    trace = {}
+    result = run_policy_batched("gps_denied_nbp", "paper", 3, VALIDATION_SEED_BASE, trace=trace, **config)
+    result = attach_bounds(result, "gps_denied_nbp", VALIDATION_SEED_BASE, trace, bounds=False, **config)
+    run = dc.play(3, VALIDATION_SEED_BASE, **config)
+    np.testing.assert_allclose(run["cost"], result["per_episode_cost"], rtol=1e-12)
+    np.testing.assert_allclose(run["nees"].mean(), result["nees"], rtol=1e-12)
+    shares = dc.band_shares(run["nees"])
+    assert shares["in"] == result["nees_in_band"]
+    np.testing.assert_allclose(shares["band"], result["nees_band"], rtol=1e-12)
+
+
+def test_gps_denied_nbp_paper_policy_nees_on_validation_seeds():
+    """The preset with its ``paper`` policy on 10 validation episodes: mean NEES in [1.5, 3.0] with >= 80 % of
+    (step, UAV) in the chi^2(20)/10 band, and the decomposition of docs/consistency.md ("The gps_denied_nbp preset"):
+    the GPS-normal UAVs' covariance is conservative in the bulk (median NEES below chi^2(2)'s), while the fault UAVs'
+    NEES has a tail above chi^2(2)'s 99.9 % quantile in far more than 0.1 % of their cells."""
+    from train import dnbp_consistency as dc
+    from train.evaluate import VALIDATION_SEED_BASE
+
+    run = dc.play(EPISODES, VALIDATION_SEED_BASE)
+    assert 1.5 <= run["nees"].mean() <= 3.0, run["nees"].mean()
+    assert dc.band_shares(run["nees"])["in"] >= 0.8, dc.band_shares(run["nees"])
+    assert dc.group_metrics(run, fault=False)["median_ratio"] < 0.9, dc.group_metrics(run, fault=False)
+    assert dc.group_metrics(run, fault=True)["tail_share"] > 0.005, dc.group_metrics(run, fault=True)
+
+
+def test_dnbp_consistency_refuses_the_evaluation_seeds():
+    from train import dnbp_consistency as dc
+    from train.evaluate import EVAL_SEED_BASE
+
+    with pytest.raises(ValueError, match=r"seed_base 1000000 with 2 episodes overlaps the evaluation seeds"):
+        dc.play(2, EVAL_SEED_BASE)
