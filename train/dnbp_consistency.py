@@ -12,7 +12,8 @@ seeds are refused), every UAV broadcasting whenever the schedule allows (the ``p
   ``coloc evaluate``'s ``nees`` / ``nees_in_band`` (``train.evaluate.attach_bounds``, the same numbers);
 * the same over the first ``--block`` episodes (with the chi^2(2 block)/block band), and the share over every
   consecutive block of ``--block`` episodes: the range and the mean over blocks;
-* for the GPS-normal and the GPS-fault UAVs apart: the bulk factor, mean squared error / mean tr P (1 for an
+* for the GPS-normal and the GPS-fault UAVs apart (a group without cells is left out): the mean squared error,
+  the mean tr P and the bulk factor, mean squared error / mean tr P (1 for an
   honest covariance; below 1 conservative), the median NEES / 1.386 (chi^2(2)'s median), and the tail: the
   share of NEES above 13.8 (chi^2(2)'s 99.9 % quantile: 0.1 % for an honest Gaussian covariance) and the share
   of the NEES sum those carry.
@@ -79,9 +80,13 @@ def group_metrics(run: dict[str, np.ndarray], fault: bool) -> dict[str, float]:
     """Bulk factor and tail (module docstring) of the GPS-fault (``fault``) or GPS-normal UAVs' cells."""
     select = run["fault"] if fault else ~run["fault"]
     nees = run["nees"][select]
+    if nees.size == 0:
+        return dict.fromkeys(("nees", "mse", "trace", "mse_over_trace", "median_ratio", "tail_share", "tail_weight"),
+                             float("nan"))
     tail = nees > TAIL
     mse_over_trace = run["squared"][select].mean() / run["trace"][select].mean()
-    return {"nees": float(nees.mean()), "mse_over_trace": float(mse_over_trace),
+    return {"nees": float(nees.mean()), "mse": float(run["squared"][select].mean()),
+            "trace": float(run["trace"][select].mean()), "mse_over_trace": float(mse_over_trace),
             "median_ratio": float(np.median(nees) / CHI2_2_MEDIAN), "tail_share": float(tail.mean()),
             "tail_weight": float(nees[tail].sum() / nees.sum())}
 
@@ -153,7 +158,10 @@ def main(argv=None) -> None:
                   f"{sum(b >= 0.8 for b in s['blocks'])} of {len(s['blocks'])} >= 80 %")
         for name in ("normal", "fault"):
             g = s[name]
-            print(f"  GPS-{name}: NEES {g['nees']:.2f}, mse / tr P {g['mse_over_trace']:.3f}, median NEES / 1.386 "
+            if np.isnan(g["nees"]):
+                continue
+            print(f"  GPS-{name}: NEES {g['nees']:.2f}, mse {g['mse']:.3f} m^2 / mean tr P {g['trace']:.3f} m^2 = "
+                  f"{g['mse_over_trace']:.3f}, median NEES / 1.386 "
                   f"{g['median_ratio']:.3f}, NEES > 13.8: {g['tail_share']:.2%} of cells, "
                   f"{g['tail_weight']:.1%} of the sum",
                   flush=True)
