@@ -18,6 +18,12 @@ seeds are refused), every UAV broadcasting whenever the schedule allows (the ``p
   share of NEES above 13.8 (chi^2(2)'s 99.9 % quantile: 0.1 % for an honest Gaussian covariance) and the share
   of the NEES sum those carry.
 
+the share in band over blocks of 10, 20, 50 and E episodes (``--block`` 10); the largest share a factor on P
+would put in band, fitted on these cells (``best_scales``: one factor, and one each for the GPS-normal and the
+fault UAVs); and, as a reference, the NEES and the band share with the truth replaced by one draw from each
+belief's density (``belief_draw``, from a generator of its own: the episodes are not changed): what a belief of
+the same shape would read were it calibrated.
+
 The decomposition is what docs/consistency.md ("The gps_denied_nbp preset") reads: a mean NEES near 2 can be a
 conservative bulk and an overconfident tail that cancel, which a per-cell band over many episodes tells apart.
 """
@@ -42,19 +48,22 @@ def play(episodes: int, seed: int, **config) -> dict[str, np.ndarray]:
     step, UAV) ``nees``, ``squared`` (2-D position error^2, m^2), ``trace`` (tr P, m^2), ``fault`` (GPS faulty),
     and per episode ``cost`` (the episode metric)."""
     check_not_evaluation_seeds(seed, episodes, "dnbp_consistency")
-    parts: dict[str, list] = {key: [] for key in ("nees", "squared", "trace", "fault", "cost")}
+    parts: dict[str, list] = {key: [] for key in ("nees", "self_nees", "squared", "trace", "fault", "cost")}
     for start in range(0, episodes, CHUNK):
         count = min(CHUNK, episodes - start)
         core = coloc_env.make_core("gps_denied_nbp", batch=count, **config)
         core.reset([np.random.default_rng(seed + start + e) for e in range(count)])
         actions = np.ones((count, core.num_agents, core.config.num_iterations))  # the paper policy
-        steps: dict[str, list] = {key: [] for key in ("nees", "squared", "trace", "fault", "error")}
+        steps: dict[str, list] = {key: [] for key in ("nees", "self_nees", "squared", "trace", "fault", "error")}
+        draw = np.random.default_rng([seed, start])  # the truth drawn from the belief: not the episodes' generators
         while not core.done().all():
             core.step(actions)
             info = core.info()
             error = (np.asarray(info["estimated_position"], float) - np.asarray(info["true_position"], float))[..., :2]
             cov, _ = reported_covariances(core)
             steps["nees"].append(_nees(error, cov))
+            steps["self_nees"].append(_nees(belief_draw(core.backend, draw)
+                                           - np.asarray(info["estimated_position"], float)[..., :2], cov))
             steps["squared"].append(np.sum(error**2, axis=-1))
             steps["trace"].append(np.trace(np.asarray(cov, float), axis1=-2, axis2=-1))
             steps["fault"].append(np.asarray(info["fault"], bool))
@@ -64,6 +73,16 @@ def play(episodes: int, seed: int, **config) -> dict[str, np.ndarray]:
         for key, value in stacked.items():
             parts[key].append(value)
     return {key: np.concatenate(value, axis=0) for key, value in parts.items()}
+
+
+def belief_draw(backend, rng: np.random.Generator) -> np.ndarray:
+    """One draw (B, N, 2) from each belief's density (``estimators.dnbp``, "Reported covariance"): a particle,
+    plus N(0, h_rho^2 I2) where the belief is its prior's particle set."""
+    points = backend.state.belief[..., :2]
+    B, N, M = points.shape[:3]
+    pick = rng.integers(M, size=(B, N))
+    chosen = np.take_along_axis(points, pick[..., None, None], axis=2)[:, :, 0]
+    return chosen + backend.belief_kernel[..., None] * rng.standard_normal((B, N, 2))
 
 
 def band_shares(nees: np.ndarray) -> dict[str, float]:
@@ -91,13 +110,33 @@ def group_metrics(run: dict[str, np.ndarray], fault: bool) -> dict[str, float]:
             "tail_weight": float(nees[tail].sum() / nees.sum())}
 
 
+SCALES = np.round(np.arange(0.6, 2.51, 0.05), 2)  # the factors on P searched by ``best_scales``
+
+
+def best_scales(run: dict[str, np.ndarray]) -> dict[str, tuple]:
+    """The largest share of cells in the E-episode band that a factor on the reported P reaches, fitted on these
+    very cells (so optimistic): one factor for every UAV ``(share, c)``, and one for the GPS-normal and another for
+    the fault UAVs ``(share, c_normal, c_fault)``, over ``SCALES``."""
+    nees, fault = run["nees"], run["fault"]
+    one = max((band_shares(nees / c)["in"], float(c)) for c in SCALES)
+    two = max((band_shares(np.where(fault, nees / cf, nees / cn))["in"], float(cn), float(cf))
+              for cn in SCALES for cf in SCALES)
+    return {"one": one, "two": two}
+
+
 def summary(run: dict[str, np.ndarray], block: int, reference: dict[str, np.ndarray] | None = None) -> dict:
     """The printed numbers of one setting (module docstring)."""
     mean, half = mean_ci95(run["cost"])
     out = {"error": (mean, half), "nees": float(run["nees"].mean()), **band_shares(run["nees"])}
+    self_nees = run["self_nees"]
+    out["self"] = {"nees": float(self_nees.mean()), "variance": float(self_nees.var()), **band_shares(self_nees)}
     E = run["nees"].shape[0]
     blocks = [band_shares(run["nees"][b:b + block])["in"] for b in range(0, E - block + 1, block)]
     out["blocks"] = blocks
+    # the share in band as the episodes per mean grow: the mean over consecutive blocks of each size
+    out["by_episodes"] = {size: float(np.mean([band_shares(run["nees"][b:b + size])["in"]
+                                               for b in range(0, E - size + 1, size)]))
+                          for size in (block, 2 * block, 5 * block, E) if 2 <= size <= E}
     if E >= block:
         out["first_block"] = {"nees": float(run["nees"][:block].mean()), **band_shares(run["nees"][:block])}
     out["normal"], out["fault"] = group_metrics(run, False), group_metrics(run, True)
@@ -150,6 +189,15 @@ def main(argv=None) -> None:
         if "paired" in s:
             line += f", paired {s['paired'][0]:+.3f} +- {s['paired'][1]:.3f} m"
         print(line, flush=True)
+        print("  in band over E episodes (the mean over blocks of E): "
+              + ", ".join(f"E = {size}: {share:.1%}" for size, share in s["by_episodes"].items()))
+        scales = best_scales(run)
+        print(f"  P scaled to fit these cells: one factor at most {scales['one'][0]:.1%} in band "
+              f"(P x {scales['one'][1]}); normal and fault apart {scales['two'][0]:.1%} "
+              f"(x {scales['two'][1]}, x {scales['two'][2]})", flush=True)
+        own = s["self"]
+        print(f"  truth drawn from the belief: NEES {own['nees']:.3f} (variance {own['variance']:.2f}; chi^2(2): 4), "
+              f"in band {own['in']:.1%}", flush=True)
         if "first_block" in s:
             first = s["first_block"]
             print(f"  first {args.block} episodes: NEES {first['nees']:.3f}, in band [{first['band'][0]:.3f}, "
