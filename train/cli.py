@@ -72,6 +72,46 @@ def _seed_range(text: str) -> list[int]:
     return list(range(first, last + 1))
 
 
+def _number(text: str) -> float | None:
+    """``text`` as a finite float (``0.5``, ``1e-2``), None for anything else (nan, inf, abc, an empty string)."""
+    import math
+
+    try:
+        value = float(text)
+    except ValueError:
+        return None
+    return value if math.isfinite(value) else None
+
+
+def _cost_range(text: str) -> tuple[float, float] | str:
+    """``LO,HI`` with 0 <= LO <= HI <= the largest cost (log-uniform for LO > 0), or ``"none"`` (a fixed cost);
+    anything else is refused naming the form and the range."""
+    from coloc_env.composition import COST_LIMIT
+
+    if text.strip().lower() == "none":
+        return "none"
+    parts = text.split(",")
+    values = [_number(p) for p in parts] if len(parts) == 2 else [None]
+    if None in values or not 0 <= values[0] <= values[1] <= COST_LIMIT:
+        raise argparse.ArgumentTypeError(f"must be LO,HI with 0 <= LO <= HI <= {COST_LIMIT:g} (e.g. 0.05,50; "
+                                         f"log-uniform for LO > 0, uniform on [0, HI] for LO = 0) or none, "
+                                         f"got {text!r}")
+    return values[0], values[1]
+
+
+def _costs(text: str) -> list[float]:
+    """``C1,C2,...``: one or more distinct costs, each in [0, the largest cost]."""
+    from coloc_env.composition import COST_LIMIT
+
+    values = [_number(p) for p in text.split(",")]
+    if None in values or not all(0 <= v <= COST_LIMIT for v in values):
+        raise argparse.ArgumentTypeError(f"must be C1,C2,... with each cost in [0, {COST_LIMIT:g}] (e.g. 0.1,1,10), "
+                                         f"got {text!r}")
+    if len(set(values)) != len(values):
+        raise argparse.ArgumentTypeError(f"must not repeat a cost, got {text!r}")
+    return values
+
+
 class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter):
     """Every option's default in its help, except where there is none to show (None, a flag's False);
     descriptions and epilogs keep their line breaks (the tables of ``coloc study --help``)."""
@@ -152,6 +192,11 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--tensorboard", action="store_true", help="also write TensorBoard logs (OUT/.../tb)")
     tr.add_argument("--curve-points", type=_count(0, MAX_CURVE_POINTS), default=10,
                     help=f"validation points of the learning curve, 0..{MAX_CURVE_POINTS} (0: none)")
+    tr.add_argument("--cost-range", type=_cost_range, default=None, metavar="LO,HI",
+                    help="cost-conditioned training: each episode draws its communication cost from [LO, HI] "
+                         "(log-uniform for LO > 0; 0 <= LO <= HI <= 1e12) and the agents observe it; none: the fixed "
+                         "communication_cost (default: COST_RANGE of train/hyperparams/<scenario>.py, none where it "
+                         "sets none)")
 
     ev = sub.add_parser("evaluate", help="evaluate a policy over seeded episodes", formatter_class=_HelpFormatter,
                         epilog=_policies_epilog())
@@ -164,6 +209,10 @@ def build_parser() -> argparse.ArgumentParser:
                     help=f"seeded evaluation episodes per policy, 2..{MAX_RUNS} (a confidence interval needs 2)")
     ev.add_argument("--stochastic", action="store_true",
                     help="trained models sample their actions (seeded) instead of taking the most likely")
+    ev.add_argument("--costs", type=_costs, default=None, metavar="C1,C2,...",
+                    help="evaluate each trained model at each communication cost (an env built with "
+                         "communication_cost=C, which its observation carries), one row 'PATH.zip @ cost=C' per cost "
+                         "(default: a cost-conditioned model at its range's median, any other at its training cost)")
     ev.add_argument("--out", type=_out_folder, default="results",
                     help="records into OUT/PAPER/leaderboard.json and OUT/leaderboard.md")
 
@@ -273,6 +322,8 @@ def _add_frontier_parser(sub) -> None:
     fr.add_argument("scenario", help="a preset or a composition world/network/backend")
     fr.add_argument("--models", default=None, metavar="DIR", help="trained .zip models under DIR, judged against "
                                                                   "the frontier")
+    fr.add_argument("--costs", type=_costs, default=None, metavar="C1,C2,...",
+                    help="with --models: each model at each communication cost, a point 'PATH.zip @ cost=C' each")
     fr.add_argument("--episodes", type=_count(2, MAX_RUNS), default=30,
                     help=f"paired episodes per point, 2..{MAX_RUNS}")
     fr.add_argument("--quick", action="store_true", help="a first look: three knobs per family")
@@ -343,15 +394,17 @@ def _check_scenario(name: str) -> None:
 def cmd_train(args) -> int:
     from train.executor import map_tasks
     from train.io import check_output_folder
-    from train.training import train
+    from train.training import FROM_SETTINGS, train, training_env_config
 
     _check_scenario(args.scenario)
     seeds = args.seeds or [0 if args.seed is None else args.seed]
     folders = [os.path.join(args.out, args.scenario, f"seed{s}") for s in seeds]
     for folder in folders:
         check_output_folder(folder)
+    cost_range = {None: FROM_SETTINGS, "none": None}.get(args.cost_range, args.cost_range)
+    training_env_config(args.scenario, cost_range)  # a refused cost range writes nothing
     jobs = [(args.scenario, args.timesteps, s, args.out, args.vec, args.executor == "local", args.tensorboard,
-             args.curve_points) for s in seeds]
+             args.curve_points, cost_range) for s in seeds]
     with contextlib.ExitStack() as stack:
         for folder in folders:
             stack.enter_context(_open(args, folder))
@@ -405,22 +458,30 @@ def _evaluation_line(scenario: str, policy: str, result: dict, episodes: int, pa
 def cmd_evaluate(args) -> int:
     from rich.progress import Progress
 
+    from coloc_env.config import BadInput
     from train.evaluate import evaluate_policy
     from train.io import check_output_folder, read_json
     from train.leaderboard import frontier_verdict, metric, record
 
     console = _console()
     check_output_folder(args.out)
+    if args.costs is not None and args.policy != "all" and not args.policy.endswith(".zip"):
+        raise BadInput(f"--costs applies to trained models (--policy PATH.zip, or the models --policy all finds); "
+                       f"{args.policy!r} does not read the communication cost")
     scenarios = _runnable_scenarios(console) if args.scenario == "all" else [args.scenario]
     for scenario in scenarios:
         _check_scenario(scenario)
         check_output_folder(os.path.join(args.out, _result_key(scenario)))
-        for policy in _policies_for(scenario, args.policy, args.models):
+        runs = [(policy, cost) for policy in _policies_for(scenario, args.policy, args.models)
+                for cost in (args.costs if args.costs is not None and policy.endswith(".zip") else [None])]
+        for policy, cost in runs:
             with Progress(console=console, transient=True) as bar:
-                task = bar.add_task(f"{scenario} / {policy}", total=args.episodes)
+                task = bar.add_task(f"{scenario} / {policy}" + ("" if cost is None else f" @ cost={cost:g}"),
+                                    total=args.episodes)
                 result = evaluate_policy(scenario, policy, args.episodes,
                                          progress=lambda task=task: bar.advance(task),
-                                         stochastic=args.stochastic and policy.endswith(".zip"))
+                                         stochastic=args.stochastic and policy.endswith(".zip"), cost=cost)
+            policy = result["policy"]
             path = record(result, args.out, _result_key(scenario))
             console.print(_evaluation_line(scenario, policy, result, args.episodes, path), highlight=False)
             against = frontier_verdict(scenario, read_json(path), result["policy"])
@@ -549,7 +610,7 @@ def cmd_frontier(args) -> int:
         task = bar.add_task(args.scenario, total=None)
         metrics, folder = run_frontier(
             args.scenario, episodes=args.episodes, seed=args.seed, models=args.models, quick=args.quick,
-            executor=args.executor,
+            executor=args.executor, costs=args.costs,
             address=args.address, out=args.out,
             progress=lambda done, total: bar.update(task, completed=done, total=total),
             mark=lambda folder: _open(args, folder))

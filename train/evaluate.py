@@ -259,8 +259,76 @@ def summarize(scenario, policy_name: str, costs, comms, seed_base: int, initial_
     }
 
 
+# --- a trained model's communication cost --------------------------------------------------------------
+COST_TAG = " @ cost="  # a model's row at one communication cost: ``PATH.zip @ cost=c``
+
+
+def trained_costs(path: str) -> tuple[tuple[float, float] | None, float | None]:
+    """(``cost_range``, fixed ``communication_cost``) a model was trained with, read from its ``model.json``
+    (``train.training``); (None, None) where it has none or records neither."""
+    import os
+
+    from agents.sb3 import metadata_path, read_metadata
+
+    meta_file = metadata_path(path)
+    if not os.path.isfile(meta_file):
+        return None, None
+    meta = read_metadata(meta_file)
+    env_config = meta.get("env_config") if isinstance(meta.get("env_config"), dict) else {}
+    cost_range = meta.get("cost_range", env_config.get("cost_range"))
+    fixed = env_config.get("communication_cost")
+    return (None if cost_range is None else (float(cost_range[0]), float(cost_range[1])),
+            None if fixed is None else float(fixed))
+
+
+def median_cost(cost_range: tuple[float, float]) -> float:
+    """The median of ``cost_range``'s law (``coloc_env.composition``): sqrt(lo hi) for the log-uniform law (lo > 0),
+    hi / 2 for the uniform one (lo = 0)."""
+    lo, hi = cost_range
+    return math.sqrt(lo * hi) if lo > 0 else hi / 2
+
+
+def model_row(path: str, cost: float | None = None) -> tuple[str, float | None]:
+    """(row name, the ``communication_cost`` of the env it plays in; None: the scenario's default) of the model
+    ``path`` evaluated at ``cost``. The observation carries the episode's cost, so a model plays at cost c in an
+    env built with ``communication_cost=c``.
+
+    | ``cost`` | model trained over ``cost_range``            | model trained at a fixed cost x                |
+    |----------|----------------------------------------------|------------------------------------------------|
+    | c        | ``PATH.zip @ cost=c``                        | ``PATH.zip @ cost=c (trained at fixed cost x)`` |
+    | None     | ``PATH.zip`` at m, the median of its range   | ``PATH.zip`` at x, the cost it observed in     |
+    |          | (``median_cost``)                            | training (the scenario's default where         |
+    |          |                                              | model.json records none)                       |
+
+    A row records the cost it was played at (``communication_cost``).
+    """
+    cost_range, fixed = trained_costs(path)
+    if cost is None:
+        return path, (fixed if cost_range is None else median_cost(cost_range))
+    name = f"{path}{COST_TAG}{cost:g}"
+    if cost_range is None:
+        name += f" (trained at fixed cost {0.0 if fixed is None else fixed:g})"
+    return name, float(cost)
+
+
+def check_costs(costs) -> list[float]:
+    """``costs`` (``--costs``): one or more distinct numbers in [0, ``COST_LIMIT``], else a ``BadInput`` naming
+    ``--costs`` and the range."""
+    from coloc_env.composition import COST_LIMIT
+    from coloc_env.config import check_range
+
+    costs = list(costs)
+    if not costs:
+        raise BadInput(f"--costs must name at least one cost in [0, {COST_LIMIT:g}]")
+    for c in costs:
+        check_range("--costs", c, 0.0, COST_LIMIT)
+    if len(set(map(float, costs))) != len(costs):
+        raise BadInput(f"--costs must not repeat a cost, got {costs}")
+    return [float(c) for c in costs]
+
+
 def evaluate_policy(scenario: str, policy_name: str, episodes: int, seed_base: int = EVAL_SEED_BASE,
-                    progress=None, stochastic: bool = False, bounds: bool = True) -> dict:
+                    progress=None, stochastic: bool = False, bounds: bool = True, cost: float | None = None) -> dict:
     """A trained model (``.zip``) on the batched core, a reference filter on the same episodes, any other
     policy through the PettingZoo env.
 
@@ -268,8 +336,13 @@ def evaluate_policy(scenario: str, policy_name: str, episodes: int, seed_base: i
     copy for copy; a test checks the costs agree); the batched one runs every
     episode in one call per step. ``stochastic``: a model samples its actions
     (torch seeded with ``seed_base``) and is recorded as ``PATH.zip (stochastic)``.
+    A model plays in an env built with the ``communication_cost`` of ``model_row(policy_name, cost)`` and its
+    row takes that name (``cost`` applies to models only: the fixed policies never read the cost).
     Every policy row gets the columns of ``attach_bounds`` (``bounds=False``: RMSE and NEES only).
     """
+    if cost is not None and not policy_name.endswith(".zip"):
+        raise BadInput(f"a communication cost applies to trained models (PATH.zip), not to {policy_name!r}, "
+                       "which does not read it")
     if policy_name in REFERENCE_FILTERS.get(scenario, {}):
         result = run_reference_filter(scenario, policy_name, episodes, seed_base)
         if progress:
@@ -291,13 +364,20 @@ def evaluate_policy(scenario: str, policy_name: str, episodes: int, seed_base: i
 
     if episodes < 2:
         raise BadInput(f"episodes must be >= 2 for a confidence interval, got {episodes}")
-    policy = agents.make_policy(policy_name, coloc_env.parallel_env(scenario))  # checks scenario and spaces
-    result = run_model_batched(policy.model, scenario, episodes, seed_base, deterministic=not stochastic, trace=trace)
+    name, communication_cost = model_row(policy_name, cost)
+    env_config = {} if communication_cost is None else {"communication_cost": communication_cost}
+    try:
+        env = coloc_env.parallel_env(scenario, **env_config)
+    except ValueError as exc:
+        raise BadInput(f"{scenario} cannot be evaluated at communication cost {communication_cost:g}: {exc}") from exc
+    policy = agents.make_policy(policy_name, env)  # checks scenario and spaces
+    result = run_model_batched(policy.model, scenario, episodes, seed_base, deterministic=not stochastic, trace=trace,
+                               **env_config)
     if progress:
         for _ in range(episodes):
             progress()
     result = attach_bounds(result, scenario, seed_base, trace, bounds)
-    return dict(result, policy=policy_name + (" (stochastic)" if stochastic else ""))
+    return dict(result, policy=name + (" (stochastic)" if stochastic else ""), communication_cost=communication_cost)
 
 
 def run_reference_filter(scenario: str, name: str, episodes: int, seed_base: int = EVAL_SEED_BASE,

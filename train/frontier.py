@@ -9,7 +9,10 @@ episodes (episode e: ``reset(seed=S + e)``, S = ``--seed``, by default the evalu
 | baselines       | ``always``, ``silent``, ``random``, ``paper`` where the scenario has one, and each       |
 |                 | event-triggered family of ``agents.event_triggered`` over its knob grid (``KNOBS``)     |
 | privileged      | ``greedy`` (it copies the core): drawn apart, never on the frontier                      |
-| models          | every ``*.zip`` under ``--models DIR``: judged against the frontier                      |
+| models          | every ``*.zip`` under ``--models DIR``: judged against the frontier; with ``--costs``    |
+|                 | ``c1,c2,...`` each model at each cost, a point ``PATH.zip @ cost=c`` each (played in an   |
+|                 | env built with ``communication_cost=c``, which its observation carries;                  |
+|                 | ``train.evaluate.model_row`` names a model trained at a fixed cost so)                    |
 
 The knob grids (``--quick``: three of each) are fixed before the evaluation episodes are played:
 ``periodic`` over ``PERIODS`` (up to the horizon); ``uncertainty``, ``send_on_delta`` and ``value`` over
@@ -144,17 +147,22 @@ def knob_grids(scenario: str, horizon: int, quick: bool = False) -> dict[str, li
     return grids
 
 
-def cells(scenario: str, horizon: int, models: list[str], quick: bool = False) -> list[dict]:
-    """The points to play: each a dict with ``policy`` (the name make_policy takes), ``kind`` (baseline,
-    privileged or model) and, for a family, ``family`` and ``knob``."""
+def cells(scenario: str, horizon: int, models: list[str], quick: bool = False,
+          costs: list[float] | None = None) -> list[dict]:
+    """The points to play: each a dict with ``policy`` (its name: make_policy's, or a model's row at a cost),
+    ``kind`` (baseline, privileged or model), for a family ``family`` and ``knob``, for a model ``model`` (its
+    path) and ``cost`` (each of ``costs``; None: ``train.evaluate.model_row``'s default)."""
     import agents
+    from train.evaluate import model_row
 
     available = agents.available_policies(scenario)
     out = [{"policy": name, "kind": "baseline"} for name in BASELINE_NAMES if name in available]
     for family, knobs in knob_grids(scenario, horizon, quick).items():
         out += [{"policy": f"{family}:{knob}", "kind": "baseline", "family": family, "knob": knob} for knob in knobs]
     out += [{"policy": name, "kind": "privileged"} for name in PRIVILEGED if name in available]
-    out += [{"policy": path, "kind": "model"} for path in models]
+    # a model's points at several costs share its path as their family: one line, the curve the model traces
+    out += [{"policy": model_row(path, cost)[0], "kind": "model", "model": path, "cost": cost,
+             **({"family": path} if costs else {})} for path in models for cost in (costs or [None])]
     return out
 
 
@@ -170,11 +178,11 @@ def find_models(folder: str | None) -> list[str]:
     return found
 
 
-def play(scenario: str, policy: str, episodes: int, seed: int) -> dict:
-    """One point: ``train.evaluate.evaluate_policy`` with its bounds on episodes ``seed + e``."""
+def play(scenario: str, policy: str, episodes: int, seed: int, cost: float | None = None) -> dict:
+    """One point: ``train.evaluate.evaluate_policy`` with its bounds on episodes ``seed + e`` (a model at ``cost``)."""
     from train.evaluate import evaluate_policy
 
-    return evaluate_policy(scenario, policy, episodes, seed, bounds=True)
+    return evaluate_policy(scenario, policy, episodes, seed, bounds=True, cost=cost)
 
 
 def _messages_per_agent(row: dict, num_agents: int) -> float:
@@ -307,11 +315,13 @@ def figure(metrics: dict):
     return fig
 
 
-def command_line(scenario, models, episodes, seed, quick, executor, address, out) -> str:
+def command_line(scenario, models, episodes, seed, quick, executor, address, out, costs=None) -> str:
     args = ["coloc", "frontier", scenario, "--episodes", str(episodes), "--seed", str(seed)] + (["--quick"] if quick
                                                                                                else [])
     if models:
         args += ["--models", models]
+    if costs:
+        args += ["--costs", ",".join(f"{c:g}" for c in costs)]
     if executor != "local":
         args += ["--executor", executor]
     if address:
@@ -321,10 +331,12 @@ def command_line(scenario, models, episodes, seed, quick, executor, address, out
 
 def run_frontier(scenario: str, episodes: int = 30, seed: int | None = None, models: str | None = None,
                  quick: bool = False, executor: str = "local", address: str | None = None, out: str = "results",
-                 progress: Callable[[int, int], None] | None = None, mark=None) -> tuple[dict, str]:
-    """Play every point (the module docstring) and write the three files; returns (metrics, folder)."""
+                 progress: Callable[[int, int], None] | None = None, mark=None,
+                 costs: list[float] | None = None) -> tuple[dict, str]:
+    """Play every point (the module docstring) and write the three files; returns (metrics, folder). ``costs``
+    (``--costs``): each model at each of these communication costs; it needs ``models``."""
     import coloc_env
-    from train.evaluate import EVAL_SEED_BASE
+    from train.evaluate import EVAL_SEED_BASE, check_costs
     from train.executor import map_tasks
     from train.io import check_output_folder, result_folder, save_figure, write_json, write_text
 
@@ -339,6 +351,10 @@ def run_frontier(scenario: str, episodes: int = 30, seed: int | None = None, mod
         raise BadInput(f"seed must be an integer in [0, 2**62], got {seed!r}")
     if executor not in ("local", "ray"):
         raise BadInput(f"executor must be 'local' or 'ray', got {executor!r}")
+    if costs is not None:
+        costs = check_costs(costs)
+        if models is None:
+            raise BadInput("--costs evaluates trained models at each cost: give them with --models DIR")
     found = find_models(models)
     folder = os.path.join(os.fspath(out), "frontier", folder_name(scenario))
     try:
@@ -347,17 +363,18 @@ def run_frontier(scenario: str, episodes: int = 30, seed: int | None = None, mod
         raise BadInput(f"frontier folder not writable: {exc}") from exc
     core = coloc_env.make_core(scenario, batch=1)
     num_agents, horizon = core.num_agents, int(core.horizon)
-    command = command_line(scenario, models, episodes, seed, quick, executor, address, os.fspath(out))
+    command = command_line(scenario, models, episodes, seed, quick, executor, address, os.fspath(out), costs)
     with result_folder(folder, command) if mark is None else mark(folder):
-        plan = cells(scenario, horizon, found, quick)
+        plan = cells(scenario, horizon, found, quick, costs)
+        tasks = [(scenario, cell.get("model", cell["policy"]), episodes, seed, cell.get("cost")) for cell in plan]
         if executor == "local":
             results = []
-            for i, cell in enumerate(plan):
-                results.append(play(scenario, cell["policy"], episodes, seed))
+            for i, task in enumerate(tasks):
+                results.append(play(*task))
                 if progress:
                     progress(i + 1, len(plan))
         else:
-            results = map_tasks(play, [(scenario, cell["policy"], episodes, seed) for cell in plan], "ray", address)
+            results = map_tasks(play, tasks, "ray", address)
             if progress:
                 progress(len(plan), len(plan))
         metrics = summarize(scenario, plan, results, num_agents, episodes, seed)

@@ -188,7 +188,14 @@ def paired(row: dict, reference: dict) -> dict | None:
 
 # --- rows ---------------------------------------------------------------------------------------------
 def _is_model(name: str) -> bool:
-    return name.endswith(".zip") or name.endswith(".zip" + STOCHASTIC)
+    """A trained model's row: ``PATH.zip``, sampled ``PATH.zip (stochastic)``, or at one communication cost
+    ``PATH.zip @ cost=c ...`` (``train.evaluate.model_row``)."""
+    return name.endswith(".zip") or name.endswith(".zip" + STOCHASTIC) or _at_cost(name)
+
+
+def _at_cost(name: str) -> bool:
+    """A trained model's row at one communication cost (``train.evaluate.model_row``)."""
+    return ".zip @ cost=" in name
 
 
 def _is_bound(name: str) -> bool:
@@ -555,7 +562,8 @@ def leaderboard_figure(table: dict, key: str):
     name, unit = metric(scenario)
     unit = unit.replace("^2", "\u00b2")
     baseline = strongest_baseline(scenario, table)
-    shown = [r for r in rows(table) if not _is_model(r["policy"])] + bound_rows(table)
+    # a model is drawn through its seeds' summary, a model at one communication cost as its own row
+    shown = [r for r in rows(table) if not _is_model(r["policy"]) or _at_cost(r["policy"])] + bound_rows(table)
     count = len(shown)
     y = np.arange(count)[::-1].astype(float)
     means = np.array([r["mean_cost"] for r in shown], float)

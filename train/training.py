@@ -6,11 +6,27 @@ the validation seeds and ``coloc evaluate`` on the evaluation seeds of
 ``train.evaluate``; neither range overlaps the training seeds.
 
 Writes ``OUT/SCENARIO/seedS/``: ``model.zip`` (+ ``model.json``: scenario,
-config, spaces, which checkpoint it is), the best checkpoint on the validation seeds (its
-point of the learning curve has the lowest validation cost; the last weights where there is no
+config, ``cost_range``, spaces, which checkpoint it is), the best checkpoint on the validation seeds (its
+point of the learning curve has the lowest validation score; the last weights where there is no
 curve), ``best.zip`` and ``last.zip`` (the final weights), ``checkpoint.zip`` (replaced atomically as training goes),
-``curve.json`` and ``learning_curve.png`` (validation error in the scenario's metric and unit vs
-timesteps, each point with its 95 % interval, the paper policy's level and interval as a line and band).
+``curve.json`` and ``learning_curve.png`` (validation score vs timesteps, each point with its 95 % interval,
+the paper policy's level and interval as a line and band).
+
+Cost conditioning. With a cost range (``--cost-range lo,hi``, else the settings module's ``COST_RANGE``) the
+training env is built with ``cost_range=(lo, hi)``: each copy draws its episode's communication cost at reset
+(log-uniform for lo > 0, ``coloc_env.composition``) and every agent observes it, so one network learns every
+price. The validation score of a learning-curve point is then
+
+    score = (1 / |C|) sum_{c in C} mean_e [ error_e(c) + c * m_e(c) ],
+
+C = ``validation_costs(lo, hi)``: the cost law's quantiles at 1/6, 1/2 and 5/6 (the centres of its thirds; one
+cost where lo = hi), error_e(c) the scenario's own per-episode metric and m_e(c) the communication per
+agent-step (``communication_per_step / N``: messages for a composition) of validation episode e played in an
+env built with ``communication_cost=c``: the frontier's two axes priced at c, for a composition the negative
+mean reward under ``reward="error"``. The 95 % interval is over the episodes of the per-episode mean over C.
+Without a cost range a point's score is the validation error, played at the training env's
+``communication_cost`` (the cost the model observes). Either way the validation episodes are seeded
+``VALIDATION_SEED_BASE + e`` (``train.evaluate``), disjoint from the training seeds and the evaluation seeds.
 """
 
 from __future__ import annotations
@@ -105,7 +121,54 @@ def make_vec_env(scenario: str, copies: int, env_config: dict, seed: int, vec: s
     raise BadInput(f"vec must be 'native' or 'supersuit', got {vec!r}")
 
 
-def _callbacks(scenario: str, folder: str, timesteps: int, curve: list, points: int, episodes: int, report=None):
+VALIDATION_COST_QUANTILES = (1 / 6, 1 / 2, 5 / 6)
+
+
+def validation_costs(cost_range: tuple[float, float]) -> list[float]:
+    """The fixed costs a cost-conditioned model is validated at: the quantiles ``VALIDATION_COST_QUANTILES`` of
+    ``cost_range``'s law (``coloc_env.composition.draw_costs``: log-uniform for lo > 0, uniform on [0, hi] for
+    lo = 0); the one cost lo where lo = hi."""
+    lo, hi = float(cost_range[0]), float(cost_range[1])
+    if lo == hi:
+        return [lo]
+    if lo > 0:
+        return [float(np.exp(np.log(lo) + q * (np.log(hi) - np.log(lo)))) for q in VALIDATION_COST_QUANTILES]
+    return [q * hi for q in VALIDATION_COST_QUANTILES]
+
+
+def priced_score(rows: dict, num_agents: int) -> dict:
+    """The validation score of the module docstring from ``rows`` {cost c: the result row played at c on the same
+    episodes}: per episode, the mean over the costs of error + c * communication per agent-step; its mean and 95 %
+    interval, with each cost's error and communication per agent-step beside them."""
+    from train.evaluate import mean_ci95
+
+    per_episode = np.mean([np.asarray(row["per_episode_cost"], float)
+                           + c * np.asarray(row["per_episode_communication"], float) / num_agents
+                           for c, row in rows.items()], axis=0)
+    mean, half = mean_ci95(per_episode)
+    return {"mean_cost": mean, "ci95": half,
+            "at_costs": [{"cost": c, "mean_cost": row["mean_cost"],
+                          "messages_per_agent_step": row["communication_per_step"] / num_agents}
+                         for c, row in rows.items()]}
+
+
+def observed_cost(env_config: dict) -> dict:
+    """The part of a training env config that a fixed-cost model observes and is validated at: its
+    ``communication_cost`` (the scenario's default where it sets none); nothing else of the training config
+    enters the validation env, which is the evaluation env."""
+    return {"communication_cost": env_config["communication_cost"]} if "communication_cost" in env_config else {}
+
+
+def validate(run, scenario: str, env_config: dict, cost_range, num_agents: int) -> dict:
+    """One validation result {``mean_cost``, ``ci95``, ...} by the module docstring's score: ``run(**config)``
+    plays the validation episodes in an env built with ``config`` and returns the result row."""
+    if cost_range is None:
+        return run(**observed_cost(env_config))
+    return priced_score({c: run(communication_cost=c) for c in validation_costs(cost_range)}, num_agents)
+
+
+def _callbacks(scenario: str, folder: str, timesteps: int, curve: list, points: int, episodes: int, report=None,
+               env_config: dict | None = None, cost_range=None, num_agents: int = 1, at_costs: list | None = None):
     from stable_baselines3.common.callbacks import BaseCallback
 
     from train.evaluate import VALIDATION_SEED_BASE, run_model_batched
@@ -117,6 +180,7 @@ def _callbacks(scenario: str, folder: str, timesteps: int, curve: list, points: 
 
         def __init__(self):
             super().__init__()
+            self.at_costs = [] if at_costs is None else at_costs
             self.next_at = 0
             self.every = 1
             self.best: tuple[float, int] | None = None  # (validation mean cost, timesteps) of best.zip
@@ -138,8 +202,12 @@ def _callbacks(scenario: str, folder: str, timesteps: int, curve: list, points: 
         def _record(self) -> None:
             save_model(os.path.join(folder, "checkpoint.zip"), self.model)
             if points:
-                result = run_model_batched(self.model, scenario, episodes, VALIDATION_SEED_BASE)
+                result = validate(lambda **config: run_model_batched(self.model, scenario, episodes,
+                                                                     VALIDATION_SEED_BASE, **config),
+                                  scenario, env_config or {}, cost_range, num_agents)
                 curve.append((int(self.num_timesteps), result["mean_cost"], result["ci95"]))
+                if "at_costs" in result:
+                    self.at_costs.append(result["at_costs"])
                 # the best point on the validation seeds is the model that is kept (never the evaluation seeds)
                 better = self.best is None or result["mean_cost"] < self.best[0]
                 if better:
@@ -147,7 +215,8 @@ def _callbacks(scenario: str, folder: str, timesteps: int, curve: list, points: 
                     self.best = (float(result["mean_cost"]), int(self.num_timesteps))
                 if report is not None:
                     unit = metric(scenario)[1]
-                    report(f"{self.num_timesteps:,} timesteps (budget {timesteps:,}): validation error "
+                    what = "error" if cost_range is None else "score (error + cost x messages)"
+                    report(f"{self.num_timesteps:,} timesteps (budget {timesteps:,}): validation {what} "
                            f"{result['mean_cost']:.4g} +- {result['ci95']:.3g} {unit} ({episodes} episodes)"
                            + (", the best so far" if better else ""))
 
@@ -163,25 +232,44 @@ def curve_reference(scenario: str) -> str:
     return agents.COMPOSITION_BASELINES[0] if coloc_env.is_composition_name(scenario) else "paper"
 
 
-def write_learning_curve(folder: str, scenario: str, curve: list, title: str, episodes: int = CURVE_EPISODES) -> None:
+def _play(scenario: str, policy: str, episodes: int, seed_base: int, **env_config) -> dict:
+    """A named policy's result row on episodes ``seed_base + e`` in an env built with ``env_config`` (batched
+    where the policy batches)."""
+    from train.evaluate import run_episodes, run_policy_batched
+
+    row = run_policy_batched(scenario, policy, episodes, seed_base, **env_config)
+    return row if row is not None else run_episodes(scenario, policy, episodes, seed_base, **env_config)
+
+
+def write_learning_curve(folder: str, scenario: str, curve: list, title: str, episodes: int = CURVE_EPISODES,
+                         env_config: dict | None = None, cost_range=None, at_costs: list | None = None) -> None:
     """``curve.json`` and ``learning_curve.png`` with the paper policy (a composition: ``always``) on the same
-    validation seeds."""
+    validation seeds, scored alike (the module docstring: with a cost range, priced at the validation costs)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from train.evaluate import VALIDATION_SEED_BASE, evaluate_policy
+    import coloc_env
+    from train.evaluate import VALIDATION_SEED_BASE
     from train.io import save_figure
 
     reference = curve_reference(scenario)
-    paper = evaluate_policy(scenario, reference, episodes, VALIDATION_SEED_BASE)
-    write_json(os.path.join(folder, "curve.json"), {
-        "scenario": scenario, "validation_seed_base": VALIDATION_SEED_BASE, "episodes": episodes,
-        "points": [{"timesteps": t, "mean_cost": c, "ci95": h} for t, c, h in curve],
-        reference: {"mean_cost": paper["mean_cost"], "ci95": paper["ci95"]},
-    })
+    num_agents = coloc_env.make_core(scenario, batch=1).num_agents
+    paper = validate(lambda **config: _play(scenario, reference, episodes, VALIDATION_SEED_BASE, **config),
+                     scenario, env_config or {}, cost_range, num_agents)
+    points = [{"timesteps": t, "mean_cost": c, "ci95": h} for t, c, h in curve]
+    for point, priced in zip(points, at_costs or [], strict=False):
+        point["at_costs"] = priced
+    content = {"scenario": scenario, "validation_seed_base": VALIDATION_SEED_BASE, "episodes": episodes,
+               "points": points, reference: {"mean_cost": paper["mean_cost"], "ci95": paper["ci95"]}}
     name, unit = metric(scenario)
+    if cost_range is not None:
+        costs = validation_costs(cost_range)
+        content.update(cost_range=list(cost_range), validation_costs=costs,
+                       score="mean over validation_costs c of (error + c * communication per agent-step)")
+        name = f"{name} + cost x messages, mean over costs {', '.join(f'{c:.3g}' for c in costs)}"
+    write_json(os.path.join(folder, "curve.json"), content)
     unit = unit.replace("^2", "\u00b2")
     fig, ax = plt.subplots(figsize=(7.5, 4.8), layout="constrained")
     steps, costs, half = (np.array(v, dtype=float) for v in zip(*curve, strict=True))
@@ -194,20 +282,58 @@ def write_learning_curve(folder: str, scenario: str, curve: list, title: str, ep
     ax.axhspan(p_mean - p_half, p_mean + p_half, color="0.5", alpha=0.15,
                label=f"{reference} policy: 95 % interval over {n} validation episodes (\u00b1{p_half:.2g} {unit})")
     ax.set_xlabel("training timesteps [agent transitions]")
-    ax.set_ylabel("\n".join(textwrap.wrap(f"validation error: {name} [{unit}]", 48)), fontsize=9)
+    what = "validation error" if cost_range is None else "validation score"
+    ax.set_ylabel("\n".join(textwrap.wrap(f"{what}: {name} [{unit}]", 48)), fontsize=9)
     ax.set_title(title, fontsize=10)
     ax.grid(True, color="0.92", lw=0.6)
     ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=1, frameon=False)
     save_figure(os.path.join(folder, "learning_curve.png"), fig)
 
 
+FROM_SETTINGS = "settings"  # train's cost_range default: the settings module's COST_RANGE
+
+
+def training_env_config(scenario: str, cost_range=FROM_SETTINGS) -> tuple[dict, tuple[float, float] | None]:
+    """(the training env config, its cost range) of ``scenario``: the settings module's ``ENV_CONFIG`` with
+    ``cost_range`` = ``cost_range`` (``FROM_SETTINGS``: its ``COST_RANGE``; None: none, a fixed cost), checked
+    before any training: a ``BadInput`` naming ``--cost-range`` and the allowed range for a bad pair, and one
+    saying so where the scenario takes no ``cost_range`` keyword."""
+    import coloc_env
+    from coloc_env.composition import check_cost_range
+    from train.hyperparams import cost_range as settings_cost_range
+    from train.hyperparams import load
+
+    env_config = load(scenario)[1]
+    if isinstance(cost_range, str) and cost_range == FROM_SETTINGS:
+        cost_range = settings_cost_range(scenario)
+    elif cost_range is not None:
+        cost_range = tuple(cost_range) if isinstance(cost_range, (list, tuple)) else cost_range
+        check_cost_range("--cost-range (lo, hi)", cost_range)
+        cost_range = (float(cost_range[0]), float(cost_range[1]))
+    env_config.pop("cost_range", None)
+    if cost_range is None:
+        return env_config, None
+    env_config["cost_range"] = list(cost_range)
+    try:
+        coloc_env.parallel_env(scenario, **env_config).close()
+    except ValueError as exc:
+        if "cost_range" not in str(exc):
+            raise
+        raise BadInput(f"--cost-range: {scenario} takes no cost_range keyword, so it cannot draw a cost per episode "
+                       f"(train it without --cost-range, at its fixed communication_cost): {exc}") from exc
+    return env_config, cost_range
+
+
 def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = "native",
-          progress_bar: bool = True, tensorboard: bool = False, curve_points: int = CURVE_POINTS) -> str:
+          progress_bar: bool = True, tensorboard: bool = False, curve_points: int = CURVE_POINTS,
+          cost_range=FROM_SETTINGS) -> str:
     """Train and save ``out/<scenario>/seed<S>/model.zip`` (+ ``model.json``); returns the model path.
 
     ``timesteps`` None: the scenario's budget (``TIMESTEPS`` of ``train/hyperparams/<scenario>.py``,
     ``DEFAULT_TIMESTEPS`` where it sets none). ``curve_points`` validation points make the learning
-    curve (0: no curve, only checkpoints).
+    curve (0: no curve, only checkpoints). ``cost_range``: (lo, hi) with 0 <= lo <= hi <= 1e12, the training
+    env's ``cost_range`` (the module docstring), None for a fixed cost, or ``FROM_SETTINGS`` (the settings
+    module's ``COST_RANGE``, none where it sets none).
     """
     import torch
     from stable_baselines3.common.vec_env import VecMonitor
@@ -226,7 +352,8 @@ def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = 
             import tensorboard as _  # noqa: F401
         except ImportError as exc:
             raise BadInput("--tensorboard needs the tensorboard package: pip install tensorboard") from exc
-    hyper, env_config = load(scenario)
+    hyper = load(scenario)[0]
+    env_config, cost_range = training_env_config(scenario, cost_range)
     episodes = curve_episodes(scenario, CURVE_EPISODES)
     copies = module(scenario).NUM_COPIES
     algorithm_name = algorithm(scenario)
@@ -270,7 +397,8 @@ def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = 
         if progress_bar and not live_bar:
             def report(message: str) -> None:
                 print(f"{scenario} seed {seed}: {message}", flush=True)
-        callback = _callbacks(scenario, folder, timesteps, curve, curve_points, episodes, report)
+        callback = _callbacks(scenario, folder, timesteps, curve, curve_points, episodes, report, env_config,
+                              cost_range, inner.num_envs // copies)
         model.learn(total_timesteps=timesteps, progress_bar=live_bar, callback=callback)
     finally:
         torch.set_num_threads(threads)
@@ -278,7 +406,9 @@ def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = 
     save_model(os.path.join(folder, "last.zip"), model)
     if callback.best is not None:  # model.zip is the best validation checkpoint; last.zip the final weights
         selected = {"selected": "best on the validation seeds", "timesteps": callback.best[1],
-                    "validation_mean_cost": callback.best[0], "validation_episodes": episodes}
+                    "validation_mean_cost": callback.best[0], "validation_episodes": episodes,
+                    "validation_score": "error" if cost_range is None else
+                    f"mean over the costs {validation_costs(cost_range)} of error + cost x messages per agent-step"}
         source = os.path.join(folder, "best.zip")
     else:
         selected = {"selected": "last (no validation curve)", "timesteps": int(model.num_timesteps)}
@@ -287,12 +417,14 @@ def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = 
     write_json(os.path.join(folder, "model.json"), {
         "checkpoint": selected,
         "scenario": scenario, "seed": seed, "timesteps": timesteps, "env_config": env_config,
+        "cost_range": None if cost_range is None else list(cost_range),
         "hyperparams": json.loads(json.dumps(hyper)), "vec": vec, "copies": copies, "algorithm": algorithm_name,
         "critic": critic_name,
         "observation_space": repr(venv.observation_space), "action_space": repr(venv.action_space),
     })
     venv.close()
     if curve:
-        write_learning_curve(folder, scenario, curve, f"{scenario}, seed {seed}: validation error vs timesteps",
-                             episodes)
+        what = "error" if cost_range is None else "score"
+        write_learning_curve(folder, scenario, curve, f"{scenario}, seed {seed}: validation {what} vs timesteps",
+                             episodes, env_config, cost_range, callback.at_costs)
     return path

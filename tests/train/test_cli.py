@@ -402,7 +402,9 @@ def test_a_composition_trains_and_evaluates_by_its_name(tmp_path, capsys, monkey
     assert main(["train", name, "--timesteps", "64", "--curve-points", "0", "--out", out]) == 0
     model = os.path.join(out, *name.split("/"), "seed0", "model.zip")
     meta = read_json(os.path.join(os.path.dirname(model), "model.json"))
-    assert meta["scenario"] == name and meta["env_config"] == {"reward": "trace", "communication_cost": 0.5}
+    assert meta["scenario"] == name and meta["env_config"] == {"reward": "trace", "communication_cost": 0.5,
+                                                               "cost_range": [0.05, 50.0]}
+    assert meta["cost_range"] == [0.05, 50.0]  # the settings' COST_RANGE: cost-conditioned by default
     every_row = train.evaluate.all_rows(name)
     assert {"always", "silent", "random", "greedy", "periodic", "uncertainty"} <= set(every_row)
     assert _policies_for(name, "all", out) == every_row + [model]

@@ -111,8 +111,7 @@ def test_learning_curve_bands_are_labelled(monkeypatch, tmp_path):
     import train.io
     from train import training
 
-    monkeypatch.setattr(train.evaluate, "evaluate_policy",
-                        lambda *args, **kwargs: {"mean_cost": 3.0, "ci95": 0.4})
+    monkeypatch.setattr(training, "_play", lambda *args, **kwargs: {"mean_cost": 3.0, "ci95": 0.4})
     saved = _capture(monkeypatch, train.io)
     training.write_learning_curve(str(tmp_path), "bandwidth_fusion", [(100, 5.0, 1.0), (200, 4.0, 0.5)], "t")
     labels = [t.get_text() for t in saved["fig"].axes[0].get_legend().get_texts()]

@@ -5,7 +5,10 @@ optionally ``TIMESTEPS``, ``ALGORITHM``: ``"ppo"`` (stable-baselines3's PPO, the
 ``"decentralized"`` (the default: the critic sees what the actor sees) or ``"centralized"`` (the critic also sees
 the copy's ``state()``; ``agents.centralized_critic``)), and ``CURVE_EPISODES``: how many validation episodes
 score each learning-curve point, the best of which becomes ``model.zip`` (default
-``train.training.CURVE_EPISODES``).
+``train.training.CURVE_EPISODES``), and ``COST_RANGE``: ``(lo, hi)``, the range the training env draws each
+episode's communication cost from (the composition option ``cost_range``: log-uniform for lo > 0), so that
+``coloc train S`` trains one cost-conditioned policy (``--cost-range`` overrides it; default: none, a fixed
+cost).
 
 A preset's module also holds what only ``train`` needs of it: ``LEADERBOARD_TARGET`` (the leaderboard's target for
 a learned policy, ``train.leaderboard.target``), and optionally ``DEMO_RUN`` (``make demo``'s budget,
@@ -81,6 +84,19 @@ def curve_episodes(scenario: str, default: int) -> int:
         raise BadInput(f"CURVE_EPISODES of train/hyperparams/{module_name(scenario)}.py must be an integer >= 2, "
                        f"got {value!r}")
     return value
+
+
+def cost_range(scenario: str) -> tuple[float, float] | None:
+    """The scenario's training cost range (its module's ``COST_RANGE``, else None): None or a pair (lo, hi) with
+    0 <= lo <= hi <= ``coloc_env.composition.COST_LIMIT``."""
+    from coloc_env.composition import check_cost_range
+
+    value = getattr(module(scenario), "COST_RANGE", None)
+    if value is None:
+        return None
+    value = tuple(value) if isinstance(value, list) else value
+    check_cost_range(f"COST_RANGE of train/hyperparams/{module_name(scenario)}.py", value)
+    return float(value[0]), float(value[1])
 
 
 def critic(scenario: str) -> str:

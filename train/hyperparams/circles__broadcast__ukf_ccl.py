@@ -20,17 +20,27 @@ The last messages of ``always`` are the least valuable: halving them costs 0.168
 
 * ``reward="trace"``: -sqrt(tr P_ii), the filter's own RMS, which depends on which measurements reach the
   filter and not on their noise (as for ``relay_ukf``); the leaderboard judges the realized error.
-* ``communication_cost=0.5`` m per message: below the 0.84 m an average one of ``always``'s last messages is
-  worth, so a policy that finds the useful ones keeps them and drops those worth less. The target is
-  ``always``'s error with fewer messages, or a lower error than a fixed schedule at the same message rate.
+* ``COST_RANGE = (0.05, 50)`` m per message, log-uniform: the cost is drawn per episode and observed, so one
+  network learns the whole error-against-messages curve. Priced at c, the schedule of the table that minimizes
+  RMS + c x messages per agent-step changes where c crosses a chord's slope: 0.83 (``always`` -> every 2nd
+  step), 2.1 (-> every 4th), 4.9 (-> every 8th) and 37 m per message (-> ``silent``); on the position error
+  column 0.54, 1.7, 3.9 and 29. The range reaches a decade below the first change (where every message is
+  worth its price) and past the last (where silence is), a third of the episodes per decade. The best
+  checkpoint is the one with the lowest mean over the validation costs 0.158, 1.58 and 15.8 (the law's
+  quantiles at 1/6, 1/2, 5/6: ``train.training.validation_costs``) of error + cost x messages.
+* ``communication_cost=0.5`` m per message where the cost is fixed (``coloc train --cost-range none``): below the
+  0.84 m an average one of ``always``'s last messages is worth, so a policy that finds the useful ones keeps them
+  and drops those worth less. The target is ``always``'s error with fewer messages, or a lower error than a fixed
+  schedule at the same message rate.
 * A measurement's effect on the covariance fades over tens of steps of dead reckoning: gamma 0.98, GAE 0.95.
 * 6 agents x 8 copies = 48 sub-envs, n_steps 64 -> 3,072 transitions per update (batches of 384).
-* Networks (64, 64): the observation has 3N + 7 + features = 26 numbers.
+* Networks (64, 64): the observation has 3N + 7 + features = 26 numbers (the cost among them).
 """
 
 from train.hyperparams import ppo
 
 ENV_CONFIG = {"reward": "trace", "communication_cost": 0.5}
+COST_RANGE = (0.05, 50.0)
 
 HYPERPARAMS = ppo(n_steps=64, batch_size=384, gamma=0.98, ent_coef=0.01)
 
