@@ -263,17 +263,26 @@ def summarize(scenario, policy_name: str, costs, comms, seed_base: int, initial_
 COST_TAG = " @ cost="  # a model's row at one communication cost: ``PATH.zip @ cost=c``
 
 
-def trained_costs(path: str) -> tuple[tuple[float, float] | None, float | None]:
-    """(``cost_range``, fixed ``communication_cost``) a model was trained with, read from its ``model.json``
-    (``train.training``); (None, None) where it has none or records neither."""
+def training_record(path: str) -> dict | None:
+    """The ``model.json`` that describes the model ``path``: its own sidecar (``PATH.json``), else, for the other
+    weights a training run writes beside it (``last.zip``, ``best.zip``, ``checkpoint.zip``), the run's
+    ``model.json`` in the same folder; None where there is neither."""
     import os
 
     from agents.sb3 import metadata_path, read_metadata
 
-    meta_file = metadata_path(path)
-    if not os.path.isfile(meta_file):
+    for meta_file in (metadata_path(path), os.path.join(os.path.dirname(path), "model.json")):
+        if os.path.isfile(meta_file):
+            return read_metadata(meta_file)
+    return None
+
+
+def trained_costs(path: str) -> tuple[tuple[float, float] | None, float | None]:
+    """(``cost_range``, fixed ``communication_cost``) a model was trained with, read from its run's ``model.json``
+    (``training_record``); (None, None) where there is none or it records neither."""
+    meta = training_record(path)
+    if meta is None:
         return None, None
-    meta = read_metadata(meta_file)
     env_config = meta.get("env_config") if isinstance(meta.get("env_config"), dict) else {}
     cost_range = meta.get("cost_range", env_config.get("cost_range"))
     fixed = env_config.get("communication_cost")
@@ -296,6 +305,7 @@ def model_row(path: str, cost: float | None = None) -> tuple[str, float | None]:
     | ``cost`` | model trained over ``cost_range``            | model trained at a fixed cost x                |
     |----------|----------------------------------------------|------------------------------------------------|
     | c        | ``PATH.zip @ cost=c``                        | ``PATH.zip @ cost=c (trained at fixed cost x)`` |
+    |          |                                              | (``(no training cost recorded)`` without x)    |
     | None     | ``PATH.zip`` at m, the median of its range   | ``PATH.zip`` at x, the cost it observed in     |
     |          | (``median_cost``)                            | training (the scenario's default where         |
     |          |                                              | model.json records none)                       |
@@ -307,7 +317,7 @@ def model_row(path: str, cost: float | None = None) -> tuple[str, float | None]:
         return path, (fixed if cost_range is None else median_cost(cost_range))
     name = f"{path}{COST_TAG}{cost:g}"
     if cost_range is None:
-        name += f" (trained at fixed cost {0.0 if fixed is None else fixed:g})"
+        name += " (no training cost recorded)" if fixed is None else f" (trained at fixed cost {fixed:g})"
     return name, float(cost)
 
 

@@ -154,6 +154,16 @@ def test_a_model_at_cost_c_plays_as_in_an_env_built_with_that_cost(trained, monk
     assert model_row(ranged) == (ranged, pytest.approx(1.0, rel=1e-12))
     assert model_row(fixed) == (fixed, 0.3)
     assert model_row(fixed, 2.0) == (f"{fixed} @ cost=2 (trained at fixed cost 0.3)", 2.0)
+    # the other weights of a run are described by the run's model.json
+    last = os.path.join(os.path.dirname(ranged), "last.zip")
+    shutil.copy(ranged, last)
+    assert model_row(last, 2.0) == (f"{last} @ cost=2", 2.0)
+    os.remove(last)
+    alone = os.path.join(os.path.dirname(os.path.dirname(ranged)), "alone.zip")
+    shutil.copy(ranged, alone)
+    assert model_row(alone, 2.0) == (f"{alone} @ cost=2 (no training cost recorded)", 2.0)
+    assert model_row(alone) == (alone, None)
+    os.remove(alone)
 
 
 def test_evaluate_costs_records_one_row_per_cost(trained, tmp_path, capsys):
