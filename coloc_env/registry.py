@@ -7,8 +7,8 @@ import pettingzoo
 
 import coloc_env  # registers the ids
 
-env = pettingzoo.make("parallel", "coloc/relay_ukf-v1", num_agents=4)   # a ParallelEnv
-aec = pettingzoo.make("aec", "coloc/relay_ukf-v1")                          # its AEC view
+env = pettingzoo.make("parallel", "coloc/relay_ukf-v2", num_agents=4)   # a ParallelEnv
+aec = pettingzoo.make("aec", "coloc/relay_ukf-v2")                          # its AEC view
 ```
 
 Keywords go to the preset's config (its dataclass fields, as for
@@ -44,7 +44,7 @@ NAMESPACE = "coloc"
 # preset -> the version it is registered under (its class's ``version``)
 __getattr__ = module_names(__name__, {"VERSIONS": lambda: {preset: cls.version for preset, cls in REGISTRY.items()}})
 def env_id(preset: str) -> str:
-    """The registered id of a preset at its current version, e.g. `coloc/relay_ukf-v1`."""
+    """The registered id of a preset at its current version, e.g. `coloc/relay_ukf-v2`."""
     if not isinstance(preset, str) or preset not in REGISTRY:
         raise ValueError(f"unknown preset {preset!r}; registered presets: {sorted(REGISTRY)}")
     return f"{NAMESPACE}/{preset}-v{REGISTRY[preset].version}"

@@ -191,17 +191,17 @@ PINNED_ROLLOUTS = {
     # tr Sigma_i (m^2).
     "bandwidth_fusion": {
         "paper": {"steps": 25, "reward": -17.268696353831736, "error": 39.658217579576494,
-                  "trace": 14.7804029124928, "obs_sum": 0.094229552894830704},
+                  "trace": 14.7804029124928, "obs_sum": 1.0942295528948307},
         "random": {"steps": 25, "reward": -21.09272043628452, "error": 42.829322103017724,
-                   "trace": 17.675288143042007, "obs_sum": -6.0589263513684273},
+                   "trace": 17.675288143042007, "obs_sum": -5.0589263513684273},
     },
     # target_cv / bernoulli_delay / prediction_compensation: the truth and measurements are the world's draws,
     # the link outcomes the bernoulli_delay network's counter-based draws (from its own child generator).
     "lossy_fusion": {
         "paper": {"steps": 25, "reward": -3249.2816163220373, "error": 356.01476929565069,
-                  "trace": 748.00516142952438, "obs_sum": 18.225183486938477},
+                  "trace": 748.00516142952438, "obs_sum": 19.225183486938477},
         "random": {"steps": 25, "reward": -6599.0181326089833, "error": 421.04619878503433,
-                   "trace": 1220.6779506897374, "obs_sum": 18.414474010467529},
+                   "trace": 1220.6779506897374, "obs_sum": 19.414474010467529},
     },
     "relay_ukf": {
         "paper": {"steps": 25, "reward": -54.656640250591714, "error": 54.656640250591735,
@@ -213,18 +213,18 @@ PINNED_ROLLOUTS = {
     # and action_space.sample() draw from; "trace" sums the belief's trace.
     "gps_denied_nbp": {
         "paper": {"steps": 10, "reward": -614.84513619304971, "error": 524.69452478183109,
-                  "trace": 7310.4069644574474, "obs_sum": 5.8214268982410431},
+                  "trace": 7310.4069644574474, "obs_sum": 6.8214268982410431},
         "random": {"steps": 10, "reward": -632.49680010031682, "error": 543.25190951594016,
-                   "trace": 14765.286277102658, "obs_sum": 6.0621970891952515},
+                   "trace": 14765.286277102658, "obs_sum": 7.0621970891952515},
     },
     # nlos_orbit / random_delay / afge, receiving before deciding: the truth, readings and prior are the world's
     # draws, the packet delays the random_delay network's counter-based draws (from its own child generator);
     # the observation's entries are clipped to the backend's finite bounds.
     "nlos_horizon": {
         "paper": {"steps": 25, "reward": -12710.078499146035, "error": 383.99771754895926,
-                  "trace": 21416.532797315038, "obs_sum": 17.500539391488928},
+                  "trace": 21416.532797315038, "obs_sum": 18.500539391488928},
         "random": {"steps": 25, "reward": -15415.544588529767, "error": 554.20384274637775,
-                   "trace": 23771.313393904766, "obs_sum": 21.448304407298565},
+                   "trace": 23771.313393904766, "obs_sum": 22.448304407298565},
     },
     # its default noise model, "likelihood" (the calibrated model's numbers: PINNED_MRCLAM_CALIBRATED)
     "mrclam_relay": {
@@ -236,20 +236,20 @@ PINNED_ROLLOUTS = {
     # gps_denied / contention / ukf_ccl; "paper" is round_robin; the medium has no draws (the decisions decide)
     "contention_localization": {
         "paper": {"steps": 25, "reward": -1870.9519567919222, "error": 1870.9519567919222,
-                  "trace": 106033.93463019808, "obs_sum": 29.765554010868073},
+                  "trace": 106033.93463019808, "obs_sum": 36.651711821556091},
         "random": {"steps": 25, "reward": -3977.6768720289192, "error": 3977.6768720289192,
-                   "trace": 200451.9321992613, "obs_sum": 31.657252371311188},
+                   "trace": 200451.9321992613, "obs_sum": 38.605718970298767},
     },
 }
 
 PINNED_VECTOR = {
-    "bandwidth_fusion": {"reward": -21.77453984785825, "obs_sum": -79.099833246320486},
-    "lossy_fusion": {"reward": -36945.847672462463, "obs_sum": 66.719748601317406},
+    "bandwidth_fusion": {"reward": -21.77453984785825, "obs_sum": -67.099833246320486},
+    "lossy_fusion": {"reward": -36945.847672462463, "obs_sum": 72.719748601317406},
     "relay_ukf": {"reward": -62.415704756975174, "obs_sum": 43.797087430953979},
-    "gps_denied_nbp": {"reward": -2156.5431070327759, "obs_sum": 91.824733301997185},
-    "nlos_horizon": {"reward": -156932.33562774584, "obs_sum": 276.53796964552021},
+    "gps_denied_nbp": {"reward": -2156.5431070327759, "obs_sum": 121.82473330199718},
+    "nlos_horizon": {"reward": -156932.33562774584, "obs_sum": 288.53796964552021},
     "mrclam_relay": {"reward": -0.74640592327341437, "obs_sum": -66.275801002979279},
-    "contention_localization": {"reward": -2783.2435924112797, "obs_sum": 1026.9490673542023},
+    "contention_localization": {"reward": -2783.2435924112797, "obs_sum": 1125.2625467926264},
 }
 
 # mrclam_relay with the noise model it defaulted to before "likelihood" (coloc/mrclam_relay-v1's): the same

@@ -51,8 +51,8 @@ to the receiver (neighbour k of ``uav_i`` is ``uav_{(i+1+k) mod N}``).
 
 Out-of-range actions are clipped to [-1, 1]; a NaN or inf is a ``ValueError``.
 
-Observation (per agent, ``Box(shape=(n + (N-1)*n + 1,), float32)``)
----------------------------------------------------------------
+Observation (per agent, ``Box(shape=(n + (N-1)*n + 1 + N + 1,), float32)``)
+--------------------------------------------------------------------------
 | index                    | meaning                                                      | bounds    |
 |--------------------------|--------------------------------------------------------------|-----------|
 | ``[0, n)``               | log of the diagonal of the node's own bound matrix M_i(k)    | unbounded |
@@ -60,7 +60,11 @@ Observation (per agent, ``Box(shape=(n + (N-1)*n + 1,), float32)``)
 |                          | paper assumes known). Log because M can grow like 1.5^k.     |           |
 | ``[n, n + (N-1)*n)``     | steps since each (neighbour, component) was last received,   | [0, 1]    |
 |                          | divided by the horizon (0 at reset: all nodes start equal)   |           |
-| ``[-1]``                 | step fraction k / horizon                                    | [0, 1]    |
+| ``[n + (N-1)*n]``        | step fraction k / horizon                                    | [0, 1]    |
+| then ``N`` entries       | ``index``: one-hot of the node's own index                   | [0, 1]    |
+| ``[-1]``                 | ``communication_cost``: its copy's cost per message this     | [0, inf)  |
+|                          | episode (``communication_cost``, or the draw from            |           |
+|                          | ``cost_range``), m^2                                         |           |
 
 The log-diagonal is unbounded: a selection that starves a component lets M_i grow without limit
 (like 1.5^k), and a well-fed one shrinks it towards 0.
@@ -78,8 +82,9 @@ Reward (per agent: each node has its own estimate)
 
 both minus ``component_cost`` per component the node received this step
 (``components_received``; the receiver chooses them) and minus
-``communication_cost`` per message it sent (``messages_sent``: one per
-receiver that took a component of it), each in m^2.
+``communication_cost`` (under ``cost_range``, its copy's draw of the episode)
+per message it sent (``messages_sent``: one per receiver that took a component
+of it), each in m^2.
 
 Minus the sum over agents of an episode's return (k = 1..50) plus the k = 0
 term sum_i tr M(0) = 1.44 is the paper's J_50 (eq. 12) for one realization.
@@ -145,6 +150,10 @@ only.
 | reward             | "error"                | "error", "trace" (both m^2)                  | composition         |
 | component_cost     | 0.0                    | [0, 1e12], m^2 per component received        | preset              |
 | communication_cost | 0.0                    | [0, 1e12], m^2 per message sent              | composition         |
+| cost_range         | None                   | None, or (lo, hi) with 0 <= lo <= hi <= 1e12: | composition         |
+|                    |                        | each copy draws its cost per episode at reset |                     |
+|                    |                        | (``coloc_env.composition``'s law), replacing |                     |
+|                    |                        | ``communication_cost``                       |                     |
 | weight_logit_scale | 4.0                    | (0, 1000]                                    | backend             |
 """
 
@@ -195,6 +204,7 @@ class BandwidthFusionConfig(PresetConfig):
     reward: str = keyword("error", "composition.reward")
     component_cost: float = keyword(0.0, "preset")
     communication_cost: float = keyword(0.0, "composition.communication_cost")
+    cost_range: tuple | None = keyword(None, "composition.cost_range")
     weight_logit_scale: float = keyword(4.0, "backend.weight_logit_scale")
 
     def check_preset(self) -> None:
@@ -223,11 +233,12 @@ class BandwidthFusionScenario(PresetScenario):
     name = "bandwidth_fusion"
     paper = "zhao2020"
     Config = BandwidthFusionConfig
-    version = 1
+    version = 2
     metric = "J_K: squared estimation error summed over the steps and receivers"
     metric_unit = "m^2"
     communication = "components received"
     policy_module = "agents.bandwidth_fusion"
+    appended_features = ("index", "communication_cost")
 
     def __init__(self, config: BandwidthFusionConfig, batch: int = 1):
         super().__init__(config, batch)
@@ -263,13 +274,18 @@ class BandwidthFusionScenario(PresetScenario):
 
     @property
     def obs_dim(self) -> int:
-        return self.n + (self.num_agents - 1) * self.n + 1
+        return self.n + (self.num_agents - 1) * self.n + 1 + self.appended_size()
 
     def observation_space(self):
         fractions = (self.num_agents - 1) * self.n + 1  # after the n unbounded log-diagonal entries
         low = np.r_[np.full(self.n, -np.inf), np.zeros(fractions)]
         high = np.r_[np.full(self.n, np.inf), np.ones(fractions)]
-        return gymnasium.spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
+        return self.extend_space(gymnasium.spaces.Box(low.astype(np.float32), high.astype(np.float32),
+                                                      dtype=np.float32))
+
+    def preset_feature_positions(self) -> dict[str, int]:
+        """The composed table's features among this observation's own entries: ``step_fraction``."""
+        return {"step_fraction": self.n + (self.num_agents - 1) * self.n}
 
     def action_space(self):
         return self._preset_action_space
@@ -351,8 +367,8 @@ class BandwidthFusionScenario(PresetScenario):
             loss = self._squared_error()
         else:
             loss = bf.node_traces(self.fusion.error_cov, self.num_agents)
-        cost = self.config.component_cost, self.config.communication_cost
-        if cost == (0, 0):  # -loss - 0 * count is -loss exactly: no count needed
+        cost = self.config.component_cost, self.costs[:, None]  # each copy's communication cost this episode
+        if cost[0] == 0 and not np.any(cost[1]):  # -loss - 0 * count is -loss exactly: no count needed
             return -loss
         return -loss - cost[0] * self.links.components_received(self.selection) - cost[1] * self.network.messages_sent
 
@@ -379,7 +395,7 @@ class BandwidthFusionScenario(PresetScenario):
         log_bound = np.log(np.diagonal(self.fusion.bound, axis1=-2, axis2=-1))
         ages = self.ages.reshape(B, N, -1) / self.horizon
         frac = np.broadcast_to((self.k / self.horizon)[:, None, None], (B, N, 1))
-        return np.concatenate([log_bound, ages, frac], axis=-1).astype(np.float32)
+        return self.extend_observation(np.concatenate([log_bound, ages, frac], axis=-1))
 
     def state(self) -> np.ndarray:
         node_cov = bf.node_covariances(self.fusion.error_cov, self.num_agents)

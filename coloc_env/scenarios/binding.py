@@ -28,9 +28,12 @@ import dataclasses
 import re
 from typing import Any, ClassVar
 
+import gymnasium
+import numpy as np
+
 from coloc_env.composition import Composition
 from coloc_env.config import BadInput, field_type_problem
-from coloc_env.scenarios.composed import ComposedScenario
+from coloc_env.scenarios.composed import OWN_BOUNDS, OWN_FEATURES, ComposedScenario
 
 TARGET_KINDS = ("world", "network", "backend", "composition", "preset")
 # Part checks name a field as prefix + field; with this prefix the message's field names can be told apart
@@ -158,6 +161,10 @@ class PresetScenario(ComposedScenario):
     # the composed observation's own features (covariance_known, displacement, ...) are a composition's; a preset
     # observes what its registered version does
     own_features: ClassVar[tuple[str, ...]] = ()
+    # what a preset appends after its own observation entries, in this order (its observation table): names of the
+    # composed observation's table (``index``: the N-entry one-hot of the agent's index; the features of
+    # ``OWN_FEATURES``, one entry each, computed as the composition computes them: ``own_feature_values``)
+    appended_features: ClassVar[tuple[str, ...]] = ("communication_cost",)
 
     @classmethod
     def compose(cls, config):
@@ -174,6 +181,59 @@ class PresetScenario(ComposedScenario):
         its network the second.)"""
         network, backend = rng.spawn(2)
         return rng, network, backend
+
+    # --- the appended observation entries ------------------------------------------------------------------
+    def observed_own_features(self) -> tuple[str, ...]:
+        own = self.own_features if isinstance(self.own_features, tuple) else ()  # a relay preset's is a method
+        return (*own, *(name for name in self.appended_features if name in OWN_FEATURES))
+
+    def appended_size(self) -> int:
+        """How many entries ``appended_features`` adds to an agent's observation."""
+        return sum(self.num_agents if name == "index" else 1 for name in self.appended_features)
+
+    def appended_observation(self) -> np.ndarray:
+        """(B, N, ``appended_size()``): the entries of ``appended_features``, in order."""
+        B, N = self.batch, self.num_agents
+        own = [name for name in self.appended_features if name != "index"]
+        values = dict(zip(own, np.moveaxis(self.own_feature_values(own), -1, 0), strict=True))
+        blocks = [np.broadcast_to(np.eye(N), (B, N, N)) if name == "index" else values[name][..., None]
+                  for name in self.appended_features]
+        return np.concatenate(blocks, axis=-1) if blocks else np.zeros((B, N, 0))
+
+    def extend_observation(self, observation: np.ndarray) -> np.ndarray:
+        """The preset's own observation entries (B, N, m) followed by the appended ones, float32."""
+        return np.concatenate([observation, self.appended_observation()], axis=-1).astype(np.float32)
+
+    def extend_space(self, space: gymnasium.spaces.Box) -> gymnasium.spaces.Box:
+        """The preset's own observation space followed by the appended entries' bounds."""
+        low = [np.zeros(self.num_agents) if name == "index" else [OWN_BOUNDS[name][0]]
+               for name in self.appended_features]
+        high = [np.ones(self.num_agents) if name == "index" else [OWN_BOUNDS[name][1]]
+                for name in self.appended_features]
+        return gymnasium.spaces.Box(np.concatenate([space.low, *low]).astype(np.float32),
+                                    np.concatenate([space.high, *high]).astype(np.float32), dtype=np.float32)
+
+    def preset_feature_positions(self) -> dict[str, int]:
+        """Features of the composed table that the preset's own entries carry: name -> index (none by default)."""
+        return {}
+
+    def feature_index(self, name: str) -> int:
+        """The index in an agent's observation of the feature ``name`` (a block's first): an appended one (after the
+        preset's own entries), one the preset's own entries carry (``preset_feature_positions``), or, for a preset
+        that observes the composed table (``own_features``), the composition's. A ``ValueError`` otherwise."""
+        if name in self.appended_features:
+            start = self.observation_space().shape[0] - self.appended_size()
+            for other in self.appended_features:
+                if other == name:
+                    return start
+                start += self.num_agents if other == "index" else 1
+        positions = self.preset_feature_positions()
+        if name in positions:
+            return positions[name]
+        if isinstance(self.own_features, tuple) and self.own_features:
+            return super().feature_index(name)
+        raise ValueError(f"{self.name}'s observation has no feature {name!r}; it has "
+                         f"{[*positions, *self.appended_features]}")
 
     @classmethod
     def composition_options(cls, config) -> dict:

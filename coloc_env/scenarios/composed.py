@@ -101,7 +101,9 @@ Observation (per agent, ``Box(float32)``; both estimands)
 
 ``ComposedScenario.feature_index(name)`` gives each named feature's index (a block's first); a realizable
 policy reads features by these names (``agents.event_triggered``). A preset binding observes what its
-registered version does (``own_features`` empty: no ``[3N+2, 3N+7)`` block where it uses this table).
+registered version does: ``contention_localization`` this whole table; the others their own entries followed
+by ``PresetScenario.appended_features`` (the episode's ``communication_cost``, the ``index`` where they lack
+it), which ``feature_index`` finds by the same names.
 
 Since the last transmission. Each agent's *reference transmission* is its last transmission that was
 delivered or, where the network gives no acknowledgements (``Network.acknowledged`` is None), its last
@@ -157,6 +159,11 @@ DISTANCE_SCALE = 100.0
 COST_STREAM = 2**32 - 1
 # the agent's own features after the step fraction, in this order (the module's observation table)
 OWN_FEATURES = ("covariance_known", "displacement", "steps_since", "message_value", "communication_cost")
+# each own feature's (low, high) bounds (the module's observation table)
+OWN_BOUNDS = {"covariance_known": (0.0, 1.0), "displacement": (0.0, np.inf), "steps_since": (0.0, 1.0),
+              "message_value": (0.0, np.inf), "communication_cost": (0.0, np.inf)}
+# the own features that read the agent's reference transmission (``_set_reference``)
+REFERENCE_FEATURES = ("displacement", "steps_since", "message_value")
 LINK_COUNTS = ("transmissions", "link_attempts", "link_deliveries", "collisions")  # coloc_env.networks.base
 
 
@@ -292,11 +299,7 @@ class ComposedScenario(Scenario):
         wl, wh = self.world.feature_bounds()
         nl, nh = self.network.observation_bounds()
         bl, bh = self.backend.feature_bounds()
-        own_low = {"covariance_known": 0.0, "displacement": 0.0, "steps_since": 0.0, "message_value": 0.0,
-                   "communication_cost": 0.0}
-        own_high = {"covariance_known": 1.0, "displacement": np.inf, "steps_since": 1.0, "message_value": np.inf,
-                    "communication_cost": np.inf}
-        ol, oh = [own_low[f] for f in self.own_features], [own_high[f] for f in self.own_features]
+        ol, oh = [OWN_BOUNDS[f][0] for f in self.own_features], [OWN_BOUNDS[f][1] for f in self.own_features]
         low = np.concatenate([np.zeros(N), [-LOG_TRACE_BOUND], np.zeros(N), np.zeros(N), [0.0], ol, wl, nl, bl])
         high = np.concatenate([np.ones(N), [LOG_TRACE_BOUND], np.ones(N), np.full(N, np.inf), [1.0], oh, wh, nh, bh])
         return gymnasium.spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
@@ -380,7 +383,7 @@ class ComposedScenario(Scenario):
             self._truth_pose[idx] = poses()[idx]
         self._received[idx] = 0.0
         self._reward[idx] = 0.0
-        if self.own_features:
+        if self.tracks_references():
             self._set_reference(np.isin(np.arange(self.batch), idx)[:, None] & np.ones(self.num_agents, bool))
         if self.receives_ahead:
             self._receive_ahead(idx)
@@ -400,7 +403,7 @@ class ComposedScenario(Scenario):
         """After step k's transport is known (the network's record) and the backend's update: an agent whose
         transmission was delivered (acknowledged to it, where the network gives acknowledgements) or, without
         acknowledgements, that transmitted (``transmissions`` > 0) takes its state now as its reference."""
-        if not self.own_features:  # a preset binding's observation has none of them
+        if not self.tracks_references():  # an observation without them (most presets)
             return
         sent = np.asarray(self.network.transmissions) > 0
         acknowledged = self.network.acknowledged()
@@ -600,21 +603,41 @@ class ComposedScenario(Scenario):
         its reference transmission, the value of transmitting now (``Backend.message_value``) and its copy's
         communication cost. ``cov``: the covariance the agent holds (``Backend.local_covariance``), where the caller
         has it."""
+        return self.own_feature_values(self.own_features, cov)
+
+    def own_feature_values(self, names, cov: np.ndarray | None = None) -> np.ndarray:
+        """(B, N, len(names)): the features ``names`` (of ``OWN_FEATURES``) in that order; what ``own_observation``
+        stacks, and what a preset appends to its own observation (``PresetScenario.appended_features``)."""
         B, N = self.batch, self.num_agents
-        cov = self.backend.local_covariance() if cov is None else cov
-        known = np.full((B, N), 0.0 if cov is None else 1.0)
-        d = self.backend.posterior_position - self._ref_position
-        displacement = np.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1]) / DISTANCE_SCALE
-        steps = self.k[:, None] - self._ref_k
-        value = None
-        if cov is not None:
-            inputs = None if self.readings is None else getattr(self.readings, "inputs", None)
-            value = self.backend.message_value(self._ref_cov, steps, inputs, cov)
-        features = {"covariance_known": known, "displacement": displacement,
-                    "steps_since": steps / self.horizon,
-                    "message_value": np.zeros((B, N)) if value is None else value,
-                    "communication_cost": np.broadcast_to(self.costs[:, None], (B, N))}
-        return np.stack([features[name] for name in self.own_features], axis=-1)
+        features = {"communication_cost": lambda: np.broadcast_to(self.costs[:, None], (B, N))}
+        if any(name != "communication_cost" for name in names):
+            cov = self.backend.local_covariance() if cov is None else cov
+            d = self.backend.posterior_position - self._ref_position
+            steps = self.k[:, None] - self._ref_k
+
+            def value():
+                if cov is None:
+                    return np.zeros((B, N))
+                inputs = None if self.readings is None else getattr(self.readings, "inputs", None)
+                v = self.backend.message_value(self._ref_cov, steps, inputs, cov)
+                return np.zeros((B, N)) if v is None else v
+
+            features.update({
+                "covariance_known": lambda: np.full((B, N), 0.0 if cov is None else 1.0),
+                "displacement": lambda: np.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1]) / DISTANCE_SCALE,
+                "steps_since": lambda: steps / self.horizon,
+                "message_value": value})
+        return np.stack([features[name]() for name in names], axis=-1) if names else np.zeros((B, N, 0))
+
+    def observed_own_features(self) -> tuple[str, ...]:
+        """The names of ``OWN_FEATURES`` this scenario's observation carries (``own_features`` here; a preset's
+        appended ones: ``PresetScenario``)."""
+        return self.own_features
+
+    def tracks_references(self) -> bool:
+        """Whether the observation carries a feature of the reference transmission (displacement, steps_since,
+        message_value): only then does the core keep the references (``_set_reference``)."""
+        return any(name in REFERENCE_FEATURES for name in self.observed_own_features())
 
     def reward(self) -> np.ndarray:
         return self._reward.copy()

@@ -14,9 +14,12 @@ composition's (``coloc_env.scenarios.composed``), the network's acknowledgements
 |--------------|-----------------------------------------------------------------------------------------|
 | action       | ``MultiDiscrete([2] * slots)`` per UAV: transmit its readings in slot s (1) or not (0); |
 |              | the centre's choice is masked (it only listens)                                        |
-| observation  | the composition's: own index, log tr P, who was heard, distances / 100 m, step fraction, |
+| observation  | the composition's (``coloc_env.scenarios.composed``'s table): own index, log tr P, who  |
+|              | was heard, distances / 100 m, step fraction, covariance_known, displacement and steps  |
+|              | since its last acknowledged frame, message_value, the episode's communication cost,    |
 |              | the world's features, the per-slot acknowledgement of its frame of the step before     |
-| reward       | minus the UAV's position error (m), minus ``communication_cost`` per frame it sent       |
+| reward       | minus the UAV's position error (m), minus its copy's cost (``communication_cost``, or   |
+|              | the episode's draw from ``cost_range``) per frame it sent                               |
 | metric       | position error averaged over the steps and UAVs (m)                                     |
 | ``paper``    | ``round_robin`` (TDMA by index: UAV i transmits in global slot t iff t mod N = i; no    |
 |              | collision, one UAV per slot), the scheduling literature's reference schedule            |
@@ -42,6 +45,10 @@ Arguments (fields of ``ContentionLocalizationConfig``)
 | p_normal_to_fault  | 0.02    | [0, 1]                                                        |
 | p_fault_to_normal  | 0.02    | [0, 1]                                                        |
 | communication_cost | 0.0     | [0, 1e12] per frame sent                                      |
+| cost_range         | None    | None, or (lo, hi) with 0 <= lo <= hi <= 1e12:                 |
+|                    |         | each copy draws its cost per episode at reset                 |
+|                    |         | (``coloc_env.composition``'s law), replacing                  |
+|                    |         | ``communication_cost``                                        |
 | reward             | "error" | "error", "trace" (the composition's reward table)             |
 """
 
@@ -52,6 +59,7 @@ from dataclasses import dataclass
 from coloc_env.backends.ukf import UkfCcl
 from coloc_env.networks.contention import Contention
 from coloc_env.scenarios.binding import PresetConfig, PresetScenario, keyword, register_preset
+from coloc_env.scenarios.composed import OWN_FEATURES
 from coloc_env.worlds.gps_denied import GpsDenied
 
 
@@ -75,6 +83,7 @@ class ContentionLocalizationConfig(PresetConfig):
     p_normal_to_fault: float = keyword(0.02, "world.p_normal_to_fault")
     p_fault_to_normal: float = keyword(0.02, "world.p_fault_to_normal")
     communication_cost: float = keyword(0.0, "composition.communication_cost")
+    cost_range: tuple | None = keyword(None, "composition.cost_range")
     reward: str = keyword("error", "composition.reward")
 
 
@@ -86,8 +95,11 @@ class ContentionLocalizationScenario(PresetScenario):
     name = "contention_localization"
     paper = "-"
     Config = ContentionLocalizationConfig
-    version = 1
+    version = 2
     metric = "position error averaged over the steps and UAVs"
     metric_unit = "m"
     communication = "frames transmitted"
     policy_module = "agents.contention_localization"
+    # the composition's observation, whole (its own features included)
+    own_features = OWN_FEATURES
+    appended_features = ()

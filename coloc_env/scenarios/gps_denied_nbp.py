@@ -29,8 +29,8 @@ A value other than 0 or 1, a NaN or inf is a ``ValueError`` naming the iteration
 (all ones) is the paper's schedule; all zeros reduces every fault UAV to dead
 reckoning.
 
-Observation (per UAV, ``Box(shape=(8,), float32)``: entries 0-3 and 5-7 in [0, 1], 4 in [0, inf)),
-about the coming step tau
+Observation (per UAV, ``Box(shape=(N + 9,), float32)``: entry 4 and the last in [0, inf), the others in
+[0, 1]), about the coming step tau
 ----------------------------------------------------------------------------------------------
 | index | meaning                                                                         |
 |-------|---------------------------------------------------------------------------------|
@@ -47,8 +47,11 @@ about the coming step tau
 | 7     | what its neighbours already heard: the mean over its neighbours within R at tau |
 |       | of the distinct UAVs each heard from in the previous step, / (N - 1) (0 without |
 |       | neighbours and at reset) [chosen: each UAV's count rides on its beacon]          |
+| [8, 8 + N) | ``index``: one-hot of the UAV's own index                                  |
+| 8 + N | ``communication_cost``: lambda of its copy this episode (``communication_cost``, |
+|       | or the draw from ``cost_range``), metres per broadcast                           |
 
-Entry 4 alone is unbounded: a lost fault UAV's prior spreads without limit. Entry 7 serves
+Entries 4 and 8 + N alone are unbounded: a lost fault UAV's prior spreads without limit. Entry 7 serves
 learning: a broadcast helps most where the neighbours heard little, which entry 3 (the UAV's own
 count) does not show.
 
@@ -62,7 +65,8 @@ e_s = ||p_hat_s - p_s|| of the belief mean at tau; sigma_s = sqrt(tr Cov_s), Cov
 backend's position covariance (the belief particles' sample covariance, plus the prior's
 KDE kernel where the belief is its prior: ``estimators.dnbp``, "Reported covariance"; the
 ``trace`` info key is tr Cov_s, m^2); F_tau the
-UAVs whose GPS is faulty at tau; lambda = ``communication_cost``.
+UAVs whose GPS is faulty at tau; lambda = ``communication_cost`` (under ``cost_range``, the copy's draw of the
+episode).
 
 | ``reward=`` | ``team_reward=True`` (every UAV)                   | ``team_reward=False`` (each UAV s) |
 |-------------|-----------------------------------------------------|-------------------------------------|
@@ -140,9 +144,14 @@ Arguments (fields of ``GpsDeniedNbpConfig``, defaults = docs/wan2014.md section 
 | team_reward        | True        | True, False               | the reward table's columns                   |
 | communication_cost | 0.0         | [0, 1e12]                 | lambda, metres per broadcast (older name:    |
 |                    |             |                           | ``broadcast_cost``)                          |
+| cost_range         | None        | None, or (lo, hi) with 0 <= lo <= hi <= 1e12 | each copy draws its lambda per |
+|                    |             |                           | episode at reset (the composition's rule and |
+|                    |             |                           | generator: ``coloc_env.composition``); it    |
+|                    |             |                           | replaces ``communication_cost``              |
 
 Each keyword sets the part field of the same name (``comm_range``: the world's ranging radius and the
-network's; ``horizon``, ``reward`` and ``communication_cost``: the composition's); each check is the part's.
+network's; ``horizon``, ``reward``, ``communication_cost`` and ``cost_range``: the composition's); each check is
+the part's.
 """
 
 from __future__ import annotations
@@ -200,6 +209,7 @@ class GpsDeniedNbpConfig(PresetConfig):
     reward: str = keyword("error", "composition.reward")
     team_reward: bool = keyword(True, "preset")
     communication_cost: float = keyword(0.0, "composition.communication_cost")
+    cost_range: tuple | None = keyword(None, "composition.cost_range")
 
     def __post_init__(self):
         if isinstance(self.reward, str) and self.reward in ("team", "own"):  # the older spelling
@@ -241,6 +251,7 @@ class GpsDeniedNbpScenario(PresetScenario):
     metric_unit = "m"
     communication = "broadcasts"
     policy_module = "agents.gps_denied_nbp"
+    appended_features = ("index", "communication_cost")
     metric_weight_key = "fault"
 
     def __init__(self, config: GpsDeniedNbpConfig, batch: int = 1):
@@ -253,10 +264,15 @@ class GpsDeniedNbpScenario(PresetScenario):
 
     def observation_space(self):
         high = np.array([1.0, 1.0, 1.0, 1.0, np.inf, 1.0, 1.0, 1.0], np.float32)
-        return gymnasium.spaces.Box(np.zeros(OBS_DIM, np.float32), high, dtype=np.float32)
+        return self.extend_space(gymnasium.spaces.Box(np.zeros(OBS_DIM, np.float32), high, dtype=np.float32))
+
+    def preset_feature_positions(self) -> dict[str, int]:
+        """The composed table's features among this observation's own entries: ``step_fraction`` (entry 6)."""
+        return {"step_fraction": 6}
 
     def state_space(self):
-        return gymnasium.spaces.Box(-np.inf, np.inf, shape=(self.num_agents * (OBS_DIM + 1),), dtype=np.float32)
+        dim = self.num_agents * (self.observation_space().shape[0] + 1)
+        return gymnasium.spaces.Box(-np.inf, np.inf, shape=(dim,), dtype=np.float32)
 
     # --- dynamics ----------------------------------------------------------------
     def part_generators(self, rng):
@@ -289,12 +305,12 @@ class GpsDeniedNbpScenario(PresetScenario):
         """The reward table: the error (or the belief's RMS) of the fault UAVs' mean (team) or each UAV's own,
         minus the cost of the broadcasts."""
         loss = self.position_error() if self.config.reward == "error" else np.sqrt(self.posterior_traces())
-        cost, fault = self.config.communication_cost, self.fault
+        cost, fault = self.costs, self.fault  # each copy's lambda this episode
         if self.config.team_reward:
             mean_fault = np.sum(loss * fault, axis=1) / np.maximum(fault.sum(axis=1), 1)
             team = -mean_fault - cost * self.broadcasts.sum(axis=1)
             return np.repeat(team[:, None], self.num_agents, axis=1)
-        return -loss - cost * self.broadcasts
+        return -loss - cost[:, None] * self.broadcasts
 
     # --- views -------------------------------------------------------------------
     def _slice(self, array: np.ndarray, k: np.ndarray) -> np.ndarray:
@@ -320,7 +336,7 @@ class GpsDeniedNbpScenario(PresetScenario):
             frac,
             neighbours_heard / (N - 1),
         ], axis=-1)
-        return obs.astype(np.float32)
+        return self.extend_observation(obs)
 
     def episode_error(self, errors: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
         """The paper's metric: the mean error of the fault UAVs over every (step, UAV) with a faulty

@@ -52,8 +52,8 @@ clipped, a NaN or inf is a ``ValueError``.
 
 The followers' weight entries and the leader's transmit entry are ignored.
 
-Observation (per agent, ``Box(shape=(3 + 4 (L-1),), float32)``)
--------------------------------------------------------------
+Observation (per agent, ``Box(shape=(3 + 4 (L-1) + L + 1,), float32)``)
+---------------------------------------------------------------------
 | index                      | leader                                        | follower                | bounds    |
 |----------------------------|-----------------------------------------------|-------------------------|-----------|
 | ``[0]``                    | 1 (role)                                      | 0                       | [0, 1]    |
@@ -64,6 +64,10 @@ Observation (per agent, ``Box(shape=(3 + 4 (L-1),), float32)``)
 |                            | packet's age, slots since it was formed)      |                         |           |
 | ``[3+(L-1), 3+4(L-1))``    | log tr of the three covariances in that       | 0                       | unbounded |
 |                            | packet, follower-major                        |                         |           |
+| ``[3+4(L-1), 3+4(L-1)+L)`` | ``index``: one-hot of the UAV's own index     | same                    | [0, 1]    |
+| ``[-1]``                   | ``communication_cost``: its copy's cost per   | same                    | [0, inf)  |
+|                            | packet this episode (``communication_cost``,  |                         |           |
+|                            | or the draw from ``cost_range``), m^2         |                         |           |
 
 The log-traces are unbounded (a filter fed by nothing but losses grows its covariance without
 limit); the packet ages have no upper bound, since a link can lose every packet of an episode of any
@@ -86,7 +90,8 @@ Reward (the fused estimate is shared: every agent gets the team's loss)
 | ``"trace"``  | -tr(H P0(k) H^T), the leader's own (eq. 30) position covariance (m^2,    |
 |              | the unit of ``error``; the ``trace`` info key is the same number)        |
 
-minus ``communication_cost`` (m^2) for each packet the agent itself sent this
+minus ``communication_cost`` (m^2; under ``cost_range``, its copy's draw of the episode) for each packet the
+agent itself sent this
 slot (followers only). Note that the paper's inverse-trace weights already minimize
 tr P0 = sum a_i^2 tr P_i, so ``"trace"`` rewards exactly the paper's weights.
 
@@ -133,6 +138,10 @@ a pair): ``num_uavs`` for ``num_agents``, ``message_cost`` for ``communication_c
 | horizon             | 100                          | 1..100000 slots                           | world, composition|
 | reward              | "error"                      | "error", "trace" (both m^2)               | composition       |
 | communication_cost  | 0.0                          | [0, 1e12] m^2 per packet sent             | composition       |
+| cost_range          | None                         | None, or (lo, hi) with 0 <= lo <= hi      | composition       |
+|                     |                              | <= 1e12: each copy draws its cost per     |                   |
+|                     |                              | episode at reset (the composition's law), |                   |
+|                     |                              | replacing ``communication_cost``          |                   |
 | weight_logit_scale  | 3.0                          | (0, 50]                                   | backend           |
 | time_stamps         | False                        | bool: packets carry their slot (the       | preset            |
 |                     |                              | observation shows ages, not arrivals)     |                   |
@@ -176,6 +185,7 @@ class LossyFusionConfig(PresetConfig):
     horizon: int = keyword(100, "world.horizon", "composition.horizon")
     reward: str = keyword("error", "composition.reward")
     communication_cost: float = keyword(0.0, "composition.communication_cost")
+    cost_range: tuple | None = keyword(None, "composition.cost_range")
     weight_logit_scale: float = keyword(3.0, "backend.weight_logit_scale")
     time_stamps: bool = keyword(False, "preset")
 
@@ -191,11 +201,12 @@ class LossyFusionScenario(PresetScenario):
     name = "lossy_fusion"
     paper = "fu2017"
     Config = LossyFusionConfig
-    version = 1
+    version = 2
     metric = "fused position MSE averaged over the slots"
     metric_unit = "m^2"
     communication = "messages transmitted"
     policy_module = "agents.lossy_fusion"
+    appended_features = ("index", "communication_cost")
 
     def __init__(self, config: LossyFusionConfig, batch: int = 1):
         super().__init__(config, batch)
@@ -247,13 +258,18 @@ class LossyFusionScenario(PresetScenario):
 
     @property
     def obs_dim(self) -> int:
-        return 3 + 4 * (self.num_agents - 1)
+        return 3 + 4 * (self.num_agents - 1) + self.appended_size()
 
     def observation_space(self):
         followers = self.num_agents - 1
         low = np.concatenate([[0.0, 0.0, -np.inf], np.zeros(followers), np.full(3 * followers, -np.inf)])
         high = np.concatenate([[1.0, 1.0, np.inf], np.full(followers, np.inf), np.full(3 * followers, np.inf)])
-        return gymnasium.spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
+        return self.extend_space(gymnasium.spaces.Box(low.astype(np.float32), high.astype(np.float32),
+                                                      dtype=np.float32))
+
+    def preset_feature_positions(self) -> dict[str, int]:
+        """The composed table's features among this observation's own entries: ``step_fraction`` (entry 1)."""
+        return {"step_fraction": 1}
 
     def state_space(self):
         dim = self.num_agents * self.obs_dim + 3 * (self.num_agents - 1)
@@ -296,7 +312,7 @@ class LossyFusionScenario(PresetScenario):
     def observation(self) -> np.ndarray:
         B, L = self.batch, self.num_agents
         fusion = self.fusion
-        obs = np.zeros((B, L, self.obs_dim))
+        obs = np.zeros((B, L, self.obs_dim - self.appended_size()))
         obs[:, 0, 0] = 1.0
         obs[:, :, 1] = (self.k / self.horizon)[:, None]
         # the ndarray.trace method: np.trace's dispatch costs more than the trace at these sizes
@@ -305,7 +321,7 @@ class LossyFusionScenario(PresetScenario):
         age = fusion.held_age if self.config.time_stamps else self._since_arrival
         obs[:, 0, 3:3 + (L - 1)] = age / AGE_SCALE
         obs[:, 0, 3 + (L - 1):] = np.log(fusion.held_cov.trace(axis1=-2, axis2=-1)).reshape(B, -1)
-        return obs.astype(np.float32)
+        return self.extend_observation(obs)
 
     def episode_error(self, errors: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
         """The paper's metric: the fused position MSE averaged over the slots (every agent holds the

@@ -96,7 +96,7 @@ If a robot recorded the same robot twice in one step, the first line in file
 order is the one used (dataset 6 has no such case). Non-integer or
 out-of-range actions and NaN/inf are a ``ValueError``.
 
-Observation (per agent, ``Box(shape=(3N + 3,), float32)``)
+Observation (per agent, ``Box(shape=(3N + 4,), float32)``)
 --------------------------------------------------------
 | index             | meaning                                                                 | bounds    |
 |-------------------|-------------------------------------------------------------------------|-----------|
@@ -108,6 +108,8 @@ Observation (per agent, ``Box(shape=(3N + 3,), float32)``)
 |                   | knowledge, as in ``relay_ukf``                                           |           |
 | ``[3N+1]``        | log tr of its own position covariance (m^2)                             | unbounded |
 | ``[3N+2]``        | step fraction k / window_steps                                          | [0, 1]    |
+| ``[3N+3]``        | ``communication_cost``: its copy's cost per delivered hop this episode  | [0, inf)  |
+|                   | (``communication_cost``, or the draw from ``cost_range``), m            |           |
 
 The sighting count and the distances have no upper bound in the model (a data set may hold any
 number of sightings per step, robots anywhere); the log-trace is unbounded because a robot that sees
@@ -125,7 +127,8 @@ Reward (team: one agent's decisions move every robot's estimate)
 | ``"trace"`` | -mean_i sqrt(tr P_ii^pos(k+1)) (m: the filter's own RMS position error, the unit of   |
 |             | ``error``; the ``trace`` info key is tr P_ii^pos itself, m^2) - C                    |
 
-C, the team's communication cost of the step, in the reward's unit (m): ``communication_cost`` per
+C, the team's communication cost of the step, in the reward's unit (m): the copy's cost per hop (``communication_cost``,
+or under ``cost_range`` its draw of the episode) per
 delivered hop (one hop is one message of the relay network) plus ``hop_cost_per_m2`` d^2 per hop of
 length d (the network's ``cost_sent``), summed over every chain of the step.
 
@@ -169,6 +172,10 @@ Arguments (fields of ``MrclamRelayConfig``)
 | loss_length          | inf            | (0, inf] m (p_loss(d) = 1 - (1 - loss_at_zero) e^(-d/loss_length)) |
 | communication_cost   | 0.0            | [0, 1e12] m per delivered hop (old name ``hop_cost``, still  |
 |                      |                | accepted)                                                    |
+| cost_range           | None           | None, or (lo, hi) with 0 <= lo <= hi <= 1e12:                |
+|                      |                | each copy draws its cost per episode at reset                |
+|                      |                | (``coloc_env.composition``'s law), replacing                 |
+|                      |                | ``communication_cost``                                       |
 | hop_cost_per_m2      | 0.0            | [0, 1e12] m per hop and squared metre of its length          |
 | ukf_lambda           | 0.0            | (-3N, 1e6]                                                   |
 | reward               | "error"        | "error", "trace"                                             |

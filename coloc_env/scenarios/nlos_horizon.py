@@ -47,11 +47,11 @@ of a stamp, the strongest ``n_strongest`` are fused), so keeping all reproduces 
 rule exactly; set ``n_strongest = num_neighbours`` to hand the whole selection to the agent.
 A NaN/inf or a value outside the space is a ``ValueError``.
 
-Observation (per agent, ``Box(low, high, shape=(D + 1 + 3 J + 2 M + 3,), float32)``; 41 by default)
-----------------------------------------------------------------------------------------------
-The ``afge`` backend's features (``coloc_env.backends.nlos``), then the step fraction.
-Every entry has a finite bound (the column; the RSS, innovation and trace entries are
-clipped to it).
+Observation (per agent, ``Box(low, high, shape=(D + 1 + 3 J + 2 M + 3 + N + 1,), float32)``; 46 by default)
+-----------------------------------------------------------------------------------------------------------
+The ``afge`` backend's features (``coloc_env.backends.nlos``), then the step fraction, the agent's index and
+the episode's communication cost. Every entry but the cost has a finite bound (the column; the RSS, innovation
+and trace entries are clipped to it).
 
 | index                   | meaning                                                                  | bounds    |
 |-------------------------|--------------------------------------------------------------------------|-----------|
@@ -68,7 +68,10 @@ clipped to it).
 | ``[D+3+3J+M, D+3+3J+2M)``| the AHG cost J_N(k) of the same M windows (``likelihood``'s: the one-   | [0, 50]   |
 |                         | step predictive cost, or the in-sample residual for ``"paper"``) minus   |           |
 |                         | the group's lowest: 0 marks AHG's pick; 50 where invalid (capped)        |           |
-| ``[-1]``                | step fraction k / horizon                                                | [0, 1]    |
+| ``[D+3+3J+2M]``         | step fraction k / horizon                                                | [0, 1]    |
+| then ``N`` entries      | ``index``: one-hot of the agent's own index                              | [0, 1]    |
+| ``[-1]``                | ``communication_cost``: its copy's cost per packet used this episode     | [0, inf)  |
+|                         | (``communication_cost``, or the draw from ``cost_range``), m^2           |           |
 
 The AHG costs are there so that a learning agent sees the innovation statistics AHG decides on.
 
@@ -154,10 +157,14 @@ the part named)
 |                     |                              | estimate = truth + N(0, P0)                       |
 | reward              | "error"                      | "error", "trace"                                  |
 | communication_cost  | 0.0                          | [0, 1e12] per packet used (m^2, the reward's unit) |
+| cost_range          | None                         | None, or (lo, hi) with 0 <= lo <= hi <= 1e12:      |
+|                     |                              | each copy draws its cost per episode at reset      |
+|                     |                              | (``coloc_env.composition``'s law), replacing       |
+|                     |                              | ``communication_cost``                             |
 
 ``num_agents`` .. ``p10`` and ``prior_std`` set the world's fields,
 ``buffer_length`` and ``delay_probs`` the network's, ``n_strongest`` .. ``smoothing`` the backend's,
-``horizon``, ``reward`` and ``communication_cost`` the composition's (``horizon`` also the world's);
+``horizon``, ``reward``, ``communication_cost`` and ``cost_range`` the composition's (``horizon`` also the world's);
 each is checked once, by that part, and a refused value is reported under the keyword. The rules
 between parts (``n_strongest``, ``min_packets`` <= J; ``window_min`` >= D + 1) are the backend's
 ``check_against``. Older keywords, still accepted by ``make`` and ``parallel_env`` (give one name of a
@@ -245,6 +252,7 @@ class NlosHorizonConfig(PresetConfig):
     prior_std: tuple = _world("prior_std")
     reward: str = keyword("error", "composition.reward")
     communication_cost: float = keyword(0.0, "composition.communication_cost")
+    cost_range: tuple | None = keyword(None, "composition.cost_range")
 
     def check_preset(self) -> None:
         """The rules between the parts (the backend's ``check_against``), under the keywords' names."""
@@ -262,11 +270,12 @@ class NlosHorizonScenario(PresetScenario):
     name = "nlos_horizon"
     paper = "gao2016"
     Config = NlosHorizonConfig
-    version = 1
+    version = 2
     metric = "squared position error averaged over k >= 50 and the UAVs"
     metric_unit = "m^2"
     communication = "packets"
     policy_module = "agents.nlos_horizon"
+    appended_features = ("index", "communication_cost")
 
     def __init__(self, config: NlosHorizonConfig, batch: int = 1):
         super().__init__(config, batch)
@@ -277,16 +286,20 @@ class NlosHorizonScenario(PresetScenario):
         self._preset_action_space = gymnasium.spaces.MultiDiscrete(
             [config.window_max - config.window_min + 1] + [2] * self.J, dtype=np.int64)
         low, high = be.feature_bounds()
-        self._observation_space = gymnasium.spaces.Box(np.r_[low, 0.0].astype(np.float32),
-                                                       np.r_[high, 1.0].astype(np.float32), dtype=np.float32)
+        self._observation_space = self.extend_space(gymnasium.spaces.Box(
+            np.r_[low, 0.0].astype(np.float32), np.r_[high, 1.0].astype(np.float32), dtype=np.float32))
 
     # --- description ------------------------------------------------------------
     @property
     def obs_dim(self) -> int:
-        return self.D + 1 + 3 * self.J + 2 * self.config.group_size + 3
+        return self.D + 1 + 3 * self.J + 2 * self.config.group_size + 3 + self.appended_size()
 
     def observation_space(self):
         return self._observation_space
+
+    def preset_feature_positions(self) -> dict[str, int]:
+        """The composed table's features among this observation's own entries: ``step_fraction``."""
+        return {"step_fraction": self.obs_dim - self.appended_size() - 1}
 
     def action_space(self):
         return self._preset_action_space
@@ -320,13 +333,13 @@ class NlosHorizonScenario(PresetScenario):
             loss = np.sum((be.posterior_position - self._truth) ** 2, axis=-1)
         else:
             loss = np.trace(be.posterior_position_cov, axis1=-2, axis2=-1)
-        return -loss - self.config.communication_cost * be.packets_used
+        return -loss - self.costs[:, None] * be.packets_used  # each copy's cost this episode
 
     # --- views -------------------------------------------------------------------
     def observation(self) -> np.ndarray:
         B, N = self.batch, self.num_agents
         frac = np.broadcast_to((self.k / self.horizon)[:, None, None], (B, N, 1))
-        return np.concatenate([self.backend.observation_features(), frac], axis=-1).astype(np.float32)
+        return self.extend_observation(np.concatenate([self.backend.observation_features(), frac], axis=-1))
 
     def episode_error(self, errors: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
         """Time-averaged squared position error over k >= min(50, horizon - 1), mean over the agents.

@@ -5,9 +5,12 @@ along chains of the ``relay`` network to a joint UKF, rewarded as one.
 |-----------------|---------------------------------------------------------------------------------------------|
 | keywords        | ``RelayTeamConfig``: the relay links (``comm_range``, ``max_hops``, ``loss_at_zero``,       |
 |                 | ``loss_length``, ``hop_cost_per_m2``), ``communication_cost``, ``ukf_lambda``, ``reward``; the |
-|                 | old ``hop_cost`` an alias of ``communication_cost``                                          |
+|                 | old ``hop_cost`` an alias of ``communication_cost``; ``cost_range`` (the composition's: each |
+|                 | copy draws its cost per hop per episode at reset)                                           |
 | observation     | one-hot of the agent's index (N), the preset's own features, the distance to each agent      |
-|                 | / ``distance_scale`` (N, 0 for itself), log tr P_ii (m^2), the step fraction k / horizon     |
+|                 | / ``distance_scale`` (N, 0 for itself), log tr P_ii (m^2), the step fraction k / horizon,    |
+|                 | then ``communication_cost``: the copy's cost per hop this episode (``communication_cost``,   |
+|                 | or the draw from ``cost_range``), m                                                          |
 | action mask     | each relay entry: the ``relay`` network's ``next_hop`` rule without its "nearest" choice     |
 | reward          | the team's, for every agent: ``"error"`` -mean_i ||xhat_i - x_i|| (m), ``"trace"``          |
 |                 | -mean_i sqrt(tr P_ii) (m, the filter's own RMS error), minus the step's communication cost   |
@@ -47,6 +50,7 @@ class RelayTeamConfig(PresetConfig):
     loss_at_zero: float = keyword(0.0, "network.loss_at_zero")
     loss_length: float = keyword(float("inf"), "network.loss_length")
     communication_cost: float = keyword(0.0, "composition.communication_cost")
+    cost_range: tuple | None = keyword(None, "composition.cost_range")
     hop_cost_per_m2: float = keyword(0.0, "network.hop_cost_per_m2")
     ukf_lambda: float = keyword(0.0, "backend.ukf_lambda")
     reward: str = keyword("error", "composition.reward")
@@ -111,14 +115,15 @@ class RelayTeamScenario(PresetScenario):
     # --- the shared codec ----------------------------------------------------------------------------------
     @property
     def obs_dim(self) -> int:
-        return 2 * self.num_agents + self.feature_bounds()[0].size + 2
+        return 2 * self.num_agents + self.feature_bounds()[0].size + 2 + self.appended_size()
 
     def observation_space(self):
         N = self.num_agents
         low, high = self.feature_bounds()
         low = np.concatenate([np.zeros(N), low, np.zeros(N), [-np.inf], [0.0]])
         high = np.concatenate([np.ones(N), high, np.full(N, np.inf), [np.inf], [1.0]])
-        return gymnasium.spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
+        return self.extend_space(gymnasium.spaces.Box(low.astype(np.float32), high.astype(np.float32),
+                                                      dtype=np.float32))
 
     def state_space(self):
         dim = self.num_agents * (self.obs_dim + self.agent_state_dim)
@@ -128,13 +133,21 @@ class RelayTeamScenario(PresetScenario):
         B, N = self.batch, self.num_agents
         features = self.own_features()
         m = features.shape[-1]
-        obs = np.empty((B, N, 2 * N + m + 2), dtype=np.float32)  # each entry cast from float64, as astype would
+        extra = self.appended_observation()
+        obs = np.empty((B, N, 2 * N + m + 2 + extra.shape[-1]), dtype=np.float32)  # cast per entry, as astype would
         obs[:, :, :N] = np.eye(N)
         obs[:, :, N:N + m] = features
         obs[:, :, N + m:2 * N + m] = self.observed_distances() / self.distance_scale
-        obs[:, :, -2] = np.log(self.own_traces())
-        obs[:, :, -1] = (self.k / self.horizon)[:, None]
+        obs[:, :, 2 * N + m] = np.log(self.own_traces())
+        obs[:, :, 2 * N + m + 1] = (self.k / self.horizon)[:, None]
+        obs[:, :, 2 * N + m + 2:] = extra
         return obs
+
+    def preset_feature_positions(self) -> dict[str, int]:
+        """The composed table's features this observation carries among its own entries: ``index`` (the
+        one-hot), ``log_trace`` (log tr P_ii) and ``step_fraction``."""
+        N, m = self.num_agents, self.feature_bounds()[0].size
+        return {"index": 0, "log_trace": 2 * N + m, "step_fraction": 2 * N + m + 1}
 
     def state(self) -> np.ndarray:
         log_var = np.log(self.own_variances())

@@ -57,7 +57,7 @@ step (observation ``[N+1, 2N+1)``); the rules are the ``circles`` world's and th
 | 1     | itself (stop, as N); a platform beyond          | N = stop and every other platform within               |
 |       | ``comm_range`` (the chain ends, as at N)        | ``comm_range`` (reached ones are not known in advance) |
 
-Observation (per agent, ``Box(shape=(2N + 3,), float32)``)
+Observation (per agent, ``Box(shape=(2N + 4,), float32)``)
 ---------------------------------------------------------
 | index            | meaning                                                               | bounds     |
 |------------------|-----------------------------------------------------------------------|------------|
@@ -68,6 +68,8 @@ Observation (per agent, ``Box(shape=(2N + 3,), float32)``)
 |                  | assumes each platform knows which neighbour is closest                |            |
 | ``[2N+1]``       | log tr P_ii, the agent's own covariance (m^2)                         | unbounded  |
 | ``[2N+2]``       | step fraction k / horizon                                             | [0, 1]     |
+| ``[2N+3]``       | ``communication_cost``: its copy's cost per hop this episode          | [0, inf)   |
+|                  | (``communication_cost``, or the draw from ``cost_range``), m          |            |
 
 The distances are unbounded because ``centres`` may be anywhere; log tr P_ii is unbounded because
 dead reckoning without measurements grows P without limit.
@@ -83,7 +85,8 @@ Reward (team: the decisions of one agent move every platform's estimate)
 | ``"trace"`` | -mean_i sqrt(tr P_ii(k+1)) (m: the filter's own RMS error, in the unit of ``error``) |
 |             | - the same hop costs; the ``trace`` info key stays tr P_ii in m^2                    |
 
-The step's hop costs: ``communication_cost`` per delivered hop (one message each) plus
+The step's hop costs: ``communication_cost`` (under ``cost_range``, the copy's draw of the episode) per
+delivered hop (one message each) plus
 ``hop_cost_per_m2`` d^2 for a hop of length d, summed over the chain (metres of error, as the
 reward; ``coloc_env.scenarios.relay_codec``).
 
@@ -135,6 +138,10 @@ Arguments (fields of ``RelayUKFConfig``, defaults = the paper's Sec. 4 / Table 1
 | loss_at_zero            | 0.0          | [0, 1]                                                    |
 | loss_length             | inf          | (0, inf] m (p_loss(d) = 1 - (1 - loss_at_zero) e^(-d/loss_length)) |
 | communication_cost      | 0.0          | [0, 1e12] m per delivered hop (one message); older name ``hop_cost`` |
+| cost_range              | None         | None, or (lo, hi) with 0 <= lo <= hi <= 1e12:                        |
+|                         |              | each copy draws its cost per episode at reset                        |
+|                         |              | (``coloc_env.composition``'s law), replacing                         |
+|                         |              | ``communication_cost``                                               |
 | hop_cost_per_m2         | 0.0          | [0, 1e12] m per hop and squared metre                     |
 | initial_position_std    | 0.1          | [1e-6, 1e6] m: P(0) = std^2 I (a Cholesky needs P > 0; the paper's |
 |                         |              | start is known, and the estimates start at the truth)      |
@@ -220,7 +227,7 @@ class RelayUKFScenario(RelayTeamScenario):
     name = "relay_ukf"
     paper = "wang2019"
     Config = RelayUKFConfig
-    version = 1
+    version = 2
     metric = "distance error averaged over the steps and platforms"
     metric_unit = "m"
     communication = "relays"

@@ -38,7 +38,7 @@ def test_spaces_are_shared_and_cached():
     assert env.possible_agents == ["uav_0", "uav_1", "uav_2", "uav_3"]
     assert env.action_space("uav_0") is env.action_space("uav_0")
     assert env.action_space("uav_0") == env.action_space("uav_3")
-    assert env.observation_space("uav_1").shape == (13,)
+    assert env.observation_space("uav_1").shape == (13 + 4 + 1,)  # then the index and the cost
     assert env.action_space("uav_1").shape == (13,)
     env.reset(seed=0)
     assert env.state().shape == env.state_space.shape
@@ -208,7 +208,7 @@ def test_observation_is_local_and_ages_count_missing_components():
     ages = observations["uav_0"][3:12].reshape(3, 3) * 50
     # T1, receiver uav_0: neighbour uav_1 sends y only, uav_2 sends x, y, uav_3 sends y, z
     np.testing.assert_allclose(ages, [[3, 0, 3], [0, 0, 3], [3, 0, 0]], atol=1e-5)
-    assert observations["uav_0"][-1] == pytest.approx(3 / 50)
+    assert observations["uav_0"][env.scenario.feature_index("step_fraction")] == pytest.approx(3 / 50)
 
 
 def test_rgb_render_draws_a_frame():

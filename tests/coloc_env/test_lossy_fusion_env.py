@@ -37,9 +37,9 @@ def test_spaces_are_shared_and_cached():
     assert env.action_space("uav_0") is env.action_space("uav_0")
     assert env.action_space("uav_0") == env.action_space("uav_3")
     assert env.action_space("uav_1").shape == (1 + 4 + 9,)
-    assert env.observation_space("uav_1").shape == (3 + 12,)
+    assert env.observation_space("uav_1").shape == (3 + 12 + 4 + 1,)  # then the index and the cost
     env.reset(seed=0)
-    assert env.state().shape == env.state_space.shape == (4 * 15 + 9,)
+    assert env.state().shape == env.state_space.shape == (4 * 20 + 9,)
 
 
 @pytest.mark.parametrize("kwargs, field", [
@@ -196,8 +196,8 @@ def test_observation_is_local():
     assert observations["uav_0"][0] == 1.0 and observations["uav_1"][0] == 0.0
     assert observations["uav_1"][1] == pytest.approx(3 / 100)
     # followers know only their own filter: the leader's slots are zero
-    np.testing.assert_array_equal(observations["uav_1"][3:], 0.0)
-    assert np.all(observations["uav_0"][5:] > 0)
+    np.testing.assert_array_equal(observations["uav_1"][3:11], 0.0)
+    assert np.all(observations["uav_0"][5:11] > 0)
 
 
 def test_rgb_render_draws_a_frame():

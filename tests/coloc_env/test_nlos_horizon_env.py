@@ -40,7 +40,7 @@ def test_spaces_are_shared_and_sized_by_the_config():
     assert env.possible_agents == ["uav_0", "uav_1", "uav_2", "uav_3"]
     assert env.action_space("uav_0") is env.action_space("uav_0")
     assert env.action_space("uav_0").nvec.tolist() == [27] + [2] * 8
-    assert env.observation_space("uav_2").shape == (41,)
+    assert env.observation_space("uav_2").shape == (41 + 4 + 1,)  # then the index and the cost
     env.reset(seed=0)
     assert env.state().shape == env.state_space.shape
     small = coloc_env.parallel_env(NAME, num_neighbours=5, n_strongest=3, window_max=20, **SHORT)

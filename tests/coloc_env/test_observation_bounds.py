@@ -17,8 +17,6 @@ SHORT = {
     "nlos_horizon": {"horizon": 7},
     "mrclam_relay": {"window_steps": 7, "data": MRCLAM_DATASET6},
 }
-# the entry that is the step fraction k / horizon (the last one but for two presets; see their tables)
-FRACTION_INDEX = {name: -1 for name in SHORT} | {"gps_denied_nbp": 6, "lossy_fusion": 1}
 
 
 def _presets():
@@ -30,7 +28,7 @@ def test_every_observation_of_random_episodes_lies_in_the_bounded_space(name):
     venv = coloc_env.vector_env(name, num_envs=3, seed=5, **SHORT[name])
     space = venv.observation_space
     low, high = space.low, space.high
-    fraction = FRACTION_INDEX[name]
+    fraction = venv.scenario.feature_index("step_fraction")
     assert (low[fraction], high[fraction]) == (0.0, 1.0), "the step fraction carries its bounds"
     venv.action_space.seed(11)
     obs = venv.reset()

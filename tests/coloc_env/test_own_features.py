@@ -32,10 +32,12 @@ def test_feature_indices_follow_the_step_fraction_in_the_documented_order():
     assert (core.feature_index("log_trace"), core.feature_index("step_fraction")) == (N, 3 * N + 1)
     with pytest.raises(ValueError, match="has no feature 'nonsense'"):
         core.feature_index("nonsense")
-    preset = coloc_env.make_core("contention_localization")
-    assert preset.own_features == () and preset.obs_dim == core_of("gps_denied/contention/ukf_ccl").obs_dim - 5
+    preset = coloc_env.make_core("contention_localization")  # the composition's whole table
+    composed = core_of("gps_denied/contention/ukf_ccl")
+    assert preset.obs_dim == composed.obs_dim
+    assert [preset.feature_index(n) for n in OWN_FEATURES] == [composed.feature_index(n) for n in OWN_FEATURES]
     with pytest.raises(ValueError, match="has no feature 'displacement'"):
-        preset.feature_index("displacement")
+        coloc_env.make_core("bandwidth_fusion").feature_index("displacement")
 
 
 @pytest.mark.parametrize("name", [ACKNOWLEDGED, UNACKNOWLEDGED])

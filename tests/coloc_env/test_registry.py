@@ -31,11 +31,11 @@ PINS = {
         "action MultiDiscrete([2, 2, 2, 2, 2])",
         [239.23559740185738, -217.28506213996212, 199.7501488348018]),
     # v2: a GPS-faulty UAV's messages tempered (fault_message_power 0.5), the covariance of a prior-only belief
-    # with its KDE kernel
+    # with its KDE kernel; the observation gains the UAV's index and the episode's communication cost
     "coloc/gps_denied_nbp-v2": (
-        "10 agents; observation Box(shape=(8,), dtype=float32, low=[0.0], high=[1.0, inf]); "
+        "10 agents; observation Box(shape=(19,), dtype=float32, low=[0.0], high=[1.0, inf]); "
         "action MultiDiscrete([2, 2, 2, 2, 2])",
-        [242.56109911203384, -228.83581136378413, 205.52552344671284]),
+        [302.56109911203384, -228.83581136378413, 205.52552344671284]),
     "coloc/nlos_horizon-v1": (
         "4 agents; observation Box(shape=(41,), dtype=float32, low=[-50.0, -20.0, -1.0, 0.0], high=[1.0, 20.0, 50.0]); "
         "action MultiDiscrete([27, 2, 2, 2, 2, 2, 2, 2, 2])",
@@ -48,11 +48,34 @@ PINS = {
         "10 agents; observation Box(shape=(34,), dtype=float32, low=[-50.0, 0.0], high=[1.0, 50.0, inf]); "
         "action MultiDiscrete([2])",
         [1893.805515833199, -271.27224529005156, 271.27224529005156]),
-    # v2: noise_model="likelihood" by default (v1: "calibrated"), the filter's covariance in the observation moved
+    # v2: noise_model="likelihood" by default (v1: "calibrated"), the filter's covariance in the observation moved;
+    # the observation gains the episode's communication cost
     "coloc/mrclam_relay-v2": (
-        "5 agents; observation Box(shape=(18,), dtype=float32, low=[-inf, 0.0], high=[1.0, inf]); "
+        "5 agents; observation Box(shape=(19,), dtype=float32, low=[-inf, 0.0], high=[1.0, inf]); "
         "action MultiDiscrete([5, 6, 6, 6, 6, 6])",
         [-157.2531400292646, -0.07803140656694496, 0.07803140656694496]),
+    # v2 of the others: the observation gains the episode's communication cost (cost_range's draw where given) and,
+    # where it lacked it, the agent's index; contention_localization observes the composition's whole table
+    "coloc/bandwidth_fusion-v2": (
+        "4 agents; observation Box(shape=(18,), dtype=float32, low=[-inf, 0.0], high=[1.0, inf]); "
+        "action Box(shape=(13,), dtype=float64, low=[-1.0], high=[1.0])",
+        [-130.78892884775996, -2.6887372904466122, 6.571709008894274]),
+    "coloc/lossy_fusion-v2": (
+        "2 agents; observation Box(shape=(10,), dtype=float32, low=[-inf, 0.0], high=[1.0, inf]); "
+        "action Box(shape=(6,), dtype=float64, low=[-1.0], high=[1.0])",
+        [163.86613804847002, -3786.2784401252143, 176.2358645357422]),
+    "coloc/relay_ukf-v2": (
+        "4 agents; observation Box(shape=(12,), dtype=float32, low=[-inf, 0.0], high=[1.0, inf]); "
+        "action MultiDiscrete([4, 5])",
+        [46.11253483220935, -5.382024811613382, 5.382024811613382]),
+    "coloc/nlos_horizon-v2": (
+        "4 agents; observation Box(shape=(46,), dtype=float32, low=[-50.0, -20.0, -1.0, 0.0], "
+        "high=[1.0, 20.0, 50.0, inf]); action MultiDiscrete([27, 2, 2, 2, 2, 2, 2, 2, 2])",
+        [3397.7995815912436, -16802.978441352876, 282.17563519136115]),
+    "coloc/contention_localization-v2": (
+        "10 agents; observation Box(shape=(39,), dtype=float32, low=[-50.0, 0.0], high=[1.0, 50.0, inf]); "
+        "action MultiDiscrete([2])",
+        [1982.0459504066966, -271.27224529005156, 271.27224529005156]),
 }
 
 DATA_PRESETS = {"mrclam_relay"}  # presets that replay recorded data: built with data=MRCLAM_DATASET6
@@ -105,7 +128,7 @@ def test_made_env_is_the_presets_env(name):
 
 
 def test_keywords_reach_the_presets_config():
-    env = pettingzoo.make("parallel", "coloc/relay_ukf-v1", num_platforms=6, max_cycles=3)
+    env = pettingzoo.make("parallel", "coloc/relay_ukf-v2", num_platforms=6, max_cycles=3)
     assert len(env.possible_agents) == 6
     env.reset(seed=0)
     steps = 0
@@ -114,9 +137,9 @@ def test_keywords_reach_the_presets_config():
         steps += 1
     assert steps == 3
     with pytest.raises(ValueError, match="measurement_probability"):
-        pettingzoo.make("parallel", "coloc/relay_ukf-v1", measurement_probability=1.5)
+        pettingzoo.make("parallel", "coloc/relay_ukf-v2", measurement_probability=1.5)
     with pytest.raises(ValueError, match="no_such_field"):
-        pettingzoo.make("parallel", "coloc/relay_ukf-v1", no_such_field=1)
+        pettingzoo.make("parallel", "coloc/relay_ukf-v2", no_such_field=1)
 
 
 def test_unversioned_id_resolves_to_the_latest_and_a_wrong_version_is_refused():

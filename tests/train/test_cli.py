@@ -363,7 +363,7 @@ def test_list_prints_every_composition_with_its_verdict(capsys):
     for r in rows:
         verdict = "ok" if r["ok"] else "no: " + r["reason"]
         assert f"{r['world']}/{r['network']}/{r['backend']}" in out and verdict in out
-    assert "relay_ukf          circles / relay / ukf_dcl  (coloc/relay_ukf-v1)" in out
+    assert "relay_ukf          circles / relay / ukf_dcl  (coloc/relay_ukf-v2)" in out
 
 
 def test_list_ok_and_part_filters_keep_only_their_rows(capsys):
