@@ -40,12 +40,19 @@ al. 2013) on what the message would tell the receivers; periodic transmission is
 reference every event-triggered scheme is compared with.
 
 Applies to plain compositions whose network has a transport decision (a block whose maximum and minimum
-differ: ``transmit``, a relay's ``next_hop``, a bandwidth ``selection``); ``uncertainty`` and ``value``
-also need a backend with a covariance. Elsewhere the factories raise ``ValueError`` saying why.
+differ: ``transmit``, a relay's ``next_hop``, a bandwidth ``selection``), and to the presets whose decision maps
+(``PresetScenario.transport_entries``: ``gps_denied_nbp``'s broadcast bits, ``lossy_fusion``'s transmit entry,
+``relay_ukf``'s and ``mrclam_relay``'s relay entries). On a preset, *send* plays its ``paper`` policy's action
+(built with the family's seed, restarted with it by ``start_episode``), which is ``always``'s there, and *not
+send* sets the declared entries to their quiet values (``silent``'s), every other entry staying ``paper``'s: the
+extremes are the preset's ``always`` and ``silent`` exactly. The presets observe the features by the same names
+(their module tables). ``uncertainty`` and ``value`` also need a backend with a covariance. Elsewhere the
+factories raise ``ValueError`` saying why.
 """
 
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
@@ -80,20 +87,29 @@ class TransmitRule(Policy):
     batching = "per_copy"
     family = "rule"
 
-    def __init__(self, env, knob: float):
+    def __init__(self, env, knob: float, seed: int | None = None):
         super().__init__(env)
         scenario = env.unwrapped.scenario
         from agents.generic import _is_composition
 
-        if not _is_composition(scenario):
-            raise BadInput(f"policy {self.family!r} needs a composition (coloc_env.compose); {scenario.name} is a "
-                           f"preset with its own policies")
-        send = np.asarray(scenario.action_vector("maximum"))
-        quiet = np.asarray(scenario.action_vector("minimum"))
-        if np.array_equal(send, quiet):
-            raise BadInput(f"policy {self.family!r} needs a transport decision; network "
-                           f"{scenario.composition.network.name} has none for backend "
-                           f"{scenario.composition.backend.name}")
+        self.paper = None  # a preset's paper policy, whose action a send keeps
+        if _is_composition(scenario):
+            send = np.asarray(scenario.action_vector("maximum"))
+            quiet = np.asarray(scenario.action_vector("minimum"))
+            if np.array_equal(send, quiet):
+                raise BadInput(f"policy {self.family!r} needs a transport decision; network "
+                               f"{scenario.composition.network.name} has none for backend "
+                               f"{scenario.composition.backend.name}")
+        else:
+            declared = scenario.transport_entries()
+            if declared is None:
+                raise BadInput(f"policy {self.family!r} needs a transmit or relay decision; preset {scenario.name} "
+                               f"declares none (PresetScenario.transport_entries)")
+            from agents import make_policy
+
+            self.entries, self.quiet = (np.asarray(a) for a in declared)
+            self.paper = make_policy("paper", env, seed=seed)
+            send = quiet = None
         self.knob = float(knob)
         self.num_agents = scenario.num_agents
         self.horizon = int(scenario.horizon)
@@ -112,10 +128,27 @@ class TransmitRule(Policy):
     def sends(self, observation: np.ndarray) -> bool:  # pragma: no cover - interface
         raise NotImplementedError
 
+    def start_episode(self, seed: int) -> None:
+        """Restart a preset's ``paper`` policy for the episode (a copy of it: a shallow copy of this policy, as a
+        batched evaluation makes one per episode, must not share its generator)."""
+        if self.paper is not None:
+            self.paper = copy.copy(self.paper)
+            self.paper.start_episode(seed)
+
     def act(self, observations: dict) -> dict:
         dtype = self.env.action_space(self.order[0]).dtype
-        return {agent: self.actions[bool(self.sends(np.asarray(obs, float)))].astype(dtype)
-                for agent, obs in observations.items()}
+        if self.paper is None:
+            return {agent: self.actions[bool(self.sends(np.asarray(obs, float)))].astype(dtype)
+                    for agent, obs in observations.items()}
+        actions = self.paper.act(observations)  # every agent's, so a stochastic paper draws as it would alone
+        out = {}
+        for agent, obs in observations.items():
+            action = np.array(actions[agent], dtype=dtype)
+            if not self.sends(np.asarray(obs, float)):
+                flat = action.reshape(-1)
+                flat[self.entries] = self.quiet[self.entries].astype(dtype)
+            out[agent] = action
+        return out
 
 
 class Periodic(TransmitRule):
@@ -135,8 +168,8 @@ class Uncertainty(TransmitRule):
 
     family = "uncertainty"
 
-    def __init__(self, env, knob: float):
-        super().__init__(env, knob)
+    def __init__(self, env, knob: float, seed: int | None = None):
+        super().__init__(env, knob, seed)
         _needs_covariance(env, "uncertainty")
         self.log_threshold = math.log(self.knob) if self.knob > 0 else -math.inf
 
@@ -160,8 +193,8 @@ class SendOnDelta(TransmitRule):
 
     family = "send_on_delta"
 
-    def __init__(self, env, knob: float):
-        super().__init__(env, knob)
+    def __init__(self, env, knob: float, seed: int | None = None):
+        super().__init__(env, knob, seed)
         from coloc_env.scenarios.composed import DISTANCE_SCALE
 
         self.index["displacement"] = env.unwrapped.scenario.feature_index("displacement")
@@ -179,8 +212,8 @@ class Value(TransmitRule):
 
     family = "value"
 
-    def __init__(self, env, knob: float):
-        super().__init__(env, knob)
+    def __init__(self, env, knob: float, seed: int | None = None):
+        super().__init__(env, knob, seed)
         _needs_covariance(env, "value")
         scenario = env.unwrapped.scenario
         if scenario.backend.position_process_noise() is None:
@@ -203,25 +236,25 @@ def has_transport_decision(spec) -> bool:
     return any(block.maximum is not None and block.maximum != block.minimum for block in network.transport_blocks())
 
 
-def periodic(env, variant: str | None = None) -> Periodic:
-    """``periodic:P`` (default P = N, round robin)."""
+def periodic(env, variant: str | None = None, seed: int | None = None) -> Periodic:
+    """``periodic:P`` (default P = N, round robin); ``seed``: a preset's ``paper`` policy's."""
     n = env.unwrapped.scenario.num_agents
-    return Periodic(env, _parse_knob("periodic", variant, float(n), 1.0, integer=True))
+    return Periodic(env, _parse_knob("periodic", variant, float(n), 1.0, integer=True), seed)
 
 
-def uncertainty(env, variant: str | None = None) -> Uncertainty:
+def uncertainty(env, variant: str | None = None, seed: int | None = None) -> Uncertainty:
     """``uncertainty:tau`` (tau in m^2, default 1)."""
-    return Uncertainty(env, _parse_knob("uncertainty", variant, 1.0, 0.0, integer=False))
+    return Uncertainty(env, _parse_knob("uncertainty", variant, 1.0, 0.0, integer=False), seed)
 
 
-def send_on_delta(env, variant: str | None = None) -> SendOnDelta:
+def send_on_delta(env, variant: str | None = None, seed: int | None = None) -> SendOnDelta:
     """``send_on_delta:delta`` (delta in m, default 1)."""
-    return SendOnDelta(env, _parse_knob("send_on_delta", variant, 1.0, 0.0, integer=False))
+    return SendOnDelta(env, _parse_knob("send_on_delta", variant, 1.0, 0.0, integer=False), seed)
 
 
-def value(env, variant: str | None = None) -> Value:
+def value(env, variant: str | None = None, seed: int | None = None) -> Value:
     """``value:tau`` (tau in m^2, default 1)."""
-    return Value(env, _parse_knob("value", variant, 1.0, 0.0, integer=False))
+    return Value(env, _parse_knob("value", variant, 1.0, 0.0, integer=False), seed)
 
 
 POLICIES = {"periodic": periodic, "uncertainty": uncertainty, "send_on_delta": send_on_delta, "value": value}

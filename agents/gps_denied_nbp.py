@@ -19,6 +19,7 @@ import math
 
 import numpy as np
 
+from agents import event_triggered
 from agents.base import FixedActionPolicy, Policy
 from coloc_env.config import BadInput
 
@@ -97,5 +98,7 @@ class ThresholdPolicy(Policy):
         return {a: actions[i] for i, a in enumerate(names)}
 
 
-POLICIES = {"paper": PaperPolicy, "always": PaperPolicy, "silent": SilentPolicy, "threshold": ThresholdPolicy}
+# the event-triggered families decide every broadcast bit of a step at once (agents.event_triggered)
+POLICIES = {"paper": PaperPolicy, "always": PaperPolicy, "silent": SilentPolicy, "threshold": ThresholdPolicy,
+            **event_triggered.POLICIES}
 STRONGEST_BASELINES = ("paper", "threshold")

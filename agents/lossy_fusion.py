@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from agents import event_triggered
 from agents.base import FixedActionPolicy
 from coloc_env.config import BadInput
 
@@ -50,7 +51,8 @@ class SilentPolicy(FixedActionPolicy):
         super().__init__(env, actions)
 
 
-POLICIES = {"paper": PaperPolicy, "always": PaperPolicy, "silent": SilentPolicy}
+# the event-triggered families decide each follower's transmit entry (agents.event_triggered)
+POLICIES = {"paper": PaperPolicy, "always": PaperPolicy, "silent": SilentPolicy, **event_triggered.POLICIES}
 # The strongest baselines are the leader-alone Kalman filter and the centralized filter (A), estimators rather
 # than env policies: ``train.evaluate.REFERENCE_FILTERS`` runs them on the same episodes (its informed filter is
 # a bound).

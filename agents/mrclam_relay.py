@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from agents import event_triggered
 from agents.base import Policy
 
 
@@ -66,8 +67,8 @@ class PaperPolicy(Policy):
     def act(self, observations):
         order = list(self.env.possible_agents)
         N = len(order)
-        obs = np.stack([np.asarray(observations[a], float) if a in observations else np.zeros(3 * N + 3)
-                        for a in order])
+        size = self.env.observation_space(order[0]).shape[0]
+        obs = np.stack([np.asarray(observations[a], float) if a in observations else np.zeros(size) for a in order])
         recorded = obs[:, N:2 * N] > 0.5
         actions = paper_actions(recorded[None], relay=self.relay)[0]
         return {a: actions[order.index(a)] for a in observations}
@@ -81,5 +82,7 @@ class NoRelayPolicy(PaperPolicy):
 
 # ``always`` (every transport decision at its maximum: the complete chain) is ``paper``; ``silent``
 # (nothing relayed: the measurement still updates m and n) is ``no_relay``.
-POLICIES = {"paper": PaperPolicy, "always": PaperPolicy, "silent": NoRelayPolicy, "no_relay": NoRelayPolicy}
+# the event-triggered families decide each robot's relay entries (agents.event_triggered)
+POLICIES = {"paper": PaperPolicy, "always": PaperPolicy, "silent": NoRelayPolicy, "no_relay": NoRelayPolicy,
+            **event_triggered.POLICIES}
 STRONGEST_BASELINES = ("paper",)

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from agents import event_triggered
 from agents.base import Policy, SeededPolicy
 from coloc_env.scenarios.relay_ukf import DISTANCE_SCALE
 
@@ -119,5 +120,5 @@ class NearestLocalPolicy(Policy):
 # ``always`` (every transport decision at its maximum: the complete chain) is ``paper``; ``silent``
 # (nothing relayed: the measurement still updates m and n) is ``no_relay``.
 POLICIES = {"paper": PaperPolicy, "always": PaperPolicy, "silent": NoRelayPolicy, "no_relay": NoRelayPolicy,
-            "nearest_local": NearestLocalPolicy}
+            "nearest_local": NearestLocalPolicy, **event_triggered.POLICIES}  # families: the relay entry
 STRONGEST_BASELINES = ("paper", "no_relay")

@@ -199,23 +199,23 @@ PINNED_ROLLOUTS = {
     # the link outcomes the bernoulli_delay network's counter-based draws (from its own child generator).
     "lossy_fusion": {
         "paper": {"steps": 25, "reward": -3249.2816163220373, "error": 356.01476929565069,
-                  "trace": 748.00516142952438, "obs_sum": 19.225183486938477},
+                  "trace": 748.00516142952438, "obs_sum": 277.7098069190979},
         "random": {"steps": 25, "reward": -6599.0181326089833, "error": 421.04619878503433,
-                   "trace": 1220.6779506897374, "obs_sum": 19.414474010467529},
+                   "trace": 1220.6779506897374, "obs_sum": 276.60244297981262},
     },
     "relay_ukf": {
         "paper": {"steps": 25, "reward": -54.656640250591714, "error": 54.656640250591735,
-                  "trace": 64.637742502185972, "obs_sum": 4.0193506041541696},
+                  "trace": 64.637742502185972, "obs_sum": 4.0415788190439343},
         "random": {"steps": 25, "reward": -53.720614082882371, "error": 53.720614082882378,
-                   "trace": 71.076467009166166, "obs_sum": 4.2395842671394348},
+                   "trace": 71.076467009166166, "obs_sum": 4.335314329713583},
     },
     # gps_denied / broadcast / dnbp; the action space is MultiDiscrete([2] * n_iter), which the random policy
     # and action_space.sample() draw from; "trace" sums the belief's trace.
     "gps_denied_nbp": {
         "paper": {"steps": 10, "reward": -614.84513619304971, "error": 524.69452478183109,
-                  "trace": 7310.4069644574474, "obs_sum": 6.8214268982410431},
+                  "trace": 7310.4069644574474, "obs_sum": 10.991077452898026},
         "random": {"steps": 10, "reward": -632.49680010031682, "error": 543.25190951594016,
-                   "trace": 14765.286277102658, "obs_sum": 7.0621970891952515},
+                   "trace": 14765.286277102658, "obs_sum": 13.202908396720886},
     },
     # nlos_orbit / random_delay / afge, receiving before deciding: the truth, readings and prior are the world's
     # draws, the packet delays the random_delay network's counter-based draws (from its own child generator);
@@ -231,7 +231,7 @@ PINNED_ROLLOUTS = {
         "paper": {"steps": 25, "reward": -2.0469074545795491, "error": 2.0469074545795496,
                   "trace": 0.12929362583600221, "obs_sum": -3.2232460975646973},
         "random": {"steps": 25, "reward": -1.8835560719774556, "error": 1.8835560719774558,
-                   "trace": 0.1338183160661747, "obs_sum": -3.0858011245727539},
+                   "trace": 0.1338183160661747, "obs_sum": -2.8186411875922204},
     },
     # gps_denied / contention / ukf_ccl; "paper" is round_robin; the medium has no draws (the decisions decide)
     "contention_localization": {
@@ -244,11 +244,11 @@ PINNED_ROLLOUTS = {
 
 PINNED_VECTOR = {
     "bandwidth_fusion": {"reward": -21.77453984785825, "obs_sum": -67.099833246320486},
-    "lossy_fusion": {"reward": -36945.847672462463, "obs_sum": 72.719748601317406},
-    "relay_ukf": {"reward": -62.415704756975174, "obs_sum": 43.797087430953979},
-    "gps_denied_nbp": {"reward": -2156.5431070327759, "obs_sum": 121.82473330199718},
+    "lossy_fusion": {"reward": -36945.847672462463, "obs_sum": 749.73463612422347},
+    "relay_ukf": {"reward": -62.415704756975174, "obs_sum": 44.729118637206284},
+    "gps_denied_nbp": {"reward": -2156.5431070327759, "obs_sum": 213.53660087287426},
     "nlos_horizon": {"reward": -156932.33562774584, "obs_sum": 288.53796964552021},
-    "mrclam_relay": {"reward": -0.74640592327341437, "obs_sum": -66.275801002979279},
+    "mrclam_relay": {"reward": -0.74640592327341437, "obs_sum": -62.069581491509609},
     "contention_localization": {"reward": -2783.2435924112797, "obs_sum": 1125.2625467926264},
 }
 
@@ -258,8 +258,8 @@ PINNED_MRCLAM_CALIBRATED = {
     "paper": {"steps": 25, "reward": -1.4354103416799124, "error": 1.4354103416799122,
               "trace": 0.057701297776787661, "obs_sum": -4.1268091201782227},
     "random": {"steps": 25, "reward": -1.3734166102313323, "error": 1.3734166102313321,
-               "trace": 0.05865494495909393, "obs_sum": -4.0507316589355469},
-    "vector": {"reward": -0.73232610011473298, "obs_sum": -77.301276981830597},
+               "trace": 0.05865494495909393, "obs_sum": -3.783578165777726},
+    "vector": {"reward": -0.73232610011473298, "obs_sum": -73.095227561937847},
 }
 
 PINNED_REPRODUCTION = {

@@ -33,7 +33,7 @@ import numpy as np
 
 from coloc_env.composition import Composition
 from coloc_env.config import BadInput, field_type_problem
-from coloc_env.scenarios.composed import OWN_BOUNDS, OWN_FEATURES, ComposedScenario
+from coloc_env.scenarios.composed import LOG_TRACE_BOUND, OWN_BOUNDS, OWN_FEATURES, ComposedScenario
 
 TARGET_KINDS = ("world", "network", "backend", "composition", "preset")
 # Part checks name a field as prefix + field; with this prefix the message's field names can be told apart
@@ -162,8 +162,9 @@ class PresetScenario(ComposedScenario):
     # observes what its registered version does
     own_features: ClassVar[tuple[str, ...]] = ()
     # what a preset appends after its own observation entries, in this order (its observation table): names of the
-    # composed observation's table (``index``: the N-entry one-hot of the agent's index; the features of
-    # ``OWN_FEATURES``, one entry each, computed as the composition computes them: ``own_feature_values``)
+    # composed observation's table (``index``: the N-entry one-hot of the agent's index; ``log_trace``; the features
+    # of ``OWN_FEATURES``, one entry each), computed as the composition computes them (``log_trace``,
+    # ``own_feature_values``)
     appended_features: ClassVar[tuple[str, ...]] = ("communication_cost",)
 
     @classmethod
@@ -194,8 +195,11 @@ class PresetScenario(ComposedScenario):
     def appended_observation(self) -> np.ndarray:
         """(B, N, ``appended_size()``): the entries of ``appended_features``, in order."""
         B, N = self.batch, self.num_agents
-        own = [name for name in self.appended_features if name != "index"]
-        values = dict(zip(own, np.moveaxis(self.own_feature_values(own), -1, 0), strict=True))
+        own = [name for name in self.appended_features if name in OWN_FEATURES]
+        cov = self.backend.local_covariance() if own or "log_trace" in self.appended_features else None
+        values = dict(zip(own, np.moveaxis(self.own_feature_values(own, cov), -1, 0), strict=True))
+        if "log_trace" in self.appended_features:
+            values["log_trace"] = self.log_trace(cov)
         blocks = [np.broadcast_to(np.eye(N), (B, N, N)) if name == "index" else values[name][..., None]
                   for name in self.appended_features]
         return np.concatenate(blocks, axis=-1) if blocks else np.zeros((B, N, 0))
@@ -206,12 +210,18 @@ class PresetScenario(ComposedScenario):
 
     def extend_space(self, space: gymnasium.spaces.Box) -> gymnasium.spaces.Box:
         """The preset's own observation space followed by the appended entries' bounds."""
-        low = [np.zeros(self.num_agents) if name == "index" else [OWN_BOUNDS[name][0]]
-               for name in self.appended_features]
-        high = [np.ones(self.num_agents) if name == "index" else [OWN_BOUNDS[name][1]]
-                for name in self.appended_features]
+        bounds = {**OWN_BOUNDS, "log_trace": (-LOG_TRACE_BOUND, LOG_TRACE_BOUND)}
+        low = [np.zeros(self.num_agents) if name == "index" else [bounds[name][0]] for name in self.appended_features]
+        high = [np.ones(self.num_agents) if name == "index" else [bounds[name][1]] for name in self.appended_features]
         return gymnasium.spaces.Box(np.concatenate([space.low, *low]).astype(np.float32),
                                     np.concatenate([space.high, *high]).astype(np.float32), dtype=np.float32)
+
+    def transport_entries(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The preset's transmit (or relay) decision, where one maps onto the event-triggered families
+        (``agents.event_triggered``): (entries (A,) bool, the entries of an agent's flat action that carry it;
+        quiet (A,), their values when the agent keeps quiet, ``silent``'s). Sending keeps the ``paper`` policy's
+        action (which is ``always``'s on every preset that declares this). None (the default): no decision maps."""
+        return None
 
     def preset_feature_positions(self) -> dict[str, int]:
         """Features of the composed table that the preset's own entries carry: name -> index (none by default)."""

@@ -582,11 +582,7 @@ class ComposedScenario(Scenario):
         identity = np.broadcast_to(np.eye(N), (B, N, N))
         # what the agent itself can compute (a backend whose exact covariance is not local says so)
         cov = self.backend.local_covariance()
-        if cov is None:
-            log_trace = np.zeros((B, N))
-        else:
-            log_trace = np.clip(np.log(np.maximum(np.trace(cov, axis1=-2, axis2=-1), 1e-300)),
-                                -LOG_TRACE_BOUND, LOG_TRACE_BOUND)
+        log_trace = self.log_trace(cov)
         p = self.world.positions()
         dx, dy = p[:, :, None, 0] - p[:, None, :, 0], p[:, :, None, 1] - p[:, None, :, 1]
         distance = np.sqrt(dx * dx + dy * dy) / DISTANCE_SCALE  # the norm over (x, y), on (B, N, N) planes
@@ -596,6 +592,14 @@ class ComposedScenario(Scenario):
                               own, self.world.observation_features(), self.network.observation_features(),
                               self.backend.observation_features()], axis=-1)
         return obs.astype(np.float32)
+
+    def log_trace(self, cov: np.ndarray | None) -> np.ndarray:
+        """(B, N) the ``log_trace`` feature: log tr of the covariance the agent holds (``cov``:
+        ``Backend.local_covariance``), clipped to [-50, 50]; 0 without one."""
+        if cov is None:
+            return np.zeros((self.batch, self.num_agents))
+        return np.clip(np.log(np.maximum(np.trace(cov, axis1=-2, axis2=-1), 1e-300)), -LOG_TRACE_BOUND,
+                       LOG_TRACE_BOUND)
 
     def own_observation(self, cov: np.ndarray | None = None) -> np.ndarray:
         """(B, N, len(own_features)): the features of ``own_features`` (the module's observation table), from what

@@ -29,8 +29,7 @@ A value other than 0 or 1, a NaN or inf is a ``ValueError`` naming the iteration
 (all ones) is the paper's schedule; all zeros reduces every fault UAV to dead
 reckoning.
 
-Observation (per UAV, ``Box(shape=(N + 9,), float32)``: entry 4 and the last in [0, inf), the others in
-[0, 1]), about the coming step tau
+Observation (per UAV, ``Box(shape=(N + 14,), float32)``: the bounds column), about the coming step tau
 ----------------------------------------------------------------------------------------------
 | index | meaning                                                                         |
 |-------|---------------------------------------------------------------------------------|
@@ -47,11 +46,27 @@ Observation (per UAV, ``Box(shape=(N + 9,), float32)``: entry 4 and the last in 
 | 7     | what its neighbours already heard: the mean over its neighbours within R at tau |
 |       | of the distinct UAVs each heard from in the previous step, / (N - 1) (0 without |
 |       | neighbours and at reset) [chosen: each UAV's count rides on its beacon]          |
-| [8, 8 + N) | ``index``: one-hot of the UAV's own index                                  |
-| 8 + N | ``communication_cost``: lambda of its copy this episode (``communication_cost``, |
-|       | or the draw from ``cost_range``), metres per broadcast                           |
 
-Entries 4 and 8 + N alone are unbounded: a lost fault UAV's prior spreads without limit. Entry 7 serves
+| index        | meaning (the composed observation's features, by name: ``feature_index``)  | bounds    |
+|--------------|------------------------------------------------------------------------------|-----------|
+| [8, 8 + N)   | ``index``: one-hot of the UAV's own index                                    | [0, 1]    |
+| 8 + N        | ``log_trace``: log tr Cov_s of its belief (m^2, the ``trace`` info key),     | [-50, 50] |
+|              | clipped                                                                      |           |
+| 9 + N        | ``displacement``: how far its belief mean moved since its reference          | [0, inf)  |
+|              | broadcast, / 100 m                                                           |           |
+| 10 + N       | ``steps_since``: steps since its reference broadcast / horizon               | [0, 1]    |
+| 11 + N       | ``message_value``: max(0, tr(Cov_ref + (k - k_ref) Q) - tr Cov_s), m^2       | [0, inf)  |
+|              | (``Backend.message_value``; Q the backend's position process noise)          |           |
+| 12 + N       | ``communication_cost``: lambda of its copy this episode                      | [0, inf)  |
+|              | (``communication_cost``, or the draw from ``cost_range``), metres per        |           |
+|              | broadcast                                                                    |           |
+
+The reference broadcast is the UAV's last step with a broadcast (``transmissions`` > 0; the broadcast
+network gives no acknowledgements), the episode's start before any (``coloc_env.scenarios.composed``,
+"Since the last transmission"). The event-triggered families (``agents.event_triggered``) decide every
+iteration bit of a step at once: send = ``paper`` (all ones, = ``always``), quiet = all zeros (``silent``).
+
+Entry 4 is unbounded: a lost fault UAV's prior spreads without limit. Entry 7 serves
 learning: a broadcast helps most where the neighbours heard little, which entry 3 (the UAV's own
 count) does not show.
 
@@ -251,7 +266,7 @@ class GpsDeniedNbpScenario(PresetScenario):
     metric_unit = "m"
     communication = "broadcasts"
     policy_module = "agents.gps_denied_nbp"
-    appended_features = ("index", "communication_cost")
+    appended_features = ("index", "log_trace", "displacement", "steps_since", "message_value", "communication_cost")
     metric_weight_key = "fault"
 
     def __init__(self, config: GpsDeniedNbpConfig, batch: int = 1):
@@ -265,6 +280,11 @@ class GpsDeniedNbpScenario(PresetScenario):
     def observation_space(self):
         high = np.array([1.0, 1.0, 1.0, 1.0, np.inf, 1.0, 1.0, 1.0], np.float32)
         return self.extend_space(gymnasium.spaces.Box(np.zeros(OBS_DIM, np.float32), high, dtype=np.float32))
+
+    def transport_entries(self) -> tuple[np.ndarray, np.ndarray]:
+        """Every iteration's broadcast bit; quiet: 0 (``silent``)."""
+        n = int(self.config.num_iterations)
+        return np.ones(n, bool), np.zeros(n)
 
     def preset_feature_positions(self) -> dict[str, int]:
         """The composed table's features among this observation's own entries: ``step_fraction`` (entry 6)."""

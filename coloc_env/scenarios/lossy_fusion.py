@@ -52,7 +52,7 @@ clipped, a NaN or inf is a ``ValueError``.
 
 The followers' weight entries and the leader's transmit entry are ignored.
 
-Observation (per agent, ``Box(shape=(3 + 4 (L-1) + L + 1,), float32)``)
+Observation (per agent, ``Box(shape=(3 + 4 (L-1) + L + 5,), float32)``)
 ---------------------------------------------------------------------
 | index                      | leader                                        | follower                | bounds    |
 |----------------------------|-----------------------------------------------|-------------------------|-----------|
@@ -65,9 +65,25 @@ Observation (per agent, ``Box(shape=(3 + 4 (L-1) + L + 1,), float32)``)
 | ``[3+(L-1), 3+4(L-1))``    | log tr of the three covariances in that       | 0                       | unbounded |
 |                            | packet, follower-major                        |                         |           |
 | ``[3+4(L-1), 3+4(L-1)+L)`` | ``index``: one-hot of the UAV's own index     | same                    | [0, 1]    |
+| ``[-5]``                   | ``log_trace``: log tr of the position block   | of its own P(k|k)       | [-50, 50] |
+|                            | of its P0 (m^2), clipped                      |                         |           |
+| ``[-4]``                   | ``displacement``: how far its position        | same (its own filter's) | [0, inf)  |
+|                            | estimate moved since its reference packet,    |                         |           |
+|                            | / 100 m                                       |                         |           |
+| ``[-3]``                   | ``steps_since``: slots since its reference    | same                    | [0, 1]    |
+|                            | packet / horizon                              |                         |           |
+| ``[-2]``                   | ``message_value``: max(0, tr(P_ref + (k -     | same                    | [0, inf)  |
+|                            | k_ref) Q_pos) - tr P_k), m^2                  |                         |           |
 | ``[-1]``                   | ``communication_cost``: its copy's cost per   | same                    | [0, inf)  |
 |                            | packet this episode (``communication_cost``,  |                         |           |
 |                            | or the draw from ``cost_range``), m^2         |                         |           |
+
+The named entries are the composed observation's features (``feature_index``). The reference packet is the
+agent's last slot with a packet sent (``transmissions`` > 0; ``bernoulli_delay`` gives no acknowledgements), the
+episode's start before any (``coloc_env.scenarios.composed``, "Since the last transmission"); the leader never
+sends, so its reference stays the start. The event-triggered families (``agents.event_triggered``) decide a
+follower's transmit entry (0): send = ``paper``'s (1, = ``always``), quiet = -1 (``silent``), every tilt
+``paper``'s.
 
 The log-traces are unbounded (a filter fed by nothing but losses grows its covariance without
 limit); the packet ages have no upper bound, since a link can lose every packet of an episode of any
@@ -206,7 +222,7 @@ class LossyFusionScenario(PresetScenario):
     metric_unit = "m^2"
     communication = "messages transmitted"
     policy_module = "agents.lossy_fusion"
-    appended_features = ("index", "communication_cost")
+    appended_features = ("index", "log_trace", "displacement", "steps_since", "message_value", "communication_cost")
 
     def __init__(self, config: LossyFusionConfig, batch: int = 1):
         super().__init__(config, batch)
@@ -266,6 +282,12 @@ class LossyFusionScenario(PresetScenario):
         high = np.concatenate([[1.0, 1.0, np.inf], np.full(followers, np.inf), np.full(3 * followers, np.inf)])
         return self.extend_space(gymnasium.spaces.Box(low.astype(np.float32), high.astype(np.float32),
                                                       dtype=np.float32))
+
+    def transport_entries(self) -> tuple[np.ndarray, np.ndarray]:
+        """Entry 0, the transmit decision (>= 0 transmits); quiet: -1 (``silent``)."""
+        entries, quiet = np.zeros(self.action_dim, bool), np.zeros(self.action_dim)
+        entries[0], quiet[0] = True, -1.0
+        return entries, quiet
 
     def preset_feature_positions(self) -> dict[str, int]:
         """The composed table's features among this observation's own entries: ``step_fraction`` (entry 1)."""

@@ -96,7 +96,7 @@ If a robot recorded the same robot twice in one step, the first line in file
 order is the one used (dataset 6 has no such case). Non-integer or
 out-of-range actions and NaN/inf are a ``ValueError``.
 
-Observation (per agent, ``Box(shape=(3N + 4,), float32)``)
+Observation (per agent, ``Box(shape=(3N + 7,), float32)``)
 --------------------------------------------------------
 | index             | meaning                                                                 | bounds    |
 |-------------------|-------------------------------------------------------------------------|-----------|
@@ -108,8 +108,20 @@ Observation (per agent, ``Box(shape=(3N + 4,), float32)``)
 |                   | knowledge, as in ``relay_ukf``                                           |           |
 | ``[3N+1]``        | log tr of its own position covariance (m^2)                             | unbounded |
 | ``[3N+2]``        | step fraction k / window_steps                                          | [0, 1]    |
-| ``[3N+3]``        | ``communication_cost``: its copy's cost per delivered hop this episode  | [0, inf)  |
+| ``[3N+3]``        | ``displacement``: how far its position estimate moved since its last    | [0, inf)  |
+|                   | relayed hop (``transmissions`` > 0; the window start before any), / 100 m |         |
+| ``[3N+4]``        | ``steps_since``: steps since that hop / window_steps                    | [0, 1]    |
+| ``[3N+5]``        | ``message_value``: max(0, tr(P_ref + (k - k_ref) Q_pos) - tr P_ii), m^2 | [0, inf)  |
+|                   | (``Backend.message_value``)                                             |           |
+| ``[3N+6]``        | ``communication_cost``: its copy's cost per delivered hop this episode  | [0, inf)  |
 |                   | (``communication_cost``, or the draw from ``cost_range``), m            |           |
+
+The named entries are the composed observation's features (``feature_index``: ``index`` [0, N),
+``log_trace`` [3N+1], ``step_fraction`` [3N+2] and these). The event-triggered families
+(``agents.event_triggered``) decide every relay entry (1..N) of an agent at once: send = ``paper``'s routing,
+quiet = N (stop), so their extremes are ``always`` (= ``paper``) and ``silent`` (= ``no_relay``); the
+measurement choice (entry 0) is ``paper``'s. ``uncertainty`` reads the holder's own log tr P_ii (the simpler
+reading of "the holder's uncertainty about the next platform").
 
 The sighting count and the distances have no upper bound in the model (a data set may hold any
 number of sightings per step, robots anywhere); the log-trace is unbounded because a robot that sees

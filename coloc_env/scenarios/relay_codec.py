@@ -9,8 +9,12 @@ along chains of the ``relay`` network to a joint UKF, rewarded as one.
 |                 | copy draws its cost per hop per episode at reset)                                           |
 | observation     | one-hot of the agent's index (N), the preset's own features, the distance to each agent      |
 |                 | / ``distance_scale`` (N, 0 for itself), log tr P_ii (m^2), the step fraction k / horizon,    |
-|                 | then ``communication_cost``: the copy's cost per hop this episode (``communication_cost``,   |
-|                 | or the draw from ``cost_range``), m                                                          |
+|                 | then the composed observation's ``displacement``, ``steps_since`` and ``message_value``      |
+|                 | since the agent's last relayed hop, and ``communication_cost``: the copy's cost per hop this |
+|                 | episode (``communication_cost``, or the draw from ``cost_range``), m                         |
+| relay decision  | the event-triggered families (``agents.event_triggered``) decide each relay entry (action    |
+|                 | entries 1..): send = ``paper``'s choice (= ``always``), quiet = N, stop (``silent`` =        |
+|                 | ``no_relay``); the measurement choice (entry 0) is ``paper``'s                               |
 | action mask     | each relay entry: the ``relay`` network's ``next_hop`` rule without its "nearest" choice     |
 | reward          | the team's, for every agent: ``"error"`` -mean_i ||xhat_i - x_i|| (m), ``"trace"``          |
 |                 | -mean_i sqrt(tr P_ii) (m, the filter's own RMS error), minus the step's communication cost   |
@@ -79,6 +83,8 @@ class RelayTeamScenario(PresetScenario):
     ``own_variances`` and ``true_position``, its ``estimate`` (B, N, >= 2: position first), and keeps
     ``dead_reckoning`` (B, N, >= 2)."""
 
+    appended_features = ("displacement", "steps_since", "message_value", "communication_cost")
+
     distance_scale: ClassVar[float]  # metres per unit of the observation's distances
     agent_state_dim: ClassVar[int]
     dead_reckoning: np.ndarray
@@ -142,6 +148,12 @@ class RelayTeamScenario(PresetScenario):
         obs[:, :, 2 * N + m + 1] = (self.k / self.horizon)[:, None]
         obs[:, :, 2 * N + m + 2:] = extra
         return obs
+
+    def transport_entries(self) -> tuple[np.ndarray, np.ndarray]:
+        """The relay entries (1..): quiet = N, stop (``no_relay``, this preset's ``silent``)."""
+        size = int(np.prod(self.action_space().shape))
+        entries = np.arange(size) >= 1
+        return entries, np.where(entries, float(self.num_agents), 0.0)
 
     def preset_feature_positions(self) -> dict[str, int]:
         """The composed table's features this observation carries among its own entries: ``index`` (the

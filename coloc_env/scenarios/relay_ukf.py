@@ -57,7 +57,7 @@ step (observation ``[N+1, 2N+1)``); the rules are the ``circles`` world's and th
 | 1     | itself (stop, as N); a platform beyond          | N = stop and every other platform within               |
 |       | ``comm_range`` (the chain ends, as at N)        | ``comm_range`` (reached ones are not known in advance) |
 
-Observation (per agent, ``Box(shape=(2N + 4,), float32)``)
+Observation (per agent, ``Box(shape=(2N + 7,), float32)``)
 ---------------------------------------------------------
 | index            | meaning                                                               | bounds     |
 |------------------|-----------------------------------------------------------------------|------------|
@@ -68,8 +68,20 @@ Observation (per agent, ``Box(shape=(2N + 4,), float32)``)
 |                  | assumes each platform knows which neighbour is closest                |            |
 | ``[2N+1]``       | log tr P_ii, the agent's own covariance (m^2)                         | unbounded  |
 | ``[2N+2]``       | step fraction k / horizon                                             | [0, 1]     |
-| ``[2N+3]``       | ``communication_cost``: its copy's cost per hop this episode          | [0, inf)   |
+| ``[2N+3]``       | ``displacement``: how far its position estimate moved since its last  | [0, inf)   |
+|                  | relayed hop (``transmissions`` > 0; the start before any), / 100 m    |            |
+| ``[2N+4]``       | ``steps_since``: steps since that hop / horizon                       | [0, 1]     |
+| ``[2N+5]``       | ``message_value``: max(0, tr(P_ref + (k - k_ref) Q_pos) - tr P_ii),   | [0, inf)   |
+|                  | m^2 (``Backend.message_value``)                                       |            |
+| ``[2N+6]``       | ``communication_cost``: its copy's cost per hop this episode          | [0, inf)   |
 |                  | (``communication_cost``, or the draw from ``cost_range``), m          |            |
+
+The named entries are the composed observation's features (``feature_index``: ``index`` [0, N),
+``log_trace`` [2N+1], ``step_fraction`` [2N+2] and these). The event-triggered families
+(``agents.event_triggered``) decide the relay entry: send = ``paper``'s choice, quiet = N (stop), so their
+extremes are ``always`` (= ``paper``) and ``silent`` (= ``no_relay``). ``uncertainty`` reads the holder's own
+log tr P_ii: the simpler reading of "the holder's uncertainty about the next platform" (the holder does not
+know which platform its message would reach before the paper's chain rule picks it).
 
 The distances are unbounded because ``centres`` may be anywhere; log tr P_ii is unbounded because
 dead reckoning without measurements grows P without limit.

@@ -103,7 +103,7 @@ def test_a_model_for_another_state_is_refused(tmp_path, monkeypatch):
     monkeypatch.setattr(settings, "CRITIC", "centralized", raising=False)
     path = train("lossy_fusion", timesteps=64, seed=0, out=str(tmp_path), progress_bar=False, curve_points=0)
     agents.make_policy(path, coloc_env.parallel_env("lossy_fusion"))
-    with pytest.raises(ValueError, match=r"(?s)has observation space .*\(33,\), float32\), the env has .*\(66,\)"):
+    with pytest.raises(ValueError, match=r"(?s)has observation space .*\(45,\), float32\), the env has .*\(82,\)"):
         agents.make_policy(path, coloc_env.parallel_env("lossy_fusion", num_agents=3))
     with pytest.raises(ValueError, match=r"centralized critic, which reads the native vector env's state"):
         train("lossy_fusion", timesteps=1, seed=0, out=str(tmp_path), vec="supersuit", progress_bar=False,

@@ -112,8 +112,8 @@ def test_families_are_listed_where_the_network_has_a_transport_decision():
         agents.make_policy("periodic", env)
     with pytest.raises(ValueError, match="needs a transport decision; network ideal has none for backend kalman"):
         event_triggered.periodic(env)
-    with pytest.raises(ValueError, match="preset with its own policies"):
-        event_triggered.periodic(coloc_env.parallel_env("gps_denied_nbp", horizon=3, num_particles=30))
+    with pytest.raises(ValueError, match="preset bandwidth_fusion declares none"):  # no transmit decision maps
+        event_triggered.periodic(coloc_env.parallel_env("bandwidth_fusion", horizon=3))
 
 
 class _SpacesOnly:

@@ -9,7 +9,8 @@ import coloc_env
 
 def test_paper_policy_transmits_and_keeps_the_paper_weights():
     env = coloc_env.parallel_env("lossy_fusion", num_agents=3)
-    assert agents.available_policies("lossy_fusion") == ["random", "paper", "always", "silent"]
+    assert agents.available_policies("lossy_fusion") == ["random", "paper", "always", "silent", "periodic",
+                                                         "uncertainty", "send_on_delta", "value"]
     policy = agents.make_policy("paper", env)
     observations, _ = env.reset(seed=0)
     actions = policy.act(observations)

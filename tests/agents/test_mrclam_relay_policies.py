@@ -45,7 +45,8 @@ def test_partners_are_the_lowest_recorded_robot_and_chains_are_complete():
 
 @pytest.mark.skipif(not os.path.isdir(DATASET6), reason=MRCLAM_SKIP_REASON)
 def test_paper_reaches_everyone_no_relay_stops_at_n_and_random_runs():
-    assert set(agents.available_policies(NAME)) == {"random", "paper", "always", "silent", "no_relay"}
+    assert set(agents.available_policies(NAME)) == {"random", "paper", "always", "silent", "no_relay", "periodic",
+                                                    "uncertainty", "send_on_delta", "value"}
     for name in ("paper", "no_relay", "random"):
         env = coloc_env.parallel_env(NAME, data=DATASET6, window_steps=40)
         policy = agents.make_policy(name, env, seed=1)

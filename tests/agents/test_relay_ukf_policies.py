@@ -54,7 +54,8 @@ def test_paper_policy_is_reproducible_from_its_seed_and_unknown_names_fail():
     assert draws[0] == draws[1] and draws[0] != draws[2]
     with pytest.raises(ValueError, match="unknown policy"):
         agents.make_policy("oracle", env)
-    assert set(agents.available_policies(NAME)) == {"random", "paper", "always", "silent", "no_relay", "nearest_local"}
+    assert set(agents.available_policies(NAME)) == {"random", "paper", "always", "silent", "no_relay", "nearest_local",
+                                                    "periodic", "uncertainty", "send_on_delta", "value"}
 
 
 def test_paper_actions_batch_equals_single_calls():

@@ -44,7 +44,7 @@ def test_spaces_state_render_and_infos():
     assert env.action_space("uav_0") == env.action_space("uav_4")
     # MultiDiscrete([2] * n_iter), not MultiBinary: RLlib's PPO refuses MultiBinary
     assert isinstance(env.action_space("uav_0"), gymnasium.spaces.MultiDiscrete)
-    assert env.action_space("uav_0").nvec.tolist() == [2] * 5 and env.observation_space("uav_1").shape == (8 + 5 + 1,)
+    assert env.action_space("uav_0").nvec.tolist() == [2] * 5 and env.observation_space("uav_1").shape == (8 + 5 + 5,)
     _, infos = env.reset(seed=0)
     assert env.state().shape == env.state_space.shape
     frame = env.render()

@@ -37,9 +37,9 @@ def test_spaces_are_shared_and_cached():
     assert env.action_space("uav_0") is env.action_space("uav_0")
     assert env.action_space("uav_0") == env.action_space("uav_3")
     assert env.action_space("uav_1").shape == (1 + 4 + 9,)
-    assert env.observation_space("uav_1").shape == (3 + 12 + 4 + 1,)  # then the index and the cost
+    assert env.observation_space("uav_1").shape == (3 + 12 + 4 + 5,)  # then the index and the named features
     env.reset(seed=0)
-    assert env.state().shape == env.state_space.shape == (4 * 20 + 9,)
+    assert env.state().shape == env.state_space.shape == (4 * 24 + 9,)
 
 
 @pytest.mark.parametrize("kwargs, field", [

@@ -52,7 +52,7 @@ def test_spaces_window_and_initial_state():
     assert env.possible_agents == [f"robot_{i}" for i in range(N)]
     assert list(env.action_space("robot_3").nvec) == [N] + [N + 1] * N
     assert env.action_space("robot_0") is env.action_space("robot_0")
-    assert env.observation_space("robot_1").shape == (3 * N + 4,)
+    assert env.observation_space("robot_1").shape == (3 * N + 7,)
     observations, infos = env.reset(seed=0)
     scenario = env.scenario
     assert env.state().shape == env.state_space.shape and np.isfinite(env.state()).all()

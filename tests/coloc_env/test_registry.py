@@ -31,11 +31,12 @@ PINS = {
         "action MultiDiscrete([2, 2, 2, 2, 2])",
         [239.23559740185738, -217.28506213996212, 199.7501488348018]),
     # v2: a GPS-faulty UAV's messages tempered (fault_message_power 0.5), the covariance of a prior-only belief
-    # with its KDE kernel; the observation gains the UAV's index and the episode's communication cost
+    # with its KDE kernel; the observation gains the UAV's index, log tr of its belief's covariance, displacement,
+    # steps_since and message_value since its last broadcast, and the episode's communication cost
     "coloc/gps_denied_nbp-v2": (
-        "10 agents; observation Box(shape=(19,), dtype=float32, low=[0.0], high=[1.0, inf]); "
+        "10 agents; observation Box(shape=(23,), dtype=float32, low=[-50.0, 0.0], high=[1.0, 50.0, inf]); "
         "action MultiDiscrete([2, 2, 2, 2, 2])",
-        [302.56109911203384, -228.83581136378413, 205.52552344671284]),
+        [543.6626199446619, -228.83581136378413, 205.52552344671284]),
     "coloc/nlos_horizon-v1": (
         "4 agents; observation Box(shape=(41,), dtype=float32, low=[-50.0, -20.0, -1.0, 0.0], high=[1.0, 20.0, 50.0]); "
         "action MultiDiscrete([27, 2, 2, 2, 2, 2, 2, 2, 2])",
@@ -49,25 +50,27 @@ PINS = {
         "action MultiDiscrete([2])",
         [1893.805515833199, -271.27224529005156, 271.27224529005156]),
     # v2: noise_model="likelihood" by default (v1: "calibrated"), the filter's covariance in the observation moved;
-    # the observation gains the episode's communication cost
+    # the observation gains displacement, steps_since and message_value since the robot's last relayed hop and the
+    # episode's communication cost
     "coloc/mrclam_relay-v2": (
-        "5 agents; observation Box(shape=(19,), dtype=float32, low=[-inf, 0.0], high=[1.0, inf]); "
+        "5 agents; observation Box(shape=(22,), dtype=float32, low=[-inf, 0.0], high=[1.0, inf]); "
         "action MultiDiscrete([5, 6, 6, 6, 6, 6])",
-        [-157.2531400292646, -0.07803140656694496, 0.07803140656694496]),
+        [-157.1258293110306, -0.07803140656694496, 0.07803140656694496]),
     # v2 of the others: the observation gains the episode's communication cost (cost_range's draw where given) and,
-    # where it lacked it, the agent's index; contention_localization observes the composition's whole table
+    # where it lacked it, the agent's index; lossy_fusion and relay_ukf also the features since the last
+    # transmission (lossy_fusion log tr P too); contention_localization observes the composition's whole table
     "coloc/bandwidth_fusion-v2": (
         "4 agents; observation Box(shape=(18,), dtype=float32, low=[-inf, 0.0], high=[1.0, inf]); "
         "action Box(shape=(13,), dtype=float64, low=[-1.0], high=[1.0])",
         [-130.78892884775996, -2.6887372904466122, 6.571709008894274]),
     "coloc/lossy_fusion-v2": (
-        "2 agents; observation Box(shape=(10,), dtype=float32, low=[-inf, 0.0], high=[1.0, inf]); "
+        "2 agents; observation Box(shape=(14,), dtype=float32, low=[-inf, -50.0, 0.0], high=[1.0, 50.0, inf]); "
         "action Box(shape=(6,), dtype=float64, low=[-1.0], high=[1.0])",
-        [163.86613804847002, -3786.2784401252143, 176.2358645357422]),
+        [1001.633779456839, -3786.2784401252143, 176.2358645357422]),
     "coloc/relay_ukf-v2": (
-        "4 agents; observation Box(shape=(12,), dtype=float32, low=[-inf, 0.0], high=[1.0, inf]); "
+        "4 agents; observation Box(shape=(15,), dtype=float32, low=[-inf, 0.0], high=[1.0, inf]); "
         "action MultiDiscrete([4, 5])",
-        [46.11253483220935, -5.382024811613382, 5.382024811613382]),
+        [46.363162901665795, -5.382024811613382, 5.382024811613382]),
     "coloc/nlos_horizon-v2": (
         "4 agents; observation Box(shape=(46,), dtype=float32, low=[-50.0, -20.0, -1.0, 0.0], "
         "high=[1.0, 20.0, 50.0, inf]); action MultiDiscrete([27, 2, 2, 2, 2, 2, 2, 2, 2])",

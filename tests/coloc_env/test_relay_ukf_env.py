@@ -44,7 +44,7 @@ def test_spaces_defaults_and_geometry():
     assert env.possible_agents == ["platform_0", "platform_1", "platform_2", "platform_3"]
     assert env.action_space("platform_0") is env.action_space("platform_0")
     assert list(env.action_space("platform_2").nvec) == [4, 5]
-    assert env.observation_space("platform_1").shape == (11 + 1,)  # then the cost
+    assert env.observation_space("platform_1").shape == (11 + 4,)  # then the named features
     observations, infos = env.reset(seed=0)
     assert env.state().shape == env.state_space.shape
     scenario = env.scenario
