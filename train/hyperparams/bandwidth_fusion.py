@@ -5,7 +5,7 @@
   the "error" reward; it removes the measurement noise from the return.
 * 50-step episodes with a shared objective: gamma 0.98 (horizon ~ 50), GAE 0.95.
 * 4 agents x 8 copies = 32 sub-envs, n_steps 64 -> 2048 transitions per update.
-* Small networks (64, 64): the observation has 13 numbers.
+* Small networks (64, 64): the observation has 18 numbers.
 """
 
 ENV_CONFIG = {"reward": "trace"}

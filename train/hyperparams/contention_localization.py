@@ -8,7 +8,7 @@
 * A delivered reading mostly helps the current step and, through the joint UKF's covariance, the next few:
   gamma 0.9, GAE 0.95; 30-step episodes.
 * 10 agents x 8 copies = 80 sub-envs, n_steps 60 (two episodes) -> 4,800 transitions per update (batches of
-  600); small networks (64, 64): the observation has 3N + 2 + 1 world feature + 1 acknowledgement = 34 numbers.
+  600); small networks (64, 64): the observation has 3N + 7 + 1 world feature + 1 acknowledgement = 39 numbers.
 """
 
 from train.hyperparams import ppo

@@ -35,7 +35,7 @@
   transitions per update, minibatches of 600.
 * A message mostly helps the current step and, through the prior, the next
   few: gamma 0.9, GAE 0.95.
-* Small networks (64, 64): the observation has 8 numbers.
+* Small networks (64, 64): the observation has 8 + N + 5 = 23 numbers.
 """
 
 ENV_CONFIG = {"communication_cost": 0.02, "num_particles": 50}

@@ -10,7 +10,7 @@
 * The fused estimate is fed back into the leader's filter every slot, so a
   decision mostly matters for the next few slots: gamma 0.95 (horizon ~20
   of the 100 slots), GAE 0.95.
-* Small networks (64, 64): the observation has 7 numbers for two UAVs.
+* Small networks (64, 64): the observation has 14 numbers for two UAVs.
 """
 
 ENV_CONFIG: dict = {}

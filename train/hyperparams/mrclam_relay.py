@@ -13,7 +13,7 @@
   validation error higher.
 * 600-step windows, and a measurement's effect on the covariance lasts tens of steps: gamma 0.99, GAE 0.95.
 * 5 agents x 8 copies = 40 sub-envs, n_steps 64 -> 2,560 transitions per update (batches of 320).
-* Networks (64, 64): the observation has 3N + 3 = 18 numbers; a little entropy (0.01), since most
+* Networks (64, 64): the observation has 3N + 7 = 22 numbers; a little entropy (0.01), since most
   steps offer an agent no choice (it recorded nobody and holds no chain).
 * ``ALGORITHM = "maskable_ppo"``: the measurement choice (action index 0) of a robot it did not record,
   and the next hops to itself, the source or beyond range, are masked (``MrclamRelayScenario.action_mask``),

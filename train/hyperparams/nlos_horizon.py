@@ -16,7 +16,7 @@
 * 500k timesteps (``TIMESTEPS``): about 7 CPU-minutes, inside the 10-minute budget.
 * 4 agents x 4 copies = 16 sub-envs, n_steps 256 -> 4096 transitions per update,
   minibatches of 512: the squared-error reward is heavy-tailed (NLOS outliers).
-* Small networks (64, 64): the observation has 41 numbers (the AHG costs of the group among them).
+* Small networks (64, 64): the observation has 46 numbers (the AHG costs of the group among them).
 """
 
 ENV_CONFIG: dict = {}

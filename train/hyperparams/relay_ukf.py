@@ -23,7 +23,7 @@
   tens of steps (until the next measurements overwrite it): gamma 0.99
   (horizon ~ 100 steps), GAE 0.95.
 * 4 agents x 4 copies = 16 sub-envs, n_steps 128 -> 2048 transitions per update.
-* Small networks (64, 64): the observation has 2N + 3 = 11 numbers.
+* Small networks (64, 64): the observation has 2N + 7 = 15 numbers.
 * A little entropy (0.01): the relay choice only matters when the location
   information reaches the agent, so most samples carry no gradient and the
   policy should not collapse early.
