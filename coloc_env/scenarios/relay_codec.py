@@ -149,6 +149,15 @@ class RelayTeamScenario(PresetScenario):
         obs[:, :, 2 * N + m + 2:] = extra
         return obs
 
+    def action_vector(self, which: str) -> np.ndarray:
+        """One agent's fixed action, for a tool that tiles one action over every agent (``train.frontier`` places
+        its knob grids from such episodes): measurement choice 0 (the measuring agent uses platform 0, where it
+        may) and every relay entry N, stop, whatever ``which`` (``default``, ``maximum``, ``minimum``). A relay
+        chain depends on who measured and on the distances, which one tiled action cannot express; the preset's
+        ``always`` and ``silent`` are its policies (``agents.relay_ukf``, ``agents.mrclam_relay``)."""
+        size = int(np.prod(self.action_space().shape))
+        return np.where(np.arange(size) >= 1, self.num_agents, 0).astype(np.int64)
+
     def transport_entries(self) -> tuple[np.ndarray, np.ndarray]:
         """The relay entries (1..): quiet = N, stop (``no_relay``, this preset's ``silent``)."""
         size = int(np.prod(self.action_space().shape))
