@@ -265,7 +265,8 @@ def test_the_parts_defaults_are_the_nlos_horizon_scenarios():
     from coloc_env.scenarios.nlos_horizon import NlosHorizonConfig
 
     assert NlosHorizonConfig().parts() == (NlosOrbit(), RandomDelay(), Afge())
-    assert NlosHorizonConfig().composition_options() == {"horizon": 1000, "reward": "error", "communication_cost": 0.0}
+    assert NlosHorizonConfig().composition_options() == {"horizon": 1000, "reward": "error", "communication_cost": 0.0,
+                                                         "cost_range": None}
     assert coloc_env.compose(world="nlos_orbit", network="random_delay", backend="afge").episode_steps == 1000
 
 
