@@ -54,7 +54,7 @@ docs: $(STAMP)
 # Numerical health at every documented extreme (tests/test_covariance_health.py): each numeric field of each preset
 # and part at its documented minimum and maximum, one at a time, plus all noise fields at their maximum together,
 # 1000 steps each (or the episode) from seeds 0 and 1 with random actions. `make test` runs the same cases with
-# 50 steps; STRESS_STEPS sets another length.
+# 30 steps; STRESS_STEPS sets another length.
 STRESS_STEPS ?= 1000
 stress: $(STAMP)
 	COLOC_STRESS=1 COLOC_STRESS_STEPS=$(STRESS_STEPS) MPLBACKEND=Agg $(PY) -m pytest -q -n 2 tests/test_covariance_health.py \

@@ -112,11 +112,11 @@ def test_the_check_catches_a_covariance_that_goes_indefinite():
 # plus every noise field of the target at its maximum together; each run from seeds 0 and 1 (the two copies of
 # vector_env(seed=0)) with random actions (the action space's sample, seeded) for STRESS_STEPS steps (or the
 # episode, if shorter), checking every covariance the backend reports (symmetric, PSD, finite), every estimate
-# and every reward finite after each step. ``make test`` runs STRESS_STEPS = 50; ``make stress`` 1000
+# and every reward finite after each step. ``make test`` runs STRESS_STEPS = 30; ``make stress`` 1000
 # (COLOC_STRESS_STEPS). An open end (0, ...] is run just inside it: low + 1e-6 max(1, |low|).
 # The episode-length fields (horizon, window_steps) are not varied: they set how many steps run, not what a step
 # computes, and their maxima (10^5..10^9 steps) would only pre-draw episodes far longer than any run here.
-STRESS_STEPS = int(os.environ.get("COLOC_STRESS_STEPS", "50"))
+STRESS_STEPS = int(os.environ.get("COLOC_STRESS_STEPS", "30"))
 # Ends whose cost grows with the value far beyond the rest (a particle filter at 5000 particles: ~20 s per step
 # on one core) run COSTLY_STEPS steps under `make stress` and are left out of `make test`.
 COSTLY = {("num_particles", "max")}

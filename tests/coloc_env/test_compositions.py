@@ -40,8 +40,8 @@ def test_every_compatible_composition_passes_the_api_and_runs(row, monkeypatch):
     spec = coloc_env.compose(world=row["world"], network=row["network"], backend=row["backend"])
     parallel_api_test(coloc_env.parallel_env(spec), num_cycles=10)
     for policy_name in ("random", "always"):
-        total, truth, _, env = _rollout(spec, policy_name, seed=1, steps=30)
-        assert np.isfinite(total) and len(truth) == 30
+        total, truth, _, env = _rollout(spec, policy_name, seed=1, steps=20)
+        assert np.isfinite(total) and len(truth) == 20
         space = env.observation_space(env.possible_agents[0])
         observation = env.unwrapped.scenario.observation()[0]
         assert all(space.contains(o) for o in observation)
