@@ -784,12 +784,25 @@ def redeliver_ignored_interrupt(unraisable) -> None:
     sys.__unraisablehook__(unraisable)
 
 
+def _forget_unhandled_keyboard_interrupt() -> None:
+    """Clear CPython's record of an unhandled Ctrl-C, which would turn this script's status 130 into a death by
+    SIGINT (status -2 to a parent) under ``python -m``.
+
+    CPython marks a KeyboardInterrupt that leaves a string ``exec`` / ``eval`` (``PyRun_String``: dataclasses and
+    namedtuples build their methods that way, so a Ctrl-C during a lazy import often lands there) as unhandled even
+    when a caller catches it; ``Py_RunMain`` then re-raises SIGINT after the interpreter exits, whatever status the
+    script chose. Every string ``exec`` clears that mark as it starts, so one trivial ``exec`` after the interrupt
+    has been caught forgets it; on an interpreter without the mark it does nothing."""
+    exec("pass", {})  # noqa: S102 - a constant string, run for its side effect on the interpreter's flag
+
+
 def _interrupted(command: str, args, as_script: bool) -> int:
     """The line of an interrupt (the folders left marked) and status 130; a script ignores a further Ctrl-C."""
     import signal
 
     if as_script:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
+        _forget_unhandled_keyboard_interrupt()
     from train.io import INCOMPLETE
 
     folders = getattr(args, "open_folders", [])

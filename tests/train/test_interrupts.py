@@ -198,6 +198,32 @@ def test_a_ctrl_c_python_ignores_in_a_callback_is_delivered_again(monkeypatch):
     assert ref() is None
 
 
+INTERRUPTED_IN_A_STRING_EXEC = """
+import sys
+import train.cli
+import train.io  # imported first, as the command has by the time it computes (an import runs string execs)
+
+
+def interrupted_in_a_string_exec(args):
+    args.open_folders = []
+    exec("raise KeyboardInterrupt", {})  # where a Ctrl-C lands while a dataclass builds its methods
+
+
+train.cli.cmd_list = interrupted_in_a_string_exec
+sys.exit(train.cli.main())
+"""
+
+
+def test_a_ctrl_c_caught_from_a_string_exec_still_exits_130_under_python_m(tmp_path):
+    """CPython records a KeyboardInterrupt that leaves a string ``exec`` as unhandled even once it is caught, and
+    ``python -m`` then ends the process by SIGINT (-2) after the script chose 130; the script forgets that record."""
+    (tmp_path / "interrupted_in_a_string_exec.py").write_text(INTERRUPTED_IN_A_STRING_EXEC)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), REPO_ROOT])}
+    done = subprocess.run([sys.executable, "-m", "interrupted_in_a_string_exec", "list"], cwd=REPO_ROOT, env=env,
+                          capture_output=True, text=True, timeout=EXIT_TIMEOUT)
+    assert (done.returncode, done.stderr) == (INTERRUPTED, "coloc list: interrupted; nothing was left half written\n")
+
+
 def test_other_ignored_exceptions_go_to_pythons_hook(monkeypatch):
     from train.cli import redeliver_ignored_interrupt
 
