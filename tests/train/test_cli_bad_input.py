@@ -177,12 +177,12 @@ def test_printed_results_carry_units_and_the_initial_term_only_where_there_is_on
 
 
 def test_output_to_a_pipe_is_not_wrapped_at_80_columns(tmp_path):
-    done = subprocess.run([sys.executable, "-m", "train.cli", "evaluate", "relay_ukf", "--policy", "no_relay",
+    done = subprocess.run([sys.executable, "-m", "train.cli", "evaluate", "bandwidth_fusion", "--policy", "silent",
                            "--episodes", "2", "--out", str(tmp_path / "a folder name long enough to pass 80 columns")],
                           cwd=REPO_ROOT, capture_output=True, text=True, timeout=300,
                           env={k: v for k, v in os.environ.items() if k != "COLUMNS"})
     assert done.returncode == 0, done.stderr
-    lines = [line for line in done.stdout.splitlines() if line.startswith("relay_ukf no_relay")]
+    lines = [line for line in done.stdout.splitlines() if line.startswith("bandwidth_fusion silent")]
     assert len(lines) == 1 and len(lines[0]) > 120 and lines[0].endswith("leaderboard.json")
 
 

@@ -34,7 +34,7 @@ def test_quick_reproduce_on_dataset6(tmp_path, monkeypatch):
         pytest.skip(MRCLAM_SKIP_REASON)
     from train.reproduce import mrclam
 
-    monkeypatch.setattr(mrclam, "QUICK_STEPS", 600)
+    monkeypatch.setattr(mrclam, "QUICK_STEPS", 400)
     metrics = mrclam.run(str(tmp_path), quick=True, data=DATASET6)
     folder = tmp_path / "mrclam"
     for name in ("metrics.json", "report.md", "trajectories.png", "error_over_time.png", "nees.png",
@@ -45,7 +45,7 @@ def test_quick_reproduce_on_dataset6(tmp_path, monkeypatch):
     assert "dnbp_beats_dead_reckoning" in stored["dnbp_landmark_normal"]["claims"]
     assert "dNBP" in (folder / "report.md").read_text()
     assert set(stored["rmse_position"]["CCL"]) == {f"robot{i}" for i in range(1, 6)} | {"mean"}
-    assert stored["steps"] == 600
+    assert stored["steps"] == 400
     assert metrics["max_abs_diff_dcl_ccl"] < 1e-9
     assert metrics["rmse_position"]["CCL"]["mean"] < metrics["rmse_position"]["IL"]["mean"]
     # the calibrated model is reported next to the baseline, and is the better-calibrated one
