@@ -326,6 +326,9 @@ def _add_frontier_parser(sub) -> None:
                     help="with --models: each model at each communication cost, a point 'PATH.zip @ cost=C' each")
     fr.add_argument("--episodes", type=_count(2, MAX_RUNS), default=30,
                     help=f"paired episodes per point, 2..{MAX_RUNS}")
+    fr.add_argument("--bound-episodes", type=_positive, default=None, metavar="K",
+                    help="each point's bounds on its first K episodes, 1..100000 (default: 8; a bound replays "
+                         "its episodes one env at a time)")
     fr.add_argument("--quick", action="store_true", help="a first look: three knobs per family")
     fr.add_argument("--seed", type=_seed, default=None,
                     help="S: episode e is seeded S + e (default: the evaluation seeds 10^6 + e)")
@@ -610,8 +613,8 @@ def cmd_frontier(args) -> int:
         task = bar.add_task(args.scenario, total=None)
         metrics, folder = run_frontier(
             args.scenario, episodes=args.episodes, seed=args.seed, models=args.models, quick=args.quick,
-            executor=args.executor, costs=args.costs,
-            address=args.address, out=args.out,
+            executor=args.executor, costs=args.costs, address=args.address, out=args.out,
+            **({} if args.bound_episodes is None else {"bound_episodes": args.bound_episodes}),
             progress=lambda done, total: bar.update(task, completed=done, total=total),
             mark=lambda folder: _open(args, folder))
     console.print(f"wrote {folder}/ (metrics.json, report.md, {FIGURE})", soft_wrap=True)

@@ -172,13 +172,18 @@ class _Replay:
 
 
 def attach_bounds(result: dict, scenario: str, seed_base: int, trace: dict, bounds: bool = True,
-                  **env_config) -> dict:
+                  bound_episodes: int | None = None, **env_config) -> dict:
     """The row plus ``rmse`` (m, sqrt of the mean squared 2-D position error, ``_trace_step``), ``nees`` with
     ``nees_band`` (the chi^2(2E)/E 95 % band of a per-step NEES averaged over the E episodes) and ``nees_in_band``
     (the share of (step, agent) in it), for an SE(2) backend ``pose_nees``, ``pose_nees_band`` (chi^2(3E)/E) and
     ``pose_nees_in_band`` likewise, and, with ``bounds``, ``coloc_env.pcrb`` on the very episodes and actions
     played: ``pcrb_centralized``, ``pcrb_local``, ``pcrb_delivered`` (sqrt of the mean over steps and agents, m;
-    None where not defined), ``efficiency`` = rmse / pcrb_centralized and ``pcrb_model_based``."""
+    None where not defined), ``efficiency`` = rmse / pcrb_centralized and ``pcrb_model_based``.
+
+    ``bound_episodes`` K: the bounds on the first K of the E episodes only (``pcrb_episodes`` says how many). A
+    bound replays its episodes one env at a time, which costs far more than the batched play; it is the mean of
+    a quantity that varies little from episode to episode, so a few episodes place it where the error needs
+    hundreds."""
     from scipy import stats
 
     import coloc_env
@@ -203,15 +208,18 @@ def attach_bounds(result: dict, scenario: str, seed_base: int, trace: dict, boun
         mean_step = per_step.mean(axis=0)
         out.update({key: float(per_step.mean()), f"{key}_band": [low, high],
                     f"{key}_in_band": float(np.mean((mean_step >= low) & (mean_step <= high)))})
-    out.update(pcrb_centralized=None, pcrb_local=None, pcrb_delivered=None, efficiency=None, pcrb_model_based=None)
+    out.update(pcrb_centralized=None, pcrb_local=None, pcrb_delivered=None, efficiency=None, pcrb_model_based=None,
+               pcrb_episodes=None)
     spec = (coloc_env.composition_named(scenario) if coloc_env.is_composition_name(scenario)
             else coloc_env.PRESETS.get(scenario))
     if not bounds or spec is None or not has_bound_model(spec.world.name):
         return out
     actions = np.concatenate(trace["actions"], axis=0)  # (E, K, N, ...)
     names = coloc_env.make_core(scenario, batch=1, **env_config).agent_names
-    replays = [_Replay(names, actions[e]) for e in range(E)]
-    bound = coloc_env.pcrb(spec, episodes=E, seed=seed_base, policy=replays, **env_config)
+    played = E if bound_episodes is None else min(E, bound_episodes)
+    replays = [_Replay(names, actions[e]) for e in range(played)]
+    bound = coloc_env.pcrb(spec, episodes=played, seed=seed_base, policy=replays, **env_config)
+    out["pcrb_episodes"] = played
     for key in ("centralized", "local", "delivered"):
         out[f"pcrb_{key}"] = float(np.sqrt(np.mean(bound[key]))) if key in bound else None
     out["efficiency"] = rmse / out["pcrb_centralized"] if out["pcrb_centralized"] else None
@@ -338,7 +346,8 @@ def check_costs(costs) -> list[float]:
 
 
 def evaluate_policy(scenario: str, policy_name: str, episodes: int, seed_base: int = EVAL_SEED_BASE,
-                    progress=None, stochastic: bool = False, bounds: bool = True, cost: float | None = None) -> dict:
+                    progress=None, stochastic: bool = False, bounds: bool = True, cost: float | None = None,
+                    bound_episodes: int | None = None) -> dict:
     """A trained model (``.zip``) on the batched core, a reference filter on the same episodes, any other
     policy through the PettingZoo env.
 
@@ -348,7 +357,8 @@ def evaluate_policy(scenario: str, policy_name: str, episodes: int, seed_base: i
     (torch seeded with ``seed_base``) and is recorded as ``PATH.zip (stochastic)``.
     A model plays in an env built with the ``communication_cost`` of ``model_row(policy_name, cost)`` and its
     row takes that name (``cost`` applies to models only: the fixed policies never read the cost).
-    Every policy row gets the columns of ``attach_bounds`` (``bounds=False``: RMSE and NEES only).
+    Every policy row gets the columns of ``attach_bounds`` (``bounds=False``: RMSE and NEES only; ``bound_episodes``:
+    the bounds on the first that many episodes).
     """
     if cost is not None and not policy_name.endswith(".zip"):
         raise BadInput(f"a communication cost applies to trained models (PATH.zip), not to {policy_name!r}, "
@@ -368,7 +378,7 @@ def evaluate_policy(scenario: str, policy_name: str, episodes: int, seed_base: i
         elif progress:
             for _ in range(episodes):
                 progress()
-        return attach_bounds(result, scenario, seed_base, trace, bounds)
+        return attach_bounds(result, scenario, seed_base, trace, bounds, bound_episodes)
     import agents
     import coloc_env
 
@@ -386,7 +396,7 @@ def evaluate_policy(scenario: str, policy_name: str, episodes: int, seed_base: i
     if progress:
         for _ in range(episodes):
             progress()
-    result = attach_bounds(result, scenario, seed_base, trace, bounds)
+    result = attach_bounds(result, scenario, seed_base, trace, bounds, bound_episodes)
     return dict(result, policy=name + (" (stochastic)" if stochastic else ""), communication_cost=communication_cost)
 
 

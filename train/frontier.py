@@ -37,7 +37,9 @@ the frontier at its own message rate (``train.leaderboard.frontier_comparison``:
 Writes ``OUT/frontier/<name>/`` (name: the scenario, ``/`` as ``__``): ``metrics.json`` (every point:
 ``messages_per_agent_step``, ``communication_per_step``, ``mean_cost`` with ``ci95`` and
 ``per_episode_cost`` for pairing, ``rmse``, ``pcrb_centralized``, ``pcrb_local``, ``pcrb_delivered`` (m,
-square roots of the bounds averaged over steps and agents), NEES; the frontier's vertices; each judged
+square roots of the bounds averaged over steps and agents, on the first ``--bound-episodes`` episodes,
+``BOUND_EPISODES`` by default: a bound replays its episodes one env at a time, and it varies little from
+episode to episode), NEES; the frontier's vertices; each judged
 point's comparison), ``report.md`` and ``frontier.png``: left, the scenario's metric against messages per
 agent-step, each family a line with its 95 % intervals, the baseline frontier drawn; right, the RMSE
 against the same axis with the square roots of the centralized and local bounds as horizontal lines and,
@@ -62,6 +64,7 @@ QUICK_PERIODS = (1, 2, 4)
 UNCERTAINTY_LEVELS = 8  # a threshold family's thresholds between the two percentiles, plus 0 and inf
 QUICK_LEVELS = 3
 GRID_EPISODES = 4  # validation episodes of always and silent that place the thresholds
+BOUND_EPISODES = 8  # the first episodes each point's bounds replay (train.evaluate.attach_bounds)
 MAX_EPISODES = 100_000
 FIGURE = "frontier.png"
 BASELINE_NAMES = ("always", "silent", "random", "paper")
@@ -178,11 +181,13 @@ def find_models(folder: str | None) -> list[str]:
     return found
 
 
-def play(scenario: str, policy: str, episodes: int, seed: int, cost: float | None = None) -> dict:
-    """One point: ``train.evaluate.evaluate_policy`` with its bounds on episodes ``seed + e`` (a model at ``cost``)."""
+def play(scenario: str, policy: str, episodes: int, seed: int, cost: float | None = None,
+         bound_episodes: int = BOUND_EPISODES) -> dict:
+    """One point: ``train.evaluate.evaluate_policy`` on episodes ``seed + e`` (a model at ``cost``), its bounds on
+    the first ``bound_episodes`` of them."""
     from train.evaluate import evaluate_policy
 
-    return evaluate_policy(scenario, policy, episodes, seed, bounds=True, cost=cost)
+    return evaluate_policy(scenario, policy, episodes, seed, bounds=True, cost=cost, bound_episodes=bound_episodes)
 
 
 def _messages_per_agent(row: dict, num_agents: int) -> float:
@@ -198,7 +203,7 @@ def summarize(scenario: str, plan: list[dict], results: list[dict], num_agents: 
     for cell, row in zip(plan, results, strict=True):
         point = {key: row.get(key) for key in ("mean_cost", "ci95", "communication_per_step", "per_episode_cost",
                                                "rmse", "pcrb_centralized", "pcrb_local", "pcrb_delivered",
-                                               "efficiency", "nees", "nees_in_band", "seed_base")}
+                                               "pcrb_episodes", "efficiency", "nees", "nees_in_band", "seed_base")}
         point.update(cell, messages_per_agent_step=_messages_per_agent(row, num_agents))
         points.append(point)
     baseline_rows = [dict(p, policy=p["policy"]) for p in points if p["kind"] == "baseline"]
@@ -315,9 +320,12 @@ def figure(metrics: dict):
     return fig
 
 
-def command_line(scenario, models, episodes, seed, quick, executor, address, out, costs=None) -> str:
+def command_line(scenario, models, episodes, seed, quick, executor, address, out, costs=None,
+                 bound_episodes=BOUND_EPISODES) -> str:
     args = ["coloc", "frontier", scenario, "--episodes", str(episodes), "--seed", str(seed)] + (["--quick"] if quick
                                                                                                else [])
+    if bound_episodes != BOUND_EPISODES:
+        args += ["--bound-episodes", str(bound_episodes)]
     if models:
         args += ["--models", models]
     if costs:
@@ -332,9 +340,10 @@ def command_line(scenario, models, episodes, seed, quick, executor, address, out
 def run_frontier(scenario: str, episodes: int = 30, seed: int | None = None, models: str | None = None,
                  quick: bool = False, executor: str = "local", address: str | None = None, out: str = "results",
                  progress: Callable[[int, int], None] | None = None, mark=None,
-                 costs: list[float] | None = None) -> tuple[dict, str]:
+                 costs: list[float] | None = None, bound_episodes: int = BOUND_EPISODES) -> tuple[dict, str]:
     """Play every point (the module docstring) and write the three files; returns (metrics, folder). ``costs``
-    (``--costs``): each model at each of these communication costs; it needs ``models``."""
+    (``--costs``): each model at each of these communication costs; it needs ``models``. ``bound_episodes``
+    (``--bound-episodes``): each point's bounds on the first that many of its episodes."""
     import coloc_env
     from train.evaluate import EVAL_SEED_BASE, check_costs
     from train.executor import map_tasks
@@ -351,6 +360,9 @@ def run_frontier(scenario: str, episodes: int = 30, seed: int | None = None, mod
         raise BadInput(f"seed must be an integer in [0, 2**62], got {seed!r}")
     if executor not in ("local", "ray"):
         raise BadInput(f"executor must be 'local' or 'ray', got {executor!r}")
+    if (isinstance(bound_episodes, bool) or not isinstance(bound_episodes, (int, np.integer))
+            or not 1 <= bound_episodes <= MAX_EPISODES):
+        raise BadInput(f"bound_episodes must be an integer in [1, {MAX_EPISODES}], got {bound_episodes!r}")
     if costs is not None:
         costs = check_costs(costs)
         if models is None:
@@ -363,10 +375,12 @@ def run_frontier(scenario: str, episodes: int = 30, seed: int | None = None, mod
         raise BadInput(f"frontier folder not writable: {exc}") from exc
     core = coloc_env.make_core(scenario, batch=1)
     num_agents, horizon = core.num_agents, int(core.horizon)
-    command = command_line(scenario, models, episodes, seed, quick, executor, address, os.fspath(out), costs)
+    command = command_line(scenario, models, episodes, seed, quick, executor, address, os.fspath(out), costs,
+                           bound_episodes)
     with result_folder(folder, command) if mark is None else mark(folder):
         plan = cells(scenario, horizon, found, quick, costs)
-        tasks = [(scenario, cell.get("model", cell["policy"]), episodes, seed, cell.get("cost")) for cell in plan]
+        tasks = [(scenario, cell.get("model", cell["policy"]), episodes, seed, cell.get("cost"), bound_episodes)
+                 for cell in plan]
         if executor == "local":
             results = []
             for i, task in enumerate(tasks):
@@ -379,6 +393,7 @@ def run_frontier(scenario: str, episodes: int = 30, seed: int | None = None, mod
                 progress(len(plan), len(plan))
         metrics = summarize(scenario, plan, results, num_agents, episodes, seed)
         metrics["command"] = command
+        metrics["bound_episodes"] = min(int(bound_episodes), episodes)
         write_json(os.path.join(folder, "metrics.json"), metrics)
         write_text(os.path.join(folder, "report.md"), report(metrics, command))
         save_figure(os.path.join(folder, FIGURE), figure(metrics))

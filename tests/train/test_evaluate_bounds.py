@@ -18,6 +18,19 @@ def test_replayed_actions_give_the_bound_of_the_named_policy():
     assert row["efficiency"] > 1.0
 
 
+def test_bounds_on_the_first_episodes_are_the_bounds_of_those_episodes():
+    """bound_episodes K: the errors on all E episodes, the bounds on the first K (the pcrb of K episodes)."""
+    name = "target_cv/bernoulli_delay/centralized_lmmse"
+    row = evaluate_policy(name, "always", 5, bound_episodes=2)
+    whole = evaluate_policy(name, "always", 5)
+    bound = coloc_env.pcrb(coloc_env.composition_named(name), episodes=2, seed=EVAL_SEED_BASE, policy="always")
+    assert (row["pcrb_episodes"], whole["pcrb_episodes"]) == (2, 5)
+    assert row["per_episode_cost"] == whole["per_episode_cost"] and row["rmse"] == whole["rmse"]
+    for key in ("centralized", "local", "delivered"):
+        assert row[f"pcrb_{key}"] == pytest.approx(np.sqrt(bound[key].mean()), rel=1e-12)
+    assert row["pcrb_delivered"] != whole["pcrb_delivered"]  # other episodes, another mean
+
+
 @pytest.mark.parametrize("scenario", ["bandwidth_fusion", "gps_denied_nbp"])
 def test_preset_rows_carry_rmse_bounds_and_the_nees_band(scenario):
     row = evaluate_policy(scenario, "paper", 2)

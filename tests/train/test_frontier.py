@@ -68,7 +68,8 @@ def test_periodic_against_always_and_silent_is_judged_at_its_own_rate(played):
 
 
 def test_the_command_writes_metrics_report_and_figure(tmp_path):
-    assert main(["frontier", SMALL, "--quick", "--episodes", "3", "--seed", "0", "--out", str(tmp_path)]) == 0
+    assert main(["frontier", SMALL, "--quick", "--episodes", "3", "--bound-episodes", "2", "--seed", "0",
+                 "--out", str(tmp_path)]) == 0
     folder = tmp_path / "frontier" / "drift__broadcast__kalman"
     metrics = json.loads((folder / "metrics.json").read_text())
     assert {"frontier.png", "report.md", "metrics.json"} <= {p.name for p in folder.iterdir()}
@@ -83,6 +84,8 @@ def test_the_command_writes_metrics_report_and_figure(tmp_path):
     assert by_name["periodic:1"]["per_episode_cost"] == by_name["always"]["per_episode_cost"]
     assert by_name["periodic:inf"]["messages_per_agent_step"] == 0.0
     assert all(p["pcrb_centralized"] is not None for p in metrics["points"])
+    assert metrics["bound_episodes"] == 2 and "--bound-episodes 2" in metrics["command"]
+    assert {p["pcrb_episodes"] for p in metrics["points"]} == {2}  # the errors on 3 episodes, the bounds on 2
     assert "greedy" in metrics["judged"]  # privileged: judged, never a vertex
     assert "greedy" not in metrics["frontier"]
     assert plotting.figure_problems(frontier.figure(metrics)) == []
@@ -91,4 +94,7 @@ def test_the_command_writes_metrics_report_and_figure(tmp_path):
 def test_bad_input_is_refused_before_anything_is_written(tmp_path):
     assert main(["frontier", "drift/broadcast/nope", "--out", str(tmp_path)]) == 2
     assert main(["frontier", SMALL, "--models", str(tmp_path / "none"), "--out", str(tmp_path)]) == 2
+    with pytest.raises(SystemExit) as refused:
+        main(["frontier", SMALL, "--bound-episodes", "0", "--out", str(tmp_path)])
+    assert refused.value.code == 2
     assert not (tmp_path / "frontier").exists()
