@@ -169,13 +169,20 @@ def cells(scenario: str, horizon: int, models: list[str], quick: bool = False,
     return out
 
 
+# what ``coloc train`` writes beside the model it keeps (model.zip, a copy of one of them): not models to judge
+TRAINING_BYPRODUCTS = ("best.zip", "last.zip", "checkpoint.zip")
+
+
 def find_models(folder: str | None) -> list[str]:
-    """Every ``*.zip`` under ``folder`` (sorted), or none; a folder without one is a ``BadInput``."""
+    """Every ``*.zip`` under ``folder`` (sorted), or none; a folder without one is a ``BadInput``. Where a folder
+    holds ``model.zip`` (a ``coloc train`` folder), its ``TRAINING_BYPRODUCTS`` are left out."""
     if folder is None:
         return []
     if not os.path.isdir(folder):
         raise BadInput(f"--models must be a folder holding trained .zip models, got {folder!r}")
-    found = sorted(glob.glob(os.path.join(folder, "**", "*.zip"), recursive=True))
+    found = sorted(path for path in glob.glob(os.path.join(folder, "**", "*.zip"), recursive=True)
+                   if not (os.path.basename(path) in TRAINING_BYPRODUCTS
+                           and os.path.isfile(os.path.join(os.path.dirname(path), "model.zip"))))
     if not found:
         raise BadInput(f"--models {folder!r} holds no .zip model")
     return found

@@ -98,3 +98,15 @@ def test_bad_input_is_refused_before_anything_is_written(tmp_path):
         main(["frontier", SMALL, "--bound-episodes", "0", "--out", str(tmp_path)])
     assert refused.value.code == 2
     assert not (tmp_path / "frontier").exists()
+
+
+def test_a_training_folder_gives_its_kept_model_only(tmp_path):
+    """``coloc train``'s folder holds model.zip beside best.zip, last.zip and checkpoint.zip (model.zip is a copy
+    of one of them): only model.zip is a model to judge; a .zip elsewhere, whatever its name, is one."""
+    for name in ("model.zip", *frontier.TRAINING_BYPRODUCTS):
+        (tmp_path / "s" / "seed0").mkdir(parents=True, exist_ok=True)
+        (tmp_path / "s" / "seed0" / name).write_bytes(b"")
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "last.zip").write_bytes(b"")
+    assert frontier.find_models(str(tmp_path)) == [str(tmp_path / "mine" / "last.zip"),
+                                                   str(tmp_path / "s" / "seed0" / "model.zip")]
