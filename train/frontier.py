@@ -6,8 +6,10 @@ episodes (episode e: ``reset(seed=S + e)``, S = ``--seed``, by default the evalu
 
 | points          | what                                                                                    |
 |-----------------|-----------------------------------------------------------------------------------------|
-| baselines       | ``always``, ``silent``, ``random``, ``paper`` where the scenario has one, and each       |
-|                 | event-triggered family of ``agents.event_triggered`` over its knob grid (``KNOBS``)     |
+| baselines       | ``always``, ``silent``, ``random``, ``paper`` where the scenario has one, each          |
+|                 | event-triggered family of ``agents.event_triggered`` over its knob grid, and over a     |
+|                 | shared medium (``contention``) ``round_robin``, ``aloha`` and ``aloha:p`` over          |
+|                 | ``ALOHA_PROBABILITIES`` (``agents.contention``)                                          |
 | privileged      | ``greedy`` (it copies the core): drawn apart, never on the frontier                      |
 | models          | every ``*.zip`` under ``--models DIR``: judged against the frontier; with ``--costs``    |
 |                 | ``c1,c2,...`` each model at each cost, a point ``PATH.zip @ cost=c`` each (played in an   |
@@ -67,7 +69,10 @@ GRID_EPISODES = 4  # validation episodes of always and silent that place the thr
 BOUND_EPISODES = 8  # the first episodes each point's bounds replay (train.evaluate.attach_bounds)
 MAX_EPISODES = 100_000
 FIGURE = "frontier.png"
-BASELINE_NAMES = ("always", "silent", "random", "paper")
+BASELINE_NAMES = ("always", "silent", "random", "paper", "round_robin", "aloha")
+# slotted ALOHA's transmit probability per slot (agents.contention), where the network is a shared medium
+ALOHA_PROBABILITIES = (0.01, 0.02, 0.05, 0.1, 0.2, 0.5)
+QUICK_ALOHA_PROBABILITIES = (0.05, 0.2)
 PRIVILEGED = ("greedy",)
 
 
@@ -137,6 +142,8 @@ def knob_grids(scenario: str, horizon: int, quick: bool = False) -> dict[str, li
 
     available = agents.available_policies(scenario)
     grids: dict[str, list[str]] = {}
+    if "aloha" in available:  # p = 1 is always (every slot); the adaptive p = 1 / (neighbours + 1) is a baseline
+        grids["aloha"] = [f"{p:g}" for p in (QUICK_ALOHA_PROBABILITIES if quick else ALOHA_PROBABILITIES)]
     if "periodic" in available:
         grids["periodic"] = [str(p) for p in (QUICK_PERIODS if quick else PERIODS) if p <= horizon] + ["inf"]
     if "uncertainty" in available:
@@ -159,7 +166,9 @@ def cells(scenario: str, horizon: int, models: list[str], quick: bool = False,
     from train.evaluate import model_row
 
     available = agents.available_policies(scenario)
-    out = [{"policy": name, "kind": "baseline"} for name in BASELINE_NAMES if name in available]
+    repeated = agents.duplicates(scenario)  # round_robin is the contention preset's paper: played once
+    out = [{"policy": name, "kind": "baseline"} for name in BASELINE_NAMES
+           if name in available and name not in repeated]
     for family, knobs in knob_grids(scenario, horizon, quick).items():
         out += [{"policy": f"{family}:{knob}", "kind": "baseline", "family": family, "knob": knob} for knob in knobs]
     out += [{"policy": name, "kind": "privileged"} for name in PRIVILEGED if name in available]

@@ -110,3 +110,14 @@ def test_a_training_folder_gives_its_kept_model_only(tmp_path):
     (tmp_path / "mine" / "last.zip").write_bytes(b"")
     assert frontier.find_models(str(tmp_path)) == [str(tmp_path / "mine" / "last.zip"),
                                                    str(tmp_path / "s" / "seed0" / "model.zip")]
+
+
+def test_a_shared_medium_adds_round_robin_and_slotted_aloha_over_its_probabilities():
+    """Over ``contention`` the medium-access baselines are points too: round_robin (once: it is the preset's paper),
+    the adaptive aloha and aloha:p over the probability grid; a network without a shared medium has none."""
+    points = {cell["policy"]: cell for cell in frontier.cells("contention_localization", 30, [])}
+    assert {"paper", "aloha", "always", "silent"} <= set(points) and "round_robin" not in points
+    assert [name for name in points if name.startswith("aloha:")] == [f"aloha:{p:g}"
+                                                                     for p in frontier.ALOHA_PROBABILITIES]
+    assert all(points[f"aloha:{p:g}"]["family"] == "aloha" for p in frontier.ALOHA_PROBABILITIES)
+    assert not any(cell["policy"].startswith(("aloha", "round_robin")) for cell in frontier.cells(SMALL, 30, [], quick=True))
