@@ -185,8 +185,7 @@ class PresetScenario(ComposedScenario):
 
     # --- the appended observation entries ------------------------------------------------------------------
     def observed_own_features(self) -> tuple[str, ...]:
-        own = self.own_features if isinstance(self.own_features, tuple) else ()  # a relay preset's is a method
-        return (*own, *(name for name in self.appended_features if name in OWN_FEATURES))
+        return (*self.own_features, *(name for name in self.appended_features if name in OWN_FEATURES))
 
     def appended_size(self) -> int:
         """How many entries ``appended_features`` adds to an agent's observation."""
@@ -240,7 +239,7 @@ class PresetScenario(ComposedScenario):
         positions = self.preset_feature_positions()
         if name in positions:
             return positions[name]
-        if isinstance(self.own_features, tuple) and self.own_features:
+        if self.own_features:
             return super().feature_index(name)
         raise ValueError(f"{self.name}'s observation has no feature {name!r}; it has "
                          f"{[*positions, *self.appended_features]}")

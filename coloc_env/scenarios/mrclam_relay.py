@@ -333,7 +333,7 @@ class MrclamRelayScenario(RelayTeamScenario):
         relay = f"action[1:] (whom to relay each source's chain to, {N} = stop)"
         return self.check_discrete_actions(actions, ("action[0] (whose measurement to use)", *[relay] * N))
 
-    def own_features(self) -> np.ndarray:
+    def preset_entries(self) -> np.ndarray:
         """The robots each one recorded at this step (N) and its landmark sightings (1): (B, N, N + 1)."""
         landmarks = self.world.tables.landmark_count[self.world.absolute_step()]
         return np.concatenate([self._recorded(), np.where((self.k < self.horizon)[:, None], landmarks, 0.0)[..., None]],

@@ -78,7 +78,7 @@ class RelayTeamConfig(PresetConfig):
 
 
 class RelayTeamScenario(PresetScenario):
-    """Batched core of a relay-chain preset (module table). A subclass gives ``own_features`` and
+    """Batched core of a relay-chain preset (module table). A subclass gives ``preset_entries`` and
     ``feature_bounds`` (its observation's entries after the one-hot), ``team_error``, ``own_traces``,
     ``own_variances`` and ``true_position``, its ``estimate`` (B, N, >= 2: position first), and keeps
     ``dead_reckoning`` (B, N, >= 2)."""
@@ -91,7 +91,7 @@ class RelayTeamScenario(PresetScenario):
     estimate: np.ndarray
 
     # --- what a preset gives -------------------------------------------------------------------------------
-    def own_features(self) -> np.ndarray:  # pragma: no cover - interface
+    def preset_entries(self) -> np.ndarray:  # pragma: no cover - interface
         """The preset's observation entries after the one-hot (B, N, m)."""
         raise NotImplementedError
 
@@ -137,7 +137,7 @@ class RelayTeamScenario(PresetScenario):
 
     def observation(self) -> np.ndarray:
         B, N = self.batch, self.num_agents
-        features = self.own_features()
+        features = self.preset_entries()
         m = features.shape[-1]
         extra = self.appended_observation()
         obs = np.empty((B, N, 2 * N + m + 2 + extra.shape[-1]), dtype=np.float32)  # cast per entry, as astype would

@@ -297,7 +297,7 @@ class RelayUKFScenario(RelayTeamScenario):
         return self.check_discrete_actions(
             actions, ("action[0] (whom to range with)", f"action[1] (whom to relay to, {N} = stop)"))
 
-    def own_features(self) -> np.ndarray:
+    def preset_entries(self) -> np.ndarray:
         """1 where the agent measures at this step (B, N, 1)."""
         return (np.arange(self.num_agents)[None, :] == self.world.measuring()[:, None])[..., None]
 
