@@ -295,6 +295,9 @@ def figure(metrics: dict):
     for p in points:
         families.setdefault(p.get("family") or p["policy"], []).append(p)
     colours = plt.get_cmap("tab10")
+    models = [name for name, group in families.items() if group[0]["kind"] == "model"]
+    # a model's label: its path below the folder its models share (seed0/model.zip), not the whole path
+    shared = os.path.commonpath(models) if len(models) > 1 else None
     for index, (name, group) in enumerate(sorted(families.items())):
         group = sorted(group, key=lambda p: p["messages_per_agent_step"])
         x = np.array([p["messages_per_agent_step"] for p in group])
@@ -302,7 +305,8 @@ def figure(metrics: dict):
         err = np.array([p["ci95"] if p["ci95"] is not None and math.isfinite(p["ci95"]) else 0.0 for p in group])
         kind = group[0]["kind"]
         style = dict(marker="o" if kind == "baseline" else "D" if kind == "model" else "x",
-                     linestyle="-" if len(group) > 1 else "none", color=colours(index % 10), label=name)
+                     linestyle="-" if len(group) > 1 else "none", color=colours(index % 10),
+                     label=os.path.relpath(name, shared) if shared and name in models else name)
         left.errorbar(x, y, yerr=err, capsize=2, **style)
         rmse = np.array([np.nan if p["rmse"] is None else p["rmse"] for p in group])
         right.plot(x, rmse, **style)
