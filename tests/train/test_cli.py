@@ -164,6 +164,7 @@ def test_a_model_save_interrupted_midway_keeps_the_previous_zip_and_leaves_no_te
     assert PPO.load(path, device="cpu").policy.state_dict().keys() == model.policy.state_dict().keys()
 
 
+@pytest.mark.slow  # Ray's start-up and its workers' imports: ~13 s of a 10-minute suite; run with -m slow
 def test_ray_executor_equals_local(tmp_path):
     ray = pytest.importorskip("ray")
     import torch

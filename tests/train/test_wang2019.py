@@ -10,6 +10,8 @@ from coloc_env.scenarios.relay_ukf import RelayUKFConfig
 from train.cli import main
 
 
+@pytest.mark.slow  # the whole reproduction (~30 s); its parts are pinned in test_pinned_numbers.py, its figures
+# in test_figures.py and its backends' numbers in test_reproductions_drive_backends.py; run with -m slow
 def test_reproduce_wang2019_writes_metrics_report_and_figures(tmp_path):
     assert main(["reproduce", "wang2019", "--runs", "2", "--seed", "2", "--out", str(tmp_path)]) == 0
     folder = tmp_path / "wang2019"
