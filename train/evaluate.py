@@ -181,9 +181,8 @@ def attach_bounds(result: dict, scenario: str, seed_base: int, trace: dict, boun
     None where not defined), ``efficiency`` = rmse / pcrb_centralized and ``pcrb_model_based``.
 
     ``bound_episodes`` K: the bounds on the first K of the E episodes only (``pcrb_episodes`` says how many). A
-    bound replays its episodes one env at a time, which costs far more than the batched play; it is the mean of
-    a quantity that varies little from episode to episode, so a few episodes place it where the error needs
-    hundreds."""
+    bound replays its episodes one env at a time, which costs far more than the batched play; where a row is
+    judged by its error over many episodes (``coloc frontier``), its bounds are reference marks from a few."""
     from scipy import stats
 
     import coloc_env

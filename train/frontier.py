@@ -40,8 +40,8 @@ Writes ``OUT/frontier/<name>/`` (name: the scenario, ``/`` as ``__``): ``metrics
 ``messages_per_agent_step``, ``communication_per_step``, ``mean_cost`` with ``ci95`` and
 ``per_episode_cost`` for pairing, ``rmse``, ``pcrb_centralized``, ``pcrb_local``, ``pcrb_delivered`` (m,
 square roots of the bounds averaged over steps and agents, on the first ``--bound-episodes`` episodes,
-``BOUND_EPISODES`` by default: a bound replays its episodes one env at a time, and it varies little from
-episode to episode), NEES; the frontier's vertices; each judged
+``BOUND_EPISODES`` by default: a bound replays its episodes one env at a time; a point is judged by its
+error, never by its bounds), NEES; the frontier's vertices; each judged
 point's comparison), ``report.md`` and ``frontier.png``: left, the scenario's metric against messages per
 agent-step, each family a line with its 95 % intervals, the baseline frontier drawn; right, the RMSE
 against the same axis with the square roots of the centralized and local bounds as horizontal lines and,
