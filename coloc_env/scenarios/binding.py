@@ -187,9 +187,13 @@ class PresetScenario(ComposedScenario):
     def observed_own_features(self) -> tuple[str, ...]:
         return (*self.own_features, *(name for name in self.appended_features if name in OWN_FEATURES))
 
+    def appended_width(self, name: str) -> int:
+        """How many entries the appended feature ``name`` takes: N for the ``index`` one-hot, else 1."""
+        return self.num_agents if name == "index" else 1
+
     def appended_size(self) -> int:
         """How many entries ``appended_features`` adds to an agent's observation."""
-        return sum(self.num_agents if name == "index" else 1 for name in self.appended_features)
+        return sum(self.appended_width(name) for name in self.appended_features)
 
     def appended_observation(self) -> np.ndarray:
         """(B, N, ``appended_size()``): the entries of ``appended_features``, in order."""
@@ -235,7 +239,7 @@ class PresetScenario(ComposedScenario):
             for other in self.appended_features:
                 if other == name:
                     return start
-                start += self.num_agents if other == "index" else 1
+                start += self.appended_width(other)
         positions = self.preset_feature_positions()
         if name in positions:
             return positions[name]
