@@ -40,10 +40,14 @@ demo: $(STAMP)
 	$(PY) -m train.demo --out results --coloc $(VENV)/bin/coloc
 
 # Two pytest workers, one per core, each with single-threaded BLAS and torch: a worker's BLAS threads would
-# otherwise compete with the other worker for the same two cores.
+# otherwise compete with the other worker for the same two cores. Work stealing: a worker that runs out takes
+# queued tests from the other, so the run does not end on one worker's tail of long tests. Bytecode caches
+# on (PYTHONDONTWRITEBYTECODE emptied): every `coloc` subprocess a test starts, and each worker's collection
+# (pytest's assertion rewriting), would otherwise compile the sources again.
 test: $(STAMP)
 	$(VENV)/bin/ruff check .
-	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 MPLBACKEND=Agg $(PY) -m pytest -q -n 2
+	PYTHONDONTWRITEBYTECODE= OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 MPLBACKEND=Agg \
+		$(PY) -m pytest -q -n 2 --dist worksteal
 
 # The documentation site (mkdocs.yml) into site/, strictly: a warning (a broken link or reference) is an error.
 # tests/test_docs.py runs the same build in `make test`. NO_MKDOCS_2_WARNING=1 is Material's own switch for its

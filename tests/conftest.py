@@ -16,10 +16,11 @@ MRCLAM_DATASET6 = os.environ.get(MRCLAM_DATA_ENV) or os.path.normpath(
     os.path.join(REPO_ROOT, "..", "shared", "data", "mrclam", "MRCLAM_Dataset6"))
 MRCLAM_SKIP_REASON = (f"MRCLAM dataset 6 not found at {MRCLAM_DATASET6} (set {MRCLAM_DATA_ENV} to a MRCLAM_Dataset6 "
                       "folder from http://asrl.utias.utoronto.ca/datasets/mrclam/)")
-# The MRCLAM likelihood fits the tests need, shipped (tests/data/fit_cache, digest-checked entries of
-# coloc_env.data.fit_cache): the tests read them instead of fitting for 17-24 s per process, unless
-# COLOC_FIT_CACHE names another cache. An entry gone stale (the fit's code or inputs changed) is refitted
-# and written there: commit the new file and delete the old one (tests/coloc_env/test_fit_cache.py says so).
+# The MRCLAM likelihood fits and the oracle_static searches the tests need, shipped (tests/data/fit_cache,
+# digest-checked entries of coloc_env.data.fit_cache): the tests read them instead of fitting for 17-24 s
+# (searching for 13 s) per process, unless COLOC_FIT_CACHE names another cache. An entry gone stale (the
+# code or inputs changed) is computed again and written there: commit the new file and delete the old one
+# (tests/coloc_env/test_fit_cache.py and tests/agents/test_bandwidth_fusion_policies.py say so).
 SHIPPED_FIT_CACHE = os.path.join(REPO_ROOT, "tests", "data", "fit_cache")
 os.environ.setdefault("COLOC_FIT_CACHE", SHIPPED_FIT_CACHE)
 RECORDED_WORLDS = ("mrclam", "mrclam_slices")  # the worlds that replay the MRCLAM data (a `data` field)

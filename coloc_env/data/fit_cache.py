@@ -1,4 +1,5 @@
-"""An on-disk cache of fits that take seconds (the MRCLAM likelihood fit: 17-24 s per process).
+"""An on-disk cache of fits that take seconds (the MRCLAM likelihood fit: 17-24 s per process; the
+``bandwidth_fusion`` ``oracle_static`` search, ``agents.bandwidth_fusion.oracle_static_search``: about 13 s).
 
 ``cached(name, key, compute, validate)`` returns the value stored under ``key`` or computes, stores and
 returns it. The caller's ``key`` is a digest of everything the value depends on (for the MRCLAM fit:

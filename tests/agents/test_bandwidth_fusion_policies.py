@@ -101,6 +101,49 @@ def test_coordinate_descent_ends_in_a_local_optimum():
     assert evaluations == 1 + 108 * 4 * sweeps
 
 
+def _fake_search(calls):
+    def search(scenario):
+        calls.append(scenario.config)
+        return [{"start": t, "weights": p, "selection": paper_selection(t)[:, 1:].tolist(), "cost": 10.0 + i,
+                 "sweeps": 1, "evaluations": 1, "history": [10.0 + i]}
+                for i, (p, t) in enumerate((p, t) for p in ("P1", "P2", "P3") for t in ("T1", "T2", "T3"))]
+    return search
+
+
+def test_oracle_static_search_is_read_from_the_disk_cache_once_stored(tmp_path, monkeypatch):
+    """The search runs once per scenario config and cache folder: a process that has not run it (the in-process
+    cache emptied) reads the stored results, the best first; another config is another entry."""
+    from agents import bandwidth_fusion as policies
+
+    calls = []
+    monkeypatch.setenv("COLOC_FIT_CACHE", str(tmp_path))
+    monkeypatch.setattr(policies, "_search", _fake_search(calls))
+    monkeypatch.setattr(policies, "_SEARCH_CACHE", {})
+    scenario = coloc_env.parallel_env(NAME).scenario
+    first = policies.oracle_static_search(scenario)
+    policies._SEARCH_CACHE.clear()
+    second = policies.oracle_static_search(scenario)
+    assert len(calls) == 1 and len(list(tmp_path.glob("bandwidth-fusion-oracle-static-*.json"))) == 1
+    assert [(r.start, r.weights, r.cost) for r in second] == [(r.start, r.weights, r.cost) for r in first]
+    assert (second[0].start, second[0].weights, second[0].cost) == ("T1", "P1", 10.0)
+    assert second[0].selection.dtype == bool and second[0].selection.shape == (4, 3, 3)
+    policies.oracle_static_search(coloc_env.parallel_env(NAME, horizon=20).scenario)
+    assert len(calls) == 2 and len(list(tmp_path.glob("bandwidth-fusion-oracle-static-*.json"))) == 2
+
+
+def test_the_shipped_oracle_static_search_is_current():
+    """The tests read the default scenario's oracle_static search from tests/data/fit_cache (conftest), or each
+    worker searches for about 13 s. When this fails the search's code changed: run this file's tests once (they
+    write the new entry there), commit it and delete the stale one."""
+    from agents import bandwidth_fusion as policies
+    from coloc_env.data import fit_cache
+    from tests.conftest import SHIPPED_FIT_CACHE
+
+    key = policies._search_key(coloc_env.parallel_env(NAME).scenario)
+    path = fit_cache.entry_path(SHIPPED_FIT_CACHE, "bandwidth-fusion-oracle-static", key)
+    assert fit_cache.read(path, key, policies._sound_search) is not None, f"no current entry {path}"
+
+
 def test_sb3_model_loads_only_for_matching_spaces(tmp_path):
     from train.training import train
 
