@@ -42,10 +42,12 @@ reference every event-triggered scheme is compared with.
 Applies to plain compositions whose network has a transport decision (a block whose maximum and minimum
 differ: ``transmit``, a relay's ``next_hop``, a bandwidth ``selection``), and to the presets whose decision maps
 (``PresetScenario.transport_entries``: ``gps_denied_nbp``'s broadcast bits, ``lossy_fusion``'s transmit entry,
-``relay_ukf``'s and ``mrclam_relay``'s relay entries). On a preset, *send* plays its ``paper`` policy's action
-(built with the family's seed, restarted with it by ``start_episode``), which is ``always``'s there, and *not
-send* sets the declared entries to their quiet values (``silent``'s), every other entry staying ``paper``'s: the
-extremes are the preset's ``always`` and ``silent`` exactly. The presets observe the features by the same names
+``relay_ukf``'s and ``mrclam_relay``'s relay entries, ``contention_localization``'s slots). On a preset, *send*
+plays the action of the policy its ``family_send`` names (built with the family's seed, restarted with it by
+``start_episode``): ``paper``, which is ``always``'s on the first four, and ``always`` on
+``contention_localization``, whose ``paper`` is round robin. *Not send* sets the declared entries to their
+quiet values (``silent``'s), every other entry staying the send policy's: the extremes are the preset's
+``always`` and ``silent`` exactly. The presets observe the features by the same names
 (their module tables). ``uncertainty`` and ``value`` also need a backend with a covariance. Elsewhere the
 factories raise ``ValueError`` saying why.
 """
@@ -92,7 +94,7 @@ class TransmitRule(Policy):
         scenario = env.unwrapped.scenario
         from agents.generic import _is_composition
 
-        self.paper = None  # a preset's paper policy, whose action a send keeps
+        self.send_policy = None  # a preset's policy whose action a send keeps (its family_send)
         if _is_composition(scenario):
             send = np.asarray(scenario.action_vector("maximum"))
             quiet = np.asarray(scenario.action_vector("minimum"))
@@ -108,7 +110,7 @@ class TransmitRule(Policy):
             from agents import make_policy
 
             self.entries, self.quiet = (np.asarray(a) for a in declared)
-            self.paper = make_policy("paper", env, seed=seed)
+            self.send_policy = make_policy(scenario.family_send, env, seed=seed)
             send = quiet = None
         self.knob = float(knob)
         self.num_agents = scenario.num_agents
@@ -129,18 +131,18 @@ class TransmitRule(Policy):
         raise NotImplementedError
 
     def start_episode(self, seed: int) -> None:
-        """Restart a preset's ``paper`` policy for the episode (a copy of it: a shallow copy of this policy, as a
+        """Restart a preset's send policy for the episode (a copy of it: a shallow copy of this policy, as a
         batched evaluation makes one per episode, must not share its generator)."""
-        if self.paper is not None:
-            self.paper = copy.copy(self.paper)
-            self.paper.start_episode(seed)
+        if self.send_policy is not None:
+            self.send_policy = copy.copy(self.send_policy)
+            self.send_policy.start_episode(seed)
 
     def act(self, observations: dict) -> dict:
         dtype = self.env.action_space(self.order[0]).dtype
-        if self.paper is None:
+        if self.send_policy is None:
             return {agent: self.actions[bool(self.sends(np.asarray(obs, float)))].astype(dtype)
                     for agent, obs in observations.items()}
-        actions = self.paper.act(observations)  # every agent's, so a stochastic paper draws as it would alone
+        actions = self.send_policy.act(observations)  # every agent's: a stochastic one draws as it would alone
         out = {}
         for agent, obs in observations.items():
             action = np.array(actions[agent], dtype=dtype)
@@ -237,7 +239,7 @@ def has_transport_decision(spec) -> bool:
 
 
 def periodic(env, variant: str | None = None, seed: int | None = None) -> Periodic:
-    """``periodic:P`` (default P = N, round robin); ``seed``: a preset's ``paper`` policy's."""
+    """``periodic:P`` (default P = N, round robin); ``seed``: a preset's send policy's."""
     n = env.unwrapped.scenario.num_agents
     return Periodic(env, _parse_knob("periodic", variant, float(n), 1.0, integer=True), seed)
 

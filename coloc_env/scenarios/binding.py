@@ -147,6 +147,10 @@ class PresetScenario(ComposedScenario):
     | ``episode_length_field``| the config field that ``max_cycles`` sets (``"horizon"`` by default)       |
     | ``policy_module``      | the module of its policies (``agents.<name>``: ``POLICIES``, optionally     |
     |                        | ``BOUNDS``, ``ALIASES``; ``STRONGEST_BASELINES``)                            |
+    | ``family_send``        | where ``transport_entries`` declares a decision: the policy whose action an  |
+    |                        | event-triggered family keeps when it sends (``"paper"`` by default, which is |
+    |                        | ``always`` on those presets; ``"always"`` where the paper's policy is a      |
+    |                        | schedule of its own), so a family's extremes are ``always`` and ``silent``   |
     """
 
     name: ClassVar[str]
@@ -158,6 +162,7 @@ class PresetScenario(ComposedScenario):
     communication: ClassVar[str]
     episode_length_field: ClassVar[str] = "horizon"
     policy_module: ClassVar[str]
+    family_send: ClassVar[str] = "paper"
     # the composed observation's own features (covariance_known, displacement, ...) are a composition's; a preset
     # observes what its registered version does
     own_features: ClassVar[tuple[str, ...]] = ()
@@ -222,8 +227,8 @@ class PresetScenario(ComposedScenario):
     def transport_entries(self) -> tuple[np.ndarray, np.ndarray] | None:
         """The preset's transmit (or relay) decision, where one maps onto the event-triggered families
         (``agents.event_triggered``): (entries (A,) bool, the entries of an agent's flat action that carry it;
-        quiet (A,), their values when the agent keeps quiet, ``silent``'s). Sending keeps the ``paper`` policy's
-        action (which is ``always``'s on every preset that declares this). None (the default): no decision maps."""
+        quiet (A,), their values when the agent keeps quiet, ``silent``'s). Sending keeps the action of the
+        policy ``family_send`` names. None (the default): no decision maps."""
         return None
 
     def preset_feature_positions(self) -> dict[str, int]:

@@ -56,6 +56,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from coloc_env.backends.ukf import UkfCcl
 from coloc_env.networks.contention import Contention
 from coloc_env.scenarios.binding import PresetConfig, PresetScenario, keyword, register_preset
@@ -100,6 +102,13 @@ class ContentionLocalizationScenario(PresetScenario):
     metric_unit = "m"
     communication = "frames transmitted"
     policy_module = "agents.contention_localization"
+    # round_robin, the paper's policy, is a schedule of its own: a family's send keeps always's action
+    family_send = "always"
     # the composition's observation, whole (its own features included)
     own_features = OWN_FEATURES
     appended_features = ()
+
+    def transport_entries(self) -> tuple[np.ndarray, np.ndarray]:
+        """Every entry: transmit in a round's slot (1) or not (0); quiet: all 0 (``silent``)."""
+        send, quiet = (np.asarray(self.action_vector(w), float) for w in ("maximum", "minimum"))
+        return send != quiet, quiet

@@ -15,6 +15,7 @@ PRESETS = {
     "lossy_fusion": {"horizon": 20},
     "relay_ukf": {"horizon": 20},
     "mrclam_relay": {"data": MRCLAM_DATA, "window_steps": 10, "noise_model": "calibrated"},
+    "contention_localization": {"horizon": 12, "slots": 2},
 }
 MAPPED = [pytest.param(name, marks=pytest.mark.skipif(not HAVE_MRCLAM, reason="MRCLAM dataset 6 absent"))
           if name == "mrclam_relay" else name for name in PRESETS]
