@@ -80,19 +80,26 @@ def folder_name(scenario: str) -> str:
     return scenario.replace("/", "__")
 
 
-def _trace_values(scenario: str, which: str, episodes: int, seed_base: int) -> np.ndarray:
-    """Every (step, agent) covariance trace (m^2) of ``always`` (``which`` = "maximum") or ``silent``
-    ("minimum") over ``episodes`` episodes seeded ``seed_base + e``, on the batched core."""
+def _fixed_action_play(scenario: str, which: str, episodes: int, seed_base: int):
+    """The batched core of ``episodes`` copies (copy e seeded ``seed_base + e``) playing ``always`` (``which`` =
+    "maximum") or ``silent`` ("minimum"): yields the core after the reset, then after each step."""
     import coloc_env
 
     core = coloc_env.make_core(scenario, batch=episodes)
     core.reset([np.random.default_rng(seed_base + e) for e in range(episodes)])
     action = np.tile(core.action_vector(which), (episodes, core.num_agents, 1))
-    values = []
+    yield core
     while not core.done().all():
         core.step(action)
-        values.append(np.asarray(core.info()["trace"], float).ravel())
-    values = np.concatenate(values)
+        yield core
+
+
+def _trace_values(scenario: str, which: str, episodes: int, seed_base: int) -> np.ndarray:
+    """Every (step, agent) covariance trace (m^2) after each step of ``always`` (``which`` = "maximum") or
+    ``silent`` ("minimum") over ``episodes`` episodes seeded ``seed_base + e``, on the batched core."""
+    play = _fixed_action_play(scenario, which, episodes, seed_base)
+    next(play)  # the reset: no step yet
+    values = np.concatenate([np.asarray(core.info()["trace"], float).ravel() for core in play])
     return values[np.isfinite(values)]
 
 
@@ -100,17 +107,12 @@ def _silent_values(scenario: str, feature: str, episodes: int, seed_base: int) -
     """(K + 1, episodes, N): the observation feature ``feature`` at each step k of ``silent`` (``displacement``
     in m, ``message_value`` in m^2) over ``episodes`` episodes seeded ``seed_base + e``, on the batched core. Under
     ``silent`` no agent transmits, so step k is k steps after each agent's reference (the episode's start)."""
-    import coloc_env
     from coloc_env.scenarios.composed import DISTANCE_SCALE
 
-    core = coloc_env.make_core(scenario, batch=episodes)
-    core.reset([np.random.default_rng(seed_base + e) for e in range(episodes)])
-    index = core.feature_index(feature)
     scale = DISTANCE_SCALE if feature == "displacement" else 1.0
-    action = np.tile(core.action_vector("minimum"), (episodes, core.num_agents, 1))
-    values = [np.asarray(core.observation()[..., index], float) * scale]
-    while not core.done().all():
-        core.step(action)
+    values, index = [], None
+    for core in _fixed_action_play(scenario, "minimum", episodes, seed_base):
+        index = core.feature_index(feature) if index is None else index
         values.append(np.asarray(core.observation()[..., index], float) * scale)
     return np.array(values)
 
