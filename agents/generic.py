@@ -93,34 +93,53 @@ class GreedyPolicy(Policy):
         if self._team_cost(core, np.tile(self.start, (core.num_agents, 1))) is None:
             raise BadInput(f"policy 'greedy' needs a backend with a covariance; {core.name}'s has none")
 
+    batching = "core"
+
     @staticmethod
-    def _team_cost(core, actions: np.ndarray) -> float | None:
+    def _team_costs(core, actions: np.ndarray) -> np.ndarray | None:
+        """J per copy (B,) after stepping a copy of the batched ``core`` with ``actions`` (B, N, A); None where the
+        backend has no covariance."""
         trial = copy.deepcopy(core)
-        trial.step(actions[None])
+        trial.step(actions)
         if getattr(trial, "estimand", "self") == "target":
             trace = trial.metric_traces()
         else:
             trace = trial.posterior_traces()
         if trace is None:
             return None
-        return float(trace[0].sum() + trial.config.communication_cost * trial.network.messages_sent[0].sum())
+        return trace.sum(axis=-1) + trial.config.communication_cost * trial.network.messages_sent.sum(axis=-1)
 
-    def act(self, observations: dict) -> dict:
+    @staticmethod
+    def _team_cost(core, actions: np.ndarray) -> float | None:
+        """J of the first copy after stepping a copy of ``core`` with ``actions`` (N, A) in every copy."""
+        costs = GreedyPolicy._team_costs(core, np.array(np.broadcast_to(actions, (core.batch, *np.shape(actions)))))
+        return None if costs is None else float(costs[0])
+
+    def batch_actions(self) -> np.ndarray:
+        """(B, N, A): each copy's choice, copies searched at once (one trial step of the batched core per agent and
+        candidate); each copy chooses what ``act`` chooses on it alone."""
         core = self.env.unwrapped.scenario
-        actions = np.tile(self.start, (core.num_agents, 1))
-        best = self._team_cost(core, actions)
+        actions = np.tile(self.start, (core.batch, core.num_agents, 1)).astype(float)
+        best = self._team_costs(core, actions)
         for agent in range(core.num_agents):
             for candidate in self.candidates:
                 trial = actions.copy()
                 for entry, value in candidate.items():
-                    trial[agent, entry] = value
-                if np.array_equal(trial, actions):
+                    trial[:, agent, entry] = value
+                changed = np.any(trial != actions, axis=(1, 2))
+                if not changed.any():
                     continue
-                cost = self._team_cost(core, trial)
-                if cost < best:
-                    best, actions = cost, trial
+                cost = self._team_costs(core, trial)
+                better = changed & (cost < best)
+                best = np.where(better, cost, best)
+                actions[better] = trial[better]
+        return actions
+
+    def act(self, observations: dict) -> dict:
+        actions = self.batch_actions()[0]
         names = self.env.possible_agents
-        return {a: actions[names.index(a)] for a in observations}
+        dtype = self.env.action_space(names[0]).dtype
+        return {a: actions[names.index(a)].astype(dtype) for a in observations}
 
 
 def greedy(env) -> GreedyPolicy:

@@ -73,3 +73,16 @@ def test_evaluate_plays_named_policies_batched(monkeypatch):
     monkeypatch.setattr(ev, "run_episodes", loop_refused)
     result = ev.evaluate_policy("lossy_fusion", "paper", 2, 77)
     assert result["episodes"] == 2 and result["policy"] == "paper"
+
+
+@pytest.mark.parametrize("scenario", ["circles/broadcast/ukf_ccl", "target_cv/bernoulli_delay/kalman"])
+def test_a_compositions_greedy_searches_every_copy_at_once_as_it_would_alone(scenario):
+    """greedy's batched search (one trial step of the batched core per agent and candidate) chooses per copy what
+    its search on that copy alone chooses: the same episodes, and on this seed some choice differs from always's."""
+    config = {"horizon": 15, "communication_cost": 0.05}
+    batched = ev.run_policy_batched(scenario, "greedy", 3, 77, **config)
+    looped = ev.run_episodes(scenario, "greedy", 3, 77, **config)
+    np.testing.assert_allclose(batched["per_episode_cost"], looped["per_episode_cost"], rtol=1e-9, atol=0)
+    assert batched["per_episode_communication"] == looped["per_episode_communication"]
+    always = ev.run_policy_batched(scenario, "always", 3, 77, **config)
+    assert batched["per_episode_communication"] != always["per_episode_communication"]

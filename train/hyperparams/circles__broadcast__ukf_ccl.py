@@ -35,6 +35,8 @@ The last messages of ``always`` are the least valuable: halving them costs 0.168
 * A measurement's effect on the covariance fades over tens of steps of dead reckoning: gamma 0.98, GAE 0.95.
 * 6 agents x 8 copies = 48 sub-envs, n_steps 64 -> 3,072 transitions per update (batches of 384).
 * Networks (64, 64): the observation has 3N + 7 + features = 26 numbers (the cost among them).
+* 1.2M timesteps: at 300k each seed's best validation checkpoint was its last, the validation score still
+  falling (docs/learning.md); four times the budget is about 12 CPU minutes per seed.
 """
 
 from train.hyperparams import ppo
@@ -45,4 +47,4 @@ COST_RANGE = (0.05, 50.0)
 HYPERPARAMS = ppo(n_steps=64, batch_size=384, gamma=0.98, ent_coef=0.01)
 
 NUM_COPIES = 8
-TIMESTEPS = 300_000
+TIMESTEPS = 1_200_000
