@@ -286,6 +286,20 @@ def report(metrics: dict, command: str) -> str:
     return "\n".join(lines) + "\n"
 
 
+WIDE_RANGE = 30.0  # a panel whose positive values span more than this factor is drawn on a log axis
+
+
+def _log_axis_if_wide(ax, values) -> None:
+    """A log y axis where the finite positive ``values`` span more than ``WIDE_RANGE`` (silence can cost orders of
+    magnitude more than sending, and a linear axis then flattens every point near the frontier's low end)."""
+    from train.plotting import plain_log_ticks
+
+    values = np.asarray([v for v in values if v is not None and np.isfinite(v) and v > 0], float)
+    if values.size and values.max() > WIDE_RANGE * values.min():
+        ax.set_yscale("log")
+        plain_log_ticks(ax)
+
+
 def figure(metrics: dict):
     import matplotlib.pyplot as plt
 
@@ -327,6 +341,9 @@ def figure(metrics: dict):
         if values:
             right.axhline(float(np.mean(values)), color="black", linestyle=style,
                           label=f"√{key.replace('pcrb_', 'pcrb ')}")
+    _log_axis_if_wide(left, [p["mean_cost"] for p in points])
+    _log_axis_if_wide(right, [p.get(key) for p in points for key in ("rmse", "pcrb_delivered", "pcrb_centralized",
+                                                                        "pcrb_local")])
     comm = metrics["communication"]
     left.set_xlabel(f"{comm} (per agent-step)")
     left.set_ylabel(f"{metrics['metric']} ({metrics['unit']})")

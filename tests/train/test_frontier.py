@@ -122,3 +122,21 @@ def test_a_shared_medium_adds_round_robin_and_slotted_aloha_over_its_probabiliti
     assert all(points[f"aloha:{p:g}"]["family"] == "aloha" for p in frontier.ALOHA_PROBABILITIES)
     plain = frontier.cells(SMALL, 30, [], quick=True)
     assert not any(cell["policy"].startswith(("aloha", "round_robin")) for cell in plain)
+
+
+def _point(policy, messages, error, rmse):
+    return {"policy": policy, "kind": "baseline", "messages_per_agent_step": messages, "mean_cost": error,
+            "ci95": 0.1 * error, "rmse": rmse, "pcrb_delivered": 1.0, "pcrb_centralized": 0.9, "pcrb_local": 2.0}
+
+
+@pytest.mark.parametrize(("silent_error", "log"), [(1e4, True), (20.0, False)])
+def test_a_panel_spanning_orders_of_magnitude_is_drawn_on_a_log_axis(silent_error, log):
+    """Each panel's y axis is logarithmic where its values span more than frontier.WIDE_RANGE, linear otherwise."""
+    metrics = {"scenario": "S", "episodes": 3, "metric": "error", "unit": "m^2", "communication": "messages",
+               "frontier": ["silent", "always"],
+               "points": [_point("silent", 0.0, silent_error, silent_error ** 0.5), _point("always", 1.0, 2.0, 1.5)]}
+    fig = frontier.figure(metrics)
+    left, right = fig.axes[:2]
+    assert left.get_yscale() == ("log" if log else "linear")
+    assert right.get_yscale() == ("log" if silent_error ** 0.5 > frontier.WIDE_RANGE * 0.9 else "linear")
+    assert plotting.figure_problems(fig) == []
