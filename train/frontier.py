@@ -168,9 +168,13 @@ def cells(scenario: str, horizon: int, models: list[str], quick: bool = False,
     from train.evaluate import model_row
 
     available = agents.available_policies(scenario)
-    repeated = agents.duplicates(scenario)  # round_robin is the contention preset's paper: played once
-    out = [{"policy": name, "kind": "baseline"} for name in BASELINE_NAMES
-           if name in available and name not in repeated]
+    # the fixed policies, and the scenario's strongest baselines (nlos_horizon's best_constant, gps_denied_nbp's
+    # threshold, ...); a name that builds the same policy as another of these plays once, under the other name
+    # (round_robin is the contention preset's paper), but does play where its twin is not listed (nlos_horizon's
+    # always is its constant)
+    names = [n for n in dict.fromkeys([*BASELINE_NAMES, *agents.strongest_baselines(scenario)]) if n in available]
+    repeated = agents.duplicates(scenario)
+    out = [{"policy": name, "kind": "baseline"} for name in names if repeated.get(name) not in names]
     for family, knobs in knob_grids(scenario, horizon, quick).items():
         out += [{"policy": f"{family}:{knob}", "kind": "baseline", "family": family, "knob": knob} for knob in knobs]
     out += [{"policy": name, "kind": "privileged"} for name in PRIVILEGED if name in available]

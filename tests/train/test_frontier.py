@@ -140,3 +140,16 @@ def test_a_panel_spanning_orders_of_magnitude_is_drawn_on_a_log_axis(silent_erro
     assert left.get_yscale() == ("log" if log else "linear")
     assert right.get_yscale() == ("log" if silent_error ** 0.5 > frontier.WIDE_RANGE * 0.9 else "linear")
     assert plotting.figure_problems(fig) == []
+
+
+def test_the_fixed_points_are_the_fixed_policies_and_the_strongest_baselines_each_once():
+    """A scenario's strongest baselines play beside always, silent, random and paper; a name that builds the same
+    policy as another listed one plays once (lossy_fusion's always is its paper), and plays where its twin is not
+    listed (nlos_horizon's always is its constant)."""
+    def fixed(scenario):
+        return [c["policy"] for c in frontier.cells(scenario, 30, [], quick=True) if c["kind"] == "baseline"
+                and "family" not in c]
+
+    assert fixed("nlos_horizon") == ["always", "silent", "random", "paper", "best_constant"]
+    assert fixed("lossy_fusion") == ["silent", "random", "paper"]
+    assert "threshold" in fixed("gps_denied_nbp") and "always" not in fixed("gps_denied_nbp")
