@@ -55,6 +55,7 @@ from __future__ import annotations
 import glob
 import math
 import os
+import textwrap
 from collections.abc import Callable
 
 import numpy as np
@@ -350,7 +351,7 @@ def figure(metrics: dict):
                                                                         "pcrb_local")])
     comm = metrics["communication"]
     left.set_xlabel(f"{comm} (per agent-step)")
-    left.set_ylabel(f"{metrics['metric']} ({metrics['unit']})")
+    left.set_ylabel(textwrap.fill(f"{metrics['metric']} ({metrics['unit']})", 45))
     left.set_title("error against communication")
     right.set_xlabel(f"{comm} (per agent-step)")
     right.set_ylabel("position RMSE (m)")

@@ -63,10 +63,10 @@ def legend_outside(ax, where: str = "right", **kwargs):
 def plain_log_ticks(ax, axis: str = "y", minimum: int = 3) -> None:
     """Label a log axis with plain numbers (1, 2, 5, 10, ...) on at least ``minimum`` major ticks, never "6x10^0".
 
-    Tries the 1-2-5 ticks, then every integer multiple of the decade, then the decades alone (a range of
-    many decades, where matplotlib's locator drops sub-decade ticks altogether); where even those give fewer than
-    ``minimum`` inside the limits (a range under a factor of ~1.5), the limits are widened geometrically
-    about their centre until they do."""
+    Tries the decades alone where they give at least ``minimum + 1`` ticks (a range of several decades, where
+    1-2-5 ticks would crowd the axis), then the 1-2-5 ticks, then every integer multiple of the decade, then the
+    decades alone; where even those give fewer than ``minimum`` inside the limits (a range under a factor of
+    ~1.5), the limits are widened geometrically about their centre until they do."""
     from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 
     target = ax.yaxis if axis == "y" else ax.xaxis
@@ -75,9 +75,10 @@ def plain_log_ticks(ax, axis: str = "y", minimum: int = 3) -> None:
     chosen = (1.0, 2.0, 5.0)
     if np.isfinite(low) and np.isfinite(high) and low > 0 and high > low:
         for _ in range(40):
-            for subs in ((1.0, 2.0, 5.0), tuple(float(k) for k in range(1, 10)), (1.0,)):
+            for subs, enough in (((1.0,), minimum + 1), ((1.0, 2.0, 5.0), minimum),
+                                 (tuple(float(k) for k in range(1, 10)), minimum), ((1.0,), minimum)):
                 inside = [t for t in LogLocator(base=10, subs=subs).tick_values(low, high) if low <= t <= high]
-                if len(inside) >= minimum:
+                if len(inside) >= enough:
                     chosen = subs
                     break
             else:
