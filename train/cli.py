@@ -348,6 +348,24 @@ def _console():
     return console
 
 
+def _progress_callback(console, bar, task, label: str, steps: int = 10):
+    """``progress(done, total)`` for a long run: it moves the bar; where the console is not a terminal (a log
+    file, a pipe), where a bar draws nothing until the end, it also prints a line each time another tenth of the
+    work is done."""
+    printed = {"tenth": 0}
+
+    def progress(done: int, total: int) -> None:
+        bar.update(task, completed=done, total=total)
+        if console.is_terminal or not total:
+            return
+        tenth = done * steps // total
+        if tenth > printed["tenth"]:
+            printed["tenth"] = tenth
+            console.print(f"{label}: {done} of {total} done", highlight=False, soft_wrap=True)
+
+    return progress
+
+
 def _open(args, folder: str):
     """``train.io.result_folder`` for ``folder``, remembered on ``args`` so that an interrupt can name it."""
     from train.io import result_folder
@@ -581,7 +599,7 @@ def cmd_study(args) -> int:
             args.world, args.network, args.backends, sweep=args.sweep, policy=args.policy, episodes=args.episodes,
             seed=args.seed, horizon=args.horizon, batched=args.batched, executor=args.executor,
             address=args.address, out=args.out, name=args.name,
-            progress=lambda done, total: bar.update(task, completed=done, total=total),
+            progress=_progress_callback(console, bar, task, f"study {args.world}/{args.network}"),
             mark=lambda folder: _open(args, folder))  # INCOMPLETE until the last file; named on Ctrl-C
     console.print(f"wrote {folder}/ (metrics.json, report.md, position_error.png)", soft_wrap=True)
     reference = metrics["reference"]
@@ -615,7 +633,7 @@ def cmd_frontier(args) -> int:
             args.scenario, episodes=args.episodes, seed=args.seed, models=args.models, quick=args.quick,
             executor=args.executor, costs=args.costs, address=args.address, out=args.out,
             **({} if args.bound_episodes is None else {"bound_episodes": args.bound_episodes}),
-            progress=lambda done, total: bar.update(task, completed=done, total=total),
+            progress=_progress_callback(console, bar, task, f"frontier {args.scenario}"),
             mark=lambda folder: _open(args, folder))
     console.print(f"wrote {folder}/ (metrics.json, report.md, {FIGURE})", soft_wrap=True)
     console.print(f"  baseline frontier: {', '.join(metrics['frontier'])}", highlight=False, soft_wrap=True)

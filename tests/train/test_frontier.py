@@ -2,6 +2,7 @@
 judge against it, and ``coloc frontier``'s files."""
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -67,9 +68,12 @@ def test_periodic_against_always_and_silent_is_judged_at_its_own_rate(played):
                                              / played["always"]["communication_per_step"])
 
 
-def test_the_command_writes_metrics_report_and_figure(tmp_path):
+def test_the_command_writes_metrics_report_and_figure(tmp_path, capsys):
     assert main(["frontier", SMALL, "--quick", "--episodes", "3", "--bound-episodes", "2", "--seed", "0",
                  "--out", str(tmp_path)]) == 0
+    # printed to a pipe, where the bar draws nothing until the end: a line per tenth of the points
+    done = re.findall(rf"frontier {SMALL}: (\d+) of (\d+) done", capsys.readouterr().out)
+    assert len(done) == 10 and done[-1][0] == done[-1][1]
     folder = tmp_path / "frontier" / "drift__broadcast__kalman"
     metrics = json.loads((folder / "metrics.json").read_text())
     assert {"frontier.png", "report.md", "metrics.json"} <= {p.name for p in folder.iterdir()}
