@@ -36,7 +36,7 @@ The last messages of ``always`` are the least valuable: halving them costs 0.168
 * 6 agents x 8 copies = 48 sub-envs, n_steps 64 -> 3,072 transitions per update (batches of 384).
 * Networks (64, 64): the observation has 3N + 7 + features = 26 numbers (the cost among them).
 * 1.2M timesteps: at 300k each seed's best validation checkpoint was its last, the validation score still
-  falling (docs/learning.md); four times the budget is about 12 CPU minutes per seed.
+  falling (docs/learning.md); four times the budget took about 10 CPU minutes per seed.
 """
 
 from train.hyperparams import ppo
