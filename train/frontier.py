@@ -111,11 +111,14 @@ def _silent_values(scenario: str, feature: str, episodes: int, seed_base: int) -
     from coloc_env.scenarios.composed import DISTANCE_SCALE
 
     scale = DISTANCE_SCALE if feature == "displacement" else 1.0
-    values, index = [], None
-    for core in _fixed_action_play(scenario, "minimum", episodes, seed_base):
-        index = core.feature_index(feature) if index is None else index
-        values.append(np.asarray(core.observation()[..., index], float) * scale)
-    return np.array(values)
+    play = _fixed_action_play(scenario, "minimum", episodes, seed_base)
+    core = next(play)  # the reset: step 0
+    index = core.feature_index(feature)
+
+    def observed(core) -> np.ndarray:  # read at each yield: the generator steps one core object
+        return np.asarray(core.observation()[..., index], float) * scale
+
+    return np.array([observed(core), *(observed(core) for core in play)])
 
 
 def _threshold_grid(pooled: np.ndarray, quick: bool) -> list[str]:

@@ -157,3 +157,11 @@ def test_the_fixed_points_are_the_fixed_policies_and_the_strongest_baselines_eac
     assert fixed("nlos_horizon") == ["always", "silent", "random", "paper", "best_constant"]
     assert fixed("lossy_fusion") == ["silent", "random", "paper"]
     assert "threshold" in fixed("gps_denied_nbp") and "always" not in fixed("gps_denied_nbp")
+
+
+def test_silents_features_are_read_at_each_step():
+    """What the send_on_delta grid is read from: under silent the displacement since the episode's start is 0 at the
+    reset and its mean over agents and episodes grows step by step (not the last step's value repeated)."""
+    values = frontier._silent_values(SMALL, "displacement", 3, 2_000_000)
+    means = values.mean(axis=(1, 2))
+    assert means[0] == 0.0 and np.all(np.diff(means[:6]) > 0), means[:6]
