@@ -86,6 +86,49 @@ def mark_truncation(venv):
     return _mark_truncation_wrapper()(venv)
 
 
+def _cost_balanced_reward_wrapper():
+    from stable_baselines3.common.vec_env import VecEnvWrapper
+
+    class CostBalancedReward(VecEnvWrapper):
+        """Divides each step's reward by 1 + c / ``reference``, c the communication cost of the episode the step
+        belongs to (the ``communication_cost`` feature of the observation the action was taken on).
+
+        The factor is constant over an episode and the policy observes c, so for every cost the optimal policy is
+        the unscaled reward's; what changes is the share of the gradient. Unscaled, an episode priced at c = 50
+        has returns tens of times larger than one priced at 0.05, so its advantages set the per-batch
+        normalization and the cheap episodes barely move the policy.
+        """
+
+        def __init__(self, venv, cost_index: int, reference: float):
+            super().__init__(venv)
+            self.cost_index = int(cost_index)
+            self.reference = float(reference)
+            self._costs = np.zeros(venv.num_envs)
+
+        def reset(self):
+            observations = self.venv.reset()
+            self._costs = np.array(observations[:, self.cost_index], dtype=np.float64)
+            return observations
+
+        def step_wait(self):
+            observations, rewards, dones, infos = self.venv.step_wait()
+            # the cost of the step's own episode: after an episode ends, the observation is the next one's
+            scaled = (rewards / (1.0 + self._costs / self.reference)).astype(rewards.dtype)
+            self._costs = np.array(observations[:, self.cost_index], dtype=np.float64)
+            return observations, scaled, dones, infos
+
+    return CostBalancedReward
+
+
+def cost_balanced_reward(venv, cost_index: int, reference: float):
+    """``venv`` with each step's reward divided by 1 + c / ``reference`` (c: the episode's communication cost,
+    read from observation entry ``cost_index``; ``reference`` > 0, in the metric's units per message): the
+    settings module's ``COST_REWARD_SCALE``, for cost-conditioned training (the wrapper's docstring says why)."""
+    if not np.isfinite(reference) or reference <= 0:
+        raise BadInput(f"COST_REWARD_SCALE must be a finite number > 0 (metric units per message), got {reference!r}")
+    return _cost_balanced_reward_wrapper()(venv, cost_index, reference)
+
+
 def make_supersuit_vec_env(scenario: str, copies: int, env_config: dict):
     """B copies x N agents as one SB3 VecEnv through SuperSuit (each agent a sub-env)."""
     import supersuit as ss
@@ -324,6 +367,17 @@ def training_env_config(scenario: str, cost_range=FROM_SETTINGS) -> tuple[dict, 
     return env_config, cost_range
 
 
+def _cost_feature_index(scenario: str, env_config: dict) -> int:
+    """Where an agent's observation of ``scenario`` carries the episode's communication cost."""
+    import coloc_env
+
+    env = coloc_env.parallel_env(scenario, **env_config)
+    try:
+        return int(env.unwrapped.scenario.feature_index("communication_cost"))
+    finally:
+        env.close()
+
+
 def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = "native",
           progress_bar: bool = True, tensorboard: bool = False, curve_points: int = CURVE_POINTS,
           cost_range=FROM_SETTINGS) -> str:
@@ -339,7 +393,7 @@ def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = 
     from stable_baselines3.common.vec_env import VecMonitor
 
     from agents.sb3 import algorithm_class
-    from train.hyperparams import algorithm, budget, critic, curve_episodes, load, module
+    from train.hyperparams import algorithm, budget, cost_reward_scale, critic, curve_episodes, load, module
 
     if timesteps is None:
         timesteps = budget(scenario, DEFAULT_TIMESTEPS)
@@ -370,6 +424,8 @@ def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = 
     if critic_name == "centralized" and algorithm_name == "recurrent_ppo":
         raise BadInput(f"{scenario}: the centralized critic is built for ppo and maskable_ppo, not recurrent_ppo")
     inner = make_vec_env(scenario, copies, env_config, seed, vec)
+    reward_scale = cost_reward_scale(scenario) if cost_range is not None else None
+    cost_index = None if reward_scale is None else _cost_feature_index(scenario, env_config)
     policy = "MlpLstmPolicy" if algorithm_name == "recurrent_ppo" else "MlpPolicy"
     if critic_name == "centralized":
         from agents.centralized_critic import CriticStateObservation, policy_class
@@ -377,7 +433,8 @@ def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = 
         inner = CriticStateObservation(inner)
         policy = policy_class(algorithm_name)
         hyper["policy_kwargs"] = {**hyper.get("policy_kwargs", {}), "local_dim": inner.local_dim}
-    venv = VecMonitor(inner)
+    # VecMonitor above the scaling: its episode returns (SB3's logs) are the ones PPO optimizes
+    venv = VecMonitor(inner if reward_scale is None else cost_balanced_reward(inner, cost_index, reward_scale))
     folder = os.path.join(out, scenario, f"seed{seed}")
     os.makedirs(folder, exist_ok=True)
     # One torch thread: a Ray worker runs with one, and a different thread count changes the
@@ -418,6 +475,7 @@ def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = 
         "checkpoint": selected,
         "scenario": scenario, "seed": seed, "timesteps": timesteps, "env_config": env_config,
         "cost_range": None if cost_range is None else list(cost_range),
+        "cost_reward_scale": reward_scale,
         "hyperparams": json.loads(json.dumps(hyper)), "vec": vec, "copies": copies, "algorithm": algorithm_name,
         "critic": critic_name,
         "observation_space": repr(venv.observation_space), "action_space": repr(venv.action_space),

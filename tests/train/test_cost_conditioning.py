@@ -127,6 +127,47 @@ def test_a_scenario_without_a_cost_range_keyword_is_refused_with_a_clear_message
         training.training_env_config(SMALL, (0.1, 1.0))
 
 
+def test_cost_balanced_reward_divides_each_step_by_its_own_episodes_cost():
+    """Two identical seeded vec envs, one wrapped: each step's reward is the plain one over 1 + c / 0.5, c the
+    cost drawn for the episode the step belongs to, including the last step of an episode (where the observation
+    returned is already the next episode's, with a new cost)."""
+    config = {"communication_cost": 0.3, "cost_range": [0.1, 10.0], "horizon": 3}
+    plain = coloc_env.vector_env(SMALL, num_envs=2, seed=5, **config)
+    index = plain.scenario.feature_index("communication_cost")
+    wrapped = training.cost_balanced_reward(coloc_env.vector_env(SMALL, num_envs=2, seed=5, **config), index, 0.5)
+    rng = np.random.default_rng(0)
+    plain.reset()
+    wrapped.reset()
+    costs, episode_costs = [], []
+    for _ in range(7):  # episodes of 3 steps: two boundaries
+        costs.append(plain.scenario.costs.copy())
+        actions = rng.integers(0, 2, (plain.num_envs, *plain.action_space.shape))
+        _, reward, done, _ = plain.step(actions)
+        _, scaled, done_w, _ = wrapped.step(actions)
+        c = np.repeat(costs[-1], plain.num_agents)
+        np.testing.assert_allclose(scaled, reward / (1 + c / 0.5), rtol=1e-6)
+        np.testing.assert_array_equal(done, done_w)
+        episode_costs.append(tuple(costs[-1]))
+    assert len(set(episode_costs)) == 3  # three episodes, three draws per copy
+    with pytest.raises(ValueError, match=r"COST_REWARD_SCALE must be a finite number > 0"):
+        training.cost_balanced_reward(plain, index, 0.0)
+
+
+def test_cost_reward_scale_reaches_training_and_model_json(settings, tmp_path):
+    settings.COST_REWARD_SCALE = 2.0
+    assert main(["train", SMALL, "--timesteps", "16", "--curve-points", "0", "--cost-range", "0.1,1",
+                 "--out", str(tmp_path)]) == 0
+    assert read_json(str(tmp_path / "drift/broadcast/kalman/seed0/model.json"))["cost_reward_scale"] == 2.0
+    assert main(["train", SMALL, "--timesteps", "16", "--curve-points", "0", "--cost-range", "none",
+                 "--out", str(tmp_path / "fixed")]) == 0  # a fixed cost: nothing to balance
+    assert read_json(str(tmp_path / "fixed/drift/broadcast/kalman/seed0/model.json"))["cost_reward_scale"] is None
+    settings.COST_REWARD_SCALE = -1
+    with pytest.raises(ValueError, match=r"COST_REWARD_SCALE of train/hyperparams/drift__broadcast__kalman.py "
+                                         r"must be a number > 0, got -1"):
+        training.train(SMALL, timesteps=1, seed=0, out=str(tmp_path / "bad"), progress_bar=False,
+                       cost_range=(0.1, 1.0))
+
+
 def test_a_model_at_cost_c_plays_as_in_an_env_built_with_that_cost(trained, monkeypatch):
     """``--costs`` plays each cost in an env built with ``communication_cost=c`` (the observation's cost feature is
     c), each its own row, equal episode by episode to the env loop of an env built so."""

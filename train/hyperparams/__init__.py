@@ -8,7 +8,8 @@ score each learning-curve point, the best of which becomes ``model.zip`` (defaul
 ``train.training.CURVE_EPISODES``), and ``COST_RANGE``: ``(lo, hi)``, the range the training env draws each
 episode's communication cost from (the composition option ``cost_range``: log-uniform for lo > 0), so that
 ``coloc train S`` trains one cost-conditioned policy (``--cost-range`` overrides it; default: none, a fixed
-cost).
+cost), and ``COST_REWARD_SCALE``: c_ref > 0, which divides each training step's reward by 1 + c / c_ref under a
+cost range (c the episode's cost; default: none, the reward unscaled).
 
 A preset's module also holds what only ``train`` needs of it: ``LEADERBOARD_TARGET`` (the leaderboard's target for
 a learned policy, ``train.leaderboard.target``), and optionally ``DEMO_RUN`` (``make demo``'s budget,
@@ -97,6 +98,21 @@ def cost_range(scenario: str) -> tuple[float, float] | None:
     value = tuple(value) if isinstance(value, list) else value
     check_cost_range(f"COST_RANGE of train/hyperparams/{module_name(scenario)}.py", value)
     return float(value[0]), float(value[1])
+
+
+def cost_reward_scale(scenario: str) -> float | None:
+    """The scenario's ``COST_REWARD_SCALE`` (else None): under a cost range, each training step's reward is divided
+    by 1 + c / ``COST_REWARD_SCALE`` (c: the episode's cost; ``train.training.cost_balanced_reward``), a number
+    > 0 in the metric's units per message."""
+    from coloc_env.config import BadInput
+
+    value = getattr(module(scenario), "COST_REWARD_SCALE", None)
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value < float("inf"):
+        raise BadInput(f"COST_REWARD_SCALE of train/hyperparams/{module_name(scenario)}.py must be a number > 0, "
+                       f"got {value!r}")
+    return float(value)
 
 
 def critic(scenario: str) -> str:

@@ -28,6 +28,13 @@ The last messages of ``always`` are the least valuable: halving them costs 0.168
   worth its price) and past the last (where silence is), a third of the episodes per decade. The best
   checkpoint is the one with the lowest mean over the validation costs 0.158, 1.58 and 15.8 (the law's
   quantiles at 1/6, 1/2, 5/6: ``train.training.validation_costs``) of error + cost x messages.
+* ``COST_REWARD_SCALE = 1.0`` m per message: each training step's reward is divided by 1 + c / 1 m
+  (``train.training.cost_balanced_reward``), which leaves every cost's optimal policy as it is (the factor is
+  fixed over an episode and c is observed) and balances the gradient between costs: unscaled, an episode at
+  c = 50 sends rewards of -50 per message beside RMS terms near -1, so the advantages of the episodes priced
+  at 5 to 50 set the per-batch normalization. 1 m is the RMS scale of a step and of what a message is worth
+  (the first chord above, 0.84 m per message). Trained unscaled at 1.2M timesteps, the three seeds were below the
+  frontier at cost 10 and two of them above it at cost 0.2 (docs/learning.md).
 * ``communication_cost=0.5`` m per message where the cost is fixed (``coloc train --cost-range none``): below the
   0.84 m an average one of ``always``'s last messages is worth, so a policy that finds the useful ones keeps them
   and drops those worth less. The target is ``always``'s error with fewer messages, or a lower error than a fixed
@@ -43,6 +50,7 @@ from train.hyperparams import ppo
 
 ENV_CONFIG = {"reward": "trace", "communication_cost": 0.5}
 COST_RANGE = (0.05, 50.0)
+COST_REWARD_SCALE = 1.0
 
 HYPERPARAMS = ppo(n_steps=64, batch_size=384, gamma=0.98, ent_coef=0.01)
 
