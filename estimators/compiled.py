@@ -18,3 +18,12 @@ def renamed(fn, suffix: str):
     copy.__qualname__ = fn.__qualname__ + suffix
     copy.__module__ = fn.__module__
     return copy
+
+
+def in_namespace(fn, namespace: dict, suffix: str = ""):
+    """A copy of ``fn`` (``renamed`` with ``suffix``) whose globals are ``namespace``: compiled, the names it
+    calls resolve there (a kernel's compiled helpers), while ``fn`` itself keeps calling its module's."""
+    copy = renamed(fn, suffix)
+    result = types.FunctionType(copy.__code__, namespace, copy.__name__, copy.__defaults__, copy.__closure__)
+    result.__qualname__, result.__module__ = copy.__qualname__, copy.__module__
+    return result

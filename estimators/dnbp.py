@@ -68,10 +68,10 @@ chunked to bound memory.
 
 Compiled kernels. ``belief_update`` (Algorithm 2, where nearly all the time
 goes) runs as two fused numba kernels, one receiver per iteration: proposals
-and importance log-weights (``_belief_weights_source``: the prior's KDE and
+and importance log-weights (``dnbp_kernels.belief_weights_source``: the prior's KDE and
 every present message evaluated at each proposal, no (R, S, C, M)
 temporaries), then normalization, systematic resampling, jitter and velocity
-completion (``_belief_resample_source``). They reproduce the numpy path's
+completion (``dnbp_kernels.belief_resample_source``). They reproduce the numpy path's
 arithmetic in its order: the same exponents, numpy's pairwise sum for the
 weight normalization, the flat-offset comparisons of ``_categorical`` (by
 bisection or a merge instead of a scan: the same counts), so they make the
@@ -81,17 +81,17 @@ evaluated once per point and added M times (the same sum). The other hot
 loops (the mixture kernel of the correction weights and, on the numpy path,
 the fast kernel, the velocity draw and the importance-weight combination)
 are compiled per row and run on numba's threads above
-``_PARALLEL_ELEMENTS`` kernel entries. The fused kernels run on one thread
+``dnbp_kernels.PARALLEL_ELEMENTS`` kernel entries. The fused kernels run on one thread
 per call or, from 4 receivers and 2^20 kernel entries, on slices of the
-receivers run by worker threads (``_split_rows``: Python threads, the
+receivers run by worker threads (``dnbp_kernels.split_rows``: Python threads, the
 kernels release the GIL; as many as the cores and NUMBA_NUM_THREADS, so
 NUMBA_NUM_THREADS=1 runs one thread), each slice given its first row for the
 flat offsets, so the bits are the whole call's. Algorithm 1's centres and
-h_rot sums are one compiled pass too (``_message_rows_source``): the numpy
+h_rot sums are one compiled pass too (``dnbp_kernels.message_rows_source``): the numpy
 path's floats, since numpy's cos and sin are libm's and the sums keep
 einsum's and the pairwise sum's orders; numpy's exp, log and pow are not
 libm's (its AVX-512 loops round differently), so what needs them stays
-numpy. numba's own threaded form of the fused kernels (``_FUSED_THREADS``)
+numpy. numba's own threaded form of the fused kernels (``dnbp_kernels.FUSED_THREADS``)
 is off: its waiting threads spin, which slows a machine whose other core is
 busy. A row (receiver) reads only its own inputs, so the results depend
 neither on the batch nor on the thread count. The numpy formulations stay
@@ -110,7 +110,7 @@ more than r^2/2 below the point's largest exponent are left out
 (r = ``truncation``, 6 by default, in [1, 10]; with equal weights: every
 component more than ~r bandwidths farther than the nearest; the exact
 kernel's cut is 50, r = 10), the rest summed relative to the largest with a
-branch-free polynomial exp (``_exp_small``, relative error < 1e-12 on
+branch-free polynomial exp (``dnbp_kernels.exp_small``, relative error < 1e-12 on
 [-50, 0]) in fastmath loops that LLVM vectorizes (numba without SVML calls
 libm's exp one term at a time), a GPS fix's K equal terms as K e^a (the
 exact kernel adds e^a K times, for numpy's bits); the velocity completion
@@ -210,14 +210,14 @@ affected (h_rot ~ 1 m).
 from __future__ import annotations
 
 import contextlib
-import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from estimators.compiled import renamed as _renamed
+from estimators import dnbp_kernels
 from estimators.cv_models import ConstantVelocityAccel
+from estimators.dnbp_kernels import EXP_FLOOR
 from estimators.models import per_copy
 
 __all__ = [
@@ -383,120 +383,16 @@ def rule_of_thumb_bandwidth(points: np.ndarray, weights: np.ndarray | None = Non
     return np.sqrt(np.maximum(var, 0.0)) * ess ** (-1.0 / 6.0)
 
 
-# Exponents below this are clipped before exp: libm's exp is ~10x slower on results that underflow, and a
-# term e^-600 relative to the largest one is below float64 resolution of any sum it enters.
-_EXP_FLOOR = -600.0
 
 
 def _logsumexp(a: np.ndarray, axis: int) -> np.ndarray:
     top = np.max(a, axis=axis, keepdims=True)
     top = np.where(np.isfinite(top), top, 0.0)
-    shifted = np.maximum(a - top, _EXP_FLOOR)
+    shifted = np.maximum(a - top, EXP_FLOOR)
     shifted = np.where(np.isneginf(a), -np.inf, shifted)
     with np.errstate(divide="ignore"):
         return np.log(np.sum(np.exp(shifted), axis=axis)) + np.squeeze(top, axis=axis)
 
-
-# Terms more than this below a row's largest exponent are left out of the fast kernel sums: K of them add less
-# than K e^-50 ~ 2e-20 (relative), far below float64 resolution of the sum.
-_NEGLIGIBLE = 50.0
-# Above this many kernel entries per call the compiled kernels run their rows on all cores (threads): high enough
-# that the correction weights' kernel (10^5-10^6 entries per step at M = 100) stays serial, where threads cost
-# more than they give on a busy 2-core machine (docs/performance.md, "dNBP kernels").
-_PARALLEL_ELEMENTS = 1 << 21
-
-_KERNELS: dict | None = None
-
-
-def _compiled_kernels() -> dict | None:
-    """The numba kernels (compiled on first use, cached on disk), or None where numba is not installed.
-
-    Each row (one point of one mixture, one new particle) is computed by one
-    thread from its own inputs only, so the results do not depend on the
-    batch, the chunking or the number of threads.
-    """
-    global _KERNELS
-    if _KERNELS is not None:
-        return _KERNELS or None
-    try:
-        import numba
-    except ImportError:  # pragma: no cover - numba is a dependency; the numpy path stays for other installs
-        _KERNELS = {}
-        return None
-    _fused_kernels()  # compiles the row functions the kernels below call (_velocity_row)
-
-    floor, negligible = _EXP_FLOOR, _NEGLIGIBLE
-
-    def mixture_rows(scaled, point_term, centres, centre_term, log_norm, out):
-        # out[j, p] = log sum_k exp(clip(scaled[j, p] . c[j, k] + point_term[j, p] + centre_term[j, k])) - log_norm[j]
-        J, P = scaled.shape[0], scaled.shape[1]
-        K = centres.shape[1]
-        threshold = 2.0 * K * math.exp(floor)
-        for row in numba.prange(J * P):
-            j = row // P
-            p = row - j * P
-            s0, s1, pt = scaled[j, p, 0], scaled[j, p, 1], point_term[j, p]
-            top = floor
-            for k in range(K):
-                a = (s0 * centres[j, k, 0] + s1 * centres[j, k, 1] + pt) + centre_term[j, k]
-                if a > top:
-                    top = a
-            top = min(top, 0.0)
-            if top <= floor:  # every term at the floor: the sum K e^floor is not above the threshold
-                out[j, p] = -np.inf
-                continue
-            # every term counts where the row is near the floor (its sum is compared with 2 K e^floor there)
-            cut = top - negligible if top > floor + negligible else -np.inf
-            total = 0.0
-            for k in range(K):
-                a = (s0 * centres[j, k, 0] + s1 * centres[j, k, 1] + pt) + centre_term[j, k]
-                if a > cut:
-                    total += math.exp(min(max(a, floor), 0.0))
-            out[j, p] = (math.log(total) if total > threshold else -np.inf) - log_norm[j]
-
-    def velocity_rows(positions, prior, denominator, uniform, u, out):
-        # _velocity_row per receiver r (the flat-offset comparison of _categorical, row index r * M + i)
-        for r in numba.prange(positions.shape[0]):
-            _velocity_row(positions[r], prior[r], denominator[r], uniform[r], u[r], r, out[r])
-
-    def importance_rows(log_rho, log_m, present, valid, log_count, out):
-        # log pi - log q per proposal, the arithmetic of _importance_log_weights (sums over slots in slot order)
-        R, S, C = log_m.shape
-        for row in numba.prange(R * C):
-            r = row // C
-            c = row - r * C
-            target = 0.0
-            top = log_rho[r, c]
-            for s in range(S):
-                if present[r, s]:
-                    target += log_m[r, s, c]
-                if log_m[r, s, c] > top:
-                    top = log_m[r, s, c]
-            target += log_rho[r, c]
-            if not np.isfinite(top):
-                top = 0.0
-            total = 0.0
-            for s in range(S + 1):
-                a = log_rho[r, c] if s == 0 else log_m[r, s - 1, c]
-                if a != -np.inf:
-                    total += math.exp(max(a - top, floor))
-            log_q = (math.log(total) if total > 0.0 else -np.inf) + top - log_count[r]
-            ok = valid[r, c] and np.isfinite(log_q) and np.isfinite(target)
-            out[r, c] = target - log_q if ok else -np.inf
-
-    options = {"cache": True, "nogil": True, "boundscheck": False}
-    _KERNELS = {name: (numba.njit(**options)(fn), numba.njit(parallel=True, **options)(_renamed(fn, "_threaded")))
-                for name, fn in (("mixture_rows", mixture_rows), ("velocity_rows", velocity_rows),
-                                 ("importance_rows", importance_rows))}
-    return _KERNELS
-
-
-def _kernel(name: str, elements: int):
-    kernels = _compiled_kernels()
-    if kernels is None:
-        return None
-    serial, parallel = kernels[name]
-    return parallel if elements >= _PARALLEL_ELEMENTS else serial
 
 
 def mixture_logpdf(points: np.ndarray, centres: np.ndarray, log_weights: np.ndarray,
@@ -535,7 +431,7 @@ def mixture_logpdf(points: np.ndarray, centres: np.ndarray, log_weights: np.ndar
         scaled = points * inv[:, None, None]
         point_term = -0.5 * np.sum(points**2, axis=-1) * inv[:, None]
         centre_term = log_weights - 0.5 * np.sum(centres**2, axis=-1) * inv[:, None]
-        kernel = _kernel("mixture_rows", J * P * K) if compiled else None
+        kernel = dnbp_kernels.row_kernel("mixture_rows", J * P * K) if compiled else None
         if kernel is not None and J * P:
             kernel(scaled, point_term, np.ascontiguousarray(centres), centre_term, log_norm[:, 0], out)
             return out
@@ -545,12 +441,12 @@ def mixture_logpdf(points: np.ndarray, centres: np.ndarray, log_weights: np.ndar
             a = np.matmul(scaled[sl], transposed[sl])
             a += point_term[sl, :, None]
             a += centre_term[sl, None, :]
-            np.clip(a, _EXP_FLOOR, 0.0, out=a)  # the exact exponent is <= 0; the floor keeps exp fast
+            np.clip(a, EXP_FLOOR, 0.0, out=a)  # the exact exponent is <= 0; the floor keeps exp fast
             np.exp(a, out=a)
             total = np.sum(a, axis=-1)
             # every component at the floor (each contributes e^-600): the density is below ~K e^-600, counted as 0
             with np.errstate(divide="ignore"):
-                out[sl] = np.where(total > 2.0 * K * np.exp(_EXP_FLOOR), np.log(total), -np.inf)
+                out[sl] = np.where(total > 2.0 * K * np.exp(EXP_FLOOR), np.log(total), -np.inf)
         return out - log_norm
     for lo in range(0, J, per):
         sl = slice(lo, min(J, lo + per))
@@ -608,601 +504,12 @@ def _normalized_cdf(log_weights: np.ndarray) -> np.ndarray:
     """CDF rows (..., K) from log-weights; rows without mass become uniform."""
     top = np.max(log_weights, axis=-1, keepdims=True)
     ok = np.isfinite(top)
-    w = np.exp(np.maximum(log_weights - np.where(ok, top, 0.0), _EXP_FLOOR))
+    w = np.exp(np.maximum(log_weights - np.where(ok, top, 0.0), EXP_FLOOR))
     w = np.where(ok & ~np.isneginf(log_weights), w, np.where(ok, 0.0, 1.0))
     cdf = np.cumsum(w, axis=-1)
     cdf /= cdf[..., -1:]
     cdf[..., -1] = 1.0
     return cdf
-
-
-# --- the fused belief update (compiled): Algorithm 2 one receiver per iteration ----------------------------------
-# Module-level sources compiled by numba in _fused_kernels(); each reproduces the numpy path's arithmetic in its
-# order (the same exponents, the same flat-offset comparisons of _categorical, numpy's pairwise sum of the
-# weights), so its draws are the numpy path's and its floats equal them up to rounding.
-_prange = range  # numba.prange once numba is imported
-
-
-def _block_sum(values, lo, n):  # pragma: no cover - compiled by numba
-    """values[lo:lo + n], n <= 128, summed as numpy's pairwise summation sums a block (sequential below 8,
-    else eight running sums combined as ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7)), then the rest)."""
-    if n < 8:
-        total = 0.0
-        for i in range(lo, lo + n):
-            total += values[i]
-        return total
-    r0, r1, r2, r3 = values[lo], values[lo + 1], values[lo + 2], values[lo + 3]
-    r4, r5, r6, r7 = values[lo + 4], values[lo + 5], values[lo + 6], values[lo + 7]
-    i = lo + 8
-    end = lo + n - n % 8
-    while i < end:
-        r0 += values[i]
-        r1 += values[i + 1]
-        r2 += values[i + 2]
-        r3 += values[i + 3]
-        r4 += values[i + 4]
-        r5 += values[i + 5]
-        r6 += values[i + 6]
-        r7 += values[i + 7]
-        i += 8
-    total = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
-    while i < lo + n:
-        total += values[i]
-        i += 1
-    return total
-
-
-def _numpy_sum(values, n):  # pragma: no cover - compiled by numba
-    """values[:n] summed in the order of numpy's pairwise summation: blocks of at most 128 (_block_sum), a
-    longer range split in halves at a multiple of 8, left + right; by an explicit stack (numba's disk cache
-    does not hold recursive functions)."""
-    if n <= 128:
-        return _block_sum(values, 0, n)
-    depth = 64
-    los, lens, stage = np.empty(depth, np.int64), np.empty(depth, np.int64), np.empty(depth, np.int64)
-    sums = np.empty(depth)
-    top, done = 0, 0
-    los[0], lens[0], stage[0] = 0, n, 0
-    while top >= 0:
-        lo, m = los[top], lens[top]
-        if m <= 128:
-            sums[done] = _block_sum(values, lo, m)
-            done += 1
-            top -= 1
-        elif stage[top] == 0:
-            stage[top] = 1
-            half = m // 2
-            half -= half % 8
-            # the right half below the left one on the stack: the left is summed first
-            los[top + 1], lens[top + 1], stage[top + 1] = lo + half, m - half, 0
-            los[top + 2], lens[top + 2], stage[top + 2] = lo, half, 0
-            top += 2
-        else:
-            done -= 1
-            sums[done - 1] = sums[done - 1] + sums[done]
-            top -= 1
-    return sums[0]
-
-
-def _mixture_point(x, y, inv, cx, cy, centre_term, log_norm, buffer, identical):  # pragma: no cover - compiled
-    """The fast kernel of ``mixture_logpdf`` at one point (x, y) of one mixture, ``mixture_rows``' arithmetic
-    (the exponent s . c_k + point term + centre term, centre_term[k] = log w_k - 0.5 ||c_k||^2 inv) on the
-    centres' coordinates cx, cy (K,): the exponents are formed once into ``buffer``, those above the cut packed
-    to its front without branches, and only they reach exp (in the same order). ``identical``: every component
-    is the same (a GPS fix): its one exponent and exp, added K times (the same sum, bit for bit)."""
-    floor, negligible = _EXP_FLOOR, _NEGLIGIBLE
-    K = cx.shape[0]
-    s0, s1 = x * inv, y * inv
-    pt = -0.5 * (x * x + y * y) * inv
-    if identical:
-        a = (s0 * cx[0] + s1 * cy[0] + pt) + centre_term[0]
-        if min(max(floor, a), 0.0) <= floor:
-            return -np.inf
-        term = math.exp(min(max(a, floor), 0.0))
-        total = 0.0
-        for _ in range(K):
-            total += term
-        return (math.log(total) if total > 2.0 * K * math.exp(floor) else -np.inf) - log_norm
-    top = floor
-    for k in range(K):
-        a = (s0 * cx[k] + s1 * cy[k] + pt) + centre_term[k]
-        buffer[k] = a
-        top = max(top, a)
-    top = min(top, 0.0)
-    if top <= floor:
-        return -np.inf
-    cut = top - negligible if top > floor + negligible else -np.inf
-    n = 0
-    for k in range(K):
-        a = buffer[k]
-        buffer[n] = a
-        n += a > cut
-    total = 0.0
-    for k in range(n):
-        total += math.exp(min(max(buffer[k], floor), 0.0))
-    return (math.log(total) if total > 2.0 * K * math.exp(floor) else -np.inf) - log_norm
-
-
-def _count_at_most(values, offset, target, lo, n):  # pragma: no cover - compiled by numba
-    """How many of values[lo:lo + n] (non-decreasing) have values + offset <= target: the count numpy's
-    searchsorted(side="right") takes on the offset rows of _categorical, by bisection (the sums are
-    non-decreasing too)."""
-    first, last = lo, lo + n
-    while first < last:
-        middle = (first + last) // 2
-        if values[middle] + offset <= target:
-            first = middle + 1
-        else:
-            last = middle
-    return first - lo
-
-
-def _logaddexp(x, y):  # pragma: no cover - compiled by numba
-    """numpy's logaddexp, in its order."""
-    if x == y:
-        return x + math.log(2.0)
-    d = x - y
-    if d > 0:
-        return x + math.log1p(math.exp(-d))
-    if d <= 0:
-        return y + math.log1p(math.exp(d))
-    return d
-
-
-# --- the truncated kernel (DnbpModel.kernel = "truncated") -------------------------------------------------------
-def _exp_small(x):  # pragma: no cover - compiled by numba (fastmath)
-    """exp(x) for x in [-50, 0] as (Taylor polynomial of degree 10 at x / 256)^(2^8): branch-free, so the loops
-    that call it vectorize; relative error below 1e-12 on [-50, 0] (the truncated kernel's exponents)."""
-    y = x * 0.00390625
-    p = 1.0 + y * (1.0 + y * (0.5 + y * (1.0 / 6.0 + y * (1.0 / 24.0 + y * (1.0 / 120.0 + y * (
-        1.0 / 720.0 + y * (1.0 / 5040.0 + y * (1.0 / 40320.0 + y * (1.0 / 362880.0 + y / 3628800.0)))))))))
-    for _ in range(8):
-        p = p * p
-    return p
-
-
-def _mixture_point_truncated(x, y, inv, cx, cy, centre_term, log_norm, buffer, limit
-                             ):  # pragma: no cover - compiled by numba (fastmath)
-    """The truncated kernel at one point: the exponents of ``_mixture_point``, then every term more than
-    ``limit`` (= r^2 / 2) below the largest left out (each is < e^(-r^2/2) of it: a component more than r
-    bandwidths farther than the nearest one, for equal weights) and the others summed relative to the largest
-    by ``_exp_small``, in any order (fastmath: the loop vectorizes)."""
-    K = cx.shape[0]
-    s0, s1 = x * inv, y * inv
-    pt = -0.5 * (x * x + y * y) * inv
-    for k in range(K):  # the exponents, then their largest, as two loops: both vectorize (one did not)
-        buffer[k] = (s0 * cx[k] + s1 * cy[k] + pt) + centre_term[k]
-    top = -np.inf
-    for k in range(K):
-        top = max(top, buffer[k])
-    if top <= _EXP_FLOOR:  # every component ~35 bandwidths away or more: density 0, as in the exact kernel
-        return -np.inf
-    total = 0.0
-    for k in range(K):
-        d = buffer[k] - top
-        total += _exp_small(d) if d >= -limit else 0.0
-    return math.log(total) + top - log_norm
-
-
-def _mixture_rows_truncated_source(points, cx, cy, centre_term, inv, log_norm, limit, out
-                                   ):  # pragma: no cover - compiled by numba
-    """The truncated kernel (_mixture_point_truncated) of J mixtures at their own points (J, P, 2): centres'
-    coordinates cx, cy (J, K), centre terms log w_k - 0.5 ||c_k||^2 inv (J, K), inv = 1 / h^2 and log(2 pi h^2)
-    (J,) -> out (J, P)."""
-    J, P = points.shape[0], points.shape[1]
-    for j in _prange(J):
-        buffer = np.empty(cx.shape[1])
-        for p in range(P):
-            out[j, p] = _mixture_point_truncated(points[j, p, 0], points[j, p, 1], inv[j], cx[j], cy[j],
-                                                 centre_term[j], log_norm[j], buffer, limit)
-
-
-def _velocity_row_truncated(positions, prior, denominator, uniform, u, limit, out
-                            ):  # pragma: no cover - compiled by numba (fastmath)
-    """The truncated kernel's v | p draw for the new particles of one receiver: j ~ softmax_j(-||p_i - x_j||^2 /
-    denominator) with the weights below e^-limit of the largest set to 0 (the exact kernel: e^-50), by inverse
-    CDF with u[i] (bisection of the running sum); a uniform pick where the prior is the cold box."""
-    M, Mp = positions.shape[0], prior.shape[0]
-    if uniform:
-        for i in range(M):
-            out[i] = min(int(u[i] * Mp), Mp - 1)
-        return
-    px, py = np.empty(Mp), np.empty(Mp)
-    for j in range(Mp):
-        px[j], py[j] = prior[j, 0], prior[j, 1]
-    scale = 1.0 / denominator
-    w = np.empty(Mp)
-    for i in range(M):
-        x, y = positions[i, 0], positions[i, 1]
-        for j in range(Mp):
-            dx, dy = x - px[j], y - py[j]
-            w[j] = -(dx * dx + dy * dy) * scale
-        top = -np.inf
-        for j in range(Mp):
-            top = max(top, w[j])
-        for j in range(Mp):
-            d = w[j] - top
-            w[j] = _exp_small(d) if d >= -limit else 0.0
-        total = 0.0
-        for j in range(Mp):
-            total += w[j]
-            w[j] = total
-        target = u[i] * total
-        first, last = 0, Mp - 1
-        while first < last:  # the first running sum above the target
-            middle = (first + last) // 2
-            if w[middle] > target:
-                last = middle
-            else:
-                first = middle + 1
-        out[i] = first
-
-
-
-def _belief_weights_source(prior, prior_bandwidth, prior_uniform, centres, log_weights, bandwidth, present, pick,
-                           box, noise, oversampling, eps, box_lo, box_hi, cold_lo, cold_hi, radius, row0, proposals,
-                           log_w):  # pragma: no cover - compiled by numba
-    """Algorithm 2's proposals and fast importance log-weights, one receiver r per iteration (``row0`` + r its row
-    in the whole update, for the flat offsets: a slice of the receivers computes what the whole call computes).
-
-    proposals (R, C, 2) and log_w (R, C) are filled as ``belief_update``'s numpy path fills them: every
-    column's proposal (the invalid ones too, they are drawable by the clipped resampling index), the weights
-    log pi - log q of the valid ones (-inf elsewhere, as in _importance_log_weights).
-    """
-    floor = _EXP_FLOOR
-    R, M = prior.shape[0], prior.shape[1]
-    S, K = centres.shape[1], centres.shape[2]
-    C = proposals.shape[1]
-    log_m_weight = -math.log(M)
-    log_cold = -2.0 * math.log(cold_hi - cold_lo)
-    log_eps = math.log(eps) if eps > 0.0 else -np.inf
-    log_box = log_eps - 2.0 * math.log(box_hi - box_lo)
-    log_keep = math.log1p(-eps)
-    for r in _prange(R):
-        count = 0
-        for s in range(S):
-            if present[r, s]:
-                count += 1
-        per = (oversampling * M + count) // (count + 1)  # ceil(k_is M / (K+1))
-        total = per * (count + 1)
-        slots = np.empty(count + 1, np.int64)
-        n = 1
-        for s in range(S):
-            if present[r, s]:
-                slots[n] = s
-                n += 1
-        # the present messages' component CDFs (_normalized_cdf) and kernel terms; the prior's KDE terms
-        cdf = np.empty((S, K))
-        terms, xs, ys = np.empty((S, K)), np.empty((S, K)), np.empty((S, K))
-        inv_m, norm_m = np.empty(S), np.empty(S)
-        identical = np.zeros(S, np.bool_)
-        for s in range(S):
-            if not present[r, s]:
-                continue
-            top = -np.inf
-            for k in range(K):
-                if log_weights[r, s, k] > top:
-                    top = log_weights[r, s, k]
-            ok = np.isfinite(top)
-            shift = top if ok else 0.0
-            run = 0.0
-            for k in range(K):
-                lw = log_weights[r, s, k]
-                if ok:
-                    w = math.exp(max(lw - shift, floor)) if lw != -np.inf else 0.0
-                else:
-                    w = 1.0
-                run += w
-                cdf[s, k] = run
-            last = cdf[s, K - 1]
-            for k in range(K - 1):
-                cdf[s, k] /= last
-            cdf[s, K - 1] = 1.0
-            b = bandwidth[r, s]
-            inv = 1.0 / (b * b)
-            inv_m[s], norm_m[s] = inv, math.log(2.0 * np.pi * (b * b))
-            for k in range(K):
-                cx, cy = centres[r, s, k, 0], centres[r, s, k, 1]
-                xs[s, k], ys[s, k] = cx, cy
-                terms[s, k] = log_weights[r, s, k] - 0.5 * (cx * cx + cy * cy) * inv
-            same = True
-            for k in range(1, K):
-                same = same and xs[s, k] == xs[s, 0] and ys[s, k] == ys[s, 0] and terms[s, k] == terms[s, 0]
-            identical[s] = same
-        h = prior_bandwidth[r]
-        inv_rho = 1.0 / (h * h)
-        norm_rho = math.log(2.0 * np.pi * (h * h))
-        rho_terms, px, py = np.empty(M), np.empty(M), np.empty(M)
-        for k in range(M):
-            cx, cy = prior[r, k, 0], prior[r, k, 1]
-            px[k], py[k] = cx, cy
-            rho_terms[k] = log_m_weight - 0.5 * (cx * cx + cy * cy) * inv_rho
-        buffer = np.empty(max(M, K))
-        log_count = math.log(count + 1.0)
-        truncated = radius > 0.0
-        limit = 0.5 * radius * radius
-        log_m = np.empty(S)
-        # truncated: a proposal whose log-weight is certainly below the best so far by more than ``prune`` is left
-        # out (-inf) before its remaining messages are evaluated; a mixture's density is at most its peak
-        # sum_k w_k / (2 pi h^2) (``upper``), and q >= (K+1)^-1 times any evaluated term
-        upper = np.zeros(S)
-        upper_total, best, prune = 0.0, -np.inf, limit + math.log(C)
-        if truncated:
-            for s in range(S):
-                if present[r, s]:
-                    peak = -np.inf
-                    for k in range(K):
-                        peak = max(peak, log_weights[r, s, k])
-                    mass = 0.0
-                    for k in range(K):
-                        mass += math.exp(log_weights[r, s, k] - peak)
-                    upper[s] = peak + math.log(mass) - norm_m[s]
-                    upper_total += upper[s]
-        for j in range(C):
-            rank = min(j // per, count)
-            if rank == 0:
-                if prior_uniform[r]:
-                    x = cold_lo + (cold_hi - cold_lo) * box[r, j, 1]
-                    y = cold_lo + (cold_hi - cold_lo) * box[r, j, 2]
-                elif box[r, j, 0] < eps:
-                    x = box_lo + (box_hi - box_lo) * box[r, j, 1]
-                    y = box_lo + (box_hi - box_lo) * box[r, j, 2]
-                else:
-                    i = min(int(pick[r, j] * M), M - 1)
-                    x = prior[r, i, 0] + h * noise[r, j, 0]
-                    y = prior[r, i, 1] + h * noise[r, j, 1]
-            else:
-                s = slots[rank]
-                offset = float((row0 + r) * S + s)  # the flat-offset comparison of the numpy path's searchsorted
-                target = offset + pick[r, j]
-                comp = min(_count_at_most(cdf[s], offset, target, 0, K), K - 1)
-                x = centres[r, s, comp, 0] + bandwidth[r, s] * noise[r, j, 0]
-                y = centres[r, s, comp, 1] + bandwidth[r, s] * noise[r, j, 1]
-            proposals[r, j, 0] = x
-            proposals[r, j, 1] = y
-            if j >= total:
-                log_w[r, j] = -np.inf
-                continue
-            # log rho (prior_logpdf)
-            if prior_uniform[r]:
-                inside = cold_lo <= x <= cold_hi and cold_lo <= y <= cold_hi
-                log_rho = log_cold if inside else -np.inf
-            else:
-                if truncated:
-                    kde = _mixture_point_truncated(x, y, inv_rho, px, py, rho_terms, norm_rho, buffer, limit)
-                else:
-                    kde = _mixture_point(x, y, inv_rho, px, py, rho_terms, norm_rho, buffer, False)
-                inside = box_lo <= x <= box_hi and box_lo <= y <= box_hi
-                log_rho = _logaddexp(log_keep + kde, log_box if inside else -np.inf)
-            # log m_s at the proposal, then the combination of importance_rows
-            target = 0.0
-            top = log_rho
-            partial, rest, pruned = log_rho, upper_total, False
-            for s in range(S):
-                if present[r, s]:
-                    if truncated:
-                        if partial == -np.inf or partial + rest - top + log_count < best - prune:
-                            pruned = True  # pi = 0, or the weight is certainly negligible
-                            break
-                        if identical[s]:  # a GPS fix: K equal terms, their sum K e^a (the exact kernel adds K times)
-                            a = (x * inv_m[s] * xs[s, 0] + y * inv_m[s] * ys[s, 0] - 0.5 * (x * x + y * y) * inv_m[s]
-                                 ) + terms[s, 0]
-                            value = a + math.log(K) - norm_m[s] if a > _EXP_FLOOR else -np.inf
-                        else:
-                            value = _mixture_point_truncated(x, y, inv_m[s], xs[s], ys[s], terms[s], norm_m[s],
-                                                             buffer, limit)
-                        partial += value
-                        rest -= upper[s]
-                    else:
-                        value = _mixture_point(x, y, inv_m[s], xs[s], ys[s], terms[s], norm_m[s], buffer,
-                                               identical[s])
-                    target += value
-                else:
-                    value = -np.inf
-                log_m[s] = value
-                if value > top:
-                    top = value
-            if pruned:
-                log_w[r, j] = -np.inf
-                continue
-            target += log_rho
-            if not np.isfinite(top):
-                top = 0.0
-            q = math.exp(max(log_rho - top, floor)) if log_rho != -np.inf else 0.0
-            for s in range(S):
-                if log_m[s] != -np.inf:
-                    q += math.exp(max(log_m[s] - top, floor))
-            log_q = (math.log(q) if q > 0.0 else -np.inf) + top - log_count
-            fine = np.isfinite(log_q) and np.isfinite(target)
-            log_w[r, j] = target - log_q if fine else -np.inf
-            if truncated and log_w[r, j] > best:
-                best = log_w[r, j]
-
-
-def _velocity_row(positions, prior, denominator, uniform, u, r, out):  # pragma: no cover - compiled by numba
-    """``velocity_rows`` for the new particles of one receiver r (flat row offsets r * M + i)."""
-    M, Mp = positions.shape[0], prior.shape[0]
-    negligible = _NEGLIGIBLE
-    w = np.empty(Mp)
-    for i in range(M):
-        top = -np.inf
-        for j in range(Mp):
-            if uniform:
-                w[j] = 0.0
-            else:
-                dx = positions[i, 0] - prior[j, 0]
-                dy = positions[i, 1] - prior[j, 1]
-                w[j] = -(dx * dx + dy * dy) / denominator
-            if w[j] > top:
-                top = w[j]
-        ok = np.isfinite(top)
-        total = 0.0
-        for j in range(Mp):
-            if ok:
-                value = math.exp(w[j] - top) if w[j] - top > -negligible else 0.0
-            else:
-                value = 1.0
-            total += value
-            w[j] = total
-        offset = float(r * M + i)
-        target = u[i] + offset
-        first, last = 0, Mp  # bisection of the CDF w[j] / total (1 at the end), non-decreasing
-        while first < last:
-            middle = (first + last) // 2
-            c = 1.0 if middle == Mp - 1 else w[middle] / total
-            if c + offset <= target:
-                first = middle + 1
-            else:
-                last = middle
-        out[i] = min(first, Mp - 1)
-
-
-def _belief_resample_source(prior, prior_bandwidth, prior_uniform, proposals, log_w, ok, resample, jitter, velocity,
-                            radius, row0, out):  # pragma: no cover - compiled by numba
-    """Algorithm 2's normalization, systematic resampling, jitter and velocity completion, one receiver per
-    iteration (the numpy path's order: pairwise weight sum, sequential CDF, flat row offsets r of _categorical)."""
-    R, d = prior.shape[0], prior.shape[2]
-    C = proposals.shape[1]
-    M = jitter.shape[1]
-    for r in _prange(R):
-        if not ok[r]:  # every weight vanished: the belief stays the prior
-            for i in range(M):
-                for e in range(d):
-                    out[r, i, e] = prior[r, i, e]
-            continue
-        weights = np.empty(C)
-        top = -np.inf
-        for j in range(C):
-            if log_w[r, j] > top:
-                top = log_w[r, j]
-        for j in range(C):
-            weights[j] = math.exp(log_w[r, j] - top)
-        norm = _numpy_sum(weights, C)
-        for j in range(C):
-            weights[j] /= norm
-        cdf = np.empty(C)
-        run = 0.0
-        for j in range(C):
-            run += weights[j]
-            cdf[j] = run
-        last = cdf[C - 1]
-        for j in range(C - 1):
-            cdf[j] /= last
-        cdf[C - 1] = 1.0
-        # h_rot of the weighted proposals (rule_of_thumb_bandwidth)
-        mx, my, ss = 0.0, 0.0, 0.0
-        for j in range(C):
-            mx += weights[j] * proposals[r, j, 0]
-            my += weights[j] * proposals[r, j, 1]
-            ss += weights[j] * weights[j]
-        var = 0.0
-        for j in range(C):
-            dx = proposals[r, j, 0] - mx
-            dy = proposals[r, j, 1] - my
-            var += weights[j] * (dx * dx) + weights[j] * (dy * dy)
-        var /= 2.0
-        h_rot = math.sqrt(max(var, 0.0)) * (1.0 / ss) ** (-1.0 / 6.0)
-        positions = np.empty((M, 2))
-        offset = float(row0 + r)
-        idx = 0  # the targets do not decrease with i: the count only grows (a merge of the two sorted lists)
-        for i in range(M):
-            target = (resample[r] + i) / M + offset
-            while idx < C and cdf[idx] + offset <= target:
-                idx += 1
-            pick = min(idx, C - 1)
-            positions[i, 0] = proposals[r, pick, 0] + h_rot * jitter[r, i, 0]
-            positions[i, 1] = proposals[r, pick, 1] + h_rot * jitter[r, i, 1]
-        index = np.empty(M, np.int64)
-        if radius > 0.0:
-            _velocity_row_truncated(positions, prior[r], 2.0 * (prior_bandwidth[r] * prior_bandwidth[r]),
-                                    prior_uniform[r], velocity[r], 0.5 * radius * radius, index)
-        else:
-            _velocity_row(positions, prior[r], 2.0 * (prior_bandwidth[r] * prior_bandwidth[r]), prior_uniform[r],
-                          velocity[r], row0 + r, index)
-        for i in range(M):
-            out[r, i, 0] = positions[i, 0]
-            out[r, i, 1] = positions[i, 1]
-            for e in range(2, d):
-                out[r, i, e] = prior[r, index[i], e]
-
-
-def _message_rows_source(points, distance, weights, permutation, offset, range_noise, range_std, centres, var,
-                         square_sum):  # pragma: no cover - compiled by numba
-    """Algorithm 1 step 2 for E messages in ``sample_messages``' numpy arithmetic, each row from its own inputs:
-    centres c_i = p_i + (d + sigma_d nu_i) [cos theta_i, sin theta_i], theta_i = 2 pi (pi_i + U_i) / M (cos and
-    sin are libm's in both), and the sums of h_rot (rule_of_thumb_bandwidth) in einsum's orders: the weighted
-    mean summed over i, the variance as sum_i w_i ((x_i - mx)^2 + (y_i - my)^2) (einsum's order for "p,pd->"),
-    sum_i w_i^2 in numpy's pairwise order (_numpy_sum). The exp of the weights and the power of the ESS stay
-    numpy's (its exp and pow round differently from libm's)."""
-    E, M = points.shape[0], points.shape[1]
-    two_pi = 2.0 * np.pi
-    squares = np.empty(M)
-    for e in range(E):
-        d = distance[e]
-        for i in range(M):
-            theta = two_pi * (permutation[e, i] + offset[e, i]) / M
-            radius = d + range_std[e] * range_noise[e, i]
-            centres[e, i, 0] = points[e, i, 0] + radius * math.cos(theta)
-            centres[e, i, 1] = points[e, i, 1] + radius * math.sin(theta)
-        mx, my = 0.0, 0.0
-        for i in range(M):
-            mx += weights[e, i] * points[e, i, 0]
-        for i in range(M):
-            my += weights[e, i] * points[e, i, 1]
-        total = 0.0
-        for i in range(M):
-            dx = points[e, i, 0] - mx
-            dy = points[e, i, 1] - my
-            total = total + weights[e, i] * (dx * dx + dy * dy)
-            squares[i] = weights[e, i] * weights[e, i]
-        var[e] = total / 2.0
-        square_sum[e] = _numpy_sum(squares, M)
-
-
-_FUSED: dict | None = None
-# The fused kernels' threaded form (over receivers; the truncated correction weights' over messages) is off:
-# libgomp's waiting threads spin, so it loses beside a busy process what it gains on an idle machine
-# (docs/performance.md, "dNBP kernels"); OMP_WAIT_POLICY=passive would help but is process-wide (torch's OpenMP
-# too), so it is not set here. It gives the same bits (tests/estimators/test_dnbp_fast.py, test_dnbp_truncated.py)
-# for a machine where it pays.
-_FUSED_THREADS = False
-# kernel entries (proposals x mixtures x components, points x components) of one call from which the threaded
-# form runs when _FUSED_THREADS is on
-_FUSED_THREAD_ELEMENTS = 8 * _PARALLEL_ELEMENTS
-
-
-def _fused_kernels() -> dict | None:
-    """{name: (serial, parallel)} of the fused belief update (numba, cached on disk), None without numba."""
-    global _FUSED, _prange, _block_sum, _numpy_sum, _mixture_point, _count_at_most, _logaddexp, _velocity_row
-    global _exp_small, _mixture_point_truncated, _velocity_row_truncated
-    if _FUSED is not None:
-        return _FUSED or None
-    try:
-        import numba
-    except ImportError:  # pragma: no cover - numba is a dependency; the numpy path stays for other installs
-        _FUSED = {}
-        return None
-    options = {"cache": True, "nogil": True, "boundscheck": False}
-    _prange = numba.prange
-    _block_sum = numba.njit(**options)(_block_sum)
-    _numpy_sum = numba.njit(**options)(_numpy_sum)
-    _mixture_point = numba.njit(**options)(_mixture_point)
-    _count_at_most = numba.njit(**options)(_count_at_most)
-    _logaddexp = numba.njit(**options)(_logaddexp)
-    _velocity_row = numba.njit(**options)(_velocity_row)
-    # the truncated kernel only (the exact one is compiled without fastmath: it keeps the numpy path's bits)
-    _exp_small = numba.njit(fastmath=True, **options)(_exp_small)
-    _mixture_point_truncated = numba.njit(fastmath=True, **options)(_mixture_point_truncated)
-    _velocity_row_truncated = numba.njit(fastmath=True, **options)(_velocity_row_truncated)
-    # the threaded form is a renamed copy, with its own on-disk cache entry (see _renamed)
-    _FUSED = {name: (numba.njit(**options)(fn), numba.njit(parallel=True, **options)(_renamed(fn, "_threaded")))
-              for name, fn in (("weights", _belief_weights_source), ("resample", _belief_resample_source))}
-    _FUSED["chunks"] = numba.parallel_chunksize
-    _FUSED["messages"] = numba.njit(**options)(_message_rows_source)
-    _FUSED["mixture_truncated"] = (numba.njit(**options)(_mixture_rows_truncated_source),
-                                   numba.njit(parallel=True, **options)(_renamed(_mixture_rows_truncated_source,
-                                                                                 "_threaded")))
-    return _FUSED
 
 
 # --- Algorithm 1 -------------------------------------------------------------------------------------------------
@@ -1219,13 +526,13 @@ def sample_messages(model: DnbpModel, sender_points: np.ndarray, distance: np.nd
     message (None: ``model.range_std``, one float). Returns centres (E, M, 2),
     log-weights (E, M), bandwidths (E,). ``compiled`` (default, where numba
     is installed): the centres and h_rot's sums by one compiled pass
-    (``_message_rows_source``), the same floats as the numpy path (False).
+    (``dnbp_kernels.message_rows_source``), the same floats as the numpy path (False).
     """
     E, M = sender_points.shape[:2]
     range_std = per_copy("range_std", model.range_std if range_std is None else range_std, E)
     if correction_log_weights is None:
         correction_log_weights = np.full((E, M), -np.log(M))
-    kernels = _fused_kernels() if compiled else None
+    kernels = dnbp_kernels.fused_kernels() if compiled else None
     if kernels is not None and E:
         centres, var, square_sum = np.empty((E, M, 2)), np.empty(E), np.empty(E)
         kernels["messages"](np.ascontiguousarray(sender_points, float), np.ascontiguousarray(distance, float),
@@ -1264,7 +571,7 @@ def correction_weights(sender_points: np.ndarray, reverse_centres: np.ndarray, r
 
     ``truncation`` r > 0: m_st by the truncated kernel (the module's Kernels note) where numba is installed;
     0 (default): the fast kernel of ``mixture_logpdf``."""
-    kernels = _fused_kernels() if truncation > 0.0 else None
+    kernels = dnbp_kernels.fused_kernels() if truncation > 0.0 else None
     if kernels is not None:
         centres = np.asarray(reverse_centres, float)
         h = np.asarray(reverse_bandwidth, float)
@@ -1274,13 +581,13 @@ def correction_weights(sender_points: np.ndarray, reverse_centres: np.ndarray, r
         log_m = np.empty(np.shape(sender_points)[:2])
         points = np.ascontiguousarray(sender_points, float)
         elements = points.shape[0] * points.shape[1] * cx.shape[1]
-        which = 1 if _FUSED_THREADS and elements >= _FUSED_THREAD_ELEMENTS else 0
+        which = 1 if dnbp_kernels.FUSED_THREADS and elements >= dnbp_kernels.FUSED_THREAD_ELEMENTS else 0
         kernel, log_norm, limit = kernels["mixture_truncated"][which], np.log(2.0 * np.pi * h**2), 0.5 * truncation**2
 
         def rows(a: int, b: int) -> None:  # messages a..b-1 (each row reads only its own inputs)
             kernel(points[a:b], cx[a:b], cy[a:b], centre_term[a:b], inv[a:b], log_norm[a:b], limit, log_m[a:b])
 
-        _split_rows(rows, len(points), 1 if which else _split_pieces(len(points), elements))
+        dnbp_kernels.split_rows(rows, len(points), 1 if which else dnbp_kernels.split_pieces(len(points), elements))
     else:
         log_m = mixture_logpdf(sender_points, reverse_centres, reverse_log_weights, reverse_bandwidth, exact=False)
     log_w = -log_m
@@ -1293,7 +600,7 @@ def correction_weights(sender_points: np.ndarray, reverse_centres: np.ndarray, r
     # every weight finite: _logsumexp's arithmetic without its guards for infinities
     top = np.max(log_w, axis=-1, keepdims=True)
     shifted = np.subtract(log_w, top)
-    np.maximum(shifted, _EXP_FLOOR, out=shifted)
+    np.maximum(shifted, EXP_FLOOR, out=shifted)
     np.exp(shifted, out=shifted)
     total = np.log(np.sum(shifted, axis=-1))
     total += top[:, 0]
@@ -1326,7 +633,7 @@ def belief_update(model: DnbpModel, prior: np.ndarray, prior_bandwidth: np.ndarr
     if np.any(total > model.proposal_capacity):
         raise ValueError(f"too many incoming messages for the proposal capacity {model.proposal_capacity}")
     C = int(total.max())  # the draws have the fixed capacity; only the first C columns are used
-    kernels = _fused_kernels() if compiled else None
+    kernels = dnbp_kernels.fused_kernels() if compiled else None
     if kernels is not None and R:
         return _belief_update_fused(kernels, model, prior, prior_bandwidth, prior_uniform, centres, log_weights,
                                     bandwidth, present, draws, K_r, total, C)
@@ -1397,10 +704,11 @@ def _belief_update_fused(kernels, model, prior, prior_bandwidth, prior_uniform, 
     the exact log-domain recomputation of a receiver whose every fast weight vanished in between."""
     R, M = prior.shape[:2]
     elements = int(np.dot(total, K_r + 1)) * M
-    # threads (off by default, see _FUSED_THREADS) over receivers, taken one at a time (dynamic chunks of 1)
-    which = 1 if _FUSED_THREADS and R >= 4 and elements >= _FUSED_THREAD_ELEMENTS else 0
-    # or slices of the receivers on the worker threads (_SPLIT_WORKERS; each slice's row offset passed: the same bits)
-    pieces = _split_pieces(R, elements) if not which else 1
+    # threads (off by default, see dnbp_kernels.FUSED_THREADS) over receivers, taken one at a time (dynamic chunks of 1)
+    which = 1 if dnbp_kernels.FUSED_THREADS and R >= 4 and elements >= dnbp_kernels.FUSED_THREAD_ELEMENTS else 0
+    # or slices of the receivers on the worker threads (dnbp_kernels.SPLIT_WORKERS; each slice's row offset
+    # passed: the same bits)
+    pieces = dnbp_kernels.split_pieces(R, elements) if not which else 1
     prior = np.ascontiguousarray(prior, float)
     prior_bandwidth = np.ascontiguousarray(prior_bandwidth, float)
     prior_uniform = np.ascontiguousarray(prior_uniform, bool)
@@ -1425,7 +733,7 @@ def _belief_update_fused(kernels, model, prior, prior_bandwidth, prior_uniform, 
                 present[a:b], pick[a:b], box[a:b], noise[a:b], *constants, a, proposals[a:b], log_w[a:b])
 
     with kernels["chunks"](1) if which else contextlib.nullcontext():
-        _split_rows(weights_rows, R, pieces)
+        dnbp_kernels.split_rows(weights_rows, R, pieces)
     ok = np.isfinite(log_w).any(axis=1)
     if not ok.all():
         redo = np.flatnonzero(~ok)
@@ -1445,59 +753,8 @@ def _belief_update_fused(kernels, model, prior, prior_bandwidth, prior_uniform, 
                         resample[a:b], jitter[a:b], velocity[a:b], radius, a, out[a:b])
 
     with kernels["chunks"](1) if which else contextlib.nullcontext():
-        _split_rows(resample_rows, R, pieces)
+        dnbp_kernels.split_rows(resample_rows, R, pieces)
     return out, ok
-
-
-# Slices of a fused kernel's rows run on Python threads (the kernels release the GIL): a thread waiting for work
-# sleeps (unlike libgomp's spinning threads, see _FUSED_THREADS). _SPLIT_WORKERS threads (at most the cores and
-# numba's thread count; 1: no split), the calling one included; a call is split from _SPLIT_RECEIVERS receivers
-# and _SPLIT_ELEMENTS kernel entries on, into _SPLIT_PER_WORKER slices per worker (one: more slices mean more
-# wake-ups than balance; the split's gain and loss are in docs/performance.md, "dNBP kernels").
-_SPLIT_WORKERS: int | None = None
-_SPLIT_RECEIVERS = 4
-_SPLIT_ELEMENTS = 1 << 20
-_SPLIT_PER_WORKER = 1
-_POOL = None
-
-
-def _split_workers() -> int:
-    global _SPLIT_WORKERS
-    if _SPLIT_WORKERS is None:
-        import os
-
-        try:
-            import numba
-
-            threads = int(numba.config.NUMBA_NUM_THREADS)
-        except ImportError:  # pragma: no cover - numba is a dependency
-            threads = 1
-        _SPLIT_WORKERS = max(1, min(os.cpu_count() or 1, threads))
-    return _SPLIT_WORKERS
-
-
-def _split_pieces(rows: int, elements: int) -> int:
-    workers = _split_workers()
-    if workers < 2 or rows < _SPLIT_RECEIVERS or elements < _SPLIT_ELEMENTS:
-        return 1
-    return min(rows, workers * _SPLIT_PER_WORKER)
-
-
-def _split_rows(call: Callable[[int, int], None], rows: int, pieces: int) -> None:
-    """call(a, b) for ``pieces`` consecutive slices [a, b) of range(rows): on the worker threads when pieces > 1."""
-    if pieces <= 1:
-        call(0, rows)
-        return
-    global _POOL
-    if _POOL is None:
-        from concurrent.futures import ThreadPoolExecutor
-
-        _POOL = ThreadPoolExecutor(max_workers=_split_workers() - 1, thread_name_prefix="dnbp")
-    edges = [rows * i // pieces for i in range(pieces + 1)]
-    futures = [_POOL.submit(call, a, b) for a, b in zip(edges[:-2], edges[1:-1], strict=True) if b > a]
-    call(edges[-2], rows)  # the last slice on this thread
-    for future in futures:
-        future.result()
 
 
 def _velocity_index(positions: np.ndarray, prior: np.ndarray, prior_bandwidth: np.ndarray, prior_uniform: np.ndarray,
@@ -1506,7 +763,7 @@ def _velocity_index(positions: np.ndarray, prior: np.ndarray, prior_bandwidth: n
     by inverse CDF with the uniforms u (R, M); a uniform pick where the prior is the cold box."""
     R, M = positions.shape[:2]
     denominator = 2.0 * prior_bandwidth**2
-    kernel = _kernel("velocity_rows", R * M * prior.shape[1]) if compiled else None
+    kernel = dnbp_kernels.row_kernel("velocity_rows", R * M * prior.shape[1]) if compiled else None
     if kernel is not None and R:
         out = np.empty((R, M), dtype=np.int64)
         kernel(np.ascontiguousarray(positions), np.ascontiguousarray(prior[..., :2]), denominator,
@@ -1530,7 +787,7 @@ def _importance_log_weights(model, proposals, prior, prior_bandwidth, prior_unif
     if len(r_idx):
         log_m[r_idx, s_idx] = mixture_logpdf(proposals[r_idx], centres[r_idx, s_idx], log_weights[r_idx, s_idx],
                                              bandwidth[r_idx, s_idx], exact)
-    kernel = _kernel("importance_rows", R * S * C) if compiled and not exact else None
+    kernel = dnbp_kernels.row_kernel("importance_rows", R * S * C) if compiled and not exact else None
     if kernel is not None and R * C:
         out = np.empty((R, C))
         kernel(log_rho, log_m, present, valid, np.log(K_r + 1.0), out)
@@ -1720,7 +977,7 @@ def step(model: DnbpModel, state: DnbpState, gps_normal: np.ndarray, gps_fix: np
     pool.centres[gps_entries] = np.nan_to_num(np.asarray(gps_fix, float).reshape(B * N, 2)[gps_rows])[:, None, :]
     pool.bandwidth[gps_entries] = per_copy("gps_std", model.gps_std, B)[gps_rows // N]
     slot_entry[gps_rows, N] = gps_entries
-    kernels = _fused_kernels()
+    kernels = dnbp_kernels.fused_kernels()
 
     def update(b_idx: np.ndarray, rows: np.ndarray) -> None:
         draws = _draw_per_copy(rngs, b_idx, B, draw_belief, model)

@@ -68,3 +68,17 @@ def test_primitives_import_only_the_checks_each_other_and_the_estimators():
     found = offenders(os.path.join("coloc_env", "primitives"),
                       lambda name: under(name, *first_party) and not under(name, *allowed))
     assert not found, "\n".join(found)
+
+
+def test_no_module_rebinds_its_globals():
+    """Compiled kernels take their compiled helpers from a namespace of their own
+    (``estimators.compiled.in_namespace``), and lazily built state is cached by ``functools.cache``: no
+    ``global`` statement rebinds a module's names after import."""
+    found = []
+    for package in ("estimators", "coloc_env", "agents", "train"):
+        for path in sorted(glob.glob(os.path.join(REPO_ROOT, package, "**", "*.py"), recursive=True)):
+            with open(path, encoding="utf-8") as handle:
+                tree = ast.parse(handle.read())
+            found += [f"{os.path.relpath(path, REPO_ROOT)}:{node.lineno} global {', '.join(node.names)}"
+                      for node in ast.walk(tree) if isinstance(node, ast.Global)]
+    assert not found, "\n".join(found)

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import estimators.dnbp as dn
+import estimators.dnbp_kernels as dk
 
 pytest.importorskip("numba")
 
@@ -72,9 +73,9 @@ def test_compiled_velocity_draws_equal_the_numpy_draws():
 def test_threads_and_batches_do_not_change_the_compiled_results(monkeypatch):
     rng = np.random.default_rng(2)
     points, centres, log_w, h = _mixtures(rng, J=12, P=90, K=60)
-    monkeypatch.setattr(dn, "_PARALLEL_ELEMENTS", 1)
+    monkeypatch.setattr(dk, "PARALLEL_ELEMENTS", 1)
     threaded = dn.mixture_logpdf(points, centres, log_w, h, exact=False)
-    monkeypatch.setattr(dn, "_PARALLEL_ELEMENTS", 1 << 62)
+    monkeypatch.setattr(dk, "PARALLEL_ELEMENTS", 1 << 62)
     serial = dn.mixture_logpdf(points, centres, log_w, h, exact=False)
     alone = np.concatenate([dn.mixture_logpdf(points[j:j + 1], centres[j:j + 1], log_w[j:j + 1], h[j:j + 1],
                                               exact=False) for j in range(len(h))])
@@ -98,8 +99,8 @@ def _episode(steps=4):
 def test_a_seeded_env_episode_is_the_same_with_the_numpy_kernels(monkeypatch):
     """The kernels' rounding differences (~1e-10 in a log density) do not move a seeded episode."""
     compiled = _episode()
-    monkeypatch.setattr(dn, "_KERNELS", {})
-    monkeypatch.setattr(dn, "_FUSED", {})
+    monkeypatch.setattr(dk, "compiled_kernels", lambda: None)
+    monkeypatch.setattr(dk, "fused_kernels", lambda: None)
     numpy = _episode()
     np.testing.assert_allclose(compiled, numpy, rtol=1e-9)
 
@@ -187,10 +188,10 @@ def test_fused_belief_update_recomputes_vanished_weights_in_the_log_domain(monke
 
 def test_fused_belief_update_depends_neither_on_threads_nor_on_the_batch(monkeypatch):
     model, args = _receivers(np.random.default_rng(4), R=12)
-    monkeypatch.setattr(dn, "_FUSED_THREADS", True)
-    monkeypatch.setattr(dn, "_PARALLEL_ELEMENTS", 1)
+    monkeypatch.setattr(dk, "FUSED_THREADS", True)
+    monkeypatch.setattr(dk, "PARALLEL_ELEMENTS", 1)
     threaded, _ = dn.belief_update(model, *args)
-    monkeypatch.setattr(dn, "_FUSED_THREADS", False)
+    monkeypatch.setattr(dk, "FUSED_THREADS", False)
     serial, _ = dn.belief_update(model, *args)
     np.testing.assert_array_equal(threaded, serial)
     # a receiver alone: the draws' flat offsets differ (row 0 instead of r), which moves nothing here
@@ -202,9 +203,8 @@ def test_fused_belief_update_depends_neither_on_threads_nor_on_the_batch(monkeyp
 
 @pytest.mark.parametrize("n", [1, 7, 8, 9, 127, 128, 129, 264, 1000, 5000])
 def test_compiled_sum_is_numpys_pairwise_sum(n):
-    dn._fused_kernels()
     values = np.exp(np.random.default_rng(n).normal(size=n) * 4)
-    assert dn._numpy_sum(values, n) == values.sum()
+    assert dk.compiled_helper("numpy_sum")(values, n) == values.sum()
 
 
 def test_fused_belief_update_split_over_worker_threads_gives_the_same_bits(monkeypatch):
@@ -213,13 +213,13 @@ def test_fused_belief_update_split_over_worker_threads_gives_the_same_bits(monke
     for kernel, far in (("exact", False), ("truncated", False), ("exact", True)):
         model, args = _receivers(np.random.default_rng(6), R=11, far=far)
         model = dataclasses.replace(model, kernel=kernel)
-        monkeypatch.setattr(dn, "_SPLIT_WORKERS", 1)
+        monkeypatch.setattr(dk, "SPLIT_WORKERS", 1)
         serial, ok_serial = dn.belief_update(model, *args)
-        monkeypatch.setattr(dn, "_SPLIT_WORKERS", 2)
-        monkeypatch.setattr(dn, "_SPLIT_ELEMENTS", 0)
+        monkeypatch.setattr(dk, "SPLIT_WORKERS", 2)
+        monkeypatch.setattr(dk, "SPLIT_ELEMENTS", 0)
         for per_worker in (1, 3, 11):
-            monkeypatch.setattr(dn, "_SPLIT_PER_WORKER", per_worker)
-            assert dn._split_pieces(11, 1) == min(11, 2 * per_worker)
+            monkeypatch.setattr(dk, "SPLIT_PER_WORKER", per_worker)
+            assert dk.split_pieces(11, 1) == min(11, 2 * per_worker)
             split, ok_split = dn.belief_update(model, *args)
             np.testing.assert_array_equal(split, serial)
             np.testing.assert_array_equal(ok_split, ok_serial)
@@ -258,7 +258,7 @@ def test_correction_weights_normalize_as_logsumexp_does():
         if truncation:
             log_m, inv = np.empty((E, M)), 1.0 / h**2  # the kernel's inputs as correction_weights forms them
             cx, cy = np.ascontiguousarray(centres[..., 0]), np.ascontiguousarray(centres[..., 1])
-            dn._fused_kernels()["mixture_truncated"][0](
+            dk.fused_kernels()["mixture_truncated"][0](
                 senders, cx, cy, log_w - 0.5 * (cx * cx + cy * cy) * inv[:, None], inv, np.log(2.0 * np.pi * h**2),
                 0.5 * truncation**2, log_m)
         else:

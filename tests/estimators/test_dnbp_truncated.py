@@ -9,6 +9,7 @@ import pytest
 
 import coloc_env
 import estimators.dnbp as dn
+import estimators.dnbp_kernels as dk
 
 pytest.importorskip("numba")
 
@@ -36,7 +37,7 @@ def _weights(model, args, radius):
     proposals, log_w = np.empty((prior.shape[0], C, 2)), np.empty((prior.shape[0], C))
     lo, hi = model.defensive_box
     lo_c, hi_c = model.cold_box
-    dn._fused_kernels()["weights"][0](prior, prior_bandwidth, prior_uniform, centres, log_weights, bandwidth, present,
+    dk.fused_kernels()["weights"][0](prior, prior_bandwidth, prior_uniform, centres, log_weights, bandwidth, present,
                                       draws["pick"], draws["box"], draws["noise"], model.oversampling,
                                       model.defensive_weight, lo, hi, lo_c, hi_c, radius, 0, proposals, log_w)
     return proposals, log_w
@@ -64,9 +65,8 @@ def test_truncated_importance_weights_equal_the_exact_ones_within_the_bound():
 
 
 def test_exp_small_is_exp_to_1e12_on_its_range():
-    dn._fused_kernels()
     x = np.linspace(-50.0, 0.0, 2001)
-    approx = np.array([dn._exp_small(v) for v in x])
+    approx = np.array([dk.compiled_helper("exp_small")(v) for v in x])
     np.testing.assert_allclose(approx, np.exp(x), rtol=1e-12, atol=0)
 
 
@@ -137,14 +137,14 @@ def test_truncated_correction_weights_depend_neither_on_threads_nor_on_the_batch
     centres = 500.0 + rng.normal(size=(E, M, 2)) * 40.0
     log_w = np.log(rng.dirichlet(np.ones(M), size=E))
     h = rng.uniform(1.0, 8.0, size=E)
-    monkeypatch.setattr(dn, "_FUSED_THREADS", True)
-    monkeypatch.setattr(dn, "_FUSED_THREAD_ELEMENTS", 1)
+    monkeypatch.setattr(dk, "FUSED_THREADS", True)
+    monkeypatch.setattr(dk, "FUSED_THREAD_ELEMENTS", 1)
     threaded = dn.correction_weights(senders, centres, log_w, h, truncation=6.0)
-    monkeypatch.setattr(dn, "_FUSED_THREADS", False)
+    monkeypatch.setattr(dk, "FUSED_THREADS", False)
     serial = dn.correction_weights(senders, centres, log_w, h, truncation=6.0)
     np.testing.assert_allclose(threaded, serial, rtol=1e-14, atol=0)
-    monkeypatch.setattr(dn, "_SPLIT_WORKERS", 2)
-    monkeypatch.setattr(dn, "_SPLIT_ELEMENTS", 0)
+    monkeypatch.setattr(dk, "SPLIT_WORKERS", 2)
+    monkeypatch.setattr(dk, "SPLIT_ELEMENTS", 0)
     split = dn.correction_weights(senders, centres, log_w, h, truncation=6.0)  # slices on the worker threads
     np.testing.assert_array_equal(split, serial)
     for e in (0, 3, 6):
