@@ -288,6 +288,12 @@ def check_range(name: str, value: Any, low: float | None, high: float, integer: 
         raise BadInput(f"{name} must be in {interval}, got {value!r}")
 
 
+def check_distance(name: str, value, allow_inf: bool = True) -> None:
+    """A positive distance in metres, (0, inf] (``inf`` meaning unlimited; (0, 1e12] without ``allow_inf``);
+    else ``ValueError`` naming ``name``."""
+    check_range(name, value, 0.0, np.inf if allow_inf else 1e12, low_open=True)
+
+
 def check_step_windows(name: str, value: Any, windows: np.ndarray, high: int = 10_000_000) -> None:
     """[start, end) windows of integer steps: ``0 <= start < end <= high``, or ``ValueError`` naming ``name``."""
     kind = np.asarray(value).dtype.kind

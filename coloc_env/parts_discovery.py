@@ -12,7 +12,8 @@ import pkgutil
 
 
 def import_parts(package: str, path, preferred: tuple[str, ...] = ()) -> None:
-    names = [m.name for m in pkgutil.iter_modules(path) if not m.name.startswith("_") and m.name != "base"]
+    names = [m.name for m in pkgutil.iter_modules(path)
+             if not m.ispkg and not m.name.startswith("_") and m.name != "base"]  # blocks/: no parts
     rank = {name: i for i, name in enumerate(preferred)}
     for name in sorted(names, key=lambda n: (rank.get(n, len(rank)), n)):
         importlib.import_module(f"{package}.{name}")

@@ -6,7 +6,7 @@
 
 x(k+1) = F x(k) + G a_hat(k) + w, F = [[I2, dt I2], [0, I2]], G = [[dt^2/2 I2], [dt I2]],
 w ~ N(0, Q), Q = accel_noise_var G G^T: an estimator that only knows the reading
-a_hat sees exactly this noise (``coloc_env.primitives.cv_uav.ConstantVelocityUAVs``).
+a_hat sees exactly this noise (``coloc_env.worlds.blocks.cv_uav.ConstantVelocityUAVs``).
 The model is linear, so ``estimators.models.predict_joint`` is exact on it.
 """
 

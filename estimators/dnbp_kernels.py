@@ -633,11 +633,12 @@ def belief_resample_source(prior, prior_bandwidth, prior_uniform, proposals, log
 def message_rows_source(points, distance, weights, permutation, offset, range_noise, range_std, centres, var,
                          square_sum):  # pragma: no cover - compiled by numba
     """Algorithm 1 step 2 for E messages in ``sample_messages``' numpy arithmetic, each row from its own inputs:
-    centres c_i = p_i + (d + sigma_d nu_i) [cos theta_i, sin theta_i], theta_i = 2 pi (pi_i + U_i) / M (cos and
-    sin are libm's in both), and the sums of h_rot (rule_of_thumb_bandwidth) in einsum's orders: the weighted
-    mean summed over i, the variance as sum_i w_i ((x_i - mx)^2 + (y_i - my)^2) (einsum's order for "p,pd->"),
-    sum_i w_i^2 in numpy's pairwise order (numpy_sum). The exp of the weights and the power of the ESS stay
-    numpy's (its exp and pow round differently from libm's)."""
+    centres c_i = p_i + (d + sigma_d nu_i) [cos theta_i, sin theta_i] (sigma_d = ``range_std``, the range noise's
+    standard deviation, m), theta_i = 2 pi (pi_i + U_i) / M (cos and sin are libm's in both), and the sums of
+    h_rot (rule_of_thumb_bandwidth) in einsum's orders: the weighted mean summed over i, the variance as
+    sum_i w_i ((x_i - mx)^2 + (y_i - my)^2) (einsum's order for "p,pd->"), sum_i w_i^2 in numpy's pairwise
+    order (numpy_sum). The exp of the weights and the power of the ESS stay numpy's (its exp and pow round
+    differently from libm's)."""
     E, M = points.shape[0], points.shape[1]
     two_pi = 2.0 * np.pi
     squares = np.empty(M)

@@ -17,7 +17,7 @@ Measurement (§4) [reconstructed]: what neighbour j measures of the target, the 
 ``P_T - PL(d0) - 10 n log10(d / d0) - eps`` (dBm) and the AOA ``atan2(p - p_j) + n_theta``
 (rad), with ``(eps, n_theta) ~ N(0, diag(s_db^2, s_th^2))`` in LOS and
 ``N((mu_db, mu_th), diag(s_db^2 + s_b,db^2, s_th^2 + s_b,th^2))`` in NLOS, as
-``coloc_env.primitives.radio.RssAoaSensor`` draws them; the parameters are an
+``coloc_env.worlds.blocks.radio.RssAoaSensor`` draws them; the parameters are an
 ``estimators.afge.SignalModel``.
 """
 

@@ -1,6 +1,6 @@
 """Imports flow down the layers (docs/architecture.md): estimators know nothing of the env, the env nothing of
-the policies or the command line, the parts nothing of the presets, the primitives only the checks, each
-other and the estimators. Every import statement counts, also one inside a function."""
+the policies or the command line, the parts nothing of the presets, the world and network building blocks only
+the checks, their own kind and the estimators. Every import statement counts, also one inside a function."""
 
 from __future__ import annotations
 
@@ -55,19 +55,38 @@ def test_the_env_imports_neither_the_policies_nor_the_command_line():
     assert not offenders("coloc_env", lambda name: under(name, "agents", "train"))
 
 
-@pytest.mark.parametrize("part", ["worlds", "networks", "backends", "primitives", os.path.join("bounds", "models")])
+@pytest.mark.parametrize("part", ["worlds", "networks", "backends", os.path.join("bounds", "models")])
 def test_parts_import_no_preset(part):
     found = offenders(os.path.join("coloc_env", part),
                       lambda name: under(name, "coloc_env.scenarios", "coloc_env.presets", "coloc_env.envs"))
     assert not found, "\n".join(found)
 
 
-def test_primitives_import_only_the_checks_each_other_and_the_estimators():
+@pytest.mark.parametrize("kind", ["worlds", "networks"])
+def test_blocks_import_only_the_checks_their_own_kind_and_the_estimators(kind):
     first_party = ("coloc_env", "estimators", "agents", "train")
-    allowed = ("coloc_env.config", "coloc_env.primitives", "estimators")
-    found = offenders(os.path.join("coloc_env", "primitives"),
+    allowed = ("coloc_env.config", f"coloc_env.{kind}.blocks", "estimators")
+    found = offenders(os.path.join("coloc_env", kind, "blocks"),
                       lambda name: under(name, *first_party) and not under(name, *allowed))
     assert not found, "\n".join(found)
+
+
+def test_the_old_primitives_paths_import_the_moved_modules_with_a_warning():
+    import importlib
+    import sys
+
+    for name in [n for n in sys.modules if n == "coloc_env.primitives" or n.startswith("coloc_env.primitives.")]:
+        del sys.modules[name]
+    with pytest.warns(DeprecationWarning, match=r"coloc_env.primitives is deprecated: import the blocks from "
+                                                r"coloc_env.worlds.blocks and coloc_env.networks.blocks"):
+        primitives = importlib.import_module("coloc_env.primitives")
+    from coloc_env.networks.blocks.relay_chain import RelayChain
+    from coloc_env.worlds.blocks.unicycle import UnicycleMotion
+
+    assert importlib.import_module("coloc_env.primitives.relay").RelayChain is RelayChain
+    assert primitives.UnicycleMotion is UnicycleMotion
+    for old, new in primitives.MOVED.items():
+        assert importlib.import_module(f"coloc_env.primitives.{old}") is importlib.import_module(new)
 
 
 def test_no_module_rebinds_its_globals():

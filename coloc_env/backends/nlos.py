@@ -113,8 +113,8 @@ import numpy as np
 import estimators.afge as af
 from coloc_env.backends.base import Backend
 from coloc_env.config import BadInput
+from coloc_env.networks.blocks.bounded_delay import NEVER
 from coloc_env.parts import BACKENDS, Block, PartConfig, check_choice, check_flag, check_range
-from coloc_env.primitives.random_delay import NEVER
 
 INVALID_LOG_TRACE = 14.0  # log tr P shown for a window without an estimate (~ a 1 km spread)
 LOG_BOUND = 50.0

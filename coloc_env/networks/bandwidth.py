@@ -6,7 +6,7 @@ with ``min_per_link <= t_ji <= max_per_link`` and sum_j t_ji = ``budget``
 (``<=`` when ``exact_budget`` is False); the rest it fills with its own
 prediction (the backend's eq. 6). The network is fully connected and
 lossless (the paper's); the constraint is the receiver's bandwidth
-(``coloc_env.primitives.links.BandwidthBudget``). n is the backend's message
+(``coloc_env.networks.blocks.links.BandwidthBudget``). n is the backend's message
 size (the world's state dimension), known when the backend is built.
 
 A receiver's transport decision is one index into the feasible selections
@@ -48,8 +48,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from coloc_env.networks.base import Network
+from coloc_env.networks.blocks.links import BandwidthBudget
 from coloc_env.parts import NETWORKS, Block, PartConfig, check_flag, check_range
-from coloc_env.primitives.links import BandwidthBudget
 
 MAX_SELECTIONS = 100_000
 TABLE_LIMIT = 4096  # feasible selections up to which component_selection decodes by a lookup table

@@ -92,8 +92,8 @@ import numpy as np
 
 from coloc_env.draws import draw_keys, uniforms
 from coloc_env.networks import chains
+from coloc_env.networks.blocks.relay_chain import RelayChain
 from coloc_env.parts import Block
-from coloc_env.primitives.relay import RelayChain
 
 # the calls that deliver messages, each reported to ``Network.observer`` (module docstring)
 DELIVERY_CALLS = ("broadcast", "packets", "node_packets", "relay", "relay_each", "messages_to")
@@ -404,7 +404,7 @@ class Network:
         """Relay chains source -> first -> ... (B,), following the holders' choices (or nearest first).
 
         ``first`` < 0: the first hop follows the source's choice too.
-        Stop reasons are those of ``coloc_env.primitives.relay.STOP_REASONS``. ``floats_per_hop(h)``
+        Stop reasons are those of ``coloc_env.networks.blocks.relay_chain.STOP_REASONS``. ``floats_per_hop(h)``
         is the payload of hop h (0-based). A copy with ``source < 0`` has no chain. ``slot`` names the
         chain within the step (see ``broadcast``). ``source`` and ``first`` (B, J) with ``slot``
         (J,) resolve J chains per copy in one call (chain j in slot[j]; the chains of one step do not

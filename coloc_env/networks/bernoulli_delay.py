@@ -5,7 +5,7 @@ xi2 z_i(k-1) + (1 - xi1 - xi2) y_i(k-1): one outcome per link and slot, on time
 (probability alpha1 = ``on_time_probability``), late (alpha2 =
 ``late_probability``: the previous slot's packet arrives now) or lost; the
 outcomes are i.i.d. over slots and links and exclusive (the paper's xi1, xi2;
-see ``coloc_env.primitives.delay_links.BernoulliDelayLink``).
+see ``coloc_env.networks.blocks.delay_links.BernoulliDelayLink``).
 
 Reading built (the paper's per-slot outcome, exactly): the outcome of slot k
 on link t -> s is one uniform u_k (the base's counter-based draw of step k);

@@ -21,9 +21,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from coloc_env.config import check_distance
 from coloc_env.networks.base import Network
 from coloc_env.parts import NETWORKS, Block, PartConfig, check_range
-from coloc_env.primitives.relay import check_distance
 
 
 @NETWORKS.register

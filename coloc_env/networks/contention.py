@@ -72,10 +72,9 @@ from typing import ClassVar
 
 import numpy as np
 
-from coloc_env.config import BadInput, is_real
+from coloc_env.config import BadInput, check_distance, is_real
 from coloc_env.networks.base import CENTRE, Network, _self_links
 from coloc_env.parts import NETWORKS, Block, PartConfig, check_range
-from coloc_env.primitives.relay import check_distance
 
 MIN_DISTANCE = 0.1  # m: the capture rule's powers are of max(d, MIN_DISTANCE) (two agents at one place)
 MEDIUM_KINDS = ("broadcast", "central", "packets")

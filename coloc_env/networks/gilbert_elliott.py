@@ -66,12 +66,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from coloc_env.config import BadInput
+from coloc_env.config import BadInput, check_distance
 from coloc_env.draws import uniforms
 from coloc_env.networks.base import NODE_STREAM, Network
 from coloc_env.networks.broadcast import Broadcast, BroadcastNetwork
 from coloc_env.parts import NETWORKS, PartConfig, check_range
-from coloc_env.primitives.relay import check_distance
 
 CHAIN_STREAM = 4  # counter stream of the agent links' states (broadcast 0, relay 1, packets 2, world nodes 3)
 NODE_CHAIN_STREAM = 5  # counter stream of the world node -> agent links' states

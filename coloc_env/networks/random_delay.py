@@ -5,7 +5,7 @@ independently of everything else; with probability 1 - sum q_l it is later than 
 receiver's buffer of length D (``buffer_length``) and counts as lost [paper]. The draw is
 the inverse CDF of one counter-based uniform u per packet (``coloc_env.draws``):
 ``tau = #{l : q_0 + ... + q_l <= u}``, lost when tau > D, the rule of
-``coloc_env.primitives.random_delay.BoundedRandomDelay.sample``. The receiver (the backend)
+``coloc_env.networks.blocks.bounded_delay.BoundedRandomDelay.sample``. The receiver (the backend)
 buffers what arrives late; the network only says when.
 
 | quantity   | value                                                                                  |
@@ -44,11 +44,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from coloc_env.config import as_array
+from coloc_env.config import as_array, check_distance
 from coloc_env.networks.base import Network
+from coloc_env.networks.blocks.bounded_delay import BoundedRandomDelay
 from coloc_env.parts import NETWORKS, Block, PartConfig, check_flag
-from coloc_env.primitives.random_delay import BoundedRandomDelay
-from coloc_env.primitives.relay import check_distance
 
 
 @NETWORKS.register

@@ -1,7 +1,7 @@
 """Network ``relay`` (wang2019 links): serial relay hops with a hop budget, a range limit and distance loss.
 
 A hop of length d is lost with p_loss(d) = 1 - (1 - loss_at_zero) exp(-d / loss_length)
-(``coloc_env.primitives.relay.RelayChainLinks``); a hop beyond ``comm_range`` is not possible.
+(``coloc_env.networks.blocks.relay_chain.RelayChainLinks``); a hop beyond ``comm_range`` is not possible.
 
 | quantity   | value                                                                                     |
 |------------|-------------------------------------------------------------------------------------------|
@@ -59,8 +59,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from coloc_env.networks.base import Network
+from coloc_env.networks.blocks.relay_chain import RelayChainLinks
 from coloc_env.parts import NETWORKS, Block, PartConfig, check_choice
-from coloc_env.primitives.relay import RelayChainLinks
 
 ROUTINGS = ("per_holder", "per_source")
 

@@ -1,18 +1,40 @@
-"""Primitives the worlds and networks are built from: motion models, sensors and links.
+"""Deprecated: the building blocks moved to ``coloc_env.worlds.blocks`` and ``coloc_env.networks.blocks``.
 
-Each part is a small validated config dataclass with batched numpy methods
-(leading batch axis B). Randomness only from ``numpy.random.Generator``
-objects passed in.
+``coloc_env.primitives`` and its modules stay importable for one release (user scripts and pickled objects
+that name the old paths); importing them warns. ``MOVED`` maps each old module to its new one.
 """
 
-from coloc_env.primitives.delay_links import BernoulliDelayLink
-from coloc_env.primitives.links import BandwidthBudget
-from coloc_env.primitives.motion import LinearMotion
-from coloc_env.primitives.odometry import OdometrySensor, RangeSensor
-from coloc_env.primitives.relay import RelayChain, RelayChainLinks
-from coloc_env.primitives.sensors import LinearSensor
-from coloc_env.primitives.target import ConstantVelocityTarget
-from coloc_env.primitives.unicycle import CircularTracks, UnicycleMotion
+import importlib
+import sys
+import warnings
 
-__all__ = ["BandwidthBudget", "BernoulliDelayLink", "CircularTracks", "ConstantVelocityTarget", "LinearMotion",
-           "LinearSensor", "OdometrySensor", "RangeSensor", "RelayChain", "RelayChainLinks", "UnicycleMotion"]
+MOVED = {
+    **{name: f"coloc_env.worlds.blocks.{name}" for name in (
+        "cv_uav", "flight", "gps_markov", "los_nlos", "motion", "noise", "odometry", "radio", "range_network",
+        "sensors", "target", "unicycle")},
+    **{name: f"coloc_env.networks.blocks.{name}" for name in ("broadcast_medium", "delay_links", "links")},
+    "random_delay": "coloc_env.networks.blocks.bounded_delay",
+    "relay": "coloc_env.networks.blocks.relay_chain",
+}
+
+warnings.warn("coloc_env.primitives is deprecated: import the blocks from coloc_env.worlds.blocks and "
+              "coloc_env.networks.blocks (coloc_env.primitives.MOVED maps each module)", DeprecationWarning,
+              stacklevel=2)
+
+for _old, _new in MOVED.items():
+    sys.modules[f"{__name__}.{_old}"] = importlib.import_module(_new)
+
+from coloc_env.networks.blocks import BandwidthBudget, BernoulliDelayLink, RelayChain, RelayChainLinks  # noqa: E402
+from coloc_env.worlds.blocks import (  # noqa: E402
+    CircularTracks,
+    ConstantVelocityTarget,
+    LinearMotion,
+    LinearSensor,
+    OdometrySensor,
+    RangeSensor,
+    UnicycleMotion,
+)
+
+__all__ = ["MOVED", "BandwidthBudget", "BernoulliDelayLink", "CircularTracks", "ConstantVelocityTarget",
+           "LinearMotion", "LinearSensor", "OdometrySensor", "RangeSensor", "RelayChain", "RelayChainLinks",
+           "UnicycleMotion"]

@@ -168,7 +168,7 @@ import estimators.bandwidth_fusion as bf
 from coloc_env.backends.fusion import BandwidthFusion, fusion_model
 from coloc_env.config import check_psd, check_range
 from coloc_env.networks.bandwidth import ScoredBandwidth
-from coloc_env.primitives import BandwidthBudget
+from coloc_env.networks.blocks import BandwidthBudget
 from coloc_env.rendering import Link, Scene, ring_layout
 from coloc_env.scenarios.base import Scenario
 from coloc_env.scenarios.binding import PresetConfig, PresetScenario, keyword, register_preset

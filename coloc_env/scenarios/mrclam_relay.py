@@ -6,7 +6,7 @@ multi-robot cooperative localization and mapping dataset", IJRR
 ``coloc_env.data.mrclam``; estimator: ``estimators.ukf_relay_se2``
 (UKF-DCL of wang2019 on planar robots with heading, range and bearing,
 Roumeliotis-Bekey factored cross-covariances); relay links:
-``coloc_env.primitives.relay`` (the link model of ``relay_ukf``).
+``coloc_env.networks.blocks.relay_chain`` (the link model of ``relay_ukf``).
 
 The world is the recorded run: five robots in a 15 m x 8 m room, their
 odometry, their camera measurements (range, bearing) of each other and of 15
@@ -155,7 +155,7 @@ model's odometry alone from the window start, m), ``measured`` (robots it record
 measurement reached the measured robot and passed the gate), ``landmarks``
 (landmark sightings applied to it), ``rejected`` (its observations refused by
 the gate), ``chain_length`` (robots its chain reached, 0 without a chain),
-``chain_stop`` (index into ``coloc_env.primitives.relay.STOP_REASONS``, -1
+``chain_stop`` (index into ``coloc_env.networks.blocks.relay_chain.STOP_REASONS``, -1
 without a chain), ``communication`` (hops it delivered this step over all
 chains; summed over agents = hops), ``hops`` and ``hop_cost`` (the team's, this
 step: hops delivered and C), the network's per-link counts ``transmissions``, ``link_attempts``,
@@ -229,8 +229,8 @@ import estimators.ukf_relay_se2 as se2
 from coloc_env.backends.ukf_se2 import UkfSe2
 from coloc_env.config import BadInput
 from coloc_env.data import mrclam
+from coloc_env.networks.blocks.relay_chain import STOP_REASONS
 from coloc_env.networks.relay import Relay
-from coloc_env.primitives.relay import STOP_REASONS
 from coloc_env.rendering import Scene
 from coloc_env.scenarios.binding import keyword, register_preset
 from coloc_env.scenarios.relay_codec import RelayTeamConfig, RelayTeamScenario, chain_links

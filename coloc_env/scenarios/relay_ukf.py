@@ -123,7 +123,7 @@ step, 0 or 1; summed over agents = hops), ``messages_sent`` (= ``communication``
 per delivered hop, at its holder) and ``floats_sent`` (that hop's payload, ``coloc_env.backends.ukf.dcl_floats``:
 10 + 5 r + 2 r (r - 1) floats with r platforms reached), ``hops`` and ``hop_cost`` (the team's, this
 step: the hop costs the reward subtracts), ``chain_stop`` (index into
-``coloc_env.primitives.relay.STOP_REASONS``, -1 without a measurement), the network's per-link counts
+``coloc_env.networks.blocks.relay_chain.STOP_REASONS``, -1 without a measurement), the network's per-link counts
 ``transmissions``, ``link_attempts`` (hops it sent, the lost one included), ``link_deliveries``, ``collisions``
 (the table of ``coloc_env.networks.base``), ``step``.
 
@@ -188,8 +188,8 @@ import numpy as np
 
 import estimators.ukf_relay as ukf
 from coloc_env.backends.ukf import UkfDcl
+from coloc_env.networks.blocks.relay_chain import STOP_REASONS, RelayChain
 from coloc_env.networks.relay import Relay
-from coloc_env.primitives.relay import STOP_REASONS, RelayChain
 from coloc_env.rendering import Scene
 from coloc_env.scenarios.binding import keyword, register_preset
 from coloc_env.scenarios.relay_codec import RelayTeamConfig, RelayTeamScenario, chain_links

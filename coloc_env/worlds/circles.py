@@ -55,12 +55,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from coloc_env.config import as_array, check_entries
+from coloc_env.config import as_array, check_distance, check_entries
 from coloc_env.parts import WORLDS, Block, PartConfig, check_flag, check_range
-from coloc_env.primitives.odometry import OdometrySensor, RangeSensor
-from coloc_env.primitives.relay import check_distance
-from coloc_env.primitives.unicycle import CircularTracks, UnicycleMotion
 from coloc_env.worlds.base import Readings, World
+from coloc_env.worlds.blocks.odometry import OdometrySensor, RangeSensor
+from coloc_env.worlds.blocks.unicycle import CircularTracks, UnicycleMotion
 from estimators.models import OdometryDisplacement
 
 

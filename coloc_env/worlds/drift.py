@@ -59,9 +59,9 @@ import numpy as np
 
 from coloc_env.config import as_array, check_psd, check_range, check_stable
 from coloc_env.parts import WORLDS, PartConfig
-from coloc_env.primitives.noise import covariance_factor, sample_gaussian
-from coloc_env.primitives.sensors import LinearSensor
 from coloc_env.worlds.base import Readings, World
+from coloc_env.worlds.blocks.noise import covariance_factor, sample_gaussian
+from coloc_env.worlds.blocks.sensors import LinearSensor
 from estimators.linear_models import LinearGaussian, LinearObservation
 
 
@@ -237,7 +237,7 @@ class NoiseFactors:
 
 
 def noise_factors(config: Drift) -> NoiseFactors:
-    """The factors of M(0), W and every agent's V_j (``coloc_env.primitives.noise.covariance_factor``)."""
+    """The factors of M(0), W and every agent's V_j (``coloc_env.worlds.blocks.noise.covariance_factor``)."""
     V = np.asarray(config.measurement_noise, float)
     per_agent = V if V.ndim == 3 else np.broadcast_to(V, (config.num_agents, *V.shape))
     return NoiseFactors(initial=covariance_factor(np.asarray(config.initial_cov, float)),

@@ -2,12 +2,12 @@
 
 N UAVs start uniformly in ``[0, side]^2`` at the nominal velocity plus a
 spread and fly the constant-velocity model driven by a random acceleration
-(``coloc_env.primitives.cv_uav.ConstantVelocityUAVs``); each reads a noisy
+(``coloc_env.worlds.blocks.cv_uav.ConstantVelocityUAVs``); each reads a noisy
 accelerometer. Each GPS receiver switches between normal and fault by a
-Markov chain (``coloc_env.primitives.gps_markov.MarkovGPS``); a normal one
+Markov chain (``coloc_env.worlds.blocks.gps_markov.MarkovGPS``); a normal one
 reports a fix. UAVs within ``comm_range`` measure their distance, one reading
 per unordered pair seen by both ends
-(``coloc_env.primitives.range_network.RangeNetwork``). The agents start from
+(``coloc_env.worlds.blocks.range_network.RangeNetwork``). The agents start from
 a warm start: the last fix before the loss, p~_0 = p_0 + N(0, gps_std^2 I),
 and a noisy velocity, v~_0 = v_0 + N(0, velocity_spread^2 I).
 
@@ -70,10 +70,10 @@ import numpy as np
 
 from coloc_env.config import MIN_STD, as_array, check_entries
 from coloc_env.parts import WORLDS, PartConfig, check_range
-from coloc_env.primitives.cv_uav import ConstantVelocityUAVs
-from coloc_env.primitives.gps_markov import MarkovGPS
-from coloc_env.primitives.range_network import RangeNetwork
 from coloc_env.worlds.base import Readings, World
+from coloc_env.worlds.blocks.cv_uav import ConstantVelocityUAVs
+from coloc_env.worlds.blocks.gps_markov import MarkovGPS
+from coloc_env.worlds.blocks.range_network import RangeNetwork
 from estimators.cv_models import ConstantVelocityAccel
 
 

@@ -6,16 +6,16 @@ noise, the navigation noise, one uniform per packet (stamp, target, neighbour) a
 The world uses no packet uniform: delivery is the network's (``random_delay``, gao2016's Assumption 3,
 draws the delays from its own generator). They are drawn all the same, so that the prior's error comes
 after them, and kept in ``Episode.packet_uniforms`` for code that wants one delay per packet on the
-world's own episode (``coloc_env.primitives.random_delay.BoundedRandomDelay.from_uniforms``).
+world's own episode (``coloc_env.networks.blocks.bounded_delay.BoundedRandomDelay.from_uniforms``).
 
 Every agent ``uav_i`` is a target that cannot localize itself directly: it flies straight
-legs and coordinated turns (``coloc_env.primitives.flight.TurnSchedulePath``; uav_i starts
+legs and coordinated turns (``coloc_env.worlds.blocks.flight.TurnSchedulePath``; uav_i starts
 at (0, i * target_spacing), its turns i * schedule_shift steps later). J neighbours orbit
-each target (``coloc_env.primitives.flight.OrbitingNeighbours``); they are part of the world,
+each target (``coloc_env.worlds.blocks.flight.OrbitingNeighbours``); they are part of the world,
 not agents. A neighbour inside the target's receive-search area (Def. 1, r_inf <= d <=
 r_sup on the true distance) measures the RSS and the AOA of the target (docs/gao2016.md §4,
-``coloc_env.primitives.radio.RssAoaSensor``), the bias of its link's LOS/NLOS Markov chain
-(``coloc_env.primitives.los_nlos.LosNlosChain``) included, and sends a packet stamped k
+``coloc_env.worlds.blocks.radio.RssAoaSensor``), the bias of its link's LOS/NLOS Markov chain
+(``coloc_env.worlds.blocks.los_nlos.LosNlosChain``) included, and sends a packet stamped k
 with its own navigation estimate (truth + N(0, sigma_nav^2 I)) to the target: the backend
 asks the network for its delivery (``coloc_env.networks.base.Network.node_packets``).
 
@@ -96,10 +96,10 @@ import numpy as np
 
 from coloc_env.config import ORBIT_LIMITS, as_array, check_entries, check_step_windows
 from coloc_env.parts import WORLDS, PartConfig, check_flag, check_range
-from coloc_env.primitives.flight import OrbitingNeighbours, OrbitParameters, TurnSchedulePath
-from coloc_env.primitives.los_nlos import LosNlosChain
-from coloc_env.primitives.radio import ReceiveSearchArea, RssAoaSensor
 from coloc_env.worlds.base import Readings, World
+from coloc_env.worlds.blocks.flight import OrbitingNeighbours, OrbitParameters, TurnSchedulePath
+from coloc_env.worlds.blocks.los_nlos import LosNlosChain
+from coloc_env.worlds.blocks.radio import ReceiveSearchArea, RssAoaSensor
 from estimators.afge import SignalModel
 from estimators.nlos_models import ConstantVelocityWhiteAccel, RssAoaModel
 

@@ -3,7 +3,7 @@
 Fu, Bi, Gao 2017 (seed ``000_de65bd0f0f4a0cb7.txt``), Sec. 4: the target
 state is x = [x, vx, y, vy, z, vz] with x(k+1) = Phi x(k) + Gamma w(k),
 Phi = blockdiag([[1, T], [0, 1]] x 3), w ~ N(0, q I_3) (eq. 1;
-``coloc_env.primitives.target.ConstantVelocityTarget``), and every UAV i
+``coloc_env.worlds.blocks.target.ConstantVelocityTarget``), and every UAV i
 measures z_i(k) = H x(k) + v_i(k), H the position rows, v_i ~ N(0, r I_3)
 (eq. 2). Every agent estimates the target (estimand ``target``).
 
@@ -60,8 +60,8 @@ import numpy as np
 
 from coloc_env.config import as_array, check_psd, check_range
 from coloc_env.parts import WORLDS, PartConfig
-from coloc_env.primitives.sensors import LinearSensor
-from coloc_env.primitives.target import ConstantVelocityTarget
+from coloc_env.worlds.blocks.sensors import LinearSensor
+from coloc_env.worlds.blocks.target import ConstantVelocityTarget
 from coloc_env.worlds.drift import TargetWorld
 from estimators.linear_models import LinearGaussian, LinearObservation
 

@@ -8,7 +8,7 @@ import pytest
 
 import coloc_env
 from coloc_env.networks.bandwidth import Bandwidth
-from coloc_env.primitives import BandwidthBudget
+from coloc_env.networks.blocks import BandwidthBudget
 from coloc_env.scenarios.bandwidth_fusion import (
     ENUMERATED_DECODE_LIMIT,
     BandwidthFusionConfig,

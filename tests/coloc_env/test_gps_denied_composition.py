@@ -6,7 +6,7 @@ import pytest
 import agents
 import coloc_env
 import estimators.dnbp as dn
-from coloc_env.primitives.broadcast_medium import BroadcastMedium
+from coloc_env.networks.blocks.broadcast_medium import BroadcastMedium
 from coloc_env.scenarios.gps_denied_nbp import GpsDeniedNbpConfig
 from coloc_env.worlds.gps_denied import sample_episode
 
@@ -87,7 +87,7 @@ def test_dnbp_reports_particles_payload_and_rounds():
 
 
 def test_the_motion_model_matches_the_world_part():
-    from coloc_env.primitives.cv_uav import ConstantVelocityUAVs
+    from coloc_env.worlds.blocks.cv_uav import ConstantVelocityUAVs
     from estimators.cv_models import ConstantVelocityAccel
 
     part, model = ConstantVelocityUAVs(1.5, 0.5, 0.3), ConstantVelocityAccel(1.5, 0.09)

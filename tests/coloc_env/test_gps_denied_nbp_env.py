@@ -12,7 +12,7 @@ import agents
 import coloc_env
 import estimators.dnbp as dn
 from coloc_env.config import build_config
-from coloc_env.primitives.broadcast_medium import BroadcastMedium
+from coloc_env.networks.blocks.broadcast_medium import BroadcastMedium
 from coloc_env.scenarios.gps_denied_nbp import GpsDeniedNbpConfig
 from coloc_env.worlds.gps_denied import sample_episode
 from tests.helpers import play

@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from coloc_env.primitives.broadcast_medium import BroadcastMedium
-from coloc_env.primitives.cv_uav import ConstantVelocityUAVs
-from coloc_env.primitives.gps_markov import MarkovGPS
-from coloc_env.primitives.range_network import RangeNetwork
+from coloc_env.networks.blocks.broadcast_medium import BroadcastMedium
+from coloc_env.worlds.blocks.cv_uav import ConstantVelocityUAVs
+from coloc_env.worlds.blocks.gps_markov import MarkovGPS
+from coloc_env.worlds.blocks.range_network import RangeNetwork
 
 
 def test_cv_model_matrices_and_the_estimator_noise_covariance():

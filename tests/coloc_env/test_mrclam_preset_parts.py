@@ -18,8 +18,8 @@ from pettingzoo.test import parallel_api_test
 import agents
 import coloc_env
 from coloc_env.data import mrclam
+from coloc_env.networks.blocks.relay_chain import STOP_REASONS
 from coloc_env.networks.relay import Relay
-from coloc_env.primitives.relay import STOP_REASONS
 from coloc_env.scenarios.mrclam_relay import MrclamRelayConfig, MrclamRelayScenario
 
 REPO_ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))

@@ -12,7 +12,7 @@ import agents
 import coloc_env
 import estimators.ukf_relay_se2 as se2
 from coloc_env.data import mrclam
-from coloc_env.primitives.relay import STOP_REASONS
+from coloc_env.networks.blocks.relay_chain import STOP_REASONS
 from tests.helpers import play
 
 NAME = "mrclam_relay"

@@ -9,7 +9,7 @@ import pytest
 
 import coloc_env
 from coloc_env.networks import BernoulliDelay, Broadcast, GilbertElliott, Ideal, Relay
-from coloc_env.primitives.relay import STOP_REASONS
+from coloc_env.networks.blocks.relay_chain import STOP_REASONS
 from tests.test_bad_config_properties import CHEAP_PRESET, presets
 
 LINE = np.array([0.0, 100.0, 250.0, 600.0])  # comm_range 200: links 0-1 and 1-2 only

@@ -8,10 +8,10 @@ import pytest
 
 from coloc_env.networks import chains
 from coloc_env.networks.base import RelayChain
+from coloc_env.networks.blocks.relay_chain import STOP_REASONS
 from coloc_env.networks.broadcast import Broadcast
 from coloc_env.networks.ideal import Ideal
 from coloc_env.networks.relay import Relay
-from coloc_env.primitives.relay import STOP_REASONS
 
 
 def started(config, kind, B=4, N=7, seed=0):

@@ -7,8 +7,8 @@ import agents
 import coloc_env
 from coloc_env.backends.dead_reckoning import DeadReckoning
 from coloc_env.backends.nlos import episode_delays
+from coloc_env.networks.blocks.bounded_delay import BoundedRandomDelay
 from coloc_env.networks.random_delay import delays_from_uniforms
-from coloc_env.primitives.random_delay import BoundedRandomDelay
 from coloc_env.scenarios.composed import ComposedScenario
 from coloc_env.worlds.nlos_orbit import NlosOrbit
 
@@ -271,7 +271,7 @@ def test_the_parts_defaults_are_the_nlos_horizon_scenarios():
 
 
 def test_the_models_are_what_the_world_simulates_and_afge_assumes():
-    from coloc_env.primitives.radio import RssAoaSensor
+    from coloc_env.worlds.blocks.radio import RssAoaSensor
     from estimators.afge import MotionModel
     from estimators.nlos_models import ConstantVelocityWhiteAccel, RssAoaModel
 

@@ -11,7 +11,7 @@ import agents
 import coloc_env
 import estimators.afge as af
 from coloc_env.backends.nlos import episode_delays
-from coloc_env.primitives.random_delay import NEVER
+from coloc_env.networks.blocks.bounded_delay import NEVER
 from coloc_env.scenarios.nlos_horizon import NlosHorizonScenario
 from tests.helpers import play
 

@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 
 import estimators.afge as af
-from coloc_env.primitives.flight import OrbitingNeighbours, TurnSchedulePath
-from coloc_env.primitives.los_nlos import LosNlosChain
-from coloc_env.primitives.radio import ReceiveSearchArea, RssAoaSensor, rsa_radii
-from coloc_env.primitives.random_delay import BoundedRandomDelay
+from coloc_env.networks.blocks.bounded_delay import BoundedRandomDelay
+from coloc_env.worlds.blocks.flight import OrbitingNeighbours, TurnSchedulePath
+from coloc_env.worlds.blocks.los_nlos import LosNlosChain
+from coloc_env.worlds.blocks.radio import ReceiveSearchArea, RssAoaSensor, rsa_radii
 
 
 def test_path_has_constant_speed_straight_legs_and_turns_by_rate_times_duration():
@@ -135,7 +135,7 @@ def test_the_radio_checks_its_angles_in_the_degrees_it_names():
     """The sensor holds its angles in radians but its fields are named (and given) in degrees."""
     import dataclasses
 
-    from coloc_env.primitives.radio import RssAoaSensor
+    from coloc_env.worlds.blocks.radio import RssAoaSensor
     from estimators.afge import SignalModel
 
     base = SignalModel()

@@ -12,7 +12,7 @@ import coloc_env
 import estimators.ukf_relay as ur
 from agents.relay_ukf import paper_actions
 from coloc_env.config import build_config
-from coloc_env.primitives.relay import STOP_REASONS
+from coloc_env.networks.blocks.relay_chain import STOP_REASONS
 from coloc_env.scenarios.relay_ukf import RelayUKFConfig, RelayUKFScenario
 from tests.helpers import play
 

@@ -10,9 +10,9 @@ import estimators.bandwidth_fusion as bf
 import estimators.lossy_fusion as lf
 from agents.lossy_fusion import paper_actions
 from coloc_env.draws import uniforms
-from coloc_env.primitives.target import ConstantVelocityTarget
 from coloc_env.scenarios.bandwidth_fusion import BandwidthFusionScenario, paper_selection, paper_weights
 from coloc_env.scenarios.lossy_fusion import LossyFusionConfig, LossyFusionScenario
+from coloc_env.worlds.blocks.target import ConstantVelocityTarget
 
 OK = {(r["world"], r["network"], r["backend"]) for r in coloc_env.compatibility() if r["ok"]}
 

@@ -5,7 +5,8 @@ import itertools
 import numpy as np
 import pytest
 
-from coloc_env.primitives import BandwidthBudget, LinearMotion, LinearSensor
+from coloc_env.networks.blocks import BandwidthBudget
+from coloc_env.worlds.blocks import LinearMotion, LinearSensor
 
 
 def test_paper_budget_has_108_selections_and_relaxed_has_216():
@@ -73,7 +74,7 @@ def test_linear_sensor_measures_and_validates():
 # --- lossy_fusion (fu2017): constant-velocity target and on-time / late / lost links ---------------
 
 def test_constant_velocity_target_matrices_and_noise():
-    from coloc_env.primitives.target import ConstantVelocityTarget
+    from coloc_env.worlds.blocks.target import ConstantVelocityTarget
 
     target = ConstantVelocityTarget(axes=3, period=2.0, accel_noise=5.0)
     target.validate()
@@ -104,7 +105,7 @@ def test_constant_velocity_target_matrices_and_noise():
 def test_a_batch_of_trajectories_equals_each_copy_drawn_alone(period):
     """The world draws every reset copy's trajectory at once: copy b must not depend on the batch around it (matrix
     products of a batch round differently from one row's at T = 0.1), and it follows Phi x + G w to rounding."""
-    from coloc_env.primitives.target import ConstantVelocityTarget
+    from coloc_env.worlds.blocks.target import ConstantVelocityTarget
 
     target = ConstantVelocityTarget(axes=3, period=period, accel_noise=5.0)
     rng = np.random.default_rng(3)
@@ -120,7 +121,7 @@ def test_a_batch_of_trajectories_equals_each_copy_drawn_alone(period):
 
 
 def test_bernoulli_delay_link_frequencies_and_indicator_covariance():
-    from coloc_env.primitives.delay_links import LATE, LOST, ON_TIME, BernoulliDelayLink
+    from coloc_env.networks.blocks.delay_links import LATE, LOST, ON_TIME, BernoulliDelayLink
 
     link = BernoulliDelayLink(on_time=0.4, late=0.3)
     link.validate()
@@ -144,7 +145,7 @@ def test_bernoulli_delay_link_frequencies_and_indicator_covariance():
 # --- relay_ukf (wang2019): unicycle and circles, odometry and range sensors, relay chains -----------
 
 def test_unicycle_rollout_equals_stepping_and_circles_close():
-    from coloc_env.primitives import CircularTracks, UnicycleMotion
+    from coloc_env.worlds.blocks import CircularTracks, UnicycleMotion
 
     motion = UnicycleMotion(dt=0.5)
     rng = np.random.default_rng(0)
@@ -173,7 +174,7 @@ def test_unicycle_rollout_equals_stepping_and_circles_close():
 
 
 def test_odometry_heading_variance_and_range_sensor():
-    from coloc_env.primitives import OdometrySensor, RangeSensor, UnicycleMotion
+    from coloc_env.worlds.blocks import OdometrySensor, RangeSensor, UnicycleMotion
 
     odometry = OdometrySensor(speed_noise_std=0.5, turn_rate_noise_std=1e-3)
     odometry.validate()
@@ -199,8 +200,8 @@ def test_odometry_heading_variance_and_range_sensor():
 
 
 def test_relay_chain_follows_choices_and_reports_each_stop_reason():
-    from coloc_env.primitives import RelayChainLinks
-    from coloc_env.primitives.relay import STOP_REASONS
+    from coloc_env.networks.blocks import RelayChainLinks
+    from coloc_env.networks.blocks.relay_chain import STOP_REASONS
 
     positions = np.array([[0.0, 0.0], [10.0, 0.0], [20.0, 0.0], [100.0, 0.0]])
     B = 6

@@ -9,7 +9,7 @@ import pytest
 
 import estimators.afge as af
 from coloc_env.config import build_config
-from coloc_env.primitives.random_delay import NEVER
+from coloc_env.networks.blocks.bounded_delay import NEVER
 from coloc_env.scenarios.nlos_horizon import NlosHorizonConfig
 from coloc_env.worlds.nlos_orbit import draw_episode, in_turn
 

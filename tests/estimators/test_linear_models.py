@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from coloc_env.primitives.motion import LinearMotion
-from coloc_env.primitives.target import ConstantVelocityTarget
+from coloc_env.worlds.blocks.motion import LinearMotion
+from coloc_env.worlds.blocks.target import ConstantVelocityTarget
 from estimators.linear_models import LinearGaussian, LinearObservation
 
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import estimators.range_ls as rl
-from coloc_env.primitives.cv_uav import ConstantVelocityUAVs
+from coloc_env.worlds.blocks.cv_uav import ConstantVelocityUAVs
 
 ANCHORS = np.array([[0.0, 0.0], [200.0, 0.0], [0.0, 200.0], [0.0, 0.0]])
 MASK = np.array([True, True, True, False])

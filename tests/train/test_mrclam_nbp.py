@@ -58,7 +58,7 @@ def _estimator_loops(sl, particles, seed):
 
     import estimators.dnbp as dn
     import estimators.range_ls as ls
-    from coloc_env.primitives.broadcast_medium import BroadcastMedium
+    from coloc_env.networks.blocks.broadcast_medium import BroadcastMedium
 
     def slice_model(base, t):
         gps = float(np.max(sl.fix_std[t])) if sl.normal[t].any() else nbp.INITIAL_STD

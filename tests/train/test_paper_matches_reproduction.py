@@ -53,7 +53,7 @@ def test_evaluate_paper_policy_equals_the_reproduction_on_the_same_seeds(scenari
 
 def _wang2019_by_the_estimator_functions(seeds, config) -> np.ndarray:
     """Per-episode paper metric of UKF-DCL from ``estimators.ukf_relay`` on chains resolved by
-    :class:`coloc_env.primitives.relay.RelayChainLinks` (the paper scenario's own delivery code): no backend,
+    :class:`coloc_env.networks.blocks.relay_chain.RelayChainLinks` (the paper scenario's own delivery code): no backend,
     no network, no env. The paper policy's partners in episode e come from ``episode_generator(seeds[e])``,
     as ``coloc evaluate`` seeds it."""
     from agents.base import episode_generator
@@ -69,7 +69,7 @@ def _wan2014_by_the_estimator_function(seeds, config) -> np.ndarray:
     on ``sample_episode``'s draws (all broadcasts the schedule allows), with the dNBP parameters written out
     (the defensive box covers the whole flight): no backend, no network, no env."""
     import estimators.dnbp as dn
-    from coloc_env.primitives.broadcast_medium import BroadcastMedium
+    from coloc_env.networks.blocks.broadcast_medium import BroadcastMedium
     from coloc_env.worlds.gps_denied import sample_episode
 
     travel, m = float(np.linalg.norm(config.nominal_velocity)) * config.dt * config.horizon, config.box_margin

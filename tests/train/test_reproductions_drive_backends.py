@@ -2,7 +2,8 @@
 compute what the validated estimator code computes on the same draws.
 
 The references here are the estimators' own functions, run on the episodes the scenarios draw from the
-same generators (``relay_ukf``'s draws and relay rules, :class:`coloc_env.primitives.relay.RelayChainLinks`, with
+same generators (``relay_ukf``'s draws and relay rules,
+:class:`coloc_env.networks.blocks.relay_chain.RelayChainLinks`, with
 ``estimators.ukf_relay``; the ``gps_denied`` world's
 ``sample_episode`` with ``estimators.range_ls.step``; the ``drift`` world's ``draw_episode`` with
 ``estimators.bandwidth_fusion.step``; the ``target_cv`` world's episodes and the ``bernoulli_delay`` network's
@@ -21,12 +22,12 @@ import estimators.ukf_relay as ukf
 from agents.relay_ukf import paper_actions
 from coloc_env.backends.fusion import lossy_model
 from coloc_env.config import build_config
-from coloc_env.primitives.unicycle import UnicycleMotion
 from coloc_env.scenarios.bandwidth_fusion import BandwidthFusionConfig
 from coloc_env.scenarios.gps_denied_nbp import GpsDeniedNbpConfig
 from coloc_env.scenarios.lossy_fusion import LossyFusionConfig
 from coloc_env.scenarios.nlos_horizon import NlosHorizonConfig
 from coloc_env.scenarios.relay_ukf import RelayUKFConfig
+from coloc_env.worlds.blocks.unicycle import UnicycleMotion
 from coloc_env.worlds.drift import draw_episode
 from coloc_env.worlds.gps_denied import sample_episode
 from estimators.bandwidth_fusion import paper_selection, paper_weights
@@ -36,7 +37,7 @@ from train.reproduce import fu2017, gao2016, wan2014, wang2019, zhao2020
 def _reference_wang2019(config, copies, policy_rng):
     """Errors (3, K, runs, N) of IL, CCL and DCL by the estimator functions on the episodes drawn from
     ``copies`` in the relay_ukf scenario's order (odometry noise, schedule, range noise), with the chains
-    resolved by :class:`coloc_env.primitives.relay.RelayChainLinks` (the paper scenario's own delivery code,
+    resolved by :class:`coloc_env.networks.blocks.relay_chain.RelayChainLinks` (the paper scenario's own delivery code,
     not the network the backends ask)."""
     runs, K, N, dt = len(copies), config.horizon, config.num_agents, config.dt
     world, network, _ = config.parts()
@@ -228,7 +229,7 @@ def _reference_gao2016(config, index, generators, mode_info="known", lag0=False,
     (``lag0``: every late packet dropped): squared errors of target 0."""
     import estimators.afge as af
     from coloc_env.backends.nlos import episode_delays
-    from coloc_env.primitives.random_delay import NEVER
+    from coloc_env.networks.blocks.bounded_delay import NEVER
     from coloc_env.scenarios.nlos_horizon import NlosHorizonScenario
 
     cfg = dataclasses.replace(gao2016._setting_config(config, index), mode_info=mode_info)

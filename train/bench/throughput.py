@@ -40,7 +40,7 @@ def _gps_denied_nbp_episode(batch: int, num_particles: int = 100):
 
 def _gps_denied_nbp_inputs(stack: dict, k: int) -> tuple:
     """dNBP's per-step inputs of step k: (gps_normal, gps_fix, deliver over the adjacency, ranges, accel)."""
-    from coloc_env.primitives.broadcast_medium import BroadcastMedium
+    from coloc_env.networks.blocks.broadcast_medium import BroadcastMedium
 
     return (stack["gps_normal"][:, k], stack["gps_fix"][:, k], BroadcastMedium().over(stack["adjacency"][:, k]),
             stack["ranges"][:, k], stack["accel"][:, k])

@@ -763,7 +763,7 @@ def _lossy_report(m: dict) -> str:
 
 The `mrclam_relay` scenario core replays the data with the `paper` policy's actions (each robot uses its
 lowest-index recorded robot measurement of the step; chains m -> n -> the other robots ascending) through the
-project's relay link model (`coloc_env.primitives.relay`): each hop is lost with probability `loss_at_zero`
+project's relay link model (`coloc_env.networks.blocks.relay_chain`): each hop is lost with probability `loss_at_zero`
 (independent of its length here), a lost hop ends the chain there (the robots it reached update by the exact
 truncated-chain UKF-DCL; a lost first hop drops the measurement), `max_hops` caps the hops. Landmark sightings
 update the robot that saw them (no communication). Noise: the calibrated model of the whole run. The same seed

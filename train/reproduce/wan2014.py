@@ -53,8 +53,8 @@ import estimators.range_ls as rl
 from coloc_env.backends import RangeLs
 from coloc_env.composition import compose
 from coloc_env.config import BadInput, build_config
+from coloc_env.networks.blocks.broadcast_medium import BroadcastMedium
 from coloc_env.networks.broadcast import BroadcastNetwork
-from coloc_env.primitives.broadcast_medium import BroadcastMedium
 from coloc_env.scenarios.gps_denied_nbp import GpsDeniedNbpConfig
 from train.executor import map_tasks
 from train.io import save_figure, write_json, write_text

@@ -47,7 +47,7 @@ from coloc_env.backends import DeadReckoning, UkfCcl
 from coloc_env.composition import compose
 from coloc_env.config import BadInput, build_config
 from coloc_env.networks import Ideal
-from coloc_env.primitives.relay import STOP_REASONS
+from coloc_env.networks.blocks.relay_chain import STOP_REASONS
 from coloc_env.scenarios.relay_ukf import RelayUKFConfig
 from estimators.models import predict_joint
 from train.executor import map_tasks

@@ -30,7 +30,7 @@ from __future__ import annotations
 import numpy as np
 
 from coloc_env.bounds.problem import BoundProblem, ReadingInformation, Recursion, delivered_recursion, with_delivered
-from coloc_env.primitives.flight import OrbitParameters
+from coloc_env.worlds.blocks.flight import OrbitParameters
 from coloc_env.worlds.nlos_orbit import ORBIT_FIELDS
 from estimators.bounds import rss_aoa_information
 

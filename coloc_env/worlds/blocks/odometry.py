@@ -6,8 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from coloc_env.config import check_range
-from coloc_env.primitives.relay import check_distance
+from coloc_env.config import check_distance, check_range
 
 
 @dataclass(frozen=True)

@@ -28,14 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from coloc_env.config import check_range
-
-
-def check_distance(name: str, value, allow_inf: bool = True) -> None:
-    """A positive distance in metres, (0, inf] (``inf`` meaning unlimited; (0, 1e12] without ``allow_inf``);
-    else ``ValueError`` naming ``name``."""
-    check_range(name, value, 0.0, np.inf if allow_inf else 1e12, low_open=True)
-
+from coloc_env.config import check_distance, check_range
 
 STOP_REASONS = ("complete", "hop_budget", "stopped", "revisit", "out_of_range", "lost")
 

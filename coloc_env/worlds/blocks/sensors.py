@@ -8,7 +8,7 @@ from functools import cached_property
 import numpy as np
 
 from coloc_env.config import as_array, check_psd
-from coloc_env.primitives.noise import covariance_factor, sample_gaussian
+from coloc_env.worlds.blocks.noise import covariance_factor, sample_gaussian
 
 
 @dataclass(frozen=True)
