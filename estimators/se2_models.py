@@ -101,7 +101,7 @@ class RangeBearingModel:
 
     (``estimators.ukf_relay_se2.observe``), v ~ N(0, R), R = diag(range_var + range_var_gain r^2,
     bearing_var) with r the measured range (the MRCLAM calibration's range-dependent sigma_r,
-    ``coloc_env.data.mrclam.NoiseModel.measurement_cov``; gain 0 = constant noise). The target t is
+    ``coloc_env.data.mrclam_noise.NoiseModel.measurement_cov``; gain 0 = constant noise). The target t is
     a known landmark or another robot's position.
     """
 

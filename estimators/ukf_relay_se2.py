@@ -177,7 +177,7 @@ def odometry_variance(odometry, var0, var_gain=(0.0, 0.0), inflation=(1.0, 1.0))
 
     For (v, w): sigma_v^2 = r_v (a_v + b_v v^2), sigma_w^2 = r_w (a_w + b_w w^2); ``inflation``
     (r_v, r_w) >= 1 accounts for errors correlated over steps (see
-    ``coloc_env.data.mrclam.calibrate_noise``). The result is a valid ``odometry_var``
+    ``coloc_env.data.mrclam_noise.calibrate_noise``). The result is a valid ``odometry_var``
     for ``time_update`` / ``time_update_factored`` when ``odometry`` is (N, 2).
     """
     u = np.asarray(odometry, float)

@@ -80,7 +80,7 @@ import numpy as np
 
 import estimators.ukf_relay_se2 as se2
 from coloc_env.backends.base import Backend
-from coloc_env.data.mrclam import GATE_999
+from coloc_env.data.mrclam_noise import GATE_999
 from coloc_env.networks.blocks.relay_chain import RelayChain
 from coloc_env.parts import BACKENDS, PartConfig, check_choice, check_range
 

@@ -4,7 +4,7 @@
 ``cached(name, key, compute, validate)`` returns the value stored under ``key`` or computes, stores and
 returns it. The caller's ``key`` is a digest of everything the value depends on (for the MRCLAM fit:
 the data it reads, the noise model's parameters, the fit's settings and the fit's code,
-``coloc_env.data.mrclam.fit_noise_scales``), so a changed input or code looks up another entry.
+``coloc_env.data.mrclam_noise.fit_noise_scales``), so a changed input or code looks up another entry.
 
 Where: the folder ``cache_dir`` names; by default ``$COLOC_FIT_CACHE`` if it is set (``off`` disables
 the disk cache: every process fits again), else ``$XDG_CACHE_HOME/coloc/fits``, else

@@ -41,15 +41,15 @@ robot), not one next hop per agent as in ``relay_ukf`` (where only one
 platform measures per step). With a single next hop per agent, two chains
 passing the same holder could not both be complete.
 
-Noise: the ``mrclam`` world's (``coloc_env.data.mrclam.NoiseModel``, the model
+Noise: the ``mrclam`` world's (``coloc_env.data.mrclam_noise.NoiseModel``, the model
 and the code of ``coloc reproduce mrclam``), fitted by
-``coloc_env.data.mrclam.calibrate_noise`` against Vicon on the start of
+``coloc_env.data.mrclam_noise.calibrate_noise`` against Vicon on the start of
 the whole run (``coloc_env.worlds.mrclam.replay_tables``: once per data path, ``dt``,
 ``noise_model`` and ``calibration_s``, and cached; episodes may overlap the
 calibration window).
 
 * ``noise_model="calibrated"``, fitted on the first
-  ``coloc_env.data.mrclam.calibration_seconds`` (10 % of the run, at
+  ``coloc_env.data.mrclam_noise.calibration_seconds`` (10 % of the run, at
   least 60 s: 75.6 s of dataset 6): the robots move as the command logged
   n = ``odometry_delay_steps`` (2 at dt 0.1) earlier times a scale c; the
   step a -> a + 1 integrates u'[a] = c * u[max(a - n, 0)] with a the absolute
@@ -64,7 +64,7 @@ calibration window).
   dataset 6, the calibrated model's none (tests/coloc_env/test_mrclam_relay.py).
 * ``noise_model="likelihood"`` (default): the calibrated shapes with the four variances
   scaled to maximize the likelihood of UKF-CCL's pose errors on the calibration
-  window (``coloc_env.data.mrclam.fit_noise_scales``). The consistent model: with the
+  window (``coloc_env.data.mrclam_noise.fit_noise_scales``). The consistent model: with the
   ``paper`` policy on dataset 6 (``coloc evaluate``, 100 episodes) its mean position NEES is
   1.99 (2 degrees of freedom) and its pose NEES 2.58 (3), the calibrated model's 4.08 and 5.21
   (docs/consistency.md). The fit runs filters for 17-24 s of CPU the first time a run is used
@@ -228,7 +228,7 @@ import numpy as np
 import estimators.ukf_relay_se2 as se2
 from coloc_env.backends.ukf_se2 import UkfSe2
 from coloc_env.config import BadInput
-from coloc_env.data import mrclam
+from coloc_env.data import mrclam, mrclam_noise
 from coloc_env.networks.blocks.relay_chain import STOP_REASONS
 from coloc_env.networks.relay import Relay
 from coloc_env.rendering import Scene
@@ -256,7 +256,7 @@ class MrclamRelayConfig(RelayTeamConfig):
     calibration_s: float | None = keyword(None, "world.calibration_s")
     initial_position_std: float = keyword(0.01, "world.initial_position_std")
     initial_heading_std: float = keyword(0.01, "world.initial_heading_std")
-    gate: float | None = keyword(mrclam.GATE_999, "backend.gate")
+    gate: float | None = keyword(mrclam_noise.GATE_999, "backend.gate")
 
     @property
     def team_size(self) -> int:

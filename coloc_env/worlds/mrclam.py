@@ -4,7 +4,7 @@ Data: Leung K.Y.K., Halpern Y., Barfoot T.D., Liu H.H.T., "The UTIAS
 multi-robot cooperative localization and mapping dataset", IJRR
 30(8):969-974, 2011 (cite it with results on the data). Loader and noise
 model: ``coloc_env.data.mrclam`` (``coloc_env.data.mrclam.load_cached``,
-``coloc_env.data.mrclam.NoiseModel``), through the run's replay tables
+``coloc_env.data.mrclam_noise.NoiseModel``), through the run's replay tables
 (``replay_tables``: loaded and calibrated once per data path, ``dt``, noise model and
 calibration window, and cached). Nothing is simulated: the motion inputs, the
 measurements and the truth are the data's, on the loader's grid of ``dt``
@@ -34,15 +34,15 @@ the recording; ``start=S`` fixes it (every copy, every episode).
 | observation    | fraction of the other robots it recorded at this step; 1 if it sighted a landmark    |
 
 Readings of step k (absolute a): ``inputs`` (B, N, 4) = (v', omega', var_v, var_omega)
-(``coloc_env.data.mrclam.NoiseModel.odometry`` and ``odometry_var`` at a: the
+(``coloc_env.data.mrclam_noise.NoiseModel.odometry`` and ``odometry_var`` at a: the
 command logged ``odometry_delay_steps`` earlier, scaled). ``range``/``range_valid``
 (B, N, N): [m, n] the range of the first line (file order) in which robot m recorded
 robot n at a, where the sensing choice of m selects n (with ``robot_sightings="all"`` the
 ``obs_*`` lists below hold every such line, the matrices still the first). ``fix``/``fix_valid`` (B, N):
-the landmark pseudo-fix of the ``mrclam_slices`` world (``coloc_env.data.mrclam.pseudo_fix``,
+the landmark pseudo-fix of the ``mrclam_slices`` world (``coloc_env.data.mrclam_navigation.pseudo_fix``,
 the rule of ``coloc_env.worlds.mrclam_slices`` at a single step): each robot runs its own
 navigation filter, a UKF on (x, y, theta) from its odometry and its own landmark sightings
-only (``coloc_env.data.mrclam.own_nav_update`` / ``own_nav_predict``, started at the
+only (``coloc_env.data.mrclam_navigation.own_nav_update`` / ``own_nav_predict``, started at the
 episode's initial belief, chi-square(2) 99.9 % gate; no robot-robot data, no Vicon after
 the start). A robot whose filter accepted landmark sightings at a gets
 p = l - r [cos(theta + b), sin(theta + b)] per sighting (theta: its filter's heading after
@@ -81,7 +81,7 @@ Arguments (``coloc_env.worlds.Mrclam``)
 | horizon              | 600          | 1..T-1-start steps (checked against the run at build time)        |
 | start                | None         | None = drawn per episode; 0..T-1-horizon = a fixed first step     |
 | noise_model          | "likelihood" | "likelihood", "calibrated", "baseline"                            |
-|                      |              | (``coloc_env.data.mrclam.NoiseModel``; "likelihood" is the  |
+|                      |              | (``coloc_env.data.mrclam_noise.NoiseModel``; "likelihood" is the  |
 |                      |              | consistent one: its fit runs filters for 17-24 s at the first     |
 |                      |              | build and is cached on disk, ``coloc_env.data.fit_cache``)        |
 | calibration_s        | None         | (0, 3600] s of the run's start the noise is fitted on; None = the model's rule |
@@ -111,7 +111,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from coloc_env.config import BadInput
-from coloc_env.data import mrclam
+from coloc_env.data import mrclam, mrclam_navigation, mrclam_noise
 from coloc_env.parts import WORLDS, Block, PartConfig, check_choice, check_range
 from coloc_env.worlds.base import Readings, World
 from estimators.se2_models import RangeBearingModel, SE2Odometry
@@ -123,8 +123,8 @@ NUM_ROBOTS = mrclam.NUM_ROBOTS
 class ReplayTables:
     """One run with what every episode needs, computed once per (path, dt, noise_model, calibration_s).
 
-    ``noise`` the ``coloc_env.data.mrclam.calibrate_noise`` dict, ``noise_model`` the
-    ``coloc_env.data.mrclam.NoiseModel`` built from it, ``measurement_cov`` (M, 2, 2) its R
+    ``noise`` the ``coloc_env.data.mrclam_noise.calibrate_noise`` dict, ``noise_model`` the
+    ``coloc_env.data.mrclam_noise.NoiseModel`` built from it, ``measurement_cov`` (M, 2, 2) its R
     of every measurement line (from the measured range); ``first_index`` (T, N, N): index into
     the measurement arrays of the first line (file order) in which robot i recorded robot j at
     step t, -1 if none; ``landmark_count`` (T, N); ``extent`` (x0, x1, y0, y1) the box holding
@@ -133,7 +133,7 @@ class ReplayTables:
 
     data: mrclam.MrclamData
     noise: dict
-    noise_model: mrclam.NoiseModel
+    noise_model: mrclam_noise.NoiseModel
     measurement_cov: np.ndarray
     first_index: np.ndarray
     landmark_count: np.ndarray
@@ -145,7 +145,7 @@ def replay_tables(path: str, dt: float, noise_model: str, calibration_s: float |
     """The ``ReplayTables`` of the run at ``path`` (a resolved dataset folder) on the grid ``dt``, with the
     noise model ``noise_model`` fitted on ``calibration_s`` seconds (None: the model's rule); cached."""
     d = mrclam.load_cached(path, dt)
-    model = mrclam.NoiseModel.calibrate(d, noise_model, calibration_s)
+    model = mrclam_noise.NoiseModel.calibrate(d, noise_model, calibration_s)
     measurement_cov = model.measurement_cov(d.meas_range)
     N, T = NUM_ROBOTS, d.steps
     robot = np.flatnonzero(d.meas_subject <= N)
@@ -170,7 +170,7 @@ def check_recording(prefix: str, data, noise_model: str, calibration_s) -> None:
     and ``calibration_s``; ValueError naming the field and its range."""
     if data is not None and not isinstance(data, (str, os.PathLike)):
         raise ValueError(f"{prefix}data must be a path to an MRCLAM dataset folder or None, got {data!r}")
-    check_choice(f"{prefix}noise_model", noise_model, mrclam.NOISE_MODELS)
+    check_choice(f"{prefix}noise_model", noise_model, mrclam_noise.NOISE_MODELS)
     if calibration_s is not None:
         check_range(f"{prefix}calibration_s", calibration_s, 0.0, 3600.0, low_open=True)
 
@@ -231,7 +231,8 @@ class Mrclam(PartConfig):
         if self.measurement_inflation:
             return tables
         # the same fit without the burst inflation of R (the cached tables keep it)
-        model = mrclam.NoiseModel.from_calibration(tables.noise, tables.noise_model.kind, inflate_measurements=False)
+        model = mrclam_noise.NoiseModel.from_calibration(tables.noise, tables.noise_model.kind,
+                                                         inflate_measurements=False)
         cov = model.measurement_cov(tables.data.meas_range)
         cov.flags.writeable = False
         return dataclasses.replace(tables, noise_model=model, measurement_cov=cov)
@@ -295,7 +296,7 @@ class MrclamWorld(World):
 
     def fix_noise_var(self) -> float:
         """Variance per axis (m^2) of a pseudo-fix: the median over the run's landmark sightings of
-        ``coloc_env.data.mrclam.fix_std``^2 with the heading variance at initial_heading_std^2 (the
+        ``coloc_env.data.mrclam_navigation.fix_std``^2 with the heading variance at initial_heading_std^2 (the
         per-reading value, with the own-navigation heading variance of the step, is ``extra["fix_var"]``)."""
         d = self.data
         lines = np.flatnonzero(d.meas_subject > NUM_ROBOTS)
@@ -303,7 +304,7 @@ class MrclamWorld(World):
             return float(self.config.initial_position_std**2)
         R = self.tables.measurement_cov[lines]
         landmark_var = np.sum(d.landmark_std[d.meas_subject[lines] - NUM_ROBOTS - 1] ** 2, axis=-1)
-        sd = mrclam.fix_std(d.meas_range[lines], R[:, 0, 0], R[:, 1, 1], self.config.initial_heading_std**2,
+        sd = mrclam_navigation.fix_std(d.meas_range[lines], R[:, 0, 0], R[:, 1, 1], self.config.initial_heading_std**2,
                             landmark_var)
         return float(np.median(sd**2))
 
@@ -333,7 +334,7 @@ class MrclamWorld(World):
         d, N = self.data, self.num_agents
         a = int(self.start[b] + self.k[b])
         x, P = self.nav_pose[b], self.nav_cov[b]
-        mrclam.own_nav_update(d, self.noise_model, a, x, P, self._accepted, robots=N)
+        mrclam_navigation.own_nav_update(d, self.noise_model, a, x, P, self._accepted, robots=N)
         s = d.measurements_at(a)
         lines = np.arange(s.start, s.stop)[self._accepted[s]]
         self._accepted[s] = False
@@ -342,9 +343,9 @@ class MrclamWorld(World):
             return
         r = d.meas_robot[lines]
         landmark = d.meas_subject[lines] - NUM_ROBOTS - 1
-        p = mrclam.pseudo_fix(self.landmarks[landmark], d.meas_range[lines], d.meas_bearing[lines], x[r, 2])
+        p = mrclam_navigation.pseudo_fix(self.landmarks[landmark], d.meas_range[lines], d.meas_bearing[lines], x[r, 2])
         R = self.tables.measurement_cov[lines]
-        sd = mrclam.fix_std(d.meas_range[lines], R[:, 0, 0], R[:, 1, 1], P[r, 2, 2],
+        sd = mrclam_navigation.fix_std(d.meas_range[lines], R[:, 0, 0], R[:, 1, 1], P[r, 2, 2],
                             np.sum(d.landmark_std[landmark] ** 2, axis=-1))
         w = 1.0 / sd**2
         for i in np.unique(r):
@@ -363,8 +364,8 @@ class MrclamWorld(World):
         u = self.noise_model.odometry(self.data, a)[:, :N]
         q = self.noise_model.odometry_var(u)
         for b in range(self.batch):
-            self.nav_pose[b], self.nav_cov[b] = mrclam.own_nav_predict(self.nav_pose[b], self.nav_cov[b], u[b], q[b],
-                                                                       self.data.dt)
+            self.nav_pose[b], self.nav_cov[b] = mrclam_navigation.own_nav_predict(
+                self.nav_pose[b], self.nav_cov[b], u[b], q[b], self.data.dt)
         super().advance()
         for b in np.flatnonzero(self.k <= self.horizon):
             self._navigate(int(b))

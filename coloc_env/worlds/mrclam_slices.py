@@ -23,8 +23,8 @@ L = ``slice_steps``):
 * **Heading.** The state (p, v) has no heading, so the heading that turns the
   odometry speed into a displacement and a landmark bearing into a direction
   comes from outside: each robot's OWN navigation filter, a UKF on (x, y, theta)
-  (``coloc_env.data.mrclam.own_navigation``, started at the Vicon pose of step 0
-  with std ``coloc_env.data.mrclam.OWN_NAV_INITIAL_STD``) driven by its corrected odometry and updated only
+  (``coloc_env.data.mrclam_navigation.own_navigation``, started at the Vicon pose of step 0
+  with std ``coloc_env.data.mrclam_navigation.OWN_NAV_INITIAL_STD``) driven by its corrected odometry and updated only
   with its own landmark sightings (chi-square(2) 99.9 % gate), no robot-robot
   measurement: the analogue of a UAV's GPS/INS heading. Dead-reckoned heading is
   useless here (dataset 6: off by 0.2-1.3 rad after 100 s).
@@ -45,7 +45,7 @@ L = ``slice_steps``):
   r, b: measured range and bearing, theta: own-nav heading at k, D: the
   displacement track above, which carries the fix from k to k_tau), with the
   isotropic sigma_fix^2 = max(sigma_r^2, r^2 (sigma_b^2 + sigma_theta^2)) +
-  |sigma_landmark|^2 (``coloc_env.data.mrclam.fix_std``). Several sightings:
+  |sigma_landmark|^2 (``coloc_env.data.mrclam_navigation.fix_std``). Several sightings:
   their inverse-variance mean with the SMALLEST single sigma_fix (no 1/n
   reduction: they share the heading error). One sigma_gps per slice, the largest
   sigma_fix of its normal robots (``extra["gps_std"]``).
@@ -105,7 +105,7 @@ Arguments (``coloc_env.worlds.MrclamSlices``)
 | slice_steps     | 10           | 1..600 grid steps of 0.1 s per slice (Delta t = 0.1 slice_steps s)   |
 | horizon         | 100          | 1..S-start slices (checked against the run at build time)            |
 | start           | None         | None = drawn per episode; 0..S-horizon = a fixed first slice         |
-| noise_model     | "calibrated" | "calibrated", "baseline", "likelihood" (``coloc_env.data.mrclam.NoiseModel``) |
+| noise_model     | "calibrated" | "calibrated", "baseline", "likelihood" (``coloc_env.data.mrclam_noise.NoiseModel``) |
 | calibration_s   | None         | (0, 3600] s of the run's start the noise is fitted on; None = the model's rule |
 | initial_std     | 0.01         | [1e-6, 1000] m: the initial belief's std (m per axis, m/s likewise)  |
 | ranges          | True         | True, False: False = no robot-robot ranges (the GPS-only baseline)   |
@@ -121,7 +121,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from coloc_env.config import BadInput, as_array, check_entries
-from coloc_env.data import mrclam
+from coloc_env.data import mrclam, mrclam_navigation, mrclam_noise
 from coloc_env.parts import WORLDS, PartConfig, check_flag, check_range
 from coloc_env.worlds.base import Readings, World
 from coloc_env.worlds.mrclam import check_recording, recording_tables, replay_tables
@@ -190,18 +190,18 @@ def slice_accel_std(displacement_var: np.ndarray, dt: float) -> np.ndarray:
     return 2.0 * np.sqrt(np.max(displacement_var, axis=-1)) / dt**2
 
 
-def build_slices(d: mrclam.MrclamData, model: mrclam.NoiseModel, slice_steps: int = 10,
+def build_slices(d: mrclam.MrclamData, model: mrclam_noise.NoiseModel, slice_steps: int = 10,
                  num_slices: int | None = None, navigation: tuple | None = None) -> Slices:
     """Map ``d`` to slices 0..num_slices-1 (all that fit by default) by the rules of the module docstring.
 
-    ``navigation``: ``coloc_env.data.mrclam.own_navigation(d, model, Vicon pose of step 0)`` of ``d`` where the
-    caller has it (the filters are causal: the slices read its prefix); None: run here."""
+    ``navigation``: ``coloc_env.data.mrclam_navigation.own_navigation(d, model, Vicon pose of step 0)`` of ``d``
+    where the caller has it (the filters are causal: the slices read its prefix); None: run here."""
     N, L = NUM_ROBOTS, int(slice_steps)
     S_max = (d.steps - 1) // L + 1
     S = S_max if num_slices is None else min(int(num_slices), S_max)
     d = d.window(0, min(d.steps, L * S + L // 2))  # the steps the slices use (and the next)
     if navigation is None:
-        navigation = mrclam.own_navigation(d, model, d.groundtruth[0].copy())
+        navigation = mrclam_navigation.own_navigation(d, model, d.groundtruth[0].copy())
     pose, cov, accepted = navigation[0][:d.steps], navigation[1][:d.steps], navigation[2][:len(d.meas_step)]
     u = model.odometry(d, np.arange(d.steps))
     q = model.odometry_var(u)
@@ -220,9 +220,9 @@ def build_slices(d: mrclam.MrclamData, model: mrclam.NoiseModel, slice_steps: in
     k, r, tau = d.meas_step[idx], d.meas_robot[idx], bin_of[idx]
     land = d.landmarks[d.meas_subject[idx] - N - 1]
     offset = track[steps[tau], r] - track[k, r]
-    p = mrclam.pseudo_fix(land, d.meas_range[idx], d.meas_bearing[idx], heading[k, r], offset)
+    p = mrclam_navigation.pseudo_fix(land, d.meas_range[idx], d.meas_bearing[idx], heading[k, r], offset)
     R = model.measurement_cov(d.meas_range[idx])
-    sd = mrclam.fix_std(d.meas_range[idx], R[:, 0, 0], R[:, 1, 1], cov[k, r, 2, 2],
+    sd = mrclam_navigation.fix_std(d.meas_range[idx], R[:, 0, 0], R[:, 1, 1], cov[k, r, 2, 2],
                         np.sum(d.landmark_std[d.meas_subject[idx] - N - 1] ** 2, axis=-1))
     w = 1.0 / sd**2
     wsum = np.zeros((S, N))
@@ -260,10 +260,10 @@ def build_slices(d: mrclam.MrclamData, model: mrclam.NoiseModel, slice_steps: in
 
 @functools.lru_cache(maxsize=2)
 def _navigation(path: str, noise_model: str, calibration_s: float | None) -> tuple:
-    """The whole run's own navigation (``coloc_env.data.mrclam.own_navigation`` from the Vicon pose of step 0);
-    cached, read-only."""
+    """The whole run's own navigation (``coloc_env.data.mrclam_navigation.own_navigation`` from the Vicon pose of
+    step 0); cached, read-only."""
     tables = replay_tables(path, GRID_DT, noise_model, calibration_s)
-    navigation = mrclam.own_navigation(tables.data, tables.noise_model, tables.data.groundtruth[0].copy())
+    navigation = mrclam_navigation.own_navigation(tables.data, tables.noise_model, tables.data.groundtruth[0].copy())
     for array in navigation:
         array.flags.writeable = False
     return navigation

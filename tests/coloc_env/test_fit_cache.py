@@ -118,11 +118,11 @@ def test_processes_that_miss_at_once_compute_once(tmp_path):
 
 FIT_WORKER = """
 import json, sys
-from coloc_env.data import fit_cache, mrclam
+from coloc_env.data import fit_cache, mrclam, mrclam_noise
 
 d = mrclam.load_cached(sys.argv[1])
-noise = mrclam.calibrate_noise(d, 60.0)
-fit = mrclam.fit_noise_scales(d, noise, 10, cache_dir=sys.argv[2])
+noise = mrclam_noise.calibrate_noise(d, 60.0)
+fit = mrclam_noise.fit_noise_scales(d, noise, 10, cache_dir=sys.argv[2])
 print(json.dumps({"fit": fit, "stats": dict(fit_cache.STATS)}))
 """
 
@@ -148,13 +148,12 @@ def test_the_shipped_dataset6_fit_is_current(mrclam_dataset6):
     """The tests read dataset 6's default likelihood fit from tests/data/fit_cache (conftest): it must be the entry of
     the current code and data, or every process fits for 17-24 s. When this fails the fit's code or inputs
     changed: run the MRCLAM tests once (they write the new entry there), commit it and delete the stale one."""
-    from coloc_env.data import mrclam
-
+    from coloc_env.data import mrclam, mrclam_noise
     d = mrclam.load_cached(mrclam_dataset6)
-    noise = mrclam.calibrate_noise(d, mrclam.calibration_seconds(d, "likelihood"))
+    noise = mrclam_noise.calibrate_noise(d, mrclam_noise.calibration_seconds(d, "likelihood"))
     steps = int(round(noise["calibration_s"] / d.dt))
-    key = mrclam._fit_key(d, noise, steps, 0.01, mrclam.GATE_999)
+    key = mrclam_noise._fit_key(d, noise, steps, 0.01, mrclam_noise.GATE_999)
     path = fit_cache.entry_path(SHIPPED_FIT_CACHE, "mrclam-likelihood", key)
-    fit = fit_cache.read(path, key, lambda v: mrclam._sound_fit(v, steps))
+    fit = fit_cache.read(path, key, lambda v: mrclam_noise._sound_fit(v, steps))
     assert fit is not None, f"no current entry {os.path.basename(path)} in {SHIPPED_FIT_CACHE}"
     assert fit["likelihood_converged"] and fit["likelihood_steps"] == steps

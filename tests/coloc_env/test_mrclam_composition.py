@@ -9,7 +9,7 @@ from pettingzoo.test import parallel_api_test
 
 import agents
 import coloc_env
-from coloc_env.data import mrclam
+from coloc_env.data import mrclam, mrclam_navigation
 from coloc_env.scenarios.composed import ComposedScenario
 from coloc_env.scenarios.mrclam_relay import MrclamRelayConfig, MrclamRelayScenario
 
@@ -122,8 +122,9 @@ def test_ukf_se2_beats_dead_reckoning_on_paired_windows():
 
 @needs_data
 def test_pseudo_fixes_come_from_the_robots_own_navigation_and_are_consistent_with_vicon():
-    """From the run's start the world's own-navigation filters are :func:`mrclam.own_navigation` exactly; every
-    pseudo-fix lies within the 99 % radius (Rayleigh, 3.03 sigma) of its stated variance around the Vicon position."""
+    """From the run's start the world's own-navigation filters are :func:`mrclam_navigation.own_navigation`
+    exactly; every pseudo-fix lies within the 99 % radius (Rayleigh, 3.03 sigma) of its stated variance around the
+    Vicon position."""
     steps = 120
     spec = coloc_env.compose(world=world(start=0, horizon=steps), network="ideal", backend="dead_reckoning")
     env = coloc_env.parallel_env(spec)
@@ -131,7 +132,7 @@ def test_pseudo_fixes_come_from_the_robots_own_navigation_and_are_consistent_wit
     replay.fixes_needed = True  # dead reckoning reads no fix; the world makes them for this inspection
     env.reset(seed=0)
     d = replay.data
-    poses, _, _ = mrclam.own_navigation(d.window(0, steps + 1), replay.noise_model, d.groundtruth[0])
+    poses, _, _ = mrclam_navigation.own_navigation(d.window(0, steps + 1), replay.noise_model, d.groundtruth[0])
     normalized, variances = [], []
     for k in range(steps):
         np.testing.assert_array_equal(replay.nav_pose[0], poses[k])

@@ -7,7 +7,7 @@ import os
 import numpy as np
 import pytest
 
-from coloc_env.data import mrclam
+from coloc_env.data import mrclam, mrclam_noise
 
 REPO_ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 from tests.conftest import MRCLAM_DATASET6 as DATASET6  # noqa: E402
@@ -154,12 +154,12 @@ def test_bad_dt(tmp_path):
 
 def test_calibration_window_rule(dataset6):
     d = dataset6
-    assert mrclam.calibration_seconds(d) == max(60.0, 0.1 * d.steps * d.dt)
-    assert mrclam.calibration_seconds(d) > 75.0  # dataset 6: 10 % of the run
-    assert mrclam.calibration_seconds(d.window(0, 1500)) == 60.0  # a short run: at least 60 s
-    assert mrclam.calibration_seconds(d, "baseline") == 60.0
+    assert mrclam_noise.calibration_seconds(d) == max(60.0, 0.1 * d.steps * d.dt)
+    assert mrclam_noise.calibration_seconds(d) > 75.0  # dataset 6: 10 % of the run
+    assert mrclam_noise.calibration_seconds(d.window(0, 1500)) == 60.0  # a short run: at least 60 s
+    assert mrclam_noise.calibration_seconds(d, "baseline") == 60.0
     with pytest.raises(ValueError, match="noise_model"):
-        mrclam.calibration_seconds(d, "white")
+        mrclam_noise.calibration_seconds(d, "white")
 
 
 def test_noise_model_applies_the_calibration_per_step(dataset6):
@@ -168,9 +168,9 @@ def test_noise_model_applies_the_calibration_per_step(dataset6):
     import estimators.ukf_relay_se2 as se2
 
     d = dataset6
-    noise = mrclam.calibrate_noise(d, mrclam.calibration_seconds(d))
-    model = mrclam.NoiseModel.from_calibration(noise)
-    assert model == mrclam.NoiseModel.calibrate(d) and model.calibration is noise
+    noise = mrclam_noise.calibrate_noise(d, mrclam_noise.calibration_seconds(d))
+    model = mrclam_noise.NoiseModel.from_calibration(noise)
+    assert model == mrclam_noise.NoiseModel.calibrate(d) and model.calibration is noise
     n, scale = noise["odometry_delay_steps"], np.asarray(noise["odometry_scale"])
     assert n == 2
     every = np.arange(d.steps)
@@ -194,12 +194,12 @@ def test_noise_model_applies_the_calibration_per_step(dataset6):
     stacked = model.measurement_cov(d.meas_range[:50])
     assert stacked.shape == (50, 2, 2)
     np.testing.assert_array_equal(stacked[7], model.measurement_cov(float(d.meas_range[7])))
-    plain = mrclam.NoiseModel.from_calibration(noise, inflate_measurements=False)
+    plain = mrclam_noise.NoiseModel.from_calibration(noise, inflate_measurements=False)
     assert plain.measurement_cov(2.5)[1, 1] == noise["sigma_bearing_p68"] ** 2
 
-    base_noise = mrclam.calibrate_noise(d, mrclam.calibration_seconds(d, "baseline"))
-    base = mrclam.NoiseModel.from_calibration(base_noise, "baseline")
-    assert base == mrclam.NoiseModel.calibrate(d, "baseline") != model
+    base_noise = mrclam_noise.calibrate_noise(d, mrclam_noise.calibration_seconds(d, "baseline"))
+    base = mrclam_noise.NoiseModel.from_calibration(base_noise, "baseline")
+    assert base == mrclam_noise.NoiseModel.calibrate(d, "baseline") != model
     np.testing.assert_array_equal(base.odometry(d, every), d.odometry)
     np.testing.assert_array_equal(base.odometry_var(u), np.broadcast_to(
         [base_noise["sigma_v"] ** 2, base_noise["sigma_w"] ** 2], u.shape))
@@ -222,6 +222,22 @@ def test_noise_model_applies_the_calibration_per_step(dataset6):
 def test_noise_model_validates_its_fields(change, field):
     import dataclasses
 
-    good = mrclam.NoiseModel("calibrated", 2, (0.9, 0.8), (1e-4, 1e-3), (0.1, 0.1), (2.0, 2.0), (1e-3, 1e-3), 3.0, 1e-4)
+    good = mrclam_noise.NoiseModel("calibrated", 2, (0.9, 0.8), (1e-4, 1e-3), (0.1, 0.1), (2.0, 2.0), (1e-3, 1e-3),
+                                   3.0, 1e-4)
     with pytest.raises(ValueError, match=field):
         dataclasses.replace(good, **change)
+
+
+@pytest.mark.parametrize("name, module", [("NoiseModel", "coloc_env.data.mrclam_noise"),
+                                          ("calibrate_noise", "coloc_env.data.mrclam_noise"),
+                                          ("own_navigation", "coloc_env.data.mrclam_navigation")])
+def test_moved_names_still_read_from_the_loader_with_a_warning(name, module):
+    import importlib
+
+    from coloc_env.data import mrclam
+
+    with pytest.warns(DeprecationWarning, match=rf"coloc_env.data.mrclam.{name} moved to {module}.{name}"):
+        moved = getattr(mrclam, name)
+    assert moved is getattr(importlib.import_module(module), name)
+    with pytest.raises(AttributeError, match="has no attribute 'no_such_name'"):
+        mrclam.no_such_name  # noqa: B018

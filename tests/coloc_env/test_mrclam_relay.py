@@ -11,7 +11,7 @@ from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test
 import agents
 import coloc_env
 import estimators.ukf_relay_se2 as se2
-from coloc_env.data import mrclam
+from coloc_env.data import mrclam, mrclam_noise
 from coloc_env.networks.blocks.relay_chain import STOP_REASONS
 from tests.helpers import play
 
@@ -175,7 +175,7 @@ def test_paper_policy_without_losses_equals_ukf_ccl_under_the_reproductions_nois
     observations, _ = env.reset(seed=3)
     scenario = env.scenario
     d, gate = scenario.world.data, scenario.config.gate
-    model = mrclam.NoiseModel.calibrate(d, noise_model)  # calibration_seconds(d, noise_model) of the run
+    model = mrclam_noise.NoiseModel.calibrate(d, noise_model)  # calibration_seconds(d, noise_model) of the run
     assert model == scenario.world.noise_model and model.kind == noise_model
     odometry = model.odometry(d, np.arange(d.steps))  # the series run_filters integrates
     Q = model.odometry_var(odometry)

@@ -10,7 +10,7 @@ import pytest
 
 import coloc_env
 import estimators.ukf_relay_se2 as se2
-from coloc_env.data import mrclam
+from coloc_env.data import mrclam, mrclam_navigation
 from coloc_env.worlds.mrclam_slices import MrclamSlices, build_slices, slice_table
 from tests.conftest import MRCLAM_DATASET6, MRCLAM_SKIP_REASON
 
@@ -22,14 +22,14 @@ def test_pseudo_fix_from_true_pose_is_the_position():
     pose = np.column_stack([rng.uniform(-3, 3, 50), rng.uniform(-3, 3, 50), rng.uniform(-np.pi, np.pi, 50)])
     landmark = rng.uniform(-5, 5, (50, 2))
     z = se2.observe(pose, landmark)
-    np.testing.assert_allclose(mrclam.pseudo_fix(landmark, z[:, 0], z[:, 1], pose[:, 2]), pose[:, :2], atol=1e-9,
-                               rtol=0)
+    np.testing.assert_allclose(mrclam_navigation.pseudo_fix(landmark, z[:, 0], z[:, 1], pose[:, 2]), pose[:, :2],
+                               atol=1e-9, rtol=0)
     # the offset carries the fix by a known displacement
-    np.testing.assert_allclose(mrclam.pseudo_fix(landmark, z[:, 0], z[:, 1], pose[:, 2], [0.5, -0.25]),
+    np.testing.assert_allclose(mrclam_navigation.pseudo_fix(landmark, z[:, 0], z[:, 1], pose[:, 2], [0.5, -0.25]),
                                pose[:, :2] + [0.5, -0.25], atol=1e-9, rtol=0)
     # isotropic std: the larger of the radial and the tangential (bearing + heading) parts
-    assert mrclam.fix_std(2.0, 0.01, 0.0004, 0.0021) == pytest.approx(np.sqrt(4 * 0.0025))
-    assert mrclam.fix_std(2.0, 0.09, 0.0004, 0.0021) == pytest.approx(0.3)
+    assert mrclam_navigation.fix_std(2.0, 0.01, 0.0004, 0.0021) == pytest.approx(np.sqrt(4 * 0.0025))
+    assert mrclam_navigation.fix_std(2.0, 0.09, 0.0004, 0.0021) == pytest.approx(0.3)
 
 
 @pytest.fixture(scope="module")
@@ -49,8 +49,8 @@ def test_pseudo_fix_with_vicon_pose_on_dataset6(run):
     pose = d.groundtruth[d.meas_step[i], d.meas_robot[i]]
     landmark = d.landmarks[d.meas_subject[i] - N - 1]
     z = se2.observe(pose, landmark)
-    np.testing.assert_allclose(mrclam.pseudo_fix(landmark, z[:, 0], z[:, 1], pose[:, 2]), pose[:, :2], atol=1e-9,
-                               rtol=0)
+    np.testing.assert_allclose(mrclam_navigation.pseudo_fix(landmark, z[:, 0], z[:, 1], pose[:, 2]), pose[:, :2],
+                               atol=1e-9, rtol=0)
 
 
 def test_the_whole_run_table_starts_with_the_slices_of_its_first_stretch(run):

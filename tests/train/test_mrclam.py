@@ -8,6 +8,7 @@ import os
 import numpy as np
 import pytest
 
+from coloc_env.data import mrclam_noise
 from train.cli import PAPERS, build_parser
 
 REPO_ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -117,10 +118,8 @@ def _synthetic(rng, T=3000, delay=2, scale=(0.9, 0.8), var0=(1e-4, 4e-3), gain=(
 
 
 def test_calibrate_noise_recovers_injected_model():
-    from coloc_env.data import mrclam
-
     d = _synthetic(np.random.default_rng(0))
-    n = mrclam.calibrate_noise(d, d.steps * d.dt)
+    n = mrclam_noise.calibrate_noise(d, d.steps * d.dt)
     for key in ("sigma_v", "sigma_w", "sigma_range", "sigma_bearing", "calibration_s", "calibration_measurements"):
         assert key in n  # the baseline keys stay
     assert n["odometry_delay_steps"] == 2
@@ -143,19 +142,16 @@ def test_calibrate_noise_recovers_injected_model():
 
 def test_speed_dependent_sigma_grows_with_speed():
     import estimators.ukf_relay_se2 as se2
-    from coloc_env.data import mrclam
 
-    n = mrclam.calibrate_noise(_synthetic(np.random.default_rng(1), T=2000), 200.0)
+    n = mrclam_noise.calibrate_noise(_synthetic(np.random.default_rng(1), T=2000), 200.0)
     q = se2.odometry_variance(np.array([[0.0, 0.0], [0.2, 0.5]]), n["odometry_var0"], n["odometry_var_gain"],
                               n["odometry_inflation"])
     assert np.all(q[1] > 1.5 * q[0])
 
 
 def test_correlated_errors_are_inflated():
-    from coloc_env.data import mrclam
-
     d = _synthetic(np.random.default_rng(2), rho=0.9, pair_bias=2.0)
-    n = mrclam.calibrate_noise(d, d.steps * d.dt)
+    n = mrclam_noise.calibrate_noise(d, d.steps * d.dt)
     assert n["odometry_lag1_autocorr"][0] > 0.8
     assert n["odometry_inflation"][0] > 2.5 and n["odometry_inflation"][1] > 2.5
     # a constant error per (robot, landmark) pair of 2 sigma: bursts of sightings share it

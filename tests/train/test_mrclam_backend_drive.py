@@ -8,7 +8,7 @@ import pytest
 
 import coloc_env
 import estimators.ukf_relay_se2 as se2
-from coloc_env.data import mrclam
+from coloc_env.data import mrclam, mrclam_noise
 from tests.conftest import MRCLAM_DATASET6 as DATASET6
 from tests.conftest import needs_mrclam
 
@@ -48,10 +48,10 @@ def test_reproduction_dcl_through_the_backend_is_ccl(inflate):
     from train.reproduce import mrclam as reproduction
 
     d = mrclam.load_cached(DATASET6).window(0, STEPS)
-    noise = mrclam.calibrate_noise(d, mrclam.calibration_seconds(d))
+    noise = mrclam_noise.calibrate_noise(d, mrclam_noise.calibration_seconds(d))
     messages = []
     result = reproduction.run_filters(d, noise, progress=messages.append, inflate_measurements=inflate)
-    model = mrclam.NoiseModel.from_calibration(noise, inflate_measurements=inflate)
+    model = mrclam_noise.NoiseModel.from_calibration(noise, inflate_measurements=inflate)
     x, P, il = _ccl(d, model, reproduction.GATE)
     blocks = P.reshape(STEPS, N, 3, N, 3)[:, np.arange(N), :, np.arange(N), :].transpose(1, 0, 2, 3)
     np.testing.assert_allclose(result["estimate"]["DCL"], x, rtol=0, atol=1e-9)
@@ -67,7 +67,7 @@ def test_local_landmark_updates_are_a_different_estimator():
     from train.reproduce import mrclam as reproduction
 
     d = mrclam.load_cached(DATASET6).window(0, STEPS)
-    noise = mrclam.calibrate_noise(d, mrclam.calibration_seconds(d))
+    noise = mrclam_noise.calibrate_noise(d, mrclam_noise.calibration_seconds(d))
     relayed = reproduction.run_filters(d, noise)["estimate"]["DCL"]
     spec = coloc_env.compose(world={"name": "mrclam", "data": DATASET6, "horizon": STEPS - 1, "start": 0,
                                     "calibration_s": noise["calibration_s"], "robot_sightings": "all"},
@@ -107,4 +107,4 @@ def test_run_filters_needs_the_run_or_a_prefix():
 
     d = mrclam.load_cached(DATASET6).window(10, 50)
     with pytest.raises(ValueError, match="prefix"):
-        reproduction.run_filters(d, mrclam.calibrate_noise(d, 4.0))
+        reproduction.run_filters(d, mrclam_noise.calibrate_noise(d, 4.0))

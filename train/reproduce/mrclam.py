@@ -28,12 +28,12 @@ whole-run columns include the calibration window; ``evaluation`` reports each
 model on the steps after it only (the part the noise was not fitted on).
 
 Noise models, every parameter from the calibration window
-(``coloc_env.data.mrclam.calibration_seconds``: the first 10 % of the
+(``coloc_env.data.mrclam_noise.calibration_seconds``: the first 10 % of the
 run, at least 60 s: 75.6 s of dataset 6, 60 s of a ``--quick`` run) against
-Vicon, applied per step by ``coloc_env.data.mrclam.NoiseModel`` (the same
+Vicon, applied per step by ``coloc_env.data.mrclam_noise.NoiseModel`` (the same
 code as the ``mrclam`` world and the ``mrclam_relay`` scenario):
 
-* per-step shapes by moment rules (``coloc_env.data.mrclam.calibrate_noise``):
+* per-step shapes by moment rules (``coloc_env.data.mrclam_noise.calibrate_noise``):
   the robots move as the command logged ``odometry_delay_steps`` earlier
   (0.2 s) times a scale (``odometry_scale``: they turn ~18 % and drive ~10 %
   less than commanded); odometry variances a_c + b_c u_c^2 (least squares of
@@ -42,7 +42,7 @@ code as the ``mrclam`` world and the ``mrclam_relay`` scenario):
 * ``likelihood`` (the reported model): the four variances scaled by
   (c_v, c_w, c_range, c_bearing) that maximize the composite likelihood of
   UKF-CCL's pose errors against Vicon on the window
-  (``coloc_env.data.mrclam.fit_noise_scales``): the odometry errors are
+  (``coloc_env.data.mrclam_noise.fit_noise_scales``): the odometry errors are
   correlated over seconds (lag-1 autocorrelation 0.37 in v, a per-robot bias)
   and successive sightings of one subject share their error, which a white
   model cannot represent; the scales absorb both into the white model at the
@@ -100,7 +100,7 @@ import numpy as np
 
 import estimators.ukf_relay_se2 as se2
 from coloc_env.config import BadInput
-from coloc_env.data import mrclam
+from coloc_env.data import mrclam, mrclam_noise
 from train.io import save_figure, write_json, write_text
 from train.reproduce import mrclam_nbp
 
@@ -109,11 +109,11 @@ RUNS = 1  # the data is one recorded run: no Monte Carlo
 QUICK_RUNS = 1
 QUICK_STEPS = 1500  # --quick: the first 150 s
 INITIAL_STD = (0.01, 0.01, 0.01)
-GATE = mrclam.GATE_999  # chi-square(2) 0.999 quantile
+GATE = mrclam_noise.GATE_999  # chi-square(2) 0.999 quantile
 N = mrclam.NUM_ROBOTS
 
 
-def _backend_parts(d: mrclam.MrclamData, noise: dict, model: mrclam.NoiseModel, kind: str,
+def _backend_parts(d: mrclam.MrclamData, noise: dict, model: mrclam_noise.NoiseModel, kind: str,
                    inflate_measurements: bool):
     """The ``mrclam`` world replaying ``d`` (batch 1, start 0, horizon T - 1) and, over the ``ideal`` network,
     the ``ukf_se2`` (DCL) and ``dead_reckoning`` (IL) backends on it, reset; the world's noise model is
@@ -155,8 +155,8 @@ def run_filters(d: mrclam.MrclamData, noise: dict, progress=None, baseline: bool
                 inflate_measurements: bool = True, kind: str | None = None) -> dict:
     """IL, CCL and DCL over the whole of ``d``; estimates (T, N, 3) and own-block covariances (T, N, 3, 3).
 
-    ``noise``: a ``coloc_env.data.mrclam.calibrate_noise`` dict, applied by
-    ``coloc_env.data.mrclam.NoiseModel``: ``baseline`` the constant 1.4826 x MAD noise on the
+    ``noise``: a ``coloc_env.data.mrclam_noise.calibrate_noise`` dict, applied by
+    ``coloc_env.data.mrclam_noise.NoiseModel``: ``baseline`` the constant 1.4826 x MAD noise on the
     raw commands (the model before calibration), else the calibrated model
     (``inflate_measurements=False``: without its measurement inflation, for the ablation).
 
@@ -168,11 +168,11 @@ def run_filters(d: mrclam.MrclamData, noise: dict, progress=None, baseline: bool
     (``coloc_env.backends.dead_reckoning``). CCL (``ccl_update`` on the joint state) reads ``d`` and the
     noise model itself: the independent check that DCL equals CCL (``max_abs_diff``, state and joint
     covariance), and of the world's replay. ``d`` must be a loaded run or a prefix of it (``window(0, S)``)
-    and ``noise`` its ``coloc_env.data.mrclam.calibrate_noise`` of ``d`` (the world refits it on the
+    and ``noise`` its ``coloc_env.data.mrclam_noise.calibrate_noise`` of ``d`` (the world refits it on the
     run: ValueError if the two differ).
     """
     kind = kind or ("baseline" if baseline else "calibrated")
-    model = mrclam.NoiseModel.from_calibration(noise, kind, inflate_measurements=inflate_measurements)
+    model = mrclam_noise.NoiseModel.from_calibration(noise, kind, inflate_measurements=inflate_measurements)
     world, network, dcl, il = _backend_parts(d, noise, model, kind, inflate_measurements)
     odometry = model.odometry(d, np.arange(d.steps))  # corrected u'[k] (T, N, 2)
     Q = model.odometry_var(odometry)  # per-step, per-robot variances (T, N, 2)
@@ -413,10 +413,10 @@ def run(out: str, runs: int = RUNS, seed: int = 0, quick: bool = False, executor
         d = d.window(0, min(QUICK_STEPS, d.steps))
     if progress:
         progress(f"loaded {d.path}: {d.steps} steps of {d.dt} s")
-    moments = mrclam.calibrate_noise(d, mrclam.calibration_seconds(d, "calibrated"))
+    moments = mrclam_noise.calibrate_noise(d, mrclam_noise.calibration_seconds(d, "calibrated"))
     calibration_steps = int(round(moments["calibration_s"] / d.dt))
-    noise = {**moments, **mrclam.fit_noise_scales(d, moments, calibration_steps)}
-    noise_baseline = mrclam.calibrate_noise(d, mrclam.calibration_seconds(d, "baseline"))
+    noise = {**moments, **mrclam_noise.fit_noise_scales(d, moments, calibration_steps)}
+    noise_baseline = mrclam_noise.calibrate_noise(d, mrclam_noise.calibration_seconds(d, "baseline"))
     results = {"likelihood": run_filters(d, noise, progress, kind="likelihood"),
                "calibrated": run_filters(d, moments, progress),
                "baseline": run_filters(d, noise_baseline, progress, baseline=True),
@@ -628,7 +628,7 @@ Initial state: the Vicon pose, std {m['initial_std']}.
 ## Noise model (from the first {noise['calibration_s']:.1f} s against Vicon; no ground truth after it)
 
 Every number below comes from the calibration window (the first 10 % of the run, at least 60 s) by a
-stated rule (`coloc_env.data.mrclam.calibrate_noise`); none was chosen by looking at the NEES.
+stated rule (`coloc_env.data.mrclam_noise.calibrate_noise`); none was chosen by looking at the NEES.
 
 * Odometry delay and scale: the robots follow the command logged {noise['odometry_delay_steps']} steps
   ({noise['odometry_delay_steps'] * m['dt']:.1f} s) earlier, the delay in 0..0.5 s that minimizes the residual
@@ -699,7 +699,7 @@ def _evaluation_section(m: dict, verdict) -> str:
     ml = ev["likelihood"]
     start = ", ".join(f"{x:.2f}" for x in noise["likelihood_start"])
     c = noise["likelihood_scale"]
-    return (f"Maximum-likelihood scales (`coloc_env.data.mrclam.fit_noise_scales`: the composite likelihood of "
+    return (f"Maximum-likelihood scales (`coloc_env.data.mrclam_noise.fit_noise_scales`: the composite likelihood of "
             f"UKF-CCL's pose errors against Vicon on the calibration window, compass search from the moment rules' "
             f"inflations {start}): c_v = {c[0]:.2f}, c_w = {c[1]:.2f}, c_range = {c[2]:.2f}, c_bearing = {c[3]:.2f} "
             f"({noise['likelihood_passes']} passes of 9 filters).\n\n"

@@ -10,7 +10,7 @@ robots that sighted a landmark in a slice GPS-normal with a pseudo-fix, the
 others faulty with robot-robot ranges; its docstring gives every rule of the
 mapping; cite Leung et al., IJRR 2011). No Vicon data after the calibration
 window enters any estimator; Vicon is used for the noise calibration (the
-first 10 % of the run, the rule of ``coloc_env.data.mrclam.NoiseModel``, as in
+first 10 % of the run, the rule of ``coloc_env.data.mrclam_noise.NoiseModel``, as in
 ``coloc reproduce mrclam``), for the initial poses and for scoring.
 
 The plan (every choice)
@@ -63,7 +63,7 @@ import numpy as np
 import estimators.ukf_relay_se2 as se2
 from coloc_env.backends.particles import Dnbp, RangeLs
 from coloc_env.composition import compose
-from coloc_env.data import mrclam
+from coloc_env.data import mrclam, mrclam_noise
 from coloc_env.env import build_scenario
 from coloc_env.networks.broadcast import Broadcast
 from coloc_env.scenarios.composed import ComposedScenario
@@ -96,7 +96,7 @@ def slices_of(world: MrclamSlices) -> Slices:
                                          for f in dataclasses.fields(table) if f.name != "dt"})
 
 
-def dead_reckoning(d: mrclam.MrclamData, model: mrclam.NoiseModel, x0: np.ndarray) -> np.ndarray:
+def dead_reckoning(d: mrclam.MrclamData, model: mrclam_noise.NoiseModel, x0: np.ndarray) -> np.ndarray:
     """Odometry alone, heading dead-reckoned too: poses (T, N, 3)."""
     u = model.odometry(d, np.arange(d.steps))
     out = np.empty((d.steps, N, 3))
