@@ -103,6 +103,87 @@ class AlohaPolicy(_SlotPolicy):
         return (self.rng.random(self.rounds * self.slots) < self.probability(observation)).astype(int)
 
 
+class PolledPolicy(_SlotPolicy):
+    """A polled medium, not realizable over ``contention`` (it has no downlink to carry the polls, and the polls
+    here cost nothing): in each of the step's R x S slots the centre lets one UAV transmit, the ones with the
+    largest ``score``, one per slot in that order. Polled are the UAVs whose transmit is not masked (not the
+    centre) and, where the centre only listens, that it can hear now (within ``comm_range`` of it by the
+    observed link distances, which the centre's radio knows; none in range: every UAV that may send): a UAV
+    out of its range would otherwise keep the largest score and hold every slot. No two frames share a slot,
+    so nothing collides; each step gives a slot to min(R S, polled) UAVs.
+
+    | ``score``   | the UAV polled first                                                          |
+    |-------------|-------------------------------------------------------------------------------|
+    | ``"trace"`` | the largest log tr P it observes (its block of the centre's covariance, which |
+    |             | the centre holds: a schedule the centre could run with a downlink)            |
+    | ``"error"`` | the largest current position error (the truth: a hindsight schedule)          |
+    | ``"age"``   | the most steps since its last delivered frame (``steps_since``; the oldest    |
+    |             | first: round robin over the UAVs that transmit, no slot left to the centre)    |
+    """
+
+    SCORES = ("trace", "error", "age")
+
+    def __init__(self, env, score: str = "trace"):
+        super().__init__(env)
+        if score not in self.SCORES:
+            raise BadInput(f"score must be one of {self.SCORES}, got {score!r}")
+        self.score = score
+        # "error" reads the env's truth, which no copy of the batched core hands a policy: the env loop only
+        self.batching = None if score == "error" else "per_copy"
+        self.core = env.unwrapped.scenario
+        masks = self.core.network.transport_masks(None)
+        can_send = np.ones(self.N, bool) if masks is None else masks[0][0, :, :, 1].all(axis=-1)
+        self.candidates = np.flatnonzero(can_send)
+        self.feature = {"trace": self.core.feature_index("log_trace"),
+                        "age": self.core.feature_index("steps_since")}.get(score)
+        listeners = np.flatnonzero(~can_send)
+        self.centre = int(listeners[0]) if len(listeners) == 1 else None
+        self.comm_range = float(self.core.composition.network.comm_range)
+
+    def act(self, observations: dict) -> dict:
+        agents = list(observations)
+        index = {agent: int(np.argmax(np.asarray(observations[agent], float)[:self.N])) for agent in agents}
+        if self.score == "error":
+            value = np.asarray(self.core.position_error()[0], float)
+        else:
+            value = np.full(self.N, -np.inf)
+            for agent in agents:
+                value[index[agent]] = float(np.asarray(observations[agent], float)[self.feature])
+        candidates = self.candidates
+        if self.centre is not None:
+            centre = next(a for a in agents if index[a] == self.centre)
+            distance = np.asarray(observations[centre], float)[2 * self.N + 1:3 * self.N + 1] * DISTANCE_SCALE
+            heard = candidates[distance[candidates] <= self.comm_range]
+            candidates = heard if len(heard) else candidates
+        # the largest first; equal scores by index (a stable sort of the negated values)
+        order = candidates[np.argsort(-value[candidates], kind="stable")]
+        slot_of = {int(i): s for s, i in enumerate(order[:self.rounds * self.slots])}
+        actions = {}
+        for agent in agents:
+            action = self.base.copy()
+            transmit = np.zeros(self.rounds * self.slots, int)
+            if index[agent] in slot_of:
+                transmit[slot_of[index[agent]]] = 1
+            action[self.start:self.start + self.rounds * self.slots] = transmit
+            actions[agent] = action.astype(self.dtype)
+        return actions
+
+
+def bound_polled(env) -> PolledPolicy:
+    """The centre polls the UAV with the largest log tr P in each slot (``PolledPolicy``, score ``"trace"``)."""
+    return PolledPolicy(env, "trace")
+
+
+def bound_polled_error(env) -> PolledPolicy:
+    """The centre polls the UAV with the largest current position error (``PolledPolicy``, score ``"error"``)."""
+    return PolledPolicy(env, "error")
+
+
+def bound_polled_age(env) -> PolledPolicy:
+    """The centre polls the UAV whose last frame it received is the oldest (``PolledPolicy``, score ``"age"``)."""
+    return PolledPolicy(env, "age")
+
+
 def round_robin(env) -> RoundRobinPolicy:
     """Agent i transmits in global slot t iff t mod N = i (module table)."""
     return RoundRobinPolicy(env)

@@ -17,7 +17,10 @@ SMALL = {
     "nlos_horizon": {"horizon": 60},
     "gps_denied_nbp": {"horizon": 5, "num_particles": 30},
     "mrclam_relay": {"data": MRCLAM_DATASET6, "window_steps": 20},
+    "contention_localization": {"horizon": 8},
 }
+# policies that read the env's truth, which no copy of the batched core hands them: the env loop only
+ENV_LOOP_ONLY = {("contention_localization", "bound_polled_error")}
 
 
 def _cases():
@@ -32,6 +35,9 @@ def _cases():
 def test_batched_policy_equals_the_env_loop(scenario, name):
     config = SMALL[scenario]
     batched = ev.run_policy_batched(scenario, name, 3, 77, **config)
+    if (scenario, name) in ENV_LOOP_ONLY:
+        assert batched is None
+        return
     assert batched is not None, f"{scenario} {name} does not batch"
     looped = ev.run_episodes(scenario, name, 3, 77, **config)
     assert len(set(looped["per_episode_cost"])) == 3  # three distinct episodes
