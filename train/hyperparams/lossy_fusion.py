@@ -11,9 +11,21 @@
   decision mostly matters for the next few slots: gamma 0.95 (horizon ~20
   of the 100 slots), GAE 0.95.
 * Small networks (64, 64): the observation has 14 numbers for two UAVs.
+* ``COST_RANGE = (250, 2.5e6)`` m^2 per packet, log-uniform: the follower's cost per packet is drawn per
+  episode and observed, so one network learns whether a packet is worth sending at every price. The fixed
+  schedules' frontier on validation episodes (``coloc frontier lossy_fusion --episodes 16 --seed 2000000``:
+  silent 21490 m^2, send_on_delta 447 / 106.9 / 45.85 / 20.03, periodic:2 874 m^2 at 0.25 packets per
+  agent-step, paper 187 m^2 at 0.5) changes vertex where the price crosses a chord's slope: 2750, 6479,
+  1.4e4, 1.1e5, 1.2e5 and 6.0e5 m^2 per packet per agent-step (-> silent). The range reaches a decade below
+  the first change and past the last, a quarter of the episodes per decade.
+* ``COST_REWARD_SCALE = 3000`` m^2 per packet (the first chord's slope): each step's reward is divided by
+  1 + c / 3000, which leaves each cost's optimum as it is and keeps the episodes priced at 1e5-1e6 m^2 from
+  setting every batch's advantage scale (``train.training.cost_balanced_reward``).
 """
 
 ENV_CONFIG: dict = {}
+COST_RANGE = (250.0, 2.5e6)
+COST_REWARD_SCALE = 3000.0
 
 HYPERPARAMS = {
     "n_steps": 128,
@@ -28,7 +40,7 @@ HYPERPARAMS = {
 }
 
 NUM_COPIES = 16
-TIMESTEPS = 1_200_000  # docs/learning.md's budget: `coloc train lossy_fusion` at its defaults reproduces the table
+TIMESTEPS = 1_200_000
 
 # The leaderboard's target for a learned policy: (what it says, the largest |paired error difference| relative to
 # the baseline's mean that counts as matching it, the communication saving a match needs).
