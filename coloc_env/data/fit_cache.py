@@ -12,7 +12,10 @@ the disk cache: every process fits again), else ``$XDG_CACHE_HOME/coloc/fits``, 
 computed and not stored.
 
 Entries: one JSON file per key, ``<name>-<first 32 hex digits of key>.json``, holding the format,
-the whole key, the value and a SHA-256 digest of the key and value. An entry is used only when it
+the whole key, the value and a SHA-256 digest of the key and value; ``cached_arrays`` stores a dict of numpy
+arrays (the MRCLAM robots' own navigation over a whole run: about 5 s per process) as
+``<name>-<first 32 hex digits>.npz``, with the key and a digest of the key and of each array's name, dtype,
+shape and bytes beside them. An entry is used only when it
 parses, its format, key and digest match, and the caller's ``validate`` accepts the value; a corrupt,
 truncated, stale (another key) or rejected entry is computed again and replaced, never trusted.
 
@@ -32,8 +35,11 @@ import hashlib
 import json
 import os
 import tempfile
+import zipfile
 from collections.abc import Callable, Iterator
 from typing import Any
+
+import numpy as np
 
 ENV_VAR = "COLOC_FIT_CACHE"
 OFF = "off"
@@ -52,8 +58,8 @@ def cache_dir(folder: str | os.PathLike | None = None) -> str | None:
     return None if folder == OFF else folder
 
 
-def entry_path(folder: str, name: str, key: str) -> str:
-    return os.path.join(folder, f"{name}-{key[:32]}.json")
+def entry_path(folder: str, name: str, key: str, suffix: str = ".json") -> str:
+    return os.path.join(folder, f"{name}-{key[:32]}{suffix}")
 
 
 def _digest(key: str, value: Any) -> str:
@@ -75,13 +81,49 @@ def read(path: str, key: str, validate: Callable[[Any], bool]) -> Any | None:
 
 def write(path: str, key: str, value: Any) -> None:
     """The entry for ``key`` at ``path``, atomically (a temporary file renamed over it)."""
-    folder = os.path.dirname(path)
     payload = json.dumps({"format": FORMAT, "key": key, "value": value, "digest": _digest(key, value)},
                          indent=1, sort_keys=True).encode()
+    _write_atomically(path, payload + b"\n")
+
+
+def _arrays_digest(key: str, arrays: dict) -> str:
+    h = hashlib.sha256(key.encode())
+    for name in sorted(arrays):
+        a = np.ascontiguousarray(arrays[name])
+        h.update(repr((name, a.dtype.str, a.shape)).encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
+def read_arrays(path: str, key: str, validate: Callable[[dict], bool]) -> dict | None:
+    """The arrays of the ``.npz`` entry at ``path`` if it is sound and for ``key``, else None."""
+    try:
+        with np.load(path, allow_pickle=False) as entry:
+            stored = {name: entry[name] for name in entry.files}
+        meta = json.loads(str(stored.pop("__entry__")))
+        sound = (meta["format"] == FORMAT and meta["key"] == key and meta["digest"] == _arrays_digest(key, stored)
+                 and validate(stored))
+    except (OSError, ValueError, KeyError, TypeError, AttributeError, EOFError, zipfile.BadZipFile):
+        return None
+    return stored if sound else None
+
+
+def write_arrays(path: str, key: str, arrays: dict) -> None:
+    """The ``.npz`` entry for ``key`` at ``path``, atomically."""
+    import io
+
+    meta = json.dumps({"format": FORMAT, "key": key, "digest": _arrays_digest(key, arrays)})
+    buffer = io.BytesIO()
+    np.savez(buffer, __entry__=np.array(meta), **arrays)
+    _write_atomically(path, buffer.getvalue())
+
+
+def _write_atomically(path: str, payload: bytes) -> None:
+    folder = os.path.dirname(path)
     fd, tmp = tempfile.mkstemp(dir=folder, prefix=".tmp-", suffix=os.path.basename(path))
     try:
         with os.fdopen(fd, "wb") as fh:
-            fh.write(payload + b"\n")
+            fh.write(payload)
         mask = os.umask(0)  # mkstemp creates 0600 files; an entry gets the permissions of any file the user creates
         os.umask(mask)
         os.chmod(tmp, 0o666 & ~mask)
@@ -113,11 +155,22 @@ def cached(name: str, key: str, compute: Callable[[], Any], validate: Callable[[
 
     ``name`` names the kind of value in the file name; ``validate`` says whether a stored value is usable
     (the right fields, finite, in range); ``compute`` returns a JSON-serializable value."""
+    return _cached(name, key, compute, validate, folder, read, write, ".json")
+
+
+def cached_arrays(name: str, key: str, compute: Callable[[], dict], validate: Callable[[dict], bool],
+                  folder: str | os.PathLike | None = None) -> dict:
+    """``cached`` for a value that is a dict of numpy arrays (name -> array), stored as a ``.npz`` entry; the
+    arrays read back are the ones stored, bit for bit."""
+    return _cached(name, key, compute, validate, folder, read_arrays, write_arrays, ".npz")
+
+
+def _cached(name, key, compute, validate, folder, read, write, suffix):
     directory = cache_dir(folder)
     if directory is None:
         STATS["computed"] += 1
         return compute()
-    path = entry_path(directory, name, key)
+    path = entry_path(directory, name, key, suffix)
     value = read(path, key, validate)
     if value is not None:
         STATS["disk"] += 1

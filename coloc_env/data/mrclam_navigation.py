@@ -1,16 +1,20 @@
 """The MRCLAM robots' own navigation: one UKF per robot on (x, y, theta) from its odometry and its own landmark
 sightings, no robot-robot data (the ``mrclam_slices`` world's source of each robot's pose belief), and the
-landmark pseudo-fix of one sighting.
+landmark pseudo-fix of one sighting. ``cached_own_navigation`` reads a whole run's filters from the on-disk
+cache of ``coloc_env.data.fit_cache`` where an earlier process computed them.
 """
 
 from __future__ import annotations
+
+import sys
 
 import numpy as np
 
 from coloc_env.data.mrclam import NUM_ROBOTS, MrclamData
 from coloc_env.data.mrclam_noise import GATE_999, NoiseModel
 
-__all__ = ["OWN_NAV_INITIAL_STD", "fix_std", "own_nav_predict", "own_nav_update", "own_navigation", "pseudo_fix"]
+__all__ = ["OWN_NAV_INITIAL_STD", "cached_own_navigation", "fix_std", "own_nav_predict", "own_nav_update",
+           "own_navigation", "pseudo_fix"]
 
 OWN_NAV_INITIAL_STD = 0.01  # m and rad: the own-navigation filter's start (Vicon pose), as coloc reproduce mrclam
 
@@ -81,3 +85,49 @@ def own_navigation(d: MrclamData, model: NoiseModel, x0: np.ndarray, initial_std
         poses[k], covs[k] = x, P
         x, P = own_nav_predict(x, P, u[k], q[k], d.dt)
     return poses, covs, accepted
+
+
+def _navigation_key(d: MrclamData, model: NoiseModel, x0: np.ndarray, initial_std: float) -> str:
+    """Digest of what ``own_navigation`` reads (the run's odometry and sightings, the noise model, the start) and
+    of its code (this module's source and the SE(2) filter's, ``estimators.ukf_relay_se2``)."""
+    import dataclasses
+    import hashlib
+    import inspect
+
+    import estimators.ukf_relay_se2 as se2
+    from coloc_env.data import mrclam_noise
+
+    h = hashlib.sha256()
+    for array in (d.odometry, d.landmarks, d.meas_step, d.meas_robot, d.meas_subject, d.meas_range,
+                  d.meas_bearing, np.asarray(x0, float)):
+        h.update(np.ascontiguousarray(array).tobytes())
+    fields = [(f.name, getattr(model, f.name)) for f in dataclasses.fields(model) if f.compare]
+    h.update(repr((fields, d.dt, d.steps, float(initial_std))).encode())
+    for module in (sys.modules[__name__], se2, mrclam_noise):
+        try:
+            h.update(inspect.getsource(module).encode())
+        except (OSError, TypeError):  # an installation without sources: the module's name alone
+            h.update(module.__name__.encode())
+    return h.hexdigest()
+
+
+def cached_own_navigation(d: MrclamData, model: NoiseModel, x0: np.ndarray,
+                          initial_std: float = OWN_NAV_INITIAL_STD, cache_dir=None):
+    """``own_navigation``, read from the on-disk cache (``coloc_env.data.fit_cache.cached_arrays``, keyed by a
+    digest of its inputs and code) where an earlier process stored it: the same arrays, bit for bit."""
+    from coloc_env.data import fit_cache
+
+    steps, robots = d.steps, len(np.asarray(x0))
+
+    def compute() -> dict:
+        poses, covs, accepted = own_navigation(d, model, x0, initial_std)
+        return {"poses": poses, "covs": covs, "accepted": accepted}
+
+    def sound(arrays: dict) -> bool:
+        return (set(arrays) == {"poses", "covs", "accepted"} and arrays["poses"].shape == (steps, robots, 3)
+                and arrays["covs"].shape == (steps, robots, 3, 3) and arrays["accepted"].shape == d.meas_step.shape
+                and bool(np.all(np.isfinite(arrays["poses"])) and np.all(np.isfinite(arrays["covs"]))))
+
+    arrays = fit_cache.cached_arrays("mrclam-navigation", _navigation_key(d, model, x0, initial_std), compute,
+                                     sound, cache_dir)
+    return arrays["poses"], arrays["covs"], arrays["accepted"]

@@ -261,9 +261,10 @@ def build_slices(d: mrclam.MrclamData, model: mrclam_noise.NoiseModel, slice_ste
 @functools.lru_cache(maxsize=2)
 def _navigation(path: str, noise_model: str, calibration_s: float | None) -> tuple:
     """The whole run's own navigation (``coloc_env.data.mrclam_navigation.own_navigation`` from the Vicon pose of
-    step 0); cached, read-only."""
+    step 0); cached in the process and on disk (``cached_own_navigation``), read-only."""
     tables = replay_tables(path, GRID_DT, noise_model, calibration_s)
-    navigation = mrclam_navigation.own_navigation(tables.data, tables.noise_model, tables.data.groundtruth[0].copy())
+    navigation = mrclam_navigation.cached_own_navigation(tables.data, tables.noise_model,
+                                                         tables.data.groundtruth[0].copy())
     for array in navigation:
         array.flags.writeable = False
     return navigation

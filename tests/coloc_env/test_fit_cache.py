@@ -5,6 +5,7 @@ import os
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from coloc_env.data import fit_cache
@@ -65,6 +66,50 @@ def test_a_corrupt_or_stale_entry_is_computed_again_and_replaced(tmp_path, damag
     assert fit_cache.cached("fit", key, compute, _sound, tmp_path) == {"scale": 2.5}
     assert compute.calls == 1
     assert fit_cache.read(path, key, _sound) == {"scale": 2.5}  # replaced by a sound entry
+
+
+def _arrays():
+    rng = np.random.default_rng(0)
+    return {"poses": rng.normal(size=(4, 2, 3)), "accepted": rng.random(5) < 0.5}
+
+
+def _sound_arrays(arrays):
+    return set(arrays) == {"poses", "accepted"} and arrays["poses"].shape == (4, 2, 3)
+
+
+@pytest.mark.parametrize("damage", [None, "truncated", "array edited", "other key", "refused"])
+def test_stored_arrays_come_back_bit_for_bit_and_a_bad_entry_is_computed_again(tmp_path, damage):
+    key = "d" * 64
+    expected = _arrays()
+    compute = Counting(expected)
+    first = fit_cache.cached_arrays("nav", key, compute, _sound_arrays, tmp_path)
+    path = fit_cache.entry_path(str(tmp_path), "nav", key, ".npz")
+    assert os.path.exists(path) and not list(tmp_path.glob(".tmp-*"))
+    if damage == "truncated":
+        with open(path, "rb") as fh:
+            data = fh.read()
+        with open(path, "wb") as fh:
+            fh.write(data[: len(data) // 2])
+    elif damage is not None:
+        changed = {name: value.copy() for name, value in expected.items()}
+        entry_key = key
+        if damage == "array edited":  # stored under the old digest: no longer matches
+            with np.load(path) as entry:
+                meta = str(entry["__entry__"])
+            changed["poses"][0, 0, 0] += 1e-12
+            np.savez(path, __entry__=np.array(meta), **changed)  # path ends in .npz: written as it is
+        else:
+            if damage == "other key":
+                entry_key = "d" * 32 + "e" * 32
+            else:  # refused: a sound entry the caller's check rejects
+                changed = {"poses": np.zeros((1, 1, 3)), "accepted": changed["accepted"]}
+            fit_cache.write_arrays(path, entry_key, changed)
+    second = fit_cache.cached_arrays("nav", key, compute, _sound_arrays, tmp_path)
+    assert compute.calls == (1 if damage is None else 2)
+    for arrays in (first, second):
+        assert set(arrays) == set(expected)
+        for name in expected:
+            assert arrays[name].dtype == expected[name].dtype and np.array_equal(arrays[name], expected[name])
 
 
 def test_the_folder_comes_from_the_argument_then_the_variable_then_the_user_cache(tmp_path, monkeypatch):
