@@ -28,11 +28,10 @@ from __future__ import annotations
 
 import functools
 import math
-import types
 
 import numpy as np
 
-from estimators.compiled import renamed
+from estimators.compiled import in_namespace
 
 PARALLEL_ELEMENTS = 4096  # (copy, agent) elements from which threads pay for themselves
 prange = range  # numba.prange in the compiled copies (the kernels' loop over elements)
@@ -375,11 +374,10 @@ def costs_kernel(prev_x, prev_P, prev_valid, z, R, T, G, out):  # pragma: no cov
 
 
 def _with_globals(fn, scope: dict, suffix: str = ""):
-    """A copy of ``fn`` (``estimators.compiled.renamed`` with ``suffix``) whose globals are its module's with
-    ``scope`` over them: the compiled helpers the copy calls, where the source calls the Python ones."""
-    copy = renamed(fn, suffix)
-    return types.FunctionType(copy.__code__, {**fn.__globals__, **scope}, copy.__name__, copy.__defaults__,
-                              copy.__closure__)
+    """A copy of ``fn`` (``estimators.compiled.renamed`` with ``suffix``: its own name and qualified name, so
+    the threaded form has its own disk-cache entry) whose globals are its module's with ``scope`` over them:
+    the compiled helpers the copy calls, where the source calls the Python ones."""
+    return in_namespace(fn, {**fn.__globals__, **scope}, suffix)
 
 
 @functools.cache
