@@ -84,6 +84,9 @@ def test_the_old_primitives_paths_import_the_moved_modules_with_a_warning():
     from coloc_env.worlds.blocks.unicycle import UnicycleMotion
 
     assert importlib.import_module("coloc_env.primitives.relay").RelayChain is RelayChain
+    import coloc_env.primitives.relay  # the statement form reads the package's attribute
+
+    assert coloc_env.primitives.relay.RelayChain is RelayChain
     assert primitives.UnicycleMotion is UnicycleMotion
     for old, new in primitives.MOVED.items():
         assert importlib.import_module(f"coloc_env.primitives.{old}") is importlib.import_module(new)

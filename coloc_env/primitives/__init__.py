@@ -21,8 +21,8 @@ warnings.warn("coloc_env.primitives is deprecated: import the blocks from coloc_
               "coloc_env.networks.blocks (coloc_env.primitives.MOVED maps each module)", DeprecationWarning,
               stacklevel=2)
 
-for _old, _new in MOVED.items():
-    sys.modules[f"{__name__}.{_old}"] = importlib.import_module(_new)
+for _old, _new in MOVED.items():  # `import coloc_env.primitives.relay` finds the module and the attribute
+    sys.modules[f"{__name__}.{_old}"] = globals()[_old] = importlib.import_module(_new)
 
 from coloc_env.networks.blocks import BandwidthBudget, BernoulliDelayLink, RelayChain, RelayChainLinks  # noqa: E402
 from coloc_env.worlds.blocks import (  # noqa: E402
