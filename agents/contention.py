@@ -142,7 +142,7 @@ class PolledPolicy(_SlotPolicy):
 
     def act(self, observations: dict) -> dict:
         agents = list(observations)
-        index = {agent: int(np.argmax(np.asarray(observations[agent], float)[:self.N])) for agent in agents}
+        index = {agent: self.own(observations[agent])[0] for agent in agents}
         if self.score == "error":
             value = np.asarray(self.core.position_error()[0], float)
         else:

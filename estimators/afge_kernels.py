@@ -374,8 +374,8 @@ def costs_kernel(prev_x, prev_P, prev_valid, z, R, T, G, out):  # pragma: no cov
 
 
 def _with_globals(fn, scope: dict, suffix: str = ""):
-    """A copy of ``fn`` (``estimators.compiled.renamed`` with ``suffix``: its own name and qualified name, so
-    the threaded form has its own disk-cache entry) whose globals are its module's with ``scope`` over them:
+    """A copy of ``fn`` (``estimators.compiled.in_namespace`` with ``suffix``: its own name and qualified name,
+    so the threaded form has its own disk-cache entry) whose globals are its module's with ``scope`` over them:
     the compiled helpers the copy calls, where the source calls the Python ones."""
     return in_namespace(fn, {**fn.__globals__, **scope}, suffix)
 
@@ -397,7 +397,7 @@ def compiled_kernels() -> dict:
              "joseph_predict": numba.njit(inline="always", **buffer)(_with_globals(joseph_predict, {}))}
     scope["predict_slots"] = numba.njit(**buffer)(_with_globals(predict_slots, scope))
     # the threaded form compiles a renamed copy: with the same name it shares the serial form's disk-cache entry,
-    # and one of them loads the other's code (estimators.compiled.renamed)
+    # and one of them loads the other's code (estimators.compiled.in_namespace)
     return {key: [numba.njit(**opts)(_with_globals(fn, scope)),
                   numba.njit(parallel=True, **opts)(_with_globals(fn, scope, "_threaded"))]
             for key, fn, opts in (("buffer", buffer_kernel, buffer), ("fuse", fuse_kernel, options),

@@ -703,15 +703,16 @@ def _compile() -> dict:
     namespace = {**globals(), "prange": numba.prange}
 
     def jit(fn, threaded: bool = False, **extra):
-        # the threaded form is a renamed copy, with its own on-disk cache entry (estimators.compiled.renamed)
+        # the threaded form is a renamed copy, with its own on-disk cache entry (estimators.compiled.in_namespace)
         return numba.njit(parallel=threaded, **options, **extra)(
             in_namespace(fn, namespace, "_threaded" if threaded else ""))
 
+    helpers = {}
     for helper in (block_sum, numpy_sum, mixture_point, count_at_most, logaddexp, velocity_row):
-        namespace[helper.__name__] = jit(helper)
+        helpers[helper.__name__] = namespace[helper.__name__] = jit(helper)
     # the truncated kernel only (the exact one is compiled without fastmath: it keeps the numpy path's bits)
     for helper in (exp_small, mixture_point_truncated, velocity_row_truncated):
-        namespace[helper.__name__] = jit(helper, fastmath=True)
+        helpers[helper.__name__] = namespace[helper.__name__] = jit(helper, fastmath=True)
     fused = {name: (jit(fn), jit(fn, threaded=True))
              for name, fn in (("weights", belief_weights_source), ("resample", belief_resample_source),
                               ("mixture_truncated", mixture_rows_truncated_source))}
@@ -719,9 +720,6 @@ def _compile() -> dict:
     fused["messages"] = jit(message_rows_source)
     rows = {name: (jit(fn), jit(fn, threaded=True)) for name, fn in
             (("mixture_rows", mixture_rows), ("velocity_rows", velocity_rows), ("importance_rows", importance_rows))}
-    helpers = {fn.__name__: namespace[fn.__name__] for fn in (block_sum, numpy_sum, mixture_point, count_at_most,
-                                                            logaddexp, velocity_row, exp_small,
-                                                            mixture_point_truncated, velocity_row_truncated)}
     return {"rows": rows, "fused": fused, "helpers": helpers}
 
 

@@ -176,7 +176,8 @@ def test_compiled_without_numba_and_an_unknown_weighting_are_refused(monkeypatch
 @pytest.mark.parametrize("name", ["buffer", "fuse", "costs", "fixes"])
 def test_threaded_kernels_have_their_own_cache_entry(name):
     """numba files cached code by function name and signature, not by ``parallel``: a threaded form compiled
-    from the serial function itself shared its entry and ran serial (estimators.compiled.renamed)."""
+    from the serial function itself shared its entry and ran serial (estimators.compiled.in_namespace)."""
     serial, threaded = afk.compiled(name)
     assert threaded.py_func.__name__ == serial.py_func.__name__ + "_threaded"
+    assert threaded.py_func.__qualname__ == serial.py_func.__qualname__ + "_threaded"  # what the cache files by
     assert threaded.targetoptions.get("parallel") and not serial.targetoptions.get("parallel")
