@@ -130,8 +130,15 @@ class Backend:
             return None
         index = getattr(self.world, "position_index", None)
         if getattr(self.config, "estimand", "self") == "target" and index is not None:
-            Q = np.asarray(model.covar(), float)
-            return Q[np.ix_(list(index), list(index))]
+            # the target's noise does not depend on the state: gathered once per model (read every step)
+            cached = getattr(self, "_target_position_noise", None)
+            if cached is None or cached[0] is not model:
+                index = list(index)
+                noise = np.asarray(model.covar(), float)[index][:, index]
+                noise.flags.writeable = False
+                cached = (model, noise)
+                self._target_position_noise = cached
+            return cached[1]
         B, N = self.batch, self.num_agents
         state = np.zeros((B, N, int(model.state_dim)))
         state[..., :2] = self.posterior_position
@@ -162,8 +169,10 @@ class Backend:
         Q = self.position_process_noise(inputs)
         if cov is None or Q is None:
             return None
-        grown = np.trace(reference_cov, axis1=-2, axis2=-1) + np.asarray(steps, float) * np.trace(Q, axis1=-2, axis2=-1)
-        return np.maximum(grown - np.trace(cov, axis1=-2, axis2=-1), 0.0)
+        # the ndarray.trace method: np.trace's dispatch costs more than the trace at these sizes
+        grown = (np.asarray(reference_cov).trace(axis1=-2, axis2=-1)
+                 + np.asarray(steps, float) * Q.trace(axis1=-2, axis2=-1))
+        return np.maximum(grown - np.asarray(cov).trace(axis1=-2, axis2=-1), 0.0)
 
     def pose(self) -> tuple[np.ndarray, np.ndarray] | None:
         """An SE(2) backend's current pose estimates (B, N, 3) [x, y, heading] and their covariances (B, N, 3, 3);

@@ -237,7 +237,12 @@ class TargetBackend(Backend):
         return self.estimate[..., self.pos]
 
     def position_cov(self) -> np.ndarray | None:
-        return None if self.cov is None else self.cov[..., self.pos, :][..., :, self.pos]
+        if self.cov is None:
+            return None
+        key = self._pos_key
+        if isinstance(key, slice):  # one strided block: a copy of a view, not two gathers
+            return self.cov[..., key, key].copy()
+        return self.cov[..., key, :][..., :, key]
 
 
 class LeaderLinks:

@@ -205,12 +205,17 @@ class PresetScenario(ComposedScenario):
         B, N = self.batch, self.num_agents
         own = [name for name in self.appended_features if name in OWN_FEATURES]
         cov = self.backend.local_covariance() if own or "log_trace" in self.appended_features else None
-        values = dict(zip(own, np.moveaxis(self.own_feature_values(own, cov), -1, 0), strict=True))
-        if "log_trace" in self.appended_features:
-            values["log_trace"] = self.log_trace(cov)
-        blocks = [np.broadcast_to(np.eye(N), (B, N, N)) if name == "index" else values[name][..., None]
-                  for name in self.appended_features]
-        return np.concatenate(blocks, axis=-1) if blocks else np.zeros((B, N, 0))
+        values = self.own_feature_values(own, cov) if own else None
+        out = np.empty((B, N, self.appended_size()))
+        start = 0
+        for name in self.appended_features:
+            if name == "index":
+                out[..., start:start + N] = np.eye(N)
+                start += N
+                continue
+            out[..., start] = self.log_trace(cov) if name == "log_trace" else values[..., own.index(name)]
+            start += 1
+        return out
 
     def extend_observation(self, observation: np.ndarray) -> np.ndarray:
         """The preset's own observation entries (B, N, m) followed by the appended ones, float32."""

@@ -225,6 +225,7 @@ class ComposedScenario(Scenario):
         self._ref_position = np.zeros((B, N, 2))
         self._ref_cov = np.zeros((B, N, 2, 2))
         self._ref_k = np.zeros((B, N), dtype=int)
+        self._tracks_references: bool | None = None
         self.readings = None
         # who is told of each step's readings and deliveries (``observe``); None: nobody
         self.observer = None
@@ -392,12 +393,11 @@ class ComposedScenario(Scenario):
     def _set_reference(self, which: np.ndarray) -> None:
         """Make the current estimate, the covariance the agent holds and its step the reference of the agents
         ``which`` (B, N) bool (a reset, or a transmission delivered / sent: ``_record_transmissions``)."""
-        b, i = np.nonzero(which)
-        self._ref_position[b, i] = self.backend.posterior_position[b, i]
+        np.copyto(self._ref_position, self.backend.posterior_position, where=which[..., None])
         cov = self.backend.local_covariance()
         if cov is not None:
-            self._ref_cov[b, i] = cov[b, i]
-        self._ref_k[b, i] = self.k[b]
+            np.copyto(self._ref_cov, cov, where=which[..., None, None])
+        np.copyto(self._ref_k, self.k[:, None], where=which)
 
     def _record_transmissions(self) -> None:
         """After step k's transport is known (the network's record) and the backend's update: an agent whose
@@ -598,8 +598,9 @@ class ComposedScenario(Scenario):
         ``Backend.local_covariance``), clipped to [-50, 50]; 0 without one."""
         if cov is None:
             return np.zeros((self.batch, self.num_agents))
-        return np.clip(np.log(np.maximum(np.trace(cov, axis1=-2, axis2=-1), 1e-300)), -LOG_TRACE_BOUND,
-                       LOG_TRACE_BOUND)
+        # minimum(maximum(.)) is np.clip's value at a fraction of its dispatch cost
+        return np.minimum(np.maximum(np.log(np.maximum(cov.trace(axis1=-2, axis2=-1), 1e-300)), -LOG_TRACE_BOUND),
+                          LOG_TRACE_BOUND)
 
     def own_observation(self, cov: np.ndarray | None = None) -> np.ndarray:
         """(B, N, len(own_features)): the features of ``own_features`` (the module's observation table), from what
@@ -613,25 +614,26 @@ class ComposedScenario(Scenario):
         """(B, N, len(names)): the features ``names`` (of ``OWN_FEATURES``) in that order; what ``own_observation``
         stacks, and what a preset appends to its own observation (``PresetScenario.appended_features``)."""
         B, N = self.batch, self.num_agents
-        features = {"communication_cost": lambda: np.broadcast_to(self.costs[:, None], (B, N))}
+        out = np.zeros((B, N, len(names)))
         if any(name != "communication_cost" for name in names):
             cov = self.backend.local_covariance() if cov is None else cov
-            d = self.backend.posterior_position - self._ref_position
             steps = self.k[:, None] - self._ref_k
-
-            def value():
-                if cov is None:
-                    return np.zeros((B, N))
+        for column, name in enumerate(names):
+            if name == "communication_cost":
+                out[..., column] = self.costs[:, None]
+            elif name == "covariance_known":
+                out[..., column] = 0.0 if cov is None else 1.0
+            elif name == "displacement":
+                d = self.backend.posterior_position - self._ref_position
+                out[..., column] = np.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1]) / DISTANCE_SCALE
+            elif name == "steps_since":
+                out[..., column] = steps / self.horizon
+            elif name == "message_value" and cov is not None:
                 inputs = None if self.readings is None else getattr(self.readings, "inputs", None)
-                v = self.backend.message_value(self._ref_cov, steps, inputs, cov)
-                return np.zeros((B, N)) if v is None else v
-
-            features.update({
-                "covariance_known": lambda: np.full((B, N), 0.0 if cov is None else 1.0),
-                "displacement": lambda: np.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1]) / DISTANCE_SCALE,
-                "steps_since": lambda: steps / self.horizon,
-                "message_value": value})
-        return np.stack([features[name]() for name in names], axis=-1) if names else np.zeros((B, N, 0))
+                value = self.backend.message_value(self._ref_cov, steps, inputs, cov)
+                if value is not None:
+                    out[..., column] = value
+        return out
 
     def observed_own_features(self) -> tuple[str, ...]:
         """The names of ``OWN_FEATURES`` this scenario's observation carries (``own_features`` here; a preset's
@@ -641,7 +643,9 @@ class ComposedScenario(Scenario):
     def tracks_references(self) -> bool:
         """Whether the observation carries a feature of the reference transmission (displacement, steps_since,
         message_value): only then does the core keep the references (``_set_reference``)."""
-        return any(name in REFERENCE_FEATURES for name in self.observed_own_features())
+        if self._tracks_references is None:  # a fact of the class's declarations: computed once
+            self._tracks_references = any(name in REFERENCE_FEATURES for name in self.observed_own_features())
+        return self._tracks_references
 
     def reward(self) -> np.ndarray:
         return self._reward.copy()

@@ -109,6 +109,18 @@ def test_message_value_is_the_open_loop_trace_growth_less_the_own_trace():
     assert np.all(own(core)["message_value"] == 0.0)  # at reset: the reference is the agent's own covariance
 
 
+def test_a_target_backend_reads_the_position_block_of_the_targets_noise_once_and_read_only():
+    core = core_of("target_cv/ideal/kalman")
+    core.reset([np.random.default_rng(0)])
+    backend, world = core.backend, core.world
+    Q = backend.position_process_noise()
+    index = list(world.position_index)
+    np.testing.assert_array_equal(Q, np.asarray(world.motion_model.covar())[np.ix_(index, index)])
+    assert backend.position_process_noise() is Q  # gathered once
+    with pytest.raises(ValueError, match="read-only"):
+        Q[0, 0] = 1.0
+
+
 def test_without_a_covariance_the_flag_says_so_and_the_features_are_zero(monkeypatch):
     core = core_of(SMALL)
     core.reset([np.random.default_rng(0)])
