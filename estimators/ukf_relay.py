@@ -178,13 +178,24 @@ def range_of(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def process_noise(speed: np.ndarray, heading: np.ndarray, dt: float, speed_var: float,
                   heading_var: np.ndarray | float = 0.0) -> np.ndarray:
-    """Q_i(k), shape (..., N, 2, 2): dt^2 sigma_v^2 u u^T + dt^2 V_m^2 sigma_phi^2 n n^T."""
+    """Q_i(k), shape (..., N, 2, 2): dt^2 sigma_v^2 u u^T + dt^2 V_m^2 sigma_phi^2 n n^T, with u = (cos phi,
+    sin phi) along the track and n = (-sin phi, cos phi) across it.
+
+    Each entry is written out, (a u_r) u_c + (b n_r) n_c, rather than formed from outer products: the same
+    floats at a fraction of the array calls (the estimator's prediction and the observation's message value
+    compute it every step)."""
     speed, heading = np.asarray(speed, float), np.asarray(heading, float)
-    along = np.stack([np.cos(heading), np.sin(heading)], axis=-1)
-    across = np.stack([-np.sin(heading), np.cos(heading)], axis=-1)
+    cos, sin = np.cos(heading), np.sin(heading)
+    along = dt**2 * speed_var
     lateral = dt**2 * speed**2 * np.asarray(heading_var, float)
-    return (dt**2 * speed_var * along[..., :, None] * along[..., None, :]
-            + lateral[..., None, None] * across[..., :, None] * across[..., None, :])
+    lateral_cos, lateral_sin = lateral * cos, lateral * -sin
+    along_cos, along_sin = along * cos, along * sin
+    Q = np.empty((*np.broadcast_shapes(cos.shape, lateral.shape), 2, 2))
+    Q[..., 0, 0] = along_cos * cos + lateral_sin * -sin
+    Q[..., 0, 1] = along_cos * sin + lateral_sin * cos
+    Q[..., 1, 0] = along_sin * cos + lateral_cos * -sin
+    Q[..., 1, 1] = along_sin * sin + lateral_cos * cos
+    return Q
 
 
 def time_update(estimate: np.ndarray, cov: np.ndarray | None, speed: np.ndarray, heading: np.ndarray,

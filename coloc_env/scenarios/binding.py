@@ -198,23 +198,35 @@ class PresetScenario(ComposedScenario):
 
     def appended_size(self) -> int:
         """How many entries ``appended_features`` adds to an agent's observation."""
-        return sum(self.appended_width(name) for name in self.appended_features)
+        return self._appended_layout()[2]
+
+    def _appended_layout(self) -> tuple[tuple[str, ...], tuple[tuple[str, int], ...], int]:
+        """(the own features among ``appended_features``, each appended feature with its first column, the
+        entries in all): facts of the class's declarations and N, computed at the first step and kept."""
+        layout = self.__dict__.get("_appended_columns")
+        if layout is None:
+            columns, start = [], 0
+            for name in self.appended_features:
+                columns.append((name, start))
+                start += self.appended_width(name)
+            own = tuple(name for name in self.appended_features if name in OWN_FEATURES)
+            layout = self._appended_columns = (own, tuple(columns), start)
+        return layout
 
     def appended_observation(self) -> np.ndarray:
         """(B, N, ``appended_size()``): the entries of ``appended_features``, in order."""
         B, N = self.batch, self.num_agents
-        own = [name for name in self.appended_features if name in OWN_FEATURES]
+        own, columns, size = self._appended_layout()
         cov = self.backend.local_covariance() if own or "log_trace" in self.appended_features else None
         values = self.own_feature_values(own, cov) if own else None
-        out = np.empty((B, N, self.appended_size()))
-        start = 0
-        for name in self.appended_features:
+        out = np.empty((B, N, size))
+        for name, start in columns:
             if name == "index":
                 out[..., start:start + N] = np.eye(N)
-                start += N
-                continue
-            out[..., start] = self.log_trace(cov) if name == "log_trace" else values[..., own.index(name)]
-            start += 1
+            elif name == "log_trace":
+                out[..., start] = self.log_trace(cov)
+            else:
+                out[..., start] = values[..., own.index(name)]
         return out
 
     def extend_observation(self, observation: np.ndarray) -> np.ndarray:
