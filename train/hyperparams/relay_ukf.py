@@ -13,12 +13,22 @@
   information reached whom; its flaw is the filter's overconfidence under
   turn-rate noise (see the wang2019 report), which scales every policy's
   trace alike.
-* ``communication_cost=0.01`` m per delivered hop: the target is the full chain's error
+* ``communication_cost=0.01`` m per delivered hop where the cost is fixed: the target is the full chain's error
   with fewer hops, and without a price on hops a hop that helps by a hair is
   still worth sending. One centimetre is small against the ~1.5 m mean error,
   so only hops that move the team's mean error by less than 1 cm are worth
   dropping. The leaderboard reports the error without this term (the
   scenario's ``error`` info) and the hops separately.
+* ``COST_RANGE = (0.01, 3)`` m per delivered hop, log-uniform: the cost is drawn per episode and observed, so
+  one network serves every price. The baseline frontier on the validation-chosen knobs (``coloc frontier
+  relay_ukf``, 30 episodes) runs from ``no_relay`` (0.124 hops per agent-step, 1.634 m) to ``paper``
+  (0.373, 1.574 m): a chord of 0.24 m per hop per agent-step, where the fixed schedules' best choice changes.
+  The range reaches more than a decade below it (every hop worth its price) and a decade above (the fewest
+  hops). No reward scaling (``COST_REWARD_SCALE``): at the top of the range a step's cost term (3 x ~0.4 hops)
+  is of the order of its RMS term (~1.5 m), so no cost's episodes set the scale of the others' advantages.
+  ``communication_cost=0.01`` stays the cost of ``coloc train relay_ukf --cost-range none``.
+* 1.2M timesteps with the cost range (600k at one fixed cost): one network now learns every price's policy;
+  ``circles/broadcast/ukf_ccl`` needed four times its fixed-cost budget for the same.
 * Episodes are 800 steps and a relay decision pays off over the following
   tens of steps (until the next measurements overwrite it): gamma 0.99
   (horizon ~ 100 steps), GAE 0.95.
@@ -41,12 +51,14 @@
 from train.hyperparams import ppo
 
 ENV_CONFIG = {"reward": "trace", "communication_cost": 0.01}
+COST_RANGE = (0.01, 3.0)
 
 HYPERPARAMS = ppo(n_steps=128, batch_size=256, gamma=0.99, ent_coef=0.01)
 
 ALGORITHM = "maskable_ppo"
 NUM_COPIES = 4
-TIMESTEPS = 600_000  # docs/learning.md's budget: `coloc train relay_ukf` at its defaults reproduces the table
+TIMESTEPS = 1_200_000  # with COST_RANGE; the fixed-cost models of docs/learning.md's table: --cost-range none
+                       # --timesteps 600000
 
 # The leaderboard's target for a learned policy: (what it says, the largest |paired error difference| relative to
 # the baseline's mean that counts as matching it, the communication saving a match needs).
