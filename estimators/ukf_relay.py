@@ -188,13 +188,14 @@ def process_noise(speed: np.ndarray, heading: np.ndarray, dt: float, speed_var: 
     cos, sin = np.cos(heading), np.sin(heading)
     along = dt**2 * speed_var
     lateral = dt**2 * speed**2 * np.asarray(heading_var, float)
-    lateral_cos, lateral_sin = lateral * cos, lateral * -sin
-    along_cos, along_sin = along * cos, along * sin
+    # a u_r and b n_r: the first factor of each entry's two terms (n = (-sin, cos))
+    along_0, along_1 = along * cos, along * sin
+    across_0, across_1 = lateral * -sin, lateral * cos
     Q = np.empty((*np.broadcast_shapes(cos.shape, lateral.shape), 2, 2))
-    Q[..., 0, 0] = along_cos * cos + lateral_sin * -sin
-    Q[..., 0, 1] = along_cos * sin + lateral_sin * cos
-    Q[..., 1, 0] = along_sin * cos + lateral_cos * -sin
-    Q[..., 1, 1] = along_sin * sin + lateral_cos * cos
+    Q[..., 0, 0] = along_0 * cos + across_0 * -sin
+    Q[..., 0, 1] = along_0 * sin + across_0 * cos
+    Q[..., 1, 0] = along_1 * cos + across_1 * -sin
+    Q[..., 1, 1] = along_1 * sin + across_1 * cos
     return Q
 
 

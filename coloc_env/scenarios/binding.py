@@ -202,7 +202,7 @@ class PresetScenario(ComposedScenario):
 
     def _appended_layout(self) -> tuple[tuple[str, ...], tuple[tuple[str, int], ...], int]:
         """(the own features among ``appended_features``, each appended feature with its first column, the
-        entries in all): facts of the class's declarations and N, computed at the first step and kept."""
+        entries in all): facts of the class's declarations and N, computed at the first call and kept."""
         layout = self.__dict__.get("_appended_columns")
         if layout is None:
             columns, start = [], 0

@@ -215,6 +215,25 @@ def test_process_noise_matches_the_displacement_spread():
     assert np.linalg.matrix_rank(no_heading) == 1 and np.linalg.matrix_rank(Q) == 2
 
 
+@pytest.mark.parametrize("shape, heading_var_shape", [((4,), ()), ((3, 4), (3, 4)), ((4,), (2, 4)), ((), ())])
+def test_process_noise_is_the_two_rank_one_terms(shape, heading_var_shape):
+    """Q = dt^2 sigma_v^2 u u^T + dt^2 V^2 sigma_phi^2 n n^T entry by entry, u along the heading, n across it,
+    for batched speeds and headings and a heading variance of its own shape (broadcast)."""
+    rng = np.random.default_rng(11)
+    speed, heading = rng.uniform(0.0, 30.0, shape), rng.uniform(-7.0, 7.0, shape)
+    heading_var = rng.uniform(0.0, 0.1, heading_var_shape)
+    dt, speed_var = 0.1, 0.5
+    Q = ur.process_noise(speed, heading, dt, speed_var, heading_var)
+    u = np.stack([np.cos(heading), np.sin(heading)], -1)
+    n = np.stack([-np.sin(heading), np.cos(heading)], -1)
+    lateral = dt**2 * speed**2 * heading_var
+    expected = (dt**2 * speed_var * np.einsum("...r,...c->...rc", u, u)
+                + lateral[..., None, None] * np.einsum("...r,...c->...rc", n, n))
+    assert Q.shape == (*np.broadcast_shapes(shape, heading_var_shape), 2, 2)
+    np.testing.assert_allclose(Q, expected, rtol=1e-14, atol=1e-18)
+    np.testing.assert_allclose(Q, np.swapaxes(Q, -1, -2), rtol=1e-14, atol=1e-18)
+
+
 def test_bad_inputs_are_refused():
     rng = np.random.default_rng(10)
     x, P = random_problem(rng)
