@@ -25,6 +25,7 @@ something the generic composition leaves open:
 from __future__ import annotations
 
 import dataclasses
+import functools
 import re
 from typing import Any, ClassVar
 
@@ -198,25 +199,23 @@ class PresetScenario(ComposedScenario):
 
     def appended_size(self) -> int:
         """How many entries ``appended_features`` adds to an agent's observation."""
-        return self._appended_layout()[2]
+        return self._appended_layout[2]
 
+    @functools.cached_property
     def _appended_layout(self) -> tuple[tuple[str, ...], tuple[tuple[str, int], ...], int]:
         """(the own features among ``appended_features``, each appended feature with its first column, the
-        entries in all): facts of the class's declarations and N, computed at the first call and kept."""
-        layout = self.__dict__.get("_appended_columns")
-        if layout is None:
-            columns, start = [], 0
-            for name in self.appended_features:
-                columns.append((name, start))
-                start += self.appended_width(name)
-            own = tuple(name for name in self.appended_features if name in OWN_FEATURES)
-            layout = self._appended_columns = (own, tuple(columns), start)
-        return layout
+        entries in all): facts of the class's declarations and N, computed once per env."""
+        columns, start = [], 0
+        for name in self.appended_features:
+            columns.append((name, start))
+            start += self.appended_width(name)
+        own = tuple(name for name in self.appended_features if name in OWN_FEATURES)
+        return own, tuple(columns), start
 
     def appended_observation(self) -> np.ndarray:
         """(B, N, ``appended_size()``): the entries of ``appended_features``, in order."""
         B, N = self.batch, self.num_agents
-        own, columns, size = self._appended_layout()
+        own, columns, size = self._appended_layout
         cov = self.backend.local_covariance() if own or "log_trace" in self.appended_features else None
         values = self.own_feature_values(own, cov) if own else None
         out = np.empty((B, N, size))

@@ -225,7 +225,6 @@ class ComposedScenario(Scenario):
         self._ref_position = np.zeros((B, N, 2))
         self._ref_cov = np.zeros((B, N, 2, 2))
         self._ref_k = np.zeros((B, N), dtype=int)
-        self._tracks_references: bool | None = None
         self.readings = None
         # who is told of each step's readings and deliveries (``observe``); None: nobody
         self.observer = None
@@ -643,9 +642,11 @@ class ComposedScenario(Scenario):
     def tracks_references(self) -> bool:
         """Whether the observation carries a feature of the reference transmission (displacement, steps_since,
         message_value): only then does the core keep the references (``_set_reference``)."""
-        if self._tracks_references is None:  # a fact of the class's declarations: computed once
-            self._tracks_references = any(name in REFERENCE_FEATURES for name in self.observed_own_features())
         return self._tracks_references
+
+    @functools.cached_property
+    def _tracks_references(self) -> bool:  # a fact of the declarations, read every step: computed once per env
+        return any(name in REFERENCE_FEATURES for name in self.observed_own_features())
 
     def reward(self) -> np.ndarray:
         return self._reward.copy()
