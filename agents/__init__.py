@@ -122,6 +122,19 @@ def strongest_baselines(scenario: str) -> tuple[str, ...]:
     return tuple(module.STRONGEST_BASELINES)
 
 
+def paper_entries(scenario: str, name: str | None):
+    """The object that fills the action entries ``name`` a trained model leaves to ``scenario``'s paper rule (its
+    policy module's ``PAPER_ENTRIES[name]()``, with ``entries(generators, observations, actions)`` and
+    ``restrict(masks, num_agents)``); None for ``name`` None. An unknown name is a ``ValueError`` listing the
+    scenario's."""
+    if name is None:
+        return None
+    table = getattr(policy_module(scenario), "PAPER_ENTRIES", {}) if scenario in REGISTRY else {}
+    if name not in table:
+        raise BadInput(f"paper entries {name!r}: {scenario} has " + (f"{sorted(table)}" if table else "none"))
+    return table[name]()
+
+
 def make_policy(name: str, env, seed: int | None = None, **kwargs) -> Policy:
     """A policy for ``env`` by name: ``paper`` (``paper:T2P3`` for other tables where the
     scenario has them), ``random``, ``always``, ``silent``, ``greedy``, ``round_robin`` and ``aloha`` (``aloha:p``)
@@ -166,7 +179,7 @@ def make_policy(name: str, env, seed: int | None = None, **kwargs) -> Policy:
 
 
 __all__ = ["FixedActionPolicy", "Policy", "RandomPolicy", "available_policies", "bound_policies", "duplicates",
-           "make_policy", "policy_module", "strongest_baselines"]
+           "make_policy", "paper_entries", "policy_module", "strongest_baselines"]
 
 
 def _per_preset(read) -> dict:

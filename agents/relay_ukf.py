@@ -18,6 +18,11 @@
 
 ``paper`` and ``no_relay`` read every agent's observation (the measuring flag
 and the distances), so they know m and can compute the whole chain.
+
+A trained model may leave the partner to the paper (``PAPER_ENTRIES["partner"]``, the settings module's
+``PAPER_ENTRIES = "partner"``): the model decides every relay entry, and the measuring platform ranges with the
+partner ``paper`` would draw, from the same per-episode generator, so a model and the fixed schedules play the
+same partners on the same evaluation episode.
 """
 
 from __future__ import annotations
@@ -116,6 +121,48 @@ class NearestLocalPolicy(Policy):
             actions[agent] = np.array([nearest if obs[N] > 0.5 else own, nearest], dtype=np.int64)
         return actions
 
+
+class PaperPartner:
+    """The partner entry (index 0) of a learned policy left to ``paper``'s draw.
+
+    ``entries`` overwrites index 0 of a batch of actions with ``paper``'s: the measuring platform (observation
+    entry N, read from every agent's observation as ``paper`` does) ranges with ``random_partners``' draw, every
+    other platform names itself. With one generator per copy, each drawing once per step whether or not a platform
+    measures, copy e plays the partners ``paper`` plays in the episode its generator belongs to.
+    ``restrict`` leaves index 0 one choice in a batch of action masks (the agent itself), so that a masked
+    training spends no entropy and no gradient on an entry the env never receives from the model.
+    """
+
+    entry = 0
+
+    def entries(self, generators, observations: np.ndarray, actions: np.ndarray) -> np.ndarray:
+        """``actions`` (B, N, 2) with index 0 replaced; ``observations`` (B, N, obs_dim); ``generators``: B
+        generators (one per copy) or one generator drawing for the whole batch (training)."""
+        observations = np.asarray(observations)
+        B, N = observations.shape[:2]
+        flags = observations[:, :, N]
+        measuring = np.where(flags.max(axis=1) > 0.5, np.argmax(flags, axis=1), -1)
+        if isinstance(generators, np.random.Generator):
+            partner = random_partners(generators, measuring, N)
+        else:  # copy by copy, with the shapes ``paper`` draws with: the same numbers from the same generator
+            partner = np.array([random_partners(rng, measuring[b:b + 1], N)[0] for b, rng in enumerate(generators)])
+        out = np.array(actions, dtype=np.int64, copy=True)
+        out[..., 0] = np.arange(N)
+        rows = np.flatnonzero(measuring >= 0)
+        out[rows, measuring[rows], 0] = partner[rows]
+        return out
+
+    def restrict(self, masks: np.ndarray, num_agents: int) -> np.ndarray:
+        """Masks (rows, 2N + 1) of sub-envs ordered copy by copy, agent by agent: index 0's block keeps only the
+        agent's own index."""
+        out = np.array(masks, dtype=bool, copy=True)
+        out[:, :num_agents] = False
+        out[np.arange(len(out)), np.arange(len(out)) % num_agents] = True
+        return out
+
+
+# The action entries a trained model may leave to the paper's rule (``coloc train --paper-entries``).
+PAPER_ENTRIES = {"partner": PaperPartner}
 
 # ``always`` (every transport decision at its maximum: the complete chain) is ``paper``; ``silent``
 # (nothing relayed: the measurement still updates m and n) is ``no_relay``.

@@ -142,6 +142,10 @@ class SB3Policy(Policy):
     model reads the env's action masks of the current step, as it did in training, and a model trained with a
     centralized critic gets the env's ``state()`` after each observation (its actor ignores it).
 
+    A model trained with ``paper_entries`` (``model.json``; ``agents.paper_entries``) has those entries of its
+    action filled by the paper's rule, drawing from the episode's generator (``agents.base.episode_generator``,
+    restarted by ``start_episode``) as the paper's policy does.
+
     A RecurrentPPO model carries each agent's LSTM memory from one step to the next. It starts afresh at the
     episode's first step (the env's ``step_count`` is 0), and a second call of ``act`` at the same step
     starts again from that step's memory instead of advancing it twice.
@@ -167,6 +171,10 @@ class SB3Policy(Policy):
             raise BadInput(f"model {path!r} cannot be loaded by stable-baselines3: "
                            f"{type(exc).__name__}: {first}") from exc
         check_spaces(path, env, self.model)
+        import agents
+
+        self.paper_entries = agents.paper_entries(scenario_name, (meta or {}).get("paper_entries"))
+        self.rng = np.random.default_rng()  # replaced per episode by start_episode
         self.deterministic = deterministic
         self.masked = is_maskable(self.model)
         from agents.centralized_critic import is_centralized
@@ -177,7 +185,10 @@ class SB3Policy(Policy):
         self._memory_in = self._memory_out = None  # LSTM memory before and after that step's act
 
     def start_episode(self, seed: int) -> None:
+        from agents.base import episode_generator
+
         self._memory_step = self._memory_in = self._memory_out = None
+        self.rng = episode_generator(seed)
 
     def act(self, observations):
         agents = list(observations)
@@ -201,4 +212,10 @@ class SB3Policy(Policy):
                                                            deterministic=self.deterministic)
         else:
             actions, _ = self.model.predict(batch, deterministic=self.deterministic, **masks)
+        if self.paper_entries is not None:  # in possible_agents order, as the paper's policy reads them
+            order, rows = self.observation_rows(observations)
+            full = np.zeros((len(order), *np.shape(actions)[1:]), dtype=np.asarray(actions).dtype)
+            full[[order.index(a) for a in agents]] = actions
+            full = self.paper_entries.entries([self.rng], rows[None], full[None])[0]
+            actions = full[[order.index(a) for a in agents]]
         return {a: actions[i] for i, a in enumerate(agents)}

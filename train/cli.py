@@ -197,6 +197,10 @@ def build_parser() -> argparse.ArgumentParser:
                          "(log-uniform for LO > 0; 0 <= LO <= HI <= 1e12) and the agents observe it; none: the fixed "
                          "communication_cost (default: COST_RANGE of train/hyperparams/<scenario>.py, none where it "
                          "sets none)")
+    tr.add_argument("--paper-entries", default=None, metavar="NAME",
+                    help="action entries the model leaves to the paper's rule (relay_ukf: partner, the paper's random "
+                         "ranging partner); none: the model decides every entry (default: PAPER_ENTRIES of "
+                         "train/hyperparams/<scenario>.py, none where it sets none)")
 
     ev = sub.add_parser("evaluate", help="evaluate a policy over seeded episodes", formatter_class=_HelpFormatter,
                         epilog=_policies_epilog())
@@ -424,8 +428,13 @@ def cmd_train(args) -> int:
         check_output_folder(folder)
     cost_range = {None: FROM_SETTINGS, "none": None}.get(args.cost_range, args.cost_range)
     training_env_config(args.scenario, cost_range)  # a refused cost range writes nothing
+    paper_entries = {None: FROM_SETTINGS, "none": None}.get(args.paper_entries, args.paper_entries)
+    if paper_entries is not None and paper_entries != FROM_SETTINGS:
+        import agents
+
+        agents.paper_entries(args.scenario, paper_entries)  # an unknown name writes nothing
     jobs = [(args.scenario, args.timesteps, s, args.out, args.vec, args.executor == "local", args.tensorboard,
-             args.curve_points, cost_range) for s in seeds]
+             args.curve_points, cost_range, paper_entries) for s in seeds]
     with contextlib.ExitStack() as stack:
         for folder in folders:
             stack.enter_context(_open(args, folder))

@@ -391,7 +391,7 @@ def evaluate_policy(scenario: str, policy_name: str, episodes: int, seed_base: i
         raise BadInput(f"{scenario} cannot be evaluated at communication cost {communication_cost:g}: {exc}") from exc
     policy = agents.make_policy(policy_name, env)  # checks scenario and spaces
     result = run_model_batched(policy.model, scenario, episodes, seed_base, deterministic=not stochastic, trace=trace,
-                               **env_config)
+                               paper_entries=policy.paper_entries, **env_config)
     if progress:
         for _ in range(episodes):
             progress()
@@ -568,7 +568,7 @@ def run_policy_batched(scenario: str, policy_name: str, episodes: int, seed_base
 
 
 def run_model_batched(model, scenario: str, episodes: int, seed_base: int, deterministic: bool = True,
-                      trace: dict | None = None, **env_config) -> dict:
+                      trace: dict | None = None, paper_entries=None, **env_config) -> dict:
     """An SB3 model on ``episodes`` copies of the batched core at once (copy e seeded ``seed_base + e``).
 
     Steps the scenario core directly rather than the VecEnv, whose auto-reset
@@ -576,7 +576,9 @@ def run_model_batched(model, scenario: str, episodes: int, seed_base: int, deter
     masks, as in training, a centralized-critic model the core's ``state()``, and a RecurrentPPO model its
     LSTM memory from the step before (fresh at each episode's first step).
     Deterministic actions by default; sampled ones (``deterministic=False``) draw from torch's
-    generator, seeded here with ``seed_base`` so that the run repeats.
+    generator, seeded here with ``seed_base`` so that the run repeats. ``paper_entries``
+    (``agents.paper_entries``) fills the entries the model leaves to the paper's rule, copy e drawing from
+    ``episode_generator(seed_base + e)`` as the paper's policy does in that episode.
     """
     if not deterministic:
         import torch
@@ -589,9 +591,13 @@ def run_model_batched(model, scenario: str, episodes: int, seed_base: int, deter
     masked = is_maskable(model)
     centralized = is_centralized(model)
     memory = {"lstm": None} if is_recurrent(model) else None  # every agent's LSTM memory, carried step to step
+    if paper_entries is not None:
+        from agents.base import episode_generator
+
+        generators = [episode_generator(seed_base + e) for e in range(episodes)]
 
     def choose(core):
-        observation = core.observation()
+        observation = own = core.observation()
         if centralized:  # the model's input; its actor reads only the own observation
             observation = extend_observation(observation, core.state())
         rows = episodes * core.num_agents
@@ -602,7 +608,10 @@ def run_model_batched(model, scenario: str, episodes: int, seed_base: int, deter
                                          deterministic=deterministic, **extra)
         if memory is not None:
             memory["lstm"] = carried
-        return np.asarray(actions, dtype=float).reshape(episodes, core.num_agents, *core.action_space().shape)
+        actions = np.asarray(actions).reshape(episodes, core.num_agents, *core.action_space().shape)
+        if paper_entries is not None:
+            actions = paper_entries.entries(generators, own, actions)
+        return np.asarray(actions, dtype=float)
 
     chunk = {} if trace is not None else None
     cost, comm, initial = _run_core(scenario, episodes, seed_base, choose, env_config, chunk)

@@ -27,6 +27,11 @@ mean reward under ``reward="error"``. The 95 % interval is over the episodes of 
 Without a cost range a point's score is the validation error, played at the training env's
 ``communication_cost`` (the cost the model observes). Either way the validation episodes are seeded
 ``VALIDATION_SEED_BASE + e`` (``train.evaluate``), disjoint from the training seeds and the evaluation seeds.
+
+Paper entries. A settings module's ``PAPER_ENTRIES`` (``--paper-entries``) names action entries the model leaves to
+the paper's rule (``agents.paper_entries``; relay_ukf's ``"partner"``: the paper's random ranging partner): the
+training env fills them before each step and masks them to one choice (``paper_entries_env``), validation and
+evaluation fill them as the paper's policy does on the same episode, and ``model.json`` records the name.
 """
 
 from __future__ import annotations
@@ -129,6 +134,55 @@ def cost_balanced_reward(venv, cost_index: int, reference: float):
     return _cost_balanced_reward_wrapper()(venv, cost_index, reference)
 
 
+def _paper_entries_wrapper():
+    from stable_baselines3.common.vec_env import VecEnvWrapper
+
+    class PaperEntries(VecEnvWrapper):
+        """Fills the action entries a model leaves to the paper's rule before the env receives the actions, and
+        leaves those entries one choice in the action masks (``agents.paper_entries``: ``entries``,
+        ``restrict``). Sub-envs are ordered copy by copy, agent by agent, as ``coloc_env.vector_env`` orders them;
+        the draws come from one generator seeded by the training seed."""
+
+        def __init__(self, venv, paper, num_agents: int, rng: np.random.Generator):
+            super().__init__(venv)
+            self.paper, self.num_agents, self.rng = paper, int(num_agents), rng
+            self._observations = None
+
+        def reset(self):
+            self._observations = self.venv.reset()
+            return self._observations
+
+        def step_async(self, actions):
+            actions = np.asarray(actions)
+            copies = len(actions) // self.num_agents
+            observed = self._observations.reshape(copies, self.num_agents, -1)
+            filled = self.paper.entries(self.rng, observed, actions.reshape(copies, self.num_agents, -1))
+            self.venv.step_async(filled.reshape(actions.shape).astype(actions.dtype))
+
+        def step_wait(self):
+            observations, rewards, dones, infos = self.venv.step_wait()
+            self._observations = observations  # after an auto-reset: the next episode's, which the next action sees
+            return observations, rewards, dones, infos
+
+        def env_method(self, method_name, *method_args, indices=None, **method_kwargs):
+            if method_name != "action_masks":
+                return self.venv.env_method(method_name, *method_args, indices=indices, **method_kwargs)
+            masks = self.paper.restrict(np.stack(self.venv.env_method("action_masks")), self.num_agents)
+            return [masks[i] for i in self._get_indices(indices)]
+
+    return PaperEntries
+
+
+# the second word of the training generator of paper entries, [training seed, PAPER_ENTRIES_STREAM]
+PAPER_ENTRIES_STREAM = 0x50A9E5
+
+
+def paper_entries_env(venv, paper, num_agents: int, seed: int):
+    """``venv`` (``coloc_env.vector_env``) whose actions get ``paper``'s entries (``agents.paper_entries``) drawn
+    from ``default_rng([seed, PAPER_ENTRIES_STREAM])`` and whose action masks leave those entries one choice."""
+    return _paper_entries_wrapper()(venv, paper, num_agents, np.random.default_rng([int(seed), PAPER_ENTRIES_STREAM]))
+
+
 def make_supersuit_vec_env(scenario: str, copies: int, env_config: dict):
     """B copies x N agents as one SB3 VecEnv through SuperSuit (each agent a sub-env)."""
     import supersuit as ss
@@ -211,7 +265,8 @@ def validate(run, scenario: str, env_config: dict, cost_range, num_agents: int) 
 
 
 def _callbacks(scenario: str, folder: str, timesteps: int, curve: list, points: int, episodes: int, report=None,
-               env_config: dict | None = None, cost_range=None, num_agents: int = 1, at_costs: list | None = None):
+               env_config: dict | None = None, cost_range=None, num_agents: int = 1, at_costs: list | None = None,
+               paper=None):
     from stable_baselines3.common.callbacks import BaseCallback
 
     from train.evaluate import VALIDATION_SEED_BASE, run_model_batched
@@ -246,7 +301,8 @@ def _callbacks(scenario: str, folder: str, timesteps: int, curve: list, points: 
             save_model(os.path.join(folder, "checkpoint.zip"), self.model)
             if points:
                 result = validate(lambda **config: run_model_batched(self.model, scenario, episodes,
-                                                                     VALIDATION_SEED_BASE, **config),
+                                                                     VALIDATION_SEED_BASE, paper_entries=paper,
+                                                                     **config),
                                   scenario, env_config or {}, cost_range, num_agents)
                 curve.append((int(self.num_timesteps), result["mean_cost"], result["ci95"]))
                 if "at_costs" in result:
@@ -380,20 +436,22 @@ def _cost_feature_index(scenario: str, env_config: dict) -> int:
 
 def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = "native",
           progress_bar: bool = True, tensorboard: bool = False, curve_points: int = CURVE_POINTS,
-          cost_range=FROM_SETTINGS) -> str:
+          cost_range=FROM_SETTINGS, paper_entries=FROM_SETTINGS) -> str:
     """Train and save ``out/<scenario>/seed<S>/model.zip`` (+ ``model.json``); returns the model path.
 
     ``timesteps`` None: the scenario's budget (``TIMESTEPS`` of ``train/hyperparams/<scenario>.py``,
     ``DEFAULT_TIMESTEPS`` where it sets none). ``curve_points`` validation points make the learning
     curve (0: no curve, only checkpoints). ``cost_range``: (lo, hi) with 0 <= lo <= hi <= 1e12, the training
     env's ``cost_range`` (the module docstring), None for a fixed cost, or ``FROM_SETTINGS`` (the settings
-    module's ``COST_RANGE``, none where it sets none).
+    module's ``COST_RANGE``, none where it sets none). ``paper_entries``: the name of the action entries the model
+    leaves to the paper's rule (``agents.paper_entries``), None for none, or ``FROM_SETTINGS`` (the settings
+    module's ``PAPER_ENTRIES``, none where it sets none).
     """
     import torch
     from stable_baselines3.common.vec_env import VecMonitor
 
     from agents.sb3 import algorithm_class
-    from train.hyperparams import algorithm, budget, cost_reward_scale, critic, curve_episodes, load, module
+    from train.hyperparams import algorithm, budget, cost_reward_scale, critic, curve_episodes, load, module, setting
 
     if timesteps is None:
         timesteps = budget(scenario, DEFAULT_TIMESTEPS)
@@ -406,7 +464,15 @@ def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = 
             import tensorboard as _  # noqa: F401
         except ImportError as exc:
             raise BadInput("--tensorboard needs the tensorboard package: pip install tensorboard") from exc
+    import agents
+
     hyper = load(scenario)[0]
+    if isinstance(paper_entries, str) and paper_entries == FROM_SETTINGS:
+        paper_entries = setting(scenario, "PAPER_ENTRIES")
+    paper = agents.paper_entries(scenario, paper_entries)
+    if paper is not None and vec != "native":
+        raise BadInput(f"--paper-entries {paper_entries}: reads the native vector env's sub-env order; use --vec "
+                       f"native, not {vec!r}")
     env_config, cost_range = training_env_config(scenario, cost_range)
     episodes = curve_episodes(scenario, CURVE_EPISODES)
     copies = module(scenario).NUM_COPIES
@@ -424,6 +490,8 @@ def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = 
     if critic_name == "centralized" and algorithm_name == "recurrent_ppo":
         raise BadInput(f"{scenario}: the centralized critic is built for ppo and maskable_ppo, not recurrent_ppo")
     inner = make_vec_env(scenario, copies, env_config, seed, vec)
+    if paper is not None:
+        inner = paper_entries_env(inner, paper, inner.num_envs // copies, seed)
     reward_scale = cost_reward_scale(scenario) if cost_range is not None else None
     cost_index = None if reward_scale is None else _cost_feature_index(scenario, env_config)
     policy = "MlpLstmPolicy" if algorithm_name == "recurrent_ppo" else "MlpPolicy"
@@ -455,7 +523,7 @@ def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = 
             def report(message: str) -> None:
                 print(f"{scenario} seed {seed}: {message}", flush=True)
         callback = _callbacks(scenario, folder, timesteps, curve, curve_points, episodes, report, env_config,
-                              cost_range, inner.num_envs // copies)
+                              cost_range, inner.num_envs // copies, paper=paper)
         model.learn(total_timesteps=timesteps, progress_bar=live_bar, callback=callback)
     finally:
         torch.set_num_threads(threads)
@@ -475,7 +543,7 @@ def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = 
         "checkpoint": selected,
         "scenario": scenario, "seed": seed, "timesteps": timesteps, "env_config": env_config,
         "cost_range": None if cost_range is None else list(cost_range),
-        "cost_reward_scale": reward_scale,
+        "cost_reward_scale": reward_scale, "paper_entries": paper_entries,
         "hyperparams": json.loads(json.dumps(hyper)), "vec": vec, "copies": copies, "algorithm": algorithm_name,
         "critic": critic_name,
         "observation_space": repr(venv.observation_space), "action_space": repr(venv.action_space),

@@ -86,7 +86,8 @@ def test_a_centralized_critic_model_trains_loads_and_evaluates_alike_batched_and
     assert is_centralized(policy.model)
     agent = env.possible_agents[0]
     assert policy.model.observation_space == critic_observation_space(env.observation_space(agent), env.state_space)
-    batched = run_model_batched(policy.model, "relay_ukf", 3, seed_base=91, horizon=40)
+    batched = run_model_batched(policy.model, "relay_ukf", 3, seed_base=91, horizon=40,
+                               paper_entries=policy.paper_entries)
     looped = run_episodes("relay_ukf", path, 3, seed_base=91, horizon=40)
     assert batched["per_episode_cost"] == pytest.approx(looped["per_episode_cost"], rel=1e-9)
     monkeypatch.setattr(settings, "CRITIC", "global")

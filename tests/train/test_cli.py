@@ -451,7 +451,8 @@ def test_a_maskable_ppo_model_trains_loads_and_never_plays_a_masked_choice(tmp_p
             assert all(mask[i][int(choice)] for i, choice in enumerate(action))
         observations, _, _, _, infos = env.step(actions)
     assert masked_somewhere  # the check above had masks to respect
-    batched = run_model_batched(policy.model, "relay_ukf", 3, seed_base=91, horizon=40)
+    batched = run_model_batched(policy.model, "relay_ukf", 3, seed_base=91, horizon=40,
+                               paper_entries=policy.paper_entries)
     looped = run_episodes("relay_ukf", path, 3, seed_base=91, horizon=40)
     assert batched["per_episode_cost"] == pytest.approx(looped["per_episode_cost"], rel=1e-9)
     os.remove(os.path.join(os.path.dirname(path), "model.json"))

@@ -9,7 +9,9 @@ score each learning-curve point, the best of which becomes ``model.zip`` (defaul
 episode's communication cost from (the composition option ``cost_range``: log-uniform for lo > 0), so that
 ``coloc train S`` trains one cost-conditioned policy (``--cost-range`` overrides it; default: none, a fixed
 cost), and ``COST_REWARD_SCALE``: c_ref > 0, which divides each training step's reward by 1 + c / c_ref under a
-cost range (c the episode's cost; default: none, the reward unscaled).
+cost range (c the episode's cost; default: none, the reward unscaled), and ``PAPER_ENTRIES``: the name of the
+action entries a model leaves to the paper's rule (``agents.paper_entries``; ``--paper-entries`` overrides it;
+default: none, the model decides every entry).
 
 A preset's module also holds what only ``train`` needs of it: ``LEADERBOARD_TARGET`` (the leaderboard's target for
 a learned policy, ``train.leaderboard.target``), and optionally ``DEMO_RUN`` (``make demo``'s budget,
