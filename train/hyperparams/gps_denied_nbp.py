@@ -28,6 +28,19 @@
   curve episodes), so the kept checkpoint matters as much as the price; more
   curve episodes did not pick better ones here, so ``CURVE_EPISODES`` stays
   at the default.
+* ``COST_RANGE = (0.01, 100)`` metres per broadcast, log-uniform, drawn per episode and observed, so one network
+  serves every price; ``communication_cost=0.02`` stays the cost of ``coloc train gps_denied_nbp --cost-range
+  none`` (the table's models). The reward charges lambda per broadcast of the whole team (10 UAVs), so the
+  fixed schedules' best choice changes where 10 lambda equals a chord slope of their frontier: on validation
+  episodes (``coloc frontier gps_denied_nbp --seed 2000000 --quick --episodes 16 --bound-episodes 1``, never the
+  evaluation seeds) the slopes run from 0.38 m per broadcast per agent-step (``send_on_delta:3.375`` to
+  ``threshold``) to 331 (``silent`` to ``value:9.809``), lambda 0.038 to 33. The range reaches a few times past
+  both ends.
+* ``COST_REWARD_SCALE = 0.5`` m per broadcast: each step's reward is divided by 1 + lambda / 0.5. At lambda = 100
+  and ~20 broadcasts a step the cost term is ~2000 m against an error of 5-30 m; scaled, a priced step stays within
+  a factor ~20 of the error, so the expensive episodes do not set every batch's advantage scale.
+* 1.2M timesteps with the cost range (300k at one fixed cost): one network learns every price, and
+  ``circles/broadcast/ukf_ccl`` needed four times its fixed-cost budget for the same.
 * ``num_particles=50``: training needs many environment steps and dNBP costs
   O(M^2) per message; the decisions (who talks when) do not depend on M.
 * The team reward (mean fault-UAV error) is shared and noisy; 10 agents x 4
@@ -52,8 +65,12 @@ HYPERPARAMS = {
     "policy_kwargs": {"net_arch": [64, 64]},
 }
 
+COST_RANGE = (0.01, 100.0)
+COST_REWARD_SCALE = 0.5
+
 NUM_COPIES = 4
-TIMESTEPS = 300_000  # docs/learning.md's budget: `coloc train gps_denied_nbp` at its defaults reproduces the table
+TIMESTEPS = 1_200_000  # with COST_RANGE; the fixed-cost models of docs/learning.md's table: --cost-range none
+                       # --timesteps 300000
 
 # The leaderboard's target for a learned policy: (what it says, the largest |paired error difference| relative to
 # the baseline's mean that counts as matching it, the communication saving a match needs).
