@@ -152,7 +152,7 @@ def make_policy(name: str, env, seed: int | None = None, **kwargs) -> Policy:
     if name.endswith(".zip"):
         from agents.sb3 import SB3Policy
 
-        return SB3Policy(env, name, **kwargs)
+        return SB3Policy(env, name, seed=seed, **kwargs)
     if name == "random":
         return RandomPolicy(env, seed=seed)
     base, colon, variant = name.partition(":")

@@ -143,15 +143,15 @@ class SB3Policy(Policy):
     centralized critic gets the env's ``state()`` after each observation (its actor ignores it).
 
     A model trained with ``paper_entries`` (``model.json``; ``agents.paper_entries``) has those entries of its
-    action filled by the paper's rule, drawing from the episode's generator (``agents.base.episode_generator``,
-    restarted by ``start_episode``) as the paper's policy does.
+    action filled by the paper's rule, drawing as the paper's policy does: from ``default_rng(seed)``, which an
+    evaluation restarts for each episode (``start_episode``: ``agents.base.episode_generator``).
 
     A RecurrentPPO model carries each agent's LSTM memory from one step to the next. It starts afresh at the
     episode's first step (the env's ``step_count`` is 0), and a second call of ``act`` at the same step
     starts again from that step's memory instead of advancing it twice.
     """
 
-    def __init__(self, env, path: str, deterministic: bool = True):
+    def __init__(self, env, path: str, deterministic: bool = True, seed: int | None = None):
         super().__init__(env)
         if not os.path.isfile(path):
             raise BadInput(f"policy model {path!r} does not exist")
@@ -174,7 +174,7 @@ class SB3Policy(Policy):
         import agents
 
         self.paper_entries = agents.paper_entries(scenario_name, (meta or {}).get("paper_entries"))
-        self.rng = np.random.default_rng()  # replaced per episode by start_episode
+        self.rng = np.random.default_rng(seed)  # for the paper entries; an evaluation restarts it per episode
         self.deterministic = deterministic
         self.masked = is_maskable(self.model)
         from agents.centralized_critic import is_centralized

@@ -128,3 +128,20 @@ def test_none_turns_the_settings_entries_off_and_an_unknown_name_is_refused(sett
         agents.paper_entries("lossy_fusion", "partner")
     with pytest.raises(ValueError, match=r"paper entries 'partner': drift/broadcast/kalman has none"):
         agents.paper_entries("drift/broadcast/kalman", "partner")
+
+
+def test_a_seeded_model_draws_the_same_partners_without_an_evaluation(trained):
+    """Played by hand (no ``start_episode``), the partners come from ``make_policy``'s seed, as ``paper``'s do."""
+    def partners(name, seed):
+        env = coloc_env.parallel_env("relay_ukf", **SHORT)
+        policy = agents.make_policy(name, env, seed=seed)
+        observations, _ = env.reset(seed=11)
+        rows = []
+        while env.agents:
+            observations, _, _, _, infos = env.step(policy.act(observations))
+            rows.append([infos[a]["partner"] for a in env.possible_agents])
+        return np.array(rows)
+
+    np.testing.assert_array_equal(partners(trained, 3), partners(trained, 3))
+    np.testing.assert_array_equal(partners(trained, 3), partners("paper", 3))
+    assert not np.array_equal(partners(trained, 3), partners(trained, 4))
