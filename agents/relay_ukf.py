@@ -133,8 +133,6 @@ class PaperPartner:
     training spends no entropy and no gradient on an entry the env never receives from the model.
     """
 
-    entry = 0
-
     def entries(self, generators, observations: np.ndarray, actions: np.ndarray) -> np.ndarray:
         """``actions`` (B, N, 2) with index 0 replaced; ``observations`` (B, N, obs_dim); ``generators``: B
         generators (one per copy) or one generator drawing for the whole batch (training)."""
