@@ -17,3 +17,17 @@ def decode_tables(scenario, actions):
     blocks = scenario.decode_actions(actions)
     selection = scenario.links.selection_at(blocks[..., 0].astype("int64"))
     return selection, scenario.backend.decode_weights(blocks[..., 1:])
+
+
+def settings_module(scenario: str, **settings):
+    """A stand-in for ``train/hyperparams/<scenario>.py`` holding ``settings``, tiny PPO rollouts
+    (``HYPERPARAMS``) unless given; install it with ``monkeypatch.setitem(sys.modules, module.__name__, module)``."""
+    import types
+
+    from train.hyperparams import module_name, ppo
+
+    module = types.ModuleType(f"train.hyperparams.{module_name(scenario)}")
+    module.HYPERPARAMS = ppo(n_steps=8, batch_size=32, n_epochs=1)
+    for field, value in settings.items():
+        setattr(module, field, value)
+    return module

@@ -6,28 +6,22 @@ import json
 import os
 import shutil
 import sys
-import types
 
 import numpy as np
 import pytest
 
 import coloc_env
+from tests.helpers import settings_module
 from train import frontier, training
 from train.cli import main
 from train.evaluate import evaluate_policy, model_row, run_episodes
-from train.hyperparams import ppo
 from train.io import read_json
 
 SMALL = "drift/broadcast/kalman"  # 4 agents, 50 steps
 
 
 def _settings_module():
-    module = types.ModuleType("train.hyperparams.drift__broadcast__kalman")
-    module.ENV_CONFIG = {"communication_cost": 0.3}
-    module.HYPERPARAMS = ppo(n_steps=8, batch_size=32, n_epochs=1)
-    module.NUM_COPIES = 2
-    module.CURVE_EPISODES = 2
-    return module
+    return settings_module(SMALL, ENV_CONFIG={"communication_cost": 0.3}, NUM_COPIES=2, CURVE_EPISODES=2)
 
 
 @pytest.fixture

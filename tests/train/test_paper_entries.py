@@ -4,7 +4,6 @@ with a settings module of the test's own."""
 
 import os
 import sys
-import types
 
 import numpy as np
 import pytest
@@ -12,24 +11,19 @@ import pytest
 import agents
 import coloc_env
 from agents.relay_ukf import PaperPartner
+from tests.helpers import settings_module
 from train import training
 from train.cli import main
 from train.evaluate import run_episodes, run_model_batched
-from train.hyperparams import ppo
 from train.io import read_json
 
 SHORT = {"horizon": 30}
 
 
 def _settings_module():
-    module = types.ModuleType("train.hyperparams.relay_ukf")
-    module.ENV_CONFIG = {"reward": "trace", "communication_cost": 0.01, **SHORT}
-    module.HYPERPARAMS = ppo(n_steps=8, batch_size=32, n_epochs=1)
-    module.NUM_COPIES = 2
-    module.ALGORITHM = "maskable_ppo"
-    module.PAPER_ENTRIES = "partner"
-    module.LEADERBOARD_TARGET = ("beat it", 0.02, 0.30)
-    return module
+    return settings_module("relay_ukf", ENV_CONFIG={"reward": "trace", "communication_cost": 0.01, **SHORT},
+                           NUM_COPIES=2, ALGORITHM="maskable_ppo", PAPER_ENTRIES="partner",
+                           LEADERBOARD_TARGET=("beat it", 0.02, 0.30))
 
 
 @pytest.fixture
