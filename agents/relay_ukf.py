@@ -67,14 +67,30 @@ def nearest_chain_choices(distances: np.ndarray, measuring: np.ndarray, partner:
     return choice
 
 
+def measuring_platforms(observations: np.ndarray) -> np.ndarray:
+    """The measuring platform m of each copy (B,), -1 where none measures, from every agent's observation
+    (B, N, obs_dim): entry N is 1 for m."""
+    N = np.shape(observations)[1]
+    flags = np.asarray(observations)[:, :, N]
+    return np.where(flags.max(axis=1) > 0.5, np.argmax(flags, axis=1), -1)
+
+
+def ranging_entries(measuring: np.ndarray, partner: np.ndarray, num_platforms: int) -> np.ndarray:
+    """Index 0 of every platform's action (B, N): m ranges with ``partner``, every other platform names itself
+    (no measurement)."""
+    entries = np.tile(np.arange(num_platforms), (len(measuring), 1))
+    rows = np.flatnonzero(measuring >= 0)
+    entries[rows, measuring[rows]] = partner[rows]
+    return entries
+
+
 def paper_actions(distances: np.ndarray, measuring: np.ndarray, rng: np.random.Generator,
                   relay: bool = True) -> np.ndarray:
     """Actions (B, N, 2) int64 of the ``paper`` policy (``relay=False``: ``no_relay``) for a batch."""
     B, N = np.shape(distances)[:2]
     partner = random_partners(rng, measuring, N)
     actions = np.empty((B, N, 2), dtype=np.int64)
-    actions[..., 0] = np.arange(N)  # nobody but m ranges
-    actions[np.arange(B), np.maximum(measuring, 0), 0] = np.where(measuring >= 0, partner, np.maximum(measuring, 0))
+    actions[..., 0] = ranging_entries(measuring, partner, N)
     if relay:
         actions[..., 1] = nearest_chain_choices(distances, measuring, partner)
     else:
@@ -91,8 +107,7 @@ class PaperPolicy(SeededPolicy):
     def act(self, observations):
         order, obs = self.observation_rows(observations)
         N = len(order)
-        flags = obs[:, N]
-        measuring = np.array([int(np.argmax(flags)) if flags.max() > 0.5 else -1])
+        measuring = measuring_platforms(obs[None])
         distances = (obs[:, N + 1:2 * N + 1] * DISTANCE_SCALE)[None]
         actions = paper_actions(distances, measuring, self.rng, relay=self.relay)[0]
         return {a: actions[order.index(a)] for a in observations}
@@ -136,18 +151,14 @@ class PaperPartner:
     def entries(self, generators, observations: np.ndarray, actions: np.ndarray) -> np.ndarray:
         """``actions`` (B, N, 2) with index 0 replaced; ``observations`` (B, N, obs_dim); ``generators``: B
         generators (one per copy) or one generator drawing for the whole batch (training)."""
-        observations = np.asarray(observations)
-        B, N = observations.shape[:2]
-        flags = observations[:, :, N]
-        measuring = np.where(flags.max(axis=1) > 0.5, np.argmax(flags, axis=1), -1)
+        N = np.shape(observations)[1]
+        measuring = measuring_platforms(observations)
         if isinstance(generators, np.random.Generator):
             partner = random_partners(generators, measuring, N)
         else:  # copy by copy, with the shapes ``paper`` draws with: the same numbers from the same generator
             partner = np.array([random_partners(rng, measuring[b:b + 1], N)[0] for b, rng in enumerate(generators)])
         out = np.array(actions, dtype=np.int64, copy=True)
-        out[..., 0] = np.arange(N)
-        rows = np.flatnonzero(measuring >= 0)
-        out[rows, measuring[rows], 0] = partner[rows]
+        out[..., 0] = ranging_entries(measuring, partner, N)
         return out
 
     def restrict(self, masks: np.ndarray, num_agents: int) -> np.ndarray:
