@@ -138,7 +138,10 @@ def model_class(path: str, meta: dict | None = None):
 
 
 class SB3Policy(Policy):
-    """Deterministic actions of a trained SB3 model, shared by all agents (parameter sharing); a MaskablePPO
+    """The actions of a trained SB3 model, shared by all agents (parameter sharing): its most likely ones, or
+    sampled ones where ``deterministic`` is False or, left None, where its ``model.json`` records
+    ``"actions": "sampled"`` (a random-access policy; the draws come from torch's generator, which
+    ``start_episode`` seeds with the episode's seed so that an episode repeats); a MaskablePPO
     model reads the env's action masks of the current step, as it did in training, and a model trained with a
     centralized critic gets the env's ``state()`` after each observation (its actor ignores it).
 
@@ -151,7 +154,7 @@ class SB3Policy(Policy):
     starts again from that step's memory instead of advancing it twice.
     """
 
-    def __init__(self, env, path: str, deterministic: bool = True, seed: int | None = None):
+    def __init__(self, env, path: str, deterministic: bool | None = None, seed: int | None = None):
         super().__init__(env)
         if not os.path.isfile(path):
             raise BadInput(f"policy model {path!r} does not exist")
@@ -175,7 +178,7 @@ class SB3Policy(Policy):
 
         self.paper_entries = agents.paper_entries(scenario_name, (meta or {}).get("paper_entries"))
         self.rng = np.random.default_rng(seed)  # for the paper entries; an evaluation restarts it per episode
-        self.deterministic = deterministic
+        self.deterministic = ((meta or {}).get("actions") != "sampled") if deterministic is None else deterministic
         self.masked = is_maskable(self.model)
         from agents.centralized_critic import is_centralized
 
@@ -189,6 +192,10 @@ class SB3Policy(Policy):
 
         self._memory_step = self._memory_in = self._memory_out = None
         self.rng = episode_generator(seed)
+        if not self.deterministic:
+            import torch
+
+            torch.manual_seed(seed)
 
     def act(self, observations):
         agents = list(observations)

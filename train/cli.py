@@ -212,7 +212,9 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--episodes", type=_count(2, MAX_RUNS), default=100,
                     help=f"seeded evaluation episodes per policy, 2..{MAX_RUNS} (a confidence interval needs 2)")
     ev.add_argument("--stochastic", action="store_true",
-                    help="trained models sample their actions (seeded) instead of taking the most likely")
+                    help="trained models sample their actions (seeded) instead of taking the most likely "
+                         "(default: as each model's model.json records; a model trained with ACTIONS = "
+                         "'sampled' samples)")
     ev.add_argument("--costs", type=_costs, default=None, metavar="C1,C2,...",
                     help="evaluate each trained model at each communication cost (an env built with "
                          "communication_cost=C, which its observation carries), one row 'PATH.zip @ cost=C' per cost "
@@ -510,7 +512,7 @@ def cmd_evaluate(args) -> int:
                                     total=args.episodes)
                 result = evaluate_policy(scenario, policy, args.episodes,
                                          progress=lambda task=task: bar.advance(task),
-                                         stochastic=args.stochastic and policy.endswith(".zip"), cost=cost)
+                                         stochastic=True if args.stochastic else None, cost=cost)
             policy = result["policy"]
             path = record(result, args.out, _result_key(scenario))
             console.print(_evaluation_line(scenario, policy, result, args.episodes, path), highlight=False)

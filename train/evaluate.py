@@ -297,6 +297,13 @@ def trained_costs(path: str) -> tuple[tuple[float, float] | None, float | None]:
             None if fixed is None else float(fixed))
 
 
+def model_actions(path: str) -> str:
+    """How the model ``path`` acts, as its run's ``model.json`` records it (``train.hyperparams.ACTIONS``):
+    ``"sampled"`` or ``"deterministic"`` (also where it records none)."""
+    meta = training_record(path)
+    return "sampled" if meta is not None and meta.get("actions") == "sampled" else "deterministic"
+
+
 def median_cost(cost_range: tuple[float, float]) -> float:
     """The median of ``cost_range``'s law (``coloc_env.composition``): sqrt(lo hi) for the log-uniform law (lo > 0),
     hi / 2 for the uniform one (lo = 0)."""
@@ -345,15 +352,17 @@ def check_costs(costs) -> list[float]:
 
 
 def evaluate_policy(scenario: str, policy_name: str, episodes: int, seed_base: int = EVAL_SEED_BASE,
-                    progress=None, stochastic: bool = False, bounds: bool = True, cost: float | None = None,
+                    progress=None, stochastic: bool | None = None, bounds: bool = True, cost: float | None = None,
                     bound_episodes: int | None = None) -> dict:
     """A trained model (``.zip``) on the batched core, a reference filter on the same episodes, any other
     policy through the PettingZoo env.
 
     The two env paths give the same episodes (``vector_env`` equals ``parallel_env``
     copy for copy; a test checks the costs agree); the batched one runs every
-    episode in one call per step. ``stochastic``: a model samples its actions
-    (torch seeded with ``seed_base``) and is recorded as ``PATH.zip (stochastic)``.
+    episode in one call per step. ``stochastic``: True, a model samples its actions
+    (torch seeded with ``seed_base``) and is recorded as ``PATH.zip (stochastic)``; False, it takes its most
+    likely ones; None, as its ``model.json`` records (``model_actions``: a model trained with sampled actions
+    samples).
     A model plays in an env built with the ``communication_cost`` of ``model_row(policy_name, cost)`` and its
     row takes that name (``cost`` applies to models only: the fixed policies never read the cost).
     Every policy row gets the columns of ``attach_bounds`` (``bounds=False``: RMSE and NEES only; ``bound_episodes``:
@@ -390,6 +399,8 @@ def evaluate_policy(scenario: str, policy_name: str, episodes: int, seed_base: i
     except ValueError as exc:
         raise BadInput(f"{scenario} cannot be evaluated at communication cost {communication_cost:g}: {exc}") from exc
     policy = agents.make_policy(policy_name, env)  # checks scenario and spaces
+    if stochastic is None:
+        stochastic = model_actions(policy_name) == "sampled"
     result = run_model_batched(policy.model, scenario, episodes, seed_base, deterministic=not stochastic, trace=trace,
                                paper_entries=policy.paper_entries, **env_config)
     if progress:

@@ -14,7 +14,9 @@ episodes (episode e: ``reset(seed=S + e)``, S = ``--seed``, by default the evalu
 | models          | every ``*.zip`` under ``--models DIR``: judged against the frontier; with ``--costs``    |
 |                 | ``c1,c2,...`` each model at each cost, a point ``PATH.zip @ cost=c`` each (played in an   |
 |                 | env built with ``communication_cost=c``, which its observation carries;                  |
-|                 | ``train.evaluate.model_row`` names a model trained at a fixed cost so)                    |
+|                 | ``train.evaluate.model_row`` names a model trained at a fixed cost so); a model that     |
+|                 | samples its actions (``model.json``: ``train.hyperparams.ACTIONS``) plays them sampled,  |
+|                 | ``PATH.zip @ cost=c (stochastic)``                                                       |
 
 The knob grids (``--quick``: three of each) are fixed before the evaluation episodes are played:
 ``periodic`` over ``PERIODS`` (up to the horizon); ``uncertainty``, ``send_on_delta`` and ``value`` over
@@ -165,11 +167,13 @@ def knob_grids(scenario: str, horizon: int, quick: bool = False) -> dict[str, li
 
 def cells(scenario: str, horizon: int, models: list[str], quick: bool = False,
           costs: list[float] | None = None) -> list[dict]:
-    """The points to play: each a dict with ``policy`` (its name: make_policy's, or a model's row at a cost),
-    ``kind`` (baseline, privileged or model), for a family ``family`` and ``knob``, for a model ``model`` (its
-    path) and ``cost`` (each of ``costs``; None: ``train.evaluate.model_row``'s default)."""
+    """The points to play: each a dict with ``policy`` (its name: make_policy's, or a model's row at a cost,
+    `` (stochastic)`` after it for a model that samples its actions), ``kind`` (baseline, privileged or model),
+    for a family ``family`` and ``knob``, for a model ``model`` (its path) and ``cost`` (each of ``costs``; None:
+    ``train.evaluate.model_row``'s default)."""
     import agents
-    from train.evaluate import model_row
+    from train.evaluate import model_actions, model_row
+    from train.leaderboard import STOCHASTIC
 
     available = agents.available_policies(scenario)
     # the fixed policies, and the scenario's strongest baselines (nlos_horizon's best_constant, gps_denied_nbp's
@@ -183,7 +187,8 @@ def cells(scenario: str, horizon: int, models: list[str], quick: bool = False,
         out += [{"policy": f"{family}:{knob}", "kind": "baseline", "family": family, "knob": knob} for knob in knobs]
     out += [{"policy": name, "kind": "privileged"} for name in PRIVILEGED if name in available]
     # a model's points at several costs share its path as their family: one line, the curve the model traces
-    out += [{"policy": model_row(path, cost)[0], "kind": "model", "model": path, "cost": cost,
+    out += [{"policy": model_row(path, cost)[0] + (STOCHASTIC if model_actions(path) == "sampled" else ""),
+             "kind": "model", "model": path, "cost": cost,
              **({"family": path} if costs else {})} for path in models for cost in (costs or [None])]
     return out
 

@@ -32,6 +32,11 @@ Paper entries. A settings module's ``PAPER_ENTRIES`` (``--paper-entries``) names
 the paper's rule (``agents.paper_entries``; relay_ukf's ``"partner"``: the paper's random ranging partner): the
 training env fills them before each step and masks them to one choice (``paper_entries_env``), validation and
 evaluation fill them as the paper's policy does on the same episode, and ``model.json`` records the name.
+
+Sampled actions. A settings module's ``ACTIONS = "sampled"`` (``train.hyperparams.ACTIONS``) makes the model a
+random-access policy: the learning curve scores it with sampled actions (torch seeded with the validation seed
+base, as ``train.evaluate.run_model_batched`` does), ``model.json`` records ``"actions": "sampled"``, and
+evaluation samples its actions too (``train.evaluate.model_actions``).
 """
 
 from __future__ import annotations
@@ -266,7 +271,7 @@ def validate(run, scenario: str, env_config: dict, cost_range, num_agents: int) 
 
 def _callbacks(scenario: str, folder: str, timesteps: int, curve: list, points: int, episodes: int, report=None,
                env_config: dict | None = None, cost_range=None, num_agents: int = 1, at_costs: list | None = None,
-               paper=None):
+               paper=None, deterministic: bool = True):
     from stable_baselines3.common.callbacks import BaseCallback
 
     from train.evaluate import VALIDATION_SEED_BASE, run_model_batched
@@ -302,7 +307,7 @@ def _callbacks(scenario: str, folder: str, timesteps: int, curve: list, points: 
             if points:
                 result = validate(lambda **config: run_model_batched(self.model, scenario, episodes,
                                                                      VALIDATION_SEED_BASE, paper_entries=paper,
-                                                                     **config),
+                                                                     deterministic=deterministic, **config),
                                   scenario, env_config or {}, cost_range, num_agents)
                 curve.append((int(self.num_timesteps), result["mean_cost"], result["ci95"]))
                 if "at_costs" in result:
@@ -341,7 +346,8 @@ def _play(scenario: str, policy: str, episodes: int, seed_base: int, **env_confi
 
 
 def write_learning_curve(folder: str, scenario: str, curve: list, title: str, episodes: int = CURVE_EPISODES,
-                         env_config: dict | None = None, cost_range=None, at_costs: list | None = None) -> None:
+                         env_config: dict | None = None, cost_range=None, at_costs: list | None = None,
+                         acting: str = "deterministic") -> None:
     """``curve.json`` and ``learning_curve.png`` with the paper policy (a composition: ``always``) on the same
     validation seeds, scored alike (the module docstring: with a cost range, priced at the validation costs)."""
     import matplotlib
@@ -375,7 +381,7 @@ def write_learning_curve(folder: str, scenario: str, curve: list, title: str, ep
     n = episodes
     # a few validation points: each its own 95 % interval (an error bar), not a band interpolated between them
     ax.errorbar(steps, costs, yerr=half, fmt="o-", color="tab:blue", capsize=4, ms=6,
-                label=f"trained policy (deterministic): mean and 95 % interval over {n} validation episodes")
+                label=f"trained policy ({acting}): mean and 95 % interval over {n} validation episodes")
     p_mean, p_half = float(paper["mean_cost"]), float(paper["ci95"])
     ax.axhline(p_mean, color="k", ls="--", label=f"{reference} policy on the same {n} episodes: {p_mean:.4g} {unit}")
     ax.axhspan(p_mean - p_half, p_mean + p_half, color="0.5", alpha=0.15,
@@ -451,6 +457,7 @@ def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = 
     from stable_baselines3.common.vec_env import VecMonitor
 
     from agents.sb3 import algorithm_class
+    from train import hyperparams
     from train.hyperparams import algorithm, budget, cost_reward_scale, critic, curve_episodes, load, module, setting
 
     if timesteps is None:
@@ -481,6 +488,7 @@ def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = 
         raise BadInput(f"{scenario} trains with maskable_ppo, which reads the native vector env's action masks; "
                        f"use --vec native, not {vec!r}")
     critic_name = critic(scenario)
+    acting = hyperparams.actions(scenario)
     if critic_name == "centralized" and vec != "native":
         raise BadInput(f"{scenario} trains with a centralized critic, which reads the native vector env's state(); "
                        f"use --vec native, not {vec!r}")
@@ -523,7 +531,8 @@ def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = 
             def report(message: str) -> None:
                 print(f"{scenario} seed {seed}: {message}", flush=True)
         callback = _callbacks(scenario, folder, timesteps, curve, curve_points, episodes, report, env_config,
-                              cost_range, inner.num_envs // copies, paper=paper)
+                              cost_range, inner.num_envs // copies, paper=paper,
+                              deterministic=acting == "deterministic")
         model.learn(total_timesteps=timesteps, progress_bar=live_bar, callback=callback)
     finally:
         torch.set_num_threads(threads)
@@ -545,12 +554,12 @@ def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = 
         "cost_range": None if cost_range is None else list(cost_range),
         "cost_reward_scale": reward_scale, "paper_entries": paper_entries,
         "hyperparams": json.loads(json.dumps(hyper)), "vec": vec, "copies": copies, "algorithm": algorithm_name,
-        "critic": critic_name,
+        "critic": critic_name, "actions": acting,
         "observation_space": repr(venv.observation_space), "action_space": repr(venv.action_space),
     })
     venv.close()
     if curve:
         what = "error" if cost_range is None else "score"
         write_learning_curve(folder, scenario, curve, f"{scenario}, seed {seed}: validation {what} vs timesteps",
-                             episodes, env_config, cost_range, callback.at_costs)
+                             episodes, env_config, cost_range, callback.at_costs, acting)
     return path

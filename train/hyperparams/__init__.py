@@ -11,7 +11,11 @@ episode's communication cost from (the composition option ``cost_range``: log-un
 cost), and ``COST_REWARD_SCALE``: c_ref > 0, which divides each training step's reward by 1 + c / c_ref under a
 cost range (c the episode's cost; default: none, the reward unscaled), and ``PAPER_ENTRIES``: the name of the
 action entries a model leaves to the paper's rule (``agents.paper_entries``; ``--paper-entries`` overrides it;
-default: none, the model decides every entry).
+default: none, the model decides every entry), and ``ACTIONS``: ``"deterministic"`` (the default: the model acts
+by its most likely action) or ``"sampled"`` (it draws its action from its distribution, seeded, as a
+random-access policy must: on a shared medium a deterministic policy shared by every agent sends or stays
+silent in step with the others); the learning curve validates it so, ``model.json`` records it, and
+evaluation plays it so (``train.evaluate.model_actions``).
 
 A preset's module also holds what only ``train`` needs of it: ``LEADERBOARD_TARGET`` (the leaderboard's target for
 a learned policy, ``train.leaderboard.target``), and optionally ``DEMO_RUN`` (``make demo``'s budget,
@@ -115,6 +119,14 @@ def cost_reward_scale(scenario: str) -> float | None:
         raise BadInput(f"COST_REWARD_SCALE of train/hyperparams/{module_name(scenario)}.py must be a number > 0, "
                        f"got {value!r}")
     return float(value)
+
+
+ACTIONS = ("deterministic", "sampled")
+
+
+def actions(scenario: str) -> str:
+    """How the scenario's model acts, one of ``ACTIONS`` (its module's ``ACTIONS``, else ``"deterministic"``)."""
+    return _setting_choice(scenario, "ACTIONS", ACTIONS, "deterministic")
 
 
 def critic(scenario: str) -> str:
