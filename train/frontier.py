@@ -299,6 +299,7 @@ def report(metrics: dict, command: str) -> str:
     return "\n".join(lines) + "\n"
 
 
+MODEL_COLOURS = ("magenta", "lime", "darkblue", "gold", "darkred", "aqua")  # a model's line in the figure
 WIDE_RANGE = 30.0  # a panel whose positive values span more than this factor is drawn on a log axis
 
 
@@ -323,24 +324,29 @@ def figure(metrics: dict):
     families: dict[str, list[dict]] = {}
     for p in points:
         families.setdefault(p.get("family") or p["policy"], []).append(p)
-    colours = plt.get_cmap("tab10")
     models = [name for name, group in families.items() if group[0]["kind"] == "model"]
     # a model's label: its path below the folder its models share (seed0/model.zip), not the whole path
     shared = os.path.commonpath(models) if len(models) > 1 else None
-    for index, (name, group) in enumerate(sorted(families.items())):
+    # the models draw from colours of their own, none near one of tab10's, which the other families draw from
+    palettes = {False: [plt.get_cmap("tab10")(i) for i in range(10)], True: MODEL_COLOURS}
+    drawn = {False: 0, True: 0}
+    for name, group in sorted(families.items()):
+        is_model = name in models
+        colour = palettes[is_model][drawn[is_model] % len(palettes[is_model])]
+        drawn[is_model] += 1
         group = sorted(group, key=lambda p: p["messages_per_agent_step"])
         x = np.array([p["messages_per_agent_step"] for p in group])
         y = np.array([p["mean_cost"] for p in group])
         err = np.array([p["ci95"] if p["ci95"] is not None and math.isfinite(p["ci95"]) else 0.0 for p in group])
         kind = group[0]["kind"]
         style = dict(marker="o" if kind == "baseline" else "D" if kind == "model" else "x",
-                     linestyle="-" if len(group) > 1 else "none", color=colours(index % 10),
+                     linestyle="-" if len(group) > 1 else "none", color=colour,
                      label=os.path.relpath(name, shared) if shared and name in models else name)
         left.errorbar(x, y, yerr=err, capsize=2, **style)
         rmse = np.array([np.nan if p["rmse"] is None else p["rmse"] for p in group])
         right.plot(x, rmse, **style)
         delivered = np.array([np.nan if p["pcrb_delivered"] is None else p["pcrb_delivered"] for p in group])
-        right.plot(x, delivered, marker="_", markersize=12, linestyle="none", color=colours(index % 10))
+        right.plot(x, delivered, marker="_", markersize=12, linestyle="none", color=colour)
     baseline_rows = [p for p in points if p["kind"] == "baseline"]
     vertices = sorted((p for p in baseline_rows if p["policy"] in metrics["frontier"]),
                       key=lambda p: p["messages_per_agent_step"])
@@ -348,7 +354,7 @@ def figure(metrics: dict):
         top = max(p["messages_per_agent_step"] for p in points)
         xs = [v["messages_per_agent_step"] for v in vertices] + [max(top, vertices[-1]["messages_per_agent_step"])]
         ys = [v["mean_cost"] for v in vertices] + [vertices[-1]["mean_cost"]]
-        left.plot(xs, ys, color="black", linewidth=2.2, alpha=0.5, zorder=0, label="baseline frontier")
+        left.plot(xs, ys, color="black", linewidth=2.4, alpha=0.85, zorder=0, label="baseline frontier")
     for key, style in (("pcrb_centralized", "--"), ("pcrb_local", ":")):
         values = [p[key] for p in points if p.get(key) is not None]
         if values:
