@@ -193,6 +193,13 @@ def _is_model(name: str) -> bool:
     return name.endswith(".zip") or name.endswith(".zip" + STOCHASTIC) or _at_cost(name)
 
 
+def _trained_sampled(name: str) -> bool:
+    """A sampled row ``PATH.zip (stochastic)`` of a model whose ``model.json`` records sampled actions."""
+    from train.evaluate import model_actions
+
+    return name.endswith(".zip" + STOCHASTIC) and model_actions(name[:-len(STOCHASTIC)]) == "sampled"
+
+
 def _at_cost(name: str) -> bool:
     """A trained model's row at one communication cost (``train.evaluate.model_row``)."""
     return ".zip @ cost=" in name
@@ -422,7 +429,9 @@ def frontier_verdict(scenario: str, table: dict, name: str) -> dict | None:
 def target_verdict(scenario: str, table: dict) -> str | None:
     """One line: the target, judged per trained model against the strongest realizable baseline on paired
     episodes; "met" only when every trained model beats it (or matches it with the communication saving)."""
-    models = sorted(n for n in table if n.endswith(".zip"))  # deterministic models; sampled ones are shown only
+    # each model as it was trained to act: its deterministic row, or the sampled row of a model trained with
+    # sampled actions (train.hyperparams.ACTIONS); another model's sampled row is shown only
+    models = sorted(n for n in table if n.endswith(".zip") or _trained_sampled(n))
     if not models:
         return None
     text = target(scenario)[0]

@@ -2,15 +2,8 @@
 
 import numpy as np
 
-from train.evaluate import EVAL_SEED_BASE
+from tests.helpers import leaderboard_row as _row
 from train.leaderboard import rows, target_verdict
-
-
-def _row(policy, costs, comm=1.0, scenario="relay_ukf"):
-    costs = np.asarray(costs, float)
-    return {"scenario": scenario, "policy": policy, "mean_cost": float(costs.mean()), "ci95": 0.1,
-            "paper_cost": float(costs.mean()), "initial_cost": 0.0, "communication_per_step": comm,
-            "episodes": len(costs), "seed_base": EVAL_SEED_BASE, "per_episode_cost": list(costs)}
 
 
 def test_nlos_target_uses_the_validated_best_constant_not_the_hindsight_bound_or_paper():

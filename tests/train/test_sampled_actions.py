@@ -108,3 +108,21 @@ def test_the_frontier_names_a_sampled_models_points_so(trained):
     points = [c["policy"] for c in frontier.cells("contention_localization", 30, [trained], costs=[10.0, 30.0])
               if c["kind"] == "model"]
     assert points == [f"{trained} @ cost=10 (stochastic)", f"{trained} @ cost=30 (stochastic)"]
+
+
+def test_the_leaderboard_target_counts_the_sampled_row_of_a_model_trained_to_sample(trained, tmp_path):
+    """A sampled-action model's ``... (stochastic)`` row is judged for the target; another model's sampled row (no
+    model.json saying it samples) is shown only."""
+    from tests.helpers import leaderboard_row as _row
+    from train.leaderboard import STOCHASTIC, target_verdict
+
+    paper = np.linspace(13.0, 14.0, 12)
+    other = str(tmp_path / "seed7" / "model.zip")
+    table = {"paper": _row("paper", paper, comm=0.9, scenario="contention_localization"),
+             trained + STOCHASTIC: _row(trained + STOCHASTIC, paper + 3.0, comm=1.5,
+                                        scenario="contention_localization"),
+             other + STOCHASTIC: _row(other + STOCHASTIC, paper - 3.0, comm=1.5, scenario="contention_localization")}
+    line = target_verdict("contention_localization", table)
+    assert "seed0: worse" in line and "seed7" not in line and "**not met**" in line
+    del table[trained + STOCHASTIC]
+    assert target_verdict("contention_localization", table) is None
