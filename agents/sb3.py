@@ -31,6 +31,12 @@ def metadata_path(model_path: str) -> str:
     return os.path.splitext(model_path)[0] + ".json"
 
 
+def samples_actions(meta: dict | None) -> bool:
+    """Whether a model's ``model.json`` (``meta``; None: none) says it acts by sampled actions
+    (``"actions": "sampled"``: the training settings' ``ACTIONS``)."""
+    return meta is not None and meta.get("actions") == "sampled"
+
+
 def check_model_zip(path: str) -> None:
     """ValueError naming ``path`` unless it is a complete zip holding SB3's ``data`` and ``policy.pth``."""
     try:
@@ -178,7 +184,7 @@ class SB3Policy(Policy):
 
         self.paper_entries = agents.paper_entries(scenario_name, (meta or {}).get("paper_entries"))
         self.rng = np.random.default_rng(seed)  # for the paper entries; an evaluation restarts it per episode
-        self.deterministic = ((meta or {}).get("actions") != "sampled") if deterministic is None else deterministic
+        self.deterministic = not samples_actions(meta) if deterministic is None else deterministic
         self.masked = is_maskable(self.model)
         from agents.centralized_critic import is_centralized
 

@@ -300,8 +300,9 @@ def trained_costs(path: str) -> tuple[tuple[float, float] | None, float | None]:
 def model_actions(path: str) -> str:
     """How the model ``path`` acts, as its run's ``model.json`` records it (``train.hyperparams.ACTIONS``):
     ``"sampled"`` or ``"deterministic"`` (also where it records none)."""
-    meta = training_record(path)
-    return "sampled" if meta is not None and meta.get("actions") == "sampled" else "deterministic"
+    from agents.sb3 import samples_actions
+
+    return "sampled" if samples_actions(training_record(path)) else "deterministic"
 
 
 def median_cost(cost_range: tuple[float, float]) -> float:

@@ -55,6 +55,7 @@ mean squared error, so they are drawn against the RMSE only, never against a mea
 from __future__ import annotations
 
 import glob
+import itertools
 import math
 import os
 import textwrap
@@ -328,12 +329,9 @@ def figure(metrics: dict):
     # a model's label: its path below the folder its models share (seed0/model.zip), not the whole path
     shared = os.path.commonpath(models) if len(models) > 1 else None
     # the models draw from colours of their own, none near one of tab10's, which the other families draw from
-    palettes = {False: [plt.get_cmap("tab10")(i) for i in range(10)], True: MODEL_COLOURS}
-    drawn = {False: 0, True: 0}
+    palettes = {False: itertools.cycle(plt.get_cmap("tab10").colors), True: itertools.cycle(MODEL_COLOURS)}
     for name, group in sorted(families.items()):
-        is_model = name in models
-        colour = palettes[is_model][drawn[is_model] % len(palettes[is_model])]
-        drawn[is_model] += 1
+        colour = next(palettes[name in models])
         group = sorted(group, key=lambda p: p["messages_per_agent_step"])
         x = np.array([p["messages_per_agent_step"] for p in group])
         y = np.array([p["mean_cost"] for p in group])
