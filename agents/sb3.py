@@ -1,8 +1,10 @@
 """Trained stable-baselines3 models as policies.
 
 A saved model ``model.zip`` has a sidecar ``model.json`` recording the
-scenario and its config; loading it for another scenario, or for spaces that
-differ from the ones it was trained on, is a ``ValueError``.
+scenario and its config (the run's other weights, ``best.zip``, ``last.zip``
+and ``checkpoint.zip``, are described by the same file: ``model_metadata``);
+loading it for another scenario, or for spaces that differ from the ones it
+was trained on, is a ``ValueError``.
 
 Damaged files are ``ValueError`` s naming the file and what is wrong with it
 (``check_model_zip``, ``read_metadata``): a truncated or non-zip
@@ -27,8 +29,25 @@ from coloc_env.config import BadInput
 REQUIRED_MEMBERS = ("data", "policy.pth")
 
 
+# the weights a training run writes beside model.zip: its model.json describes them all (train.training)
+RUN_WEIGHTS = ("best.zip", "last.zip", "checkpoint.zip")
+
+
 def metadata_path(model_path: str) -> str:
     return os.path.splitext(model_path)[0] + ".json"
+
+
+def model_metadata(path: str) -> dict | None:
+    """The ``model.json`` that describes the model ``path``, as a dict: its own sidecar (``PATH.json``), else, for
+    the other weights a training run writes beside ``model.zip`` (``RUN_WEIGHTS``), the run's ``model.json`` in the
+    same folder; None where there is neither."""
+    candidates = [metadata_path(path)]
+    if os.path.basename(path) in RUN_WEIGHTS:
+        candidates.append(os.path.join(os.path.dirname(path), "model.json"))
+    for meta_file in candidates:
+        if os.path.isfile(meta_file):
+            return read_metadata(meta_file)
+    return None
 
 
 def samples_actions(meta: dict | None) -> bool:
@@ -128,10 +147,10 @@ def algorithm_class(name: str):
 
 
 def model_class(path: str, meta: dict | None = None):
-    """The class that saved ``path``: the ``algorithm`` of ``meta`` (read from the model.json beside it when not
-    given), else what the zip's policy class says."""
-    if meta is None and os.path.isfile(metadata_path(path)):
-        meta = read_metadata(metadata_path(path))
+    """The class that saved ``path``: the ``algorithm`` of ``meta`` (``model_metadata(path)`` when not given),
+    else what the zip's policy class says."""
+    if meta is None:
+        meta = model_metadata(path)
     name = (meta or {}).get("algorithm")
     if name is None:  # a model without model.json (or from before the field): the zip names its policy class
         with zipfile.ZipFile(path) as archive:
@@ -164,11 +183,9 @@ class SB3Policy(Policy):
         super().__init__(env)
         if not os.path.isfile(path):
             raise BadInput(f"policy model {path!r} does not exist")
-        meta_file = metadata_path(path)
         scenario_name = env.unwrapped.scenario.name
-        meta = None
-        if os.path.isfile(meta_file):
-            meta = read_metadata(meta_file)
+        meta = model_metadata(path)
+        if meta is not None:
             if meta.get("scenario") != scenario_name:
                 raise BadInput(f"model {path!r} was trained on {meta.get('scenario')!r}, not {scenario_name!r}")
         check_model_zip(path)

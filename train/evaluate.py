@@ -270,24 +270,12 @@ def summarize(scenario, policy_name: str, costs, comms, seed_base: int, initial_
 COST_TAG = " @ cost="  # a model's row at one communication cost: ``PATH.zip @ cost=c``
 
 
-def training_record(path: str) -> dict | None:
-    """The ``model.json`` that describes the model ``path``: its own sidecar (``PATH.json``), else, for the other
-    weights a training run writes beside it (``last.zip``, ``best.zip``, ``checkpoint.zip``), the run's
-    ``model.json`` in the same folder; None where there is neither."""
-    import os
-
-    from agents.sb3 import metadata_path, read_metadata
-
-    for meta_file in (metadata_path(path), os.path.join(os.path.dirname(path), "model.json")):
-        if os.path.isfile(meta_file):
-            return read_metadata(meta_file)
-    return None
-
-
 def trained_costs(path: str) -> tuple[tuple[float, float] | None, float | None]:
     """(``cost_range``, fixed ``communication_cost``) a model was trained with, read from its run's ``model.json``
-    (``training_record``); (None, None) where there is none or it records neither."""
-    meta = training_record(path)
+    (``agents.sb3.model_metadata``); (None, None) where there is none or it records neither."""
+    from agents.sb3 import model_metadata
+
+    meta = model_metadata(path)
     if meta is None:
         return None, None
     env_config = meta.get("env_config") if isinstance(meta.get("env_config"), dict) else {}
@@ -300,9 +288,9 @@ def trained_costs(path: str) -> tuple[tuple[float, float] | None, float | None]:
 def model_actions(path: str) -> str:
     """How the model ``path`` acts, as its run's ``model.json`` records it (``train.hyperparams.ACTIONS``):
     ``"sampled"`` or ``"deterministic"`` (also where it records none)."""
-    from agents.sb3 import samples_actions
+    from agents.sb3 import model_metadata, samples_actions
 
-    return "sampled" if samples_actions(training_record(path)) else "deterministic"
+    return "sampled" if samples_actions(model_metadata(path)) else "deterministic"
 
 
 def median_cost(cost_range: tuple[float, float]) -> float:

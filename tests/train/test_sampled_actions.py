@@ -92,6 +92,21 @@ def test_the_env_loop_policy_samples_and_an_episode_repeats(trained):
     assert (draws != choices).any()
 
 
+@pytest.mark.parametrize("weights", ["best.zip", "last.zip"])
+def test_the_runs_other_weights_act_as_its_model_json_records(trained, weights, tmp_path):
+    """``best.zip`` and ``last.zip`` have no sidecar of their own: the run's ``model.json`` describes them, so the
+    env-loop policy samples and the evaluation names the row so; the same zip copied out of the run has no record
+    and acts by its most likely actions."""
+    path = os.path.join(os.path.dirname(trained), weights)
+    env = coloc_env.parallel_env("contention_localization", communication_cost=10.0, **SHORT)
+    assert agents.make_policy(path, env).deterministic is False
+    assert evaluate_policy("contention_localization", path, 2, 10**6, bounds=False,
+                           cost=10.0)["policy"].endswith(" (stochastic)")
+    alone = tmp_path / weights
+    alone.write_bytes(open(path, "rb").read())
+    assert agents.make_policy(str(alone), env).deterministic is True
+
+
 def test_an_unknown_actions_setting_is_refused(tmp_path, monkeypatch):
     module = _settings_module(ACTIONS="greedy")
     monkeypatch.setitem(sys.modules, module.__name__, module)
