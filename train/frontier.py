@@ -437,16 +437,7 @@ def run_frontier(scenario: str, episodes: int = 30, seed: int | None = None, mod
         plan = cells(scenario, horizon, found, quick, costs)
         tasks = [(scenario, cell.get("model", cell["policy"]), episodes, seed, cell.get("cost"), bound_episodes)
                  for cell in plan]
-        if executor == "local":
-            results = []
-            for i, task in enumerate(tasks):
-                results.append(play(*task))
-                if progress:
-                    progress(i + 1, len(plan))
-        else:
-            results = map_tasks(play, tasks, "ray", address)
-            if progress:
-                progress(len(plan), len(plan))
+        results = map_tasks(play, tasks, executor, address, progress=progress)
         metrics = summarize(scenario, plan, results, num_agents, episodes, seed)
         metrics["command"] = command
         metrics["bound_episodes"] = min(int(bound_episodes), episodes)

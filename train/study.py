@@ -736,10 +736,8 @@ def run_study(world: str, network: str, backends: str | Sequence[str], sweep: st
             from train.executor import map_tasks
 
             outputs = map_tasks(run_cell, [(cells[cell], policy, episodes, seed, batched) for cell in order], "ray",
-                                address)
+                                address, progress=progress)
             results = dict(zip(order, outputs, strict=True))
-            if progress:
-                progress(total, total)
 
         # 3. the bounds of each cell on its episodes (coloc_env.pcrb), then metrics, report, figure
         from coloc_env.bounds.models import has_bound_model

@@ -1,6 +1,7 @@
 """The coloc command line end to end, on small runs."""
 
 import json
+import math
 import os
 
 import numpy as np
@@ -164,6 +165,19 @@ def test_a_model_save_interrupted_midway_keeps_the_previous_zip_and_leaves_no_te
     assert PPO.load(path, device="cpu").policy.state_dict().keys() == model.policy.state_dict().keys()
 
 
+def test_map_tasks_reports_each_finished_unit_and_stops_at_a_failure():
+    from train.executor import map_tasks
+
+    finished = []
+    assert map_tasks(pow, [(2, 1), (2, 2), (2, 3)], progress=lambda done, total: finished.append((done, total))) == [
+        2, 4, 8]
+    assert finished == [(1, 3), (2, 3), (3, 3)]
+    finished.clear()
+    with pytest.raises(ValueError, match="math domain error"):
+        map_tasks(math.log, [(1.0,), (-1.0,), (2.0,)], progress=lambda done, total: finished.append(done))
+    assert finished == [1]
+
+
 @pytest.mark.slow  # Ray's start-up and its workers' imports: ~13 s of a 10-minute suite; run with -m slow
 def test_ray_executor_equals_local(tmp_path):
     ray = pytest.importorskip("ray")
@@ -183,11 +197,13 @@ def test_ray_executor_equals_local(tmp_path):
     local = map_tasks(monte_carlo_block, blocks, "local")
     local_model = map_tasks(train, jobs[:1], "local")[0]
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    finished = []
     try:
-        remote = map_tasks(monte_carlo_block, blocks, "ray")
+        remote = map_tasks(monte_carlo_block, blocks, "ray", progress=lambda done, total: finished.append((done, total)))
         remote_model = map_tasks(train, jobs[1:], "ray")[0]
     finally:
         ray.shutdown()
+    assert finished == [(1, 2), (2, 2)]
     for a, b in zip(local, remote, strict=True):
         np.testing.assert_array_equal(a["per_run_cost"], b["per_run_cost"])
     weights_local = PPO.load(local_model, device="cpu").policy.state_dict()

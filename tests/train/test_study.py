@@ -250,7 +250,7 @@ def test_cells_travel_to_an_executor_and_give_the_local_numbers(small, tmp_path,
 
     calls = []
 
-    def pickling_executor(fn, items, executor="local", address=None):
+    def pickling_executor(fn, items, executor="local", address=None, progress=None):
         calls.append((executor, address, len(items)))
         fn, items = pickle.loads(pickle.dumps((fn, list(items))))
         return [pickle.loads(pickle.dumps(fn(*item))) for item in items]
