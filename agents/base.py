@@ -15,6 +15,16 @@ def episode_generator(seed: int) -> np.random.Generator:
     return np.random.default_rng([int(seed), POLICY_STREAM])
 
 
+def own_choice_only(masks: np.ndarray, num_agents: int) -> np.ndarray:
+    """Action masks (rows, ...) of sub-envs ordered copy by copy, agent by agent, whose first entry's block (the
+    first ``num_agents`` choices) keeps only the agent's own index: an entry left to the paper's rule
+    (``agents.paper_entries``), so that a masked training spends no entropy and no gradient on it."""
+    out = np.array(masks, dtype=bool, copy=True)
+    out[:, :num_agents] = False
+    out[np.arange(len(out)), np.arange(len(out)) % num_agents] = True
+    return out
+
+
 class Policy:
     """Maps a dict of observations (one per live agent) to a dict of actions.
 

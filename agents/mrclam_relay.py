@@ -10,6 +10,11 @@
   robot (only m and n update, with the consistent cross-covariance update).
 
 Both are deterministic and read only the observations (the "recorded" flags).
+
+A trained model may leave the measurement to the paper (``PAPER_ENTRIES["measurement"]``, the settings module's
+``PAPER_ENTRIES = "measurement"``): the model decides every relay entry, and each robot uses the measurement
+``paper`` uses, so a model and the fixed schedules (which all choose so) apply the same measurements and differ only
+in how far each travels.
 """
 
 from __future__ import annotations
@@ -17,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from agents import event_triggered
-from agents.base import Policy
+from agents.base import Policy, own_choice_only
 
 
 def paper_partners(recorded: np.ndarray) -> np.ndarray:
@@ -79,6 +84,30 @@ class NoRelayPolicy(PaperPolicy):
 
     relay = False
 
+
+class PaperMeasurement:
+    """The measurement entry (index 0) of a learned policy left to ``paper``'s rule: the lowest-index robot each
+    robot recorded at this step (``paper_partners`` of its observation's recorded flags, entries [N, 2N)), itself
+    where it recorded nobody. The rule draws nothing, so ``generators`` are not used (``agents.paper_entries``'
+    interface). ``restrict`` leaves index 0 one choice in a batch of action masks (the agent itself), so that a
+    masked training spends no entropy and no gradient on an entry the env never receives from the model."""
+
+    def entries(self, generators, observations: np.ndarray, actions: np.ndarray) -> np.ndarray:
+        """``actions`` (B, N, 1 + N) with index 0 replaced; ``observations`` (B, N, obs_dim)."""
+        observations = np.asarray(observations, float)
+        N = observations.shape[1]
+        out = np.array(actions, dtype=np.int64, copy=True)
+        out[..., 0] = paper_partners(observations[..., N:2 * N] > 0.5)
+        return out
+
+    def restrict(self, masks: np.ndarray, num_agents: int) -> np.ndarray:
+        """Masks (rows, N + N (N + 1)) of sub-envs ordered copy by copy, agent by agent: index 0's block keeps only
+        the agent's own index (``agents.base.own_choice_only``)."""
+        return own_choice_only(masks, num_agents)
+
+
+# The action entries a trained model may leave to the paper's rule (``coloc train --paper-entries``).
+PAPER_ENTRIES = {"measurement": PaperMeasurement}
 
 # ``always`` (every transport decision at its maximum: the complete chain) is ``paper``; ``silent``
 # (nothing relayed: the measurement still updates m and n) is ``no_relay``.

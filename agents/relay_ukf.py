@@ -30,7 +30,7 @@ from __future__ import annotations
 import numpy as np
 
 from agents import event_triggered
-from agents.base import Policy, SeededPolicy
+from agents.base import Policy, SeededPolicy, own_choice_only
 from coloc_env.scenarios.relay_ukf import DISTANCE_SCALE
 
 
@@ -163,11 +163,8 @@ class PaperPartner:
 
     def restrict(self, masks: np.ndarray, num_agents: int) -> np.ndarray:
         """Masks (rows, 2N + 1) of sub-envs ordered copy by copy, agent by agent: index 0's block keeps only the
-        agent's own index."""
-        out = np.array(masks, dtype=bool, copy=True)
-        out[:, :num_agents] = False
-        out[np.arange(len(out)), np.arange(len(out)) % num_agents] = True
-        return out
+        agent's own index (``agents.base.own_choice_only``)."""
+        return own_choice_only(masks, num_agents)
 
 
 # The action entries a trained model may leave to the paper's rule (``coloc train --paper-entries``).

@@ -199,7 +199,8 @@ def build_parser() -> argparse.ArgumentParser:
                          "sets none)")
     tr.add_argument("--paper-entries", default=None, metavar="NAME",
                     help="action entries the model leaves to the paper's rule (relay_ukf: partner, the paper's random "
-                         "ranging partner); none: the model decides every entry (default: PAPER_ENTRIES of "
+                         "ranging partner; mrclam_relay: measurement, the paper's measurement choice); none: the model "
+                         "decides every entry (default: PAPER_ENTRIES of "
                          "train/hyperparams/<scenario>.py, none where it sets none)")
 
     ev = sub.add_parser("evaluate", help="evaluate a policy over seeded episodes", formatter_class=_HelpFormatter,

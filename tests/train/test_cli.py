@@ -199,7 +199,8 @@ def test_ray_executor_equals_local(tmp_path):
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
     finished = []
     try:
-        remote = map_tasks(monte_carlo_block, blocks, "ray", progress=lambda done, total: finished.append((done, total)))
+        remote = map_tasks(monte_carlo_block, blocks, "ray",
+                           progress=lambda done, total: finished.append((done, total)))
         remote_model = map_tasks(train, jobs[1:], "ray")[0]
     finally:
         ray.shutdown()
