@@ -18,7 +18,8 @@
   (message per agent-step); on validation windows (``coloc frontier mrclam_relay --seed 2000000 --quick
   --episodes 16 --bound-episodes 1``, never the evaluation seeds) the hull's chords are 0.012 and 0.0025, c =
   2.4e-3 and 5e-4. The range reaches a few times past both. The cost term stays below the error (at c = 1e-2
-  and the paper's 1.7 hops per agent-step it is 0.085 m a step against ~0.06 m), so no ``COST_REWARD_SCALE``.
+  and the paper's 1.7 hops a step, 0.34 per agent-step, it is 0.017 m a step against ~0.06 m), so no
+  ``COST_REWARD_SCALE``.
 * 1.2M timesteps with the cost range (300k at one fixed cost): one network learns every price.
 * ``PAPER_ENTRIES = "measurement"``: each robot uses the measurement ``paper`` uses (the lowest-index robot it
   recorded; ``agents.mrclam_relay.PaperMeasurement``), as every fixed schedule of the frontier does, and the model
