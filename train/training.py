@@ -27,9 +27,13 @@ mean reward under ``reward="error"``. The 95 % interval is over the episodes of 
 Without a cost range a point's score is the validation error, played at the training env's
 ``communication_cost`` (the cost the model observes). Either way the validation episodes are seeded
 ``VALIDATION_SEED_BASE + e`` (``train.evaluate``), disjoint from the training seeds and the evaluation seeds.
+Under a cost range a settings module's ``COST_FEATURE = "scaled"`` makes the network read the observed cost as its
+place in [lo, hi] (``agents.cost_feature.CostScaledExtractor``, the model's features extractor, saved with it);
+``model.json`` records ``cost_feature``.
 
 Paper entries. A settings module's ``PAPER_ENTRIES`` (``--paper-entries``) names action entries the model leaves to
-the paper's rule (``agents.paper_entries``; relay_ukf's ``"partner"``: the paper's random ranging partner): the
+the paper's rule (``agents.paper_entries``; relay_ukf's ``"partner"``: the paper's random ranging partner;
+mrclam_relay's ``"measurement"``: the paper's measurement choice): the
 training env fills them before each step and masks them to one choice (``paper_entries_env``), validation and
 evaluation fill them as the paper's policy does on the same episode, and ``model.json`` records the name.
 
@@ -501,7 +505,19 @@ def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = 
     if paper is not None:
         inner = paper_entries_env(inner, paper, inner.num_envs // copies, seed)
     reward_scale = cost_reward_scale(scenario) if cost_range is not None else None
-    cost_index = None if reward_scale is None else _cost_feature_index(scenario, env_config)
+    # a fixed cost is one value the whole training: nothing to scale
+    feature = hyperparams.cost_feature(scenario) if cost_range is not None else "raw"
+    if feature != "raw" and critic_name == "centralized":
+        raise BadInput(f"COST_FEATURE {feature!r} of train/hyperparams/{hyperparams.module_name(scenario)}.py: the "
+                       f"centralized critic reads the observation itself; use COST_FEATURE 'raw' with it")
+    cost_index = (_cost_feature_index(scenario, env_config)
+                  if reward_scale is not None or feature != "raw" else None)
+    model_kwargs = {}
+    if feature == "scaled":
+        from agents.cost_feature import CostScaledExtractor
+
+        model_kwargs = {"features_extractor_class": CostScaledExtractor,
+                        "features_extractor_kwargs": {"column": cost_index, "cost_range": tuple(cost_range)}}
     policy = "MlpLstmPolicy" if algorithm_name == "recurrent_ppo" else "MlpPolicy"
     if critic_name == "centralized":
         from agents.centralized_critic import CriticStateObservation, policy_class
@@ -519,8 +535,11 @@ def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = 
     torch.set_num_threads(1)
     try:
         set_random_seed(seed)
+        settings = dict(hyper)
+        if model_kwargs:  # hyper stays JSON (model.json); the extractor's class goes to the model only
+            settings["policy_kwargs"] = {**hyper.get("policy_kwargs", {}), **model_kwargs}
         model = Algorithm(policy, venv, device="cpu", verbose=0,
-                    tensorboard_log=os.path.join(folder, "tb") if tensorboard else None, **hyper)
+                    tensorboard_log=os.path.join(folder, "tb") if tensorboard else None, **settings)
         model.action_space.seed(seed)
         curve: list = []
         # SB3's live bar on a terminal; elsewhere (a pipe, a log file) a plain line per validation point,
@@ -554,7 +573,7 @@ def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = 
         "cost_range": None if cost_range is None else list(cost_range),
         "cost_reward_scale": reward_scale, "paper_entries": paper_entries,
         "hyperparams": json.loads(json.dumps(hyper)), "vec": vec, "copies": copies, "algorithm": algorithm_name,
-        "critic": critic_name, "actions": acting,
+        "critic": critic_name, "actions": acting, "cost_feature": feature,
         "observation_space": repr(venv.observation_space), "action_space": repr(venv.action_space),
     })
     venv.close()

@@ -15,7 +15,9 @@ default: none, the model decides every entry), and ``ACTIONS``: ``"deterministic
 by its most likely action) or ``"sampled"`` (it draws its action from its distribution, seeded, as a
 random-access policy must: on a shared medium a deterministic policy shared by every agent sends or stays
 silent in step with the others); the learning curve validates it so, ``model.json`` records it, and
-evaluation plays it so (``train.evaluate.model_actions``).
+evaluation plays it so (``train.evaluate.model_actions``), and ``COST_FEATURE``: ``"raw"`` (the default: the
+network reads the observed cost c itself) or ``"scaled"`` (under a cost range it reads c's position in the range,
+from -1 at lo to 1 at hi, log-scaled for lo > 0: ``agents.cost_feature``; ``model.json`` records it).
 
 A preset's module also holds what only ``train`` needs of it: ``LEADERBOARD_TARGET`` (the leaderboard's target for
 a learned policy, ``train.leaderboard.target``), and optionally ``DEMO_RUN`` (``make demo``'s budget,
@@ -127,6 +129,15 @@ ACTIONS = ("deterministic", "sampled")
 def actions(scenario: str) -> str:
     """How the scenario's model acts, one of ``ACTIONS`` (its module's ``ACTIONS``, else ``"deterministic"``)."""
     return _setting_choice(scenario, "ACTIONS", ACTIONS, "deterministic")
+
+
+def cost_feature(scenario: str) -> str:
+    """How a model trained over a cost range reads the observed cost, one of ``agents.cost_feature.COST_FEATURES``
+    (its module's ``COST_FEATURE``, else ``"raw"``: c itself; ``"scaled"``: its position in the range,
+    ``agents.cost_feature.CostScaledExtractor``)."""
+    from agents.cost_feature import COST_FEATURES
+
+    return _setting_choice(scenario, "COST_FEATURE", COST_FEATURES, "raw")
 
 
 def critic(scenario: str) -> str:
