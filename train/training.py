@@ -505,8 +505,9 @@ def train(scenario: str, timesteps: int | None, seed: int, out: str, vec: str = 
     if paper is not None:
         inner = paper_entries_env(inner, paper, inner.num_envs // copies, seed)
     reward_scale = cost_reward_scale(scenario) if cost_range is not None else None
-    # a fixed cost is one value the whole training: nothing to scale
-    feature = hyperparams.cost_feature(scenario) if cost_range is not None else "raw"
+    feature = hyperparams.cost_feature(scenario)  # checked whatever the range
+    if cost_range is None:  # a fixed cost is one value the whole training: nothing to scale
+        feature = "raw"
     if feature != "raw" and critic_name == "centralized":
         raise BadInput(f"COST_FEATURE {feature!r} of train/hyperparams/{hyperparams.module_name(scenario)}.py: the "
                        f"centralized critic reads the observation itself; use COST_FEATURE 'raw' with it")

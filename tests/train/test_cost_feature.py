@@ -89,6 +89,8 @@ def test_an_unknown_cost_feature_and_the_centralized_critic_are_refused(tmp_path
     with pytest.raises(ValueError, match=r"COST_FEATURE of train/hyperparams/relay_ukf\.py must be one of "
                                          r"\['raw', 'scaled'\], got 'log'"):
         _train(tmp_path, COST_FEATURE="log")
+    with pytest.raises(ValueError, match=r"COST_FEATURE of train/hyperparams/relay_ukf\.py must be one of"):
+        _train(tmp_path, cost_range=None, COST_FEATURE="log")
     with pytest.raises(ValueError, match=r"COST_FEATURE 'scaled' of train/hyperparams/relay_ukf\.py: the "
                                          r"centralized critic reads the observation itself"):
         _train(tmp_path, COST_FEATURE="scaled", CRITIC="centralized")
