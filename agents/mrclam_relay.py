@@ -25,6 +25,14 @@ from agents import event_triggered
 from agents.base import Policy, own_choice_only
 
 
+def recorded_flags(observations: np.ndarray) -> np.ndarray:
+    """(..., N, N) bool: whom each robot recorded at this step, from its observation's entries [N, 2N)
+    (``observations`` (..., N, obs_dim), one row per robot)."""
+    observations = np.asarray(observations, float)
+    N = observations.shape[-2]
+    return observations[..., N:2 * N] > 0.5
+
+
 def paper_partners(recorded: np.ndarray) -> np.ndarray:
     """(B, N) the lowest-index robot each robot recorded, itself where none. ``recorded`` (B, N, N) bool."""
     recorded = np.asarray(recorded, bool)
@@ -71,11 +79,9 @@ class PaperPolicy(Policy):
 
     def act(self, observations):
         order = list(self.env.possible_agents)
-        N = len(order)
         size = self.env.observation_space(order[0]).shape[0]
         obs = np.stack([np.asarray(observations[a], float) if a in observations else np.zeros(size) for a in order])
-        recorded = obs[:, N:2 * N] > 0.5
-        actions = paper_actions(recorded[None], relay=self.relay)[0]
+        actions = paper_actions(recorded_flags(obs)[None], relay=self.relay)[0]
         return {a: actions[order.index(a)] for a in observations}
 
 
@@ -94,10 +100,8 @@ class PaperMeasurement:
 
     def entries(self, generators, observations: np.ndarray, actions: np.ndarray) -> np.ndarray:
         """``actions`` (B, N, 1 + N) with index 0 replaced; ``observations`` (B, N, obs_dim)."""
-        observations = np.asarray(observations, float)
-        N = observations.shape[1]
         out = np.array(actions, dtype=np.int64, copy=True)
-        out[..., 0] = paper_partners(observations[..., N:2 * N] > 0.5)
+        out[..., 0] = paper_partners(recorded_flags(observations))
         return out
 
     def restrict(self, masks: np.ndarray, num_agents: int) -> np.ndarray:
